@@ -1,0 +1,1 @@
+"""The edge: wire format, zenoh publish/subscribe, MCAP archive, replay, scene simulator."""

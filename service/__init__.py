@@ -1,0 +1,1 @@
+"""Composition: per-mill worker, storage, REST API, reports, CLI."""
