@@ -1,7 +1,7 @@
 """Rainflow cycles: the fact that the rainflow counter emits and recorders consume.
 
-A :class:`Cycles` value holds *n* cycles as parallel arrays, in the order the counter closed them (ASTM E1049-85 §5.4.4 order, the same order as the
-``rainflow`` package's ``extract_cycles``):
+A :class:`Cycles` value holds *n* cycles as parallel arrays, in the order the counter closed them
+(ASTM E1049-85 §5.4.4 order, the same order as the ``rainflow`` package's ``extract_cycles``):
 
 ============ ======== ==============================================================
 field        dtype    meaning
@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["Cycles"]
+
 
 class Cycles:
     """Closed (or closable) rainflow cycles; see the module docstring.

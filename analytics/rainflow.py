@@ -9,9 +9,11 @@ Numerical contract (DESIGN.md):
 * The cycles :meth:`RainflowCounter.feed` returns over a record, followed by
   :meth:`RainflowCounter.close` in ``"half"`` mode, equal — bitwise, in order, with the same sample
   indices — ``rainflow.extract_cycles`` (rainflow 3.2) on the whole record, for any split into
-  blocks. Two documented exceptions, both degenerate: a record of exactly two samples, where
-  ``rainflow`` drops the second sample (we count the half cycle), and a constant record, where
-  ``rainflow`` reports a half cycle of range 0 (we report nothing).
+  blocks. Three documented exceptions, all degenerate: a record of exactly two samples, where
+  ``rainflow`` drops the second sample (we count the half cycle); a constant record, where
+  ``rainflow`` reports a half cycle of range 0 (we report nothing); and differences so small
+  (< ~1e-154) that ``rainflow``'s direction test ``d_last * d_next < 0`` underflows to zero and
+  misses a reversal (we compare signs, so we do not).
 * Turning points follow ``rainflow.reversals``: plateaus count once, at their last sample; the last
   sample is held back (the *candidate*) until the signal turns away from it.
 * State is the open residue plus a few scalars: :meth:`RainflowCounter.snapshot` returns it as
@@ -78,14 +80,15 @@ class RainflowCounter:
 
     >>> c = RainflowCounter()
     >>> closed = c.feed(np.array([0.0, 5.0, 1.0, 4.0]))   # nothing closed yet
-    >>> closed = c.feed(np.array([-2.0, 3.0]))            # 4 → 1 closes as a full cycle
+    >>> closed = c.feed(np.array([-2.0, 3.0]))  # 1 → 4 closes; 0 → 5 leaves as a half
     >>> closed.as_tuples()
-    [(3.0, 2.5, 1.0, 2, 3)]
-    >>> len(c.close())                                    # the residue as half cycles
-    3
+    [(3.0, 2.5, 1.0, 2, 3), (5.0, 2.5, 0.5, 0, 1)]
+    >>> c.close().as_tuples()  # the residue 5, -2, 3 as half cycles
+    [(7.0, 1.5, 0.5, 1, 4), (5.0, 0.5, 0.5, 4, 5)]
     """
 
-    __slots__ = ("_buf_f", "_buf_i", "_out_f", "_out_i", "_st_f", "_st_i")
+    __slots__ = ("_F", "_I", "_out_f", "_out_i", "_st_f", "_st_i")
+    # _F/_I: the kernel's two state arrays; the rest are row views of them.
 
     def __init__(self, gate: float = 0.0, capacity: int = 1024) -> None:
         """``gate``: hysteresis in signal units (0 = exact); ``capacity``: initial buffer length in
@@ -93,9 +96,8 @@ class RainflowCounter:
         gate = float(gate)
         if not np.isfinite(gate) or gate < 0.0:
             raise ValueError(f"gate must be a finite range >= 0 in signal units, got {gate!r}")
-        self._st_i = np.zeros(5, dtype=np.int64)
-        self._st_f = np.array([0.0, 0.0, gate])
-        self._allocate(max(int(capacity), 8), stack_len=0)
+        self._allocate(max(int(capacity), 8))
+        self._st_f[_k.GATE] = gate
 
     # ------------------------------------------------------------------ streaming
     def feed(self, samples: np.ndarray | Iterable[float]) -> Cycles:
@@ -107,7 +109,7 @@ class RainflowCounter:
         x = samples
         if x.__class__ is not np.ndarray or x.dtype is not _F64 or x.ndim != 1:
             x = self._as_samples(samples)
-        k = _k.feed(x, self._st_i, self._st_f, self._buf_f, self._buf_i, self._out_f, self._out_i)
+        k = _k.feed(x, self._F, self._I)
         if k < 0:
             k = self._retry(x, k)
         return Cycles(self._out_f, self._out_i, k)
@@ -116,20 +118,26 @@ class RainflowCounter:
         if code <= _k.NON_FINITE:
             j = _k.NON_FINITE - code
             raise NonFiniteSampleError(int(self._st_i[_k.N_SEEN]) + j, float(x[j]))
-        n = int(self._st_i[_k.STACK_LEN])
-        self._allocate(max(n + x.shape[0] + 2, 2 * self._buf_f.shape[1]), stack_len=n)
-        return _k.feed(x, self._st_i, self._st_f, self._buf_f, self._buf_i, self._out_f, self._out_i)
+        self._grow(int(self._st_i[_k.STACK_LEN]) + x.shape[0] + 2)
+        return _k.feed(x, self._F, self._I)
 
-    def _allocate(self, size: int, stack_len: int) -> None:
-        """(Re)allocate the buffers to ``size`` turning points, keeping the open stack."""
-        buf_f = np.empty((2, size), dtype=np.float64)
-        buf_i = np.empty((2, size), dtype=np.int64)
-        if stack_len:
-            buf_f[0, :stack_len] = self._buf_f[0, :stack_len]
-            buf_i[0, :stack_len] = self._buf_i[0, :stack_len]
-        self._buf_f, self._buf_i = buf_f, buf_i
-        self._out_f = np.empty((3, size), dtype=np.float64)
-        self._out_i = np.empty((2, size), dtype=np.int64)
+    def _allocate(self, size: int) -> None:
+        """Fresh zeroed buffers for ``size`` turning points (see the kernel's state layout)."""
+        self._F = np.zeros((_k.F_ROWS, size), dtype=np.float64)
+        self._I = np.zeros((_k.I_ROWS, size), dtype=np.int64)
+        self._st_f, self._st_i = self._F[_k.STATE], self._I[_k.STATE]
+        self._out_f, self._out_i = self._F[_k.OUT :], self._I[_k.OUT :]
+
+    def _grow(self, need: int) -> None:
+        """Larger buffers (at least doubled), keeping the state and the open stack."""
+        old_f, old_i = self._F, self._I
+        n = int(old_i[_k.STATE, _k.STACK_LEN])
+        self._allocate(max(need, 2 * old_f.shape[1]))
+        self._st_f[: _k.GATE + 1] = old_f[_k.STATE, : _k.GATE + 1]
+        self._st_i[: _k.STARTED + 1] = old_i[_k.STATE, : _k.STARTED + 1]
+        self._F[_k.STACK, :n] = old_f[_k.STACK, :n]
+        self._I[_k.STACK, :n] = old_i[_k.STACK, :n]
+        log.debug("rainflow buffers grown to %d turning points", self._F.shape[1])
 
     @staticmethod
     def _as_samples(samples: Any) -> np.ndarray:
@@ -160,8 +168,8 @@ class RainflowCounter:
         """The open turning points ``(values, sample_indices)``, oldest first, as copies; the last
         one is the held-back extreme once the signal has moved at all."""
         n = int(self._st_i[_k.STACK_LEN])
-        values = self._buf_f[0, :n].copy()
-        indices = self._buf_i[0, :n].copy()
+        values = self._F[_k.STACK, :n].copy()
+        indices = self._I[_k.STACK, :n].copy()
         if self._has_candidate():
             values = np.append(values, self._st_f[_k.CAND_VALUE])
             indices = np.append(indices, self._st_i[_k.CAND_INDEX])
@@ -182,8 +190,8 @@ class RainflowCounter:
         n = int(self._st_i[_k.STACK_LEN])
         sv = np.empty(n + 1)
         si = np.empty(n + 1, dtype=np.int64)
-        sv[:n] = self._buf_f[0, :n]
-        si[:n] = self._buf_i[0, :n]
+        sv[:n] = self._F[_k.STACK, :n]
+        si[:n] = self._I[_k.STACK, :n]
         out_f = np.empty((3, n + 1))
         out_i = np.empty((2, n + 1), dtype=np.int64)
         cand, cand_i = self._st_f[_k.CAND_VALUE], self._st_i[_k.CAND_INDEX]
@@ -197,10 +205,10 @@ class RainflowCounter:
         return {
             "version": _SNAPSHOT_VERSION,
             "kind": "rainflow",
-            "ints": self._st_i.tolist(),
-            "floats": self._st_f.tolist(),
-            "stack_values": self._buf_f[0, :n].tolist(),
-            "stack_indices": self._buf_i[0, :n].tolist(),
+            "ints": self._st_i[: _k.STARTED + 1].tolist(),
+            "floats": self._st_f[: _k.GATE + 1].tolist(),
+            "stack_values": self._F[_k.STACK, :n].tolist(),
+            "stack_indices": self._I[_k.STACK, :n].tolist(),
         }
 
     @classmethod
@@ -216,38 +224,43 @@ class RainflowCounter:
         if len(values) != snapshot["ints"][_k.STACK_LEN]:
             raise ValueError("rainflow snapshot is inconsistent: stack length does not match")
         counter = cls(gate=snapshot["floats"][_k.GATE], capacity=2 * len(values) + 1024)
-        counter._st_i[:] = snapshot["ints"]
-        counter._st_f[:] = snapshot["floats"]
-        counter._buf_f[0, : len(values)] = values
-        counter._buf_i[0, : len(values)] = snapshot["stack_indices"]
+        counter._st_i[: _k.STARTED + 1] = snapshot["ints"]
+        counter._st_f[: _k.GATE + 1] = snapshot["floats"]
+        counter._F[_k.STACK, : len(values)] = values
+        counter._I[_k.STACK, : len(values)] = snapshot["stack_indices"]
         return counter
 
 
 def _close_by_repetition(values: np.ndarray, indices: np.ndarray) -> Cycles:
-    """Full cycles of ``residue ⊕ residue`` (the junction reduced to reversals)."""
-    if values.shape[0] < 2:
-        return Cycles.empty()
-    doubled_v = np.concatenate([values, values])
+    """Four-point rule over the residue (it may still close cycles through the held-back
+    extreme), then over what is left joined to itself at a clean reversal."""
+    first, left_v, left_i = _four_point(values, indices)
+    if left_v.shape[0] < 2:
+        return first
+    doubled_v = np.concatenate([left_v, left_v])
     keep = _reversal_mask(doubled_v)
-    pv = doubled_v[keep]
-    pi = np.concatenate([indices, indices])[keep]
-    out_f = np.empty((3, pv.shape[0]))
-    out_i = np.empty((2, pv.shape[0]), dtype=np.int64)
-    return Cycles(out_f, out_i, _k.close_repeat(pv, pi, out_f, out_i))
+    second, _, _ = _four_point(doubled_v[keep], np.concatenate([left_i, left_i])[keep])
+    return Cycles.concatenate([first, second])
+
+
+def _four_point(values: np.ndarray, indices: np.ndarray) -> tuple[Cycles, np.ndarray, np.ndarray]:
+    m = values.shape[0]
+    out_f, out_i = np.empty((3, m)), np.empty((2, m), dtype=np.int64)
+    left_v, left_i = np.empty(m), np.empty(m, dtype=np.int64)
+    k, n = _k.four_point(values, indices, out_f, out_i, left_v, left_i)
+    return Cycles(out_f, out_i, k), left_v[:n], left_i[:n]
 
 
 def _reversal_mask(values: np.ndarray) -> np.ndarray:
-    """Keep the end points and the points where the direction changes; drop repeats."""
+    """Mask keeping the end points and the direction changes of ``values``, repeats dropped
+    (used at the junction of a residue joined to itself)."""
     keep = np.ones(values.shape[0], dtype=bool)
-    same = np.zeros(values.shape[0], dtype=bool)
-    same[1:] = values[1:] == values[:-1]
-    keep &= ~same
-    v = values[keep]
-    idx = np.flatnonzero(keep)
-    if v.shape[0] >= 3:
-        d = np.diff(v)
-        interior = np.sign(d[1:]) != np.sign(d[:-1])
-        keep[idx[1:-1][~interior]] = False
+    keep[1:] = values[1:] != values[:-1]
+    kept = np.flatnonzero(keep)
+    if kept.shape[0] >= 3:
+        d = np.diff(values[kept])
+        through = np.sign(d[1:]) == np.sign(d[:-1])
+        keep[kept[1:-1][through]] = False
     return keep
 
 
