@@ -6,6 +6,7 @@ bitwise the ``rainflow.extract_cycles`` result for any split of the record into 
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import fatpack
@@ -32,7 +33,7 @@ def streamed(counter: RainflowCounter, x: np.ndarray, cuts: list[int]) -> list[t
     """Feed ``x`` split at ``cuts``; return closed cycles then the ASTM closure."""
     out: list[tuple] = []
     bounds = [0, *sorted(cuts), len(x)]
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for a, b in itertools.pairwise(bounds):
         out += counter.feed(x[a:b]).as_tuples()
     return out + counter.close().as_tuples()
 
@@ -42,12 +43,11 @@ def is_degenerate(x: np.ndarray) -> bool:
     return len(x) == 2 or (len(x) > 0 and bool(np.all(x == x[0])))
 
 
-def readable_reference(x: np.ndarray, gate: float) -> list[tuple]:
-    """Plain Python: hysteresis turning points, then the ASTM three-point rule with halves."""
-    points: list[tuple[int, float]] = []
+def readable_turning_points(x: np.ndarray, gate: float) -> list[tuple[int, float]]:
+    """Plain Python hysteresis: a reversal once the signal comes back by more than ``gate``."""
     if len(x) == 0:
         return []
-    points.append((0, float(x[0])))
+    points = [(0, float(x[0]))]
     direction, cand, cand_i = 0, float(x[0]), 0
     for i, v in enumerate(x[1:].tolist(), start=1):
         if direction == 0:
@@ -60,9 +60,14 @@ def readable_reference(x: np.ndarray, gate: float) -> list[tuple]:
             direction, cand, cand_i = -direction, v, i
     if direction != 0:
         points.append((cand_i, cand))
+    return points
+
+
+def readable_reference(x: np.ndarray, gate: float) -> list[tuple]:
+    """Plain Python: turning points, then the ASTM three-point rule with halves."""
     cycles: list[tuple] = []
     stack: list[tuple[int, float]] = []
-    for p in points:
+    for p in readable_turning_points(x, gate):
         stack.append(p)
         while len(stack) >= 3:
             (i1, x1), (i2, x2), (_, x3) = stack[-3], stack[-2], stack[-1]
@@ -74,7 +79,7 @@ def readable_reference(x: np.ndarray, gate: float) -> list[tuple]:
             else:
                 cycles.append((abs(x1 - x2), 0.5 * (x1 + x2), 1.0, i1, i2))
                 del stack[-3:-1]
-    for (i1, x1), (i2, x2) in zip(stack[:-1], stack[1:], strict=True):
+    for (i1, x1), (i2, x2) in itertools.pairwise(stack):
         cycles.append((abs(x1 - x2), 0.5 * (x1 + x2), 0.5, i1, i2))
     return cycles
 
