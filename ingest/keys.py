@@ -1,0 +1,248 @@
+"""The one module that owns millwatch's zenoh key expressions (build/parse pairs).
+
+Layout, version 1 (``/``-separated chunks)::
+
+    live:    millwatch/v1/<site>/<mill>/<signal>
+    replay:  millwatch/v1/@replay/<run>/<site>/<mill>/<signal>
+
+- ``v1`` is the key-layout version; a new layout gets ``v2`` and both can coexist
+  on one router.
+- ``<site>``, ``<mill>`` and the replay ``<run>`` id are lower-case segments matching
+  ``[a-z0-9][a-z0-9_-]{0,63}``.
+- ``<signal>`` is a base signal, optionally with a drive-side suffix on dual-drive
+  mills: ``motor_torque``, ``pinion_torque``, ``pinion_bending``, ``speed``,
+  ``tacho``; suffix ``_nbs`` (non-barring side) or ``_bs`` (barring side), e.g.
+  ``pinion_torque_nbs``. Single-drive mills use the bare base name.
+- Replayed data is tagged by the **verbatim** chunk ``@replay`` followed by a run id.
+  In zenoh 1.x a chunk starting with ``@`` is matched only by the identical chunk,
+  never by ``*`` or ``**``: a live consumer subscribed to ``millwatch/v1/**`` can
+  therefore never receive replayed blocks by accident, and each replay run has its
+  own key space (two engineers replaying the same mill do not interleave).
+
+No other module formats keys: use :func:`build_key`, :func:`parse_key` and the
+pattern helpers. :func:`key_matches` implements zenoh's ``*``/``**``/verbatim rules
+for concrete keys (used by the archive reader, which must not need a session).
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+ROOT = "millwatch"
+LAYOUT_VERSION = "v1"
+REPLAY_TAG = "@replay"
+WILD = "*"
+WILD_ANY = "**"
+_SEGMENT_RE = re.compile(r"[a-z0-9][a-z0-9_-]{0,63}")
+_LIVE_LEN = 5  # millwatch / v1 / site / mill / signal
+_REPLAY_LEN = 7  # millwatch / v1 / @replay / run / site / mill / signal
+
+
+class KeyFormatError(ValueError):
+    """A key or key segment is malformed; ``segment`` names the offending part."""
+
+    def __init__(self, segment: str, value: str, reason: str) -> None:
+        super().__init__(f"{segment} segment {value!r} is invalid: {reason}")
+        self.segment = segment
+        self.value = value
+
+
+class Signal(enum.StrEnum):
+    """Base signal names (the ``<signal>`` chunk without side suffix)."""
+
+    MOTOR_TORQUE = "motor_torque"
+    PINION_TORQUE = "pinion_torque"
+    PINION_BENDING = "pinion_bending"
+    SPEED = "speed"
+    TACHO = "tacho"
+
+
+class Side(enum.StrEnum):
+    """Drive side on dual-drive mills: non-barring side and barring side."""
+
+    NBS = "nbs"
+    BS = "bs"
+
+
+def _check_segment(name: str, value: str) -> str:
+    if not isinstance(value, str) or not _SEGMENT_RE.fullmatch(value):
+        raise KeyFormatError(name, str(value), "must match [a-z0-9][a-z0-9_-]{0,63}")
+    return value
+
+
+_SIGNALS = frozenset(s.value for s in Signal)
+_SIDES = frozenset(s.value for s in Side)
+
+
+def _parse_signal(value: str) -> tuple[Signal, Side | None]:
+    if value in _SIGNALS:
+        return Signal(value), None
+    base, _, suffix = value.rpartition("_")
+    if base in _SIGNALS and suffix in _SIDES:
+        return Signal(base), Side(suffix)
+    known = ", ".join(s.value for s in Signal)
+    raise KeyFormatError("signal", value, f"expected one of {known}, optionally + _nbs/_bs")
+
+
+@dataclass(frozen=True, slots=True)
+class ChannelKey:
+    """A parsed channel key. ``replay_run`` is ``None`` for live data."""
+
+    site: str
+    mill: str
+    signal: Signal
+    side: Side | None = None
+    replay_run: str | None = None
+
+    def __post_init__(self) -> None:
+        _check_segment("site", self.site)
+        _check_segment("mill", self.mill)
+        if str(self.signal) not in _SIGNALS:
+            known = ", ".join(sorted(_SIGNALS))
+            raise KeyFormatError("signal", str(self.signal), f"expected one of {known}")
+        object.__setattr__(self, "signal", Signal(self.signal))
+        if self.side is not None and str(self.side) not in _SIDES:
+            raise KeyFormatError("side", str(self.side), "expected 'nbs' or 'bs'")
+        if self.side is not None:
+            object.__setattr__(self, "side", Side(self.side))
+        if self.replay_run is not None:
+            _check_segment("run", self.replay_run)
+
+    @property
+    def signal_segment(self) -> str:
+        """The ``<signal>`` chunk, e.g. ``pinion_torque_nbs``."""
+        return self.signal.value if self.side is None else self.signal.value + "_" + self.side
+
+    @property
+    def is_replay(self) -> bool:
+        """True for keys carrying the ``@replay/<run>`` tag."""
+        return self.replay_run is not None
+
+    @property
+    def expr(self) -> str:
+        """The key expression string."""
+        return "/".join([*_prefix(self.replay_run), self.site, self.mill, self.signal_segment])
+
+    def as_replay(self, run: str) -> ChannelKey:
+        """The same channel under replay run ``run``."""
+        return replace(self, replay_run=run)
+
+    def as_live(self) -> ChannelKey:
+        """The same channel without replay tag."""
+        return replace(self, replay_run=None)
+
+    def __str__(self) -> str:
+        return self.expr
+
+
+def _prefix(replay_run: str | None) -> list[str]:
+    if replay_run is None:
+        return [ROOT, LAYOUT_VERSION]
+    return [ROOT, LAYOUT_VERSION, REPLAY_TAG, replay_run]
+
+
+def build_key(
+    site: str,
+    mill: str,
+    signal: Signal | str,
+    side: Side | str | None = None,
+    *,
+    replay_run: str | None = None,
+) -> str:
+    """Build a concrete channel key; raises :class:`KeyFormatError` naming the bad segment.
+
+    ``signal`` is a base signal name; the drive side goes in ``side``.
+    """
+    return ChannelKey(site, mill, signal, side, replay_run).expr
+
+
+def _split_prefix(expr: str) -> tuple[str | None, list[str]]:
+    parts = expr.split("/")
+    if parts[:1] != [ROOT]:
+        raise KeyFormatError("root", parts[0], f"expected {ROOT!r}")
+    if parts[1:2] != [LAYOUT_VERSION]:
+        got = parts[1] if len(parts) > 1 else ""
+        raise KeyFormatError("version", got, f"expected {LAYOUT_VERSION!r}")
+    if len(parts) > 2 and parts[2] == REPLAY_TAG:
+        if len(parts) != _REPLAY_LEN:
+            raise KeyFormatError("key", expr, "replay keys have 7 chunks: " + replay_pattern())
+        return _check_segment("run", parts[3]), parts[4:]
+    if len(parts) != _LIVE_LEN:
+        raise KeyFormatError("key", expr, "live keys have 5 chunks: " + live_pattern())
+    return None, parts[2:]
+
+
+def parse_key(expr: str) -> ChannelKey:
+    """Parse a concrete key (live or replay); raises :class:`KeyFormatError`."""
+    run, (site, mill, signal) = _split_prefix(expr)
+    base, side = _parse_signal(signal)
+    return ChannelKey(_check_segment("site", site), _check_segment("mill", mill), base, side, run)
+
+
+def _segment_or_wild(name: str, value: str) -> str:
+    return value if value in (WILD, WILD_ANY) else _check_segment(name, value)
+
+
+def mill_pattern(site: str, mill: str, *, replay_run: str | None = None) -> str:
+    """All signals of one mill: ``millwatch/v1/<site>/<mill>/*`` (``*`` allowed)."""
+    run = None if replay_run is None else _segment_or_wild("run", replay_run)
+    segs = [_segment_or_wild("site", site), _segment_or_wild("mill", mill), WILD]
+    return "/".join([*_prefix(run), *segs])
+
+
+def site_pattern(site: str, *, replay_run: str | None = None) -> str:
+    """All mills of one site: ``millwatch/v1/<site>/*/*``."""
+    return mill_pattern(site, WILD, replay_run=replay_run)
+
+
+def live_pattern() -> str:
+    """Every live channel: ``millwatch/v1/*/*/*`` (never matches replayed keys)."""
+    return mill_pattern(WILD, WILD)
+
+
+def replay_pattern(run: str = WILD) -> str:
+    """Every channel of replay run ``run`` (default: all runs)."""
+    return mill_pattern(WILD, WILD, replay_run=run)
+
+
+def to_replay(expr: str, run: str) -> str:
+    """Map a live (or replay) key to the same channel under replay run ``run``."""
+    return parse_key(expr).as_replay(run).expr
+
+
+def to_live(expr: str) -> str:
+    """Strip the replay tag of a key (identity for live keys)."""
+    return parse_key(expr).as_live().expr
+
+
+def _chunk_ok(pattern_chunk: str, key_chunk: str) -> bool:
+    if pattern_chunk == WILD:
+        return not key_chunk.startswith("@")
+    return pattern_chunk == key_chunk
+
+
+@lru_cache(maxsize=4096)
+def _match(pattern: tuple[str, ...], key: tuple[str, ...]) -> bool:
+    if not pattern:
+        return not key
+    head = pattern[0]
+    if head == WILD_ANY:
+        if _match(pattern[1:], key):
+            return True
+        return bool(key) and not key[0].startswith("@") and _match(pattern, key[1:])
+    return bool(key) and _chunk_ok(head, key[0]) and _match(pattern[1:], key[1:])
+
+
+def key_matches(pattern: str, key: str) -> bool:
+    """Whether concrete ``key`` matches zenoh key expression ``pattern``.
+
+    Supports literal chunks, ``*`` (one chunk) and ``**`` (zero or more chunks);
+    wildcards never match verbatim ``@`` chunks, as in zenoh 1.x. Sub-chunk
+    wildcards (``$*``) are rejected with :class:`KeyFormatError`.
+    """
+    if "$*" in pattern:
+        raise KeyFormatError("pattern", pattern, "sub-chunk wildcards ($*) are not supported")
+    return _match(tuple(pattern.split("/")), tuple(key.split("/")))

@@ -1,0 +1,288 @@
+"""Versioned block wire format: one zenoh message = one block of one channel.
+
+A block is a fixed 40-byte little-endian header followed by a contiguous run of
+little-endian samples. Format version 1 layout (offsets in bytes):
+
+=======  ====  ========  ===============================================================
+offset   size  type      field
+=======  ====  ========  ===============================================================
+0        4     bytes     magic ``b"MWBK"`` (0x4D 0x57 0x42 0x4B)
+4        2     uint16    format version, ``1``
+6        2     uint16    header length H in bytes; ``>= 40``. Samples start at offset H.
+                         v1 writers send 40; v1 readers skip any extra header bytes, so a
+                         later minor revision can append header fields.
+8        8     int64     t0: time of sample 0, ns since the Unix epoch, UTC
+16       8     float64   fs: sample rate in Hz, finite and ``> 0``
+24       8     uint64    seq: per-channel sequence number (+1 per block; gaps = lost blocks)
+32       1     uint8     dtype code: 1 float32, 2 float64, 3 int16, 4 int32
+33       1     uint8     unit code: 1 kN·m, 2 MPa, 3 rpm, 4 V, 5 pulse
+34       2     uint16    flags, reserved: writers send 0, v1 readers ignore the value
+36       4     uint32    n: sample count
+40       n·w   samples   n little-endian samples of the dtype (w = 4, 8, 2, 4 bytes)
+=======  ====  ========  ===============================================================
+
+Total length is exactly ``H + n·w``. Sample ``i`` is at ``t0 + i·1e9/fs`` ns.
+Integer dtypes carry the values as sent (e.g. ``pulse`` levels or counts); channel
+calibration lives in the mill config, not in the block.
+
+Decoding is defensive and cheap (one ``struct.unpack_from`` and one
+``np.frombuffer`` view, no copy): every malformed payload raises a subclass of
+:class:`WireError` (itself a ``ValueError``), and only those. Non-finite samples
+(NaN, ±inf) are *counted* in :attr:`Block.n_nonfinite`, not rejected: the caller
+decides what to do with them.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+MAGIC = b"MWBK"
+FORMAT_VERSION = 1
+HEADER = struct.Struct("<4sHHqdQBBHI")
+HEADER_SIZE = HEADER.size  # 40 bytes
+_INT64_MIN, _INT64_MAX = -(2**63), 2**63 - 1
+_UINT64_MAX = 2**64 - 1
+_UINT32_MAX = 2**32 - 1
+
+
+class DType(enum.IntEnum):
+    """Sample dtype codes (byte 32 of the header)."""
+
+    FLOAT32 = 1
+    FLOAT64 = 2
+    INT16 = 3
+    INT32 = 4
+
+    @property
+    def numpy(self) -> np.dtype:
+        """The little-endian numpy dtype of this code."""
+        return _NUMPY_DTYPES[self]
+
+
+_NUMPY_DTYPES = {
+    DType.FLOAT32: np.dtype("<f4"),
+    DType.FLOAT64: np.dtype("<f8"),
+    DType.INT16: np.dtype("<i2"),
+    DType.INT32: np.dtype("<i4"),
+}
+_DTYPE_BY_KIND = {(d.numpy.kind, d.numpy.itemsize): d for d in DType}
+_DTYPE_CODES = frozenset(int(d) for d in DType)
+
+
+class Unit(enum.IntEnum):
+    """Unit codes (byte 33 of the header); ``symbol`` is the display string."""
+
+    KILONEWTON_METRE = 1
+    MEGAPASCAL = 2
+    RPM = 3
+    VOLT = 4
+    PULSE = 5
+
+    @property
+    def symbol(self) -> str:
+        """Human-readable unit symbol, e.g. ``"kN·m"``."""
+        return _UNIT_SYMBOLS[self]
+
+
+_UNIT_SYMBOLS = {
+    Unit.KILONEWTON_METRE: "kN·m",
+    Unit.MEGAPASCAL: "MPa",
+    Unit.RPM: "rpm",
+    Unit.VOLT: "V",
+    Unit.PULSE: "pulse",
+}
+_UNIT_CODES = frozenset(int(u) for u in Unit)
+
+
+class WireError(ValueError):
+    """Base of every decode/encode error of the block format.
+
+    ``kind`` is a short stable name for metrics and log-once bookkeeping.
+    """
+
+    kind = "wire_error"
+
+
+class BadMagic(WireError):
+    """The first four bytes are not ``b"MWBK"``."""
+
+    kind = "bad_magic"
+
+
+class UnsupportedVersion(WireError):
+    """The format version is not one this decoder understands."""
+
+    kind = "unsupported_version"
+
+
+class Truncated(WireError):
+    """The payload ends before the header or the declared samples end."""
+
+    kind = "truncated"
+
+
+class LengthMismatch(WireError):
+    """The payload is longer than header + declared samples (trailing bytes)."""
+
+    kind = "length_mismatch"
+
+
+class BadHeaderValue(WireError):
+    """A header field holds an invalid value (fs ≤ 0, unknown dtype/unit, …)."""
+
+    kind = "bad_header_value"
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Block:
+    """One decoded block.
+
+    ``samples`` is a read-only numpy view on the payload (no copy), dtype per
+    ``dtype``, in ``unit``. ``t0_ns`` is int64 ns since the Unix epoch (UTC), ``fs``
+    in Hz. ``n_nonfinite`` counts NaN/±inf samples (always 0 for integer dtypes).
+    """
+
+    samples: np.ndarray
+    t0_ns: int
+    fs: float
+    seq: int
+    unit: Unit
+    dtype: DType
+    n_nonfinite: int = 0
+    version: int = FORMAT_VERSION
+
+    @property
+    def duration_ns(self) -> int:
+        """Span covered by the block, ``n·1e9/fs`` ns (rounded)."""
+        return round(len(self.samples) * 1e9 / self.fs)
+
+    @property
+    def t_end_ns(self) -> int:
+        """Time just after the last sample, ``t0 + n·1e9/fs`` ns (rounded)."""
+        return self.t0_ns + self.duration_ns
+
+    def times_ns(self) -> np.ndarray:
+        """int64 time stamps (ns since epoch, UTC) of every sample."""
+        offsets = np.rint(np.arange(len(self.samples)) * (1e9 / self.fs))
+        return self.t0_ns + offsets.astype(np.int64)
+
+
+def _dtype_of(samples: np.ndarray, dtype: DType | None) -> DType:
+    if dtype is not None:
+        return DType(dtype)
+    code = _DTYPE_BY_KIND.get((samples.dtype.kind, samples.dtype.itemsize))
+    if code is None:
+        raise BadHeaderValue(f"dtype: unsupported sample dtype {samples.dtype}")
+    return code
+
+
+def _check_encode_args(t0_ns: int, fs: float, seq: int, n: int) -> None:
+    if not _INT64_MIN <= t0_ns <= _INT64_MAX:
+        raise BadHeaderValue(f"t0_ns: {t0_ns} does not fit int64")
+    if not (math.isfinite(fs) and fs > 0):
+        raise BadHeaderValue(f"fs: sample rate must be finite and > 0 Hz, got {fs}")
+    if not 0 <= seq <= _UINT64_MAX:
+        raise BadHeaderValue(f"seq: {seq} does not fit uint64")
+    if n > _UINT32_MAX:
+        raise BadHeaderValue(f"n: {n} samples do not fit uint32")
+
+
+def encode_block(
+    samples: np.ndarray,
+    t0_ns: int,
+    fs: float,
+    seq: int,
+    unit: Unit,
+    dtype: DType | None = None,
+) -> bytes:
+    """Encode one block (format v1) to bytes.
+
+    ``samples`` (1-D) in ``unit``; ``t0_ns`` int64 ns since the Unix epoch (UTC);
+    ``fs`` in Hz; ``seq`` uint64. ``dtype`` defaults to the samples' own dtype; when
+    given, samples are cast with ``same_kind`` casting (float64 → float32 is fine,
+    float → int16 raises). Raises :class:`BadHeaderValue` for invalid arguments.
+    """
+    arr = np.asarray(samples)
+    if arr.ndim != 1:
+        raise BadHeaderValue(f"samples: expected a 1-D array, got shape {arr.shape}")
+    code = _dtype_of(arr, dtype)
+    try:
+        unit = Unit(unit)
+    except ValueError as exc:
+        raise BadHeaderValue(f"unit: unknown unit {unit!r}") from exc
+    _check_encode_args(int(t0_ns), float(fs), int(seq), arr.size)
+    try:
+        body = arr.astype(code.numpy, casting="same_kind", copy=False)
+    except TypeError as exc:
+        raise BadHeaderValue(f"dtype: cannot cast {arr.dtype} to {code.name}") from exc
+    head = HEADER.pack(
+        MAGIC, FORMAT_VERSION, HEADER_SIZE, int(t0_ns), float(fs), int(seq),
+        int(code), int(unit), 0, arr.size,
+    )  # fmt: skip
+    return head + body.tobytes()
+
+
+def _check_header(fs: float, dtype_code: int, unit_code: int, header_len: int) -> None:
+    if header_len < HEADER_SIZE:
+        raise BadHeaderValue(f"header length: {header_len} < {HEADER_SIZE} bytes")
+    if not (math.isfinite(fs) and fs > 0):
+        raise BadHeaderValue(f"fs: sample rate must be finite and > 0 Hz, got {fs}")
+    if dtype_code not in _DTYPE_CODES:
+        raise BadHeaderValue(f"dtype: unknown dtype code {dtype_code}")
+    if unit_code not in _UNIT_CODES:
+        raise BadHeaderValue(f"unit: unknown unit code {unit_code}")
+
+
+def _check_prefix(payload: bytes | bytearray | memoryview) -> None:
+    if len(payload) < 6:
+        if bytes(payload[:4]) != MAGIC[: min(len(payload), 4)]:
+            raise BadMagic(f"magic: expected {MAGIC!r}, got {bytes(payload[:4])!r}")
+        raise Truncated(f"payload of {len(payload)} bytes is shorter than the magic+version")
+    if bytes(payload[:4]) != MAGIC:
+        raise BadMagic(f"magic: expected {MAGIC!r}, got {bytes(payload[:4])!r}")
+    (version,) = struct.unpack_from("<H", payload, 4)
+    if version != FORMAT_VERSION:
+        raise UnsupportedVersion(f"format version {version}; this decoder reads {FORMAT_VERSION}")
+    if len(payload) < HEADER_SIZE:
+        raise Truncated(
+            f"payload of {len(payload)} bytes is shorter than the {HEADER_SIZE}-byte header"
+        )
+
+
+def _count_nonfinite(samples: np.ndarray) -> int:
+    if samples.dtype.kind != "f":
+        return 0
+    return int(samples.size - np.count_nonzero(np.isfinite(samples)))
+
+
+def decode_block(payload: bytes | bytearray | memoryview) -> Block:
+    """Decode one block; raise a :class:`WireError` subclass if it is malformed.
+
+    The returned samples are a read-only view on ``payload`` (no copy).
+    """
+    _check_prefix(payload)
+    _, version, header_len, t0_ns, fs, seq, dtype_code, unit_code, _, n = HEADER.unpack_from(
+        payload
+    )
+    _check_header(fs, dtype_code, unit_code, header_len)
+    dtype = DType(dtype_code)
+    expected = header_len + n * dtype.numpy.itemsize
+    if len(payload) < expected:
+        raise Truncated(f"payload of {len(payload)} bytes, header declares {expected}")
+    if len(payload) > expected:
+        raise LengthMismatch(
+            f"payload of {len(payload)} bytes, header declares {expected} ({n} samples)"
+        )
+    samples = np.frombuffer(payload, dtype=dtype.numpy, count=n, offset=header_len)
+    if samples.flags.writeable:
+        samples = samples.view()
+        samples.flags.writeable = False
+    return Block(
+        samples=samples, t0_ns=t0_ns, fs=fs, seq=seq, unit=Unit(unit_code), dtype=dtype,
+        n_nonfinite=_count_nonfinite(samples), version=version,
+    )  # fmt: skip
