@@ -106,6 +106,14 @@ class Cycles:
         """Number of half cycles (count 0.5)."""
         return int(np.count_nonzero(self.count == 0.5))
 
+    def times_ns(self, t0_ns: int, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        """Start and end times of each cycle, int64 ns since the Unix epoch, for a record whose
+        sample 0 is at ``t0_ns`` and sampled at ``fs_hz`` (DESIGN.md: t = t0 + i·1e9/fs)."""
+        step = 1e9 / fs_hz
+        start = t0_ns + np.rint(self.i_start * step).astype(np.int64)
+        end = t0_ns + np.rint(self.i_end * step).astype(np.int64)
+        return start, end
+
     def copy(self) -> Cycles:
         """An independent copy (the counter's views are overwritten by its next ``feed``)."""
         return Cycles(self._f[:, : self._n].copy(), self._i[:, : self._n].copy(), self._n)

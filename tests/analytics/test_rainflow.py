@@ -337,3 +337,11 @@ def test_residue_of_white_noise_stays_small():
         c.feed(rng.standard_normal(1000))
         longest = max(longest, c.residue_length)
     assert longest < 40
+
+
+def test_cycle_times_follow_the_block_convention():
+    cycles = count_cycles(np.array([0.0, 5.0, 1.0, 4.0, -2.0, 3.0]))
+    start, end = cycles.times_ns(1_700_000_000_000_000_000, 1000.0)
+    assert start.tolist()[0] == 1_700_000_000_000_000_000 + 2_000_000
+    assert end.tolist()[0] == 1_700_000_000_000_000_000 + 3_000_000
+    assert start.dtype == np.int64
