@@ -21,13 +21,21 @@ from dataclasses import dataclass
 
 from analytics.sn_curves import SNCurve, marin_endurance_limit
 
-__all__ = ["SN_MODEL_NAMES", "SNModelParameters", "build_sn_curve"]
+__all__ = ["SN_MODEL_NAMES", "SN_MODEL_PARAMETERS", "SNModelParameters", "build_sn_curve"]
 
 #: App. D section 1: S_ut and the Marin factors of the pinion shaft.
 APP_D_S_UT = 850.0
 APP_D_MARIN = {"ka": 0.8, "kb": 0.688, "kc": 0.814, "kd": 1.0}
 
-SN_MODEL_NAMES = ("shigley", "shigley-limit", "fat-normal", "fat-shear")
+#: Each model's own parameter (besides S_ut) and its default: ``None`` = from S_ut and the Marin
+#: factors (App. D section 1, or the material's in a mill configuration).
+SN_MODEL_PARAMETERS: dict[str, dict[str, float | None]] = {
+    "shigley": {"S_e": None},
+    "shigley-limit": {"S_e": None},
+    "fat-normal": {"fat": 160.0},
+    "fat-shear": {"fat": 100.0},
+}
+SN_MODEL_NAMES = tuple(SN_MODEL_PARAMETERS)
 
 
 @dataclass(frozen=True, slots=True)
