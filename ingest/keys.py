@@ -159,6 +159,13 @@ def build_key(
     return ChannelKey(site, mill, signal, side, replay_run).expr
 
 
+def channel_key(site: str, mill: str, segment: str, *, replay_run: str | None = None) -> str:
+    """The key of a configured channel whose ``<signal>`` chunk is ``segment`` (e.g. the mill
+    config's ``pinion_torque_nbs``); raises :class:`KeyFormatError` naming the bad part."""
+    signal, side = _parse_signal(segment)
+    return build_key(site, mill, signal, side, replay_run=replay_run)
+
+
 def _split_prefix(expr: str) -> tuple[str | None, list[str]]:
     parts = expr.split("/")
     if parts[:1] != [ROOT]:

@@ -88,6 +88,15 @@ class Unit(enum.IntEnum):
         """Human-readable unit symbol, e.g. ``"kN·m"``."""
         return _UNIT_SYMBOLS[self]
 
+    @classmethod
+    def from_symbol(cls, symbol: str) -> Unit:
+        """The unit whose symbol is ``symbol`` (as written in mill configs, e.g. ``"MPa"``)."""
+        for unit, text in _UNIT_SYMBOLS.items():
+            if text == symbol:
+                return unit
+        known = ", ".join(_UNIT_SYMBOLS.values())
+        raise BadHeaderValue(f"unit: unknown unit symbol {symbol!r}; known: {known}")
+
 
 _UNIT_SYMBOLS = {
     Unit.KILONEWTON_METRE: "kN·m",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-__all__ = ["non_negative_float", "positive_float", "positive_int"]
+__all__ = ["duration_seconds", "non_negative_float", "positive_float", "positive_int"]
 
 
 def positive_int(text: str) -> int:
@@ -42,4 +42,23 @@ def _float(text: str, rule: str) -> float:
         raise argparse.ArgumentTypeError(f"must be a number {rule}, got {text!r}") from None
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"must be a finite number {rule}, got {text}")
+    return value
+
+
+_DURATION_UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
+
+
+def duration_seconds(text: str) -> float:
+    """A duration > 0: seconds, or a number with unit s, m, h or d (``90s``, ``10m``, ``30d``)."""
+    unit = text[-1:].lower()
+    scale = _DURATION_UNITS.get(unit)
+    number = text[:-1] if scale is not None else text
+    try:
+        value = float(number) * (scale or 1.0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be a duration such as 90s, 10m, 2h or 30d, got {text!r}"
+        ) from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a duration > 0, got {text!r}")
     return value

@@ -153,3 +153,15 @@ def test_no_formatted_keys_outside_the_keys_module() -> None:
         if path not in owners and _FORMATTED_KEY.search(path.read_text(encoding="utf-8"))
     ]
     assert offenders == []
+
+
+def test_channel_key_takes_the_mill_config_segment():
+    from ingest.keys import channel_key
+
+    assert (
+        channel_key("plant", "m1", "pinion_torque_nbs") == "millwatch/v1/plant/m1/pinion_torque_nbs"
+    )
+    assert channel_key("plant", "m1", "speed") == "millwatch/v1/plant/m1/speed"
+    with pytest.raises(KeyFormatError) as err:
+        channel_key("plant", "m1", "pinion_torque_left")
+    assert err.value.segment == "signal"

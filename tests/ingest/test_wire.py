@@ -191,3 +191,12 @@ def test_decode_is_fast_enough_for_8000_blocks_per_second() -> None:
     for _ in range(8000):
         decode_block(payload)
     assert time.perf_counter() - start < 0.5  # one second of traffic in < 0.5 s (≈ 7 µs each)
+
+
+def test_units_are_found_by_their_config_symbol():
+    from ingest.wire import Unit
+
+    assert Unit.from_symbol("kN·m") is Unit.KILONEWTON_METRE
+    assert Unit.from_symbol("MPa") is Unit.MEGAPASCAL
+    with pytest.raises(BadHeaderValue, match="unknown unit symbol 'psi'"):
+        Unit.from_symbol("psi")
