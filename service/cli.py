@@ -12,7 +12,11 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from service import demo_command, rainflow_command
+from service import (
+    demo_command,
+    rainflow_command,
+    simulate_command,
+)
 from service.signal_files import SignalFileError
 
 __all__ = ["build_parser", "main"]
@@ -20,7 +24,7 @@ __all__ = ["build_parser", "main"]
 log = logging.getLogger("millwatch")
 
 #: Errors a user can fix from the message alone: printed without a traceback.
-USER_ERRORS: tuple[type[BaseException], ...] = (SignalFileError, ValueError, OSError)
+USER_ERRORS: tuple[type[BaseException], ...] = (SignalFileError, ValueError, KeyError, OSError)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -36,6 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
     demo_command.add_parser(sub)
     rainflow_command.add_parser(sub)
+    simulate_command.add_parser(sub)
     return parser
 
 
