@@ -1,0 +1,266 @@
+"""The embedded store: SQLite in WAL mode, schema versioned with forward migrations.
+
+What the worker keeps (DESIGN.md "Persistence and recovery"): events (starts, stops, barring,
+data quality, alarms' transitions later), damage per mill, component, phase and day, per-day
+rainflow matrices, steady-state metrics and harmonic tables as timestamped records, and
+checkpoints: analyzer snapshots with the archive position they correspond to.
+
+Design notes:
+
+* One writer (the worker thread) and any number of readers (the API): WAL mode lets readers see
+  a consistent snapshot while the writer appends. ``synchronous=NORMAL`` is durable across a
+  process crash (the MCAP archive is the log; a power cut loses at most the last transactions,
+  which recovery rebuilds from the archive tail).
+* Everything one analyzed frame produces is written in one transaction
+  (:meth:`Store.transaction`), and the checkpoint that covers it is written in the same way, so
+  after a crash the store never holds results newer than its last checkpoint plus replay.
+* Damage rows are *set*, not added: the worker writes each day's running totals (exact sums
+  kept in the analyzer), so replaying the archive tail after a crash is idempotent.
+* Migrations: ``MIGRATIONS[i]`` brings the schema from version ``i`` to ``i + 1``. Opening an
+  older file migrates it; opening a file written by a newer millwatch is refused.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sqlite3
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+__all__ = ["SCHEMA_VERSION", "DamageRow", "EventRow", "Store", "StoreError"]
+
+log = logging.getLogger(__name__)
+
+MIGRATIONS: tuple[tuple[str, ...], ...] = (
+    (  # 0 → 1
+        """CREATE TABLE mills (
+            mill_id TEXT PRIMARY KEY, site TEXT NOT NULL, config_json TEXT NOT NULL,
+            updated_ns INTEGER NOT NULL)""",
+        """CREATE TABLE events (
+            id INTEGER PRIMARY KEY, mill_id TEXT NOT NULL, kind TEXT NOT NULL,
+            t_ns INTEGER NOT NULL, t_end_ns INTEGER, data_json TEXT NOT NULL)""",
+        "CREATE INDEX events_by_mill_time ON events (mill_id, kind, t_ns)",
+        """CREATE UNIQUE INDEX events_unique ON events (mill_id, kind, t_ns)""",
+        """CREATE TABLE damage_daily (
+            mill_id TEXT NOT NULL, component TEXT NOT NULL, phase TEXT NOT NULL,
+            day TEXT NOT NULL, damage REAL NOT NULL, cycles REAL NOT NULL,
+            PRIMARY KEY (mill_id, component, phase, day))""",
+        """CREATE TABLE records (
+            id INTEGER PRIMARY KEY, mill_id TEXT NOT NULL, kind TEXT NOT NULL,
+            t_ns INTEGER NOT NULL, data_json TEXT NOT NULL)""",
+        "CREATE UNIQUE INDEX records_unique ON records (mill_id, kind, t_ns)",
+        """CREATE TABLE checkpoints (
+            id INTEGER PRIMARY KEY, created_ns INTEGER NOT NULL, position_json TEXT NOT NULL,
+            state_json TEXT NOT NULL)""",
+    ),
+)
+SCHEMA_VERSION = len(MIGRATIONS)
+#: Checkpoints kept (older ones are deleted when a new one is written).
+CHECKPOINTS_KEPT = 3
+
+
+class StoreError(RuntimeError):
+    """The store file cannot be used (newer schema, corrupt, not writable)."""
+
+
+@dataclass(frozen=True, slots=True)
+class EventRow:
+    """An event of a mill: ``kind`` (start, stop, barring, data_quality, …), times in ns UTC."""
+
+    mill_id: str
+    kind: str
+    t_ns: int
+    data: dict[str, Any]
+    t_end_ns: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class DamageRow:
+    """Miner damage and cycles of one component and phase on one local calendar day."""
+
+    mill_id: str
+    component: str
+    phase: str
+    day: str  # YYYY-MM-DD in the site's time zone
+    damage: float
+    cycles: float
+
+
+class Store:
+    """A SQLite store file; thread-safe (one connection, serialised by a lock)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=NORMAL")
+            self._db.execute("PRAGMA busy_timeout=5000")
+        except sqlite3.Error as exc:
+            raise StoreError(f"{self.path}: cannot open the store ({exc})") from exc
+        self._lock = threading.RLock()
+        self._migrate()
+
+    # ------------------------------------------------------------------ schema
+    @property
+    def schema_version(self) -> int:
+        return int(self._db.execute("PRAGMA user_version").fetchone()[0])
+
+    def _migrate(self) -> None:
+        version = self.schema_version
+        if version > SCHEMA_VERSION:
+            raise StoreError(
+                f"{self.path}: schema version {version} was written by a newer millwatch "
+                f"(this one knows up to {SCHEMA_VERSION}); upgrade millwatch to open it"
+            )
+        for target in range(version + 1, SCHEMA_VERSION + 1):
+            with self.transaction() as db:
+                for statement in MIGRATIONS[target - 1]:
+                    db.execute(statement)
+                db.execute(f"PRAGMA user_version = {target}")
+            log.info("store %s migrated to schema version %d", self.path, target)
+
+    @contextmanager
+    def transaction(self) -> Iterator[sqlite3.Connection]:
+        """One atomic write (``BEGIN IMMEDIATE`` … ``COMMIT``, rolled back on error)."""
+        with self._lock:
+            self._db.execute("BEGIN IMMEDIATE")
+            try:
+                yield self._db
+            except BaseException:
+                self._db.execute("ROLLBACK")
+                raise
+            self._db.execute("COMMIT")
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ writing
+    def put_mill(self, mill_id: str, site: str, config: dict[str, Any], now_ns: int) -> None:
+        with self.transaction() as db:
+            db.execute(
+                "INSERT INTO mills VALUES (?, ?, ?, ?) ON CONFLICT (mill_id) DO UPDATE SET "
+                "site = excluded.site, config_json = excluded.config_json, "
+                "updated_ns = excluded.updated_ns",
+                (mill_id, site, json.dumps(config), now_ns),
+            )
+
+    @staticmethod
+    def add_events(db: sqlite3.Connection, events: Sequence[EventRow]) -> None:
+        """Insert events (inside :meth:`transaction`); an event already stored (same mill,
+        kind and time, e.g. re-derived while replaying the archive tail) is replaced."""
+        db.executemany(
+            "INSERT OR REPLACE INTO events (mill_id, kind, t_ns, t_end_ns, data_json) "
+            "VALUES (?, ?, ?, ?, ?)",
+            [(e.mill_id, e.kind, e.t_ns, e.t_end_ns, json.dumps(e.data)) for e in events],
+        )
+
+    @staticmethod
+    def set_damage(db: sqlite3.Connection, rows: Sequence[DamageRow]) -> None:
+        """Set running daily totals (inside :meth:`transaction`); idempotent."""
+        db.executemany(
+            "INSERT OR REPLACE INTO damage_daily VALUES (?, ?, ?, ?, ?, ?)",
+            [(r.mill_id, r.component, r.phase, r.day, r.damage, r.cycles) for r in rows],
+        )
+
+    @staticmethod
+    def add_record(
+        db: sqlite3.Connection, mill_id: str, kind: str, t_ns: int, data: dict[str, Any]
+    ) -> None:
+        """A timestamped record (steady-state metrics, harmonic table, matrix, health…)."""
+        db.execute(
+            "INSERT OR REPLACE INTO records (mill_id, kind, t_ns, data_json) VALUES (?, ?, ?, ?)",
+            (mill_id, kind, t_ns, json.dumps(data)),
+        )
+
+    @staticmethod
+    def put_checkpoint(
+        db: sqlite3.Connection, created_ns: int, position: dict[str, Any], state: dict[str, Any]
+    ) -> None:
+        """Store a checkpoint (inside :meth:`transaction`) and drop all but the newest few."""
+        db.execute(
+            "INSERT INTO checkpoints (created_ns, position_json, state_json) VALUES (?, ?, ?)",
+            (created_ns, json.dumps(position), json.dumps(state)),
+        )
+        db.execute(
+            "DELETE FROM checkpoints WHERE id NOT IN "
+            "(SELECT id FROM checkpoints ORDER BY id DESC LIMIT ?)",
+            (CHECKPOINTS_KEPT,),
+        )
+
+    # ------------------------------------------------------------------ reading
+    def latest_checkpoint(self) -> tuple[dict[str, Any], dict[str, Any]] | None:
+        """``(position, state)`` of the newest checkpoint, or ``None``."""
+        row = self._query_one(
+            "SELECT position_json, state_json FROM checkpoints ORDER BY id DESC LIMIT 1", ()
+        )
+        return None if row is None else (json.loads(row[0]), json.loads(row[1]))
+
+    def mills(self) -> list[dict[str, Any]]:
+        rows = self._query("SELECT mill_id, site, config_json, updated_ns FROM mills", ())
+        return [
+            {"mill_id": m, "site": s, "config": json.loads(c), "updated_ns": u}
+            for m, s, c, u in rows
+        ]
+
+    def events(
+        self,
+        mill_id: str,
+        kind: str | None = None,
+        since_ns: int | None = None,
+        until_ns: int | None = None,
+    ) -> list[EventRow]:
+        """Events of a mill in time order, optionally of one kind and in ``[since, until)``."""
+        sql = "SELECT mill_id, kind, t_ns, data_json, t_end_ns FROM events WHERE mill_id = ?"
+        args: list[Any] = [mill_id]
+        for clause, value in (("kind = ?", kind), ("t_ns >= ?", since_ns), ("t_ns < ?", until_ns)):
+            if value is not None:
+                sql += " AND " + clause
+                args.append(value)
+        rows = self._query(sql + " ORDER BY t_ns, id", tuple(args))
+        return [EventRow(m, k, t, json.loads(d), e) for m, k, t, d, e in rows]
+
+    def damage(self, mill_id: str, since_day: str | None = None) -> list[DamageRow]:
+        """Daily damage rows of a mill, oldest first."""
+        sql = "SELECT * FROM damage_daily WHERE mill_id = ?"
+        args: tuple[Any, ...] = (mill_id,)
+        if since_day is not None:
+            sql += " AND day >= ?"
+            args = (mill_id, since_day)
+        return [DamageRow(*r) for r in self._query(sql + " ORDER BY day, component, phase", args)]
+
+    def records(
+        self, mill_id: str, kind: str, since_ns: int | None = None, limit: int | None = None
+    ) -> list[tuple[int, dict[str, Any]]]:
+        """``(t_ns, data)`` records of one kind, newest first."""
+        sql = "SELECT t_ns, data_json FROM records WHERE mill_id = ? AND kind = ?"
+        args: list[Any] = [mill_id, kind]
+        if since_ns is not None:
+            sql += " AND t_ns >= ?"
+            args.append(since_ns)
+        sql += " ORDER BY t_ns DESC"
+        if limit is not None:
+            sql += " LIMIT ?"
+            args.append(limit)
+        return [(t, json.loads(d)) for t, d in self._query(sql, tuple(args))]
+
+    def _query(self, sql: str, args: tuple[Any, ...]) -> list[tuple[Any, ...]]:
+        with self._lock:
+            return self._db.execute(sql, args).fetchall()
+
+    def _query_one(self, sql: str, args: tuple[Any, ...]) -> tuple[Any, ...] | None:
+        with self._lock:
+            return self._db.execute(sql, args).fetchone()
