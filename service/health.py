@@ -1,0 +1,105 @@
+"""Health of the data path, per mill and channel, for the API and for data-quality events.
+
+Per channel: last sample time (end of the last block, sample clock), last receive time (wall
+clock), lag between the two, blocks and samples received, sequence gaps (missing blocks),
+repeated or out-of-order blocks, non-finite samples, decode errors by kind. Per worker: queue
+depth, high-water mark and drops, keys that belong to no configured mill, archive status.
+
+A channel is *stale* when nothing arrived for ``stale_after_s`` seconds of wall time.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+from ingest.wire import Block
+
+__all__ = ["ChannelHealth", "MillHealth", "SeqVerdict"]
+
+SeqVerdict = str  # "first", "next", "gap", "repeat"
+
+
+@dataclass
+class ChannelHealth:
+    """Counters and times of one channel (times in ns since the Unix epoch, UTC)."""
+
+    blocks: int = 0
+    samples: int = 0
+    nonfinite_samples: int = 0
+    missing_blocks: int = 0
+    gaps: int = 0
+    repeats: int = 0
+    decode_errors: Counter[str] = field(default_factory=Counter)
+    last_seq: int | None = None
+    last_sample_ns: int | None = None
+    last_recv_ns: int | None = None
+
+    def observe(self, block: Block, recv_ns: int) -> SeqVerdict:
+        """Account for a decoded block; returns what its sequence number says."""
+        verdict = self._sequence(block.seq)
+        self.blocks += 1
+        self.samples += block.samples.shape[0]
+        self.nonfinite_samples += block.n_nonfinite
+        self.last_sample_ns = block.t_end_ns
+        self.last_recv_ns = recv_ns
+        return verdict
+
+    def _sequence(self, seq: int) -> SeqVerdict:
+        last, self.last_seq = self.last_seq, seq
+        if last is None:
+            return "first"
+        if seq == last + 1:
+            return "next"
+        if seq > last + 1:
+            self.gaps += 1
+            self.missing_blocks += seq - last - 1
+            return "gap"
+        self.repeats += 1
+        return "repeat"
+
+    def decode_error(self, kind: str, recv_ns: int) -> None:
+        self.decode_errors[kind] += 1
+        self.last_recv_ns = recv_ns
+
+    def stale(self, now_ns: int, stale_after_s: float) -> bool:
+        return self.last_recv_ns is None or now_ns - self.last_recv_ns > stale_after_s * 1e9
+
+    def as_dict(self, now_ns: int, stale_after_s: float) -> dict[str, Any]:
+        lag = None
+        if self.last_recv_ns is not None and self.last_sample_ns is not None:
+            lag = (self.last_recv_ns - self.last_sample_ns) / 1e9
+        return {
+            "blocks": self.blocks,
+            "samples": self.samples,
+            "nonfinite_samples": self.nonfinite_samples,
+            "missing_blocks": self.missing_blocks,
+            "gaps": self.gaps,
+            "repeats": self.repeats,
+            "decode_errors": dict(self.decode_errors),
+            "last_sample_ns": self.last_sample_ns,
+            "last_recv_ns": self.last_recv_ns,
+            "lag_s": lag,
+            "stale": self.stale(now_ns, stale_after_s),
+        }
+
+
+@dataclass
+class MillHealth:
+    """The channels of one mill, by configured channel name."""
+
+    channels: dict[str, ChannelHealth]
+
+    @classmethod
+    def for_channels(cls, names: list[str]) -> MillHealth:
+        return cls({name: ChannelHealth() for name in names})
+
+    def stale_channels(self, now_ns: int, stale_after_s: float) -> list[str]:
+        return [n for n, c in self.channels.items() if c.stale(now_ns, stale_after_s)]
+
+    def as_dict(self, now_ns: int, stale_after_s: float) -> dict[str, Any]:
+        return {
+            "stale_channels": self.stale_channels(now_ns, stale_after_s),
+            "channels": {n: c.as_dict(now_ns, stale_after_s) for n, c in self.channels.items()},
+        }

@@ -1,0 +1,142 @@
+"""Service settings: one validated TOML file for ``millwatch serve``, read at the CLI entry.
+
+Relative paths in the file are relative to the file itself, so a plant directory can be moved
+as a whole. Errors name the file and the field (``archive.rotate_seconds: must be > 0``).
+Nothing is read at import time: :func:`load_service_settings` is called by the command, and
+tests build :class:`ServiceSettings` directly.
+
+Example (``deploy/plant.toml``)::
+
+    [zenoh]
+    listen = ["tcp/127.0.0.1:7447"]      # loopback by default; plants connect to a router
+
+    [archive]
+    directory = "../var/archive"
+
+    [store]
+    path = "../var/millwatch.db"
+
+    [mills]
+    files = ["mills/sag-5200-lrs.toml"]  # or: directory = "mills"
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from analytics.mill_config import MillConfig, describe_validation_error
+from ingest.mill_files import load_mill_config, load_mill_configs
+
+__all__ = ["ServiceSettings", "SettingsError", "load_service_settings"]
+
+
+class SettingsError(ValueError):
+    """Unusable service settings; the message names the file and the fields."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ZenohSettings(_Strict):
+    """Zenoh session: loopback peer by default; ``connect`` to a router in a plant."""
+
+    mode: Literal["peer", "client"] = "peer"
+    listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    connect: tuple[str, ...] = ()
+
+
+class ArchiveSettings(_Strict):
+    """MCAP archive: hourly, 256 MiB files, 64 KiB chunks flushed at least every 0.1 s."""
+
+    directory: Path = Path("var/archive")
+    rotate_seconds: Annotated[float, Field(gt=0)] = 3600.0
+    rotate_bytes: Annotated[int, Field(gt=0)] = 256 * 2**20
+    chunk_size: Annotated[int, Field(gt=0)] = 64 * 2**10
+    max_latency_s: Annotated[float, Field(gt=0)] = 0.1
+
+
+class StoreSettings(_Strict):
+    path: Path = Path("var/millwatch.db")
+
+
+class WorkerSettings(_Strict):
+    """Queue between zenoh callbacks and the worker, and how often to checkpoint."""
+
+    queue_blocks: Annotated[int, Field(gt=0)] = 200_000
+    checkpoint_seconds: Annotated[float, Field(gt=0)] = 60.0
+    stale_after_s: Annotated[float, Field(gt=0)] = 10.0
+
+
+class ApiSettings(_Strict):
+    host: str = "127.0.0.1"
+    port: Annotated[int, Field(ge=0, le=65535)] = 8080
+    api_key: str | None = None
+
+
+class MillSettings(_Strict):
+    """Which mill configuration files this worker analyses."""
+
+    files: tuple[Path, ...] = ()
+    directory: Path | None = None
+
+
+class ServiceSettings(_Strict):
+    zenoh: ZenohSettings = ZenohSettings()
+    archive: ArchiveSettings = ArchiveSettings()
+    store: StoreSettings = StoreSettings()
+    worker: WorkerSettings = WorkerSettings()
+    api: ApiSettings = ApiSettings()
+    mills: MillSettings = MillSettings()
+
+    def resolved(self, base: Path) -> ServiceSettings:
+        """The same settings with relative paths made relative to ``base``."""
+
+        def at(p: Path) -> Path:
+            return p if p.is_absolute() else (base / p).resolve()
+
+        mills = MillSettings(
+            files=tuple(at(p) for p in self.mills.files),
+            directory=None if self.mills.directory is None else at(self.mills.directory),
+        )
+        return self.model_copy(
+            update={
+                "archive": self.archive.model_copy(
+                    update={"directory": at(self.archive.directory)}
+                ),
+                "store": StoreSettings(path=at(self.store.path)),
+                "mills": mills,
+            }
+        )
+
+    def load_mills(self) -> dict[str, MillConfig]:
+        """The configured mills by id; raises naming the file and field of a bad one."""
+        mills = load_mill_configs(self.mills.directory) if self.mills.directory else {}
+        for path in self.mills.files:
+            config = load_mill_config(path)
+            if config.id in mills:
+                raise SettingsError(f"{path}: mill id {config.id!r} is configured twice")
+            mills[config.id] = config
+        if not mills:
+            raise SettingsError("mills: no mill configured (set mills.files or mills.directory)")
+        return mills
+
+
+def load_service_settings(path: str | Path) -> ServiceSettings:
+    """Read and validate a service settings TOML file."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SettingsError(f"{path}: cannot read ({exc})") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise SettingsError(f"{path}: TOML syntax error: {exc}") from exc
+    try:
+        settings = ServiceSettings.model_validate(data)
+    except ValidationError as exc:
+        raise SettingsError(f"{path}: " + "; ".join(describe_validation_error(exc))) from exc
+    return settings.resolved(path.parent.resolve())
