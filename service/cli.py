@@ -12,9 +12,12 @@ import logging
 import sys
 from collections.abc import Sequence
 
+from ingest.archive import ArchiveError
 from service import (
+    archive_command,
     demo_command,
     rainflow_command,
+    replay_command,
     simulate_command,
 )
 from service.signal_files import SignalFileError
@@ -24,7 +27,13 @@ __all__ = ["build_parser", "main"]
 log = logging.getLogger("millwatch")
 
 #: Errors a user can fix from the message alone: printed without a traceback.
-USER_ERRORS: tuple[type[BaseException], ...] = (SignalFileError, ValueError, KeyError, OSError)
+USER_ERRORS: tuple[type[BaseException], ...] = (
+    SignalFileError,
+    ValueError,
+    KeyError,
+    OSError,
+    ArchiveError,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo_command.add_parser(sub)
     rainflow_command.add_parser(sub)
     simulate_command.add_parser(sub)
+    replay_command.add_parser(sub)
+    archive_command.add_parser(sub)
     return parser
 
 
