@@ -252,4 +252,10 @@ def key_matches(pattern: str, key: str) -> bool:
     """
     if "$*" in pattern:
         raise KeyFormatError("pattern", pattern, "sub-chunk wildcards ($*) are not supported")
-    return _match(tuple(pattern.split("/")), tuple(key.split("/")))
+    chunks = tuple(pattern.split("/"))
+    for chunk in chunks:
+        if "*" in chunk and chunk not in (WILD, WILD_ANY):
+            raise KeyFormatError(
+                "pattern", pattern, f"chunk {chunk!r}: '*' and '**' must stand alone in a chunk"
+            )
+    return _match(chunks, tuple(key.split("/")))

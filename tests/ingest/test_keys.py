@@ -165,3 +165,9 @@ def test_channel_key_takes_the_mill_config_segment():
     with pytest.raises(KeyFormatError) as err:
         channel_key("plant", "m1", "pinion_torque_left")
     assert err.value.segment == "signal"
+
+
+@pytest.mark.parametrize("pattern", ["millwatch/v1/s1/m1/*_torque", "millwatch/**x/speed"])
+def test_partial_chunk_wildcards_are_refused_not_silently_unmatched(pattern):
+    with pytest.raises(KeyFormatError, match="must stand alone"):
+        key_matches(pattern, "millwatch/v1/s1/m1/pinion_torque")
