@@ -9,6 +9,11 @@ blocks (see README "Wire format") on the channel keys of the mill configuration.
 Offline (``--out``) runs as fast as the machine allows with a progress bar; ``--out x.mcap``
 writes one file, ``--out DIR`` hourly rotated files named after the mill. ``--truth`` writes the
 ground truth (event times, peaks, rise times, harmonic lines, injected faults) as JSON.
+
+Live (``--publish``) re-times the scene to start now and publishes each block on the mill's live
+keys when it is complete, at ``--speed`` × real time, like a plant gateway. By default it listens
+on ``tcp/127.0.0.1:7447`` (loopback only, multicast scouting off), where ``millwatch serve`` with
+default settings connects; ``--connect`` a router instead in a plant-like setup.
 """
 
 from __future__ import annotations
@@ -28,9 +33,11 @@ from ingest import wire
 from ingest.archive import ArchiveWriter
 from ingest.mill_files import load_mill_config
 from ingest.scene_blocks import SceneBlock, scene_blocks
+from ingest.scene_publisher import ScenePublisher, starting_now
 from ingest.scenes import get_scene, list_scenes, load_scene_file
 from ingest.simulator import Scene, SceneSpec
-from service.cli_args import duration_seconds, positive_int
+from ingest.zenoh_session import build_config, open_session
+from service.cli_args import duration_seconds, positive_float, positive_int
 
 __all__ = ["add_parser", "build_scene", "simulate_to_archive"]
 
@@ -138,8 +145,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="length, e.g. 90s, 10m, 2h, 30d (default: the scene's own)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed: same seed, same signals")
-    p.add_argument(
-        "--out", type=Path, required=True, help="FILE.mcap (one file) or a directory (hourly files)"
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument(
+        "--out", type=Path, help="FILE.mcap (one file) or a directory (hourly files)"
+    )
+    where.add_argument(
+        "--publish", action="store_true", help="publish live to zenoh instead (paced by --speed)"
     )
     p.add_argument("--truth", type=Path, help="write the ground truth as JSON here")
     p.add_argument(
@@ -155,12 +166,35 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="sample type on the wire (float64 keeps the simulator's values exactly)",
     )
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    live = p.add_argument_group("live publishing (--publish)")
+    live.add_argument(
+        "--speed",
+        type=positive_float,
+        default=1.0,
+        help="× real time (default 1; 60 shows an hour a minute)",
+    )
+    live.add_argument(
+        "--listen",
+        action="append",
+        default=None,
+        metavar="ENDPOINT",
+        help="zenoh endpoint to listen on (default tcp/127.0.0.1:7447)",
+    )
+    live.add_argument(
+        "--connect",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="zenoh endpoint to connect to (e.g. a router)",
+    )
     p.set_defaults(handler=_main)
 
 
 def _main(args: argparse.Namespace) -> int:
     scene = build_scene(args.scene, args.mill, seed=args.seed, duration_s=args.duration)
     dtype = wire.DType[args.dtype.upper()]
+    if args.publish:
+        return _publish(scene, args, dtype)
     progress = not args.no_progress and sys.stderr.isatty()
     files = simulate_to_archive(
         scene, args.out, block_samples=args.block_size, dtype=dtype, progress=progress
@@ -168,6 +202,32 @@ def _main(args: argparse.Namespace) -> int:
     if args.truth is not None:
         args.truth.write_text(json.dumps(scene.truth.to_dict(), indent=2) + "\n")
     _report(scene.config, scene, files, args.truth)
+    return 0
+
+
+def _publish(scene: Scene, args: argparse.Namespace, dtype: wire.DType) -> int:
+    listen = (
+        args.listen if args.listen is not None else ([] if args.connect else ["tcp/127.0.0.1:7447"])
+    )
+    scene = starting_now(scene)
+    if args.truth is not None:
+        args.truth.write_text(json.dumps(scene.truth.to_dict(), indent=2) + "\n")
+    config = build_config(listen=listen, connect=args.connect)
+    sys.stderr.write(
+        f"publishing {scene.spec.name!r} for mill {scene.config.id} at {args.speed:g}× real time "
+        f"({scene.n_samples / scene.fs / args.speed:.0f} s); listen {listen or '-'}, "
+        f"connect {args.connect or '-'}; Ctrl-C stops\n"
+    )
+    with open_session(config) as session:
+        publisher = ScenePublisher(
+            session, scene, speed=args.speed, block_samples=args.block_size, dtype=dtype
+        )
+        try:
+            report = publisher.run()
+        except KeyboardInterrupt:
+            sys.stderr.write(f"stopped after {publisher.published} blocks\n")
+            return 130
+    sys.stdout.write(f"published {report.blocks} blocks in {report.wall_s:.1f} s\n")
     return 0
 
 

@@ -21,9 +21,9 @@ import zenoh
 
 from ingest import keys, wire
 from ingest.archive import ArchivedBlock, ArchiveWriter, list_archive_files
+from ingest.pacing import PacingClock, PacingError
 from ingest.replay import (
     KeyRemap,
-    PacingClock,
     Replayer,
     ReplayError,
     ReplayProgress,
@@ -313,7 +313,7 @@ def test_speed_change_keeps_the_archive_position() -> None:
     pacer.set_speed(1.0)  # from max: the next block anchors afresh, not "late"
     assert pacer.wait_s(T0 + 2000 * MS) == 0.0
     assert pacer.late_resyncs == 0
-    with pytest.raises(ReplayError, match="speed"):
+    with pytest.raises(PacingError, match="speed"):
         pacer.set_speed(0.0)
 
 
