@@ -19,6 +19,7 @@ from service import (
     rainflow_command,
     replay_command,
     simulate_command,
+    spectrum_command,
 )
 from service.signal_files import SignalFileError
 
@@ -50,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo_command.add_parser(sub)
     rainflow_command.add_parser(sub)
     simulate_command.add_parser(sub)
+    spectrum_command.add_parser(sub)
     replay_command.add_parser(sub)
     archive_command.add_parser(sub)
     return parser
