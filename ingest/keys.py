@@ -4,6 +4,7 @@ Layout, version 1 (``/``-separated chunks)::
 
     live:    millwatch/v1/<site>/<mill>/<signal>
     replay:  millwatch/v1/@replay/<run>/<site>/<mill>/<signal>
+    alarms:  millwatch/v1/<site>/<mill>/@alarms
 
 - ``v1`` is the key-layout version; a new layout gets ``v2`` and both can coexist
   on one router.
@@ -18,6 +19,13 @@ Layout, version 1 (``/``-separated chunks)::
   never by ``*`` or ``**``: a live consumer subscribed to ``millwatch/v1/**`` can
   therefore never receive replayed blocks by accident, and each replay run has its
   own key space (two engineers replaying the same mill do not interleave).
+
+- Alarm transitions of a mill (JSON, :mod:`alarms.wire`) go on the **verbatim** chunk
+  ``@alarms`` in place of the signal: ``*``/``**`` never match it, so telemetry consumers
+  (``millwatch/v1/**``, :func:`live_pattern`) never receive alarms and alarm subscribers never
+  receive telemetry. SCADA gateways subscribe to :func:`alarm_pattern` (all sites and mills:
+  ``millwatch/v1/*/*/@alarms``) or to one site or mill. :func:`parse_key` refuses alarm keys
+  (they are not channels); :func:`parse_alarm_key` parses them.
 
 No other module formats keys: use :func:`build_key`, :func:`parse_key` and the
 pattern helpers. :func:`key_matches` implements zenoh's ``*``/``**``/verbatim rules
@@ -34,6 +42,7 @@ from functools import lru_cache
 ROOT = "millwatch"
 LAYOUT_VERSION = "v1"
 REPLAY_TAG = "@replay"
+ALARMS_TAG = "@alarms"
 WILD = "*"
 WILD_ANY = "**"
 _SEGMENT_RE = re.compile(r"[a-z0-9][a-z0-9_-]{0,63}")
@@ -259,3 +268,26 @@ def key_matches(pattern: str, key: str) -> bool:
                 "pattern", pattern, f"chunk {chunk!r}: '*' and '**' must stand alone in a chunk"
             )
     return _match(chunks, tuple(key.split("/")))
+
+
+def alarm_key(site: str, mill: str) -> str:
+    """The key a mill's alarm transitions are published on: ``millwatch/v1/<site>/<mill>/@alarms``;
+    raises :class:`KeyFormatError` naming the bad segment."""
+    return "/".join([*_prefix(None), _check_segment("site", site), _check_segment("mill", mill),
+                     ALARMS_TAG])  # fmt: skip
+
+
+def alarm_pattern(site: str = WILD, mill: str = WILD) -> str:
+    """Alarm keys of one mill, one site (``mill="*"``) or everything (default):
+    ``millwatch/v1/*/*/@alarms``."""
+    segs = [_segment_or_wild("site", site), _segment_or_wild("mill", mill), ALARMS_TAG]
+    return "/".join([*_prefix(None), *segs])
+
+
+def parse_alarm_key(expr: str) -> tuple[str, str]:
+    """``(site, mill)`` of an alarm key; raises :class:`KeyFormatError`."""
+    parts = expr.split("/")
+    if len(parts) != _LIVE_LEN or parts[-1] != ALARMS_TAG:
+        raise KeyFormatError("key", expr, "alarm keys look like " + alarm_pattern())
+    _split_prefix(expr)
+    return _check_segment("site", parts[2]), _check_segment("mill", parts[3])

@@ -32,7 +32,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SCHEMA_VERSION", "DamageRow", "EventRow", "Store", "StoreError"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "AlarmRow",
+    "AlarmTransitionRow",
+    "DamageRow",
+    "EventRow",
+    "Store",
+    "StoreError",
+]
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +65,21 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         """CREATE TABLE checkpoints (
             id INTEGER PRIMARY KEY, created_ns INTEGER NOT NULL, position_json TEXT NOT NULL,
             state_json TEXT NOT NULL)""",
+    ),
+    (  # 1 → 2: alarms (current state per alarm) and their transitions (alarms.lifecycle)
+        """CREATE TABLE alarms (
+            alarm_id TEXT PRIMARY KEY, mill_id TEXT NOT NULL, rule TEXT NOT NULL,
+            subject TEXT NOT NULL, quantity TEXT NOT NULL, unit TEXT NOT NULL,
+            severity TEXT NOT NULL, state TEXT NOT NULL, condition INTEGER NOT NULL,
+            raised_ns INTEGER NOT NULL, updated_ns INTEGER NOT NULL, acked_ns INTEGER,
+            acked_by TEXT, cleared_ns INTEGER, value REAL, threshold REAL,
+            message TEXT NOT NULL, seq INTEGER NOT NULL)""",
+        "CREATE INDEX alarms_by_state ON alarms (state, updated_ns)",
+        "CREATE INDEX alarms_by_mill ON alarms (mill_id, updated_ns)",
+        """CREATE TABLE alarm_transitions (
+            alarm_id TEXT NOT NULL, seq INTEGER NOT NULL, kind TEXT NOT NULL,
+            t_ns INTEGER NOT NULL, severity TEXT NOT NULL, state TEXT NOT NULL, value REAL,
+            threshold REAL, by TEXT, message TEXT NOT NULL, PRIMARY KEY (alarm_id, seq))""",
     ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
@@ -89,6 +112,59 @@ class DamageRow:
     day: str  # YYYY-MM-DD in the site's time zone
     damage: float
     cycles: float
+
+
+@dataclass(frozen=True, slots=True)
+class AlarmRow:
+    """Current state of one alarm (fields of ``alarms.lifecycle.Alarm.to_dict()``); times ns
+    UTC; ``condition`` is False while a latched alarm waits for acknowledgement."""
+
+    alarm_id: str
+    mill_id: str
+    rule: str
+    subject: str
+    quantity: str
+    unit: str
+    severity: str
+    state: str
+    raised_ns: int
+    updated_ns: int
+    value: float | None
+    threshold: float | None
+    message: str
+    condition: bool = True
+    acked_ns: int | None = None
+    acked_by: str | None = None
+    cleared_ns: int | None = None
+    seq: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class AlarmTransitionRow:
+    """One transition of an alarm (the fields of ``alarms.lifecycle.Transition.to_row()``,
+    i.e. without ``alarm``); ``seq`` numbers an alarm's transitions from 1."""
+
+    alarm_id: str
+    seq: int
+    kind: str
+    t_ns: int
+    severity: str
+    state: str
+    value: float | None
+    threshold: float | None
+    message: str
+    by: str | None = None
+
+
+_ALARM_COLUMNS = (
+    "alarm_id, mill_id, rule, subject, quantity, unit, severity, state, raised_ns, updated_ns, "
+    "value, threshold, message, condition, acked_ns, acked_by, cleared_ns, seq"
+)
+_TRANSITION_COLUMNS = "alarm_id, seq, kind, t_ns, severity, state, value, threshold, message, by"
+
+
+def _alarm_row(r: tuple[Any, ...]) -> AlarmRow:
+    return AlarmRow(*r[:13], bool(r[13]), *r[14:])
 
 
 class Store:
@@ -201,7 +277,66 @@ class Store:
             (CHECKPOINTS_KEPT,),
         )
 
+    @staticmethod
+    def put_alarm_transitions(
+        db: sqlite3.Connection,
+        transitions: Sequence[AlarmTransitionRow],
+        alarms: Sequence[AlarmRow],
+    ) -> None:
+        """Record alarm transitions and set the alarms' current state (inside
+        :meth:`transaction`). Idempotent: ids and ``seq`` are deterministic, so the archive
+        tail replayed after a crash rewrites the same rows; an older state never overwrites a
+        newer one (higher ``seq`` wins)."""
+        db.executemany(
+            f"INSERT OR REPLACE INTO alarm_transitions ({_TRANSITION_COLUMNS}) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            [(t.alarm_id, t.seq, t.kind, t.t_ns, t.severity, t.state, t.value, t.threshold,
+              t.message, t.by) for t in transitions],
+        )  # fmt: skip
+        db.executemany(
+            f"INSERT INTO alarms ({_ALARM_COLUMNS}) VALUES ({', '.join('?' * 18)}) "
+            "ON CONFLICT (alarm_id) DO UPDATE SET "
+            + ", ".join(f"{c} = excluded.{c}" for c in _ALARM_COLUMNS.split(", ")[1:])
+            + " WHERE excluded.seq >= alarms.seq",
+            [(a.alarm_id, a.mill_id, a.rule, a.subject, a.quantity, a.unit, a.severity, a.state,
+              a.raised_ns, a.updated_ns, a.value, a.threshold, a.message, int(a.condition),
+              a.acked_ns, a.acked_by, a.cleared_ns, a.seq) for a in alarms],
+        )  # fmt: skip
+
     # ------------------------------------------------------------------ reading
+    def alarms(
+        self,
+        state: str | Sequence[str] | None = None,
+        since_ns: int | None = None,
+        mill_id: str | None = None,
+    ) -> list[AlarmRow]:
+        """Alarms, most recently changed first; ``state`` one state or several (e.g.
+        ``("raised", "acknowledged")`` for the open ones), ``since_ns`` changed at or after
+        (``updated_ns``, for pollers), optionally of one mill."""
+        states = [state] if isinstance(state, str) else list(state or [])
+        sql = f"SELECT {_ALARM_COLUMNS} FROM alarms WHERE 1"
+        args: list[Any] = []
+        if states:
+            sql += f" AND state IN ({', '.join('?' * len(states))})"
+            args += states
+        for clause, value in (("updated_ns >= ?", since_ns), ("mill_id = ?", mill_id)):
+            if value is not None:
+                sql += " AND " + clause
+                args.append(value)
+        rows = self._query(sql + " ORDER BY updated_ns DESC, alarm_id", tuple(args))
+        return [_alarm_row(r) for r in rows]
+
+    def alarm(self, alarm_id: str) -> AlarmRow | None:
+        """One alarm's current state, or None."""
+        sql = f"SELECT {_ALARM_COLUMNS} FROM alarms WHERE alarm_id = ?"
+        row = self._query_one(sql, (alarm_id,))
+        return None if row is None else _alarm_row(row)
+
+    def alarm_transitions(self, alarm_id: str) -> list[AlarmTransitionRow]:
+        """An alarm's transitions in order."""
+        sql = f"SELECT {_TRANSITION_COLUMNS} FROM alarm_transitions WHERE alarm_id = ? ORDER BY seq"
+        return [AlarmTransitionRow(*r) for r in self._query(sql, (alarm_id,))]
+
     def latest_checkpoint(self) -> tuple[dict[str, Any], dict[str, Any]] | None:
         """``(position, state)`` of the newest checkpoint, or ``None``."""
         row = self._query_one(

@@ -171,3 +171,40 @@ def test_channel_key_takes_the_mill_config_segment():
 def test_partial_chunk_wildcards_are_refused_not_silently_unmatched(pattern):
     with pytest.raises(KeyFormatError, match="must stand alone"):
         key_matches(pattern, "millwatch/v1/s1/m1/pinion_torque")
+
+
+# ---------------------------------------------------------------- alarm keys
+def test_alarm_key_layout_and_parse():
+    from ingest.keys import alarm_key, alarm_pattern, parse_alarm_key
+
+    key = alarm_key("rustenburg", "sag-5200-lrs")
+    assert key == "millwatch/v1/rustenburg/sag-5200-lrs/@alarms"
+    assert parse_alarm_key(key) == ("rustenburg", "sag-5200-lrs")
+    assert alarm_pattern() == "millwatch/v1/*/*/@alarms"
+    assert alarm_pattern("rustenburg") == "millwatch/v1/rustenburg/*/@alarms"
+    for pattern in (alarm_pattern(), alarm_pattern("rustenburg"), key):
+        assert key_matches(pattern, key)
+    with pytest.raises(KeyFormatError) as err:
+        alarm_key("rustenburg", "Mill 1")
+    assert err.value.segment == "mill"
+    with pytest.raises(KeyFormatError):
+        parse_key(key)  # not a channel
+    for bad in (
+        "millwatch/v1/s/m/speed",
+        "millwatch/v2/s/m/@alarms",
+        "millwatch/v1/@replay/@alarms",
+    ):
+        with pytest.raises(KeyFormatError):
+            parse_alarm_key(bad)
+
+
+def test_telemetry_and_alarm_subscriptions_never_see_each_other():
+    from ingest.keys import alarm_key, alarm_pattern
+
+    key = alarm_key("s", "m")
+    telemetry = build_key("s", "m", "speed")
+    for pattern in (live_pattern(), "millwatch/v1/**", mill_pattern("s", "m"), site_pattern("s")):
+        assert not key_matches(pattern, key)
+        assert not zenoh.KeyExpr(pattern).intersects(zenoh.KeyExpr(key))
+    assert not key_matches(alarm_pattern(), telemetry)
+    assert zenoh.KeyExpr(alarm_pattern()).intersects(zenoh.KeyExpr(key))

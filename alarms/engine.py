@@ -1,0 +1,305 @@
+"""The alarm engine: observations in, alarm transitions out; no I/O (the caller stores/publishes).
+
+Per condition ``(mill, rule, subject)`` the engine keeps a small tracker and at most one open
+alarm (deduplication). It applies the rule's lifecycle knobs (:mod:`alarms.rules`) on the
+observations' own clock (``t_ns``), so a replay of the same observations gives the same
+transitions and the same deterministic alarm ids (:func:`alarms.lifecycle.alarm_id_for`):
+
+* **level** quantities — a severity is *confirmed* when every observation since the value first
+  went beyond its threshold stayed beyond it for ``raise_delay_s``; the highest confirmed
+  severity raises the alarm or escalates it in place. The condition returns to normal when the
+  value stayed at or inside the clear level (threshold ∓ deadband) for ``clear_delay_s``. A value
+  between the clear level and the threshold touches nothing: no chatter.
+* **event** quantities — an offending event raises (or escalates) at once. The condition
+  returns to normal after ``clean_events_to_clear`` consecutive clean events, or once
+  ``quiet_s_to_clear`` passed without a recurrence (checked on every later observation of the
+  mill and on :meth:`AlarmEngine.tick`), or on acknowledgement when ``clear_on_ack``.
+
+Bad input never raises: an unknown mill or quantity, or a non-finite value, is logged once per
+kind and ignored. State is bounded: trackers exist only for subjects with an open alarm or a
+pending raise (subjects are channels, sides, components — a configured, finite set); cleared
+alarms leave the engine (the store keeps history). :meth:`AlarmEngine.snapshot` returns the state
+as plain JSON data; :meth:`AlarmEngine.restore` takes it back (checkpointed with the analyzer).
+Thread safety: one lock serialises all public methods (the API thread may acknowledge while the
+worker thread observes).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from alarms import lifecycle
+from alarms.lifecycle import Alarm, AlarmState, Transition
+from alarms.observations import Kind, Observation
+from alarms.rules import Rule, RuleBook, RuleOptions, Severity, build_rules
+from analytics.mill_config import MillConfig
+
+__all__ = ["AlarmEngine", "UnknownAlarmError"]
+
+log = logging.getLogger(__name__)
+
+SNAPSHOT_VERSION = 1
+_NS = 1_000_000_000
+
+
+class UnknownAlarmError(KeyError):
+    """No open alarm has this id (never raised, already cleared, or a typo)."""
+
+
+Key = tuple[str, str, str]  # mill, rule name, subject
+
+
+@dataclass(slots=True)
+class _Condition:
+    """Tracker of one (mill, rule, subject): pending-raise times, clear timers, open alarm."""
+
+    above_since: dict[str, int] = field(default_factory=dict)  # severity → t_ns first beyond
+    normal_since: int | None = None
+    clean_events: int = 0
+    last_offence_ns: int | None = None
+    alarm: Alarm | None = None
+
+    @property
+    def idle(self) -> bool:
+        return self.alarm is None and not self.above_since
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "above_since": dict(self.above_since),
+            "normal_since": self.normal_since,
+            "clean_events": self.clean_events,
+            "last_offence_ns": self.last_offence_ns,
+            "alarm": None if self.alarm is None else self.alarm.to_dict(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> _Condition:
+        alarm = d.get("alarm")
+        return cls(
+            {str(k): int(v) for k, v in d.get("above_since", {}).items()},
+            d.get("normal_since"),
+            int(d.get("clean_events", 0)),
+            d.get("last_offence_ns"),
+            None if alarm is None else Alarm.from_dict(alarm),
+        )
+
+
+class AlarmEngine:
+    """Alarm rules and lifecycle over the observations of one or more mills (module docstring)."""
+
+    def __init__(self, books: Iterable[RuleBook]) -> None:
+        self.books: dict[str, RuleBook] = {b.mill_id: b for b in books}
+        self._conditions: dict[Key, _Condition] = {}
+        self._open: dict[str, Key] = {}  # open alarm id → its condition
+        self._logged: set[tuple[str, str]] = set()
+        self._lock = threading.RLock()
+
+    @classmethod
+    def for_mills(
+        cls, configs: Iterable[MillConfig], options: RuleOptions | None = None
+    ) -> AlarmEngine:
+        """An engine with :func:`alarms.rules.build_rules` for each mill."""
+        return cls(build_rules(c, options) for c in configs)
+
+    # ------------------------------------------------------------------ input
+    def observe(self, obs: Observation) -> list[Transition]:
+        """Evaluate one observation; returns the transitions it caused (often none)."""
+        with self._lock:
+            rule = self._rule_for(obs)
+            if rule is None:
+                return []
+            key = (obs.mill_id, rule.name, obs.subject)
+            cond = self._conditions.get(key) or _Condition()
+            if rule.kind is Kind.LEVEL:
+                out = self._level(rule, key, cond, obs)
+            else:
+                out = self._event(rule, key, cond, obs)
+            self._keep(key, cond)
+            return out + self._quiet_clears(obs.mill_id, obs.t_ns)
+
+    def observe_all(self, observations: Iterable[Observation]) -> list[Transition]:
+        """:meth:`observe` each observation in the given order."""
+        out: list[Transition] = []
+        for obs in observations:
+            out += self.observe(obs)
+        return out
+
+    def tick(self, t_ns: int, mill_id: str | None = None) -> list[Transition]:
+        """Let time pass without observations: clears quiet event alarms (one mill or all)."""
+        with self._lock:
+            mills = list(self.books) if mill_id is None else [mill_id]
+            return [t for m in mills for t in self._quiet_clears(m, t_ns)]
+
+    def acknowledge(self, alarm_id: str, by: str, t_ns: int) -> list[Transition]:
+        """Acknowledge an open alarm (idempotent); raises :class:`UnknownAlarmError`."""
+        with self._lock:
+            key = self._open.get(alarm_id)
+            if key is None:
+                raise UnknownAlarmError(alarm_id)
+            cond = self._conditions[key]
+            rule = self.books[key[0]].rule(key[1])
+            assert cond.alarm is not None
+            out = lifecycle.acknowledge(cond.alarm, by, t_ns, rule.clear_on_ack)
+            self._keep(key, cond)
+            return out
+
+    # ------------------------------------------------------------------ reading
+    def open_alarms(self, mill_id: str | None = None) -> list[Alarm]:
+        """Copies of the open (not cleared) alarms, oldest first."""
+        with self._lock:
+            alarms = [self._conditions[k].alarm for k in self._open.values()]
+            chosen = [a.copy() for a in alarms if a and mill_id in (None, a.mill_id)]
+        return sorted(chosen, key=lambda a: (a.raised_ns, a.alarm_id))
+
+    def alarm(self, alarm_id: str) -> Alarm | None:
+        """A copy of the open alarm ``alarm_id``, or None."""
+        with self._lock:
+            key = self._open.get(alarm_id)
+            alarm = None if key is None else self._conditions[key].alarm
+            return None if alarm is None else alarm.copy()
+
+    # ------------------------------------------------------------------ state
+    def snapshot(self) -> dict[str, Any]:
+        """The engine's state as plain JSON data."""
+        with self._lock:
+            conditions = [
+                {"mill_id": m, "rule": r, "subject": s, **c.to_dict()}
+                for (m, r, s), c in self._conditions.items()
+            ]
+        return {"version": SNAPSHOT_VERSION, "conditions": conditions}
+
+    def restore(self, snapshot: Mapping[str, Any]) -> None:
+        """Replace the state with a :meth:`snapshot`; conditions of mills or rules no longer
+        configured are dropped with a warning."""
+        if snapshot.get("version") != SNAPSHOT_VERSION:
+            raise ValueError(f"alarm engine snapshot version {snapshot.get('version')!r}")
+        with self._lock:
+            self._conditions.clear()
+            self._open.clear()
+            for entry in snapshot.get("conditions", []):
+                key = (entry["mill_id"], entry["rule"], entry["subject"])
+                if not self._configured(key):
+                    log.warning("alarm snapshot: dropping %s (no longer configured)", key)
+                    continue
+                self._keep(key, _Condition.from_dict(entry))
+
+    # ------------------------------------------------------------------ internals
+    def _configured(self, key: Key) -> bool:
+        book = self.books.get(key[0])
+        return book is not None and any(r.name == key[1] for r in book.rules.values())
+
+    def _keep(self, key: Key, cond: _Condition) -> None:
+        """File the condition after a change: forget cleared alarms and idle trackers."""
+        if cond.alarm is not None and not cond.alarm.open:
+            self._open.pop(cond.alarm.alarm_id, None)
+            cond.alarm = None
+        if cond.alarm is not None:
+            self._open[cond.alarm.alarm_id] = key
+        if cond.idle:
+            self._conditions.pop(key, None)
+        else:
+            self._conditions[key] = cond
+
+    def _rule_for(self, obs: Observation) -> Rule | None:
+        book = self.books.get(obs.mill_id)
+        if book is None:
+            self._log_once("mill", obs.mill_id, "observations of unknown mill %s ignored")
+            return None
+        if not obs.usable or obs.quantity not in book.rules:
+            self._log_once("quantity", obs.quantity, "unusable observation of %s ignored")
+            return None
+        return book.rules[obs.quantity]
+
+    def _log_once(self, kind: str, name: str, msg: str) -> None:
+        if (kind, name) not in self._logged:
+            self._logged.add((kind, name))
+            log.warning(msg + " (further ones not logged)", name)
+
+    def _level(self, rule: Rule, key: Key, cond: _Condition, obs: Observation) -> list[Transition]:
+        exceeded = [str(s) for s in rule.exceeded(obs)]
+        cond.above_since = {s: cond.above_since.get(s, obs.t_ns) for s in exceeded}
+        delay = rule.raise_delay_s * _NS
+        confirmed = [s for s in exceeded if obs.t_ns - cond.above_since[s] >= delay]
+        if not rule.is_normal(obs):
+            cond.normal_since = None
+        elif cond.normal_since is None:
+            cond.normal_since = obs.t_ns
+        if confirmed:
+            return self._offend(rule, key, cond, obs, Severity(confirmed[-1]))
+        alarm = cond.alarm
+        if alarm is None or not alarm.condition or cond.normal_since is None:
+            return []
+        held_s = (obs.t_ns - cond.normal_since) / _NS
+        if held_s < rule.clear_delay_s:
+            return []
+        why = f"{rule.fmt(obs.value)} within the clear level for {held_s:.0f} s"
+        return [self._normal(rule, cond, obs, why)]
+
+    def _event(self, rule: Rule, key: Key, cond: _Condition, obs: Observation) -> list[Transition]:
+        exceeded = rule.exceeded(obs)
+        if exceeded:
+            cond.clean_events = 0
+            cond.last_offence_ns = obs.t_ns
+            return self._offend(rule, key, cond, obs, exceeded[-1])
+        if rule.is_normal(obs):
+            cond.clean_events += 1
+        needed = rule.clean_events_to_clear
+        alarm = cond.alarm
+        if alarm is None or not alarm.condition or needed is None or cond.clean_events < needed:
+            return []
+        why = f"{needed} clean in a row, latest {rule.fmt(obs.value)}"
+        return [self._normal(rule, cond, obs, why)]
+
+    def _normal(self, rule: Rule, cond: _Condition, obs: Observation, why: str) -> Transition:
+        alarm = cond.alarm
+        assert alarm is not None
+        return lifecycle.return_to_normal(
+            alarm, rule.latched, obs.t_ns, obs.value, rule.clear_level(obs), why
+        )
+
+    def _offend(
+        self, rule: Rule, key: Key, cond: _Condition, obs: Observation, severity: Severity
+    ) -> list[Transition]:
+        threshold = rule.threshold(severity, obs)
+        message = rule.message(obs, severity, self.books[key[0]].time_zone)
+        alarm = cond.alarm
+        if alarm is None:
+            cond.alarm = _new_alarm(rule, key, obs, severity, threshold, message)
+            return [lifecycle.raise_alarm(cond.alarm)]
+        if severity.rank > alarm.severity.rank:
+            return [lifecycle.escalate(alarm, severity, obs.t_ns, obs.value, threshold, message)]
+        if not alarm.condition:
+            return [lifecycle.recur(alarm, obs.t_ns, obs.value, threshold, message)]
+        return []
+
+    def _quiet_clears(self, mill_id: str, t_ns: int) -> list[Transition]:
+        out = []
+        for key in [k for k in self._open.values() if k[0] == mill_id]:
+            cond = self._conditions[key]
+            rule = self.books[mill_id].rule(key[1])
+            quiet = rule.quiet_s_to_clear
+            if quiet is None or cond.alarm is None or not cond.alarm.condition:
+                continue
+            since = cond.last_offence_ns if cond.last_offence_ns is not None else t_ns
+            if t_ns - since >= quiet * _NS:
+                why = f"no recurrence for {(t_ns - since) / _NS:.0f} s"
+                alarm = cond.alarm
+                out.append(lifecycle.return_to_normal(alarm, rule.latched, t_ns, None, None, why))
+                self._keep(key, cond)
+        return out
+
+
+def _new_alarm(
+    rule: Rule, key: Key, obs: Observation, severity: Severity, threshold: float, message: str
+) -> Alarm:
+    mill_id, name, subject = key
+    return Alarm(
+        alarm_id=lifecycle.alarm_id_for(mill_id, name, subject, obs.t_ns),
+        mill_id=mill_id, rule=name, subject=subject, quantity=rule.quantity, unit=rule.unit,
+        severity=severity, state=AlarmState.RAISED, raised_ns=obs.t_ns, updated_ns=obs.t_ns,
+        value=obs.value, threshold=threshold, message=message,
+    )  # fmt: skip

@@ -1,0 +1,226 @@
+"""The alarm lifecycle: raised → acknowledged → cleared, with latching and escalation in place.
+
+States (:class:`AlarmState`) and transitions (:class:`TransitionKind`), after the alarm-management
+practice control rooms know (ISA-18.2 style, simplified; seed 000 §10.6 asks for "diagnostic
+alarms" a site acts on):
+
+* ``raised`` — the condition was confirmed; nobody has acknowledged it yet.
+* ``acknowledged`` — someone (``acked_by``) has seen it; the condition is still present.
+* ``cleared`` — over; an alarm never leaves this state (a new occurrence is a new alarm).
+
+Transitions, each recorded with time, triggering value and threshold (:class:`Transition`):
+
+* ``raised`` — new alarm for ``(mill, rule, subject)``; at most one open alarm per key.
+* ``escalated`` — a more severe level was confirmed: the *same* alarm changes severity; an
+  acknowledged alarm goes back to ``raised`` (the new severity must be seen).
+* ``acknowledged`` — :func:`acknowledge`; acknowledging twice records nothing.
+* ``normal`` — a *latched* alarm's condition returned to normal before anyone acknowledged it:
+  the alarm stays ``raised`` until acknowledged, then clears.
+* ``recurred`` — the condition came back while a latched alarm waited in ``normal``.
+* ``cleared`` — the condition returned to normal (acknowledged or not latched), or it was
+  acknowledged while normal, or acknowledged under a clear-on-acknowledgement rule.
+
+Severity never steps down while the alarm is open (see :mod:`alarms.rules`). The functions here
+mutate one :class:`Alarm` and return the :class:`Transition` they record; deciding *when* is
+:mod:`alarms.engine`'s job. Everything converts to plain JSON data (``to_dict``/``from_dict``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any
+
+from alarms.rules import Severity
+
+__all__ = [
+    "Alarm",
+    "AlarmState",
+    "Transition",
+    "TransitionKind",
+    "acknowledge",
+    "alarm_id_for",
+    "clear",
+    "escalate",
+    "raise_alarm",
+    "recur",
+    "return_to_normal",
+]
+
+
+class AlarmState(StrEnum):
+    RAISED = "raised"
+    ACKNOWLEDGED = "acknowledged"
+    CLEARED = "cleared"
+
+
+class TransitionKind(StrEnum):
+    RAISED = "raised"
+    ESCALATED = "escalated"
+    ACKNOWLEDGED = "acknowledged"
+    NORMAL = "normal"
+    RECURRED = "recurred"
+    CLEARED = "cleared"
+
+
+def alarm_id_for(mill_id: str, rule: str, subject: str, raised_ns: int) -> str:
+    """Deterministic id ``<mill>:<rule>:<subject or ->:<raised ns>``: replaying the same
+    observations (archive tail after a crash) gives the same ids, so store writes are idempotent."""
+    return f"{mill_id}:{rule}:{subject or '-'}:{raised_ns}"
+
+
+@dataclass(slots=True)
+class Alarm:
+    """The current state of one alarm. ``value``/``threshold`` belong to the latest transition;
+    ``condition`` is False while a latched alarm waits for acknowledgement after its condition
+    returned to normal; ``seq`` counts the alarm's transitions."""
+
+    alarm_id: str
+    mill_id: str
+    rule: str
+    subject: str
+    quantity: str
+    unit: str
+    severity: Severity
+    state: AlarmState
+    raised_ns: int
+    updated_ns: int
+    value: float
+    threshold: float
+    message: str
+    condition: bool = True
+    acked_ns: int | None = None
+    acked_by: str | None = None
+    cleared_ns: int | None = None
+    seq: int = 0
+
+    @property
+    def open(self) -> bool:
+        return self.state is not AlarmState.CLEARED
+
+    def copy(self) -> Alarm:
+        return dataclasses.replace(self)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON data (enums as strings)."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["severity"], d["state"] = str(self.severity), str(self.state)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Alarm:
+        return cls(**{**d, "severity": Severity(d["severity"]), "state": AlarmState(d["state"])})
+
+
+@dataclass(frozen=True, slots=True)
+class Transition:
+    """One recorded change of an alarm; ``alarm`` is the alarm's state right after it."""
+
+    alarm_id: str
+    seq: int
+    kind: TransitionKind
+    t_ns: int
+    severity: Severity
+    state: AlarmState
+    value: float | None
+    threshold: float | None
+    message: str
+    by: str | None
+    alarm: Alarm
+
+    def to_row(self) -> dict[str, Any]:
+        """Plain JSON data of the transition alone (the fields of
+        ``service.store.AlarmTransitionRow``)."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "alarm"}
+        d.update(kind=str(self.kind), severity=str(self.severity), state=str(self.state))
+        return d
+
+    def to_dict(self) -> dict[str, Any]:
+        """:meth:`to_row` plus ``alarm`` as :meth:`Alarm.to_dict` (the fields of
+        ``service.store.AlarmRow``)."""
+        return {**self.to_row(), "alarm": self.alarm.to_dict()}
+
+
+def _record(
+    alarm: Alarm,
+    kind: TransitionKind,
+    t_ns: int,
+    value: float | None,
+    threshold: float | None,
+    message: str,
+    by: str | None = None,
+) -> Transition:
+    alarm.seq += 1
+    alarm.updated_ns = max(alarm.updated_ns, t_ns)
+    if value is not None:
+        alarm.value = value
+    if threshold is not None:
+        alarm.threshold = threshold
+    return Transition(
+        alarm.alarm_id, alarm.seq, kind, t_ns, alarm.severity, alarm.state, value, threshold,
+        message, by, alarm.copy(),
+    )  # fmt: skip
+
+
+def raise_alarm(alarm: Alarm) -> Transition:
+    """Record the ``raised`` transition of a freshly built alarm (state ``raised``)."""
+    return _record(
+        alarm, TransitionKind.RAISED, alarm.raised_ns, alarm.value, alarm.threshold, alarm.message
+    )
+
+
+def escalate(
+    alarm: Alarm, severity: Severity, t_ns: int, value: float, threshold: float, message: str
+) -> Transition:
+    """Raise the severity of an open alarm in place; an acknowledged alarm is raised again."""
+    alarm.severity = severity
+    alarm.state = AlarmState.RAISED
+    alarm.condition = True
+    alarm.message = message
+    return _record(alarm, TransitionKind.ESCALATED, t_ns, value, threshold, message)
+
+
+def recur(alarm: Alarm, t_ns: int, value: float, threshold: float, message: str) -> Transition:
+    """The condition of a latched alarm waiting in ``normal`` came back."""
+    alarm.condition = True
+    alarm.message = message
+    return _record(alarm, TransitionKind.RECURRED, t_ns, value, threshold, message)
+
+
+def clear(
+    alarm: Alarm, t_ns: int, value: float | None, threshold: float | None, why: str
+) -> Transition:
+    """Close the alarm for good."""
+    alarm.state = AlarmState.CLEARED
+    alarm.condition = False
+    alarm.cleared_ns = t_ns
+    return _record(alarm, TransitionKind.CLEARED, t_ns, value, threshold, "Cleared: " + why)
+
+
+def return_to_normal(
+    alarm: Alarm, latched: bool, t_ns: int, value: float | None, threshold: float | None, why: str
+) -> Transition:
+    """The condition is over: clear, unless the alarm is latched and not yet acknowledged."""
+    if latched and alarm.state is AlarmState.RAISED:
+        alarm.condition = False
+        text = f"Back to normal: {why}; latched until acknowledged"
+        return _record(alarm, TransitionKind.NORMAL, t_ns, value, threshold, text)
+    return clear(alarm, t_ns, value, threshold, why)
+
+
+def acknowledge(alarm: Alarm, by: str, t_ns: int, clear_on_ack: bool) -> list[Transition]:
+    """Acknowledge a raised alarm; it clears too when its condition is already normal (latched)
+    or its rule clears on acknowledgement. Acknowledging an acknowledged alarm records nothing."""
+    if alarm.state is not AlarmState.RAISED:
+        return []
+    alarm.state = AlarmState.ACKNOWLEDGED
+    alarm.acked_ns = t_ns
+    alarm.acked_by = by
+    text = f"Acknowledged by {by}"
+    out = [_record(alarm, TransitionKind.ACKNOWLEDGED, t_ns, None, None, text, by)]
+    if not alarm.condition:
+        out.append(clear(alarm, t_ns, None, None, "acknowledged after the condition ended"))
+    elif clear_on_ack:
+        out.append(clear(alarm, t_ns, None, None, "acknowledged (this rule clears on ack)"))
+    return out

@@ -1,0 +1,50 @@
+"""Alarms a recording would have raised, for ``millwatch analyze`` (seed 000 §10.6 reports).
+
+:func:`alarms_for_report` runs a fresh :class:`~alarms.engine.AlarmEngine` over a list of
+observations in time order and returns the alarm history as plain data: one dict per alarm (its
+final state, :meth:`~alarms.lifecycle.Alarm.to_dict`) with its ``transitions``. Alarms still open
+at the end of the recording are reported open. When the observations hold start peaks but no
+``starts_this_month``, the monthly counts are derived from the starts in the mill's time zone
+(:func:`~alarms.observations.derive_start_counts`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from alarms.engine import AlarmEngine
+from alarms.lifecycle import Transition
+from alarms.observations import Observation, derive_start_counts
+from alarms.rules import RuleOptions
+from analytics.mill_config import MillConfig
+
+__all__ = ["alarms_for_report", "history"]
+
+
+def _with_start_counts(observations: list[Observation], time_zone: str) -> list[Observation]:
+    if any(o.quantity == "starts_this_month" for o in observations):
+        return observations
+    return observations + derive_start_counts(observations, time_zone)
+
+
+def history(transitions: Iterable[Transition]) -> list[dict[str, Any]]:
+    """Group transitions by alarm: final state plus ``transitions`` (oldest alarm first)."""
+    alarms: dict[str, dict[str, Any]] = {}
+    for t in transitions:
+        step = t.to_row()
+        steps = alarms.get(t.alarm_id, {}).get("transitions", [])
+        steps.append(step)
+        alarms[t.alarm_id] = {**t.alarm.to_dict(), "transitions": steps}
+    return sorted(alarms.values(), key=lambda a: (a["raised_ns"], a["alarm_id"]))
+
+
+def alarms_for_report(
+    observations: Iterable[Observation],
+    config: MillConfig,
+    options: RuleOptions | None = None,
+) -> list[dict[str, Any]]:
+    """The alarm history the observations of ``config``'s mill would have produced."""
+    ordered = sorted(_with_start_counts(list(observations), config.time_zone), key=lambda o: o.t_ns)
+    engine = AlarmEngine.for_mills([config], options)
+    return history(engine.observe_all(ordered))

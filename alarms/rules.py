@@ -1,0 +1,461 @@
+"""Alarm rules from the field evidence, one per observed quantity, configured per mill.
+
+A :class:`Rule` says when a quantity (:data:`alarms.observations.QUANTITIES`) is abnormal — one
+threshold per severity, compared *strictly* (``>`` for ``above`` rules, ``<`` for ``below``) — how
+it returns to normal, and what to tell the control room. :func:`build_rules` makes the rule book
+of one mill from ``MillConfig.alarms`` (seed thresholds) and :class:`RuleOptions` (the knobs the
+seed says nothing about: deadbands, delays, data-quality limits).
+
+Lifecycle knobs (:mod:`alarms.engine` applies them):
+
+* level rules: ``raise_delay_s`` — the value must stay beyond a level that long (on the
+  observation clock) before the alarm is raised or escalated to it; ``clear_delay_s`` — it must
+  stay at or inside the clear level (least severe threshold ∓ ``deadband``) that long before the
+  condition returns to normal. A value hovering inside the deadband changes nothing.
+* event rules: raise at once; the condition returns to normal after ``clean_events_to_clear``
+  consecutive clean events (at or inside the clear level), after ``quiet_s_to_clear`` seconds
+  without a recurrence, or — with ``clear_on_ack`` — when acknowledged.
+* ``latched``: a condition that returns to normal before anyone acknowledged it keeps the alarm
+  raised until acknowledged (the control room must see that it happened).
+
+Rules and their defaults (``MillConfig.alarms`` unless marked *option*):
+
+=========================== ===================================== ====================== =======
+rule                        levels                                clears                 source
+=========================== ===================================== ====================== =======
+start_peak (event)          warning > 250 %, alarm > 300 %        3 clean starts         §7.2,
+                                                                                         §10.4
+starts_per_month (level)    warning > 5, alarm > 20               new month; latched     §6.1.3,
+                                                                                         §6.2.8
+oscillation_range (level)   warning > 25 %, alarm > 45 %          ≤ 23 % for 5 min       Tab. 14–15
+bending_amplitude (level)   warning > 25, alarm > 43,             ≤ 23 MPa for 5 min     §8.1
+                            critical > 90 MPa
+barring_peak (event)        alarm > 185 % single / 314 % dual     1 clean session or ack Tab. 12–13
+unexplained_peak (event)    warning on any reported peak          1 h without recurrence §6.2.7
+resonance_margin (level)    warning < 10 % (*option*)             ≥ 12 % for 5 min       seed 001
+remaining_life (level)      warning < 1.0×, alarm < 0.5× the      ≥ 1.05× for 5 min      §8.3
+                            remaining design life (*option*)
+stale_channel (level)       warning > 10 s (*option*)             data again             §5.1
+spike_rate (level)          warning > 6/min (*option*)            ≤ 3/min for 5 min      §5.2.2
+sequence_gaps (level)       warning > 0/min (*option*)            0 for 5 min            §5.1
+archive_write_failures      alarm > 0 (*option*)                  3 clean reports;       DESIGN
+(event)                                                           latched
+load_sharing (level)        warning > 10 %, alarm > 20 %          ≤ 8 % for 5 min        §6.2.2
+                            (*option*)
+=========================== ===================================== ====================== =======
+
+Severity never steps down while an alarm is open: an alarm that reached ``alarm`` stays an
+``alarm`` until it clears (stepping down would chatter between levels; the transitions keep the
+history).
+"""
+
+from __future__ import annotations
+
+import zoneinfo
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from enum import StrEnum
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from alarms.observations import QUANTITIES, Kind, Observation, local_month
+from analytics.mill_config import MillConfig
+
+__all__ = ["Level", "Rule", "RuleBook", "RuleOptions", "Severity", "build_rules"]
+
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class Severity(StrEnum):
+    """Alarm severities, least severe first."""
+
+    WARNING = "warning"
+    ALARM = "alarm"
+    CRITICAL = "critical"
+
+    @property
+    def rank(self) -> int:
+        return _RANK[self]
+
+
+_RANK = {Severity.WARNING: 0, Severity.ALARM: 1, Severity.CRITICAL: 2}
+
+
+@dataclass(frozen=True, slots=True)
+class Level:
+    """One severity of a rule: beyond ``threshold`` (strictly) it applies; ``advice`` overrides
+    the rule's advice at this severity."""
+
+    severity: Severity
+    threshold: float
+    advice: str | None = None
+
+
+class _Defaults(dict[str, Any]):
+    """``str.format_map`` mapping: context keys missing from an observation show as ``?``."""
+
+    def __missing__(self, key: str) -> str:
+        return "?"
+
+
+@dataclass(frozen=True, slots=True)
+class Rule:
+    """One alarm rule; see the module docstring for the lifecycle knobs.
+
+    ``headline`` is a ``str.format`` template over ``time`` (local), ``value`` (formatted with
+    ``value_format``), ``subject``, ``where`` (" on <subject>" or "") and the observation's
+    context; ``criterion`` replaces the generated "<severity> above <limit>" text when the
+    threshold itself means nothing to a reader. ``scale_key``: thresholds and deadband are
+    multiplied by ``context[scale_key]`` (default ``default_scale``).
+    """
+
+    name: str
+    quantity: str
+    levels: tuple[Level, ...]
+    headline: str
+    advice: str
+    source: str
+    value_format: str
+    direction: Literal["above", "below"] = "above"
+    deadband: float = 0.0
+    raise_delay_s: float = 0.0
+    clear_delay_s: float = 0.0
+    clean_events_to_clear: int | None = None
+    quiet_s_to_clear: float | None = None
+    clear_on_ack: bool = False
+    latched: bool = False
+    criterion: str | None = None
+    scale_key: str | None = None
+    default_scale: float = 1.0
+
+    @property
+    def kind(self) -> Kind:
+        return QUANTITIES[self.quantity].kind
+
+    @property
+    def unit(self) -> str:
+        return QUANTITIES[self.quantity].unit
+
+    def scale(self, obs: Observation) -> float:
+        if self.scale_key is None:
+            return 1.0
+        return float(obs.context.get(self.scale_key, self.default_scale))
+
+    def threshold(self, severity: Severity, obs: Observation) -> float:
+        """The threshold of ``severity`` for this observation (scaled)."""
+        level = next(lv for lv in self.levels if lv.severity == severity)
+        return level.threshold * self.scale(obs)
+
+    def beyond(self, value: float, threshold: float) -> bool:
+        return value > threshold if self.direction == "above" else value < threshold
+
+    def exceeded(self, obs: Observation) -> list[Severity]:
+        """Severities whose threshold ``obs.value`` is strictly beyond, least severe first."""
+        k = self.scale(obs)
+        return [lv.severity for lv in self.levels if self.beyond(obs.value, lv.threshold * k)]
+
+    def clear_level(self, obs: Observation) -> float:
+        """The least severe threshold pulled back by the deadband (hysteresis)."""
+        k = self.scale(obs)
+        sign = -1.0 if self.direction == "above" else 1.0
+        return (self.levels[0].threshold + sign * self.deadband) * k
+
+    def is_normal(self, obs: Observation) -> bool:
+        """At or inside the clear level: counts towards returning to normal."""
+        limit = self.clear_level(obs)
+        return obs.value <= limit if self.direction == "above" else obs.value >= limit
+
+    def fmt(self, value: float) -> str:
+        return self.value_format.format(value)
+
+    def message(self, obs: Observation, severity: Severity, time_zone: str) -> str:
+        """A sentence for the control room: what, when, how bad, per which source, what to do."""
+        level = next(lv for lv in self.levels if lv.severity == severity)
+        fields = _Defaults({k: _short(v) for k, v in obs.context.items()})
+        subject = obs.subject
+        fields.setdefault("month", local_month(obs.t_ns, time_zone))
+        fields.update(
+            time=local_time(obs.t_ns, time_zone),
+            value=self.fmt(obs.value),
+            subject=subject or "the mill",
+            where=f" on {subject}" if subject else "",
+        )
+        headline = self.headline.format_map(fields)
+        criterion = self.criterion or (
+            f"{severity} {self.direction} {self.fmt(self.threshold(severity, obs))}"
+        )
+        return f"{headline} ({criterion}, {self.source}): {level.advice or self.advice}"
+
+
+def _short(value: Any) -> Any:
+    """Context numbers in messages: four significant digits."""
+    return f"{value:.4g}" if isinstance(value, float) else value
+
+
+def local_time(t_ns: int, time_zone: str) -> str:
+    """``YYYY-MM-DD HH:MM`` in the site's time zone (what the control room's clock shows)."""
+    zone = zoneinfo.ZoneInfo(time_zone)
+    return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).astimezone(zone).strftime("%Y-%m-%d %H:%M")
+
+
+@dataclass(frozen=True, slots=True)
+class RuleBook:
+    """The rules of one mill, by quantity, with the site's time zone for messages."""
+
+    mill_id: str
+    time_zone: str
+    rules: Mapping[str, Rule]
+
+    def rule(self, name: str) -> Rule:
+        """The rule called ``name`` (KeyError if none)."""
+        for rule in self.rules.values():
+            if rule.name == name:
+                return rule
+        raise KeyError(name)
+
+
+class RuleOptions(BaseModel):
+    """Knobs the seed does not fix (deadbands, delays, data quality, resonance, life, load
+    sharing). Defaults are engineering judgement; each names its unit. Candidates for
+    ``MillConfig.alarms`` once they have proved themselves."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    raise_delay_s: NonNegative = 60.0
+    clear_delay_s: NonNegative = 300.0
+    start_peak_deadband_pct: NonNegative = 10.0
+    clean_starts_to_clear: Annotated[int, Field(ge=1)] = 3
+    oscillation_deadband_pct: NonNegative = 2.0
+    bending_deadband_mpa: NonNegative = 2.0
+    barring_deadband_pct: NonNegative = 10.0
+    unexplained_peak_quiet_s: Positive = 3600.0
+    resonance_margin_warn: Annotated[float, Field(gt=0, lt=1)] = 0.10
+    resonance_margin_deadband: NonNegative = 0.02
+    life_warn_fraction: Positive = 1.0
+    life_alarm_fraction: Positive = 0.5
+    life_deadband_fraction: NonNegative = 0.05
+    stale_after_s: Positive = 10.0
+    spike_rate_warn_per_min: Positive = 6.0
+    spike_rate_deadband_per_min: NonNegative = 3.0
+    sequence_gaps_warn_per_min: NonNegative = 0.0
+    archive_clean_reports_to_clear: Annotated[int, Field(ge=1)] = 3
+    imbalance_warn_pct: Positive = 10.0
+    imbalance_alarm_pct: Positive = 20.0
+    imbalance_deadband_pct: NonNegative = 2.0
+
+
+def _levels(*pairs: tuple[Severity, float]) -> tuple[Level, ...]:
+    return tuple(Level(sev, thr) for sev, thr in pairs)
+
+
+def _start_peak(config: MillConfig, o: RuleOptions) -> Rule:
+    """Start peak torque, % of motor rated torque (seed 000 §7.2, §10.4; Tables 4–6: LRS
+    averages 233 %, Grid 542 %). Event; clears after ``clean_starts_to_clear`` clean starts."""
+    a = config.alarms
+    return Rule(
+        "start_peak", "start_peak_pct",
+        _levels((Severity.WARNING, a.start_peak_warn_pct),
+                (Severity.ALARM, a.start_peak_alarm_pct)),
+        headline="Start at {time}{where} reached {value} of rated motor torque",
+        advice="check the liquid resistance starter (electrolyte density) and the start sequence",
+        source="seed 000 §7.2, §10.4", value_format="{:.0f} %",
+        deadband=o.start_peak_deadband_pct, clean_events_to_clear=o.clean_starts_to_clear,
+    )  # fmt: skip
+
+
+def _starts_per_month(config: MillConfig, o: RuleOptions) -> Rule:
+    """Starts in the local calendar month (seed 000 §6.1.3 supplier norm 3–5, §6.2.8 field
+    average 20–22, §10.3 "recorded and scrutinized"). Level without delays (a count does not
+    chatter); latched: a busy month must be acknowledged even after the count resets."""
+    a = config.alarms
+    return Rule(
+        "starts_per_month", "starts_this_month",
+        _levels((Severity.WARNING, a.starts_per_month_warn),
+                (Severity.ALARM, a.starts_per_month_alarm)),
+        headline="{value} starts in the calendar month {month} (latest at {time})",
+        advice="every start exposes the drivetrain to start-up peaks: record and scrutinize "
+        "each stop (supplier norm 3–5 starts a month)",
+        source="seed 000 §6.1.3, §6.2.8, §10.3", value_format="{:.0f}", latched=True,
+    )  # fmt: skip
+
+
+def _oscillation(config: MillConfig, o: RuleOptions) -> Rule:
+    """Steady-state torque oscillation range, % of motor rated torque (seed 000 Tables 14–15:
+    23.6 % average, 45.4 % max on single-drive motor shafts; §7.4, §10.5)."""
+    a = config.alarms
+    return Rule(
+        "oscillation_range", "oscillation_range_pct",
+        _levels((Severity.WARNING, a.oscillation_range_warn_pct),
+                (Severity.ALARM, a.oscillation_range_alarm_pct)),
+        headline="Steady-state torque oscillation range{where} reached {value} of rated motor "
+        "torque at {time}",
+        advice="check the spectrum (gear mesh, liner passing, pinion speed) and gear wear",
+        source="seed 000 Tables 14–15, §10.5", value_format="{:.0f} %",
+        deadband=o.oscillation_deadband_pct, raise_delay_s=o.raise_delay_s,
+        clear_delay_s=o.clear_delay_s,
+    )  # fmt: skip
+
+
+def _bending(config: MillConfig, o: RuleOptions) -> Rule:
+    """Pinion-shaft bending stress amplitude, MPa (seed 000 §8.1: < 25 MPa by experience, 43 MPa
+    for a fatigue reserve factor of 2, > 90 MPa fails within weeks; §10.1 alignment)."""
+    a = config.alarms
+    levels = (
+        Level(Severity.WARNING, a.bending_amplitude_warn_mpa),
+        Level(Severity.ALARM, a.bending_amplitude_alarm_mpa),
+        Level(Severity.CRITICAL, a.bending_amplitude_critical_mpa,
+              "failure predicted within weeks at this amplitude: realign the drivetrain now"),
+    )  # fmt: skip
+    return Rule(
+        "bending_amplitude", "bending_amplitude_mpa", levels,
+        headline="Pinion-shaft bending amplitude{where} reached {value} at {time}",
+        advice="check the alignment of the whole drivetrain (bearing and gear wear, foundation)",
+        source="seed 000 §8.1, §10.1", value_format="{:.1f} MPa",
+        deadband=o.bending_deadband_mpa, raise_delay_s=o.raise_delay_s,
+        clear_delay_s=o.clear_delay_s,
+    )  # fmt: skip
+
+
+def _barring(config: MillConfig, o: RuleOptions) -> Rule:
+    """Barring peak torque above the drive's limit (seed 000 §6.2.3, Tables 12–13: 185 % single,
+    314 % dual). Event; clears after one clean barring session or on acknowledgement."""
+    return Rule(
+        "barring_peak", "barring_peak_pct",
+        _levels((Severity.ALARM, config.barring_peak_limit_pct)),
+        headline="Barring at {time}{where} reached {value} of rated motor torque",
+        advice="the charge may have set during a long stop: loosen it before a full start",
+        source="seed 000 §6.2.3, Tables 12–13", value_format="{:.0f} %",
+        deadband=o.barring_deadband_pct, clean_events_to_clear=1, clear_on_ack=True,
+    )  # fmt: skip
+
+
+def _unexplained_peak(config: MillConfig, o: RuleOptions) -> Rule:
+    """A spectral peak matching no expected excitation (seed 000 §6.2.7, Figure 36: 10–15 Hz
+    peaks pointing to torsional resonance). Event: every reported peak offends (the harmonic
+    tracker already applied its SNR and amplitude gates); clears after a quiet hour."""
+    return Rule(
+        "unexplained_peak", "unexplained_peak_hz", _levels((Severity.WARNING, 0.0)),
+        headline="Spectral peak at {value}{where} ({time}) matches no drivetrain excitation; "
+        "nearest natural frequency {nearest_natural_hz} Hz",
+        advice="possible torsional resonance: compare with the drivetrain model and inspect",
+        source="seed 000 §6.2.7, seed 001", value_format="{:.2f} Hz",
+        criterion="warning: unexplained by the drivetrain kinematics",
+        quiet_s_to_clear=o.unexplained_peak_quiet_s,
+    )  # fmt: skip
+
+
+def _resonance(config: MillConfig, o: RuleOptions) -> Rule:
+    """Excitation close to a torsional natural frequency (seed 001 torsional model; seed 000
+    §6.1.1 resonance near 90 % speed during acceleration). Level, lower is worse."""
+    return Rule(
+        "resonance_margin", "resonance_margin",
+        _levels((Severity.WARNING, o.resonance_margin_warn)),
+        headline="Excitation {line} at {frequency_hz} Hz{where} is only {value} from the natural "
+        "frequency {natural_hz} Hz ({time})",
+        advice="running close to resonance amplifies torque oscillations: review speed and model",
+        source="seed 001, seed 000 §6.1.1", value_format="{:.1%}", direction="below",
+        deadband=o.resonance_margin_deadband, raise_delay_s=o.raise_delay_s,
+        clear_delay_s=o.clear_delay_s,
+    )  # fmt: skip
+
+
+def _remaining_life(config: MillConfig, o: RuleOptions) -> Rule:
+    """Projected remaining life shorter than the remaining design life (seed 000 §8.2–8.3:
+    bending range, start transients and start count drive damage). Level, lower is worse;
+    thresholds are fractions of ``context['remaining_design_life_years']`` (default: the
+    mill's ``design_life_years``)."""
+    return Rule(
+        "remaining_life", "remaining_life_years",
+        _levels((Severity.WARNING, o.life_warn_fraction), (Severity.ALARM, o.life_alarm_fraction)),
+        headline="Projected remaining life of {subject} is {value} at the current damage rate "
+        "({time})",
+        advice="the damage rate is too high: review bending (alignment), start peaks and "
+        "start count in the damage report",
+        source="seed 000 §8.2–8.3", value_format="{:.1f} years", direction="below",
+        deadband=o.life_deadband_fraction, raise_delay_s=o.raise_delay_s,
+        clear_delay_s=o.clear_delay_s, scale_key="remaining_design_life_years",
+        default_scale=config.design_life_years,
+    )  # fmt: skip
+
+
+def _stale(config: MillConfig, o: RuleOptions) -> Rule:
+    """No data from a channel (seed 000 §5.1: telemetry links drop out). The value is already a
+    duration, so no delays; clears as soon as data flows again."""
+    return Rule(
+        "stale_channel", "stale_channel", _levels((Severity.WARNING, o.stale_after_s)),
+        headline="No data{where} for {value} (at {time})",
+        advice="check the telemetry transmitter, the gateway and the network link",
+        source="seed 000 §5.1", value_format="{:.0f} s", deadband=o.stale_after_s * 0.5,
+    )  # fmt: skip
+
+
+def _spike_rate(config: MillConfig, o: RuleOptions) -> Rule:
+    """Telemetry interference spikes per minute (seed 000 §5.2.2: two-way radios and phones)."""
+    return Rule(
+        "spike_rate", "spike_rate", _levels((Severity.WARNING, o.spike_rate_warn_per_min)),
+        headline="Telemetry spikes{where}: {value} ({time})",
+        advice="check the telemetry antenna and radio sources near the mill; flagged samples "
+        "are excluded from the analysis",
+        source="seed 000 §5.2.2", value_format="{:.1f} per minute",
+        deadband=o.spike_rate_deadband_per_min, raise_delay_s=o.raise_delay_s,
+        clear_delay_s=o.clear_delay_s,
+    )  # fmt: skip
+
+
+def _sequence_gaps(config: MillConfig, o: RuleOptions) -> Rule:
+    """Blocks missing from a channel's sequence (seed 000 §5.1 telemetry path; the wire
+    format's sequence numbers)."""
+    return Rule(
+        "sequence_gaps", "sequence_gaps", _levels((Severity.WARNING, o.sequence_gaps_warn_per_min)),
+        headline="Data blocks missing{where}: {value} ({time})",
+        advice="check the sensor gateway and the network between gateway and service",
+        source="seed 000 §5.1", value_format="{:.0f} per minute",
+        raise_delay_s=o.raise_delay_s, clear_delay_s=o.clear_delay_s,
+    )  # fmt: skip
+
+
+def _archive(config: MillConfig, o: RuleOptions) -> Rule:
+    """Archive writes failing: raw data is being lost (the archive is the log; seed 000 §10.6
+    long-term trending needs it). Event, latched; clears after clean reports."""
+    return Rule(
+        "archive_write_failures", "archive_write_failures", _levels((Severity.ALARM, 0.0)),
+        headline="{value} failed at {time}: raw telemetry is not being archived",
+        advice="check the archive disk (space, permissions, health)",
+        source="seed 000 §10.6", value_format="{:.0f} archive writes",
+        clean_events_to_clear=o.archive_clean_reports_to_clear, latched=True,
+    )  # fmt: skip
+
+
+def _load_sharing(config: MillConfig, o: RuleOptions) -> Rule:
+    """Dual-drive load-sharing imbalance between barring and non-barring sides (seed 000 §6.2.2,
+    Table 15 compares the sides; the limits are engineering defaults, not seed values)."""
+    return Rule(
+        "load_sharing", "load_sharing_imbalance_pct",
+        _levels((Severity.WARNING, o.imbalance_warn_pct), (Severity.ALARM, o.imbalance_alarm_pct)),
+        headline="Load sharing between the drive sides is {value} out of balance at {time}",
+        advice="check the drives' load-sharing control and the pinion alignment of both sides",
+        source="seed 000 §6.2.2, Table 15", value_format="{:.0f} %",
+        deadband=o.imbalance_deadband_pct, raise_delay_s=o.raise_delay_s,
+        clear_delay_s=o.clear_delay_s,
+    )  # fmt: skip
+
+
+_BUILDERS = (
+    _start_peak, _starts_per_month, _oscillation, _bending, _barring, _unexplained_peak,
+    _resonance, _remaining_life, _stale, _spike_rate, _sequence_gaps, _archive, _load_sharing,
+)  # fmt: skip
+
+
+def build_rules(config: MillConfig, options: RuleOptions | None = None) -> RuleBook:
+    """The rule book of one mill: seed thresholds from ``config.alarms``, other knobs from
+    ``options`` (defaults: :class:`RuleOptions`)."""
+    opts = options or RuleOptions()
+    if not opts.imbalance_warn_pct < opts.imbalance_alarm_pct:
+        raise ValueError("imbalance_warn_pct must be below imbalance_alarm_pct")
+    if not opts.life_alarm_fraction < opts.life_warn_fraction:
+        raise ValueError("life_alarm_fraction must be below life_warn_fraction")
+    rules = [build(config, opts) for build in _BUILDERS]
+    return RuleBook(config.id, config.time_zone, {r.quantity: r for r in rules})

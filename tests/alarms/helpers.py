@@ -1,0 +1,46 @@
+"""Shared fixtures of the alarm tests: seed-based mill configs and observation builders."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+from zoneinfo import ZoneInfo
+
+from alarms.engine import AlarmEngine
+from alarms.lifecycle import Transition
+from alarms.observations import Observation
+from alarms.rules import RuleOptions
+from analytics.mill_config import MillConfig
+
+MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
+NS = 1_000_000_000
+#: 2026-11-02 00:00 in Johannesburg (the deploy mills' time zone), in ns UTC.
+T0 = int(datetime(2026, 11, 2, tzinfo=ZoneInfo("Africa/Johannesburg")).timestamp()) * NS
+
+
+def mill(name: str = "sag-5200-lrs") -> MillConfig:
+    return MillConfig.from_toml_text((MILLS / f"{name}.toml").read_text(encoding="utf-8"))
+
+
+def engine(name: str = "sag-5200-lrs", options: RuleOptions | None = None) -> AlarmEngine:
+    return AlarmEngine.for_mills([mill(name)], options)
+
+
+def obs(quantity: str, value: float, t_s: float, mill_id: str = "sag-5200-lrs", **context: Any):
+    return Observation(mill_id, quantity, float(value), T0 + int(t_s * NS), context)
+
+
+def feed(
+    eng: AlarmEngine, quantity: str, values: list[float], *, step_s: float = 60.0,
+    start_s: float = 0.0, mill_id: str = "sag-5200-lrs", **context: Any,
+) -> list[Transition]:  # fmt: skip
+    """Observe ``values`` of one quantity ``step_s`` apart."""
+    out: list[Transition] = []
+    for i, v in enumerate(values):
+        out += eng.observe(obs(quantity, v, start_s + i * step_s, mill_id, **context))
+    return out
+
+
+def kinds(transitions: list[Transition]) -> list[str]:
+    return [str(t.kind) for t in transitions]
