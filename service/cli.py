@@ -14,6 +14,7 @@ from collections.abc import Sequence
 
 from ingest.archive import ArchiveError
 from service import (
+    analyze_command,
     archive_command,
     demo_command,
     rainflow_command,
@@ -54,6 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     spectrum_command.add_parser(sub)
     replay_command.add_parser(sub)
     archive_command.add_parser(sub)
+    analyze_command.add_parser(sub)
     return parser
 
 

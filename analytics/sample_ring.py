@@ -1,0 +1,76 @@
+"""A fixed-size ring buffer of the last samples of several channels, indexed by stream sample.
+
+Event measurements (a start, a stop) look back at the samples of a phase once the phase has been
+decided, a few seconds to a minute after it began; the ring keeps exactly ``capacity`` samples per
+channel whatever the running time (bounded state, DESIGN.md). Snapshots hold only the samples a
+consumer still needs, as base64 of little-endian float64 (exact, compact, JSON-safe).
+"""
+
+from __future__ import annotations
+
+import base64
+from typing import Any
+
+import numpy as np
+
+__all__ = ["SampleRing"]
+
+
+class SampleRing:
+    """``rows`` channels × ``capacity`` samples; :meth:`write` appends a ``(rows, n)`` block."""
+
+    def __init__(self, rows: int, capacity: int) -> None:
+        self.rows = rows
+        self.capacity = int(capacity)
+        self._buf = np.full((rows, self.capacity), np.nan)
+        self.end = 0  # stream index one past the newest sample
+        self.floor = 0  # no sample before this one is held (a restored ring's first sample)
+
+    @property
+    def start(self) -> int:
+        """Oldest stream index still held."""
+        return max(self.floor, self.end - self.capacity)
+
+    def write(self, block: np.ndarray) -> None:
+        """Append samples ``[end, end + n)``."""
+        n = block.shape[1]
+        if n >= self.capacity:
+            block, self.end = block[:, -self.capacity :], self.end + n - self.capacity
+            n = self.capacity
+        a = self.end % self.capacity
+        first = min(n, self.capacity - a)
+        self._buf[:, a : a + first] = block[:, :first]
+        if first < n:
+            self._buf[:, : n - first] = block[:, first:]
+        self.end += n
+
+    def read(self, n0: int, n1: int) -> tuple[int, np.ndarray]:
+        """Samples ``[max(n0, start), min(n1, end))`` as a new ``(rows, m)`` array, and the
+        stream index of its first column."""
+        n0, n1 = max(n0, self.start), min(n1, self.end)
+        if n1 <= n0:
+            return n0, np.empty((self.rows, 0))
+        idx = np.arange(n0, n1) % self.capacity
+        return n0, self._buf[:, idx]
+
+    def snapshot(self, keep_from: int) -> dict[str, Any]:
+        """The samples from ``keep_from`` (clipped to what is held) and the write position."""
+        n0, data = self.read(keep_from, self.end)
+        raw = np.ascontiguousarray(data, dtype="<f8").tobytes()
+        return {
+            "rows": self.rows,
+            "capacity": self.capacity,
+            "end": self.end,
+            "from": n0,
+            "data": base64.b64encode(raw).decode(),
+        }
+
+    @classmethod
+    def restore(cls, d: dict[str, Any]) -> SampleRing:
+        ring = cls(int(d["rows"]), int(d["capacity"]))
+        data = np.frombuffer(base64.b64decode(d["data"]), dtype="<f8").reshape(ring.rows, -1)
+        ring.end = int(d["from"])
+        ring.write(data.copy())
+        ring.end = int(d["end"])
+        ring.floor = int(d["from"])
+        return ring
