@@ -23,12 +23,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from tqdm import tqdm
 
-from analytics.frame_aligner import FrameAligner
-from analytics.mill_analyzer import MillAnalyzer
+from alarms.from_analysis import report_observations
+from alarms.report import alarms_for_report
 from analytics.mill_config import MillConfig
+from analytics.mill_monitor import MillMonitor
 from ingest import keys, wire
 from ingest.archive import ArchiveError, RawMessage, TailTolerantReader
 from ingest.mill_files import load_mill_config
@@ -98,19 +98,13 @@ class _Blocks:
             self.malformed[kind] = self.malformed.get(kind, 0) + 1
             return None
 
-    def samples(self, name: str, block: wire.Block) -> np.ndarray:
-        ch = self.config.channels[name]
-        x = block.samples.astype(np.float64)
-        return ch.gain * (x - ch.offset) if (ch.gain, ch.offset) != (1.0, 0.0) else x
-
 
 def analyze_recording(
     files: list[Path], config: MillConfig, *, progress: bool = False
-) -> tuple[MillAnalyzer, dict[str, Any]]:
-    """Run the analyzer over the recording; returns it and reading statistics."""
-    analyzer = MillAnalyzer(config)
+) -> tuple[MillMonitor, dict[str, Any]]:
+    """Run the mill monitor over the recording; returns it and reading statistics."""
+    monitor = MillMonitor(config)
     blocks = _Blocks(config)
-    aligner = FrameAligner(list(config.channels), float(config.sample_rate_hz))
     total = sum(p.stat().st_size for p in files)
     with tqdm(total=total, unit="B", unit_scale=True, disable=not progress, file=sys.stderr,
               desc=f"analyze {config.id}") as bar:  # fmt: skip
@@ -120,19 +114,17 @@ def analyze_recording(
             if got is None:
                 continue
             name, block = got
-            for frame in aligner.push(name, block.t0_ns, block.fs, blocks.samples(name, block)):
-                analyzer.feed(frame)
-        for frame in aligner.flush():
-            analyzer.feed(frame)
+            monitor.push(name, block.t0_ns, block.fs, block.samples)
+        monitor.flush()
     stats = {
         "files": [str(p) for p in files],
         "malformed_blocks": blocks.malformed,
         "foreign_blocks": blocks.foreign,
-        "missing_blocks": aligner.missing_blocks,
-        "gap_samples": aligner.gap_samples,
-        "dropped_blocks": aligner.dropped_blocks,
+        "missing_blocks": monitor.aligner.missing_blocks,
+        "gap_samples": monitor.aligner.gap_samples,
+        "dropped_blocks": monitor.aligner.dropped_blocks,
     }
-    return analyzer, stats
+    return monitor, stats
 
 
 # ---------------------------------------------------------------- output
@@ -142,6 +134,22 @@ def _when(t_ns: int) -> str:
 
 def _fmt(x: float | None, spec: str = ".1f") -> str:
     return "—" if x is None else format(x, spec)
+
+
+def _spectral_and_alarm_lines(report: dict[str, Any]) -> list[str]:
+    lines = [
+        f"  line {h['channel']} {h['name']}: {h['frequency_hz']:.2f} Hz, "
+        f"{h['amplitude_pct']:.2f} % rated"
+        for h in report["harmonics"]
+        if h.get("detected") and h.get("amplitude_pct") is not None
+    ]
+    lines += [
+        f"  UNEXPLAINED peak {p['channel']} {p['frequency_hz']:.2f} Hz (possible torsional "
+        "resonance)"
+        for p in report["unexplained_peaks"]
+    ]
+    alarms = report["alarms"]
+    return lines + [f"  alarm {a['severity']} {a['rule']}: {a['message']}" for a in alarms]
 
 
 def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
@@ -169,6 +177,7 @@ def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
         hours = d["start_cost"]["hours_of_running_per_start"]
         if hours is not None:
             lines.append(f"    one start costs {hours:.3g} h of steady running")
+    lines += _spectral_and_alarm_lines(report)
     if stats["malformed_blocks"] or stats["missing_blocks"] or stats["gap_samples"]:
         lines.append(f"  reading: {stats}")
     return "\n".join(lines) + "\n"
@@ -201,10 +210,11 @@ def _main(args: argparse.Namespace) -> int:
         raise ValueError(f"--mill {exc}") from exc
     files = recording_files(args.recording)
     progress = not args.no_progress and sys.stderr.isatty()
-    analyzer, stats = analyze_recording(files, config, progress=progress)
-    if analyzer.n == 0:
+    monitor, stats = analyze_recording(files, config, progress=progress)
+    if monitor.analyzer.n == 0:
         raise ValueError(f"RECORDING {args.recording}: no blocks of mill {config.id!r} found")
-    report = analyzer.report()
+    report = monitor.report()
+    report["alarms"] = alarms_for_report(report_observations(config.id, report), config)
     if args.json:
         sys.stdout.write(json.dumps({**report, "reading": stats}, indent=1) + "\n")
     else:

@@ -67,3 +67,17 @@ def test_out_of_order_channels_within_pending_are_fine():
     out += al.push("b", T0, FS, block(4))
     assert [f.t0_ns for f in out] == [T0, T0 + STEP]
     assert al.missing_blocks == 0
+
+
+def test_snapshot_restore_keeps_pending_blocks():
+    import json
+
+    from analytics.frame_aligner import FrameAligner
+
+    a = FrameAligner(["x", "y"], 1000.0)
+    assert a.push("x", 0, 1000.0, np.arange(10.0)) == []
+    b = FrameAligner.restore(json.loads(json.dumps(a.snapshot())))
+    frames = b.push("y", 0, 1000.0, np.ones(10))
+    assert len(frames) == 1
+    np.testing.assert_array_equal(frames[0].data["x"], np.arange(10.0))
+    assert b.push("x", 0, 1000.0, np.zeros(10)) == [] and b.dropped_blocks == 1

@@ -39,6 +39,24 @@ def test_analyze_json_end_to_end(recording, capsys):
     assert start["rise_time_10_90_ms"] == pytest.approx(want["switch_on"][0]["rise_ms"], abs=2)
     assert len(r["stops"]) == 1 and r["reading"]["malformed_blocks"] == {}
     assert set(r["damage"]["pinion_combined"]["phases"]) >= {"start", "run", "stop", "barring"}
+    lines = {(h["channel"], h["name"]) for h in r["harmonics"] if h["detected"]}
+    assert ("motor_torque", "girth_mesh") in lines and r["unexplained_peaks"] == []
+    peak = max(start["switch_on_peak_pct"], start["short_circuit_peak_pct"])
+    raised = [a for a in r["alarms"] if a["rule"] == "start_peak"]
+    assert bool(raised) == (peak > 250.0)  # seed 000 §7.2: warning above 250 % of rated
+    assert r["data_quality"]["faults"]["motor_torque"]["spikes"] == 0
+
+
+def test_analyze_reports_an_injected_resonance_and_spikes(tmp_path, capsys):
+    out = tmp_path / "res.mcap"
+    assert main(["simulate", "--scene", "resonance", "--duration", "150s", "--out", str(out),
+                 "--no-progress"]) == 0  # fmt: skip
+    capsys.readouterr()
+    assert main(["analyze", str(out), "--mill", str(MILL), "--json", "--no-progress"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    freqs = [p["frequency_hz"] for p in r["unexplained_peaks"]]
+    assert any(abs(f - 12.0) < 0.1 for f in freqs), freqs
+    assert any(a["rule"] == "unexplained_peak" for a in r["alarms"])
 
 
 def test_analyze_directory_and_summary(recording, capsys):
