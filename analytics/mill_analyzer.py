@@ -470,6 +470,16 @@ class MillAnalyzer:
         return dataclasses.asdict(w) | {"t_ns": self.t_ns(w.sample)}
 
     # ------------------------------------------------------------ report
+    def damage_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
+        """Attributed damage per component, local day and phase, so far (cheap: no residue
+        closure, no projections). Attribution only books cycles whose phase is decided, so
+        calling this often or rarely gives the same totals (the sums are exact)."""
+        out = {}
+        for comp, pd in self.damage.items():
+            pd.attribute(self.timeline, self.sm.decided_until)
+            out[comp] = pd.days()
+        return out
+
     def report(self) -> dict[str, Any]:
         """Everything measured so far, as plain JSON-ready data."""
         from analytics.mill_report import build_report

@@ -1,0 +1,131 @@
+"""A mill's analysis inside the worker: :class:`~analytics.mill_monitor.MillMonitor` plus alarms,
+turned into rows for the store.
+
+Per decoded block the monitor returns the events and harmonic windows it completed; this adapter
+turns them (and any new steady-state windows) into
+
+* event rows (starts, stops, barring sessions),
+* records (``steady`` windows, ``harmonics`` tables),
+* alarm observations → alarm transitions (:mod:`alarms`), and
+* daily damage totals per component and phase, refreshed every ``damage_every_s`` seconds of
+  *sample* time (not wall time), so a replay of the archive produces the same rows.
+
+Everything is derived from the samples alone, so replaying the archive tail after a crash
+reproduces the same rows, which the store writes idempotently.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from alarms.engine import AlarmEngine
+from alarms.from_analysis import event_observations, peak_observations, window_observations
+from alarms.lifecycle import Transition
+from alarms.observations import Observation, local_month
+from analytics.mill_config import MillConfig
+from analytics.mill_monitor import MillMonitor
+from ingest.wire import Block
+from service.store import AlarmRow, AlarmTransitionRow, DamageRow, EventRow
+from service.worker import MillUpdate
+
+__all__ = ["AnalyzerPipeline"]
+
+log = logging.getLogger(__name__)
+
+DAMAGE_EVERY_S = 60.0
+
+
+class AnalyzerPipeline:
+    """The worker's :class:`~service.worker.MillPipeline` for one mill."""
+
+    def __init__(self, config: MillConfig, damage_every_s: float = DAMAGE_EVERY_S) -> None:
+        self.config = config
+        self.monitor = MillMonitor(config)
+        self.alarms = AlarmEngine.for_mills([config])
+        self._damage_every = round(damage_every_s * config.sample_rate_hz)
+        self._next_damage = self._damage_every
+        self._last_window_ns = -1
+        self._latest_window: dict[str, Any] | None = None
+
+    # ------------------------------------------------------------------ feeding
+    def feed_block(self, channel: str, block: Block) -> MillUpdate:
+        out = self.monitor.push(channel, block.t0_ns, block.fs, block.samples)
+        update = MillUpdate()
+        observations: list[Observation] = []
+        for event in out.events:
+            update.events.append(self._event_row(event))
+            observations += self._event_observations(event)
+        for window in self._new_windows():
+            update.records.append(("steady", int(window["t_ns"]), window))
+            observations += window_observations(self.config.id, window)
+        for hw in out.harmonics:
+            update.records.append(("harmonics", int(hw.t_end_ns), hw.to_dict()))
+            peaks = [p.to_dict() for p in hw.peaks]
+            observations += peak_observations(self.config.id, peaks, int(hw.t_end_ns))
+        self._alarm_rows(self.alarms.observe_all(observations), update)
+        if self.monitor.analyzer.n >= self._next_damage:
+            update.damage += self._damage_rows()
+            self._next_damage = self.monitor.analyzer.n + self._damage_every
+        return update
+
+    def _event_row(self, event: dict[str, Any]) -> EventRow:
+        return EventRow(self.config.id, str(event["event"]), int(event["t_ns"]), event,
+                        event.get("end_t_ns"))  # fmt: skip
+
+    def _event_observations(self, event: dict[str, Any]) -> list[Observation]:
+        obs = event_observations(self.config.id, event)
+        if event.get("event") == "start":
+            month = local_month(int(event["t_ns"]), self.config.time_zone)
+            count = self.monitor.analyzer.starts_per_month.get(month, {}).get("starts", 0)
+            obs.append(Observation(self.config.id, "starts_this_month", float(count),
+                                   int(event["t_ns"]), {"month": month}))  # fmt: skip
+        return obs
+
+    def _new_windows(self) -> list[dict[str, Any]]:
+        new = [w for w in self.monitor.analyzer.windows if w["t_ns"] > self._last_window_ns]
+        if new:
+            self._last_window_ns = int(new[-1]["t_ns"])
+            self._latest_window = new[-1]
+        return new
+
+    def _alarm_rows(self, transitions: list[Transition], update: MillUpdate) -> None:
+        for t in transitions:
+            update.alarm_transitions.append(AlarmTransitionRow(**t.to_row()))
+            update.alarms.append(AlarmRow(**t.alarm.to_dict()))
+
+    def _damage_rows(self) -> list[DamageRow]:
+        rows = []
+        for comp, days in self.monitor.analyzer.damage_by_day().items():
+            for day, phases in days.items():
+                for phase, damage in phases.items():
+                    rows.append(DamageRow(self.config.id, comp, phase, day, damage, 0.0))
+        return rows
+
+    # ------------------------------------------------------------------ reading
+    def status(self) -> dict[str, Any]:
+        a = self.monitor.analyzer
+        return {
+            "state": self.monitor.state,
+            "samples": a.n,
+            "last_sample_ns": a.t_ns(a.n) if a.t0_ns is not None else None,
+            "latest_steady": self._latest_window,
+            "open_alarms": len(self.alarms.open_alarms(self.config.id)),
+        }
+
+    # ------------------------------------------------------------------ persistence
+    def snapshot(self) -> dict[str, Any]:
+        return {
+            "monitor": self.monitor.snapshot(),
+            "alarms": self.alarms.snapshot(),
+            "next_damage": self._next_damage,
+            "last_window_ns": self._last_window_ns,
+            "latest_window": self._latest_window,
+        }
+
+    def restore(self, snapshot: dict[str, Any]) -> None:
+        self.monitor = MillMonitor.restore(self.config, snapshot["monitor"])
+        self.alarms.restore(snapshot["alarms"])
+        self._next_damage = int(snapshot["next_damage"])
+        self._last_window_ns = int(snapshot["last_window_ns"])
+        self._latest_window = snapshot["latest_window"]

@@ -1,0 +1,185 @@
+"""The running service: zenoh subscribers, the worker thread, archive, store — composed here.
+
+:class:`ServiceRuntime` owns every long-lived resource and closes them in reverse order. The
+order of start-up matters:
+
+1. open the store and the archive writer;
+2. subscribe on zenoh (callbacks only enqueue), so nothing published during recovery is lost;
+3. recover: restore the newest checkpoint and replay the archive after it;
+4. start the worker thread, which drains the queue (archive first, then analysis).
+
+Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the worker thread after its current batch,
+write a final checkpoint, finish the archive file (footer and index), undeclare the subscribers,
+close the zenoh session and the store.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from analytics.mill_config import MillConfig
+from ingest.archive import ArchiveReader, ArchiveWriter
+from ingest.zenoh_session import build_config, declare_block_subscriber
+from service.block_queue import BlockQueue
+from service.settings import ServiceSettings
+from service.store import Store
+from service.worker import MillPipeline, Worker, mill_patterns
+
+__all__ = ["ARCHIVE_PREFIX", "ServiceRuntime"]
+
+log = logging.getLogger(__name__)
+
+ARCHIVE_PREFIX = "millwatch"
+STATUS_EVERY_S = 0.5
+
+
+class ServiceRuntime:
+    """Everything ``millwatch serve`` runs, in one object; see the module docstring."""
+
+    def __init__(
+        self,
+        settings: ServiceSettings,
+        mills: dict[str, MillConfig],
+        pipeline_factory: Callable[[MillConfig], MillPipeline],
+    ) -> None:
+        self.settings = settings
+        self.mills = mills
+        self._pipeline_factory = pipeline_factory
+        self.queue = BlockQueue(settings.worker.queue_blocks)
+        self.store: Store | None = None
+        self.archive: ArchiveWriter | None = None
+        self.worker: Worker | None = None
+        self.session: zenoh.Session | None = None
+        self._subscribers: list[zenoh.Subscriber] = []
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.status: dict[str, Any] = {}
+        self.recovered_blocks = 0
+        self.started_ns: int | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        s = self.settings
+        self.store = Store(s.store.path)
+        for mill_id, config in self.mills.items():
+            self.store.put_mill(
+                mill_id, config.site, config.model_dump(mode="json"), time.time_ns()
+            )
+        self.archive = ArchiveWriter(
+            s.archive.directory,
+            ARCHIVE_PREFIX,
+            s.archive.rotate_seconds,
+            s.archive.rotate_bytes,
+            s.archive.chunk_size,
+            max_latency_s=s.archive.max_latency_s,
+        )
+        pipelines = {m: self._pipeline_factory(c) for m, c in self.mills.items()}
+        self.worker = Worker(
+            self.mills,
+            pipelines,
+            self.store,
+            self.archive,
+            checkpoint_seconds=s.worker.checkpoint_seconds,
+        )
+        self._subscribe()
+        self.recovered_blocks = self.worker.recover(
+            ArchiveReader(s.archive.directory, ARCHIVE_PREFIX)
+        )
+        self._refresh_status()
+        self._thread = threading.Thread(target=self._run, name="millwatch-worker", daemon=True)
+        self._thread.start()
+        self.started_ns = time.time_ns()
+        log.info(
+            "millwatch serving %d mill(s); archive %s; store %s",
+            len(self.mills),
+            s.archive.directory,
+            s.store.path,
+        )
+
+    def _subscribe(self) -> None:
+        z = self.settings.zenoh
+        self.session = zenoh.open(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
+        for pattern in mill_patterns(self.mills.values()):
+            self._subscribers.append(
+                declare_block_subscriber(self.session, pattern, self._on_block)
+            )
+
+    def _on_block(self, key: str, payload: bytes) -> None:
+        self.queue.offer(key, payload)
+
+    def _run(self) -> None:
+        assert self.worker is not None
+        last_status = 0.0
+        while not self._stop.is_set():
+            try:
+                self.worker.step(self.queue, timeout_s=0.1)
+            except Exception:
+                log.exception("worker step failed; continuing with the next batch")
+            if time.monotonic() - last_status >= STATUS_EVERY_S:
+                self._refresh_status()
+                last_status = time.monotonic()
+
+    def _refresh_status(self) -> None:
+        assert self.worker is not None
+        self.status = self.worker.status(self.settings.worker.stale_after_s)
+
+    def stop(self) -> None:
+        """Stop in reverse order; safe to call twice."""
+        self._stop.set()
+        for sub in self._subscribers:
+            sub.undeclare()
+        self._subscribers.clear()
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+            self._thread = None
+        if self.worker is not None:
+            self._drain_and_checkpoint()
+        if self.archive is not None:
+            self.archive.close()
+            self.archive = None
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+        if self.store is not None:
+            self.store.close()
+            self.store = None
+
+    def _drain_and_checkpoint(self) -> None:
+        assert self.worker is not None
+        while self.queue.depth:
+            self.worker.step(self.queue, timeout_s=0.0)
+        self.worker.checkpoint()
+        self._refresh_status()
+        self.worker = None
+
+    # ------------------------------------------------------------------ readiness
+    def readiness(self) -> dict[str, Any]:
+        """What ``GET /ready`` reports: zenoh up, archive writable, store reachable, fresh data."""
+        stale = {m: s["health"]["stale_channels"] for m, s in self.status.items()}
+        checks = {
+            "zenoh": self.session is not None,
+            "worker": self._thread is not None and self._thread.is_alive(),
+            "archive": self.archive is not None
+            and (self.worker is None or self.worker.archive_errors == 0),
+            "store": self._store_ok(),
+            "data_fresh": {m: not s for m, s in stale.items()},
+        }
+        ready = all(v for k, v in checks.items() if k != "data_fresh") and all(
+            checks["data_fresh"].values()
+        )
+        return {"ready": ready, "checks": checks, "stale_channels": stale}
+
+    def _store_ok(self) -> bool:
+        if self.store is None:
+            return False
+        try:
+            self.store.mills()
+        except Exception:  # any failure means "not reachable"
+            return False
+        return True

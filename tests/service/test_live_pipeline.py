@@ -1,0 +1,79 @@
+"""End to end over real zenoh on 127.0.0.1: simulated mill → worker → archive + store, and the
+archive analysed offline gives bitwise the same damage as the live worker."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import pytest
+
+from analytics.mill_monitor import MillMonitor
+from ingest.mill_files import load_mill_config
+from ingest.scene_publisher import ScenePublisher, starting_now
+from ingest.scenes import get_scene
+from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
+from service.analyze_command import analyze_recording, recording_files
+from service.mill_pipeline import AnalyzerPipeline
+from service.runtime import ServiceRuntime
+from service.settings import ServiceSettings
+
+MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
+
+
+def settings_for(tmp_path: Path, port: int) -> ServiceSettings:
+    return ServiceSettings.model_validate({
+        "zenoh": {"listen": [tcp_endpoint(port)]},
+        "archive": {"directory": str(tmp_path / "archive")},
+        "store": {"path": str(tmp_path / "mw.db")},
+        "worker": {"checkpoint_seconds": 1.0},
+        "mills": {"files": [str(MILLS / "sag-5200-lrs.toml")]},
+    })
+
+
+def wait_until(predicate, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.05)
+    return predicate()
+
+
+@pytest.mark.slow
+def test_live_results_equal_offline_analysis_of_the_archive(tmp_path):
+    port = free_loopback_port()
+    settings = settings_for(tmp_path, port)
+    mills = settings.load_mills()
+    config = mills["sag-5200-lrs"]
+    runtime = ServiceRuntime(settings, mills, AnalyzerPipeline)
+    runtime.start()
+    try:
+        scene = starting_now(get_scene("start-lrs", config, seed=7, duration_s=120.0))
+        with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
+            pub = ScenePublisher(session, scene, speed=None, wait_subscribers_s=5.0)
+            report = pub.run()
+        assert wait_until(lambda: runtime.worker.blocks_handled >= report.blocks, 30.0)
+        assert runtime.queue.dropped == 0
+    finally:
+        runtime.stop()
+    # the live side: the final checkpoint holds the worker's analyzer
+    from service.store import Store
+
+    with Store(settings.store.path) as store:
+        _, state = store.latest_checkpoint()
+        starts = store.events("sag-5200-lrs", "start")
+        alarms = store.alarms()
+    live = MillMonitor.restore(config, state["pipelines"]["sag-5200-lrs"]["monitor"])
+    live.flush()
+    # the offline side: the archive, analysed by `millwatch analyze`'s code path
+    offline, stats = analyze_recording(recording_files(settings.archive.directory), config)
+    assert stats["malformed_blocks"] == {} and stats["dropped_blocks"] == 0
+    live_damage = live.report()["damage"]
+    offline_damage = offline.report()["damage"]
+    assert json.dumps(live_damage, sort_keys=True) == json.dumps(offline_damage, sort_keys=True)
+    assert live_damage["pinion_combined"]["committed"] > 0
+    assert len(starts) == 1 == len(offline.report()["starts"])
+    peak = starts[0].data["switch_on_peak_pct"]
+    assert any(a.rule == "start_peak" for a in alarms) == (peak > 250.0)
