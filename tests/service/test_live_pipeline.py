@@ -10,7 +10,6 @@ from pathlib import Path
 import pytest
 
 from analytics.mill_monitor import MillMonitor
-from ingest.mill_files import load_mill_config
 from ingest.scene_publisher import ScenePublisher, starting_now
 from ingest.scenes import get_scene
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
@@ -18,18 +17,21 @@ from service.analyze_command import analyze_recording, recording_files
 from service.mill_pipeline import AnalyzerPipeline
 from service.runtime import ServiceRuntime
 from service.settings import ServiceSettings
+from service.store import Store
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 
 
 def settings_for(tmp_path: Path, port: int) -> ServiceSettings:
-    return ServiceSettings.model_validate({
-        "zenoh": {"listen": [tcp_endpoint(port)]},
-        "archive": {"directory": str(tmp_path / "archive")},
-        "store": {"path": str(tmp_path / "mw.db")},
-        "worker": {"checkpoint_seconds": 1.0},
-        "mills": {"files": [str(MILLS / "sag-5200-lrs.toml")]},
-    })
+    return ServiceSettings.model_validate(
+        {
+            "zenoh": {"listen": [tcp_endpoint(port)]},
+            "archive": {"directory": str(tmp_path / "archive")},
+            "store": {"path": str(tmp_path / "mw.db")},
+            "worker": {"checkpoint_seconds": 1.0},
+            "mills": {"files": [str(MILLS / "sag-5200-lrs.toml")]},
+        }
+    )
 
 
 def wait_until(predicate, timeout_s: float) -> bool:
@@ -59,8 +61,6 @@ def test_live_results_equal_offline_analysis_of_the_archive(tmp_path):
     finally:
         runtime.stop()
     # the live side: the final checkpoint holds the worker's analyzer
-    from service.store import Store
-
     with Store(settings.store.path) as store:
         _, state = store.latest_checkpoint()
         starts = store.events("sag-5200-lrs", "start")
