@@ -19,6 +19,7 @@ from service import (
     demo_command,
     rainflow_command,
     replay_command,
+    serve_command,
     simulate_command,
     spectrum_command,
 )
@@ -55,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     spectrum_command.add_parser(sub)
     replay_command.add_parser(sub)
     archive_command.add_parser(sub)
+    serve_command.add_parser(sub)
     analyze_command.add_parser(sub)
     return parser
 
