@@ -1,0 +1,89 @@
+"""A flood of malformed and random payloads: the worker survives, counts them, archives them,
+and the good blocks give exactly the results they give alone."""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from pathlib import Path
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from ingest.archive import ArchiveReader, ArchiveWriter
+from ingest.keys import build_key, channel_key
+from ingest.mill_files import load_mill_config
+from ingest.scene_blocks import scene_blocks
+from ingest.scenes import get_scene
+from service.block_queue import QueuedBlock
+from service.mill_pipeline import AnalyzerPipeline
+from service.store import Store
+from service.worker import Worker
+
+MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
+CONFIG = load_mill_config(MILL)
+GOOD = [
+    QueuedBlock(b.key, b.payload, b.t_end_ns)
+    for b in scene_blocks(get_scene("start-lrs", CONFIG, seed=3, duration_s=12.0))
+]
+KEYS = [channel_key(CONFIG.site, CONFIG.id, c.key) for c in CONFIG.channels.values()]
+FOREIGN = build_key("elsewhere", "other-mill", "pinion_torque")
+
+
+def run(items: list[QueuedBlock], directory: Path) -> tuple[Worker, str]:
+    with Store(directory / "mw.db") as store, ArchiveWriter(directory / "a", "w") as archive:
+        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: AnalyzerPipeline(CONFIG)}, store,
+                        archive)  # fmt: skip
+        for item in items:
+            worker.handle(item)
+        worker.commit()
+        monitor = worker.pipelines[CONFIG.id].monitor
+        monitor.flush()
+        return worker, json.dumps(monitor.report()["damage"], sort_keys=True)
+
+
+def mangle(payload: bytes, how: int, junk: bytes) -> bytes:
+    """Malformed variants of a good block: bad magic, bad version, truncated, trailing bytes,
+    or random bytes."""
+    return [
+        b"XXXX" + payload[4:],
+        payload[:4] + b"\x09\x00" + payload[6:],
+        payload[: max(0, len(payload) - 1 - len(junk))],
+        payload + b"\x00" + junk,
+        junk,
+    ][how]
+
+
+bad_block = st.tuples(st.integers(0, len(GOOD) - 1), st.integers(0, 4), st.binary(max_size=64),
+                      st.sampled_from([*KEYS, FOREIGN]))  # fmt: skip
+
+with tempfile.TemporaryDirectory() as _d:
+    _, CLEAN = run(GOOD, Path(_d))
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.integers(0, len(GOOD)), bad_block), min_size=1, max_size=60))
+def test_bad_payloads_are_counted_and_archived_and_change_nothing(flood):
+    items = list(GOOD)
+    for at, (src, how, junk, key) in sorted(flood, key=lambda f: -f[0]):
+        items.insert(at, QueuedBlock(key, mangle(GOOD[src].payload, how, junk), 0))
+    with tempfile.TemporaryDirectory() as d:
+        worker, damage = run(items, Path(d))
+        archived = sum(1 for _ in ArchiveReader(Path(d) / "a", "w").blocks())
+    assert damage == CLEAN
+    assert archived == len(items)  # everything is archived as received, bad blocks included
+    errors = sum(
+        sum(ch.decode_errors.values()) for ch in worker.health[CONFIG.id].channels.values()
+    )
+    foreign = sum(worker.unrouted.values())
+    assert errors + foreign == len(flood)
+    assert foreign == sum(1 for f in flood if f[1][3] == FOREIGN)
+
+
+def test_a_repeated_block_is_ignored_not_counted_twice():
+    items = list(GOOD)
+    items.insert(40, GOOD[30])
+    with tempfile.TemporaryDirectory() as d:
+        worker, damage = run(items, Path(d))
+    assert damage == CLEAN
+    assert sum(ch.repeats for ch in worker.health[CONFIG.id].channels.values()) == 1
