@@ -1,70 +1,159 @@
-"""``millwatch demo``: the main job of the README, runnable on a fresh machine.
+"""``millwatch demo``: the whole product on one machine, with simulated mills.
 
-Until the live pipeline exists, the demo analyses a *simulated* hour of pinion-shaft stress
-offline and says so: once-per-revolution bending of 15 MPa range (seed 000 Table 16, single drive,
-average) on the torsional stress of a mill running at 70 % of rated torque with torque
-oscillations at pinion speed and at tooth mesh (seed 000 §6.2.4). The stress goes through the same
-counter and damage recorder as live data.
+Starts, on loopback only: the worker (zenoh subscriber, MCAP archive, analysis, SQLite store,
+checkpoints), one simulated sensor gateway per mill publishing a month-long scene of starts,
+barring, steady running and telemetry spikes (seed 000 §6) at ``--speed`` × real time, and the
+REST API. It prints where to look and runs until Ctrl-C (or ``--minutes``). The data is
+SIMULATED and says so everywhere it is shown.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
+import logging
 import sys
+import tempfile
+import threading
 from pathlib import Path
 
-import numpy as np
+import uvicorn
 
-from analytics.sn_models import build_sn_curve
-from service.rainflow_command import run_rainflow
-from service.signal_files import ArraySource
+from analytics.mill_config import MillConfig
+from ingest.scene_publisher import ScenePublisher, starting_now
+from ingest.scenes import get_scene
+from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
+from service.api import create_app
+from service.cli_args import positive_float, positive_int
+from service.mill_pipeline import AnalyzerPipeline
+from service.runtime import ServiceRuntime
+from service.settings import ServiceSettings
 
-__all__ = ["add_parser", "simulated_pinion_stress"]
+__all__ = ["add_parser"]
 
-FS_HZ = 1000.0
-PINION_RPM = 176.0  # seed 000 §6.2.1: 995 rpm motor, reducer 113/20
-PINION_TEETH = 22  # illustrative; the seed gives no tooth count
+log = logging.getLogger(__name__)
+
+MILLS_DIR = Path(__file__).resolve().parents[1] / "deploy" / "mills"
 
 
-def simulated_pinion_stress(seconds: float, seed: int = 1) -> np.ndarray:
-    """Combined pinion-shaft stress σθ = ½σx + ½σx·cos2θ + τ·sin2θ at θ = 45° (seed 000 eq. 12),
-    MPa, sampled at 1 kHz: a clearly synthetic signal for the demo."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(int(seconds * FS_HZ)) / FS_HZ
-    f_pinion = PINION_RPM / 60.0
-    bending = 7.5 * np.sin(2 * np.pi * f_pinion * t)  # 15 MPa range (Table 16)
-    tau = 30.0 * (1 + 0.12 * np.sin(2 * np.pi * f_pinion * t + 0.4))
-    tau += 1.5 * np.sin(2 * np.pi * f_pinion * PINION_TEETH * t)
-    noise = rng.normal(0.0, 0.3, t.shape)
-    return 0.5 * bending + tau + noise
+def demo_settings(directory: Path, zenoh_port: int, api_port: int, mills: int) -> ServiceSettings:
+    files = sorted(MILLS_DIR.glob("*.toml"))[:mills]
+    return ServiceSettings.model_validate({
+        "zenoh": {"listen": [tcp_endpoint(zenoh_port)]},
+        "archive": {"directory": str(directory / "archive")},
+        "store": {"path": str(directory / "millwatch.db")},
+        "worker": {"checkpoint_seconds": 30.0, "stale_after_s": 10.0},
+        "api": {"host": "127.0.0.1", "port": api_port},
+        "mills": {"files": [str(f) for f in files]},
+    })  # fmt: skip
+
+
+class Gateways:
+    """One simulated gateway thread per mill, each with its own zenoh session."""
+
+    def __init__(self, runtime: ServiceRuntime, endpoint: str, speed: float, scene: str) -> None:
+        self._stop = threading.Event()
+        self._threads = [
+            threading.Thread(target=self._run, args=(config, endpoint, speed, scene, seed),
+                             name=f"gateway-{mill_id}", daemon=True)
+            for seed, (mill_id, config) in enumerate(runtime.mills.items())
+        ]  # fmt: skip
+
+    def start(self) -> None:
+        for t in self._threads:
+            t.start()
+
+    def _run(self, config: MillConfig, endpoint: str, speed: float, name: str, seed: int) -> None:
+        scene = starting_now(get_scene(name, config, seed=seed))
+        with open_session(build_config(connect=[endpoint])) as session:
+            ScenePublisher(session, scene, speed=speed, wait_subscribers_s=5.0).run(self._stop)
+
+    def stop(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=10)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
-        help="analyse a simulated hour of pinion-shaft stress (offline demo)",
+        help="run everything on loopback with simulated mills: worker, gateways, REST API",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="example:\n  millwatch demo --speed 60      # an hour of plant time per minute",
     )
-    p.add_argument("--minutes", type=float, default=60.0, help="simulated minutes (default 60)")
+    p.add_argument(
+        "--mills",
+        type=positive_int,
+        default=3,
+        help="simulated mills from deploy/mills (1–3, default 3)",
+    )
+    p.add_argument(
+        "--speed",
+        type=positive_float,
+        default=20.0,
+        help="× real time of the simulated plant (default 20)",
+    )
+    p.add_argument(
+        "--scene", default="month", help="catalogue scene each mill plays (default: month)"
+    )
+    p.add_argument("--port", type=int, default=8080, help="API port on 127.0.0.1 (default 8080)")
+    p.add_argument(
+        "--dir",
+        type=Path,
+        help="where the archive and store go (default: a new temporary directory)",
+    )
+    p.add_argument(
+        "--minutes",
+        type=positive_float,
+        help="stop by itself after this many minutes (default: run until Ctrl-C)",
+    )
     p.set_defaults(handler=_main)
 
 
 def _main(args: argparse.Namespace) -> int:
-    stress = simulated_pinion_stress(args.minutes * 60.0)
-    curve = build_sn_curve("shigley")
-    label = Path(f"simulated-pinion-stress-{args.minutes:g}min")
-    s = run_rainflow(ArraySource(label, stress), curve, scale=2.0, progress=sys.stderr.isatty())
-    hours = args.minutes / 60.0
-    years = math.inf if s.damage == 0 else hours / s.damage / 8766.0
-    sys.stdout.write(
-        "millwatch demo — SIMULATED data (no plant connected)\n"
-        f"  signal        combined pinion-shaft stress, {s.samples} samples at 1 kHz, K_t = 2\n"
-        f"  cycles        {s.full_cycles} full, {s.half_cycles} half\n"
-        f"  damage        {s.damage:.3e} in {hours:g} h on '{curve.name}' "
-        "(seed 000 App. D section 1)\n"
-        f"  life at this duty  {years:.3g} years of continuous running\n"
-        "Next: 'millwatch rainflow FILE.npy --json' analyses a recording of your own.\n"
-    )
+    directory = args.dir or Path(tempfile.mkdtemp(prefix="millwatch-demo-"))
+    zenoh_port = free_loopback_port()
+    settings = demo_settings(directory, zenoh_port, args.port, min(args.mills, 3))
+    runtime = ServiceRuntime(settings, settings.load_mills(), AnalyzerPipeline)
+    runtime.start()
+    gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene)
+    server = uvicorn.Server(uvicorn.Config(create_app(runtime), host="127.0.0.1",
+                                           port=args.port, log_level="warning"))  # fmt: skip
+    timer = _stop_after(server, args.minutes)
+    try:
+        gateways.start()
+        _announce(settings, runtime, directory, args)
+        server.run()
+    finally:
+        if timer is not None:
+            timer.cancel()
+        gateways.stop()
+        runtime.stop()
+    sys.stdout.write(f"millwatch demo stopped; archive and store kept in {directory}\n")
     return 0
+
+
+def _stop_after(server: uvicorn.Server, minutes: float | None) -> threading.Timer | None:
+    if minutes is None:
+        return None
+    timer = threading.Timer(minutes * 60.0, lambda: setattr(server, "should_exit", True))
+    timer.daemon = True
+    timer.start()
+    return timer
+
+
+def _announce(settings: ServiceSettings, runtime: ServiceRuntime, directory: Path,
+              args: argparse.Namespace) -> None:  # fmt: skip
+    base = f"http://127.0.0.1:{args.port}"
+    mills = ", ".join(runtime.mills)
+    sys.stdout.write(
+        "millwatch demo — SIMULATED mills, nothing here comes from a plant\n"
+        f"  mills      {mills} (scene '{args.scene}' at {args.speed:g}× real time)\n"
+        f"  API        {base}/mills   {base}/mills/<id>   {base}/ready   {base}/docs\n"
+        f"  archive    {settings.archive.directory}\n"
+        f"  store      {settings.store.path}\n"
+        f"  then try   millwatch analyze {settings.archive.directory} "
+        f"--mill deploy/mills/sag-5200-lrs.toml\n"
+        "Ctrl-C stops (final checkpoint, archive files finished).\n"
+    )
+    sys.stdout.flush()

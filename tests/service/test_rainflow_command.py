@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import subprocess
 import sys
 from pathlib import Path
@@ -133,11 +132,3 @@ def test_console_script_runs_and_prints_a_readable_summary(npy):
         check=True,
     )
     assert "damage" in proc.stdout and "FAT 160 normal" in proc.stdout
-
-
-def test_demo_reports_simulated_damage(capsys):
-    assert main(["demo", "--minutes", "1"]) == 0
-    out = capsys.readouterr().out
-    assert "SIMULATED" in out
-    damage = float(out.split("damage")[1].split()[0])
-    assert 0 < damage < 1 and math.isfinite(damage)

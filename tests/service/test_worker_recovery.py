@@ -38,7 +38,7 @@ from service.store import Store
 
 ROOT = Path(__file__).resolve().parents[2]
 MILL = ROOT / "deploy" / "mills" / "sag-5200-lrs.toml"
-BLOCK_S = 0.1
+PACE_S = 0.0005  # between blocks: 2000 blocks/s, 500 per channel, about 50x real time
 
 
 def write_settings(tmp_path: Path, port: int) -> Path:
@@ -85,7 +85,7 @@ def test_sigkill_at_random_moments_then_restart_equals_offline_analysis(tmp_path
             start = 0
             for cut in [*cuts, len(blocks)]:
                 publishers: dict = {}
-                publish(session, blocks[start:cut], publishers, pace_s=0.0005)
+                publish(session, blocks[start:cut], publishers, pace_s=PACE_S)
                 for p in publishers.values():
                     p.undeclare()
                 start = cut
@@ -107,9 +107,10 @@ def test_sigkill_at_random_moments_then_restart_equals_offline_analysis(tmp_path
                        .blocks())  # fmt: skip
     published = Counter(b.key for b in blocks)
     lost = {k: published[k] - archived[k] for k in published}
-    # three kills; each loses at most the blocks not yet in the archive (~0.1 s per channel,
-    # plus what the dying process had queued)
-    assert all(0 <= n <= 3 * 10 for n in lost.values()), lost
+    # Each kill loses at most what reached the worker in the last ~0.1 s of *wall* time (the
+    # archive's max latency) plus scheduling slack: 0.25 s at this publish rate, per channel.
+    per_channel_rate = 1.0 / (PACE_S * len(published))
+    assert all(0 <= n <= len(cuts) * 0.25 * per_channel_rate for n in lost.values()), lost
     assert set(archived) == {
         channel_key(config.site, config.id, c.key) for c in config.channels.values()
     }
