@@ -122,6 +122,7 @@ class ServiceRuntime:
             except Exception:
                 log.exception("worker step failed; continuing with the next batch")
             if time.monotonic() - last_status >= STATUS_EVERY_S:
+                self.worker.check_staleness(self.settings.worker.stale_after_s)
                 self._refresh_status()
                 last_status = time.monotonic()
 

@@ -81,6 +81,11 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             t_ns INTEGER NOT NULL, severity TEXT NOT NULL, state TEXT NOT NULL, value REAL,
             threshold REAL, by TEXT, message TEXT NOT NULL, PRIMARY KEY (alarm_id, seq))""",
     ),
+    (  # 2 → 3: several events of one kind at one time need a subject (e.g. a channel)
+        "ALTER TABLE events ADD COLUMN subject TEXT NOT NULL DEFAULT ''",
+        "DROP INDEX events_unique",
+        "CREATE UNIQUE INDEX events_unique ON events (mill_id, kind, t_ns, subject)",
+    ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 #: Checkpoints kept (older ones are deleted when a new one is written).
@@ -100,6 +105,7 @@ class EventRow:
     t_ns: int
     data: dict[str, Any]
     t_end_ns: int | None = None
+    subject: str = ""  # what the event is about when one time has several (e.g. a channel)
 
 
 @dataclass(frozen=True, slots=True)
@@ -237,11 +243,14 @@ class Store:
     @staticmethod
     def add_events(db: sqlite3.Connection, events: Sequence[EventRow]) -> None:
         """Insert events (inside :meth:`transaction`); an event already stored (same mill,
-        kind and time, e.g. re-derived while replaying the archive tail) is replaced."""
+        kind, time and subject, e.g. re-derived while replaying the archive tail) is replaced."""
         db.executemany(
-            "INSERT OR REPLACE INTO events (mill_id, kind, t_ns, t_end_ns, data_json) "
-            "VALUES (?, ?, ?, ?, ?)",
-            [(e.mill_id, e.kind, e.t_ns, e.t_end_ns, json.dumps(e.data)) for e in events],
+            "INSERT OR REPLACE INTO events (mill_id, kind, t_ns, t_end_ns, data_json, subject) "
+            "VALUES (?, ?, ?, ?, ?, ?)",
+            [
+                (e.mill_id, e.kind, e.t_ns, e.t_end_ns, json.dumps(e.data), e.subject)
+                for e in events
+            ],
         )
 
     @staticmethod
@@ -359,14 +368,16 @@ class Store:
         until_ns: int | None = None,
     ) -> list[EventRow]:
         """Events of a mill in time order, optionally of one kind and in ``[since, until)``."""
-        sql = "SELECT mill_id, kind, t_ns, data_json, t_end_ns FROM events WHERE mill_id = ?"
+        sql = (
+            "SELECT mill_id, kind, t_ns, data_json, t_end_ns, subject FROM events WHERE mill_id = ?"
+        )
         args: list[Any] = [mill_id]
         for clause, value in (("kind = ?", kind), ("t_ns >= ?", since_ns), ("t_ns < ?", until_ns)):
             if value is not None:
                 sql += " AND " + clause
                 args.append(value)
         rows = self._query(sql + " ORDER BY t_ns, id", tuple(args))
-        return [EventRow(m, k, t, json.loads(d), e) for m, k, t, d, e in rows]
+        return [EventRow(m, k, t, json.loads(d), e, sub) for m, k, t, d, e, sub in rows]
 
     def damage(self, mill_id: str, since_day: str | None = None) -> list[DamageRow]:
         """Daily damage rows of a mill, oldest first."""

@@ -94,6 +94,7 @@ class Worker:
         self._logged: set[tuple[str, str]] = set()
         self._pending = PendingResults()
         self._last_checkpoint = time.monotonic()
+        self._stale: dict[str, set[str]] = {}
 
     # ------------------------------------------------------------------ one block
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
@@ -117,13 +118,44 @@ class Worker:
                 (item.key, exc.kind), "%s: %s (counted; further ones not logged)", item.key, exc
             )
             return
-        verdict = self.health[mill_id].channels[channel].observe(block, item.recv_ns)
+        health = self.health[mill_id].channels[channel]
+        missing_before = health.missing_blocks
+        verdict = health.observe(block, item.recv_ns)
+        if verdict == "gap":
+            self._quality(
+                mill_id,
+                channel,
+                block.t0_ns,
+                "sequence_gap",
+                missing_blocks=health.missing_blocks - missing_before,
+                seq=block.seq,
+            )
         if verdict == "repeat":
             self._log_once(
                 (item.key, "repeat"), "%s: repeated block seq %d ignored", item.key, block.seq
             )
             return
         self._pending.add(mill_id, self.pipelines[mill_id].feed_block(channel, block))
+
+    def _quality(self, mill_id: str, channel: str, t_ns: int, problem: str, **data: Any) -> None:
+        """A data-quality event (stored with the mill's events)."""
+        row = EventRow(mill_id, "data_quality", int(t_ns),
+                       {"channel": channel, "problem": problem, **data},
+                       subject=f"{channel}:{problem}")  # fmt: skip
+        self._pending.add(mill_id, MillUpdate(events=[row]))
+
+    def check_staleness(self, stale_after_s: float) -> None:
+        """Data-quality events when a channel goes stale or comes back; call about once a
+        second. Staleness is wall-clock: it is not replayed from the archive."""
+        now = self._clock()
+        for mill_id, mh in self.health.items():
+            stale = set(mh.stale_channels(now, stale_after_s))
+            was = self._stale.get(mill_id, set())
+            for channel in sorted(stale - was):
+                self._quality(mill_id, channel, now, "stale", stale_after_s=stale_after_s)
+            for channel in sorted(was - stale):
+                self._quality(mill_id, channel, now, "fresh")
+            self._stale[mill_id] = stale
 
     def _archive(self, item: QueuedBlock) -> None:
         try:

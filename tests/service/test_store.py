@@ -102,3 +102,11 @@ def test_readers_in_other_connections_see_committed_data_while_a_writer_works(tm
     assert reader.records("m1", "steady", limit=1)[0][0] == 199
     store.close()
     reader.close()
+
+
+def test_events_of_one_kind_at_one_time_are_kept_apart_by_subject(tmp_path):
+    with Store(tmp_path / "s.db") as store:
+        rows = [EventRow("m1", "data_quality", 7, {"channel": c}, subject=c) for c in "ab"]
+        with store.transaction() as db:
+            Store.add_events(db, rows)
+        assert [e.subject for e in store.events("m1", "data_quality")] == ["a", "b"]

@@ -87,3 +87,22 @@ def test_a_repeated_block_is_ignored_not_counted_twice():
         worker, damage = run(items, Path(d))
     assert damage == CLEAN
     assert sum(ch.repeats for ch in worker.health[CONFIG.id].channels.values()) == 1
+
+
+def test_sequence_gaps_and_stale_channels_become_data_quality_events():
+    items = [it for i, it in enumerate(GOOD) if i not in (41, 50)]  # one block of two channels
+    with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
+        clock = [10**18]
+        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: AnalyzerPipeline(CONFIG)}, store,
+                        None, clock=lambda: clock[0])  # fmt: skip
+        for item in items:
+            worker.handle(QueuedBlock(item.key, item.payload, clock[0]))
+        worker.check_staleness(10.0)
+        clock[0] += 11 * 10**9
+        worker.check_staleness(10.0)
+        worker.commit()
+        events = store.events(CONFIG.id, "data_quality")
+    gaps = [e for e in events if e.data["problem"] == "sequence_gap"]
+    stale = [e for e in events if e.data["problem"] == "stale"]
+    assert len(gaps) == 2 and all(e.data["missing_blocks"] == 1 for e in gaps)
+    assert {e.data["channel"] for e in stale} == set(CONFIG.channels)
