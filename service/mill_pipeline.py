@@ -21,12 +21,11 @@ from typing import Any
 
 from alarms.engine import AlarmEngine
 from alarms.from_analysis import event_observations, peak_observations, window_observations
-from alarms.lifecycle import Transition
 from alarms.observations import Observation, local_month
 from analytics.mill_config import MillConfig
 from analytics.mill_monitor import MillMonitor
 from ingest.wire import Block
-from service.store import AlarmRow, AlarmTransitionRow, DamageRow, EventRow
+from service.store import DamageRow, EventRow
 from service.worker import MillUpdate
 
 __all__ = ["AnalyzerPipeline"]
@@ -63,7 +62,7 @@ class AnalyzerPipeline:
             update.records.append(("harmonics", int(hw.t_end_ns), hw.to_dict()))
             peaks = [p.to_dict() for p in hw.peaks]
             observations += peak_observations(self.config.id, peaks, int(hw.t_end_ns))
-        self._alarm_rows(self.alarms.observe_all(observations), update)
+        update.alarm_transitions += self.alarms.observe_all(observations)
         if self.monitor.analyzer.n >= self._next_damage:
             update.damage += self._damage_rows()
             self._next_damage = self.monitor.analyzer.n + self._damage_every
@@ -88,11 +87,6 @@ class AnalyzerPipeline:
             self._last_window_ns = int(new[-1]["t_ns"])
             self._latest_window = new[-1]
         return new
-
-    def _alarm_rows(self, transitions: list[Transition], update: MillUpdate) -> None:
-        for t in transitions:
-            update.alarm_transitions.append(AlarmTransitionRow(**t.to_row()))
-            update.alarms.append(AlarmRow(**t.alarm.to_dict()))
 
     def _damage_rows(self) -> list[DamageRow]:
         rows = []

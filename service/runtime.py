@@ -23,8 +23,11 @@ from typing import Any
 
 import zenoh
 
+from alarms.lifecycle import Transition
+from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
 from analytics.mill_config import MillConfig
 from ingest.archive import ArchiveReader, ArchiveWriter
+from ingest.keys import alarm_key
 from ingest.zenoh_session import build_config, declare_block_subscriber
 from service.block_queue import BlockQueue
 from service.settings import ServiceSettings
@@ -57,6 +60,7 @@ class ServiceRuntime:
         self.worker: Worker | None = None
         self.session: zenoh.Session | None = None
         self._subscribers: list[zenoh.Subscriber] = []
+        self._alarm_publishers: dict[str, zenoh.Publisher] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.status: dict[str, Any] = {}
@@ -88,6 +92,7 @@ class ServiceRuntime:
             checkpoint_seconds=s.worker.checkpoint_seconds,
         )
         self._subscribe()
+        self.worker.on_alarms = self._publish_alarms
         self.recovered_blocks = self.worker.recover(
             ArchiveReader(s.archive.directory, ARCHIVE_PREFIX)
         )
@@ -109,6 +114,28 @@ class ServiceRuntime:
             self._subscribers.append(
                 declare_block_subscriber(self.session, pattern, self._on_block)
             )
+
+    def _publish_alarms(self, transitions: list[Transition]) -> None:
+        """Put each stored alarm transition on its mill's ``…/@alarms`` key (JSON), for SCADA
+        gateways. Transitions carry the alarm id and a sequence number, so a transition
+        published again after a crash recovery is recognisable as the same one."""
+        if self.session is None:
+            return
+        for t in transitions:
+            config = self.mills.get(t.alarm.mill_id)
+            if config is None:
+                continue
+            key = alarm_key(config.site, config.id)
+            publisher = self._alarm_publishers.get(key)
+            if publisher is None:
+                publisher = self.session.declare_publisher(
+                    key,
+                    encoding=zenoh.Encoding(ALARM_ENCODING).with_schema(ALARM_SCHEMA),
+                    congestion_control=zenoh.CongestionControl.BLOCK,
+                    reliability=zenoh.Reliability.RELIABLE,
+                )
+                self._alarm_publishers[key] = publisher
+            publisher.put(encode_transition(t, config.site))
 
     def _on_block(self, key: str, payload: bytes) -> None:
         self.queue.offer(key, payload)
@@ -144,6 +171,9 @@ class ServiceRuntime:
         if self.archive is not None:
             self.archive.close()
             self.archive = None
+        for publisher in self._alarm_publishers.values():
+            publisher.undeclare()
+        self._alarm_publishers.clear()
         if self.session is not None:
             self.session.close()
             self.session = None

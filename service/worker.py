@@ -25,6 +25,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from alarms.lifecycle import Transition
 from analytics.mill_config import MillConfig
 from ingest import keys
 from ingest.archive import ArchivePosition, ArchiveReader, ArchiveWriter
@@ -48,8 +49,7 @@ class MillUpdate:
     events: list[EventRow] = field(default_factory=list)
     damage: list[DamageRow] = field(default_factory=list)
     records: list[tuple[str, int, dict[str, Any]]] = field(default_factory=list)
-    alarm_transitions: list[AlarmTransitionRow] = field(default_factory=list)
-    alarms: list[AlarmRow] = field(default_factory=list)
+    alarm_transitions: list[Transition] = field(default_factory=list)
 
     def __bool__(self) -> bool:
         return bool(self.events or self.damage or self.records or self.alarm_transitions)
@@ -95,6 +95,7 @@ class Worker:
         self._pending = PendingResults()
         self._last_checkpoint = time.monotonic()
         self._stale: dict[str, set[str]] = {}
+        self.on_alarms: Callable[[list[Transition]], None] | None = None
 
     # ------------------------------------------------------------------ one block
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
@@ -183,12 +184,15 @@ class Worker:
         return len(items)
 
     def commit(self) -> None:
-        """Write the pending results in one transaction."""
+        """Write the pending results in one transaction, then hand the alarm transitions to
+        ``on_alarms`` (e.g. to publish them on zenoh) — only once they are stored."""
         if not self._pending:
             return
+        pending, self._pending = self._pending, PendingResults()
         with self.store.transaction() as db:
-            self._pending.write(db)
-        self._pending = PendingResults()
+            pending.write(db)
+        if pending.transitions and self.on_alarms is not None:
+            self.on_alarms(pending.transitions)
 
     def checkpoint(self) -> ArchivePosition | None:
         """Flush the archive and store every pipeline's snapshot with the archive position."""
@@ -262,8 +266,7 @@ class PendingResults:
         self.events: list[EventRow] = []
         self.records: list[tuple[str, str, int, dict[str, Any]]] = []
         self.damage: dict[tuple[str, str, str, str], DamageRow] = {}
-        self.transitions: list[AlarmTransitionRow] = []
-        self.alarms: dict[str, AlarmRow] = {}
+        self.transitions: list[Transition] = []
 
     def add(self, mill_id: str, update: MillUpdate) -> None:
         self.events += update.events
@@ -271,7 +274,6 @@ class PendingResults:
         for row in update.damage:
             self.damage[(row.mill_id, row.component, row.phase, row.day)] = row
         self.transitions += update.alarm_transitions
-        self.alarms |= {a.alarm_id: a for a in update.alarms}
 
     def __bool__(self) -> bool:
         return bool(self.events or self.records or self.damage or self.transitions)
@@ -282,7 +284,9 @@ class PendingResults:
         for mill_id, kind, t_ns, data in self.records:
             Store.add_record(db, mill_id, kind, t_ns, data)
         if self.transitions:
-            Store.put_alarm_transitions(db, self.transitions, list(self.alarms.values()))
+            rows = [AlarmTransitionRow(**t.to_row()) for t in self.transitions]
+            latest = {t.alarm_id: AlarmRow(**t.alarm.to_dict()) for t in self.transitions}
+            Store.put_alarm_transitions(db, rows, list(latest.values()))
 
 
 def _routes(mills: dict[str, MillConfig]) -> dict[str, tuple[str, str]]:
