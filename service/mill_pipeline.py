@@ -96,6 +96,10 @@ class AnalyzerPipeline:
                     rows.append(DamageRow(self.config.id, comp, phase, day, damage, 0.0))
         return rows
 
+    def observe(self, observations: list[Observation]) -> MillUpdate:
+        """Alarm observations from outside the analysis (the worker's data-quality checks)."""
+        return MillUpdate(alarm_transitions=self.alarms.observe_all(observations))
+
     # ------------------------------------------------------------------ reading
     def status(self) -> dict[str, Any]:
         a = self.monitor.analyzer

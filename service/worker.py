@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from alarms.lifecycle import Transition
+from alarms.observations import Observation
 from analytics.mill_config import MillConfig
 from ingest import keys
 from ingest.archive import ArchivePosition, ArchiveReader, ArchiveWriter
@@ -59,6 +60,8 @@ class MillPipeline(Protocol):
     """One mill's analysis: fed decoded blocks per configured channel, in arrival order."""
 
     def feed_block(self, channel: str, block: Block) -> MillUpdate: ...
+
+    def observe(self, observations: list[Observation]) -> MillUpdate: ...
 
     def status(self) -> dict[str, Any]: ...
 
@@ -95,6 +98,7 @@ class Worker:
         self._pending = PendingResults()
         self._last_checkpoint = time.monotonic()
         self._stale: dict[str, set[str]] = {}
+        self._started_ns = clock()
         self.on_alarms: Callable[[list[Transition]], None] | None = None
 
     # ------------------------------------------------------------------ one block
@@ -157,6 +161,16 @@ class Worker:
             for channel in sorted(was - stale):
                 self._quality(mill_id, channel, now, "fresh")
             self._stale[mill_id] = stale
+            self._pending.add(mill_id, self.pipelines[mill_id].observe(self._silence(mill_id, now)))
+
+    def _silence(self, mill_id: str, now: int) -> list[Observation]:
+        """``stale_channel`` observations: seconds since each channel last delivered data."""
+        out = []
+        for channel, h in self.health[mill_id].channels.items():
+            since = h.last_recv_ns if h.last_recv_ns is not None else self._started_ns
+            out.append(Observation(mill_id, "stale_channel", max(0, now - since) / 1e9, now,
+                                   {"channel": channel}))  # fmt: skip
+        return out
 
     def _archive(self, item: QueuedBlock) -> None:
         try:

@@ -106,3 +106,6 @@ def test_sequence_gaps_and_stale_channels_become_data_quality_events():
     stale = [e for e in events if e.data["problem"] == "stale"]
     assert len(gaps) == 2 and all(e.data["missing_blocks"] == 1 for e in gaps)
     assert {e.data["channel"] for e in stale} == set(CONFIG.channels)
+    raised = {a.subject for a in worker.pipelines[CONFIG.id].alarms.open_alarms(CONFIG.id)
+              if a.rule == "stale_channel"}  # fmt: skip
+    assert raised == set(CONFIG.channels)  # silent for 11 s > 10 s: a data-quality alarm
