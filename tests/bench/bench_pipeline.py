@@ -54,8 +54,8 @@ def run(configs, items: list[QueuedBlock], archive: bool) -> float:
     with tempfile.TemporaryDirectory() as d:
         writer = ArchiveWriter(Path(d), "bench") if archive else None
         with Store(Path(d) / "mw.db") as store:
-            worker = Worker({c.id: c for c in configs},
-                            {c.id: AnalyzerPipeline(c) for c in configs}, store, writer)  # fmt: skip
+            pipelines = {c.id: AnalyzerPipeline(c) for c in configs}
+            worker = Worker({c.id: c for c in configs}, pipelines, store, writer)
             t0 = time.perf_counter()
             for k, item in enumerate(items, start=1):
                 worker.handle(item)
