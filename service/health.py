@@ -16,7 +16,7 @@ from typing import Any
 
 from ingest.wire import Block
 
-__all__ = ["ChannelHealth", "MillHealth", "SeqVerdict"]
+__all__ = ["ChannelHealth", "MillHealth", "PerMinute", "SeqVerdict"]
 
 SeqVerdict = str  # "first", "next", "gap", "repeat"
 
@@ -103,3 +103,22 @@ class MillHealth:
             "stale_channels": self.stale_channels(now_ns, stale_after_s),
             "channels": {n: c.as_dict(now_ns, stale_after_s) for n, c in self.channels.items()},
         }
+
+
+class PerMinute:
+    """Rate of a growing counter over the last minute of wall time (e.g. spikes, lost blocks):
+    ``rate(now_ns, total)`` returns (total − total a minute ago) per minute, using what it has
+    seen so far when it has seen less than a minute. Bounded: one reading per call, a minute kept.
+    """
+
+    def __init__(self, window_s: float = 60.0) -> None:
+        self.window_ns = int(window_s * 1e9)
+        self._readings: list[tuple[int, int]] = []
+
+    def rate(self, now_ns: int, total: int) -> float:
+        self._readings.append((now_ns, total))
+        while len(self._readings) > 2 and now_ns - self._readings[1][0] >= self.window_ns:
+            self._readings.pop(0)
+        t0, v0 = self._readings[0]
+        span_ns = max(now_ns - t0, self.window_ns)
+        return (total - v0) * 60e9 / span_ns

@@ -100,6 +100,10 @@ class AnalyzerPipeline:
         """Alarm observations from outside the analysis (the worker's data-quality checks)."""
         return MillUpdate(alarm_transitions=self.alarms.observe_all(observations))
 
+    def spike_counts(self) -> dict[str, int]:
+        """Telemetry spikes flagged so far, per checked channel."""
+        return {n: c.spikes for n, c in self.monitor.faults.totals().items()}
+
     # ------------------------------------------------------------------ reading
     def status(self) -> dict[str, Any]:
         a = self.monitor.analyzer

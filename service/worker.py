@@ -32,7 +32,7 @@ from ingest import keys
 from ingest.archive import ArchivePosition, ArchiveReader, ArchiveWriter
 from ingest.wire import Block, WireError, decode_block
 from service.block_queue import BlockQueue, QueuedBlock
-from service.health import MillHealth
+from service.health import MillHealth, PerMinute
 from service.store import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
 
 __all__ = ["MillPipeline", "MillUpdate", "Worker"]
@@ -62,6 +62,8 @@ class MillPipeline(Protocol):
     def feed_block(self, channel: str, block: Block) -> MillUpdate: ...
 
     def observe(self, observations: list[Observation]) -> MillUpdate: ...
+
+    def spike_counts(self) -> dict[str, int]: ...
 
     def status(self) -> dict[str, Any]: ...
 
@@ -99,6 +101,8 @@ class Worker:
         self._last_checkpoint = time.monotonic()
         self._stale: dict[str, set[str]] = {}
         self._started_ns = clock()
+        self._rate_meters: dict[tuple[str, str, str], PerMinute] = {}
+        self._archive_errors_reported = 0
         self.on_alarms: Callable[[list[Transition]], None] | None = None
 
     # ------------------------------------------------------------------ one block
@@ -150,9 +154,11 @@ class Worker:
         self._pending.add(mill_id, MillUpdate(events=[row]))
 
     def check_staleness(self, stale_after_s: float) -> None:
-        """Data-quality events when a channel goes stale or comes back; call about once a
-        second. Staleness is wall-clock: it is not replayed from the archive."""
+        """Data-quality events when a channel goes stale or comes back, and the data-quality
+        alarm observations (silence, spike rate, lost blocks, archive write failures); call
+        about once a second. These are wall-clock facts: they are not replayed from the archive."""
         now = self._clock()
+        archive_failures = self.archive_errors - self._archive_errors_reported
         for mill_id, mh in self.health.items():
             stale = set(mh.stale_channels(now, stale_after_s))
             was = self._stale.get(mill_id, set())
@@ -161,7 +167,25 @@ class Worker:
             for channel in sorted(was - stale):
                 self._quality(mill_id, channel, now, "fresh")
             self._stale[mill_id] = stale
-            self._pending.add(mill_id, self.pipelines[mill_id].observe(self._silence(mill_id, now)))
+            observations = self._silence(mill_id, now) + self._rates(mill_id, now)
+            observations.append(Observation(mill_id, "archive_write_failures",
+                                            float(archive_failures), now))  # fmt: skip
+            self._pending.add(mill_id, self.pipelines[mill_id].observe(observations))
+        self._archive_errors_reported = self.archive_errors
+
+    def _rates(self, mill_id: str, now: int) -> list[Observation]:
+        """``spike_rate`` and ``sequence_gaps`` per channel, per minute of wall time."""
+        out = []
+        spikes = self.pipelines[mill_id].spike_counts()
+        for channel, h in self.health[mill_id].channels.items():
+            for quantity, total in (("spike_rate", spikes.get(channel)),
+                                    ("sequence_gaps", h.missing_blocks)):  # fmt: skip
+                if total is None:
+                    continue
+                meter = self._rate_meters.setdefault((mill_id, channel, quantity), PerMinute())
+                out.append(Observation(mill_id, quantity, meter.rate(now, total), now,
+                                       {"channel": channel}))  # fmt: skip
+        return out
 
     def _silence(self, mill_id: str, now: int) -> list[Observation]:
         """``stale_channel`` observations: seconds since each channel last delivered data."""

@@ -37,3 +37,14 @@ def test_a_mill_lists_its_stale_channels():
     assert m.stale_channels(now_ns=5_000_000_000, stale_after_s=10.0) == []
     assert m.stale_channels(now_ns=20_000_000_000, stale_after_s=10.0) == ["speed", "pinion_torque"]
     assert m.as_dict(0, 10.0)["channels"]["pinion_torque"]["decode_errors"] == {"truncated": 1}
+
+
+def test_per_minute_rate_over_the_last_minute():
+    from service.health import PerMinute
+
+    meter = PerMinute()
+    s = 1_000_000_000
+    assert meter.rate(0, 0) == 0.0
+    assert meter.rate(30 * s, 3) == 3.0  # less than a minute seen: counted over a minute
+    assert meter.rate(60 * s, 6) == 6.0
+    assert meter.rate(120 * s, 6) == 0.0  # nothing new in the last minute

@@ -109,3 +109,23 @@ def test_sequence_gaps_and_stale_channels_become_data_quality_events():
     raised = {a.subject for a in worker.pipelines[CONFIG.id].alarms.open_alarms(CONFIG.id)
               if a.rule == "stale_channel"}  # fmt: skip
     assert raised == set(CONFIG.channels)  # silent for 11 s > 10 s: a data-quality alarm
+
+
+def test_archive_write_failures_raise_the_data_quality_alarm():
+    class FullDisk:
+        def write(self, *_args: object) -> None:
+            raise OSError(28, "No space left on device")
+
+        def flush_if_due(self) -> bool:
+            return False
+
+    with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
+        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: AnalyzerPipeline(CONFIG)}, store,
+                        FullDisk())  # fmt: skip
+        for item in GOOD[:8]:
+            worker.handle(item)
+        worker.check_staleness(10.0)
+        worker.commit()
+        rules = {a.rule for a in store.alarms()}
+    assert worker.archive_errors == 8
+    assert "archive_write_failures" in rules
