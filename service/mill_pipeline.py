@@ -33,6 +33,7 @@ __all__ = ["AnalyzerPipeline"]
 log = logging.getLogger(__name__)
 
 DAMAGE_EVERY_S = 60.0
+SECONDS_PER_YEAR = 365.25 * 86400.0
 
 
 class AnalyzerPipeline:
@@ -65,6 +66,8 @@ class AnalyzerPipeline:
         update.alarm_transitions += self.alarms.observe_all(observations)
         if self.monitor.analyzer.n >= self._next_damage:
             update.damage += self._damage_rows()
+            observations = self._life_observations()
+            update.alarm_transitions += self.alarms.observe_all(observations)
             self._next_damage = self.monitor.analyzer.n + self._damage_every
         return update
 
@@ -87,6 +90,26 @@ class AnalyzerPipeline:
             self._last_window_ns = int(new[-1]["t_ns"])
             self._latest_window = new[-1]
         return new
+
+    def _life_observations(self) -> list[Observation]:
+        """``remaining_life_years`` per component: (1 − D) / (D per year so far), the damage
+        rate taken over everything this analyzer has seen (seed 000 §8.2; Miner limit 1)."""
+        a = self.monitor.analyzer
+        seconds = a.n / a.fs
+        out = []
+        for comp, pd in a.damage.items():
+            damage = pd.committed
+            if damage <= 0.0 or seconds <= 0.0:
+                continue
+            per_year = damage / seconds * SECONDS_PER_YEAR
+            out.append(Observation(self.config.id, "remaining_life_years",
+                                   (1.0 - damage) / per_year, a.t_ns(a.n), {
+                                       "component": comp,
+                                       "remaining_design_life_years":
+                                           self.config.design_life_years,
+                                       "rate_window_s": seconds,
+                                   }))  # fmt: skip
+        return out
 
     def _damage_rows(self) -> list[DamageRow]:
         rows = []

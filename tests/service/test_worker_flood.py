@@ -129,3 +129,17 @@ def test_archive_write_failures_raise_the_data_quality_alarm():
         rules = {a.rule for a in store.alarms()}
     assert worker.archive_errors == 8
     assert "archive_write_failures" in rules
+
+
+def test_a_mill_wearing_out_too_fast_raises_the_remaining_life_alarm():
+    fast = CONFIG.model_copy(update={"design_life_years": 1e12})  # any damage is too fast
+    scene = get_scene("steady", fast, seed=1, duration_s=90.0)  # > the rule's 60 s raise delay
+    items = [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
+    with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
+        pipeline = AnalyzerPipeline(fast, damage_every_s=5.0)
+        worker = Worker({fast.id: fast}, {fast.id: pipeline}, store, None)
+        for item in items:
+            worker.handle(item)
+        worker.commit()
+        life = [a for a in store.alarms() if a.rule == "remaining_life"]
+    assert {a.subject for a in life} == {"pinion_combined", "pinion_torsion", "motor_torsion"}
