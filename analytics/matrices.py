@@ -124,6 +124,22 @@ class _Matrix:
         added = np.bincount(flat, weights=_half_counts(cycles), minlength=self._counts.size)
         self._counts += added.astype(np.int64).reshape(self._counts.shape)
 
+    def _binned_damage(
+        self,
+        curve: SNCurve,
+        ranges: np.ndarray,
+        means: np.ndarray,
+        mean_correction: GoodmanCorrection | None,
+    ) -> float:
+        """Miner damage of the occupied cells read at ``ranges``/``means`` (per-cell grids)."""
+        nonzero = self._counts > 0
+        return curve.damage(
+            np.maximum(ranges[nonzero], 0.0),
+            self._counts[nonzero] * 0.5,
+            means[nonzero] if mean_correction is not None else None,
+            mean_correction,
+        )
+
     @property
     def half_cycles(self) -> np.ndarray:
         """Counts in half cycles, shape (k₀ + 1, k₁ + 1), under/overflow bins included (a copy)."""
@@ -225,13 +241,7 @@ class RangeMeanMatrix(_Matrix):
         ranges = _representatives(self.range_edges, representative, 0.0)
         means = _representatives(self.mean_edges, representative, self.mean_edges[0])
         rr, mm = np.meshgrid(ranges * scale, means * scale, indexing="ij")
-        nonzero = self._counts > 0
-        return curve.damage(
-            np.maximum(rr[nonzero], 0.0),
-            self._counts[nonzero] * 0.5,
-            mm[nonzero] if mean_correction is not None else None,
-            mean_correction,
-        )
+        return self._binned_damage(curve, rr, mm, mean_correction)
 
 
 class FromToMatrix(_Matrix):
@@ -277,10 +287,4 @@ class FromToMatrix(_Matrix):
         else:
             valley = peak = _representatives(edges, representative, edges[0])
         vv, pp = np.meshgrid(valley * scale, peak * scale, indexing="ij")
-        nonzero = self._counts > 0
-        return curve.damage(
-            np.maximum(pp[nonzero] - vv[nonzero], 0.0),
-            self._counts[nonzero] * 0.5,
-            0.5 * (pp[nonzero] + vv[nonzero]) if mean_correction is not None else None,
-            mean_correction,
-        )
+        return self._binned_damage(curve, pp - vv, 0.5 * (pp + vv), mean_correction)
