@@ -366,12 +366,10 @@ class TelemetryFaultDetector:
 
     def _decide(self, buf: np.ndarray, stop: int) -> FaultFlags:
         first = self.samples_decided
-        before = self.totals
+        before = self._i[_C_SPIKES : _C_FLAGGED + 1].copy()
         kinds = np.zeros(stop - _HIST, dtype=np.uint8)
         _scan(buf, _HIST, stop, kinds, self._p, self._f, self._i)
-        counts = FaultCounts(
-            *(a - b for a, b in zip(self.totals.as_tuple(), before.as_tuple(), strict=True))
-        )
+        counts = FaultCounts(*(self._i[_C_SPIKES : _C_FLAGGED + 1] - before).tolist())
         if counts.flagged_samples:
             log.debug("telemetry faults in samples %d+%d: %s", first, kinds.size, counts)
         return FaultFlags(kinds != 0, counts, first, buf[_HIST:stop].copy(), kinds)
