@@ -11,34 +11,19 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from fastapi import FastAPI, Request
+from fastapi import FastAPI
 from fastapi.responses import JSONResponse
 
+from service.api_alarms import alarms_router
+from service.api_errors import NotFound, install_problem_handlers, problem_responses
+from service.api_metrics import metrics_router
+from service.api_mills import mills_router
+from service.metrics import metrics_registry
 from service.runtime import ServiceRuntime
 
 __all__ = ["NotFound", "create_app"]
 
 PROBLEM = "application/problem+json"
-
-
-class NotFound(LookupError):
-    """A resource the client named does not exist; ``detail`` says which and what exists."""
-
-    def __init__(self, title: str, detail: str) -> None:
-        super().__init__(detail)
-        self.title = title
-        self.detail = detail
-
-
-def _problem(status: int, title: str, detail: str, instance: str) -> JSONResponse:
-    body = {
-        "type": "about:blank",
-        "title": title,
-        "status": status,
-        "detail": detail,
-        "instance": instance,
-    }
-    return JSONResponse(body, status_code=status, media_type=PROBLEM)
 
 
 def create_app(runtime: ServiceRuntime) -> FastAPI:
@@ -49,9 +34,10 @@ def create_app(runtime: ServiceRuntime) -> FastAPI:
         version="0.1.0",
     )
 
-    @app.exception_handler(NotFound)
-    async def not_found(request: Request, exc: NotFound) -> JSONResponse:
-        return _problem(404, exc.title, exc.detail, request.url.path)
+    install_problem_handlers(app)
+    app.include_router(mills_router(runtime))
+    app.include_router(alarms_router(runtime))
+    app.include_router(metrics_router(metrics_registry(runtime)))
 
     @app.get("/health", summary="Liveness: the process answers")
     def health() -> dict[str, Any]:
@@ -66,7 +52,11 @@ def create_app(runtime: ServiceRuntime) -> FastAPI:
     def mills() -> list[dict[str, Any]]:
         return [_mill_summary(runtime, m) for m in runtime.mills]
 
-    @app.get("/mills/{mill_id}", summary="One mill: state, latest metrics, data health")
+    @app.get(
+        "/mills/{mill_id}",
+        summary="One mill: state, latest metrics, data health",
+        responses=problem_responses(404),
+    )
     def mill(mill_id: str) -> dict[str, Any]:
         return _mill_detail(runtime, mill_id)
 

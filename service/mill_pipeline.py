@@ -136,7 +136,26 @@ class AnalyzerPipeline:
             "last_sample_ns": a.t_ns(a.n) if a.t0_ns is not None else None,
             "latest_steady": self._latest_window,
             "open_alarms": len(self.alarms.open_alarms(self.config.id)),
+            "monitored_since_ns": a.t0_ns,
+            "damage": self._damage_summary(),
         }
+
+    def _damage_summary(self) -> dict[str, dict[str, float]]:
+        """Miner damage per component so far: closed cycles (``committed``), what closing the
+        open rainflow residue now as half cycles would add (``pending_residue``), and their sum
+        (``with_residue``). Cheap (the residue is a few turning points); called by the worker
+        thread when it refreshes the status, so the API never touches the analyzer."""
+        a = self.monitor.analyzer
+        out = {}
+        for comp, pd in a.damage.items():
+            committed = pd.committed
+            with_residue = pd.with_residue(a.counters[comp].close())
+            out[comp] = {
+                "committed": committed,
+                "pending_residue": with_residue - committed,
+                "with_residue": with_residue,
+            }
+        return out
 
     # ------------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:

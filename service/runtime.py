@@ -32,7 +32,7 @@ from ingest.zenoh_session import build_config, declare_block_subscriber
 from service.block_queue import BlockQueue
 from service.settings import ServiceSettings
 from service.store import Store
-from service.worker import MillPipeline, Worker, mill_patterns
+from service.worker import AckRequest, MillPipeline, Worker, mill_patterns
 
 __all__ = ["ARCHIVE_PREFIX", "ServiceRuntime"]
 
@@ -188,6 +188,20 @@ class ServiceRuntime:
         self.worker.checkpoint()
         self._refresh_status()
         self.worker = None
+
+    # ------------------------------------------------------------------ acknowledgements
+    @property
+    def worker_alive(self) -> bool:
+        """The worker thread runs (so a queued acknowledgement will be applied)."""
+        return self.worker is not None and self._thread is not None and self._thread.is_alive()
+
+    def request_ack(self, mill_id: str, alarm_id: str, by: str) -> AckRequest | None:
+        """Queue an acknowledgement for the worker thread (see :meth:`Worker.request_ack`);
+        None when the worker is not running."""
+        worker = self.worker
+        if worker is None or not self.worker_alive:
+            return None
+        return worker.request_ack(mill_id, alarm_id, by)
 
     # ------------------------------------------------------------------ readiness
     def readiness(self) -> dict[str, Any]:

@@ -19,9 +19,11 @@ and logged once per kind; a block whose key belongs to no configured mill is arc
 from __future__ import annotations
 
 import logging
+import queue
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -35,7 +37,7 @@ from service.block_queue import BlockQueue, QueuedBlock
 from service.health import MillHealth, PerMinute
 from service.store import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
 
-__all__ = ["MillPipeline", "MillUpdate", "Worker"]
+__all__ = ["AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +56,18 @@ class MillUpdate:
 
     def __bool__(self) -> bool:
         return bool(self.events or self.damage or self.records or self.alarm_transitions)
+
+
+@dataclass(frozen=True)
+class AckRequest:
+    """An acknowledgement asked for by another thread (the API), applied by the worker thread
+    in :meth:`Worker.step`; ``done`` gets the stored transitions, or the engine's exception
+    (e.g. :class:`alarms.engine.UnknownAlarmError` when the alarm is no longer open)."""
+
+    mill_id: str
+    alarm_id: str
+    by: str
+    done: Future[list[Transition]] = field(default_factory=Future)
 
 
 class MillPipeline(Protocol):
@@ -104,6 +118,7 @@ class Worker:
         self._rate_meters: dict[tuple[str, str, str], PerMinute] = {}
         self._archive_errors_reported = 0
         self.on_alarms: Callable[[list[Transition]], None] | None = None
+        self._acks: queue.SimpleQueue[AckRequest] = queue.SimpleQueue()
 
     # ------------------------------------------------------------------ one block
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
@@ -214,12 +229,54 @@ class Worker:
         items = queue.drain(BATCH_BLOCKS, timeout_s)
         for item in items:
             self.handle(item)
-        self.commit()
+        acked = self._apply_acks()
+        try:
+            self.commit()
+        except Exception as exc:
+            for request, _ in acked:
+                request.done.set_exception(exc)
+            raise
+        if acked:
+            self._finish_acks(acked)
         if self.archive is not None:
             self.archive.flush_if_due()
         if time.monotonic() - self._last_checkpoint >= self.checkpoint_seconds:
             self.checkpoint()
         return len(items)
+
+    # ------------------------------------------------------------------ acknowledgements
+    def request_ack(self, mill_id: str, alarm_id: str, by: str) -> AckRequest:
+        """Ask the worker thread to acknowledge an alarm (any thread may call this); wait on
+        the request's ``done`` future. The worker applies it at its next :meth:`step` (within
+        ~0.1 s), stores and publishes its transitions like any other, then checkpoints."""
+        request = AckRequest(mill_id, alarm_id, by)
+        self._acks.put(request)
+        return request
+
+    def _apply_acks(self) -> list[tuple[AckRequest, list[Transition]]]:
+        """Apply the queued acknowledgements to the mills' alarm engines (worker thread)."""
+        applied = []
+        while True:
+            try:
+                request = self._acks.get_nowait()
+            except queue.Empty:
+                return applied
+            try:
+                engine = self.pipelines[request.mill_id].alarms  # type: ignore[attr-defined]
+                transitions = engine.acknowledge(request.alarm_id, request.by, self._clock())
+            except Exception as exc:  # handed to the waiting caller, who maps it
+                request.done.set_exception(exc)
+                continue
+            self._pending.add(request.mill_id, MillUpdate(alarm_transitions=transitions))
+            applied.append((request, transitions))
+
+    def _finish_acks(self, acked: list[tuple[AckRequest, list[Transition]]]) -> None:
+        """After the acks' transitions are stored: checkpoint at once, because an ack is a
+        wall-clock fact the archive cannot replay, then tell the callers."""
+        if any(transitions for _, transitions in acked):
+            self.checkpoint()
+        for request, transitions in acked:
+            request.done.set_result(transitions)
 
     def commit(self) -> None:
         """Write the pending results in one transaction, then hand the alarm transitions to

@@ -1,0 +1,71 @@
+"""What the per-mill endpoints answer: life, starts of a month, latest spectrum.
+
+The service layer between the routes (:mod:`service.api_mills`) and the store/runtime: it finds
+the mill (or raises :class:`~service.api_errors.NotFound` naming it and the mills that exist),
+reads the store, and reads live values only from ``runtime.status`` — the snapshot the worker
+thread refreshes every 0.5 s — never from the analyzer itself.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from analytics.mill_config import MillConfig
+from service.api_errors import NotFound, Unavailable
+from service.life import LifeInputs, life_report
+from service.runtime import ServiceRuntime
+from service.starts import current_month, starts_in_month
+from service.store import Store
+
+__all__ = ["mill_config", "mill_life", "mill_spectrum", "mill_starts", "store_of"]
+
+
+def mill_config(runtime: ServiceRuntime, mill_id: str) -> MillConfig:
+    """The configuration of a mill served here; :class:`NotFound` otherwise."""
+    config = runtime.mills.get(mill_id)
+    if config is None:
+        known = ", ".join(sorted(runtime.mills)) or "(none)"
+        raise NotFound("Unknown mill", f"No mill {mill_id!r} is configured here; mills: {known}.")
+    return config
+
+
+def store_of(runtime: ServiceRuntime) -> Store:
+    """The open store; :class:`Unavailable` while the service starts or stops."""
+    store = runtime.store
+    if store is None:
+        raise Unavailable(
+            "Store closed",
+            "The store is not open (the service is starting or "
+            "stopping); try again in a few seconds.",
+        )
+    return store
+
+
+def mill_life(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
+    """Damage so far, damage rate and remaining life per component (:mod:`service.life`)."""
+    config = mill_config(runtime, mill_id)
+    rows = store_of(runtime).damage(mill_id)
+    status = runtime.status.get(mill_id, {})
+    return life_report(LifeInputs(config, rows, status, time.time_ns()))
+
+
+def mill_starts(runtime: ServiceRuntime, mill_id: str, month: str | None) -> dict[str, Any]:
+    """The starts of ``month`` (default: the current month in the site's time zone)."""
+    config = mill_config(runtime, mill_id)
+    month = month or current_month(config, time.time_ns())
+    return starts_in_month(store_of(runtime), config, month)
+
+
+def mill_spectrum(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
+    """The latest stored harmonic table; :class:`NotFound` when none was computed yet."""
+    mill_config(runtime, mill_id)
+    latest = store_of(runtime).records(mill_id, "harmonics", limit=1)
+    if not latest:
+        raise NotFound(
+            "No spectrum yet",
+            f"Mill {mill_id!r} has no harmonic table yet: spectra "
+            "are computed only in steady running, once per Welch window.",
+        )
+    t_ns, data = latest[0]
+    return {"mill": mill_id, "t_ns": t_ns, "harmonics": data}

@@ -1,0 +1,93 @@
+"""Shared fixture of the API tests: a real runtime (zenoh on 127.0.0.1, MCAP archive, SQLite
+store) fed one simulated LRS start, served by uvicorn on 127.0.0.1."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+import uvicorn
+
+from ingest.scene_publisher import ScenePublisher, starting_now
+from ingest.scenes import get_scene
+from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
+from service.api import create_app
+from service.mill_pipeline import AnalyzerPipeline
+from service.runtime import ServiceRuntime
+from service.settings import ServiceSettings
+
+MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
+API_KEY = "test-key-123"
+MILL = "sag-5200-lrs"
+
+
+@dataclass
+class LiveApi:
+    runtime: ServiceRuntime
+    url: str
+    zenoh_port: int
+
+
+def _wait_until(predicate, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.05)
+    return predicate()
+
+
+def _settings(tmp: Path, zenoh_port: int) -> ServiceSettings:
+    return ServiceSettings.model_validate(
+        {
+            "zenoh": {"listen": [tcp_endpoint(zenoh_port)]},
+            "archive": {"directory": str(tmp / "archive")},
+            "store": {"path": str(tmp / "mw.db")},
+            "api": {"api_key": API_KEY},
+            "mills": {"files": [str(MILLS / f"{MILL}.toml")]},
+        }
+    )
+
+
+def _feed(runtime: ServiceRuntime, zenoh_port: int, duration_s: float) -> None:
+    config = runtime.mills[MILL]
+    scene = starting_now(get_scene("start-lrs", config, seed=0, duration_s=duration_s))
+    with open_session(build_config(connect=[tcp_endpoint(zenoh_port)])) as session:
+        report = ScenePublisher(session, scene, speed=None, wait_subscribers_s=5.0).run()
+    assert _wait_until(lambda: runtime.worker.blocks_handled >= report.blocks, 30.0)
+    before = runtime.status
+    assert _wait_until(lambda: runtime.status is not before, 5.0)  # a fresh status snapshot
+
+
+def serve(app, port: int) -> tuple[uvicorn.Server, threading.Thread]:
+    """Serve ``app`` with uvicorn on 127.0.0.1:``port`` in a thread; set ``should_exit`` and
+    join the thread to stop it."""
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, name="test-uvicorn", daemon=True)
+    thread.start()
+    assert _wait_until(lambda: server.started, 10.0)
+    return server, thread
+
+
+@pytest.fixture(scope="session")
+def live_api(tmp_path_factory) -> Iterator[LiveApi]:
+    """The served app over a runtime that analysed a 120 s LRS start (and keeps running)."""
+    tmp = tmp_path_factory.mktemp("api")
+    zenoh_port = free_loopback_port()
+    settings = _settings(tmp, zenoh_port)
+    runtime = ServiceRuntime(settings, settings.load_mills(), AnalyzerPipeline)
+    runtime.start()
+    server = thread = None
+    try:
+        _feed(runtime, zenoh_port, duration_s=120.0)
+        server, thread = serve(create_app(runtime), free_loopback_port())
+        yield LiveApi(runtime, f"http://127.0.0.1:{server.config.port}", zenoh_port)
+    finally:
+        if server is not None:
+            server.should_exit = True
+            thread.join(timeout=10)
+        runtime.stop()
