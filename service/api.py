@@ -18,6 +18,7 @@ from service.api_alarms import alarms_router
 from service.api_errors import NotFound, install_problem_handlers, problem_responses
 from service.api_metrics import metrics_router
 from service.api_mills import mills_router
+from service.api_reports import register_report_routes
 from service.metrics import metrics_registry
 from service.runtime import ServiceRuntime
 
@@ -38,6 +39,7 @@ def create_app(runtime: ServiceRuntime) -> FastAPI:
     app.include_router(mills_router(runtime))
     app.include_router(alarms_router(runtime))
     app.include_router(metrics_router(metrics_registry(runtime)))
+    register_report_routes(app, runtime)
 
     @app.get("/health", summary="Liveness: the process answers")
     def health() -> dict[str, Any]:
