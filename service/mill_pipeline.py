@@ -33,6 +33,10 @@ __all__ = ["AnalyzerPipeline"]
 log = logging.getLogger(__name__)
 
 DAMAGE_EVERY_S = 60.0
+#: A harmonic table is stored at most every 5 minutes of sample time (a window completes about
+#: every 10 s while running; storing each, with every expected line, took ~1.8 MB per running
+#: hour), and at once whenever a window holds an unexplained peak.
+HARMONICS_EVERY_NS = 300 * 1_000_000_000
 SECONDS_PER_YEAR = 365.25 * 86400.0
 
 
@@ -47,6 +51,7 @@ class AnalyzerPipeline:
         self._next_damage = self._damage_every
         self._last_window_ns = -1
         self._latest_window: dict[str, Any] | None = None
+        self._next_harmonics_ns = 0
 
     # ------------------------------------------------------------------ feeding
     def feed_block(self, channel: str, block: Block) -> MillUpdate:
@@ -60,8 +65,10 @@ class AnalyzerPipeline:
             update.records.append(("steady", int(window["t_ns"]), window))
             observations += window_observations(self.config.id, window)
         for hw in out.harmonics:
-            update.records.append(("harmonics", int(hw.t_end_ns), hw.to_dict()))
             peaks = [p.to_dict() for p in hw.peaks]
+            if peaks or hw.t_end_ns >= self._next_harmonics_ns:
+                update.records.append(("harmonics", int(hw.t_end_ns), _compact(hw.to_dict())))
+                self._next_harmonics_ns = int(hw.t_end_ns) + HARMONICS_EVERY_NS
             observations += peak_observations(self.config.id, peaks, int(hw.t_end_ns))
         update.alarm_transitions += self.alarms.observe_all(observations)
         if self.monitor.analyzer.n >= self._next_damage:
@@ -165,6 +172,7 @@ class AnalyzerPipeline:
             "next_damage": self._next_damage,
             "last_window_ns": self._last_window_ns,
             "latest_window": self._latest_window,
+            "next_harmonics_ns": self._next_harmonics_ns,
         }
 
     def restore(self, snapshot: dict[str, Any]) -> None:
@@ -173,3 +181,12 @@ class AnalyzerPipeline:
         self._next_damage = int(snapshot["next_damage"])
         self._last_window_ns = int(snapshot["last_window_ns"])
         self._latest_window = snapshot["latest_window"]
+        self._next_harmonics_ns = int(snapshot["next_harmonics_ns"])
+
+
+def _compact(table: dict[str, Any]) -> dict[str, Any]:
+    """A harmonic table as stored: the lines that were detected, and the segment count."""
+    return table | {
+        "lines": [m for m in table["lines"] if m.get("detected")],
+        "segments": len(table["segments"]),
+    }

@@ -143,3 +143,18 @@ def test_a_mill_wearing_out_too_fast_raises_the_remaining_life_alarm():
         worker.commit()
         life = [a for a in store.alarms() if a.rule == "remaining_life"]
     assert {a.subject for a in life} == {"pinion_combined", "pinion_torsion", "motor_torsion"}
+
+
+def test_harmonic_tables_are_stored_thinned_and_compact():
+    scene = get_scene("steady", CONFIG, seed=2, duration_s=400.0)
+    items = [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
+    with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
+        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: AnalyzerPipeline(CONFIG)}, store, None)
+        for item in items:
+            worker.handle(item)
+        worker.commit()
+        tables = store.records(CONFIG.id, "harmonics")
+    assert 1 <= len(tables) <= 2  # ~38 windows in 400 s of running; one stored per 5 min
+    latest = tables[0][1]
+    assert latest["lines"] and all(line["detected"] for line in latest["lines"])
+    assert isinstance(latest["segments"], int)
