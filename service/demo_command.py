@@ -79,7 +79,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="run everything on loopback with simulated mills: worker, gateways, REST API",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="example:\n  millwatch demo --speed 60      # an hour of plant time per minute",
+        epilog=(
+            "examples:\n"
+            "  millwatch demo --speed 40                # 40 minutes of plant time a minute\n"
+            "  millwatch demo --mills 1 --speed 100     # one mill, faster\n\n"
+            "One worker core keeps up with about 120 mill-equivalents (mills x speed)."
+        ),
     )
     p.add_argument(
         "--mills",
@@ -110,10 +115,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=_main)
 
 
+#: Mill-equivalents (mills × speed) one worker core keeps up with, measured with
+#: tests/bench/bench_pipeline.py (about 150 running mills per core); kept with some margin.
+KEEPS_UP_WITH = 120
+
+
 def _main(args: argparse.Namespace) -> int:
+    mills = min(args.mills, 3)
+    if mills * args.speed > KEEPS_UP_WITH:
+        log.warning(
+            "%d mills at %g× real time is %g mill-equivalents; one worker keeps up with about "
+            "%d — expect a growing queue, dropped blocks and stale-channel alarms",
+            mills, args.speed, mills * args.speed, KEEPS_UP_WITH,
+        )  # fmt: skip
     directory = args.dir or Path(tempfile.mkdtemp(prefix="millwatch-demo-"))
     zenoh_port = free_loopback_port()
-    settings = demo_settings(directory, zenoh_port, args.port, min(args.mills, 3))
+    settings = demo_settings(directory, zenoh_port, args.port, mills)
     runtime = ServiceRuntime(settings, settings.load_mills(), AnalyzerPipeline)
     runtime.start()
     gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene)
