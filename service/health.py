@@ -14,9 +14,11 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from ingest.wire import Block
 
-__all__ = ["ChannelHealth", "MillHealth", "PerMinute", "SeqVerdict"]
+__all__ = ["ChannelHealth", "LatencyReservoir", "MillHealth", "PerMinute", "SeqVerdict"]
 
 SeqVerdict = str  # "first", "next", "gap", "repeat"
 
@@ -122,3 +124,27 @@ class PerMinute:
         t0, v0 = self._readings[0]
         span_ns = max(now_ns - t0, self.window_ns)
         return (total - v0) * 60e9 / span_ns
+
+
+class LatencyReservoir:
+    """Receive-to-store latency of the last ``size`` blocks (s): the time from the zenoh
+    callback enqueuing a block to the commit of the batch that holds its results. Bounded."""
+
+    def __init__(self, size: int = 100_000) -> None:
+        self._values = np.zeros(size)
+        self._n = 0
+
+    def add_batch(self, committed_ns: int, items: Any) -> None:
+        for item in items:
+            self._values[self._n % self._values.size] = (committed_ns - item.recv_ns) / 1e9
+            self._n += 1
+
+    def quantiles(self) -> dict[str, float | int]:
+        """p50, p99 and max over the kept blocks (NaN before any)."""
+        kept = self._values[: min(self._n, self._values.size)]
+        if kept.size == 0:
+            return {"blocks": 0, "p50_s": float("nan"), "p99_s": float("nan"),
+                    "max_s": float("nan")}  # fmt: skip
+        p50, p99 = np.quantile(kept, [0.5, 0.99])
+        return {"blocks": int(kept.size), "p50_s": float(p50), "p99_s": float(p99),
+                "max_s": float(kept.max())}  # fmt: skip

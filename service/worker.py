@@ -34,7 +34,7 @@ from ingest import keys
 from ingest.archive import ArchivePosition, ArchiveReader, ArchiveWriter
 from ingest.wire import Block, WireError, decode_block
 from service.block_queue import BlockQueue, QueuedBlock
-from service.health import MillHealth, PerMinute
+from service.health import LatencyReservoir, MillHealth, PerMinute
 from service.store import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
 
 __all__ = ["AckRequest", "MillPipeline", "MillUpdate", "Worker"]
@@ -116,6 +116,7 @@ class Worker:
         self._stale: dict[str, set[str]] = {}
         self._started_ns = clock()
         self._rate_meters: dict[tuple[str, str, str], PerMinute] = {}
+        self.latency = LatencyReservoir()
         self._archive_errors_reported = 0
         self.on_alarms: Callable[[list[Transition]], None] | None = None
         self._acks: queue.SimpleQueue[AckRequest] = queue.SimpleQueue()
@@ -232,6 +233,7 @@ class Worker:
         acked = self._apply_acks()
         try:
             self.commit()
+            self.latency.add_batch(self._clock(), items)
         except Exception as exc:
             for request, _ in acked:
                 request.done.set_exception(exc)

@@ -48,3 +48,15 @@ def test_per_minute_rate_over_the_last_minute():
     assert meter.rate(30 * s, 3) == 3.0  # less than a minute seen: counted over a minute
     assert meter.rate(60 * s, 6) == 6.0
     assert meter.rate(120 * s, 6) == 0.0  # nothing new in the last minute
+
+
+def test_latency_reservoir_reports_quantiles_of_the_kept_blocks():
+    from types import SimpleNamespace
+
+    from service.health import LatencyReservoir
+
+    r = LatencyReservoir(size=4)
+    assert r.quantiles()["blocks"] == 0
+    r.add_batch(10_000_000_000, [SimpleNamespace(recv_ns=t * 1_000_000_000) for t in range(10)])
+    q = r.quantiles()
+    assert q["blocks"] == 4 and q["max_s"] == 4.0  # only the newest four are kept: 4, 3, 2, 1 s
