@@ -174,7 +174,8 @@ def _alarm_row(r: tuple[Any, ...]) -> AlarmRow:
 
 
 class Store:
-    """A SQLite store file; thread-safe (one connection, serialised by a lock)."""
+    """A SQLite store file; thread-safe: one writing connection serialised by a lock, and a
+    read-only connection per reading thread."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
@@ -187,6 +188,8 @@ class Store:
         except sqlite3.Error as exc:
             raise StoreError(f"{self.path}: cannot open the store ({exc})") from exc
         self._lock = threading.RLock()
+        self._local = threading.local()
+        self._readers: list[sqlite3.Connection] = []
         self._migrate()
 
     # ------------------------------------------------------------------ schema
@@ -222,6 +225,9 @@ class Store:
 
     def close(self) -> None:
         with self._lock:
+            for db in self._readers:
+                db.close()
+            self._readers.clear()
             self._db.close()
 
     def __enter__(self) -> Store:
@@ -403,10 +409,20 @@ class Store:
             args.append(limit)
         return [(t, json.loads(d)) for t, d in self._query(sql, tuple(args))]
 
+    def _reader(self) -> sqlite3.Connection:
+        """This thread's own read-only connection: WAL lets readers see the last commit while
+        the writer works, so API reads never wait for the worker's lock or transaction."""
+        db = getattr(self._local, "db", None)
+        if db is None:
+            db = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, check_same_thread=False)
+            db.execute("PRAGMA busy_timeout=5000")
+            self._local.db = db
+            with self._lock:
+                self._readers.append(db)
+        return db
+
     def _query(self, sql: str, args: tuple[Any, ...]) -> list[tuple[Any, ...]]:
-        with self._lock:
-            return self._db.execute(sql, args).fetchall()
+        return self._reader().execute(sql, args).fetchall()
 
     def _query_one(self, sql: str, args: tuple[Any, ...]) -> tuple[Any, ...] | None:
-        with self._lock:
-            return self._db.execute(sql, args).fetchone()
+        return self._reader().execute(sql, args).fetchone()
