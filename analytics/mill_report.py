@@ -13,11 +13,24 @@ from analytics.phase_damage import APP_D_SCENARIOS, MONTH_S, project_monthly_dam
 
 if TYPE_CHECKING:
     from analytics.mill_analyzer import MillAnalyzer
+    from analytics.mill_config import AlarmThresholds
 
-__all__ = ["STARTS_NORM_PER_MONTH", "build_report"]
+__all__ = ["STARTS_NORM_PER_MONTH", "build_report", "starts_status"]
 
 STARTS_NORM_PER_MONTH = (3, 5)
 """Supplier norm for starts per month (seed 000 §6.1.3)."""
+
+
+def starts_status(n: int, alarms: AlarmThresholds) -> str:
+    """Starts of one calendar month against the norm and the configured levels: ``alarm`` above
+    the alarm level, ``warning`` above the warning level (strictly above, as the alarm rules of
+    :mod:`alarms.rules` and seed 000 §6.1.3/§10.3 put it), ``above norm`` beyond 3–5, else
+    ``ok``."""
+    if n > alarms.starts_per_month_alarm:
+        return "alarm"
+    if n > alarms.starts_per_month_warn:
+        return "warning"
+    return "ok" if n <= STARTS_NORM_PER_MONTH[1] else "above norm"
 
 
 def build_report(a: MillAnalyzer) -> dict[str, Any]:
@@ -54,16 +67,11 @@ def _months(a: MillAnalyzer) -> dict[str, dict[str, Any]]:
     out = {}
     for month, rec in sorted(a.starts_per_month.items()):
         n = rec["starts"]
-        status = "ok" if n <= STARTS_NORM_PER_MONTH[1] else "above norm"
-        if n >= alarms.starts_per_month_alarm:
-            status = "alarm"
-        elif n > alarms.starts_per_month_warn:
-            status = "warning"
         out[month] = {
             "starts": n,
             "failed_starts": failed.get(month, 0),
             "norm": list(STARTS_NORM_PER_MONTH),
-            "status": status,
+            "status": starts_status(n, alarms),
         }
     return out
 

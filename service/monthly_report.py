@@ -38,6 +38,7 @@ from datetime import date, datetime, timedelta
 from typing import Any
 
 from analytics.mill_config import MillConfig
+from analytics.mill_report import STARTS_NORM_PER_MONTH, starts_status
 from analytics.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
@@ -58,8 +59,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-STARTS_NORM_PER_MONTH = (3, 5)
-"""Supplier norm for starts per month (seed 000 §6.1.3)."""
 SECONDS_PER_YEAR = 365.25 * 86_400.0
 HOUR_NS = 3_600 * 10**9
 #: Harmonic tables are large (every expected line of every channel): trends read at most one
@@ -451,12 +450,6 @@ def _start_row(e: EventRow, config: MillConfig, zone: zoneinfo.ZoneInfo) -> Star
     )
 
 
-def _starts_status(n: int, config: MillConfig) -> str:
-    a = config.alarms
-    status = _level(float(n), a.starts_per_month_warn, a.starts_per_month_alarm)
-    return "above norm" if status == "ok" and n > STARTS_NORM_PER_MONTH[1] else status
-
-
 def _starts(events: list[EventRow], config: MillConfig, days: list[str]) -> Starts:
     zone = zoneinfo.ZoneInfo(config.time_zone)
     rows = [_start_row(e, config, zone) for e in events if e.kind == "start"]
@@ -473,7 +466,7 @@ def _starts(events: list[EventRow], config: MillConfig, days: list[str]) -> Star
         norm=STARTS_NORM_PER_MONTH,
         warn_above=a.starts_per_month_warn,
         alarm_above=a.starts_per_month_alarm,
-        status=_starts_status(len(rows), config),
+        status=starts_status(len(rows), config.alarms),
         per_day=per_day,
         peak_warn_pct=a.start_peak_warn_pct,
         peak_alarm_pct=a.start_peak_alarm_pct,

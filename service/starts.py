@@ -13,8 +13,8 @@ import zoneinfo
 from datetime import datetime
 from typing import Any
 
-from analytics.mill_config import AlarmThresholds, MillConfig
-from analytics.mill_report import STARTS_NORM_PER_MONTH
+from analytics.mill_config import MillConfig
+from analytics.mill_report import STARTS_NORM_PER_MONTH, starts_status
 from service.api_errors import BadRequest
 from service.store import EventRow, Store
 
@@ -48,16 +48,6 @@ def month_bounds_ns(month: str, time_zone: str) -> tuple[int, int]:
     return int(start.timestamp() * 1e9), int(end.timestamp() * 1e9)
 
 
-def count_status(n: int, alarms: AlarmThresholds) -> str:
-    """``ok`` within the norm, ``above norm``, ``warning`` above the warning level, ``alarm``
-    at or above the alarm level (the same levels as :mod:`analytics.mill_report`)."""
-    if n >= alarms.starts_per_month_alarm:
-        return "alarm"
-    if n > alarms.starts_per_month_warn:
-        return "warning"
-    return "ok" if n <= STARTS_NORM_PER_MONTH[1] else "above norm"
-
-
 def _start(event: EventRow, tz: zoneinfo.ZoneInfo) -> dict[str, Any]:
     d = event.data
     return {
@@ -88,7 +78,7 @@ def starts_in_month(store: Store, config: MillConfig, month: str) -> dict[str, A
         "norm_per_month": list(STARTS_NORM_PER_MONTH),
         "count_warn": a.starts_per_month_warn,
         "count_alarm": a.starts_per_month_alarm,
-        "count_status": count_status(len(starts), a),
+        "count_status": starts_status(len(starts), a),
         "peak_limits_pct": {"warn": a.start_peak_warn_pct, "alarm": a.start_peak_alarm_pct},
         "starts": starts,
     }

@@ -121,3 +121,17 @@ def test_empty_frames_are_fine():
     a = MillAnalyzer(mill("sag-5200-lrs"))
     assert a.feed(Frame(0, 1000.0, {})) == []
     assert a.report()["samples"] == 0
+
+
+def test_starts_status_is_strictly_above_the_levels_like_the_alarm_rules():
+    from analytics.mill_config import AlarmThresholds
+    from analytics.mill_report import starts_status
+
+    levels = AlarmThresholds()  # warning above 5, alarm above 20 (seed 000 §6.1.3, §10.3)
+    assert [starts_status(n, levels) for n in (4, 5, 6, 20, 21)] == [
+        "ok",
+        "ok",
+        "warning",
+        "warning",
+        "alarm",
+    ]
