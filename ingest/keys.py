@@ -5,6 +5,8 @@ Layout, version 1 (``/``-separated chunks)::
     live:    millwatch/v1/<site>/<mill>/<signal>
     replay:  millwatch/v1/@replay/<run>/<site>/<mill>/<signal>
     alarms:  millwatch/v1/<site>/<mill>/@alarms
+    query:   millwatch/v1/<site>/<mill>/@query/<what>     (a worker's queryable)
+    worker:  millwatch/v1/<site>/<mill>/@worker/<worker>  (liveliness token)
 
 - ``v1`` is the key-layout version; a new layout gets ``v2`` and both can coexist
   on one router.
@@ -26,6 +28,10 @@ Layout, version 1 (``/``-separated chunks)::
   receive telemetry. SCADA gateways subscribe to :func:`alarm_pattern` (all sites and mills:
   ``millwatch/v1/*/*/@alarms``) or to one site or mill. :func:`parse_key` refuses alarm keys
   (they are not channels); :func:`parse_alarm_key` parses them.
+
+- Scale-out (:func:`query_key`, :func:`worker_token_key`): a worker answers ``get`` about
+  each of its mills on ``…/@query/<what>`` and holds a liveliness token
+  ``…/@worker/<worker>`` per mill while it runs; ``*``/``**`` never match either chunk.
 
 No other module formats keys: use :func:`build_key`, :func:`parse_key` and the
 pattern helpers. :func:`key_matches` implements zenoh's ``*``/``**``/verbatim rules
@@ -291,3 +297,69 @@ def parse_alarm_key(expr: str) -> tuple[str, str]:
         raise KeyFormatError("key", expr, "alarm keys look like " + alarm_pattern())
     _split_prefix(expr)
     return _check_segment("site", parts[2]), _check_segment("mill", parts[3])
+
+
+# ----------------------------------------------------------------------------- scale-out keys
+QUERY_TAG = "@query"
+WORKER_TAG = "@worker"
+_QUERY_LEN = 6  # millwatch / v1 / site / mill / @query / what
+_TOKEN_LEN = 6  # millwatch / v1 / site / mill / @worker / worker
+
+
+def query_key(site: str, mill: str, what: str) -> str:
+    """The key a worker answers queries about one mill on:
+    ``millwatch/v1/<site>/<mill>/@query/<what>`` (``what``: ``status``, ``life``, ``alarms`` …).
+    The verbatim ``@query`` chunk keeps queries apart from telemetry and alarm keys."""
+    segs = [_check_segment("site", site), _check_segment("mill", mill), QUERY_TAG,
+            _check_segment("query", what)]  # fmt: skip
+    return "/".join([*_prefix(None), *segs])
+
+
+def query_pattern(what: str = WILD, site: str = WILD, mill: str = WILD) -> str:
+    """Query keys of every mill (default), one site or one mill, for one ``what`` or all:
+    ``millwatch/v1/*/*/@query/status``; a ``get`` on it gathers one reply per mill."""
+    segs = [_segment_or_wild("site", site), _segment_or_wild("mill", mill), QUERY_TAG,
+            _segment_or_wild("query", what)]  # fmt: skip
+    return "/".join([*_prefix(None), *segs])
+
+
+def parse_query_key(expr: str) -> tuple[str, str, str]:
+    """``(site, mill, what)`` of a concrete query key; raises :class:`KeyFormatError`."""
+    parts = expr.split("/")
+    if len(parts) != _QUERY_LEN or parts[4] != QUERY_TAG or parts[:2] != [ROOT, LAYOUT_VERSION]:
+        raise KeyFormatError("key", expr, "query keys look like " + query_pattern())
+    return (_check_segment("site", parts[2]), _check_segment("mill", parts[3]),
+            _check_segment("query", parts[5]))  # fmt: skip
+
+
+def worker_token_key(site: str, mill: str, worker: str) -> str:
+    """The liveliness token a worker holds while it analyses a mill:
+    ``millwatch/v1/<site>/<mill>/@worker/<worker>``. It disappears when the worker's session
+    ends (clean stop, crash: TCP closes; a hung host: the zenoh lease)."""
+    segs = [_check_segment("site", site), _check_segment("mill", mill), WORKER_TAG,
+            _check_segment("worker", worker)]  # fmt: skip
+    return "/".join([*_prefix(None), *segs])
+
+
+def worker_token_pattern(site: str = WILD, mill: str = WILD, worker: str = WILD) -> str:
+    """Worker tokens of every mill (default), one site or one mill:
+    ``millwatch/v1/*/*/@worker/*``."""
+    segs = [_segment_or_wild("site", site), _segment_or_wild("mill", mill), WORKER_TAG,
+            _segment_or_wild("worker", worker)]  # fmt: skip
+    return "/".join([*_prefix(None), *segs])
+
+
+def parse_worker_token_key(expr: str) -> tuple[str, str, str]:
+    """``(site, mill, worker)`` of a worker token key; raises :class:`KeyFormatError`."""
+    parts = expr.split("/")
+    if len(parts) != _TOKEN_LEN or parts[4] != WORKER_TAG or parts[:2] != [ROOT, LAYOUT_VERSION]:
+        raise KeyFormatError("key", expr, "worker tokens look like " + worker_token_pattern())
+    return (_check_segment("site", parts[2]), _check_segment("mill", parts[3]),
+            _check_segment("worker", parts[5]))  # fmt: skip
+
+
+def worker_name(text: str) -> str:
+    """``text`` (e.g. a host name) made into a valid worker segment: lower case, other
+    characters replaced by ``-``, at most 64 characters; ``worker`` when nothing is left."""
+    name = re.sub(r"[^a-z0-9_-]", "-", text.lower()).strip("-_")[:64]
+    return name if name else "worker"

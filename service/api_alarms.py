@@ -1,27 +1,23 @@
 """Routes of the alarms: ``GET /alarms`` (ETag/cursor polling), ``GET /alarms/{id}``,
-``POST /alarms/{id}/ack`` (API key). The work is in :mod:`service.alarm_views`."""
+``POST /alarms/{id}/ack`` (API key).
+
+``GET /alarms`` is an ``async`` route answered from the in-memory alarm board
+(:mod:`service.alarm_board`): no SQLite and no threadpool hop per poll, the body and ETag made
+once per board version. The other two go to the :class:`~service.backend.Backend` (the store
+in process, the mill's worker over zenoh); the API key is checked here, in the API process."""
 
 from __future__ import annotations
 
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Header, Path, Query, Response, Security
-from fastapi.responses import JSONResponse
 from fastapi.security import APIKeyHeader
 
-from service.alarm_views import (
-    STATE_PATTERN,
-    acknowledge,
-    alarm_detail,
-    alarm_list,
-    check_api_key,
-    matches,
-    parse_states,
-)
+from service.alarm_views import STATE_PATTERN, check_api_key, matches, parse_states
 from service.api_errors import problem_responses
 from service.api_models import AckBody, AlarmDetail, AlarmList
-from service.mill_views import mill_config, store_of
-from service.runtime import ServiceRuntime
+from service.backend import Backend
+from service.mill_views import config_of
 
 __all__ = ["alarms_router"]
 
@@ -43,8 +39,8 @@ _POLL_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 
 
-def alarms_router(runtime: ServiceRuntime) -> APIRouter:
-    """The alarm routes over a runtime."""
+def alarms_router(backend: Backend) -> APIRouter:
+    """The alarm routes over a backend."""
     router = APIRouter(tags=["alarms"])
 
     @router.get(
@@ -53,7 +49,7 @@ def alarms_router(runtime: ServiceRuntime) -> APIRouter:
         response_model=AlarmList,
         responses={**_POLL_RESPONSES, **problem_responses(404, 422, 503)},
     )
-    def alarms(
+    async def alarms(
         state: Annotated[str | None, Query(pattern=STATE_PATTERN, description=_STATE_HELP)] = None,
         since: Annotated[
             int | None, Query(ge=0, le=INT64_MAX, description="Changed at or after (ns UTC).")
@@ -62,12 +58,12 @@ def alarms_router(runtime: ServiceRuntime) -> APIRouter:
         if_none_match: Annotated[str | None, Header(max_length=1000)] = None,
     ) -> Response:
         if mill is not None:
-            mill_config(runtime, mill)
-        body, tag = alarm_list(store_of(runtime), parse_states(state), since, mill)
-        headers = {"ETag": tag, "Cache-Control": "no-cache"}
-        if matches(if_none_match, tag):
+            config_of(backend.mills, mill)
+        listing = backend.alarm_board().listing(parse_states(state), since, mill)
+        headers = {"ETag": listing.etag, "Cache-Control": "no-cache"}
+        if matches(if_none_match, listing.etag):
             return Response(status_code=304, headers=headers)
-        return JSONResponse(body, headers=headers)
+        return Response(listing.body, media_type="application/json", headers=headers)
 
     @router.get(
         "/alarms/{alarm_id}",
@@ -76,7 +72,7 @@ def alarms_router(runtime: ServiceRuntime) -> APIRouter:
         responses=problem_responses(404, 422, 503),
     )
     def alarm(alarm_id: AlarmId) -> dict[str, Any]:
-        return alarm_detail(store_of(runtime), alarm_id)
+        return backend.alarm(alarm_id)
 
     @router.post(
         "/alarms/{alarm_id}/ack",
@@ -89,8 +85,8 @@ def alarms_router(runtime: ServiceRuntime) -> APIRouter:
         body: AckBody | None = None,
         api_key: Annotated[str | None, Security(API_KEY)] = None,
     ) -> dict[str, Any]:
-        check_api_key(runtime.settings.api.api_key, api_key)
+        check_api_key(backend.api_key, api_key)
         by = body.by if body is not None else "api"
-        return acknowledge(runtime, store_of(runtime), alarm_id, by)
+        return backend.ack(alarm_id, by)
 
     return router

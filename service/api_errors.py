@@ -24,12 +24,15 @@ __all__ = [
     "BadRequest",
     "Conflict",
     "Forbidden",
+    "GatewayTimeout",
     "NotFound",
     "Problem",
     "Unauthorized",
     "Unavailable",
+    "error_for_status",
     "install_problem_handlers",
     "problem_responses",
+    "status_of",
 ]
 
 log = logging.getLogger(__name__)
@@ -70,6 +73,10 @@ class Unavailable(ApiError):
     """The service cannot do it right now (worker stopped or busy); retrying may help."""
 
 
+class GatewayTimeout(ApiError):
+    """A worker asked over zenoh did not answer in time (``millwatch api``); retrying may help."""
+
+
 _STATUS: dict[type[ApiError], int] = {
     BadRequest: 422,
     Unauthorized: 401,
@@ -77,6 +84,7 @@ _STATUS: dict[type[ApiError], int] = {
     NotFound: 404,
     Conflict: 409,
     Unavailable: 503,
+    GatewayTimeout: 504,
 }
 
 
@@ -100,6 +108,7 @@ _TITLES = {
     409: "Conflict",
     422: "Invalid request",
     503: "Service unavailable",
+    504: "Worker did not answer",
 }
 
 
@@ -134,6 +143,20 @@ def _status_of(exc: ApiError) -> int:
         if cls in _STATUS:
             return _STATUS[cls]
     return 400
+
+
+def status_of(exc: ApiError) -> int:
+    """The HTTP status an error is answered with (422, 401, 403, 404, 409, 503, 504; else 400)."""
+    return _status_of(exc)
+
+
+def error_for_status(status: int, title: str, detail: str) -> ApiError:
+    """The error class answered with ``status`` (a plain :class:`ApiError` for others): how a
+    problem that crossed zenoh from a worker is raised again in the API."""
+    for cls, code in _STATUS.items():
+        if code == status:
+            return cls(title, detail)
+    return ApiError(title, detail)
 
 
 def _short(value: object, limit: int = 60) -> str:

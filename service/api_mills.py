@@ -1,5 +1,6 @@
-"""Routes of one mill's analysis: ``/life``, ``/starts``, ``/spectrum``. The work is in
-:mod:`service.mill_views`; the monthly report has its own module."""
+"""Routes of one mill's analysis: ``/life``, ``/starts``, ``/spectrum``. The work is done by the
+:class:`~service.backend.Backend` (in process: :mod:`service.mill_views`; remote: a worker over
+zenoh); the monthly report has its own module."""
 
 from __future__ import annotations
 
@@ -9,8 +10,7 @@ from fastapi import APIRouter, Path, Query
 
 from service.api_errors import problem_responses
 from service.api_models import Life, MonthStarts, Spectrum
-from service.mill_views import mill_life, mill_spectrum, mill_starts
-from service.runtime import ServiceRuntime
+from service.backend import Backend
 from service.starts import MONTH_PATTERN
 
 __all__ = ["mills_router"]
@@ -26,8 +26,8 @@ Month = Annotated[
 ]
 
 
-def mills_router(runtime: ServiceRuntime) -> APIRouter:
-    """The per-mill analysis routes over a runtime."""
+def mills_router(backend: Backend) -> APIRouter:
+    """The per-mill analysis routes over a backend."""
     router = APIRouter(tags=["mills"])
 
     @router.get(
@@ -37,7 +37,7 @@ def mills_router(runtime: ServiceRuntime) -> APIRouter:
         responses=problem_responses(404, 422, 503),
     )
     def life(mill_id: MillId) -> dict[str, Any]:
-        return mill_life(runtime, mill_id)
+        return backend.life(mill_id)
 
     @router.get(
         "/mills/{mill_id}/starts",
@@ -46,7 +46,7 @@ def mills_router(runtime: ServiceRuntime) -> APIRouter:
         responses=problem_responses(404, 422, 503),
     )
     def starts(mill_id: MillId, month: Month = None) -> dict[str, Any]:
-        return mill_starts(runtime, mill_id, month)
+        return backend.starts(mill_id, month)
 
     @router.get(
         "/mills/{mill_id}/spectrum",
@@ -55,6 +55,6 @@ def mills_router(runtime: ServiceRuntime) -> APIRouter:
         responses=problem_responses(404, 422, 503),
     )
     def spectrum(mill_id: MillId) -> dict[str, Any]:
-        return mill_spectrum(runtime, mill_id)
+        return backend.spectrum(mill_id)
 
     return router

@@ -62,6 +62,8 @@ def negotiate(fmt: str | None, accept: str | None) -> str:
 
 
 def _report(runtime: Any, mill_id: str, month: str | None) -> MonthlyReport:
+    if hasattr(runtime, "monthly_report"):  # a service.backend.Backend (in process or remote)
+        return runtime.monthly_report(mill_id, month)
     if mill_id not in runtime.mills:
         known = ", ".join(sorted(runtime.mills)) or "(none)"
         raise NotFound("Unknown mill", f"No mill {mill_id!r} is configured; mills: {known}.")

@@ -15,10 +15,12 @@ from collections.abc import Sequence
 from ingest.archive import ArchiveError
 from service import (
     analyze_command,
+    api_command,
     archive_command,
     demo_command,
     rainflow_command,
     replay_command,
+    router_command,
     serve_command,
     simulate_command,
     spectrum_command,
@@ -57,6 +59,8 @@ def build_parser() -> argparse.ArgumentParser:
     replay_command.add_parser(sub)
     archive_command.add_parser(sub)
     serve_command.add_parser(sub)
+    router_command.add_parser(sub)
+    api_command.add_parser(sub)
     analyze_command.add_parser(sub)
     return parser
 

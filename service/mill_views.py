@@ -9,6 +9,7 @@ thread refreshes every 0.5 s — never from the analyzer itself.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from typing import Any
 
 from analytics.mill_config import MillConfig
@@ -18,16 +19,71 @@ from service.runtime import ServiceRuntime
 from service.starts import current_month, starts_in_month
 from service.store import Store
 
-__all__ = ["mill_config", "mill_life", "mill_spectrum", "mill_starts", "store_of"]
+__all__ = [
+    "UNREACHABLE",
+    "config_of",
+    "mill_config",
+    "mill_detail",
+    "mill_life",
+    "mill_spectrum",
+    "mill_starts",
+    "mill_summary",
+    "store_of",
+]
+
+UNREACHABLE = "unreachable"
+"""The state of a mill whose worker is gone (``millwatch api``): every channel counts as stale."""
+
+
+def config_of(mills: Mapping[str, MillConfig], mill_id: str) -> MillConfig:
+    """The configuration of a known mill; :class:`NotFound` naming it and the known ones."""
+    config = mills.get(mill_id)
+    if config is None:
+        known = ", ".join(sorted(mills)) or "(none)"
+        raise NotFound("Unknown mill", f"No mill {mill_id!r} is configured here; mills: {known}.")
+    return config
+
+
+def mill_summary(
+    config: MillConfig, status: Mapping[str, Any] | None, worker: str | None
+) -> dict[str, Any]:
+    """One line of ``GET /mills``: state and stale channels from the worker's status; a mill
+    without status (``None``: its worker is gone) is ``unreachable`` with every channel stale."""
+    if status is None:
+        state, stale = UNREACHABLE, list(config.channels)
+    else:
+        state = status.get("state", "unknown")
+        stale = status.get("health", {}).get("stale_channels", [])
+    return {
+        "id": config.id,
+        "site": config.site,
+        "drive": config.drive.layout,
+        "starter": config.drive.starter,
+        "state": state,
+        "stale_channels": stale,
+        "worker": worker,
+    }
+
+
+def mill_detail(
+    config: MillConfig, status: Mapping[str, Any] | None, worker: Mapping[str, Any]
+) -> dict[str, Any]:
+    """``GET /mills/{id}``: the summary, rated torques, the worker's status of the mill, and
+    the worker that analyses it (name, partition, counters; ``live`` False when it is gone)."""
+    return {
+        **mill_summary(config, status, worker.get("name")),
+        "rated_torque_knm": {
+            "motor": config.motor_rated_torque_knm,
+            "pinion": config.pinion_rated_torque_knm,
+        },
+        "status": dict(status or {}),
+        "worker_status": dict(worker),
+    }
 
 
 def mill_config(runtime: ServiceRuntime, mill_id: str) -> MillConfig:
     """The configuration of a mill served here; :class:`NotFound` otherwise."""
-    config = runtime.mills.get(mill_id)
-    if config is None:
-        known = ", ".join(sorted(runtime.mills)) or "(none)"
-        raise NotFound("Unknown mill", f"No mill {mill_id!r} is configured here; mills: {known}.")
-    return config
+    return config_of(runtime.mills, mill_id)
 
 
 def store_of(runtime: ServiceRuntime) -> Store:

@@ -64,6 +64,9 @@ class ServiceRuntime:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.status: dict[str, Any] = {}
+        #: Called in the worker thread with each batch of stored alarm transitions (e.g. the
+        #: API's alarm board), before they are published on zenoh; must be quick.
+        self.alarm_listeners: list[Callable[[list[Transition]], None]] = []
         self.recovered_blocks = 0
         self.started_ns: int | None = None
 
@@ -92,7 +95,7 @@ class ServiceRuntime:
             checkpoint_seconds=s.worker.checkpoint_seconds,
         )
         self._subscribe()
-        self.worker.on_alarms = self._publish_alarms
+        self.worker.on_alarms = self._on_alarms
         self.recovered_blocks = self.worker.recover(
             ArchiveReader(s.archive.directory, ARCHIVE_PREFIX)
         )
@@ -114,6 +117,15 @@ class ServiceRuntime:
             self._subscribers.append(
                 declare_block_subscriber(self.session, pattern, self._on_block)
             )
+
+    def _on_alarms(self, transitions: list[Transition]) -> None:
+        """Stored transitions: tell the listeners, then publish them."""
+        for listener in self.alarm_listeners:
+            try:
+                listener(transitions)
+            except Exception:
+                log.exception("alarm listener %r failed", listener)
+        self._publish_alarms(transitions)
 
     def _publish_alarms(self, transitions: list[Transition]) -> None:
         """Put each stored alarm transition on its mill's ``…/@alarms`` key (JSON), for SCADA

@@ -18,6 +18,10 @@ Example (``deploy/plant.toml``)::
 
     [mills]
     files = ["mills/sag-5200-lrs.toml"]  # or: directory = "mills"
+
+Scale-out (``deploy/worker-*.toml``, ``deploy/api.toml``): ``[zenoh] mode = "client"`` with
+``connect`` = the router, ``[worker] partition`` = the key expressions of this worker's mills,
+``[api] query_timeout_s`` for ``millwatch api``.
 """
 
 from __future__ import annotations
@@ -26,12 +30,17 @@ import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+import zenoh
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from analytics.mill_config import MillConfig, describe_validation_error
+from ingest.keys import LAYOUT_VERSION, ROOT
 from ingest.mill_files import load_mill_config, load_mill_configs
 
 __all__ = ["ServiceSettings", "SettingsError", "load_service_settings"]
+
+
+_LIVE_PREFIX = "/".join([ROOT, LAYOUT_VERSION, ""])
 
 
 class SettingsError(ValueError):
@@ -65,17 +74,44 @@ class StoreSettings(_Strict):
 
 
 class WorkerSettings(_Strict):
-    """Queue between zenoh callbacks and the worker, and how often to checkpoint."""
+    """Queue between zenoh callbacks and the worker, how often to checkpoint, and which mills
+    this worker analyses when several share a zenoh router (scale-out):
+
+    * ``partition``: zenoh key expressions; the worker analyses exactly the configured mills
+      whose live keys (``millwatch/v1/<site>/<mill>/*``) intersect one of them, e.g.
+      ``["millwatch/v1/rustenburg/**"]``. Empty (default): every configured mill.
+    * ``name``: the worker's name in its liveliness tokens and in API errors
+      (``[a-z0-9][a-z0-9_-]*``); default: the host name.
+    """
 
     queue_blocks: Annotated[int, Field(gt=0)] = 200_000
     checkpoint_seconds: Annotated[float, Field(gt=0)] = 60.0
     stale_after_s: Annotated[float, Field(gt=0)] = 10.0
+    name: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$")] | None = None
+    partition: tuple[str, ...] = ()
+
+    @field_validator("partition")
+    @classmethod
+    def _key_expressions(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        for expr in value:
+            try:
+                zenoh.KeyExpr(expr)
+            except zenoh.ZError as exc:
+                reason = str(exc).split(" at /")[0]
+                raise ValueError(f"{expr!r} is not a zenoh key expression ({reason})") from None
+            if not expr.startswith(_LIVE_PREFIX):
+                raise ValueError(f"{expr!r} must start with {_LIVE_PREFIX} (the live key layout)")
+        return value
 
 
 class ApiSettings(_Strict):
+    """The REST API; ``query_timeout_s``: how long the API waits for a worker's answer over
+    zenoh (``millwatch api``) before it answers 504."""
+
     host: str = "127.0.0.1"
     port: Annotated[int, Field(ge=0, le=65535)] = 8080
     api_key: str | None = None
+    query_timeout_s: Annotated[float, Field(gt=0, le=600)] = 10.0
 
 
 class MillSettings(_Strict):
