@@ -18,33 +18,44 @@ The month is the site's calendar month (``MillConfig.time_zone``). Nothing is in
 month gives zero counts, empty tables and ``None`` where a quantity cannot be computed.
 
 Data source: the store keeps results, not raw samples (those are in the MCAP archive), so the
-report states the store file and the first/last times of the results it read.
+report states the store file and the first/last times of the results it read. It reads them in
+one snapshot of the store, bounded to the month on the indexes, and only what it shows: SQLite
+extracts the few fields of each steady-state window (a month holds tens of thousands), harmonic
+tables are sampled hourly. Month bounds, the starts norm and the statuses come from
+:mod:`service.starts`, shared with ``GET /mills/{id}/starts``.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import math
-import re
-import sqlite3
 import statistics
 import time
 import zoneinfo
 from collections import Counter, defaultdict
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass, field
-from datetime import date, datetime, timedelta
+from dataclasses import dataclass, field
+from datetime import datetime
 from typing import Any
 
+import numpy as np
+
 from analytics.mill_config import MillConfig
-from analytics.mill_report import STARTS_NORM_PER_MONTH, starts_status
 from analytics.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
     StartCost,
     project_monthly_damage,
     start_cost,
+)
+from service.starts import (
+    STARTS_NORM_PER_MONTH,
+    MonthError,
+    count_starts,
+    day_starts_ns,
+    month_bounds_ns,
+    month_days,
+    peak_status,
 )
 from service.store import AlarmRow, DamageRow, EventRow, Store
 
@@ -53,7 +64,6 @@ __all__ = [
     "MonthError",
     "MonthlyReport",
     "build_monthly_report",
-    "month_bounds",
     "report_to_dict",
 ]
 
@@ -62,13 +72,8 @@ log = logging.getLogger(__name__)
 SECONDS_PER_YEAR = 365.25 * 86_400.0
 HOUR_NS = 3_600 * 10**9
 #: Harmonic tables are large (every expected line of every channel): trends read at most one
-#: table per hour; unexplained peaks are read from every table.
+#: table per hour; unexplained peaks are read from the same tables.
 HARMONIC_SAMPLE_NS = HOUR_NS
-_MONTH = re.compile(r"^(\d{4})-(0[1-9]|1[0-2])$")
-
-
-class MonthError(ValueError):
-    """A month that is not ``YYYY-MM``; the message names it."""
 
 
 # ----------------------------------------------------------------------------- the data
@@ -272,58 +277,54 @@ class MonthlyReport:
 
 
 def report_to_dict(report: MonthlyReport) -> dict[str, Any]:
-    """JSON-ready plain data (non-finite floats become None)."""
-    return _finite(asdict(report)) | {"empty": report.empty}
+    """JSON-ready plain data in field order, as :func:`dataclasses.asdict` would give but
+    without its deep copies (a month holds tens of thousands of steady windows); non-finite
+    floats become None, tuples lists."""
+    return _plain(report) | {"empty": report.empty}
 
 
-def _finite(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
+def _plain(x: Any) -> Any:
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
     if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
+        return {k: _plain(v) for k, v in x.items()}
     if isinstance(x, list | tuple):
-        return [_finite(v) for v in x]
-    return x
+        return [_plain(v) for v in x]
+    if isinstance(x, SteadyPoint):
+        return {"t_ns": x.t_ns, "range_pct": _floats(x.range_pct),
+                "bending_amplitude_mpa": _floats(x.bending_amplitude_mpa)}  # fmt: skip
+    names = getattr(x, "__dataclass_fields__", None)
+    return x if names is None else {name: _plain(getattr(x, name)) for name in names}
+
+
+def _floats(d: dict[str, float]) -> dict[str, float | None]:
+    return {k: v if math.isfinite(v) else None for k, v in d.items()}
 
 
 # ----------------------------------------------------------------------------- building
-def month_bounds(month: str, time_zone: str) -> tuple[int, int, list[str]]:
-    """``[start, end)`` ns UTC of a local calendar month and its local days; :class:`MonthError`
-    if ``month`` is not ``YYYY-MM``."""
-    m = _MONTH.match(month) if isinstance(month, str) else None
-    if m is None:
-        raise MonthError(f"month {month!r} is not a calendar month: expected YYYY-MM, e.g. 2024-01")
-    year, mon = int(m.group(1)), int(m.group(2))
-    zone = zoneinfo.ZoneInfo(time_zone)
-    first = date(year, mon, 1)
-    nxt = date(year + mon // 12, mon % 12 + 1, 1)
-    days = [(first + timedelta(days=i)).isoformat() for i in range((nxt - first).days)]
-    start, end = (datetime(d.year, d.month, d.day, tzinfo=zone) for d in (first, nxt))
-    return int(start.timestamp()) * 10**9, int(end.timestamp()) * 10**9, days
-
-
 def build_monthly_report(
     store: Store, config: MillConfig, month: str, *, now_ns: int | None = None
 ) -> MonthlyReport:
-    """The report of ``config``'s mill for ``month`` (``YYYY-MM``, the site's time zone)."""
-    start_ns, end_ns, days = month_bounds(month, config.time_zone)
-    reader = _MonthReader(store, config.id, start_ns, end_ns)
-    events = reader.events()
-    steady_rows = reader.records("steady")
-    harmonics, harm_span = _harmonics(reader, config.time_zone)
-    span = _span(events, steady_rows, harm_span)
-    starts = _starts(events, config, days)
-    seconds = _phase_seconds(reader, events, span)
-    damage = _damage(reader.damage(days), starts.count, seconds)
-    covered = _covered_seconds(reader, span, days)
-    notes = _notes(span, starts, covered)
+    """The report of ``config``'s mill for ``month`` (``YYYY-MM``, the site's time zone);
+    every read sees one snapshot of the store."""
+    reader = _MonthReader(store, config, month)
+    with store.read_snapshot():
+        events = reader.events()
+        steady_rows = reader.steady()
+        harmonics, harm_span = _harmonics(reader, config.time_zone)
+        span = _span(events, steady_rows, harm_span)
+        starts = _starts(events, config, reader.days)
+        seconds = _phase_seconds(reader, events, span)
+        damage = _damage(reader.damage(), starts.count, seconds)
+        covered = _covered_seconds(reader, span)
+        alarms = _alarms(store.alarms(mill_id=config.id), reader.start_ns, reader.end_ns)
     report = MonthlyReport(
         mill=config.id,
         site=config.site,
         time_zone=config.time_zone,
         month=month,
-        start_ns=start_ns,
-        end_ns=end_ns,
+        start_ns=reader.start_ns,
+        end_ns=reader.end_ns,
         generated_ns=time.time_ns() if now_ns is None else now_ns,
         source=DataSource(str(store.path), *span),
         rated_torque_knm={
@@ -335,23 +336,40 @@ def build_monthly_report(
         phase_seconds=seconds,
         damage=damage,
         what_if=_what_if(damage, starts.count, covered),
-        steady=_steady(steady_rows, config),
+        steady=_steady(steady_rows, config, reader),
         harmonics=harmonics,
-        alarms=_alarms(store.alarms(mill_id=config.id), start_ns, end_ns),
+        alarms=alarms,
         data_quality=_data_quality([e for e in events if e.kind == "data_quality"]),
-        notes=notes,
+        notes=_notes(span, starts, covered),
     )
     log.info("monthly report %s %s: %d starts", config.id, month, starts.count)
     return report
 
 
-class _MonthReader:
-    """Reads one mill's month from the store; records through a read-only connection with a
-    time window (``Store.records`` has no upper bound and would read every later record)."""
+@dataclass(frozen=True, slots=True)
+class _SteadyRows:
+    """The month's steady windows as columns, oldest first: start and end times (ns), the
+    oscillation range (% rated) and the bending amplitude (MPa, range per revolution / 2) per
+    channel, ``None`` where a window has no value."""
 
-    def __init__(self, store: Store, mill_id: str, start_ns: int, end_ns: int) -> None:
-        self.store, self.mill_id = store, mill_id
-        self.start_ns, self.end_ns = start_ns, end_ns
+    t_ns: list[int]
+    end_ns: list[int]
+    range_pct: dict[str, list[float | None]]
+    bending: dict[str, list[float | None]]
+
+
+class _MonthReader:
+    """Reads one mill's local calendar month from the store, bounded in time on the indexes."""
+
+    def __init__(self, store: Store, config: MillConfig, month: str) -> None:
+        self.store, self.mill_id = store, config.id
+        self.start_ns, self.end_ns = month_bounds_ns(month, config.time_zone)
+        self.days = month_days(month)
+        self.day_starts_ns = day_starts_ns(self.days, config.time_zone)
+
+    @property
+    def window(self) -> tuple[int, int]:
+        return self.start_ns, self.end_ns
 
     def events(self) -> list[EventRow]:
         return self.store.events(self.mill_id, since_ns=self.start_ns, until_ns=self.end_ns)
@@ -361,60 +379,64 @@ class _MonthReader:
         before = [
             e
             for kind in ("start", "stop")
-            for e in self.store.events(self.mill_id, kind, until_ns=self.start_ns)[-1:]
+            for e in self.store.events(
+                self.mill_id, kind, until_ns=self.start_ns, limit=1, newest_first=True
+            )
         ]
         return max(before, key=lambda e: e.t_ns, default=None)
 
-    def damage(self, days: list[str]) -> list[DamageRow]:
-        rows = self.store.damage(self.mill_id, since_day=days[0])
-        return [r for r in rows if r.day <= days[-1]]
+    def damage(self) -> list[DamageRow]:
+        return self.store.damage(self.mill_id, self.days[0], self.days[-1])
 
-    def has_damage_outside(self, days: list[str]) -> tuple[bool, bool]:
+    def has_damage_outside(self) -> tuple[bool, bool]:
         """Whether daily damage rows exist before / after the month (monitoring covered it)."""
-        sql = "SELECT min(day), max(day) FROM damage_daily WHERE mill_id = ?"
-        lo, hi = self._query(sql, (self.mill_id,))[0]
-        return (lo is not None and lo < days[0], hi is not None and hi > days[-1])
+        lo, hi = self.store.damage_days(self.mill_id)
+        return (lo is not None and lo < self.days[0], hi is not None and hi > self.days[-1])
 
-    def records(self, kind: str, every_ns: int | None = None) -> list[tuple[int, dict[str, Any]]]:
-        """``(t_ns, data)`` of the month, oldest first; with ``every_ns`` the first of each
-        such interval only (chosen on the index, so skipped rows are never read)."""
-        where = "WHERE mill_id = ? AND kind = ? AND t_ns >= ? AND t_ns < ?"
-        args: tuple[Any, ...] = (self.mill_id, kind, self.start_ns, self.end_ns)
-        if every_ns:
-            times = f"SELECT min(t_ns) FROM records {where} GROUP BY t_ns / ?"
-            where += f" AND t_ns IN ({times})"
-            args += (*args, every_ns)
-        rows = self._query(f"SELECT t_ns, data_json FROM records {where} ORDER BY t_ns", args)
-        return [(int(t), json.loads(d)) for t, d in rows]
+    def steady(self) -> _SteadyRows:
+        """Only the fields the report uses, extracted by SQLite (no per-window JSON decode)."""
+        (ranges, per_rev), rows = self.store.record_columns(
+            self.mill_id, "steady", [("sample",), ("end_sample",)],
+            [("range_pct",), ("range_per_rev",)], *self.window,
+        )  # fmt: skip
+        cols = [[r[i] for r in rows] for i in range(3 + len(ranges) + len(per_rev))]
+        t = list(cols[0])
+        values = [[None if v is None else float(v) for v in c] for c in cols[3:]]
+        bending = {ch: c for ch, c in zip(per_rev, values[len(ranges) :], strict=True)
+                   if ch.startswith("bending")}  # fmt: skip
+        return _SteadyRows(
+            t_ns=t,
+            end_ns=[_window_end(*w) for w in zip(t, cols[1], cols[2], strict=True)],
+            range_pct=dict(zip(ranges, values[: len(ranges)], strict=True)),
+            bending={ch: [None if v is None else v / 2.0 for v in c]  # amplitude = range / 2
+                     for ch, c in bending.items()},
+        )  # fmt: skip
+
+    def harmonic_tables(self) -> list[tuple[int, dict[str, Any]]]:
+        """The first harmonic table of each hour, oldest first."""
+        return self.store.records(self.mill_id, "harmonics", self.start_ns, until_ns=self.end_ns,
+                                  every_ns=HARMONIC_SAMPLE_NS, oldest_first=True)  # fmt: skip
 
     def count(self, kind: str) -> tuple[int, int | None, int | None]:
         """Number of records of ``kind`` in the month, first and last time (on the index)."""
-        sql = (
-            "SELECT count(*), min(t_ns), max(t_ns) FROM records WHERE mill_id = ? AND kind = ? "
-            "AND t_ns >= ? AND t_ns < ?"
-        )
-        n, lo, hi = self._query(sql, (self.mill_id, kind, self.start_ns, self.end_ns))[0]
-        return int(n), lo, hi
+        return self.store.record_stats(self.mill_id, kind, *self.window)
 
-    def _query(self, sql: str, args: tuple[Any, ...]) -> list[tuple[Any, ...]]:
-        uri = f"file:{self.store.path}?mode=ro"
-        with sqlite3.connect(uri, uri=True) as db:
-            return db.execute(sql, args).fetchall()
+
+def _window_end(t_ns: int, first: Any, last: Any) -> int:
+    """End of a window of ``last - first`` samples at 1 kHz starting at ``t_ns``."""
+    n = 0 if first is None or last is None else int(last) - int(first)
+    return t_ns + round(n * 1e6) if n > 0 else t_ns
 
 
 def _span(
-    events: list[EventRow], steady: list[tuple[int, dict[str, Any]]], harm: tuple[int, int] | None
+    events: list[EventRow], steady: _SteadyRows, harm: tuple[int, int] | None
 ) -> tuple[int | None, int | None]:
     """First and last time of the results read for the month."""
     times = [e.t_ns for e in events] + [e.t_end_ns for e in events if e.t_end_ns is not None]
-    times += [t for t, _ in steady] + [_window_end(t, w) for t, w in steady]
+    if steady.t_ns:
+        times += [min(steady.t_ns), max(steady.end_ns)]
     times += list(harm or ())
     return (min(times), max(times)) if times else (None, None)
-
-
-def _window_end(t_ns: int, window: dict[str, Any]) -> int:
-    n = int(window.get("end_sample", 0)) - int(window.get("sample", 0))
-    return t_ns + round(n * 1e6) if n > 0 else t_ns  # samples at 1 kHz → ns
 
 
 def _local(t_ns: int, zone: zoneinfo.ZoneInfo) -> datetime:
@@ -422,20 +444,13 @@ def _local(t_ns: int, zone: zoneinfo.ZoneInfo) -> datetime:
 
 
 # ----------------------------------------------------------------------------- starts
-def _level(value: float | None, warn: float, alarm: float) -> str:
-    """Status strictly above the levels, as the alarm rules decide."""
-    if value is None:
-        return "n/a"
-    return "alarm" if value > alarm else "warning" if value > warn else "ok"
-
-
 def _peak(sides: Iterable[dict[str, Any]], key: str) -> float | None:
     values = [float(s[key]) for s in sides if s.get(key) is not None]
     return max(values) if values else None
 
 
 def _start_row(e: EventRow, config: MillConfig, zone: zoneinfo.ZoneInfo) -> StartRow:
-    d, a = e.data, config.alarms
+    d = e.data
     switch_on = _peak(d.get("switch_on", ()), "motor_pct")
     return StartRow(
         t_ns=e.t_ns,
@@ -446,7 +461,7 @@ def _start_row(e: EventRow, config: MillConfig, zone: zoneinfo.ZoneInfo) -> Star
         pinion_switch_on_pct=_peak(d.get("switch_on", ()), "pinion_pct"),
         rise_10_90_ms=d.get("rise_time_10_90_ms"),
         accel_s=d.get("accel_s"),
-        status=_level(switch_on, a.start_peak_warn_pct, a.start_peak_alarm_pct),
+        status=peak_status(switch_on, config.alarms),
     )
 
 
@@ -457,19 +472,19 @@ def _starts(events: list[EventRow], config: MillConfig, days: list[str]) -> Star
     per_day = dict.fromkeys(days, 0)
     for r in rows:
         per_day[r.local_time[:10]] += 1
-    a = config.alarms
+    c = count_starts([r.failed for r in rows], config.alarms)
     return Starts(
-        count=len(rows),
-        failed=sum(r.failed for r in rows),
+        count=c.count,
+        failed=c.failed,
         stops=len(stops),
         trips=sum(e.data.get("kind") == "trip" for e in stops),
-        norm=STARTS_NORM_PER_MONTH,
-        warn_above=a.starts_per_month_warn,
-        alarm_above=a.starts_per_month_alarm,
-        status=starts_status(len(rows), config.alarms),
+        norm=c.norm,
+        warn_above=c.warn_above,
+        alarm_above=c.alarm_above,
+        status=c.status,
         per_day=per_day,
-        peak_warn_pct=a.start_peak_warn_pct,
-        peak_alarm_pct=a.start_peak_alarm_pct,
+        peak_warn_pct=c.peak_warn_pct,
+        peak_alarm_pct=c.peak_alarm_pct,
         starts=rows,
     )
 
@@ -533,14 +548,12 @@ def _damage(rows: list[DamageRow], starts: int, seconds: dict[str, float]) -> li
     return out
 
 
-def _covered_seconds(
-    reader: _MonthReader, span: tuple[int | None, int | None], days: list[str]
-) -> float:
+def _covered_seconds(reader: _MonthReader, span: tuple[int | None, int | None]) -> float:
     """Seconds of the month under monitoring: the whole month where damage rows exist on both
     sides of it, else from/to the first/last stored result."""
     if span[0] is None or span[1] is None:
         return 0.0
-    before, after = reader.has_damage_outside(days)
+    before, after = reader.has_damage_outside()
     lo = reader.start_ns if before else max(reader.start_ns, span[0])
     hi = reader.end_ns if after else min(reader.end_ns, span[1])
     return max(hi - lo, 0) / 1e9
@@ -566,47 +579,52 @@ def _what_if(damage: list[ComponentDamage], starts: int, covered_s: float) -> li
 
 
 # ----------------------------------------------------------------------------- steady state
-def _steady_point(t_ns: int, w: dict[str, Any]) -> SteadyPoint:
-    ranges = {ch: float(v) for ch, v in (w.get("range_pct") or {}).items() if v is not None}
-    bending = {
-        ch: float(v) / 2.0  # amplitude = range / 2, as the bending alarm rule
-        for ch, v in (w.get("range_per_rev") or {}).items()
-        if ch.startswith("bending") and v is not None
-    }
-    return SteadyPoint(t_ns, ranges, bending)
+def _steady_points(rows: _SteadyRows) -> list[SteadyPoint]:
+    """One point per window with the channels that have a value."""
+    ranges, bending = list(rows.range_pct.items()), list(rows.bending.items())
+    return [
+        SteadyPoint(
+            t,
+            {ch: v[i] for ch, v in ranges if v[i] is not None},
+            {ch: v[i] for ch, v in bending if v[i] is not None},
+        )
+        for i, t in enumerate(rows.t_ns)
+    ]
 
 
-def _stats(values: dict[str, list[float]]) -> tuple[dict[str, float], dict[str, float]]:
-    return (
-        {k: statistics.fmean(v) for k, v in sorted(values.items())},
-        {k: max(v) for k, v in sorted(values.items())},
-    )
+def _day_stats(
+    columns: dict[str, np.ndarray], lo: int, hi: int
+) -> tuple[dict[str, float], dict[str, float]]:
+    """Mean (exactly rounded sum / n) and max per channel over windows ``lo:hi`` that have a
+    finite value; channels without one that day are left out."""
+    mean, top = {}, {}
+    for ch in sorted(columns):
+        v = columns[ch][lo:hi]
+        v = v[np.isfinite(v)]
+        if v.size:
+            mean[ch], top[ch] = math.fsum(v.tolist()) / v.size, float(v.max())
+    return mean, top
 
 
-def _steady_days(points: list[SteadyPoint], zone: zoneinfo.ZoneInfo) -> list[SteadyDay]:
-    groups: dict[str, list[SteadyPoint]] = defaultdict(list)
-    for p in points:
-        groups[_local(p.t_ns, zone).date().isoformat()].append(p)
-    out = []
-    for day, ps in sorted(groups.items()):
-        ranges: dict[str, list[float]] = defaultdict(list)
-        bending: dict[str, list[float]] = defaultdict(list)
-        for p in ps:
-            for ch, v in p.range_pct.items():
-                ranges[ch].append(v)
-            for ch, v in p.bending_amplitude_mpa.items():
-                bending[ch].append(v)
-        out.append(SteadyDay(day, len(ps), *_stats(ranges), *_stats(bending)))
-    return out
+def _steady_days(rows: _SteadyRows, reader: _MonthReader) -> list[SteadyDay]:
+    """Daily summaries over the local days (windows by their start time)."""
+    ranges = {ch: np.array(v, dtype=float) for ch, v in rows.range_pct.items()}  # None → NaN
+    bending = {ch: np.array(v, dtype=float) for ch, v in rows.bending.items()}
+    edges = np.searchsorted(np.array(rows.t_ns, dtype=np.int64),
+                            [*reader.day_starts_ns, reader.end_ns]).tolist()  # fmt: skip
+    return [
+        SteadyDay(day, hi - lo, *_day_stats(ranges, lo, hi), *_day_stats(bending, lo, hi))
+        for day, lo, hi in zip(reader.days, edges[:-1], edges[1:], strict=True)
+        if hi > lo
+    ]
 
 
-def _steady(rows: list[tuple[int, dict[str, Any]]], config: MillConfig) -> Steady:
-    points = [_steady_point(t, w) for t, w in rows]
+def _steady(rows: _SteadyRows, config: MillConfig, reader: _MonthReader) -> Steady:
     a = config.alarms
     return Steady(
-        windows=len(points),
-        points=points,
-        days=_steady_days(points, zoneinfo.ZoneInfo(config.time_zone)),
+        windows=len(rows.t_ns),
+        points=_steady_points(rows),
+        days=_steady_days(rows, reader),
         oscillation_warn_pct=a.oscillation_range_warn_pct,
         oscillation_alarm_pct=a.oscillation_range_alarm_pct,
         bending_warn_mpa=a.bending_amplitude_warn_mpa,
@@ -620,7 +638,7 @@ def _harmonics(reader: _MonthReader, time_zone: str) -> tuple[Harmonics, tuple[i
     """Line trends and unexplained peaks from one harmonic table per hour (a table holds every
     expected line of every channel, ~25 kB; reading a month's ~40 000 takes seconds). Every
     unexplained peak also raises an ``unexplained_peak`` alarm, listed with the alarms."""
-    sampled = reader.records("harmonics", every_ns=HARMONIC_SAMPLE_NS)
+    sampled = reader.harmonic_tables()
     n, lo, hi = reader.count("harmonics")
     zone = zoneinfo.ZoneInfo(time_zone)
     peaks = [(t, list(table.get("peaks") or ())) for t, table in sampled]

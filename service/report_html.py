@@ -1,8 +1,14 @@
 """The monthly damage report as one self-contained HTML page (seed 000 §10.6 "automatic reports").
 
-Inline CSS, plots as inline SVG drawn with matplotlib's object API (no pyplot state, so it is
-safe in the API's worker threads), no external URL, no script. The figure builders are shared
-with :mod:`service.report_pdf`. Sections follow :mod:`service.monthly_report`.
+Inline CSS, plots as inline SVG drawn with matplotlib's object API (no pyplot state; the
+process-wide rcParams a renderer changes are guarded by :data:`MPL_LOCK`, so it is safe in the
+API's worker threads), no external URL, no script. The figure builders are shared with
+:mod:`service.report_pdf`. Sections follow :mod:`service.monthly_report`.
+
+Plots cost most of a report's time, so they are kept cheap: fixed margins instead of a layout
+engine, one collection per bar series, few ticks, and the month's steady-state windows (tens of
+thousands) drawn as a min–max envelope per plot column (:func:`envelope`), which keeps every
+peak visible against the levels.
 """
 
 from __future__ import annotations
@@ -10,19 +16,28 @@ from __future__ import annotations
 import html
 import io
 import logging
+import threading
 import zoneinfo
 from collections.abc import Callable, Iterable, Sequence
-from datetime import date, datetime
+from datetime import datetime
+from typing import Any
 
 import matplotlib
-from matplotlib.dates import DateFormatter
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
+from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator, NullLocator
 
 from service.monthly_report import MonthlyReport
+from service.starts import day_starts_ns
 
 __all__ = [
     "FIGURES",
+    "MPL_LOCK",
     "damage_figure",
+    "day_positions",
+    "envelope",
     "fmt",
     "local_time",
     "render_html",
@@ -40,8 +55,14 @@ PHASE_COLOURS = {
     "stopped": "#7f7f7f",
     "unknown": "#bcbd22",
 }
-#: Above this many steady windows per channel, the trend plots hourly maxima.
-RASTER_POINTS = 2000
+#: matplotlib's rcParams are one per process and read while drawing: renderers that change them
+#: (SVG text here, PDF core fonts in :mod:`service.report_pdf`) build and save their figures
+#: holding this lock, so concurrent requests cannot leak settings into one another.
+MPL_LOCK = threading.RLock()
+FIG_WIDTH_IN = 9.0
+#: Plot columns of the steady-state trends (~1 per hour of a month; about one per pixel column
+#: at 96 dpi): each shows the min–max envelope of its windows.
+TREND_COLUMNS = 720
 CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:2rem auto;
 max-width:1100px;color:#222;line-height:1.4}
@@ -75,29 +96,63 @@ def local_time(t_ns: int | None, time_zone: str) -> str:
     )
 
 
-def _days(days: Iterable[str]) -> list[date]:
-    return [date.fromisoformat(d) for d in days]
+# ----------------------------------------------------------------------------- figures
+# Figures are laid out with fixed margins in inches (no constrained layout: it draws every
+# figure twice) and draw many bars as one collection per phase (a patch per bar costs ~1 ms).
+def _frame(height_in: float, panels: int = 1) -> tuple[Figure, list[Axes]]:
+    """A 9-inch wide figure of ``panels`` stacked axes over the month's days (x ticks on the
+    bottom one only: ticks are the dearest part of drawing a figure)."""
+    fig = Figure(figsize=(FIG_WIDTH_IN, height_in))
+    fig.subplots_adjust(left=0.8 / FIG_WIDTH_IN, right=1 - 0.2 / FIG_WIDTH_IN,
+                        bottom=0.55 / height_in, top=1 - 0.35 / height_in,
+                        hspace=0.45 * panels / (height_in - 0.9 - 0.45 * (panels - 1)))  # fmt: skip
+    axes = list(fig.subplots(panels, 1, squeeze=False)[:, 0])
+    for ax in axes[:-1]:
+        ax.xaxis.set_major_locator(NullLocator())
+    axes[-1].set_xlabel("day of month")
+    return fig, axes
 
 
-def _date_axis(ax: matplotlib.axes.Axes) -> None:
-    ax.xaxis.set_major_formatter(DateFormatter("%d"))
-    ax.set_xlabel("day of month")
+def _day_axis(ax: Axes, n_days: int) -> None:
+    """x in days of the month: day d spans [d, d + 1), labelled at its middle."""
+    ax.set_xlim(1, n_days + 1)
+    if not isinstance(ax.xaxis.get_major_locator(), NullLocator):
+        step = 1 if n_days <= 16 else 2
+        ax.xaxis.set_major_locator(FixedLocator([d + 0.5 for d in range(1, n_days + 1, step)]))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: f"{int(x)}"))
     ax.grid(axis="y", alpha=0.3)
 
 
-# ----------------------------------------------------------------------------- figures
+def day_positions(r: MonthlyReport, t_ns: np.ndarray) -> np.ndarray:
+    """Times (ns UTC) as fractional days of the month in the site's time zone (day d spans
+    [d, d + 1), whatever its length in hours across a DST change)."""
+    edges = np.array([*day_starts_ns(list(r.starts.per_day), r.time_zone), r.end_ns])
+    i = np.clip(np.searchsorted(edges, t_ns, side="right") - 1, 0, len(edges) - 2)
+    return i + 1 + (t_ns - edges[i]) / (edges[i + 1] - edges[i])
+
+
+def _bars(ax: Axes, values: Sequence[float], bottom: Sequence[float], **style: Any) -> None:
+    """One bar per day of the month (value on top of bottom), as one collection."""
+    v, b = np.asarray(values, dtype=float), np.asarray(bottom, dtype=float)
+    x = np.arange(1, len(v) + 1) + 0.5
+    keep = v != 0
+    lo, hi, x0, x1 = b[keep], (b + v)[keep], x[keep] - 0.4, x[keep] + 0.4
+    verts = np.stack([np.column_stack(p) for p in ((x0, lo), (x0, hi), (x1, hi), (x1, lo))], 1)
+    ax.add_collection(PolyCollection(verts, linewidths=0, **style), autolim=True)
+
+
 def starts_figure(r: MonthlyReport) -> Figure | None:
-    """Starts per local day, with the daily equivalent of the monthly norm marked."""
+    """Starts per local day of the month."""
     if not r.starts.count:
         return None
-    fig = Figure(figsize=(9, 2.8), layout="constrained")
-    ax = fig.add_subplot()
-    days = _days(r.starts.per_day)
-    ax.bar(days, list(r.starts.per_day.values()), color="#1f77b4", width=0.8)
+    fig, (ax,) = _frame(2.8)
+    counts = list(r.starts.per_day.values())
+    _bars(ax, counts, [0.0] * len(counts), facecolors="#1f77b4")
+    ax.set_ylim(0, max(counts) * 1.1)
     ax.set_ylabel("starts per day")
-    ax.set_title(f"Starts per day — {r.starts.count} in {r.month} (norm 3–5 per month)")
-    ax.yaxis.get_major_locator().set_params(integer=True)
-    _date_axis(ax)
+    ax.set_title(f"Starts per day — {r.starts.count} in {r.month} (norm 3–5 per month)", y=1)
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    _day_axis(ax, len(counts))
     return fig
 
 
@@ -106,80 +161,100 @@ def damage_figure(r: MonthlyReport) -> Figure | None:
     comps = [c for c in r.damage if c.total > 0]
     if not comps:
         return None
-    fig = Figure(figsize=(9, 2.2 * len(comps) + 0.6), layout="constrained")
-    axes = fig.subplots(len(comps), 1, sharex=True, squeeze=False)[:, 0]
-    all_days = _days(r.starts.per_day)
+    fig, axes = _frame(2.2 * len(comps) + 0.6, len(comps))
+    days = list(r.starts.per_day)
     for ax, c in zip(axes, comps, strict=True):
-        bottom = [0.0] * len(all_days)
-        for phase in PHASE_COLOURS:
-            values = [c.per_day.get(d.isoformat(), {}).get(phase, 0.0) for d in all_days]
-            if any(values):
-                ax.bar(all_days, values, bottom=bottom, width=0.8, label=phase,
-                       color=PHASE_COLOURS[phase])  # fmt: skip
-                bottom = [b + v for b, v in zip(bottom, values, strict=True)]
+        bottom = np.zeros(len(days))
+        for phase, colour in PHASE_COLOURS.items():
+            values = np.array([c.per_day.get(d, {}).get(phase, 0.0) for d in days])
+            if values.any():
+                _bars(ax, values, bottom, facecolors=colour, label=phase)
+                bottom += values
+        _headroom(ax, float(bottom.max()))
         ax.set_ylabel("damage / day")
-        ax.set_title(f"{c.component}: {fmt(c.total)} this month", fontsize=10)
+        ax.set_title(f"{c.component}: {fmt(c.total)} this month", fontsize=10, y=1)
         ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
         ax.legend(fontsize=8, ncols=6, loc="upper left")
-        _date_axis(ax)
+        _day_axis(ax, len(days))
     return fig
 
 
-def _hourly_max(pts: list[tuple]) -> list[tuple]:
-    """Hourly maxima (conservative against the levels) when there are too many windows."""
-    if len(pts) <= RASTER_POINTS:
-        return pts
-    top: dict[int, tuple] = {}
-    for p in pts:
-        hour = p[0] // 3_600_000_000_000
-        if hour not in top or p[1] > top[hour][1]:
-            top[hour] = p
-    return [top[h] for h in sorted(top)]
+def envelope(x: np.ndarray, y: np.ndarray, lo: float, hi: float, columns: int) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray
+]:  # fmt: skip
+    """Min and max of ``y`` per column of ``[lo, hi)`` (x sorted): column centres and the
+    envelope, NaN where a column is empty, so peaks stay visible however many points."""
+    ok = np.isfinite(y)
+    x, y = x[ok], y[ok]
+    col = np.clip(((x - lo) / (hi - lo) * columns).astype(np.int64), 0, columns - 1)
+    ymin, ymax = np.full(columns, np.nan), np.full(columns, np.nan)
+    if col.size:
+        first = np.flatnonzero(np.r_[True, col[1:] != col[:-1]])
+        ymin[col[first]] = np.minimum.reduceat(y, first)
+        ymax[col[first]] = np.maximum.reduceat(y, first)
+    return lo + (np.arange(columns) + 0.5) * (hi - lo) / columns, ymin, ymax
 
 
-def _trend(ax: matplotlib.axes.Axes, r: MonthlyReport, values: dict[str, list[tuple]]) -> None:
-    zone = zoneinfo.ZoneInfo(r.time_zone)
-    for ch, pts in sorted(values.items()):
-        pts = _hourly_max(pts)
-        t = [datetime.fromtimestamp(p[0] / 1e9, tz=zone) for p in pts]
-        ax.plot(t, [p[1] for p in pts], ".", ms=2, label=ch)
-    ax.xaxis.set_major_formatter(DateFormatter("%d %H:%M" if len(r.steady.days) < 3 else "%d"))
-    ax.grid(alpha=0.3)
+def _trend(ax: Axes, r: MonthlyReport, series: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+    """Each channel's envelope per plot column: the band from min to max, its max as a line
+    (dots where few columns have data)."""
+    n_days = len(r.starts.per_day)
+    for ch, (t, v) in sorted(series.items()):
+        xc, ymin, ymax = envelope(day_positions(r, t), v, 1, n_days + 1, TREND_COLUMNS)
+        sparse = np.isfinite(ymax).sum() < 100
+        (line,) = ax.plot(xc, ymax, lw=0.8, marker="." if sparse else None, ms=3, label=ch)
+        ax.fill_between(xc, ymin, ymax, color=line.get_color(), alpha=0.3, lw=0)
+    _day_axis(ax, n_days)
 
 
-def _levels(ax: matplotlib.axes.Axes, levels: Sequence[tuple[str, float, str]]) -> None:
+def _levels(ax: Axes, levels: Sequence[tuple[str, float, str]]) -> None:
+    """Dashed level lines; the y axis from 0 to above the data and the levels."""
     for name, y, colour in levels:
         ax.axhline(y, color=colour, ls="--", lw=1, label=name)
+    top = [y for _n, y, _c in levels] + [float(np.nanmax(ln.get_ydata(), initial=0.0))
+                                         for ln in ax.get_lines()]  # fmt: skip
+    _headroom(ax, max(top))
+
+
+def _headroom(ax: Axes, top: float) -> None:
+    """y from 0 with room above ``top`` for the legend (placed in the upper left corner)."""
+    ax.set_ylim(0, top * 1.35 if top > 0 else 1.0)
+
+
+def _steady_series(r: MonthlyReport) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Per channel ``(t_ns, value)`` arrays of the oscillation range and bending amplitude
+    (NaN where a window has no value)."""
+    points = r.steady.points
+    t = np.array([p.t_ns for p in points], dtype=np.int64)
+    out: tuple[dict[str, Any], dict[str, Any]] = ({}, {})
+    for series, of in zip(out, (lambda p: p.range_pct, lambda p: p.bending_amplitude_mpa),
+                          strict=True):  # fmt: skip
+        rows = [of(p) for p in points]
+        for ch in sorted(set().union(*rows)):
+            series[ch] = (t, np.array([row.get(ch) for row in rows], dtype=float))
+    return out
 
 
 def steady_figure(r: MonthlyReport) -> Figure | None:
-    """Oscillation range (% rated) and bending amplitude (MPa) of every steady window."""
+    """Oscillation range (% rated) and bending amplitude (MPa) of the steady windows."""
     s = r.steady
     if not s.windows:
         return None
-    ranges: dict[str, list[tuple]] = {}
-    bending: dict[str, list[tuple]] = {}
-    for p in s.points:
-        for ch, v in p.range_pct.items():
-            ranges.setdefault(ch, []).append((p.t_ns, v))
-        for ch, v in p.bending_amplitude_mpa.items():
-            bending.setdefault(ch, []).append((p.t_ns, v))
-    fig = Figure(figsize=(9, 5.2), layout="constrained")
-    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    ranges, bending = _steady_series(r)
+    fig, (ax1, ax2) = _frame(5.2, 2)
     _trend(ax1, r, ranges)
     _levels(ax1, [("warning", s.oscillation_warn_pct, "#f0b400"),
                   ("alarm", s.oscillation_alarm_pct, "#c00")])  # fmt: skip
-    ax1.set_ylabel("oscillation range, % rated")
-    ax1.set_title(
-        "Steady-state torque oscillation range per window (hourly max if many)", fontsize=10
-    )
-    ax1.legend(fontsize=8, ncols=4)
+    ax1.set_ylabel("range, % rated")
+    ax1.set_title("Steady-state torque oscillation range (per-column min–max band and max)",
+                  fontsize=10, y=1)  # fmt: skip
+    ax1.legend(fontsize=8, ncols=4, loc="upper left")
     _trend(ax2, r, bending)
     _levels(ax2, [("warning", s.bending_warn_mpa, "#f0b400"),
                   ("alarm", s.bending_alarm_mpa, "#c00")])  # fmt: skip
     ax2.set_ylabel("bending amplitude, MPa")
-    ax2.set_title("Pinion bending amplitude (range per revolution / 2)", fontsize=10)
-    ax2.legend(fontsize=8, ncols=4)
+    ax2.set_title("Pinion bending amplitude (range per revolution / 2)", fontsize=10, y=1)
+    ax2.legend(fontsize=8, ncols=4, loc="upper left")
     return fig
 
 
@@ -190,12 +265,14 @@ FIGURES: tuple[tuple[str, Callable[[MonthlyReport], Figure | None]], ...] = (
 )
 
 
-def svg(fig: Figure | None) -> str:
-    """Inline SVG of a figure (text kept as text), or a short 'no data' paragraph."""
-    if fig is None:
-        return "<p class='meta'>No data for this plot in the month.</p>"
+def svg(build: Callable[[MonthlyReport], Figure | None], r: MonthlyReport) -> str:
+    """Inline SVG of the figure ``build`` makes of ``r`` (text kept as text), or a short 'no
+    data' paragraph. Built and saved holding :data:`MPL_LOCK`."""
     buf = io.StringIO()
-    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": "millwatch"}):
+    with MPL_LOCK, matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": "millwatch"}):
+        fig = build(r)
+        if fig is None:
+            return "<p class='meta'>No data for this plot in the month.</p>"
         fig.savefig(buf, format="svg")
     text = buf.getvalue()
     return "<figure>" + text[text.index("<svg") :] + "</figure>"
@@ -251,7 +328,7 @@ def _starts(r: MonthlyReport) -> str:
     head = ["local time", "failed", "switch-on % rated", "short-circuit % rated",
             "pinion switch-on %", "rise 10–90 ms", "acceleration s", "status"]  # fmt: skip
     return (
-        "<h2>Starts (seed 000 §6.1.3, §6.2.8)</h2>" + summary + svg(starts_figure(r))
+        "<h2>Starts (seed 000 §6.1.3, §6.2.8)</h2>" + summary + svg(starts_figure, r)
         + f"<p class='meta'>Start-peak levels: warning above {fmt(s.peak_warn_pct)} %, alarm "
         f"above {fmt(s.peak_alarm_pct)} % of rated motor torque (§7.2, Tables 4–6).</p>"
         + table(head, rows, left=2)
@@ -267,7 +344,7 @@ def _damage(r: MonthlyReport) -> str:
             "start = hours of running"]  # fmt: skip
     secs = ", ".join(f"{p} {fmt(v / 3600.0)} h" for p, v in r.phase_seconds.items())
     return (
-        "<h2>Fatigue damage (Miner, seed 000 §8.2, App. D)</h2>" + svg(damage_figure(r))
+        "<h2>Fatigue damage (Miner, seed 000 §8.2, App. D)</h2>" + svg(damage_figure, r)
         + table(head, rows) + f"<p class='meta'>Time in phases: {secs}. The cost of a start is "
         "(start + stop damage) / starts, expressed as hours of steady running (§8.3).</p>"
     )  # fmt: skip
@@ -297,7 +374,7 @@ def _steady(r: MonthlyReport) -> str:
     head = ["day", "windows", "mean range % rated", "max range % rated", "max bending MPa"]
     return (
         "<h2>Steady-state oscillation and bending (Tables 14–15, §8.1)</h2>"
-        + svg(steady_figure(r)) + table(head, rows, left=5)
+        + svg(steady_figure, r) + table(head, rows, left=5)
     )  # fmt: skip
 
 

@@ -3,6 +3,10 @@
 Same content as :mod:`service.report_html` (seed 000 §10.6 "automatic reports"): a title page
 with the header and the summary tables, then one page per figure, then the tables of starts,
 alarms, harmonics and data quality as monospaced text pages (A4 portrait).
+
+Text uses the PDF core fonts (Helvetica, Courier: every viewer has them), so no font is laid
+out glyph by glyph and embedded: that made most of the rendering time. Their encoding is
+Windows-1252; a character outside it prints as ``?`` (hence ASCII hyphens for minus signs).
 """
 
 from __future__ import annotations
@@ -10,15 +14,22 @@ from __future__ import annotations
 import io
 from collections.abc import Iterable, Sequence
 
+import matplotlib
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 
 from service.monthly_report import MonthlyReport
-from service.report_html import FIGURES, fmt, local_time
+from service.report_html import FIGURES, MPL_LOCK, fmt, local_time
 
 __all__ = ["render_pdf"]
 
 A4 = (8.27, 11.69)
+#: PDF core fonts (no embedding; their regular faces are "medium" in their metrics files);
+#: ASCII minus signs, which Windows-1252 has.
+PDF_RC = {"pdf.use14corefonts": True, "axes.unicode_minus": False, "font.family": "sans-serif",
+          "font.sans-serif": ["Helvetica"], "font.monospace": ["Courier"],
+          "font.weight": "medium", "axes.titleweight": "medium",
+          "axes.labelweight": "medium", "axes.formatter.use_mathtext": False}  # fmt: skip
 LINES_PER_PAGE = 70
 WIDTH = 110
 
@@ -108,7 +119,11 @@ def _text_pages(lines: list[str]) -> Iterable[Figure]:
 def render_pdf(r: MonthlyReport) -> bytes:
     """The report as PDF bytes (a text summary page, the figures, the detail tables)."""
     buf = io.BytesIO()
-    with PdfPages(buf, metadata={"Title": f"millwatch {r.mill} {r.month}"}) as pdf:
+    with (
+        MPL_LOCK,
+        matplotlib.rc_context(PDF_RC),
+        PdfPages(buf, metadata={"Title": f"millwatch {r.mill} {r.month}"}) as pdf,
+    ):
         for fig in _text_pages(_summary(r)):
             pdf.savefig(fig)
         for _name, build in FIGURES:

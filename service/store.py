@@ -88,6 +88,8 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
     ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
+#: Object keys of records are first read from one record per this interval (then checked).
+_KEY_SAMPLE_NS = 3_600 * 10**9
 #: Checkpoints kept (older ones are deleted when a new one is written).
 CHECKPOINTS_KEPT = 3
 
@@ -171,6 +173,48 @@ _TRANSITION_COLUMNS = "alarm_id, seq, kind, t_ns, severity, state, value, thresh
 
 def _alarm_row(r: tuple[Any, ...]) -> AlarmRow:
     return AlarmRow(*r[:13], bool(r[13]), *r[14:])
+
+
+def _record_window(
+    mill_id: str, kind: str, since_ns: int | None, until_ns: int | None
+) -> tuple[str, tuple[Any, ...]]:
+    """WHERE clause (on the ``records_unique`` index) and its arguments."""
+    where, args = "mill_id = ? AND kind = ?", [mill_id, kind]
+    for clause, value in (("t_ns >= ?", since_ns), ("t_ns < ?", until_ns)):
+        if value is not None:
+            where += " AND " + clause
+            args.append(value)
+    return where, tuple(args)
+
+
+def _column_paths(
+    fields: Sequence[Sequence[str]], objects: Sequence[Sequence[str]], keys: list[list[str]]
+) -> list[Sequence[str]]:
+    """Key paths of the value columns of :meth:`Store.record_columns`."""
+    paths = list(fields)
+    for obj, names in zip(objects, keys, strict=True):
+        paths += [(*obj, k) for k in names]
+    return paths
+
+
+def _json_path(keys: Sequence[str]) -> str:
+    """SQLite JSON path of object keys (``("range_pct", "motor")`` → ``$."range_pct"."motor"``)."""
+    if isinstance(keys, str) or any('"' in k for k in keys):
+        raise ValueError(f"a JSON path is a sequence of keys without double quotes, not {keys!r}")
+    return "$" + "".join(f'."{k}"' for k in keys)
+
+
+def _walk(data: Any, keys: Sequence[str]) -> Any:
+    for k in keys:
+        data = data.get(k) if isinstance(data, dict) else None
+    return data
+
+
+def _scalar(value: Any) -> Any:
+    """What ``json_extract`` gives: objects and arrays as JSON text, booleans as 0/1."""
+    if isinstance(value, dict | list):
+        return json.dumps(value)
+    return int(value) if isinstance(value, bool) else value
 
 
 class Store:
@@ -372,8 +416,12 @@ class Store:
         kind: str | None = None,
         since_ns: int | None = None,
         until_ns: int | None = None,
+        *,
+        limit: int | None = None,
+        newest_first: bool = False,
     ) -> list[EventRow]:
-        """Events of a mill in time order, optionally of one kind and in ``[since, until)``."""
+        """Events of a mill in time order (``newest_first``: reversed), optionally of one kind,
+        in ``[since, until)`` and at most ``limit`` of them."""
         sql = (
             "SELECT mill_id, kind, t_ns, data_json, t_end_ns, subject FROM events WHERE mill_id = ?"
         )
@@ -382,32 +430,198 @@ class Store:
             if value is not None:
                 sql += " AND " + clause
                 args.append(value)
-        rows = self._query(sql + " ORDER BY t_ns, id", tuple(args))
-        return [EventRow(m, k, t, json.loads(d), e, sub) for m, k, t, d, e, sub in rows]
-
-    def damage(self, mill_id: str, since_day: str | None = None) -> list[DamageRow]:
-        """Daily damage rows of a mill, oldest first."""
-        sql = "SELECT * FROM damage_daily WHERE mill_id = ?"
-        args: tuple[Any, ...] = (mill_id,)
-        if since_day is not None:
-            sql += " AND day >= ?"
-            args = (mill_id, since_day)
-        return [DamageRow(*r) for r in self._query(sql + " ORDER BY day, component, phase", args)]
-
-    def records(
-        self, mill_id: str, kind: str, since_ns: int | None = None, limit: int | None = None
-    ) -> list[tuple[int, dict[str, Any]]]:
-        """``(t_ns, data)`` records of one kind, newest first."""
-        sql = "SELECT t_ns, data_json FROM records WHERE mill_id = ? AND kind = ?"
-        args: list[Any] = [mill_id, kind]
-        if since_ns is not None:
-            sql += " AND t_ns >= ?"
-            args.append(since_ns)
-        sql += " ORDER BY t_ns DESC"
+        sql += " ORDER BY t_ns DESC, id DESC" if newest_first else " ORDER BY t_ns, id"
         if limit is not None:
             sql += " LIMIT ?"
             args.append(limit)
-        return [(t, json.loads(d)) for t, d in self._query(sql, tuple(args))]
+        rows = self._query(sql, tuple(args))
+        return [EventRow(m, k, t, json.loads(d), e, sub) for m, k, t, d, e, sub in rows]
+
+    def damage(
+        self, mill_id: str, since_day: str | None = None, until_day: str | None = None
+    ) -> list[DamageRow]:
+        """Daily damage rows of a mill, oldest first; days in ``[since_day, until_day]``
+        (``YYYY-MM-DD``, both included) when given."""
+        sql = "SELECT * FROM damage_daily WHERE mill_id = ?"
+        args: list[Any] = [mill_id]
+        for clause, value in (("day >= ?", since_day), ("day <= ?", until_day)):
+            if value is not None:
+                sql += " AND " + clause
+                args.append(value)
+        rows = self._query(sql + " ORDER BY day, component, phase", tuple(args))
+        return [DamageRow(*r) for r in rows]
+
+    def damage_days(self, mill_id: str) -> tuple[str | None, str | None]:
+        """First and last day with damage rows of a mill (``None`` without any)."""
+        row = self._query_one("SELECT min(day), max(day) FROM damage_daily WHERE mill_id = ?",
+                              (mill_id,))  # fmt: skip
+        return (None, None) if row is None else (row[0], row[1])
+
+    def records(
+        self,
+        mill_id: str,
+        kind: str,
+        since_ns: int | None = None,
+        limit: int | None = None,
+        *,
+        until_ns: int | None = None,
+        every_ns: int | None = None,
+        oldest_first: bool = False,
+    ) -> list[tuple[int, dict[str, Any]]]:
+        """``(t_ns, data)`` records of one kind in ``[since, until)``, newest first (oldest
+        first with ``oldest_first``). With ``every_ns`` only the first record of each interval
+        of that length (counted from the epoch) is read: the choice is made on the index, so the
+        skipped records are never read or decoded."""
+        where, args = _record_window(mill_id, kind, since_ns, until_ns)
+        if every_ns:
+            where += f" AND t_ns IN (SELECT min(t_ns) FROM records WHERE {where} GROUP BY t_ns / ?)"
+            args = (*args, *args, int(every_ns))
+        sql = f"SELECT t_ns, data_json FROM records WHERE {where} ORDER BY t_ns"
+        sql += "" if oldest_first else " DESC"
+        if limit is not None:
+            sql += " LIMIT ?"
+            args = (*args, limit)
+        return [(t, json.loads(d)) for t, d in self._query(sql, args)]
+
+    def record_stats(
+        self, mill_id: str, kind: str, since_ns: int | None = None, until_ns: int | None = None
+    ) -> tuple[int, int | None, int | None]:
+        """Number of records of one kind in ``[since, until)``, first and last time (read on
+        the index only)."""
+        where, args = _record_window(mill_id, kind, since_ns, until_ns)
+        row = self._query_one(f"SELECT count(*), min(t_ns), max(t_ns) FROM records WHERE {where}",
+                              args)  # fmt: skip
+        return (0, None, None) if row is None else (int(row[0]), row[1], row[2])
+
+    def record_keys(
+        self,
+        mill_id: str,
+        kind: str,
+        paths: Sequence[Sequence[str]],
+        since_ns: int | None = None,
+        until_ns: int | None = None,
+    ) -> list[list[str]]:
+        """For each path (keys from the top), the sorted keys of the JSON object there over
+        the records of one kind in ``[since, until)``; SQLite reads them without decoding
+        records in Python."""
+        where, args = _record_window(mill_id, kind, since_ns, until_ns)
+        return self._keys(where, args, paths, self._unparsable(where, args))
+
+    def _keys(
+        self,
+        where: str,
+        args: tuple[Any, ...],
+        paths: Sequence[Sequence[str]],
+        odd: list[tuple[int, Any]],
+        sample_ns: int | None = None,
+    ) -> list[list[str]]:
+        """Object keys at ``paths`` over the records in ``where`` (only the first of each
+        ``sample_ns`` interval if given) and the ``odd`` ones decoded in Python."""
+        sql = (f"SELECT DISTINCT j.key FROM records, json_each(data_json, ?) AS j WHERE {where} "
+               "AND json_valid(data_json) AND j.key IS NOT NULL")  # fmt: skip
+        params = args
+        if sample_ns:
+            sql += f" AND t_ns IN (SELECT min(t_ns) FROM records WHERE {where} GROUP BY t_ns / ?)"
+            params = (*args, *args, int(sample_ns))
+        keys = [{str(k) for (k,) in self._query(sql, (_json_path(p), *params))} for p in paths]
+        for _t, data in odd:
+            for found, path in zip(keys, paths, strict=True):
+                obj = _walk(data, path)
+                found.update(obj if isinstance(obj, dict) else ())
+        return [sorted(k) for k in keys]
+
+    def record_fields(
+        self,
+        mill_id: str,
+        kind: str,
+        fields: Sequence[Sequence[str]],
+        since_ns: int | None = None,
+        until_ns: int | None = None,
+    ) -> list[tuple[Any, ...]]:
+        """``(t_ns, value, …)`` of the records of one kind in ``[since, until)``, oldest first:
+        one scalar per field (a key path into the record; ``None`` where absent), extracted by
+        SQLite (see :meth:`record_columns`)."""
+        return self.record_columns(mill_id, kind, fields, (), since_ns, until_ns)[1]
+
+    def record_columns(
+        self,
+        mill_id: str,
+        kind: str,
+        fields: Sequence[Sequence[str]],
+        objects: Sequence[Sequence[str]],
+        since_ns: int | None = None,
+        until_ns: int | None = None,
+    ) -> tuple[list[list[str]], list[tuple[Any, ...]]]:
+        """Columns of the records of one kind in ``[since, until)``, extracted by SQLite, so a
+        month of steady-state windows is read without decoding each record in Python.
+
+        Returns ``(keys, rows)``: for each path in ``objects`` (keys from the top), the sorted
+        keys of the JSON object there over all the records; rows ``(t_ns, *fields,
+        *objects' values)``, oldest first, one value per field and per object key, ``None``
+        where absent. The object keys are read from the first record of each hour and checked
+        on every record in the same pass; a second pass reads them all only if some record
+        has others. Records SQLite's JSON refuses (``NaN`` and ``Infinity``, which Python's
+        json writes) are decoded in Python."""
+        where, args = _record_window(mill_id, kind, since_ns, until_ns)
+        odd = self._unparsable(where, args)
+        keys = self._keys(where, args, objects, odd, sample_ns=_KEY_SAMPLE_NS)
+        rows = self._columns(where, args, fields, objects, keys, check=True)
+        if rows is None:  # some record has keys the hourly sample missed
+            keys = self._keys(where, args, objects, odd)
+            rows = self._columns(where, args, fields, objects, keys, check=False)
+            assert rows is not None
+        if odd:
+            paths = _column_paths(fields, objects, keys)
+            rows += [(t, *(_scalar(_walk(d, p)) for p in paths)) for t, d in odd]
+            rows.sort(key=lambda r: r[0])
+        return keys, rows
+
+    def _columns(
+        self,
+        where: str,
+        args: tuple[Any, ...],
+        fields: Sequence[Sequence[str]],
+        objects: Sequence[Sequence[str]],
+        keys: list[list[str]],
+        check: bool,
+    ) -> list[tuple[Any, ...]] | None:
+        """Rows of :meth:`record_columns` from SQLite; with ``check``, ``None`` if an object
+        has a key outside ``keys`` in some record (what ``json_remove`` leaves of it)."""
+        paths = _column_paths(fields, objects, keys)
+        columns = ["json_extract(data_json, ?)"] * len(paths)
+        params = [_json_path(p) for p in paths]
+        if check:
+            for obj, names in zip(objects, keys, strict=True):
+                columns.append(f"json_remove(json_extract(data_json, ?){', ?' * len(names)})")
+                params += [_json_path(obj), *(_json_path((k,)) for k in names)]
+        sql = (f"SELECT {', '.join(['t_ns', *columns])} FROM records WHERE {where} "
+               "AND json_valid(data_json) ORDER BY t_ns")  # fmt: skip
+        rows = self._query(sql, (*params, *args))
+        n = len(objects) if check else 0
+        if not n:
+            return rows
+        if any(rest not in (None, "{}") for row in rows for rest in row[-n:]):
+            return None
+        return [row[:-n] for row in rows]
+
+    def _unparsable(self, where: str, args: tuple[Any, ...]) -> list[tuple[int, Any]]:
+        """``(t_ns, data)`` of the records in ``where`` that SQLite's JSON functions refuse."""
+        sql = f"SELECT t_ns, data_json FROM records WHERE {where} AND NOT json_valid(data_json)"
+        return [(t, json.loads(d)) for t, d in self._query(sql, args)]
+
+    @contextmanager
+    def read_snapshot(self) -> Iterator[None]:
+        """Reads of this thread inside the block see one snapshot of the store (one read
+        transaction on its reader connection), whatever the writer commits meanwhile."""
+        db = self._reader()
+        if db.in_transaction:
+            yield
+            return
+        db.execute("BEGIN")
+        try:
+            yield
+        finally:
+            db.execute("COMMIT")
 
     def _reader(self) -> sqlite3.Connection:
         """This thread's own read-only connection: WAL lets readers see the last commit while

@@ -8,9 +8,12 @@ import io
 import json
 import math
 import re
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import SimpleNamespace
 
+import matplotlib
+import numpy as np
 import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
@@ -23,11 +26,12 @@ from service.api_errors import install_problem_handlers
 from service.api_reports import register_report_routes
 from service.block_queue import QueuedBlock
 from service.mill_pipeline import AnalyzerPipeline
-from service.monthly_report import MonthError, build_monthly_report, month_bounds, report_to_dict
+from service.monthly_report import MonthError, build_monthly_report, report_to_dict
 from service.report_csv import damage_csv, render_csv, starts_csv
-from service.report_html import render_html
+from service.report_html import day_positions, envelope, render_html
 from service.report_pdf import render_pdf
-from service.store import Store
+from service.starts import month_bounds_ns, month_days
+from service.store import EventRow, Store
 from service.worker import Worker
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -107,6 +111,54 @@ def test_steady_harmonics_alarms_and_data_quality_come_from_the_store(store, rep
     assert report.data_quality.by_problem == {"sequence_gap": len(gaps)}
 
 
+def test_steady_trends_are_the_stored_windows(store, report):
+    stored = sorted(store.records(CONFIG.id, "steady"))
+    assert [p.t_ns for p in report.steady.points] == [t for t, _ in stored]
+    for p, (_t, w) in zip(report.steady.points, stored, strict=True):
+        assert p.range_pct == w["range_pct"]
+        assert p.bending_amplitude_mpa == {k: v / 2 for k, v in w["range_per_rev"].items()
+                                           if k.startswith("bending")}  # fmt: skip
+    day = report.steady.days[0]
+    for ch, mean in day.range_pct_mean.items():
+        values = [w["range_pct"][ch] for _t, w in stored]
+        assert mean == math.fsum(values) / len(values) and day.range_pct_max[ch] == max(values)
+
+
+def test_a_stored_nan_is_kept_in_its_window_and_left_out_of_daily_statistics(tmp_path):
+    t0 = 1704067200 * 10**9  # 2024-01-01T02:00 in Johannesburg
+    windows = [{"sample": 0, "end_sample": 60_000, "range_pct": {"motor_torque0": v},
+                "range_per_rev": {"bending0": 20.0}} for v in (10.0, math.nan, 14.0)]  # fmt: skip
+    with Store(tmp_path / "nan.db") as s:
+        with s.transaction() as db:
+            Store.add_events(db, [EventRow(CONFIG.id, "start", t0 - 60 * 10**9, {})])
+            for i, w in enumerate(windows):
+                Store.add_record(db, CONFIG.id, "steady", t0 + i * 60 * 10**9, w)
+        r = build_monthly_report(s, CONFIG, MONTH)
+        assert r.source.last_ns == t0 + 120 * 10**9 + 60 * 10**9  # the last window's end
+    assert [math.isnan(p.range_pct["motor_torque0"]) for p in r.steady.points] == [0, 1, 0]
+    assert r.steady.days[0].range_pct_mean == {"motor_torque0": 12.0}
+    assert r.steady.days[0].bending_amplitude_max == {"bending0": 10.0}
+    assert report_to_dict(r)["steady"]["points"][1]["range_pct"] == {"motor_torque0": None}
+    assert render_html(r).count("<svg") == 2 and render_pdf(r).startswith(b"%PDF")  # no damage
+
+
+def test_trend_envelopes_keep_single_window_peaks():
+    x = np.linspace(1.0, 32.0, 40_000, endpoint=False)
+    y = np.full(x.size, 10.0)
+    y[12_345], y[20_000] = 55.0, np.nan  # one window above the alarm level, one without value
+    centres, lo, hi = envelope(x, y, 1.0, 32.0, 720)
+    assert centres.size == lo.size == hi.size == 720
+    assert np.nanmax(hi) == 55.0 and np.nanmin(lo) == 10.0 and np.isfinite(hi).all()
+    _c, _lo, hi = envelope(x[:10], y[:10], 1.0, 32.0, 720)
+    assert np.isfinite(hi).sum() == 1  # empty columns stay empty (no line across stops)
+
+
+def test_day_positions_follow_local_days(report):
+    day = 86_400 * 10**9
+    t = np.array([report.start_ns, report.start_ns + day + day // 2, report.end_ns - 1])
+    assert day_positions(report, t) == pytest.approx([1.0, 2.5, 32.0])
+
+
 def test_an_empty_month_is_an_honest_empty_report(store):
     empty = build_monthly_report(store, CONFIG, "2024-02")
     assert empty.empty and empty.starts.count == 0 and empty.damage == []
@@ -127,10 +179,11 @@ def test_a_malformed_month_is_refused_naming_it(store, month):
 
 
 def test_months_are_local_calendar_months():
-    start, end, days = month_bounds("2024-01", "Africa/Johannesburg")  # UTC+2
+    start, end = month_bounds_ns("2024-01", "Africa/Johannesburg")  # UTC+2
     assert start == (1704067200 - 7200) * 10**9 and end == (1706745600 - 7200) * 10**9
+    days = month_days("2024-01")
     assert days[0] == "2024-01-01" and days[-1] == "2024-01-31"
-    assert len(month_bounds("2024-02", "UTC")[2]) == 29
+    assert len(month_days("2024-02")) == 29
 
 
 def test_html_is_self_contained_with_inline_plots(report):
@@ -147,6 +200,15 @@ def test_pdf_has_pages(report):
     pdf = render_pdf(report)
     assert pdf.startswith(b"%PDF")
     assert len(re.findall(rb"/Type /Page\b", pdf)) >= 5  # summary, 3 figures, details
+    assert b"/FontFile" not in pdf  # core fonts, nothing embedded (rendering time)
+
+
+def test_concurrent_renders_leave_matplotlib_settings_as_they_were(report):
+    before = dict(matplotlib.rcParams)
+    with ThreadPoolExecutor(4) as pool:
+        pages = list(pool.map(lambda f: f(report), [render_pdf, render_html] * 3))
+    assert all(p.startswith(b"%PDF") for p in pages[::2]) and all("<svg" in p for p in pages[1::2])
+    assert dict(matplotlib.rcParams) == before  # PDF core fonts did not leak into the process
 
 
 def test_csv_parses_and_matches_the_report(report):
