@@ -18,16 +18,14 @@ from __future__ import annotations
 
 import json
 import logging
-import time
 from collections.abc import Callable
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal, Protocol
 
 from fastapi import FastAPI, Query, Request
 from fastapi.responses import Response
 
-from alarms.observations import local_month
-from service.api_errors import BadRequest, NotFound, Unavailable, problem_responses
-from service.monthly_report import MonthError, MonthlyReport, build_monthly_report, report_to_dict
+from service.api_errors import BadRequest, problem_responses
+from service.monthly_report import MonthlyReport, report_to_dict
 from service.report_csv import render_csv
 from service.report_html import render_html
 from service.report_pdf import render_pdf
@@ -47,6 +45,12 @@ _ACCEPT = {"text/html": "html", "text/csv": "csv", "application/pdf": "pdf",
            "application/json": "json"}  # fmt: skip
 
 
+class ReportSource(Protocol):
+    """What the route needs of a :class:`~service.backend.Backend`."""
+
+    def monthly_report(self, mill_id: str, month: str | None) -> MonthlyReport: ...
+
+
 def negotiate(fmt: str | None, accept: str | None) -> str:
     """The output format: ``fmt`` if given (checked), else the first known type in ``Accept``."""
     if fmt is not None:
@@ -61,25 +65,9 @@ def negotiate(fmt: str | None, accept: str | None) -> str:
     return "json"
 
 
-def _report(runtime: Any, mill_id: str, month: str | None) -> MonthlyReport:
-    if hasattr(runtime, "monthly_report"):  # a service.backend.Backend (in process or remote)
-        return runtime.monthly_report(mill_id, month)
-    if mill_id not in runtime.mills:
-        known = ", ".join(sorted(runtime.mills)) or "(none)"
-        raise NotFound("Unknown mill", f"No mill {mill_id!r} is configured; mills: {known}.")
-    if runtime.store is None:
-        raise Unavailable("Store not open", "The service has not opened its store yet.")
-    config = runtime.mills[mill_id]
-    month = month or local_month(time.time_ns(), config.time_zone)
-    try:
-        return build_monthly_report(runtime.store, config, month)
-    except MonthError as exc:
-        raise BadRequest("Malformed month", str(exc)) from exc
-
-
-def register_report_routes(app: FastAPI, runtime: Any) -> None:
-    """Add the monthly report route to ``app``; ``runtime``: a started
-    :class:`~service.runtime.ServiceRuntime` (anything with ``mills`` and ``store``)."""
+def register_report_routes(app: FastAPI, backend: ReportSource) -> None:
+    """Add the monthly report route to ``app``; ``backend`` builds the report (a
+    :class:`~service.backend.Backend`: in process, or a worker over zenoh)."""
 
     @app.get(
         "/mills/{mill_id}/reports/monthly",
@@ -96,7 +84,7 @@ def register_report_routes(app: FastAPI, runtime: Any) -> None:
         format: Literal["json", "html", "csv", "pdf"] | None = None,
     ) -> Response:
         kind = negotiate(format, request.headers.get("accept"))
-        report = _report(runtime, mill_id, month)
+        report = backend.monthly_report(mill_id, month)
         media, render = FORMATS[kind]
         headers = {}
         if kind in ("csv", "pdf"):

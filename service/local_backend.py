@@ -11,26 +11,24 @@ registers on ``runtime.alarm_listeners``) and loaded once from the store when th
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 from prometheus_client import CollectorRegistry
 
-from alarms.observations import local_month
 from service.alarm_board import AlarmBoard, row_from_dict
 from service.alarm_views import acknowledge, alarm_detail
-from service.api_errors import BadRequest
 from service.metrics import metrics_registry
 from service.mill_views import (
     config_of,
     mill_detail,
     mill_life,
+    mill_monthly_report,
     mill_spectrum,
     mill_starts,
     mill_summary,
     store_of,
 )
-from service.monthly_report import MonthError, MonthlyReport, build_monthly_report
+from service.monthly_report import MonthlyReport
 from service.partition import worker_identity
 from service.runtime import ServiceRuntime
 
@@ -118,13 +116,7 @@ class LocalBackend:
 
     def monthly_report(self, mill_id: str, month: str | None) -> MonthlyReport:
         """The monthly report (default: this month in the site's time zone)."""
-        config = config_of(self.mills, mill_id)
-        store = store_of(self.runtime)
-        month = month or local_month(time.time_ns(), config.time_zone)
-        try:
-            return build_monthly_report(store, config, month)
-        except MonthError as exc:
-            raise BadRequest("Malformed month", str(exc)) from exc
+        return mill_monthly_report(self.runtime, mill_id, month)
 
     # ------------------------------------------------------------------ operations
     def readiness(self) -> dict[str, Any]:

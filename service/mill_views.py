@@ -15,6 +15,7 @@ from typing import Any
 from analytics.mill_config import MillConfig
 from service.api_errors import NotFound, Unavailable
 from service.life import LifeInputs, life_report
+from service.monthly_report import MonthlyReport, build_monthly_report
 from service.runtime import ServiceRuntime
 from service.starts import current_month, starts_in_month
 from service.store import Store
@@ -111,6 +112,14 @@ def mill_starts(runtime: ServiceRuntime, mill_id: str, month: str | None) -> dic
     config = mill_config(runtime, mill_id)
     month = month or current_month(config, time.time_ns())
     return starts_in_month(store_of(runtime), config, month)
+
+
+def mill_monthly_report(runtime: ServiceRuntime, mill_id: str, month: str | None) -> MonthlyReport:
+    """The monthly report of ``month`` (default: the current month in the site's time zone);
+    a malformed month is a :class:`~service.starts.MonthError` (422)."""
+    config = mill_config(runtime, mill_id)
+    month = month or current_month(config, time.time_ns())
+    return build_monthly_report(store_of(runtime), config, month)
 
 
 def mill_spectrum(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:

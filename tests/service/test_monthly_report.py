@@ -9,6 +9,7 @@ import json
 import math
 import re
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -26,6 +27,7 @@ from service.api_errors import install_problem_handlers
 from service.api_reports import register_report_routes
 from service.block_queue import QueuedBlock
 from service.mill_pipeline import AnalyzerPipeline
+from service.mill_views import mill_monthly_report
 from service.monthly_report import MonthError, build_monthly_report, report_to_dict
 from service.report_csv import damage_csv, render_csv, starts_csv
 from service.report_html import day_positions, envelope, render_html
@@ -230,7 +232,9 @@ def test_json_is_plain_data(report):
 def client(store: Store) -> TestClient:
     app = FastAPI()
     install_problem_handlers(app)
-    register_report_routes(app, SimpleNamespace(mills={CONFIG.id: CONFIG}, store=store))
+    runtime = SimpleNamespace(mills={CONFIG.id: CONFIG}, store=store)
+    backend = SimpleNamespace(monthly_report=partial(mill_monthly_report, runtime))
+    register_report_routes(app, backend)
     return TestClient(app)
 
 
