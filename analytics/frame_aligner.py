@@ -25,10 +25,15 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
+
+from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["Frame", "FrameAligner"]
 
 log = logging.getLogger(__name__)
+
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
 @dataclass(frozen=True)
@@ -43,6 +48,50 @@ class Frame:
 
     def __len__(self) -> int:
         return int(next(iter(self.data.values())).shape[0]) if self.data else 0
+
+
+@njit(cache=True, nogil=True)
+def _emitted_groups(present, chan, group, max_pending):
+    """Replay :meth:`FrameAligner.push` of blocks (``chan[k]``, grid group ``group[k]``) in
+    arrival order over the groups already ``present`` (groups × channels), emitting as its
+    drain does; returns how many leading groups come out complete and in order, or -1 when a
+    block would be late or repeated, or a group emitted incomplete (``max_pending`` exceeded) or
+    after a gap — the cases the caller leaves to block-by-block pushes."""
+    n_groups, n_ch = present.shape
+    counts = np.zeros(n_groups, dtype=np.int64)
+    for g in range(n_groups):
+        for c in range(n_ch):
+            counts[g] += present[g, c]
+    state = np.zeros(2, dtype=np.int64)  # groups emitted, groups open (started, not emitted)
+    state[1] = np.count_nonzero(counts)
+    for k in range(chan.shape[0]):
+        g, c = group[k], chan[k]
+        if g < state[0] or present[g, c]:
+            return -1
+        present[g, c] = True
+        counts[g] += 1
+        state[1] += counts[g] == 1
+        if not _drain_groups(counts, state, n_ch, max_pending):
+            return -1
+    return state[0]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _drain_groups(counts, state, n_ch, max_pending):
+    """The aligner's drain over group counts; False when it would emit a group incomplete or
+    after a gap."""
+    while state[1] > 0:
+        m = state[0]
+        while counts[m] == 0:
+            m += 1
+        complete = counts[m] == n_ch
+        if not (complete or state[1] > max_pending):
+            return True
+        if not complete or m != state[0]:
+            return False
+        state[0] += 1
+        state[1] -= 1
+    return True
 
 
 class FrameAligner:
@@ -80,6 +129,85 @@ class FrameAligner:
             return []
         self._pending.setdefault(int(t0_ns), {})[channel] = np.asarray(samples, dtype=np.float64)
         return list(self._drain(final=False))
+
+    def push_blocks(
+        self, chan: np.ndarray, t0_ns: np.ndarray, rows: np.ndarray
+    ) -> list[Frame] | None:
+        """Many blocks at once, as :meth:`push` of each in order would take them — for the
+        regular case only: block ``k`` (arrival order) is of channel ``self.channels[chan[k]]``,
+        starts at ``t0_ns[k]`` and holds ``rows[k]`` (all blocks ``n`` samples at ``fs``).
+
+        Regular means that, pushed one by one, every block would land on the grid of whole
+        blocks after the last frame, no block would be late or repeated and no group would be
+        emitted incomplete or after a gap (:func:`_emitted_groups` replays the arrival order
+        against ``max_pending``). Then the complete groups come out as one frame and the rest
+        stays pending, exactly as block by block. Otherwise nothing changes and None is
+        returned: the caller pushes the blocks one by one."""
+        n = rows.shape[1]
+        if n == 0 or chan.shape[0] == 0:
+            return None
+        step = round(n * 1e9 / self.fs)
+        base = self._next_t0
+        if base is None:
+            base = min(int(t0_ns.min()), min(self._pending, default=int(t0_ns.min())))
+        held = self._held_groups(base, step, n)
+        if held is None:
+            return None
+        rel = t0_ns - base
+        group = rel // step
+        if rel.min() < 0 or np.any(rel % step):
+            return None
+        n_groups = int(max(group.max(), max(held, default=-1))) + 1
+        if n_groups > chan.shape[0] + len(held) + 1:  # a gap: block by block
+            return None
+        present = np.zeros((n_groups, len(self.channels)), dtype=np.bool_)
+        for g, chans in held.items():
+            present[g, chans] = True
+        emitted = _emitted_groups(present, chan.astype(np.int64), group, self.max_pending)
+        if emitted < 0:
+            return None
+        return self._take_groups(base, step, n, chan, group, rows, emitted)
+
+    def _held_groups(self, base: int, step: int, n: int) -> dict[int, list[int]] | None:
+        """Pending groups as grid index → channel indices; None when one is off the grid."""
+        held: dict[int, list[int]] = {}
+        index = {c: i for i, c in enumerate(self.channels)}
+        for t0, group in self._pending.items():
+            g, off = divmod(t0 - base, step)
+            if off or g < 0 or any(x.shape[0] != n for x in group.values()):
+                return None
+            held[g] = [index[c] for c in group]
+        return held
+
+    def _take_groups(
+        self, base: int, step: int, n: int, chan: np.ndarray, group: np.ndarray,
+        rows: np.ndarray, emitted: int,
+    ) -> list[Frame]:  # fmt: skip
+        """Groups [0, emitted) as one frame; the later ones back into ``_pending``."""
+        old = {(t0 - base) // step: grp for t0, grp in self._pending.items()}
+        pending: dict[int, dict[str, np.ndarray]] = {}
+        data = {}
+        for ci, name in enumerate(self.channels):
+            mine = np.flatnonzero(chan == ci)
+            g_old = sorted(g for g in old if name in old[g])
+            g_all = np.concatenate((np.array(g_old, dtype=np.int64), group[mine]))
+            parts = [old[g][name] for g in g_old]
+            if np.all(np.diff(g_all) > 0):  # the usual case: already in grid order
+                stream = np.concatenate([*parts, rows[mine].reshape(-1)])
+            else:
+                pieces = parts + list(rows[mine])
+                order = np.argsort(g_all, kind="stable")
+                g_all = g_all[order]
+                stream = np.concatenate([pieces[k] for k in order.tolist()])
+            data[name] = stream[: emitted * n]
+            for k in range(emitted, g_all.shape[0]):
+                t0 = base + int(g_all[k]) * step
+                pending.setdefault(t0, {})[name] = stream[k * n : (k + 1) * n]
+        self._pending = {t0: pending[t0] for t0 in sorted(pending)}
+        if emitted == 0:
+            return []
+        self._next_t0 = base + emitted * step
+        return [Frame(base, self.fs, data)]
 
     def flush(self) -> list[Frame]:
         """Emit everything still pending (missing channels as NaN)."""
@@ -128,14 +256,14 @@ class FrameAligner:
         """Complete state as plain JSON-serialisable data (pending blocks included)."""
         return {
             "kind": "frame_aligner",
-            "version": 1,
+            "version": _SNAPSHOT_VERSION,
             "channels": self.channels,
             "fs": self.fs,
             "max_pending": self.max_pending,
             "gap_chunk": self.gap_chunk,
             "next_t0": self._next_t0,
             "pending": [
-                [t0, {c: x.tolist() for c, x in group.items()}]
+                [t0, {c: pack_array(x) for c, x in group.items()}]
                 for t0, group in sorted(self._pending.items())
             ],
             "counters": [self.missing_blocks, self.gap_samples, self.dropped_blocks],
@@ -144,14 +272,13 @@ class FrameAligner:
     @classmethod
     def restore(cls, snap: dict[str, Any]) -> FrameAligner:
         """An aligner that continues exactly where the snapshotted one stood."""
-        if snap.get("kind") != "frame_aligner" or snap.get("version") != 1:
-            raise ValueError("not a frame aligner snapshot of version 1")
+        if snap.get("kind") != "frame_aligner" or snap.get("version") != _SNAPSHOT_VERSION:
+            raise ValueError(f"not a frame aligner snapshot of version {_SNAPSHOT_VERSION}")
         a = cls(snap["channels"], snap["fs"], max_pending=snap["max_pending"],
                 gap_chunk=snap["gap_chunk"])  # fmt: skip
         a._next_t0 = snap["next_t0"]
         a._pending = {
-            int(t0): {c: np.array(x, dtype=np.float64) for c, x in group.items()}
-            for t0, group in snap["pending"]
+            int(t0): {c: unpack_array(x) for c, x in group.items()} for t0, group in snap["pending"]
         }
         a.missing_blocks, a.gap_samples, a.dropped_blocks = snap["counters"]
         return a

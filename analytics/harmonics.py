@@ -45,12 +45,12 @@ seed 000 Table 14), bending MPa, speed rpm, frequency Hz, time int64 ns since th
 
 from __future__ import annotations
 
-import base64
 import logging
 import math
+import zlib
 import zoneinfo
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Annotated, Any, Literal
 
@@ -59,6 +59,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from analytics.kinematics import ExpectedLine, KinematicsOptions, expected_lines
 from analytics.mill_config import MillConfig
+from analytics.order_kernels import catmull_rom, cosine_window, demodulate
+from analytics.running_median import running_median
+from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = [
     "DailyHarmonicTrend",
@@ -69,12 +72,14 @@ __all__ = [
     "UnexplainedPeak",
     "harmonics_report",
     "is_running",
+    "stagger_for",
     "window_response",
 ]
 
 log = logging.getLogger(__name__)
 
-_SNAPSHOT_VERSION = 1
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_KIND = ("harmonic_tracker", _SNAPSHOT_VERSION)
 #: Cosine-sum windows ``w(u) = Σ a_k (−1)^k cos 2πku`` on ``u ∈ [0, 1)`` (periodic).
 COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
     "hann": (0.5, 0.5),
@@ -82,6 +87,9 @@ COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
     "flattop": (0.21557895, 0.41663158, 0.277263158, 0.083578947, 0.006947368),
 }
 _SPEED_BLOCKS = 10  # speed block means per segment for the drift estimate
+#: Largest deferral of a complete segment's spectrum, in hops (``stagger`` → 1): under one hop,
+#: so a segment never waits behind the next one.
+MAX_DEFER_HOPS = 0.8
 
 
 class HarmonicSettings(BaseModel):
@@ -137,6 +145,11 @@ def is_running(
     return bool(x.min() >= band[0] * rated and x.max() <= band[1] * rated)
 
 
+def stagger_for(key: str) -> float:
+    """A fraction in [0, 1) fixed by ``key`` (CRC-32), e.g. a mill id → its ``stagger``."""
+    return zlib.crc32(key.encode()) / 2**32
+
+
 def window_values(name: str, u: np.ndarray) -> np.ndarray:
     """Cosine-sum window ``name`` at fractions ``u ∈ [0, 1)`` of the segment."""
     a = COSINE_WINDOWS[name]
@@ -156,6 +169,21 @@ def window_response(name: str, eps: np.ndarray | float) -> np.ndarray:
     return np.abs(s) / a[0]
 
 
+def _sinc(x: float) -> float:
+    """``np.sinc`` of one float (the same formula, without array overhead)."""
+    y = math.pi * (x if x != 0.0 else 1.0e-20)
+    return math.sin(y) / y
+
+
+def _response(name: str, eps: float) -> float:
+    """:func:`window_response` of one offset (per line in every table: scalar math)."""
+    a = COSINE_WINDOWS[name]
+    s = a[0] * _sinc(eps)
+    for k in range(1, len(a)):
+        s = s + 0.5 * a[k] * (_sinc(eps - k) + _sinc(eps + k))
+    return abs(s) / a[0]
+
+
 def _interp_table(name: str) -> tuple[np.ndarray, np.ndarray]:
     """(ρ, δ): ρ(δ) = (|W(1−δ)| − |W(1+δ)|) / |W(δ)| for the 3-bin peak interpolation."""
     d = np.linspace(-0.5, 0.5, 2001)
@@ -163,25 +191,6 @@ def _interp_table(name: str) -> tuple[np.ndarray, np.ndarray]:
         name, d
     )
     return rho, d
-
-
-def _catmull_rom(x: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Rows of ``x`` (uniformly sampled) at fractional indices ``s`` (cubic, clamped ends)."""
-    n = x.shape[-1]
-    i = np.floor(s).astype(np.int64)
-    t = s - i
-    p0, p1, p2, p3 = (x[..., np.clip(i + k, 0, n - 1)] for k in (-1, 0, 1, 2))
-    return p1 + 0.5 * t * (
-        p2 - p0 + t * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + t * (3.0 * (p1 - p2) + p3 - p0))
-    )
-
-
-def _b64(a: np.ndarray) -> str:
-    return base64.b64encode(np.ascontiguousarray(a, dtype="<f8").tobytes()).decode("ascii")
-
-
-def _unb64(text: str, shape: tuple[int, ...]) -> np.ndarray:
-    return np.frombuffer(base64.b64decode(text), dtype="<f8").reshape(shape).copy()
 
 
 # --------------------------------------------------------------------------- facts
@@ -214,7 +223,7 @@ class LineMeasurement:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data; NaN becomes None (JSON-ready)."""
-        return {k: _jsonable(v) for k, v in asdict(self).items()}
+        return {k: _jsonable(v) for k, v in vars(self).items()}  # flat: no asdict deep copy
 
 
 @dataclass(frozen=True)
@@ -239,7 +248,7 @@ class UnexplainedPeak:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready)."""
-        return {k: _jsonable(v) for k, v in asdict(self).items()}
+        return {k: _jsonable(v) for k, v in vars(self).items()}  # flat: no asdict deep copy
 
 
 @dataclass(frozen=True)
@@ -332,8 +341,8 @@ class _Acc:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "spec": _b64(self.spec),
-            "lines": _b64(self.lines),
+            "spec": pack_array(self.spec) if self.count else None,  # all zeros when empty
+            "lines": pack_array(self.lines),
             "count": self.count,
             "revs": self.revs,
             "seconds": self.seconds,
@@ -344,9 +353,12 @@ class _Acc:
 
     @classmethod
     def from_json(cls, d: dict[str, Any], channels: int, bins: int, lines: int) -> _Acc:
+        spec = d["spec"]
         return cls(
-            _unb64(d["spec"], (channels, bins)),
-            _unb64(d["lines"], (channels, lines)),
+            np.zeros((channels, bins))
+            if spec is None
+            else unpack_array(spec, shape=(channels, bins)),
+            unpack_array(d["lines"], shape=(channels, lines)),
             int(d["count"]),
             float(d["revs"]),
             float(d["seconds"]),
@@ -387,6 +399,14 @@ class HarmonicTracker:
     :class:`HarmonicWindow` facts it completed. ``snapshot()``/``restore()`` continue exactly;
     the results do not depend on how the samples are split into frames (except that running
     flags and gaps, by design, restart the segmentation).
+
+    ``stagger`` ∈ [0, 1) puts off the spectrum of a complete segment (the costly part: FFT,
+    line demodulation, and every ``segments_per_window``-th time the table) by that fraction of
+    :data:`MAX_DEFER_HOPS` hops of samples, so that mills started together do not all compute
+    their spectra in the same instant (issue 5: sample-to-store latency). The segment's samples
+    stay in the buffer meanwhile, so every window is bitwise what it is without stagger; only
+    the sample at which it is returned moves (deterministically: at the deferral's end, at a
+    stop, gap or non-finite sample, or at :meth:`flush`). ``stagger_for(mill id)`` spreads mills.
     """
 
     def __init__(
@@ -395,6 +415,7 @@ class HarmonicTracker:
         channels: Sequence[str] | None = None,
         settings: HarmonicSettings | None = None,
         natural_frequencies_hz: Sequence[float] = (),
+        stagger: float = 0.0,
     ) -> None:
         self.config = config
         self.settings = settings or HarmonicSettings()
@@ -404,14 +425,21 @@ class HarmonicTracker:
         self.speed_channel = next((n for n, c in config.channels.items() if c.kind == "rpm"), None)
         self._speed_scale = self._speed_to_revs_per_sample()
         self._geometry()
+        if not 0.0 <= stagger < 1.0:
+            raise ValueError(f"stagger must be in [0, 1), got {stagger!r}")
+        self.stagger = float(stagger)
+        hop_samples = self.hop_revs / (config.pinion_speed_rpm / 60.0) * self.fs
+        self.defer_samples = math.floor(self.stagger * MAX_DEFER_HOPS * hop_samples)
         self._lines = [
             ln for ln in expected_lines(config, None, self.settings.kinematics) if ln.observable
         ]
         self._all_lines = expected_lines(config, None, self.settings.kinematics)
+        self._grid: tuple[np.ndarray, np.ndarray] | None = None  # see _grid_taper
         self._rho, self._delta = _interp_table(self.settings.window)
         nc, nl = len(self.channels), len(self._lines)
-        self._buf = np.zeros((nc + 1, self.capacity))
+        self._buf = np.zeros((nc + 1, self.capacity + self.defer_samples))
         self._len = 0
+        self._due: tuple[int, int] | None = None  # a complete segment: (end, length when due)
         self._approx_revs = 0.0
         self._anchor_ns: int | None = None
         self._anchor_offset = 0  # run sample index of buffer[0]
@@ -474,25 +502,39 @@ class HarmonicTracker:
         self, t0_ns: int, fs: float, frame: dict[str, np.ndarray], running: bool
     ) -> list[HarmonicWindow]:
         """Add one frame; returns the windows it completed (usually none)."""
+        out: list[HarmonicWindow] = []
         if not running:
             self.counters["frames_skipped"] += 1
-            self._anchor_ns = None
-            return []
+            if self._anchor_ns is not None:  # a run ends: its buffered samples are of no use
+                self.flush(out)
+                self._break_at(self._anchor_offset + self._len)
+                self._anchor_ns = None
+            return out
         if fs != self.fs:
             raise ValueError(f"frame at {fs} Hz, mill {self.config.id} is at {self.fs} Hz")
         x = self._stack(frame)
         self.counters["running_samples"] += x.shape[1]
         if not self._continuous(t0_ns):
+            self.flush(out)
             self._anchor_ns = t0_ns
             self._break_at(0)
         first = self._anchor_offset + self._len  # run offset of the frame's first sample
-        out: list[HarmonicWindow] = []
         start = 0
         for j in np.flatnonzero(~np.isfinite(x).all(axis=0)):  # non-finite samples break the run
             self._append(x[:, start:j], out)
+            self.flush(out)
             self._break_at(first + int(j) + 1)
             start = int(j) + 1
         self._append(x[:, start:], out)
+        return out
+
+    def flush(self, out: list[HarmonicWindow] | None = None) -> list[HarmonicWindow]:
+        """Compute at once the complete segments still put off by ``stagger`` (before a break,
+        and at the end of a record); returns the windows they completed (appended to ``out``
+        if given)."""
+        out = [] if out is None else out
+        if self._anchor_ns is not None:
+            self._cut_segments(out, force=True)
         return out
 
     def _stack(self, frame: dict[str, np.ndarray]) -> np.ndarray:
@@ -526,35 +568,61 @@ class HarmonicTracker:
         if self._len:
             self.counters["breaks"] += 1
         self._anchor_offset, self._len, self._approx_revs = offset, 0, 0.0
+        self._due = None
 
     def _append(self, x: np.ndarray, out: list[HarmonicWindow]) -> None:
+        """Buffer ``x`` and cut the segments it completes. Without a complete segment waiting
+        the buffer holds ``capacity`` samples (full: the mill is too slow to complete one, and
+        the buffer is dropped); a waiting one may use the ``defer_samples`` beyond."""
+        self._cut_segments(out)  # finds a waiting segment again after a restore
         pos = 0
         while pos < x.shape[1]:
-            take = min(x.shape[1] - pos, self.capacity - self._len)
+            limit = self.capacity if self._due is None else self._buf.shape[1]
+            take = min(x.shape[1] - pos, limit - self._len)
             piece = x[:, pos : pos + take]
             self._buf[:, self._len : self._len + take] = piece
             self._len += take
             self._approx_revs += float(piece[-1].sum())
             pos += take
             self._cut_segments(out)
-            if self._len == self.capacity:  # too slow to complete a segment: drop the buffer
+            if self._len >= self.capacity and self._due is None:  # too slow: drop the buffer
                 self.counters["stalls"] += 1
                 self._anchor_offset += self._len
                 self._len, self._approx_revs = 0, 0.0
 
-    def _cut_segments(self, out: list[HarmonicWindow]) -> None:
-        while self._approx_revs >= self.revs * (1.0 - 1e-6):
-            n = self._len
-            phi = np.concatenate(([0.0], np.cumsum(self._buf[-1, :n])))
-            end = int(np.searchsorted(phi, self.revs, side="left"))
-            if end + 2 > n:
+    def _cut_segments(self, out: list[HarmonicWindow], force: bool = False) -> None:
+        """Cut every complete segment whose deferral is over (every one with ``force``)."""
+        while True:
+            if self._due is None:
+                self._due = self._complete_segment()
+                if self._due is None:
+                    return
+            end, due = self._due
+            if self._len < due and not force:
                 return
-            seg = self._segment(self._buf[:, : end + 2], phi[: end + 2], end)
-            window = self._add(seg)
-            if window is not None:
-                out.append(window)
-            hop = max(1, int(np.searchsorted(phi, self.hop_revs, side="left")))
-            self._compact(hop)
+            self._due = None
+            self._cut(end, out)
+
+    def _complete_segment(self) -> tuple[int, int] | None:
+        """``(end, due)`` when the buffer starts with a complete segment of ``M`` revolutions
+        (samples ``[0, end]``, one more for interpolation), cut once ``due`` samples are in."""
+        if self._approx_revs < self.revs * (1.0 - 1e-6):
+            return None
+        phi = np.concatenate(([0.0], np.cumsum(self._buf[-1, : self._len])))
+        end = int(np.searchsorted(phi, self.revs, side="left"))
+        if end + 2 > self._len:
+            return None
+        return end, min(end + 2 + self.defer_samples, self._buf.shape[1])
+
+    def _cut(self, end: int, out: list[HarmonicWindow]) -> None:
+        """Spectrum of the segment ``[0, end + 2)``, then drop one hop from the buffer."""
+        phi = np.concatenate(([0.0], np.cumsum(self._buf[-1, : self._len])))
+        seg = self._segment(self._buf[:, : end + 2], phi[: end + 2], end)
+        window = self._add(seg)
+        if window is not None:
+            out.append(window)
+        hop = max(1, int(np.searchsorted(phi, self.hop_revs, side="left")))
+        self._compact(hop)
 
     def _compact(self, hop: int) -> None:
         rest = self._len - hop
@@ -603,13 +671,20 @@ class HarmonicTracker:
 
     def _power(self, data: np.ndarray, phi: np.ndarray, end: int) -> np.ndarray:
         """|FFT|² of the segment resampled to ``P`` points per revolution, tapered."""
-        grid = np.arange(self.n_grid) * (self.revs / self.n_grid)
+        grid, taper = self._grid_taper()
         s = np.interp(grid, phi[: end + 1], np.arange(end + 1, dtype=np.float64))
-        y = _catmull_rom(data, s)
+        y = catmull_rom(data, s)
         y -= y.mean(axis=1, keepdims=True)
-        y *= window_values(self.settings.window, grid / self.revs)
+        y *= taper
         spec = np.fft.rfft(y, axis=1)
         return spec.real**2 + spec.imag**2
+
+    def _grid_taper(self) -> tuple[np.ndarray, np.ndarray]:
+        """The angle grid of a segment (revolutions) and the taper on it (computed once)."""
+        if self._grid is None:
+            grid = np.arange(self.n_grid) * (self.revs / self.n_grid)
+            self._grid = grid, window_values(self.settings.window, grid / self.revs)
+        return self._grid
 
     def _orders(self, rev_hz: float) -> np.ndarray:
         """Orders of the tracked lines; fixed-frequency lines converted at ``rev_hz``."""
@@ -621,12 +696,11 @@ class HarmonicTracker:
         """Squared amplitudes of every tracked line, demodulated at its exact order."""
         p = phi[:end]
         dphi = np.diff(phi[: end + 1])
-        q = window_values(self.settings.window, p / self.revs) * dphi
+        q = cosine_window(p, self.revs, COSINE_WINDOWS[self.settings.window]) * dphi
         qs = q.sum()
         centred = data - (data @ q / qs)[:, None]
         rev_hz = phi[end] / (end / self.fs)
-        phase = np.exp(-2j * np.pi * np.multiply.outer(self._orders(rev_hz), p))
-        amp = 2.0 * (phase @ (centred * q).T) / qs  # (lines, channels)
+        amp = 2.0 * demodulate(centred, q, p, self._orders(rev_hz)) / qs  # (lines, channels)
         return (amp.real**2 + amp.imag**2).T
 
     def _add(self, seg: _Segment) -> HarmonicWindow | None:
@@ -664,10 +738,7 @@ class HarmonicTracker:
 
     def _floor(self, power: np.ndarray) -> np.ndarray:
         """Running median of the power spectrum over ± ``floor_bins`` bins (noise floor)."""
-        h = self.settings.floor_bins
-        padded = np.pad(power, h, mode="reflect")
-        view = np.lib.stride_tricks.sliding_window_view(padded, 2 * h + 1)
-        return np.maximum(np.median(view, axis=1), np.finfo(float).tiny)
+        return np.maximum(running_median(power, self.settings.floor_bins), np.finfo(float).tiny)
 
     def _amplitude(self, power: float) -> float:
         """Amplitude of a bin-centred line whose |FFT|² is ``power``."""
@@ -726,9 +797,9 @@ class HarmonicTracker:
         if locked and abs(eps) > 0.5:
             eps = 0.0
         if abs(eps) <= 0.5:
-            amp = demod / float(window_response(self.settings.window, eps))
+            amp = demod / _response(self.settings.window, eps)
         else:
-            amp = self._amplitude(mag[k] ** 2) / float(window_response(self.settings.window, delta))
+            amp = self._amplitude(mag[k] ** 2) / _response(self.settings.window, delta)
         measured = (b + eps) / self.revs
         return LineMeasurement(
             ch.name, ln.name, ln.family, ln.kind, ln.order, order * rev_hz, measured,
@@ -772,7 +843,7 @@ class HarmonicTracker:
         out = []
         for k in self._candidates(power, floor):
             delta = self._interpolate(mag, int(k))
-            amp = self._amplitude(power[k]) / float(window_response(self.settings.window, delta))
+            amp = self._amplitude(power[k]) / _response(self.settings.window, delta)
             if amp < self._min_peak(ch):
                 continue
             bin_pos = k + delta
@@ -838,7 +909,7 @@ class HarmonicTracker:
 
     # ------------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
-        """The complete state as plain JSON-serialisable data (base64 float64, exact)."""
+        """The complete state as plain JSON-serialisable data (arrays packed, exact)."""
         nc, nl = len(self.channels), len(self._lines)
         return {
             "kind": "harmonic_tracker",
@@ -846,8 +917,9 @@ class HarmonicTracker:
             "mill": self.config.id,
             "channels": [c.name for c in self.channels],
             "settings": self.settings.model_dump(mode="json"),
+            "stagger": self.stagger,
             "shape": [nc, self.bins, nl, self.capacity],
-            "buffer": _b64(self._buf[:, : self._len]),
+            "buffer": pack_array(self._buf[:, : self._len]),
             "len": self._len,
             "approx_revs": self._approx_revs,
             "anchor_ns": self._anchor_ns,
@@ -866,8 +938,8 @@ class HarmonicTracker:
         natural_frequencies_hz: Sequence[float] = (),
     ) -> HarmonicTracker:
         """A tracker that continues exactly where the snapshotted one stood."""
-        if snapshot.get("kind") != "harmonic_tracker" or snapshot.get("version") != 1:
-            raise ValueError("not a harmonic tracker snapshot of version 1")
+        if (snapshot.get("kind"), snapshot.get("version")) != _SNAPSHOT_KIND:
+            raise ValueError(f"not a harmonic tracker snapshot of version {_SNAPSHOT_VERSION}")
         if snapshot["mill"] != config.id:
             raise ValueError(f"snapshot of mill {snapshot['mill']!r}, config is {config.id!r}")
         t = cls(
@@ -875,12 +947,13 @@ class HarmonicTracker:
             snapshot["channels"],
             HarmonicSettings.model_validate(snapshot["settings"]),
             natural_frequencies_hz,
+            float(snapshot["stagger"]),
         )
         nc, bins, nl, cap = snapshot["shape"]
         if (nc, bins, nl, cap) != (len(t.channels), t.bins, len(t._lines), t.capacity):
             raise ValueError("snapshot does not fit this mill configuration")
         n = int(snapshot["len"])
-        t._buf[:, :n] = _unb64(snapshot["buffer"], (nc + 1, n))
+        t._buf[:, :n] = unpack_array(snapshot["buffer"], shape=(nc + 1, n))
         t._len, t._approx_revs = n, float(snapshot["approx_revs"])
         t._anchor_ns, t._anchor_offset = snapshot["anchor_ns"], int(snapshot["anchor_offset"])
         t._window = _Acc.from_json(snapshot["window"], nc, bins, nl)

@@ -36,12 +36,13 @@ from numpy.typing import ArrayLike
 
 from analytics.cycles import Cycles
 from analytics.sn_curves import GoodmanCorrection, SNCurve
+from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["FromToMatrix", "RangeMeanMatrix", "Representative", "uniform_edges"]
 
 Representative = Literal["upper", "centre"]
 
-_SNAPSHOT_VERSION = 1
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
 def uniform_edges(lo: float, hi: float, n_bins: int) -> np.ndarray:
@@ -176,9 +177,9 @@ class _Matrix:
         return {
             "kind": self._KIND,
             "version": _SNAPSHOT_VERSION,
-            f"{self._AXES[0]}_edges": self._edges[0].tolist(),
-            f"{self._AXES[1]}_edges": self._edges[1].tolist(),
-            "half_cycles": self._counts.tolist(),
+            f"{self._AXES[0]}_edges": pack_array(self._edges[0]),
+            f"{self._AXES[1]}_edges": pack_array(self._edges[1]),
+            "half_cycles": pack_array(self._counts, "<i8"),
         }
 
     @classmethod
@@ -189,8 +190,11 @@ class _Matrix:
                 f"not a {cls._KIND} snapshot of version {_SNAPSHOT_VERSION}: "
                 f"kind={snapshot.get('kind')!r}, version={snapshot.get('version')!r}"
             )
-        out = cls._blank(*(snapshot[f"{axis}_edges"] for axis in cls._AXES))
-        counts = np.array(snapshot["half_cycles"], dtype=np.int64)
+        out = cls._blank(*(unpack_array(snapshot[f"{axis}_edges"]) for axis in cls._AXES))
+        try:
+            counts = unpack_array(snapshot["half_cycles"], "<i8")
+        except ValueError as exc:
+            raise ValueError(f"{cls._KIND} snapshot: counts unreadable ({exc})") from None
         if counts.shape != out._counts.shape or np.any(counts < 0):
             raise ValueError(f"{cls._KIND} snapshot: counts do not fit the edges or are negative")
         out._counts = counts

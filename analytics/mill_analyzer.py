@@ -131,6 +131,10 @@ class MillAnalyzer:
         self.stops: list[dict[str, Any]] = []
         self.barrings: list[dict[str, Any]] = []
         self.windows: list[dict[str, Any]] = []
+        #: Steady windows and start/stop/barring events (each kind) kept for :meth:`report`;
+        #: a caller that stores each as it comes (the live worker) may keep far fewer.
+        self.keep_windows = _KEEP_WINDOWS
+        self.keep_events = _KEEP_EVENTS
         self.starts_per_day: dict[str, int] = {}
         self.starts_per_month: dict[str, dict[str, int]] = {}
         self.phase_samples = dict.fromkeys(PHASE_OF_STATE.values(), 0)
@@ -319,7 +323,7 @@ class MillAnalyzer:
             "shock_load": bool(on is not None and on.shock),
             "alarm": self._start_alarm(on.motor_pct if on else None),
         }
-        return _keep(self.starts, d)
+        return _keep(self.starts, d, self.keep_events)
 
     def _start_alarm(self, pct: float | None) -> str | None:
         a = self.config.alarms
@@ -337,7 +341,7 @@ class MillAnalyzer:
             "after_failed_start": from_start,
             "truncated": max(n0 - round(_PREROLL_S * self.fs), 0) < self.ring.start,
         }
-        return _keep(self.stops, d)
+        return _keep(self.stops, d, self.keep_events)
 
     def _barring_event(self, end: int) -> dict[str, Any]:
         acc = self.barring
@@ -352,7 +356,7 @@ class MillAnalyzer:
             "peak_limit_pct": self.config.barring_peak_limit_pct,
             "above_limit": m.peak_pct > self.config.barring_peak_limit_pct,
         }
-        return _keep(self.barrings, d)
+        return _keep(self.barrings, d, self.keep_events)
 
     def _barring_add(self, until: int) -> None:
         acc = self.barring
@@ -464,7 +468,7 @@ class MillAnalyzer:
                 chans[key] = data[rows[name]] if name else np.full(data.shape[1], np.nan)
         speed = np.abs(data[0]) / self.rated_rpm
         for w in self.meter.feed(start, speed, chans):
-            _keep(self.windows, self._window_dict(w), _KEEP_WINDOWS)
+            _keep(self.windows, self._window_dict(w), self.keep_windows)
 
     def _window_dict(self, w: SteadyWindow) -> dict[str, Any]:
         return dataclasses.asdict(w) | {"t_ns": self.t_ns(w.sample)}
@@ -523,5 +527,5 @@ def _keep(store: list[dict[str, Any]], item: dict[str, Any], limit: int = _KEEP_
     item = _plain(item)
     store.append(item)
     if len(store) > limit:
-        del store[0]
+        del store[:-limit]
     return item

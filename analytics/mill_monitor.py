@@ -14,20 +14,29 @@ block by block, in arrival order::
                            by component, phase and day (seed 000 §6, §8, App. D)
       → HarmonicTracker    order-tracked spectra, only while running (seed 000 §6.2.7, seed 001)
 
-Work follows the scene: the harmonic tracker skips every frame that is not steady running, and
-the analyzer skips per-revolution work when stopped. Everything is snapshot-able as plain data.
+Work follows the scene: the harmonic tracker skips every sample that is not steady running (the
+state after each sample decides, so spectra do not depend on the framing), and the analyzer
+skips per-revolution work when stopped. Everything is snapshot-able as plain data.
+
+Batches: :meth:`MillMonitor.push` analyses a block at once; :meth:`~MillMonitor.add` (or
+:meth:`~MillMonitor.add_blocks` for many) only aligns it, and :meth:`~MillMonitor.process`
+runs the analysis over everything aligned so far as contiguous chunks of up to
+:data:`MAX_CHUNK_S` — a few times cheaper per sample than 100-sample blocks, and bitwise the same
+results, since every stage is a function of the sample stream (tests split records at random).
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
+from collections import deque
 from typing import Any
 
 import numpy as np
 
 from analytics.fault_stage import FaultStage
 from analytics.frame_aligner import Frame, FrameAligner
-from analytics.harmonics import HarmonicTracker, HarmonicWindow, harmonics_report
+from analytics.harmonics import HarmonicTracker, HarmonicWindow, harmonics_report, stagger_for
 from analytics.mill_analyzer import MillAnalyzer
 from analytics.mill_config import ChannelConfig, MillConfig
 from analytics.operating_states import OperatingState
@@ -40,7 +49,11 @@ log = logging.getLogger(__name__)
 
 #: Name of the rpm channel derived from a tacho pulse channel when the mill has no rpm channel.
 DERIVED_SPEED = "speed_from_tacho"
-_SNAPSHOT_VERSION = 1
+#: Longest contiguous chunk (s of samples) analysed in one go: long enough that per-call costs
+#: vanish, short enough that an event window is still in the analyzer's 90 s ring.
+MAX_CHUNK_S = 10.0
+_RUNNING = np.int8(OperatingState.RUNNING)
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
 class MonitorOutput:
@@ -77,9 +90,13 @@ class MillMonitor:
         self.faults = FaultStage(config)
         self.tacho = self._tacho(fs)
         self.analyzer = MillAnalyzer(self.analysis_config)
-        self.harmonics = HarmonicTracker(self.analysis_config)
+        # mills started together compute their spectra at different samples (issue 5 latency)
+        self.harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
         self._gain = {n: (ch.gain, ch.offset) for n, ch in config.channels.items()}
         self._last_good: dict[str, float] = {}
+        self._max_chunk = max(1, round(MAX_CHUNK_S * fs))
+        self._queued: deque[Frame] = deque()
+        self.backlog = 0  # samples aligned but not yet analysed
 
     def _tacho(self, fs: float) -> tuple[str, TachoSpeed] | None:
         if DERIVED_SPEED not in self.analysis_config.channels:
@@ -89,24 +106,103 @@ class MillMonitor:
 
     # ------------------------------------------------------------------ feeding
     def push(self, channel: str, t0_ns: int, fs: float, raw: np.ndarray) -> MonitorOutput:
-        """One decoded block of a configured channel (raw units before calibration)."""
-        out = MonitorOutput()
+        """One decoded block of a configured channel (raw units before calibration), analysed
+        at once: :meth:`add` then :meth:`process`."""
+        self.add(channel, t0_ns, fs, raw)
+        return self.process()
+
+    def add(self, channel: str, t0_ns: int, fs: float, raw: np.ndarray) -> None:
+        """Calibrate and align one block; the frames it completes wait for :meth:`process`.
+
+        Callers with many blocks at hand (a worker's batch, a replay) add them all and process
+        once: the analysis then runs over long contiguous chunks, which costs far less per
+        sample than block by block and gives bitwise the same results."""
         gain, offset = self._gain.get(channel, (1.0, 0.0))
         x = np.asarray(raw, dtype=np.float64)
-        if (gain, offset) != (1.0, 0.0):
+        if gain != 1.0 or offset != 0.0:
             x = gain * (x - offset)
-        for frame in self.aligner.push(channel, t0_ns, fs, x):
-            self._frame(frame, out)
+        frames = self.aligner.push(channel, t0_ns, fs, x)
+        if frames:
+            self._queue_frames(frames)
+
+    def add_blocks(self, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray) -> None:
+        """Many blocks at once, as :meth:`add` of each in order: block ``k`` is of channel
+        ``list(config.channels)[chan[k]]``, starts at ``t0_ns[k]`` and holds ``raw[k]`` (all of
+        one length, at the mill's rate). Regular runs are aligned in one go
+        (:meth:`~analytics.frame_aligner.FrameAligner.push_blocks`), anything else block by
+        block — the same frames either way."""
+        rows = np.array(raw, dtype=np.float64)
+        names = self.aligner.channels
+        for ci in np.unique(chan).tolist():
+            gain, offset = self._gain.get(names[ci], (1.0, 0.0))
+            if gain != 1.0 or offset != 0.0:
+                sel = chan == ci
+                rows[sel] = gain * (rows[sel] - offset)
+        frames = self.aligner.push_blocks(chan, t0_ns, rows)
+        if frames is None:
+            frames = []
+            for k, ci in enumerate(chan.tolist()):
+                frames += self.aligner.push(names[ci], int(t0_ns[k]), self.aligner.fs, rows[k])
+        if frames:
+            self._queue_frames(frames)
+
+    def _queue_frames(self, frames: list[Frame]) -> None:
+        self._queued.extend(frames)
+        self.backlog += sum(len(f) for f in frames)
+
+    def process(self, until: int | None = None) -> MonitorOutput:
+        """Analyse the aligned frames waiting, concatenated into chunks of at most
+        :data:`MAX_CHUNK_S`; with ``until``, stop once the analyzer has reached stream sample
+        ``until`` (the rest keeps waiting), so a caller can read totals at exact sample counts."""
+        out = MonitorOutput()
+        while self._queued:
+            take = self._room(until)
+            if take <= 0:
+                break
+            self._frame(self._take(take), out)
         return out
+
+    def _room(self, until: int | None) -> int:
+        """Input samples to feed now: a chunk, or what brings the analyzer to ``until`` (the
+        fault stage holds back ``delay`` samples, so feeding m gives max(0, held + m − delay))."""
+        room = self._max_chunk
+        if until is not None:
+            want = until - self.analyzer.n
+            if want <= 0:
+                return 0
+            room = min(room, want + self.faults.delay - self.faults.held)
+        return room
+
+    def _take(self, m: int) -> Frame:
+        """The first ``m`` queued samples as one frame (frames are contiguous by construction)."""
+        parts: list[Frame] = []
+        got = 0
+        while self._queued and got < m:
+            f = self._queued[0]
+            n = len(f)
+            if got + n <= m:
+                parts.append(self._queued.popleft())
+                got += n
+                continue
+            k = m - got
+            parts.append(Frame(f.t0_ns, f.fs, {c: x[:k] for c, x in f.data.items()}))
+            t_rest = f.t0_ns + round(k * 1e9 / f.fs)
+            self._queued[0] = Frame(t_rest, f.fs, {c: x[k:] for c, x in f.data.items()})
+            got = m
+        self.backlog -= got
+        if len(parts) == 1:
+            return parts[0]
+        data = {c: np.concatenate([p.data[c] for p in parts]) for c in parts[0].data}
+        return Frame(parts[0].t0_ns, parts[0].fs, data)
 
     def flush(self) -> MonitorOutput:
         """End of a record: emit what the aligner and the fault stage still hold."""
-        out = MonitorOutput()
-        for frame in self.aligner.flush():
-            self._frame(frame, out)
+        self._queue_frames(self.aligner.flush())
+        out = self.process()
         tail = self.faults.flush()
         if tail is not None:
             self._analyse(tail, out)
+        out.harmonics += self.harmonics.flush()  # spectra put off by the stagger
         return out
 
     def _frame(self, frame: Frame, out: MonitorOutput) -> None:
@@ -119,8 +215,30 @@ class MillMonitor:
             name, conv = self.tacho
             frame.data[DERIVED_SPEED] = conv.feed(frame.data[name])
         out.events += self.analyzer.feed(frame)
-        running = self.analyzer.sm.state == OperatingState.RUNNING
-        out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, self._held(frame), running)
+        self._harmonics(frame, out)
+
+    def _harmonics(self, frame: Frame, out: MonitorOutput) -> None:
+        """Feed the harmonic tracker the running samples: the state after each sample decides
+        (not the state at the end of a frame), so spectra do not depend on the framing."""
+        n = len(frame)
+        shown = self.analyzer.sm.shown
+        if n == 0 or shown.shape[0] != n:
+            return
+        running = shown == _RUNNING
+        if not running[0] and not running.any():  # a stopped mill costs no spectra
+            self._note_last_good(frame)
+            out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, {}, False)
+            return
+        held = self._held(frame)
+        if running.all():
+            out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, held, True)
+            return
+        cuts = [0, *(np.flatnonzero(running[1:] != running[:-1]) + 1).tolist(), n]
+        first = self.analyzer.n - n  # stream index of the frame's first sample
+        for a, b in itertools.pairwise(cuts):
+            t_ns = self.faults.time_of(first + a)
+            piece = {c: x[a:b] for c, x in held.items()} if running[a] else {}
+            out.harmonics += self.harmonics.feed(t_ns, frame.fs, piece, bool(running[a]))
 
     def _held(self, frame: Frame) -> dict[str, np.ndarray]:
         """Flagged samples replaced by the last good value (spectra must not see spikes)."""
@@ -135,6 +253,16 @@ class MillMonitor:
             elif data[name].size:
                 self._last_good[name] = float(data[name][-1])
         return data
+
+    def _note_last_good(self, frame: Frame) -> None:
+        """What :meth:`_held` would leave in ``_last_good``, without holding anything."""
+        for name, mask in (frame.flags or {}).items():
+            if mask.shape[0] and not mask[-1]:  # the usual case: the last sample is good
+                self._last_good[name] = float(frame.data[name][-1])
+                continue
+            good = np.flatnonzero(~mask)
+            if good.size:
+                self._last_good[name] = float(frame.data[name][good[-1]])
 
     # ------------------------------------------------------------------ reading
     @property
@@ -155,6 +283,8 @@ class MillMonitor:
 
     # ------------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
+        if self._queued:
+            raise RuntimeError("process() the aligned frames before taking a snapshot")
         return {
             "kind": "mill_monitor",
             "version": _SNAPSHOT_VERSION,

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 __all__ = ["restore_analyzer", "snapshot_analyzer"]
 
-_VERSION = 1
+_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 _PLAIN = (
     "n", "t0_ns", "steady_until", "open_start", "open_stop", "stop_after_start", "starts",
     "stops", "barrings", "windows", "starts_per_day", "starts_per_month", "phase_samples",

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from analytics.cycles import Cycles
+from analytics.exact_sum import fsum, fsum2
 from analytics.sn_curves import GoodmanCorrection, SNCurve
 
 __all__ = ["DamageRecorder", "InvalidIncrementError", "MinerSum"]
@@ -54,25 +55,22 @@ def _two_sum(a: float, b: float) -> tuple[float, float]:
 
 
 def _exact_sum(x: np.ndarray) -> tuple[float, float]:
-    """The exact sum of ``x`` as a double-double: fsum, and the fsum of what it left out."""
-    values = x.tolist()
-    hi = math.fsum(values)
-    if not math.isfinite(hi):
-        return hi, 0.0
-    values.append(-hi)
-    return hi, math.fsum(values)
+    """The exact sum of ``x`` as a double-double: fsum, and the fsum of what it left out
+    (compiled, :func:`analytics.exact_sum.fsum2`; the same floats as :func:`math.fsum`)."""
+    return fsum2(x)
 
 
 class MinerSum:
     """A monotone, compensated damage total: ``add`` non-negative finite increments, read
     :attr:`value`. Snapshot/restore as plain data (floats round-trip exactly through JSON)."""
 
-    __slots__ = ("_hi", "_lo", "_n")
+    __slots__ = ("_hi", "_lo", "_n", "last_block")
 
     def __init__(self) -> None:
         self._hi = 0.0
         self._lo = 0.0
         self._n = 0
+        self.last_block = (0.0, 0.0, 0)  # (hi, lo, count) of the last add_block
 
     def __repr__(self) -> str:
         return f"MinerSum(value={self.value!r}, increments={self._n})"
@@ -114,7 +112,17 @@ class MinerSum:
         if not math.isfinite(hi):
             raise InvalidIncrementError("damage increments refused: the block sum is not finite")
         self._accumulate(hi, lo, x.size)
+        self.last_block = (hi, lo, x.size)
         return hi
+
+    def add_sum(self, block: tuple[float, float, int]) -> None:
+        """Add a block another sum has just taken (its :attr:`last_block`: the exact sum as
+        ``hi + lo`` and the count), e.g. the same increments in a second total, without summing
+        them again."""
+        hi, lo, n = block
+        if not (hi >= 0.0 and math.isfinite(hi)):
+            raise InvalidIncrementError(f"damage block sum {hi!r} refused")
+        self._accumulate(hi, lo, n)
 
     def _accumulate(self, x: float, x_lo: float, n: int) -> None:
         """Add the double-double ``x + x_lo`` (|x_lo| <= ulp(x)/2) to the total."""
@@ -216,7 +224,7 @@ class DamageRecorder:
         if len(cycles) == 0:
             return 0.0
         block = self._sum.add_block(self.block_damage(cycles), exact=True)
-        self._cycles += math.fsum(cycles.count.tolist())
+        self._cycles += fsum(cycles.count)
         return block
 
     def pending(self, residue_cycles: Cycles) -> float:
@@ -224,7 +232,7 @@ class DamageRecorder:
         recording them: the damage "if the record ended now"."""
         if len(residue_cycles) == 0:
             return self.damage
-        extra = math.fsum(self.block_damage(residue_cycles).tolist())
+        extra = fsum(self.block_damage(residue_cycles))
         return self._sum.peek(extra)
 
     def snapshot(self) -> dict[str, Any]:

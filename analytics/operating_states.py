@@ -51,9 +51,11 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from analytics.snapshot_arrays import pack_array, unpack_array
+
 __all__ = ["OperatingState", "OperatingStateMachine", "StateThresholds", "Transition"]
 
-_SNAPSHOT_VERSION = 1
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
 class OperatingState(IntEnum):
@@ -149,7 +151,7 @@ def _emit(out_i, out_s, k, idx, state):
     return k + 1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _stopped_step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     """Stopped: watch for a sustained energised run; decide start or barring."""
     if st_i[_PKIND] == _P_ENERGISE:
@@ -179,7 +181,7 @@ def _stopped_step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     return k
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _starting_step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     """Starting: running once the short-circuit window after full speed has passed; a speed
     fall is a failed start (dated at the last torque drop, if any)."""
@@ -200,7 +202,7 @@ def _starting_step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     return k
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _track_drop(st_i, st_f, par, q, n):
     """Torque-drop candidate: |T| < drop_fraction × EMA; cancelled by recovery."""
     if st_i[_PKIND] == _P_DROP:
@@ -219,7 +221,7 @@ def _track_drop(st_i, st_f, par, q, n):
         st_f[_EMA] += par[14] * (q - st_f[_EMA])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _running_step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     """Running: a confirmed torque drop (or speed collapse) is a stop."""
     _track_drop(st_i, st_f, par, q, n)
@@ -238,7 +240,7 @@ def _running_step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     return k
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _quiet_step(st_i, par, s, q, n, out_i, out_s, k):
     """Stopping, barring or unknown: a quiet run of ``quiet_s`` means stopped (dated back)."""
     if q < par[1] and s < par[12]:
@@ -255,7 +257,7 @@ def _quiet_step(st_i, par, s, q, n, out_i, out_s, k):
     return k
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     mode = st_i[_MODE]
     if mode == _STOP:
@@ -274,7 +276,7 @@ def _step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     return _quiet_step(st_i, par, s, q, n, out_i, out_s, k)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _unknown_step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     """Unknown (e.g. the first samples): a quiet run of ``quiet_s`` is stopped; a quiet run,
     however short, followed within ``min_on_s`` by a sustained energised run was stopped too."""
@@ -305,19 +307,21 @@ def _unknown_step(st_i, st_f, par, s, q, n, out_i, out_s, k):
     return k
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _pending(st_i):
     return st_i[_PKIND] != _P_NONE or st_i[_QST] >= 0
 
 
 @njit(cache=True, nogil=True)
-def _feed(speed, torque, st_i, st_f, par, out_i, out_s):
-    """One block; returns the number of transitions written to ``out_i``/``out_s``."""
+def _feed(speed, torque, st_i, st_f, par, out_i, out_s, shown):
+    """One block; returns the number of transitions written to ``out_i``/``out_s``, and
+    writes the tentative (shown) state after each sample into ``shown``."""
     k = 0
     for j in range(speed.shape[0]):
         n = st_i[_N] + j
         s, q = speed[j], torque[j]
         if q == -np.inf:
+            shown[j] = st_i[_SHOWN]
             continue
         if not (s == s and q == q):  # NaN: missing
             if st_i[_SHOWN] != _UNK and not _pending(st_i):
@@ -325,6 +329,7 @@ def _feed(speed, torque, st_i, st_f, par, out_i, out_s):
                 st_i[_SHOWN] = _UNK
             st_i[_ONST] = -1
             st_i[_QST] = -1
+            shown[j] = st_i[_SHOWN]
             continue
         if st_i[_SHOWN] != st_i[_MODE]:
             if st_i[_SHOWN] == _UNK and st_i[_MODE] != _UNK:
@@ -334,6 +339,7 @@ def _feed(speed, torque, st_i, st_f, par, out_i, out_s):
         k = _step(st_i, st_f, par, s, q, n, out_i, out_s, k)
         if k > k0:
             st_i[_SHOWN] = st_i[_MODE]
+        shown[j] = st_i[_SHOWN]
     st_i[_N] += speed.shape[0]
     return k
 
@@ -353,6 +359,8 @@ class OperatingStateMachine:
         self._I = np.full(_NI, -1, dtype=np.int64)
         self._I[[_MODE, _SHOWN, _N, _PKIND, _RECOV]] = 0
         self._F = np.zeros(_NF)
+        #: Tentative state after each sample of the last :meth:`feed` (int8 codes).
+        self.shown = np.empty(0, dtype=np.int8)
 
     @property
     def state(self) -> OperatingState:
@@ -383,7 +391,9 @@ class OperatingStateMachine:
         return n
 
     def feed(self, speed_frac: np.ndarray, torque_frac: np.ndarray) -> list[Transition]:
-        """One block of inputs (equal length float64); returns the decided transitions."""
+        """One block of inputs (equal length float64); returns the decided transitions and
+        leaves the tentative state after each sample in :attr:`shown` (what a consumer that
+        needs a per-sample running flag, independent of the blocking, reads)."""
         s = np.ascontiguousarray(speed_frac, dtype=np.float64)
         q = np.ascontiguousarray(torque_frac, dtype=np.float64)
         if s.shape != q.shape or s.ndim != 1:
@@ -391,7 +401,10 @@ class OperatingStateMachine:
         cap = 2 * s.shape[0] + 4
         out_i = np.empty(cap, dtype=np.int64)
         out_s = np.empty(cap, dtype=np.int64)
-        k = _feed(s, q, self._I, self._F, self._P, out_i, out_s)
+        self.shown = np.empty(s.shape[0], dtype=np.int8)
+        k = _feed(s, q, self._I, self._F, self._P, out_i, out_s, self.shown)
+        if k == 0:
+            return []
         pairs = zip(out_i[:k].tolist(), out_s[:k].tolist(), strict=True)
         return [Transition(i, OperatingState(st)) for i, st in pairs]
 
@@ -402,16 +415,17 @@ class OperatingStateMachine:
             "version": _SNAPSHOT_VERSION,
             "fs": self.fs,
             "thresholds": dataclasses.asdict(self.thresholds),
-            "ints": self._I.tolist(),
-            "floats": self._F.tolist(),
+            "ints": pack_array(self._I, "<i8"),
+            "floats": pack_array(self._F),
         }
 
     @classmethod
     def restore(cls, snapshot: dict[str, Any]) -> OperatingStateMachine:
         """A machine that continues exactly where the snapshotted one stood."""
-        if snapshot.get("kind") != "operating_state_machine" or snapshot.get("version") != 1:
-            raise ValueError("not an operating_state_machine snapshot of version 1")
+        kind = ("operating_state_machine", _SNAPSHOT_VERSION)
+        if (snapshot.get("kind"), snapshot.get("version")) != kind:
+            raise ValueError(f"not an operating_state_machine snapshot of version {kind[1]}")
         machine = cls(snapshot["fs"], StateThresholds(**snapshot["thresholds"]))
-        machine._I[:] = snapshot["ints"]
-        machine._F[:] = snapshot["floats"]
+        machine._I[:] = unpack_array(snapshot["ints"], "<i8", shape=machine._I.shape)
+        machine._F[:] = unpack_array(snapshot["floats"], shape=machine._F.shape)
         return machine

@@ -28,8 +28,10 @@ from typing import Any
 import numpy as np
 
 from analytics.cycles import Cycles
+from analytics.exact_sum import fsum
 from analytics.miner import DamageRecorder, MinerSum
 from analytics.operating_states import OperatingState, Transition
+from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = [
     "APP_D_SCENARIOS",
@@ -177,27 +179,25 @@ class PhaseDamage:
 
     def _attribute(self, dmg: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline) -> None:
         states = timeline.states_at(i_end)
-        days = self._days(i_end)
-        for day in np.unique(days):
-            in_day = days == day
+        lo, hi = self._day(int(i_end.min())), self._day(int(i_end.max()))
+        one_day = lo == hi  # the usual case: no per-cycle dates needed
+        days = None if one_day else np.array([self._day(int(s)) for s in i_end])
+        for day in [lo] if days is None else np.unique(days):
+            in_day = None if days is None else days == day
             per_day = self.by_day.setdefault(str(day), {})
-            for st in np.unique(states[in_day]):
-                sel = in_day & (states == st)
-                phase = PHASE_OF_STATE[OperatingState(int(st))]
-                self.by_phase[phase].add_block(dmg[sel], exact=True)
-                per_day.setdefault(phase, MinerSum()).add_block(dmg[sel], exact=True)
+            in_states = states if in_day is None else states[in_day]
+            for st in np.flatnonzero(np.bincount(in_states)).tolist():  # the states, in order
+                sel = states == st if in_day is None else in_day & (states == st)
+                phase = PHASE_OF_STATE[OperatingState(st)]
+                by_phase = self.by_phase[phase]
+                by_phase.add_block(dmg[sel], exact=True)
+                per_day.setdefault(phase, MinerSum()).add_sum(by_phase.last_block)
         while len(self.by_day) > self.keep_days:
             del self.by_day[min(self.by_day)]
 
     def _day(self, sample: int) -> str:
         t = self.t0_ns + sample * 1e9 / self.fs
         return datetime.fromtimestamp(t / 1e9, tz=self._tz).date().isoformat()
-
-    def _days(self, samples: np.ndarray) -> np.ndarray:
-        lo, hi = self._day(int(samples.min())), self._day(int(samples.max()))
-        if lo == hi:
-            return np.full(samples.shape, lo)
-        return np.array([self._day(int(s)) for s in samples])
 
     # ------------------------------------------------------------ reading
     @property
@@ -209,7 +209,7 @@ class PhaseDamage:
     def with_residue(self, residue: Cycles) -> float:
         """Committed damage plus that of the open residue closed now (``counter.close()``)."""
         self._compute()
-        extra = math.fsum(self.recorder.block_damage(residue).tolist()) if len(residue) else 0.0
+        extra = fsum(self.recorder.block_damage(residue)) if len(residue) else 0.0
         return self.total.peek(extra)
 
     def phases(self) -> dict[str, float]:
@@ -233,8 +233,8 @@ class PhaseDamage:
             "by_phase": {p: s.snapshot() for p, s in self.by_phase.items()},
             "by_day": {d: {p: s.snapshot() for p, s in v.items()} for d, v in self.by_day.items()},
             "total": self.total.snapshot(),
-            "pending_damage": [x for d, _ in self._pend for x in d.tolist()],
-            "pending_i_end": [x for _, i in self._pend for x in i.tolist()],
+            "pending_damage": pack_array(_joined([d for d, _ in self._pend], np.float64)),
+            "pending_i_end": pack_array(_joined([i for _, i in self._pend], np.int64), "<i8"),
         }
 
     @classmethod
@@ -251,10 +251,16 @@ class PhaseDamage:
             day: {p: MinerSum.restore(s) for p, s in v.items()} for day, v in d["by_day"].items()
         }
         pd.total = MinerSum.restore(d["total"])
-        dmg = np.array(d["pending_damage"], dtype=np.float64)
+        dmg = unpack_array(d["pending_damage"])
+        i_end = unpack_array(d["pending_i_end"], "<i8", shape=dmg.shape)
         if dmg.size:
-            pd._pend = [(dmg, np.array(d["pending_i_end"], dtype=np.int64))]
+            pd._pend = [(dmg, i_end)]
         return pd
+
+
+def _joined(parts: list[np.ndarray], dtype: type) -> np.ndarray:
+    """One 1-D array of ``parts`` in order (empty when there are none)."""
+    return np.concatenate(parts).astype(dtype, copy=False) if parts else np.empty(0, dtype)
 
 
 # ---------------------------------------------------------------- start cost and projection

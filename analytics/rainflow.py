@@ -42,6 +42,7 @@ import numpy as np
 
 from analytics import rainflow_kernel as _k
 from analytics.cycles import Cycles
+from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = [
     "NonFiniteSampleError",
@@ -53,7 +54,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _F64 = np.dtype(np.float64)
-_SNAPSHOT_VERSION = 1
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
 class ResidueMode(StrEnum):
@@ -205,10 +206,10 @@ class RainflowCounter:
         return {
             "version": _SNAPSHOT_VERSION,
             "kind": "rainflow",
-            "ints": self._st_i[: _k.STARTED + 1].tolist(),
-            "floats": self._st_f[: _k.GATE + 1].tolist(),
-            "stack_values": self._F[_k.STACK, :n].tolist(),
-            "stack_indices": self._I[_k.STACK, :n].tolist(),
+            "ints": pack_array(self._st_i[: _k.STARTED + 1], "<i8"),
+            "floats": pack_array(self._st_f[: _k.GATE + 1]),
+            "stack_values": pack_array(self._F[_k.STACK, :n]),
+            "stack_indices": pack_array(self._I[_k.STACK, :n], "<i8"),
         }
 
     @classmethod
@@ -220,14 +221,17 @@ class RainflowCounter:
                 f"{_SNAPSHOT_VERSION}: kind={snapshot.get('kind')!r}, "
                 f"version={snapshot.get('version')!r}"
             )
-        values = snapshot["stack_values"]
-        if len(values) != snapshot["ints"][_k.STACK_LEN]:
+        ints = unpack_array(snapshot["ints"], "<i8", shape=(_k.STARTED + 1,))
+        floats = unpack_array(snapshot["floats"], shape=(_k.GATE + 1,))
+        values = unpack_array(snapshot["stack_values"])
+        indices = unpack_array(snapshot["stack_indices"], "<i8", shape=values.shape)
+        if values.shape != (ints[_k.STACK_LEN],):
             raise ValueError("rainflow snapshot is inconsistent: stack length does not match")
-        counter = cls(gate=snapshot["floats"][_k.GATE], capacity=2 * len(values) + 1024)
-        counter._st_i[: _k.STARTED + 1] = snapshot["ints"]
-        counter._st_f[: _k.GATE + 1] = snapshot["floats"]
+        counter = cls(gate=float(floats[_k.GATE]), capacity=2 * len(values) + 1024)
+        counter._st_i[: _k.STARTED + 1] = ints
+        counter._st_f[: _k.GATE + 1] = floats
         counter._F[_k.STACK, : len(values)] = values
-        counter._I[_k.STACK, : len(values)] = snapshot["stack_indices"]
+        counter._I[_k.STACK, : len(values)] = indices
         return counter
 
 

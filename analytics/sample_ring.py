@@ -3,15 +3,16 @@
 Event measurements (a start, a stop) look back at the samples of a phase once the phase has been
 decided, a few seconds to a minute after it began; the ring keeps exactly ``capacity`` samples per
 channel whatever the running time (bounded state, DESIGN.md). Snapshots hold only the samples a
-consumer still needs, as base64 of little-endian float64 (exact, compact, JSON-safe).
+consumer still needs, packed by :mod:`analytics.snapshot_arrays` (exact, compact, JSON-safe).
 """
 
 from __future__ import annotations
 
-import base64
 from typing import Any
 
 import numpy as np
+
+from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["SampleRing"]
 
@@ -56,21 +57,22 @@ class SampleRing:
     def snapshot(self, keep_from: int) -> dict[str, Any]:
         """The samples from ``keep_from`` (clipped to what is held) and the write position."""
         n0, data = self.read(keep_from, self.end)
-        raw = np.ascontiguousarray(data, dtype="<f8").tobytes()
         return {
             "rows": self.rows,
             "capacity": self.capacity,
             "end": self.end,
             "from": n0,
-            "data": base64.b64encode(raw).decode(),
+            "data": pack_array(data),
         }
 
     @classmethod
     def restore(cls, d: dict[str, Any]) -> SampleRing:
         ring = cls(int(d["rows"]), int(d["capacity"]))
-        data = np.frombuffer(base64.b64decode(d["data"]), dtype="<f8").reshape(ring.rows, -1)
+        data = unpack_array(d["data"])
+        if data.ndim != 2 or data.shape[0] != ring.rows:
+            raise ValueError(f"sample ring snapshot: data of shape {data.shape}, {ring.rows} rows")
         ring.end = int(d["from"])
-        ring.write(data.copy())
+        ring.write(data)
         ring.end = int(d["end"])
         ring.floor = int(d["from"])
         return ring

@@ -17,13 +17,18 @@ windows.
 
 from __future__ import annotations
 
-import base64
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
+
+from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["SteadyStateMeter", "SteadyWindow"]
+
+_BIG = np.finfo(np.float64).max  # what np.nan_to_num makes of an infinite speed
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,11 +49,92 @@ class SteadyWindow:
     imbalance_pct: float | None
 
 
-def _seq_sum(carry: float, x: np.ndarray) -> float:
-    """carry + x[0] + x[1] + … summed left to right (bitwise independent of blocking)."""
-    if x.size == 0:
-        return carry
-    return float(np.cumsum(np.concatenate(([carry], x)))[-1])
+@njit(cache=True, nogil=True)
+def _revolutions(speed, rps, st_f, r):
+    """Pinion revolution number of each sample (speed NaN counts 0, as ``np.nan_to_num``);
+    the angle and the speed sum carried in ``st_f`` = [revs, speed_sum] are sequential sums."""
+    revs, speed_sum = st_f[0], st_f[1]
+    for j in range(speed.shape[0]):
+        v = speed[j]
+        if v != v:
+            v = 0.0
+        elif v == np.inf:
+            v = _BIG
+        elif v == -np.inf:
+            v = -_BIG
+        revs = revs + v * rps
+        speed_sum = speed_sum + v
+        r[j] = np.int64(math.floor(revs))
+    st_f[0], st_f[1] = revs, speed_sum
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _keep(kept, n_kept, c, h, lw):
+    if np.isfinite(h) and np.isfinite(lw):
+        kept[0, c, n_kept[c]] = h
+        kept[1, c, n_kept[c]] = lw
+        n_kept[c] += 1
+
+
+@njit(cache=True, nogil=True)
+def _fold_kernel(speed, x, rps, st_f, rev_index, first_rev, part, sums, counts, kept, n_kept):
+    """One window's samples: finite sums and counts per channel (left to right), and the
+    maxima/minima per revolution (App. C routine 4). The carried partial revolution is
+    completed (kept unless it is the run's first) or continued; revolutions that complete here
+    are appended to ``kept`` (finite ones only); the last group becomes the new partial.
+    Returns the revolution number of the last sample."""
+    n = speed.shape[0]
+    r = np.empty(n, dtype=np.int64)
+    _revolutions(speed, rps, st_f, r)
+    first_new = rev_index != r[0]
+    keep_partial = first_new and rev_index > first_rev
+    for c in range(x.shape[0]):
+        total, count = sums[c], counts[c]
+        h, lw = -np.inf, np.inf  # extremes of the current group (one revolution number)
+        group = 0
+        for j in range(n):
+            if j > 0 and r[j] != r[j - 1]:
+                _close_group(kept, n_kept, part, c, group, h, lw, first_new, keep_partial,
+                             r[0] > first_rev)  # fmt: skip
+                group += 1
+                h, lw = -np.inf, np.inf
+            v = x[c, j]
+            if np.isfinite(v):
+                total = total + v
+                count += 1
+                if v > h:
+                    h = v
+                if v < lw:
+                    lw = v
+        if group == 0:  # one group: it continues (or replaces) the partial revolution
+            if first_new:
+                if keep_partial:
+                    _keep(kept, n_kept, c, part[0, c], part[1, c])
+                part[0, c], part[1, c] = h, lw
+            else:
+                part[0, c] = h if h > part[0, c] else part[0, c]
+                part[1, c] = lw if lw < part[1, c] else part[1, c]
+        else:
+            part[0, c], part[1, c] = h, lw
+        sums[c], counts[c] = total, count
+    return r[n - 1]
+
+
+@njit(cache=True, nogil=True)
+def _close_group(kept, n_kept, part, c, group, h, lw, first_new, keep_partial, first_whole):
+    """A group (all samples of one revolution number) before the last one has ended."""
+    if group > 0:
+        _keep(kept, n_kept, c, h, lw)
+        return
+    if first_new:
+        if keep_partial:
+            _keep(kept, n_kept, c, part[0, c], part[1, c])
+        pm, pn = h, lw
+    else:
+        pm = h if h > part[0, c] else part[0, c]
+        pn = lw if lw < part[1, c] else part[1, c]
+    if first_whole:
+        _keep(kept, n_kept, c, pm, pn)
 
 
 class SteadyStateMeter:
@@ -118,56 +204,33 @@ class SteadyStateMeter:
         return out
 
     def _fold(self, speed: np.ndarray, data: dict[str, np.ndarray]) -> None:
-        if speed.size == 0:
+        """Fold samples of one window into the sums and the per-revolution extremes (one
+        compiled pass, :func:`_fold_kernel`; bitwise what the numpy formulation gave)."""
+        n = speed.shape[0]
+        if n == 0:
             return
-        s = np.nan_to_num(speed, nan=0.0)
-        revs = np.cumsum(np.concatenate(([self.revs], s * self.rev_per_sample)))[1:]
-        r = np.floor(revs).astype(np.int64)
-        self.revs = float(revs[-1])
-        self.speed_sum = _seq_sum(self.speed_sum, s)
-        starts = np.concatenate(([0], np.flatnonzero(np.diff(r)) + 1))
-        first_new = self.rev_index != int(r[0])
-        keep_partial = first_new and self.rev_index > int(self.first_rev)
-        for name, x in data.items():
-            ok = np.isfinite(x)
-            self.sums[name] = _seq_sum(self.sums[name], x[ok])
-            self.counts[name] += int(ok.sum())
-            hi = np.maximum.reduceat(np.where(ok, x, -np.inf), starts)
-            lo = np.minimum.reduceat(np.where(ok, x, np.inf), starts)
-            self._merge_revs(name, hi, lo, first_new, keep_partial, r[starts])
-        self.rev_index = int(r[-1])
-
-    def _merge_revs(
-        self,
-        name: str,
-        hi: np.ndarray,
-        lo: np.ndarray,
-        first_new: bool,
-        keep_partial: bool,
-        rev_numbers: np.ndarray,
-    ) -> None:
-        """Per-revolution extremes of this block: the carried partial revolution is completed
-        (kept unless it is the run's first) or continued; the last group is the new partial."""
-        if first_new:
-            if keep_partial:
-                self._keep(name, self.part_max[name], self.part_min[name])
-            pm, pn = float(hi[0]), float(lo[0])
-        else:
-            pm = max(self.part_max[name], float(hi[0]))
-            pn = min(self.part_min[name], float(lo[0]))
-        if hi.size == 1:
-            self.part_max[name], self.part_min[name] = pm, pn
-            return
-        if int(rev_numbers[0]) > self.first_rev:
-            self._keep(name, pm, pn)
-        for h, lw in zip(hi[1:-1].tolist(), lo[1:-1].tolist(), strict=True):
-            self._keep(name, h, lw)
-        self.part_max[name], self.part_min[name] = float(hi[-1]), float(lo[-1])
-
-    def _keep(self, name: str, h: float, lw: float) -> None:
-        if np.isfinite(h) and np.isfinite(lw):
-            self.rev_max[name].append(h)
-            self.rev_min[name].append(lw)
+        names = list(self.channels)
+        x = np.empty((len(names), n))
+        for c, name in enumerate(names):
+            x[c] = data[name]
+        st_f = np.array([self.revs, self.speed_sum])
+        sums = np.array([self.sums[k] for k in names])
+        counts = np.array([self.counts[k] for k in names], dtype=np.int64)
+        part = np.array([[self.part_max[k] for k in names], [self.part_min[k] for k in names]])
+        kept = np.empty((2, len(names), n + 1))
+        n_kept = np.zeros(len(names), dtype=np.int64)
+        self.rev_index = int(_fold_kernel(
+            np.ascontiguousarray(speed, dtype=np.float64), x, self.rev_per_sample, st_f,
+            self.rev_index, self.first_rev, part, sums, counts, kept, n_kept,
+        ))  # fmt: skip
+        self.revs, self.speed_sum = float(st_f[0]), float(st_f[1])
+        for c, name in enumerate(names):
+            self.sums[name] = float(sums[c])
+            self.counts[name] = int(counts[c])
+            self.part_max[name], self.part_min[name] = float(part[0, c]), float(part[1, c])
+            if n_kept[c]:
+                self.rev_max[name] += kept[0, c, : n_kept[c]].tolist()
+                self.rev_min[name] += kept[1, c, : n_kept[c]].tolist()
 
     def _close(self, end: int) -> SteadyWindow:
         mean, rng, mean_pct, rng_pct = {}, {}, {}, {}
@@ -201,11 +264,7 @@ class SteadyStateMeter:
 
     # ------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
-        """Plain JSON-serialisable state (floats exact; per-revolution lists as base64)."""
-
-        def enc(v: list[float]) -> str:
-            return base64.b64encode(np.asarray(v, dtype="<f8").tobytes()).decode()
-
+        """Plain JSON-serialisable state (floats exact; per-revolution lists packed)."""
         return {
             "kind": "steady_state_meter",
             "run_start": self.run_start,
@@ -214,18 +273,15 @@ class SteadyStateMeter:
             "rev_index": self.rev_index,
             "part_max": {k: repr(v) for k, v in self.part_max.items()},
             "part_min": {k: repr(v) for k, v in self.part_min.items()},
-            "sums": self.sums,
-            "counts": self.counts,
+            "sums": dict(self.sums),
+            "counts": dict(self.counts),
             "speed_sum": self.speed_sum,
-            "rev_max": {k: enc(v) for k, v in self.rev_max.items()},
-            "rev_min": {k: enc(v) for k, v in self.rev_min.items()},
+            "rev_max": {k: pack_array(v) for k, v in self.rev_max.items()},
+            "rev_min": {k: pack_array(v) for k, v in self.rev_min.items()},
         }
 
     def restore_state(self, d: dict[str, Any]) -> None:
         """Load the state of :meth:`snapshot` (same configuration) into this meter."""
-
-        def dec(s: str) -> list[float]:
-            return np.frombuffer(base64.b64decode(s), dtype="<f8").tolist()
 
         self.run_start, self.next = int(d["run_start"]), int(d["next"])
         self.revs, self.rev_index = float(d["revs"]), int(d["rev_index"])
@@ -234,5 +290,5 @@ class SteadyStateMeter:
         self.sums = {k: float(v) for k, v in d["sums"].items()}
         self.counts = {k: int(v) for k, v in d["counts"].items()}
         self.speed_sum = float(d["speed_sum"])
-        self.rev_max = {k: dec(v) for k, v in d["rev_max"].items()}
-        self.rev_min = {k: dec(v) for k, v in d["rev_min"].items()}
+        self.rev_max = {k: unpack_array(v).tolist() for k, v in d["rev_max"].items()}
+        self.rev_min = {k: unpack_array(v).tolist() for k, v in d["rev_min"].items()}

@@ -43,11 +43,13 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from analytics.snapshot_arrays import pack_array, unpack_array
+
 __all__ = ["TachoSpeed"]
 
 log = logging.getLogger(__name__)
 
-_SNAPSHOT_VERSION = 1
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 # float state: [last sample, current estimate rpm, samples seen]; int state: [level, edges kept]
 _LAST, _EST, _SEEN = 0, 1, 2
 _LEVEL, _NEDGES = 0, 1
@@ -174,12 +176,12 @@ class TachoSpeed:
             "kind": "tacho",
             "pulses_per_rev": self.pulses_per_rev,
             "fs": self.fs,
-            "params": self._p.tolist(),
+            "params": pack_array(self._p),
             "last": None if math.isnan(last) else last,
             "estimate": float(self._sf[_EST]),
             "seen": float(self._sf[_SEEN]),
-            "ints": self._si.tolist(),
-            "edges": self._edges.tolist(),
+            "ints": pack_array(self._si, "<i8"),
+            "edges": pack_array(self._edges),
         }
 
     @classmethod
@@ -188,11 +190,11 @@ class TachoSpeed:
         if snapshot.get("kind") != "tacho" or snapshot.get("version") != _SNAPSHOT_VERSION:
             raise ValueError(f"not a tacho snapshot of version {_SNAPSHOT_VERSION}")
         obj = cls(snapshot["pulses_per_rev"], snapshot["fs"], average_edges=1)
-        obj._p = np.array(snapshot["params"], dtype=np.float64)
+        obj._p = unpack_array(snapshot["params"], shape=obj._p.shape)
         last = snapshot["last"]
         obj._sf = np.array(
             [np.nan if last is None else last, snapshot["estimate"], snapshot["seen"]]
         )
-        obj._si = np.array(snapshot["ints"], dtype=np.int64)
-        obj._edges = np.array(snapshot["edges"], dtype=np.float64)
+        obj._si = unpack_array(snapshot["ints"], "<i8", shape=obj._si.shape)
+        obj._edges = unpack_array(snapshot["edges"])
         return obj

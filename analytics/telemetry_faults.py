@@ -80,6 +80,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from analytics.snapshot_arrays import pack_array, unpack_array
+
 __all__ = [
     "LOOKAHEAD",
     "FaultCounts",
@@ -94,7 +96,8 @@ log = logging.getLogger(__name__)
 #: Samples of look-ahead: flags are returned this many samples after the sample arrives.
 LOOKAHEAD = 4
 _HIST = 4  # samples of left context kept before the first undecided sample
-_SNAPSHOT_VERSION = 1
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_KIND = ("telemetry_faults", _SNAPSHOT_VERSION)
 RC_10_90 = (math.acos(-0.8) - math.acos(0.8)) / math.pi
 """10–90 % rise of a raised-cosine front as a fraction of its duration (≈ 0.59)."""
 MEDIAN_TO_SIGMA = 0.6745
@@ -116,6 +119,7 @@ _LOG_Q, _STUCK_VALUE = 0, 1
 _PREV_KIND, _STUCK_KIND, _GOOD_RUN, _N_DECIDED = 0, 1, 2, 3
 _C_SPIKES, _C_DROPOUTS, _C_ZERO_RUNS, _C_RAIL_HITS, _C_FLAGGED = 4, 5, 6, 7, 8
 _N_INTS = 9
+_EXP_SLOTS = 4096  # exp cache of the noise tracker (a power of two)
 # Kernel parameters: [noise_k, m3_allowance, slew, rail_low, rail_high, eta, log_q_floor]
 _P_K, _P_M3, _P_SLEW, _P_LO, _P_HI, _P_ETA, _P_FLOOR = range(7)
 
@@ -149,69 +153,80 @@ def _chains(x, j, thr, slew):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _at_rail(v, p):
-    return v <= p[_P_LO] or v >= p[_P_HI]
+def _classify(x, j, thr, slew, low, high, good_run):
+    """Kind of the finite sample x[j] outside a stuck run.
 
-
-@njit(cache=True, nogil=True, inline="always")
-def _classify(x, j, p, fs, si, thr):
-    """Kind of the finite sample x[j] outside a stuck run; updates the stuck state."""
+    Fast path: a smooth left chain (the usual case) decides "good" (or "rail" for a repeat at
+    the rail) without looking at the right-hand chains."""
     v = x[j]
-    ok_l, ok_r, finite, fin_l = _chains(x, j, thr, p[_P_SLEW])
     repeated = v == x[j + 1] or v == x[j - 1]
-    kind = 0
-    if repeated and _at_rail(v, p):
-        kind = 4
-    elif ok_l or ok_r or not finite:  # no complete chain at all: no evidence, keep
-        if not ok_l and fin_l and v == x[j + 1] and si[_GOOD_RUN] >= _HIST:
-            kind = 3 if v == 0.0 else 1  # a stuck value entered by an impossible step
-    else:
-        kind = 1
-    if repeated and kind != 0:
-        si[_STUCK_KIND] = kind
-        fs[_STUCK_VALUE] = v
-    return kind
+    at_rail = v <= low or v >= high
+    if _chain(x, j - 4, thr, slew)[0] and _chain(x, j - 3, thr, slew)[0]:
+        return 4 if repeated and at_rail else 0
+    ok_l, ok_r, finite, fin_l = _chains(x, j, thr, slew)
+    if repeated and at_rail:
+        return 4
+    if ok_l or ok_r or not finite:  # no complete chain at all: no evidence, keep
+        if not ok_l and fin_l and v == x[j + 1] and good_run >= _HIST:
+            return 3 if v == 0.0 else 1  # a stuck value entered by an impossible step
+        return 0
+    return 1
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _track_noise(x, j, p, fs):
-    """Streaming median of |Δ³x| over the left chains (log-domain stochastic quantile)."""
-    d3 = x[j] - 3.0 * x[j - 1] + 3.0 * x[j - 2] - x[j - 3]
-    if np.isfinite(d3):
-        q = math.exp(fs[_LOG_Q])
-        fs[_LOG_Q] += p[_P_ETA] if abs(d3) > q else -p[_P_ETA]
-        fs[_LOG_Q] = max(fs[_LOG_Q], p[_P_FLOOR])
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _count(kind, si):
-    if kind != 0:
-        si[_C_FLAGGED] += 1
-        if kind != si[_PREV_KIND]:
-            si[_C_SPIKES + kind - 1] += 1
-        si[_GOOD_RUN] = 0
-    else:
-        si[_GOOD_RUN] += 1
-    si[_PREV_KIND] = kind
+def _exp(log_q, inv_eta, keys, values):
+    """exp(log_q) through a direct-mapped cache: the noise tracker's log_q walks in steps of
+    ±eta over a small set of floats (~1300 distinct values in 10⁶ samples), so exp runs
+    rarely; a hit returns the very float exp gave (bitwise the uncached result)."""
+    slot = np.int64(log_q * inv_eta) & (keys.shape[0] - 1)  # any slot works: keys decide
+    if keys[slot] != log_q:
+        keys[slot] = log_q
+        values[slot] = math.exp(log_q)
+    return values[slot]
 
 
 @njit(cache=True, nogil=True)
-def _scan(x, start, stop, out, p, fs, si):
-    """Decide samples x[start:stop] (x holds 3 samples of context on each side) into ``out``."""
+def _scan(x, start, stop, out, p, fs, si, keys, values):
+    """Decide samples x[start:stop] (x holds 3 samples of context on each side) into ``out``.
+
+    The state lives in locals for the loop (loaded from and stored back to ``fs``/``si``);
+    ``keys``/``values`` are the exp cache of :func:`_exp`."""
+    k_noise, m3, slew, low, high, eta, floor = p[_P_K], p[_P_M3], p[_P_SLEW], p[_P_LO], \
+        p[_P_HI], p[_P_ETA], p[_P_FLOOR]  # fmt: skip
+    log_q, stuck_value = fs[_LOG_Q], fs[_STUCK_VALUE]
+    inv_eta = 1.0 / eta
+    prev_kind, stuck_kind, good_run = si[_PREV_KIND], si[_STUCK_KIND], si[_GOOD_RUN]
+    counts = si[_C_SPIKES : _C_FLAGGED + 1].copy()  # spikes, dropouts, zero runs, rail, flagged
     for j in range(start, stop):
         v = x[j]
-        thr = p[_P_K] * math.exp(fs[_LOG_Q]) / MEDIAN_TO_SIGMA + p[_P_M3]
+        q = _exp(log_q, inv_eta, keys, values)  # the classification does not change it
+        thr = k_noise * q / MEDIAN_TO_SIGMA + m3
         if not np.isfinite(v):
             kind = 2
-            si[_STUCK_KIND] = 0
-        elif si[_STUCK_KIND] != 0 and v == fs[_STUCK_VALUE]:
-            kind = si[_STUCK_KIND]
+            stuck_kind = 0
+        elif stuck_kind != 0 and v == stuck_value:
+            kind = stuck_kind
         else:
-            si[_STUCK_KIND] = 0
-            kind = _classify(x, j, p, fs, si, thr)
-        _track_noise(x, j, p, fs)
-        _count(kind, si)
+            stuck_kind = 0
+            kind = _classify(x, j, thr, slew, low, high, good_run)
+            if kind != 0 and (v == x[j + 1] or v == x[j - 1]):
+                stuck_kind, stuck_value = kind, v
+        d3 = x[j] - 3.0 * x[j - 1] + 3.0 * x[j - 2] - x[j - 3]  # noise: median of |Δ³x|
+        if np.isfinite(d3):
+            log_q += eta if abs(d3) > q else -eta
+            log_q = max(log_q, floor)
+        if kind != 0:
+            counts[4] += 1
+            if kind != prev_kind:
+                counts[kind - 1] += 1
+            good_run = 0
+        else:
+            good_run += 1
+        prev_kind = kind
         out[j - start] = kind
+    fs[_LOG_Q], fs[_STUCK_VALUE] = log_q, stuck_value
+    si[_PREV_KIND], si[_STUCK_KIND], si[_GOOD_RUN] = prev_kind, stuck_kind, good_run
+    si[_C_SPIKES : _C_FLAGGED + 1] = counts
     si[_N_DECIDED] += stop - start
 
 
@@ -315,6 +330,7 @@ class TelemetryFaultDetector:
         )
         self._f = np.array([math.log(max(noise, 1e-9 * span) * MEDIAN_TO_SIGMA * 20**0.5), 0.0])
         self._i = np.zeros(_N_INTS, dtype=np.int64)
+        self._exp_cache = (np.full(_EXP_SLOTS, np.nan), np.zeros(_EXP_SLOTS))  # see _exp
         self._buf = np.full(_HIST, np.nan)  # left context, then the undecided samples
 
     @classmethod
@@ -329,6 +345,11 @@ class TelemetryFaultDetector:
     def delay(self) -> int:
         """Samples between a sample's arrival and its decision (:data:`LOOKAHEAD`)."""
         return LOOKAHEAD
+
+    @property
+    def held(self) -> int:
+        """Samples fed but not yet decided (at most :data:`LOOKAHEAD`)."""
+        return self._buf.shape[0] - _HIST
 
     @property
     def samples_decided(self) -> int:
@@ -347,64 +368,65 @@ class TelemetryFaultDetector:
 
     def feed(self, samples: np.ndarray) -> FaultFlags:
         """Add a block; returns the decisions for the samples that became decidable."""
+        first = self.samples_decided
+        before = self._i[_C_SPIKES : _C_FLAGGED + 1].copy()
+        values, kinds = self.decide(samples)
+        return self._flags(first, before, values, kinds)
+
+    def decide(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`feed` in its lean form, for the per-frame path: the raw values and the
+        :class:`FaultKind` codes of the samples that became decidable (no counts, no log)."""
         x = np.asarray(samples, dtype=np.float64).ravel()
-        buf = np.concatenate([self._buf, x])
+        buf = np.concatenate((self._buf, x))
         stop = max(buf.shape[0] - LOOKAHEAD, _HIST)
-        flags = self._decide(buf, stop)
+        kinds = np.zeros(stop - _HIST, dtype=np.uint8)
+        _scan(buf, _HIST, stop, kinds, self._p, self._f, self._i, *self._exp_cache)
         self._buf = buf[stop - _HIST :]
-        return flags
+        return buf[_HIST:stop], kinds  # views of a buffer nothing writes to again
 
     def flush(self) -> FaultFlags:
         """Decide the held-back samples at the end of a record (right chains missing).
 
         The detector then continues as if the record went on with NaN: call it only at the end.
         """
-        buf = np.concatenate([self._buf, np.full(LOOKAHEAD, np.nan)])
-        flags = self._decide(buf, buf.shape[0] - LOOKAHEAD)
-        self._buf = np.full(_HIST, np.nan)
-        return flags
-
-    def _decide(self, buf: np.ndarray, stop: int) -> FaultFlags:
         first = self.samples_decided
         before = self._i[_C_SPIKES : _C_FLAGGED + 1].copy()
-        kinds = np.zeros(stop - _HIST, dtype=np.uint8)
-        _scan(buf, _HIST, stop, kinds, self._p, self._f, self._i)
+        values, kinds = self.decide(np.full(LOOKAHEAD, np.nan))
+        self._buf = np.full(_HIST, np.nan)
+        return self._flags(first, before, values, kinds)
+
+    def _flags(
+        self, first: int, before: np.ndarray, values: np.ndarray, kinds: np.ndarray
+    ) -> FaultFlags:
         counts = FaultCounts(*(self._i[_C_SPIKES : _C_FLAGGED + 1] - before).tolist())
         if counts.flagged_samples:
             log.debug("telemetry faults in samples %d+%d: %s", first, kinds.size, counts)
-        return FaultFlags(kinds != 0, counts, first, buf[_HIST:stop].copy(), kinds)
+        return FaultFlags(kinds != 0, counts, first, values, kinds)
 
     # ------------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
-        """The complete state as plain JSON-serialisable data (NaN as None)."""
+        """The complete state as plain JSON-serialisable data (arrays packed, exact)."""
         return {
             "version": _SNAPSHOT_VERSION,
             "kind": "telemetry_faults",
-            "params": self._p.tolist(),
+            "params": pack_array(self._p),
             "config": [*self.full_scale, self.fs, self.bandwidth_hz, self.min_rise_s],
-            "floats": self._f.tolist(),
-            "ints": self._i.tolist(),
-            "buffer": [None if not math.isfinite(v) else v for v in self._buf.tolist()],
-            "buffer_inf": [v if math.isinf(v) else 0.0 for v in self._buf.tolist()],
+            "floats": pack_array(self._f),
+            "ints": pack_array(self._i, "<i8"),
+            "buffer": pack_array(self._buf),
         }
 
     @classmethod
     def restore(cls, snapshot: dict[str, Any]) -> TelemetryFaultDetector:
         """A detector that continues exactly where the snapshotted one stood."""
-        if snapshot.get("kind") != "telemetry_faults" or snapshot.get("version") != 1:
-            raise ValueError("not a telemetry_faults snapshot of version 1")
+        if (snapshot.get("kind"), snapshot.get("version")) != _SNAPSHOT_KIND:
+            raise ValueError(f"not a telemetry_faults snapshot of version {_SNAPSHOT_VERSION}")
         low, high, fs, bandwidth, rise = snapshot["config"]
         det = cls((low, high), fs, bandwidth_hz=bandwidth, min_rise_s=rise)
-        det._p = np.array(snapshot["params"], dtype=np.float64)
-        det._f = np.array(snapshot["floats"], dtype=np.float64)
-        det._i = np.array(snapshot["ints"], dtype=np.int64)
-        det._buf = np.array(
-            [
-                inf if inf else (np.nan if v is None else v)
-                for v, inf in zip(snapshot["buffer"], snapshot["buffer_inf"], strict=True)
-            ],
-            dtype=np.float64,
-        )
+        det._p = unpack_array(snapshot["params"], shape=det._p.shape)
+        det._f = unpack_array(snapshot["floats"], shape=det._f.shape)
+        det._i = unpack_array(snapshot["ints"], "<i8", shape=det._i.shape)
+        det._buf = unpack_array(snapshot["buffer"])
         return det
 
 

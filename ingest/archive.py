@@ -72,6 +72,7 @@ from mcap.writer import CompressionType, Writer
 
 from ingest import wire
 from ingest.keys import key_matches
+from ingest.mcap_append import MessageAppender, appender, pack_chunk_indexes
 
 log = logging.getLogger(__name__)
 
@@ -130,6 +131,12 @@ def _file_sort_key(name: str) -> tuple[str, int]:
     return match["ts"], int(match["n"] or 0)
 
 
+def archive_file_order(name: str) -> tuple[str, int]:
+    """Sort key of an archive file's base name: the files of one prefix in archive order (so
+    positions in different files compare by it); :class:`ArchiveError` if not an archive name."""
+    return _file_sort_key(name)
+
+
 def list_archive_files(directory: str | Path, prefix: str) -> list[Path]:
     """Archive files of ``prefix`` in ``directory``, oldest first."""
     names = [
@@ -153,6 +160,7 @@ class _OpenFile:
     count: int = 0
     last_log_time_ns: int = 0
     written_bytes: int = 0
+    append: MessageAppender | None = None
 
 
 class ArchiveWriter:
@@ -210,10 +218,13 @@ class ArchiveWriter:
         if log_time_ns < current.last_log_time_ns:
             self._note_out_of_order(key, log_time_ns, current.last_log_time_ns)
         channel_id = self._channel_id(current, key)
-        current.writer.add_message(
-            channel_id, log_time=log_time_ns, data=bytes(payload), publish_time=log_time_ns,
-            sequence=current.count % _UINT32,
-        )  # fmt: skip
+        if current.append is not None:
+            current.append.append(channel_id, current.count % _UINT32, log_time_ns, bytes(payload))
+        else:
+            current.writer.add_message(
+                channel_id, log_time=log_time_ns, data=bytes(payload), publish_time=log_time_ns,
+                sequence=current.count % _UINT32,
+            )  # fmt: skip
         current.count += 1
         current.last_log_time_ns = max(current.last_log_time_ns, log_time_ns)
         if self._pending_since is None:
@@ -313,7 +324,8 @@ class ArchiveWriter:
         writer = Writer(stream, chunk_size=self._chunk_size, compression=CompressionType.ZSTD)
         writer.start(profile=PROFILE, library=LIBRARY)
         writer.register_schema(SCHEMA_NAME, SCHEMA_ENCODING, (wire.__doc__ or "").encode())
-        opened = _OpenFile(path=path, stream=stream, writer=writer, window=window)
+        opened = _OpenFile(path=path, stream=stream, writer=writer, window=window,
+                           append=appender(writer, self._chunk_size))  # fmt: skip
         self._sync(opened)
         log.info("archive: opened %s", path)
         return opened
@@ -332,6 +344,7 @@ class ArchiveWriter:
         self._last_position = ArchivePosition(
             current.path.name, current.count, current.last_log_time_ns
         )
+        pack_chunk_indexes(current.writer)
         current.writer.finish()
         current.stream.flush()
         if self._fsync:
@@ -452,7 +465,7 @@ class TailTolerantReader:
                 return
             try:
                 yield from self._record(opcode, body)
-            except (ArchiveError, McapError, zstandard.ZstdError, struct.error) as exc:
+            except (ArchiveError, McapError, zstandard.ZstdError, struct.error, ValueError) as exc:
                 self.error = f"corrupt record at byte {self.valid_bytes}: {exc}"
                 return
             self.valid_bytes += _RECORD_HEAD.size + length

@@ -269,11 +269,70 @@ def _count_nonfinite(samples: np.ndarray) -> int:
     return int(samples.size - np.count_nonzero(np.isfinite(samples)))
 
 
+_FAST = {int(d): (d, d.numpy, d.numpy.itemsize, d.numpy.kind == "f") for d in DType}
+_UNITS = {int(u): u for u in Unit}
+_INF = math.inf
+
+
 def decode_block(payload: bytes | bytearray | memoryview) -> Block:
     """Decode one block; raise a :class:`WireError` subclass if it is malformed.
 
-    The returned samples are a read-only view on ``payload`` (no copy).
+    The returned samples are a read-only view on ``payload`` (no copy). A well-formed block
+    takes the fast path (one unpack, table look-ups, ~3 µs); anything else is decoded by
+    :func:`_decode_checked`, which names what is wrong.
     """
+    if len(payload) >= HEADER_SIZE:
+        magic, version, header_len, t0_ns, fs, seq, code, unit, _, n = HEADER.unpack_from(payload)
+        kind = _FAST.get(code)
+        if (
+            magic == MAGIC and version == FORMAT_VERSION and header_len >= HEADER_SIZE
+            and 0.0 < fs < _INF and kind is not None and unit in _UNITS
+            and len(payload) == header_len + n * kind[2]
+        ):  # fmt: skip
+            samples = np.frombuffer(payload, dtype=kind[1], count=n, offset=header_len)
+            if samples.flags.writeable:
+                samples.flags.writeable = False
+            bad = n - int(np.count_nonzero(np.isfinite(samples))) if kind[3] else 0
+            return Block(samples, t0_ns, fs, seq, _UNITS[unit], kind[0], bad, version)
+    return _decode_checked(payload)
+
+
+#: The v1 header as a numpy record (same layout as :data:`HEADER`), for many blocks at once.
+HEADER_DTYPE = np.dtype([
+    ("magic", "S4"), ("version", "<u2"), ("header_len", "<u2"), ("t0_ns", "<i8"),
+    ("fs", "<f8"), ("seq", "<u8"), ("dtype", "u1"), ("unit", "u1"), ("flags", "<u2"),
+    ("n", "<u4"),
+])  # fmt: skip
+_ITEMSIZE = np.zeros(256, dtype=np.int64)
+_ITEMSIZE[[int(d) for d in DType]] = [d.numpy.itemsize for d in DType]
+_UNIT_OK = np.zeros(256, dtype=bool)
+_UNIT_OK[[int(u) for u in Unit]] = True
+
+
+def decode_headers(
+    buf: np.ndarray, offset: np.ndarray, length: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The headers of many payloads held in one uint8 buffer (payload k at ``offset[k]``,
+    ``length[k]`` bytes), as a :data:`HEADER_DTYPE` array, and a mask of the payloads that are
+    well-formed — exactly those :func:`decode_block` decodes without error. Samples of a
+    well-formed payload start at ``offset + header_len``. For replaying the archive in bulk."""
+    size = HEADER_SIZE
+    padded = buf if buf.shape[0] >= size else np.concatenate((buf, np.zeros(size, np.uint8)))
+    at = np.minimum(offset, padded.shape[0] - size)
+    head = padded[at[:, None] + np.arange(size)].reshape(-1).view(HEADER_DTYPE)
+    itemsize = _ITEMSIZE[head["dtype"]]
+    fs = head["fs"]
+    ok = (
+        (length >= size) & (head["magic"] == MAGIC) & (head["version"] == FORMAT_VERSION)
+        & (head["header_len"] >= size) & (fs > 0.0) & (fs < np.inf) & (itemsize > 0)
+        & _UNIT_OK[head["unit"]]
+        & (length == head["header_len"].astype(np.int64) + head["n"].astype(np.int64) * itemsize)
+    )  # fmt: skip
+    return head, ok
+
+
+def _decode_checked(payload: bytes | bytearray | memoryview) -> Block:
+    """:func:`decode_block` with every check spelled out (raises the precise error)."""
     _check_prefix(payload)
     _, version, header_len, t0_ns, fs, seq, dtype_code, unit_code, _, n = HEADER.unpack_from(
         payload

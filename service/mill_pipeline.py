@@ -1,14 +1,17 @@
 """A mill's analysis inside the worker: :class:`~analytics.mill_monitor.MillMonitor` plus alarms,
 turned into rows for the store.
 
-Per decoded block the monitor returns the events and harmonic windows it completed; this adapter
-turns them (and any new steady-state windows) into
+The worker adds a batch's blocks (:meth:`AnalyzerPipeline.add_block` / ``add_blocks``: aligned
+only) and then calls :meth:`AnalyzerPipeline.finish` once: the monitor analyses everything as long
+chunks and returns the events and harmonic windows completed; this adapter turns them (and any
+new steady-state windows) into
 
 * event rows (starts, stops, barring sessions),
 * records (``steady`` windows, ``harmonics`` tables),
 * alarm observations → alarm transitions (:mod:`alarms`), and
-* daily damage totals per component and phase, refreshed every ``damage_every_s`` seconds of
-  *sample* time (not wall time), so a replay of the archive produces the same rows.
+* daily damage totals per component and phase, taken every ``damage_every_s`` seconds of
+  *sample* time (not wall time): the analysis stops at exactly those samples, so the rows and the
+  remaining-life observations are the same however the blocks were batched.
 
 Everything is derived from the samples alone, so replaying the archive tail after a crash
 reproduces the same rows, which the store writes idempotently.
@@ -19,11 +22,14 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+import numpy as np
+
 from alarms.engine import AlarmEngine
 from alarms.from_analysis import event_observations, peak_observations, window_observations
 from alarms.observations import Observation, local_month
+from analytics.harmonics import stagger_for
 from analytics.mill_config import MillConfig
-from analytics.mill_monitor import MillMonitor
+from analytics.mill_monitor import MillMonitor, MonitorOutput
 from ingest.wire import Block
 from service.store import DamageRow, EventRow
 from service.worker import MillUpdate
@@ -37,6 +43,12 @@ DAMAGE_EVERY_S = 60.0
 #: every 10 s while running; storing each, with every expected line, took ~1.8 MB per running
 #: hour), and at once whenever a window holds an unexplained peak.
 HARMONICS_EVERY_NS = 300 * 1_000_000_000
+#: Steady windows (an hour's) and events of each kind the live analyzer keeps in memory: each
+#: is stored when it comes, so what an offline report keeps (a day of windows, 2000 starts, ~6 kB
+#: each in memory) would only grow memory and checkpoints; more windows than one
+#: :meth:`AnalyzerPipeline.finish` step (a damage interval) makes.
+WINDOWS_KEPT = 60
+EVENTS_KEPT = 20
 SECONDS_PER_YEAR = 365.25 * 86400.0
 
 
@@ -46,17 +58,55 @@ class AnalyzerPipeline:
     def __init__(self, config: MillConfig, damage_every_s: float = DAMAGE_EVERY_S) -> None:
         self.config = config
         self.monitor = MillMonitor(config)
+        self.monitor.analyzer.keep_windows = WINDOWS_KEPT
+        self.monitor.analyzer.keep_events = EVENTS_KEPT
         self.alarms = AlarmEngine.for_mills([config])
         self._damage_every = round(damage_every_s * config.sample_rate_hz)
-        self._next_damage = self._damage_every
+        # the first interval is longer by a fraction fixed by the mill id, so mills started
+        # together do not all attribute their damage in the same instant (issue 5 latency)
+        self._next_damage = self._damage_every + round(stagger_for(config.id) * self._damage_every)
         self._last_window_ns = -1
         self._latest_window: dict[str, Any] | None = None
         self._next_harmonics_ns = 0
 
     # ------------------------------------------------------------------ feeding
     def feed_block(self, channel: str, block: Block) -> MillUpdate:
-        out = self.monitor.push(channel, block.t0_ns, block.fs, block.samples)
+        """One block, analysed at once (:meth:`add_block` then :meth:`finish`)."""
+        self.add_block(channel, block)
+        return self.finish()
+
+    def add_block(self, channel: str, block: Block) -> None:
+        """Align one block; its analysis waits for :meth:`finish` (a worker adds a batch's
+        blocks, then finishes once: the analysis then runs over long chunks)."""
+        self.monitor.add(channel, block.t0_ns, block.fs, block.samples)
+
+    def add_blocks(self, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray) -> None:
+        """Many blocks of this mill at once (see :meth:`MillMonitor.add_blocks`)."""
+        self.monitor.add_blocks(chan, t0_ns, raw)
+
+    @property
+    def backlog(self) -> int:
+        """Samples aligned but not yet analysed."""
+        return self.monitor.backlog
+
+    def finish(self) -> MillUpdate:
+        """Analyse what :meth:`add_block` queued; returns the rows and alarm transitions.
+
+        The analysis stops at every multiple of the damage interval (stream samples), where
+        the daily damage rows and remaining-life observations are taken, so they are the same
+        however the blocks were batched (live, replayed after a crash, or one at a time)."""
         update = MillUpdate()
+        while True:
+            out = self.monitor.process(until=self._next_damage)
+            self._fold(out, update)
+            if self.monitor.analyzer.n < self._next_damage:
+                return update
+            update.damage += self._damage_rows()
+            update.alarm_transitions += self.alarms.observe_all(self._life_observations())
+            self._next_damage = self.monitor.analyzer.n + self._damage_every
+
+    def _fold(self, out: MonitorOutput, update: MillUpdate) -> None:
+        """Events, steady windows and harmonic tables of ``out`` as rows and alarm input."""
         observations: list[Observation] = []
         for event in out.events:
             update.events.append(self._event_row(event))
@@ -70,13 +120,8 @@ class AnalyzerPipeline:
                 update.records.append(("harmonics", int(hw.t_end_ns), _compact(hw.to_dict())))
                 self._next_harmonics_ns = int(hw.t_end_ns) + HARMONICS_EVERY_NS
             observations += peak_observations(self.config.id, peaks, int(hw.t_end_ns))
-        update.alarm_transitions += self.alarms.observe_all(observations)
-        if self.monitor.analyzer.n >= self._next_damage:
-            update.damage += self._damage_rows()
-            observations = self._life_observations()
+        if observations:
             update.alarm_transitions += self.alarms.observe_all(observations)
-            self._next_damage = self.monitor.analyzer.n + self._damage_every
-        return update
 
     def _event_row(self, event: dict[str, Any]) -> EventRow:
         return EventRow(self.config.id, str(event["event"]), int(event["t_ns"]), event,
@@ -177,6 +222,8 @@ class AnalyzerPipeline:
 
     def restore(self, snapshot: dict[str, Any]) -> None:
         self.monitor = MillMonitor.restore(self.config, snapshot["monitor"])
+        self.monitor.analyzer.keep_windows = WINDOWS_KEPT
+        self.monitor.analyzer.keep_events = EVENTS_KEPT
         self.alarms.restore(snapshot["alarms"])
         self._next_damage = int(snapshot["next_damage"])
         self._last_window_ns = int(snapshot["last_window_ns"])

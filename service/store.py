@@ -3,7 +3,8 @@
 What the worker keeps (DESIGN.md "Persistence and recovery"): events (starts, stops, barring,
 data quality, alarms' transitions later), damage per mill, component, phase and day, per-day
 rainflow matrices, steady-state metrics and harmonic tables as timestamped records, and
-checkpoints: analyzer snapshots with the archive position they correspond to.
+checkpoints: analyzer snapshots with the archive position they correspond to, one per part
+(mill), each part written on its own.
 
 Design notes:
 
@@ -86,12 +87,21 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "DROP INDEX events_unique",
         "CREATE UNIQUE INDEX events_unique ON events (mill_id, kind, t_ns, subject)",
     ),
+    (  # 3 → 4: checkpoints per part (a mill), each written on its own with its own archive
+        # position; the whole-worker checkpoints of schema 3 (arrays as JSON lists) are dropped
+        """CREATE TABLE checkpoint_parts (
+            id INTEGER PRIMARY KEY, part TEXT NOT NULL, created_ns INTEGER NOT NULL,
+            position_json TEXT NOT NULL, state_json TEXT NOT NULL)""",
+        "CREATE INDEX checkpoint_parts_by_part ON checkpoint_parts (part, id)",
+        "DROP TABLE checkpoints",
+    ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
+_PART_CHECKPOINTS = 4  # the schema version that brought checkpoint_parts
 #: Object keys of records are first read from one record per this interval (then checked).
 _KEY_SAMPLE_NS = 3_600 * 10**9
-#: Checkpoints kept (older ones are deleted when a new one is written).
-CHECKPOINTS_KEPT = 3
+#: Checkpoints kept per part (older ones of the part are deleted when a new one is written).
+CHECKPOINTS_KEPT = 2
 
 
 class StoreError(RuntimeError):
@@ -248,12 +258,24 @@ class Store:
                 f"{self.path}: schema version {version} was written by a newer millwatch "
                 f"(this one knows up to {SCHEMA_VERSION}); upgrade millwatch to open it"
             )
+        if 0 < version < _PART_CHECKPOINTS:
+            self._warn_old_checkpoints()
         for target in range(version + 1, SCHEMA_VERSION + 1):
             with self.transaction() as db:
                 for statement in MIGRATIONS[target - 1]:
                     db.execute(statement)
                 db.execute(f"PRAGMA user_version = {target}")
             log.info("store %s migrated to schema version %d", self.path, target)
+
+    def _warn_old_checkpoints(self) -> None:
+        (n,) = self._db.execute("SELECT COUNT(*) FROM checkpoints").fetchone()
+        if n:
+            log.warning(
+                "store %s: its %d checkpoint(s) are in the format of an older millwatch and are "
+                "dropped; the worker rebuilds its state by replaying the whole archive once",
+                self.path,
+                n,
+            )
 
     @contextmanager
     def transaction(self) -> Iterator[sqlite3.Connection]:
@@ -323,18 +345,28 @@ class Store:
 
     @staticmethod
     def put_checkpoint(
-        db: sqlite3.Connection, created_ns: int, position: dict[str, Any], state: dict[str, Any]
-    ) -> None:
-        """Store a checkpoint (inside :meth:`transaction`) and drop all but the newest few."""
+        db: sqlite3.Connection,
+        part: str,
+        created_ns: int,
+        position: dict[str, Any],
+        state: dict[str, Any],
+    ) -> int:
+        """Store the checkpoint of one ``part`` (e.g. a mill: its analyzer's snapshot) with the
+        archive ``position`` it covers (inside :meth:`transaction`), and drop all but the newest
+        :data:`CHECKPOINTS_KEPT` of that part. Parts are written one by one, each in a small
+        transaction, so no write holds the store for long. Returns the state's size in bytes."""
+        text = json.dumps(state)
         db.execute(
-            "INSERT INTO checkpoints (created_ns, position_json, state_json) VALUES (?, ?, ?)",
-            (created_ns, json.dumps(position), json.dumps(state)),
+            "INSERT INTO checkpoint_parts (part, created_ns, position_json, state_json) "
+            "VALUES (?, ?, ?, ?)",
+            (part, created_ns, json.dumps(position), text),
         )
         db.execute(
-            "DELETE FROM checkpoints WHERE id NOT IN "
-            "(SELECT id FROM checkpoints ORDER BY id DESC LIMIT ?)",
-            (CHECKPOINTS_KEPT,),
+            "DELETE FROM checkpoint_parts WHERE part = ? AND id NOT IN "
+            "(SELECT id FROM checkpoint_parts WHERE part = ? ORDER BY id DESC LIMIT ?)",
+            (part, part, CHECKPOINTS_KEPT),
         )
+        return len(text)
 
     @staticmethod
     def put_alarm_transitions(
@@ -396,12 +428,30 @@ class Store:
         sql = f"SELECT {_TRANSITION_COLUMNS} FROM alarm_transitions WHERE alarm_id = ? ORDER BY seq"
         return [AlarmTransitionRow(*r) for r in self._query(sql, (alarm_id,))]
 
-    def latest_checkpoint(self) -> tuple[dict[str, Any], dict[str, Any]] | None:
-        """``(position, state)`` of the newest checkpoint, or ``None``."""
-        row = self._query_one(
-            "SELECT position_json, state_json FROM checkpoints ORDER BY id DESC LIMIT 1", ()
+    def latest_checkpoints(self) -> dict[str, tuple[dict[str, Any], dict[str, Any]]]:
+        """The newest checkpoint of every part: ``part → (position, state)``."""
+        rows = self._query(
+            "SELECT part, position_json, state_json FROM checkpoint_parts WHERE id IN "
+            "(SELECT MAX(id) FROM checkpoint_parts GROUP BY part) ORDER BY part",
+            (),
         )
-        return None if row is None else (json.loads(row[0]), json.loads(row[1]))
+        return {part: (json.loads(p), json.loads(s)) for part, p, s in rows}
+
+    def latest_checkpoint(self) -> tuple[dict[str, dict[str, Any]], dict[str, Any]] | None:
+        """The newest checkpoints of all parts together, or ``None`` when there is none:
+        ``(positions by part, state)``, the state being the parts' states merged key by key
+        (each part's entries under each top-level key, e.g. ``state["pipelines"][mill]``)."""
+        parts = self.latest_checkpoints()
+        if not parts:
+            return None
+        merged: dict[str, Any] = {}
+        for _, state in parts.values():
+            for key, value in state.items():
+                if isinstance(value, dict):
+                    merged.setdefault(key, {}).update(value)
+                else:
+                    merged[key] = value
+        return {part: position for part, (position, _) in parts.items()}, merged
 
     def mills(self) -> list[dict[str, Any]]:
         rows = self._query("SELECT mill_id, site, config_json, updated_ns FROM mills", ())

@@ -3,14 +3,24 @@
 Data path for every received block (DESIGN.md "Data flow")::
 
     queue → archive (raw bytes, before anything can fail) → decode + validate → health
-          → the mill's pipeline (aligner + analyzer) → store (one transaction per batch)
+          → the mill's pipeline (aligner) → … end of the batch: each mill's analyzer over
+          everything its blocks brought (long chunks: far cheaper per sample, same results)
+          → store (one transaction per batch)
 
-Recovery (DESIGN.md "Persistence and recovery"): every ``checkpoint_seconds`` the worker flushes
-the archive, takes the archive position and snapshots every pipeline *in the same thread that
-processes blocks*, so the snapshot covers exactly the blocks before the position. After a crash
-:meth:`Worker.recover` restores the newest checkpoint and re-reads the archive after its position
-through the same :meth:`Worker.handle` path (without archiving again), so the results equal an
-uninterrupted run; only blocks that never reached the archive (at most ~0.1 s) are lost.
+A replay of the archive (:meth:`Worker.recover`) reads it in batches of messages held in arrays
+(:mod:`ingest.archive_batches`) and hands them to :class:`~service.batch_lane.BatchLane`, which
+takes each mill's regular blocks as arrays and anything irregular through :meth:`Worker.handle`.
+
+Recovery (DESIGN.md "Persistence and recovery"): every ``checkpoint_seconds`` each mill is
+checkpointed — the mills' turns spread over the interval (:mod:`service.checkpoints`), so no
+step stalls for all of them at once: the worker flushes the archive, takes the archive position
+and snapshots the mill's pipeline *in the same thread that processes blocks*, so the snapshot
+covers exactly the mill's blocks before the position, and stores it in a small transaction of
+its own. After a crash :meth:`Worker.recover` restores every mill's newest checkpoint and
+re-reads the archive from the earliest of their positions through the same :meth:`Worker.handle`
+path (without archiving again), skipping for each mill the blocks its checkpoint already holds,
+so the results equal an uninterrupted run; only blocks that never reached the archive (at most
+~0.1 s) are lost.
 
 Bad input never stops the worker: an undecodable block is archived, counted per channel and kind
 and logged once per kind; a block whose key belongs to no configured mill is archived and counted.
@@ -32,8 +42,11 @@ from alarms.observations import Observation
 from analytics.mill_config import MillConfig
 from ingest import keys
 from ingest.archive import ArchivePosition, ArchiveReader, ArchiveWriter
+from ingest.archive_batches import archive_batches
 from ingest.wire import Block, WireError, decode_block
+from service.batch_lane import BatchLane
 from service.block_queue import BlockQueue, QueuedBlock
+from service.checkpoints import STEP_BUDGET_S, CheckpointSchedule, earliest
 from service.health import LatencyReservoir, MillHealth, PerMinute
 from service.store import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
 
@@ -42,6 +55,10 @@ __all__ = ["AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 log = logging.getLogger(__name__)
 
 BATCH_BLOCKS = 2000
+#: Blocks replayed from the archive per commit in :meth:`Worker.recover`: ~10 s of 50 mills, so
+#: each mill's blocks reach its analyzer as chunks of seconds (the cost per sample then drops
+#: several-fold; the results do not depend on it).
+REPLAY_BATCH_BLOCKS = 20_000
 
 
 @dataclass
@@ -71,9 +88,12 @@ class AckRequest:
 
 
 class MillPipeline(Protocol):
-    """One mill's analysis: fed decoded blocks per configured channel, in arrival order."""
+    """One mill's analysis: fed decoded blocks per configured channel, in arrival order;
+    ``add_block`` only queues a block, ``finish`` analyses what was queued."""
 
-    def feed_block(self, channel: str, block: Block) -> MillUpdate: ...
+    def add_block(self, channel: str, block: Block) -> None: ...
+
+    def finish(self) -> MillUpdate: ...
 
     def observe(self, observations: list[Observation]) -> MillUpdate: ...
 
@@ -112,7 +132,10 @@ class Worker:
         self.blocks_handled = 0
         self._logged: set[tuple[str, str]] = set()
         self._pending = PendingResults()
-        self._last_checkpoint = time.monotonic()
+        self._unfinished: dict[str, None] = {}  # mills with queued blocks, in arrival order
+        self._schedule = CheckpointSchedule(pipelines, checkpoint_seconds)
+        self.checkpoints_written = 0
+        self.checkpoint_bytes = 0
         self._stale: dict[str, set[str]] = {}
         self._started_ns = clock()
         self._rate_meters: dict[tuple[str, str, str], PerMinute] = {}
@@ -160,7 +183,16 @@ class Worker:
                 (item.key, "repeat"), "%s: repeated block seq %d ignored", item.key, block.seq
             )
             return
-        self._pending.add(mill_id, self.pipelines[mill_id].feed_block(channel, block))
+        self.pipelines[mill_id].add_block(channel, block)
+        self._unfinished[mill_id] = None
+
+    def finish_analysis(self) -> None:
+        """Analyse the blocks :meth:`handle` queued, mill by mill: each mill's blocks of a
+        batch go through its analyzer as long contiguous chunks (the results do not depend on
+        the batching). :meth:`commit` calls this first."""
+        unfinished, self._unfinished = self._unfinished, {}
+        for mill_id in unfinished:
+            self._pending.add(mill_id, self.pipelines[mill_id].finish())
 
     def _quality(self, mill_id: str, channel: str, t_ns: int, problem: str, **data: Any) -> None:
         """A data-quality event (stored with the mill's events)."""
@@ -242,8 +274,7 @@ class Worker:
             self._finish_acks(acked)
         if self.archive is not None:
             self.archive.flush_if_due()
-        if time.monotonic() - self._last_checkpoint >= self.checkpoint_seconds:
-            self.checkpoint()
+        self._checkpoint_due()
         return len(items)
 
     # ------------------------------------------------------------------ acknowledgements
@@ -275,14 +306,16 @@ class Worker:
     def _finish_acks(self, acked: list[tuple[AckRequest, list[Transition]]]) -> None:
         """After the acks' transitions are stored: checkpoint at once, because an ack is a
         wall-clock fact the archive cannot replay, then tell the callers."""
-        if any(transitions for _, transitions in acked):
-            self.checkpoint()
+        mills = {request.mill_id for request, transitions in acked if transitions}
+        if mills:
+            self.checkpoint(sorted(mills))
         for request, transitions in acked:
             request.done.set_result(transitions)
 
     def commit(self) -> None:
         """Write the pending results in one transaction, then hand the alarm transitions to
         ``on_alarms`` (e.g. to publish them on zenoh) — only once they are stored."""
+        self.finish_analysis()
         if not self._pending:
             return
         pending, self._pending = self._pending, PendingResults()
@@ -291,58 +324,90 @@ class Worker:
         if pending.transitions and self.on_alarms is not None:
             self.on_alarms(pending.transitions)
 
-    def checkpoint(self) -> ArchivePosition | None:
-        """Flush the archive and store every pipeline's snapshot with the archive position."""
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint(self, mills: Iterable[str] | None = None) -> ArchivePosition | None:
+        """Store the results so far, flush the archive and store the snapshot of each of
+        ``mills`` (default: every mill) with the archive position, one transaction per mill."""
         self.commit()
         position = self.archive.flush() if self.archive is not None else None
-        state = {
-            "pipelines": {m: p.snapshot() for m, p in self.pipelines.items()},
-            "last_seq": self._last_seqs(),
-        }
-        with self.store.transaction() as db:
-            Store.put_checkpoint(db, self._clock(), position.as_dict() if position else {}, state)
-        self._last_checkpoint = time.monotonic()
+        for mill_id in self.pipelines if mills is None else mills:
+            self._checkpoint_mill(mill_id, position)
         return position
 
-    def _last_seqs(self) -> dict[str, dict[str, int | None]]:
-        return {m: {c: h.last_seq for c, h in mh.channels.items()} for m, mh in self.health.items()}
+    def _checkpoint_due(self) -> None:
+        """Checkpoint the mills whose turn has come: at least one, then as many as fit in
+        :data:`~service.checkpoints.STEP_BUDGET_S` (the rest at the next steps)."""
+        due = self._schedule.due()
+        if not due:
+            return
+        started = time.monotonic()
+        position = self.checkpoint(due[:1])
+        for mill_id in due[1:]:
+            if time.monotonic() - started >= STEP_BUDGET_S:
+                return
+            self._checkpoint_mill(mill_id, position)
+
+    def _checkpoint_mill(self, mill_id: str, position: ArchivePosition | None) -> None:
+        """One mill's snapshot (exact at ``position``: taken on this thread between blocks),
+        serialised and stored at once, so it shares nothing mutable with the live pipeline."""
+        seqs = {c: h.last_seq for c, h in self.health[mill_id].channels.items()}
+        state = {"pipelines": {mill_id: self.pipelines[mill_id].snapshot()},
+                 "last_seq": {mill_id: seqs}}  # fmt: skip
+        where = position.as_dict() if position else {}
+        with self.store.transaction() as db:
+            size = Store.put_checkpoint(db, mill_id, self._clock(), where, state)
+        self.checkpoints_written += 1
+        self.checkpoint_bytes += size
+        self._schedule.done(mill_id)
 
     # ------------------------------------------------------------------ recovery
     def recover(self, reader: ArchiveReader) -> int:
-        """Restore the newest checkpoint and replay the archive after it; returns the number of
-        archived blocks replayed. Call before going live."""
-        checkpoint = self.store.latest_checkpoint()
-        after = None
-        if checkpoint is not None:
-            position, state = checkpoint
-            self._restore(state)
-            after = ArchivePosition.from_dict(position) if position else None
-        replayed = 0
-        for archived in reader.blocks(after=after):
-            self.handle(
-                QueuedBlock(archived.key, archived.payload, archived.log_time_ns), archive=False
-            )
-            replayed += 1
-            if replayed % BATCH_BLOCKS == 0:
+        """Restore every mill's newest checkpoint and replay the archive after them; returns
+        the number of archived blocks replayed. Call before going live.
+
+        The replay starts at the earliest mill's position; each mill skips the blocks before
+        its own position. A configured mill without a checkpoint starts fresh at that earliest
+        position (at the archive's start when no mill has one)."""
+        covered = self._restore(self.store.latest_checkpoints())
+        replayed = skipped = 0
+        lane = BatchLane(self)  # whole batches of blocks as arrays; irregular ones one by one
+        batches = archive_batches(reader.directory, reader.prefix,
+                                  after=earliest(covered.values()),
+                                  min_messages=REPLAY_BATCH_BLOCKS // 2)  # fmt: skip
+        for batch in batches:
+            handled, skip = lane.handle(batch, covered)
+            replayed, skipped = replayed + handled, skipped + skip
+            if replayed // REPLAY_BATCH_BLOCKS != (replayed - handled) // REPLAY_BATCH_BLOCKS:
                 self.commit()
         self.commit()
+        self._schedule.restart()
         log.info(
-            "recovered: checkpoint %s, %d archived blocks replayed",
-            "found" if checkpoint else "none",
+            "recovered: %d mill checkpoint(s), %d archived blocks replayed, %d skipped (already "
+            "in their mill's checkpoint)",
+            len(covered),
             replayed,
+            skipped,
         )
         return replayed
 
-    def _restore(self, state: dict[str, Any]) -> None:
-        for mill_id, snap in state.get("pipelines", {}).items():
-            if mill_id in self.pipelines:
+    def _restore(
+        self, parts: dict[str, tuple[dict[str, Any], dict[str, Any]]]
+    ) -> dict[str, ArchivePosition | None]:
+        """Load each part's snapshots; returns the archive position each mill was restored at."""
+        covered: dict[str, ArchivePosition | None] = {}
+        for position, state in parts.values():
+            at = ArchivePosition.from_dict(position) if position else None
+            for mill_id, snap in state.get("pipelines", {}).items():
+                if mill_id not in self.pipelines:
+                    log.warning("checkpoint holds mill %s, which is no longer configured", mill_id)
+                    continue
                 self.pipelines[mill_id].restore(snap)
-            else:
-                log.warning("checkpoint holds mill %s, which is no longer configured", mill_id)
-        for mill_id, seqs in state.get("last_seq", {}).items():
-            for channel, seq in seqs.items():
-                if mill_id in self.health and channel in self.health[mill_id].channels:
-                    self.health[mill_id].channels[channel].last_seq = seq
+                covered[mill_id] = at
+            for mill_id, seqs in state.get("last_seq", {}).items():
+                for channel, seq in seqs.items():
+                    if mill_id in self.health and channel in self.health[mill_id].channels:
+                        self.health[mill_id].channels[channel].last_seq = seq
+        return covered
 
     # ------------------------------------------------------------------ reading
     def status(self, stale_after_s: float) -> dict[str, Any]:

@@ -81,3 +81,55 @@ def test_snapshot_restore_keeps_pending_blocks():
     assert len(frames) == 1
     np.testing.assert_array_equal(frames[0].data["x"], np.arange(10.0))
     assert b.push("x", 0, 1000.0, np.zeros(10)) == [] and b.dropped_blocks == 1
+
+
+def _state(al: FrameAligner, frames) -> tuple:
+    stream = {c: np.concatenate([f.data[c] for f in frames]) if frames else np.empty(0)
+              for c in al.channels}  # fmt: skip
+    pending = {t: {c: x.tobytes() for c, x in g.items()} for t, g in al._pending.items()}
+    counters = (al.missing_blocks, al.gap_samples, al.dropped_blocks)
+    return ({c: x.tobytes() for c, x in stream.items()}, pending, al._next_t0, counters)
+
+
+def _arrivals(rng: np.random.Generator, n_ch: int, n_groups: int, mess: float) -> list:
+    """(channel, group) in a gateway-like order: time steps in order, channels shuffled a
+    little, with some lag, repeats, drops and jumps when ``mess`` > 0."""
+    out = []
+    for g in range(n_groups):
+        chans = list(rng.permutation(n_ch)) if rng.random() < 0.5 else list(range(n_ch))
+        out += [(int(c), g) for c in chans if rng.random() >= mess / 4]
+    if mess and out:
+        for _ in range(int(mess * 10)):
+            i, j = rng.integers(0, len(out), 2)
+            out[i], out[j] = out[j], out[i]
+        out += [out[int(rng.integers(0, len(out)))] for _ in range(int(mess * 3))]
+    return out
+
+
+def test_pushing_blocks_at_once_equals_pushing_them_one_by_one():
+    rng = np.random.default_rng(5)
+    regular = 0
+    for trial in range(300):
+        n_ch, mess = int(rng.integers(1, 5)), float(rng.choice([0.0, 0.0, 0.3, 1.0]))
+        names = [f"c{i}" for i in range(n_ch)]
+        one, bulk = FrameAligner(names, FS, max_pending=3), FrameAligner(names, FS, max_pending=3)
+        got_one, got_bulk = [], []
+        start = T0 + trial
+        for _ in range(3):  # consecutive batches: leftovers carry over as pending groups
+            n_groups = int(rng.integers(1, 12))
+            arr = _arrivals(rng, n_ch, n_groups, mess)
+            start += (n_groups + (int(rng.integers(0, 3)) if mess else 0)) * STEP
+            chan = np.array([c for c, _ in arr], dtype=np.int64)
+            t0 = np.array([start - n_groups * STEP + g * STEP for _, g in arr], dtype=np.int64)
+            rows = rng.standard_normal((len(arr), 100))
+            for k in range(len(arr)):
+                got_one += one.push(names[chan[k]], int(t0[k]), FS, rows[k])
+            frames = bulk.push_blocks(chan, t0, rows) if len(arr) else None
+            if frames is None:
+                for k in range(len(arr)):
+                    got_bulk += bulk.push(names[chan[k]], int(t0[k]), FS, rows[k])
+            else:
+                regular += 1
+                got_bulk += frames
+            assert _state(bulk, got_bulk) == _state(one, got_one)
+    assert regular > 450, regular  # most batches took the bulk path

@@ -18,6 +18,7 @@ from analytics.harmonics import (
     HarmonicWindow,
     harmonics_report,
     is_running,
+    stagger_for,
     window_response,
 )
 from analytics.mill_config import MillConfig
@@ -195,6 +196,64 @@ def test_gaps_and_dropouts_restart_the_segmentation(short_run) -> None:
         assert all(a >= sc.t_ns(30_500) or b <= sc.t_ns(30_000) for a, b in w.segments)
     state = tracker.snapshot()
     assert state["len"] <= tracker.capacity  # bounded
+
+
+def _interrupted(sc: Scene, data: dict) -> list[tuple[int, dict, bool]]:
+    """Frames ``(t0_ns, frame, running)`` of a run with a stop, a time gap and a dropout."""
+    holed = {k: v.copy() for k, v in data.items()}
+    holed["motor_torque"][120_000:120_010] = np.nan
+    spans = [(0, 45_000, 0), (45_000, 48_000, None), (48_000, 100_000, 0),
+             (100_000, 150_000, 5 * 10**9)]  # fmt: skip
+    frames = []
+    for a, b, shift in spans:
+        for lo in range(a, b, 700):
+            hi = min(b, lo + 700)
+            frame = {k: v[lo:hi] for k, v in holed.items()}
+            frames.append((sc.t_ns(lo) + (shift or 0), frame, shift is not None))
+    return frames
+
+
+def test_stagger_moves_when_windows_come_not_what_they_hold() -> None:
+    sc = scene("steady", config(), 150.0, seed=3)
+    data = sc.render(0, sc.n_samples)
+    frames = _interrupted(sc, data)
+    plain = HarmonicTracker(sc.config, settings=SHORT)
+    reference = [w for t, f, run in frames for w in plain.feed(t, sc.fs, f, run)]
+    assert len(reference) >= 3 and plain.counters["breaks"] >= 3
+    rng = np.random.default_rng(5)
+    for stagger in (0.3, 0.999):
+        tracker = HarmonicTracker(sc.config, settings=SHORT, stagger=stagger)
+        assert tracker.defer_samples > 0.2 * stagger * 20_000
+        out, late = [], 0
+        for i, (t, f, run) in enumerate(frames):
+            got = tracker.feed(t, sc.fs, f, run)
+            late += len(got) < len(plain_windows_at(frames, i, sc))
+            out += got
+            if rng.random() < 0.1:  # snapshot and restore anywhere, deferral included
+                snap = json.loads(json.dumps(tracker.snapshot()))
+                tracker = HarmonicTracker.restore(sc.config, snap)
+        out += tracker.flush()
+        assert same(out, reference) and late > 0
+        assert harmonics_report(tracker) == harmonics_report(plain)
+        assert tracker.snapshot()["len"] <= tracker.capacity + tracker.defer_samples
+
+
+def plain_windows_at(frames: list, i: int, sc: Scene) -> list[HarmonicWindow]:
+    """Windows an unstaggered tracker returns at frame ``i`` (replayed from the start)."""
+    if i not in _PLAIN_CACHE:
+        plain = HarmonicTracker(sc.config, settings=SHORT)
+        per = [plain.feed(t, sc.fs, f, run) for t, f, run in frames]
+        _PLAIN_CACHE.update(enumerate(per))
+    return _PLAIN_CACHE[i]
+
+
+_PLAIN_CACHE: dict[int, list[HarmonicWindow]] = {}
+
+
+def test_stagger_for_spreads_mill_ids() -> None:
+    fractions = [stagger_for(f"mill-{i:03d}") for i in range(200)]
+    assert all(0.0 <= f < 1.0 for f in fractions) and stagger_for("a") == stagger_for("a")
+    assert np.histogram(fractions, bins=4, range=(0, 1))[0].min() > 30
 
 
 def test_degenerate_inputs_never_raise() -> None:

@@ -73,3 +73,66 @@ def test_speed_from_tacho_pulses_when_no_rpm_channel_is_configured():
     assert not rep["starts"][0]["failed"]
     assert rep["steady_state"], "running was recognised from the tacho-derived speed"
     assert np.isfinite(rep["steady_state"][0]["speed_pct"])
+
+
+def _queued_report(config, scene, names, rng, max_batch: int) -> str:
+    """Blocks added in random batches of 1..max_batch block times, processed in between."""
+    m = MillMonitor(config)
+    block_times = list(range(0, scene.n_samples, 100))
+    data = scene.render(0, scene.n_samples)
+    k = 0
+    while k < len(block_times):
+        n = int(rng.integers(1, max_batch + 1))
+        for a in block_times[k : k + n]:
+            for name, x in data.items():
+                if name in names:
+                    m.add(name, scene.t_ns(a), scene.fs, x[a : a + 100])
+        k += n
+        m.process()
+    return report(m)
+
+
+def test_long_chunks_give_the_block_by_block_report_bitwise():
+    """Starts, stops, barring, faults, steady windows, damage and spectra: the analysis of
+    chunks up to MAX_CHUNK_S equals the analysis block by block (random batching)."""
+    from ingest.simulator import BarringEvent, DropoutEvent, SpikesEvent, StartEvent, TripEvent
+
+    rng = np.random.default_rng(3)
+    for mill, drop_rpm in (("sag-5200-lrs.toml", False), ("ball-dual-lrs.toml", True)):
+        full = load_mill_config(MILLS / mill)
+        channels = {n: c for n, c in full.channels.items() if not (drop_rpm and c.kind == "rpm")}
+        config = full.model_copy(update={"channels": channels})
+        events = (StartEvent(at_s=10.0), TripEvent(at_s=130.0), BarringEvent(at_s=200.0, sweeps=1),
+                  SpikesEvent(at_s=20.0, bursts=15, spread_s=300.0),
+                  DropoutEvent(at_s=90.0, duration_s=1.5))  # fmt: skip
+        scene = get_scene("steady", full, seed=7, duration_s=420.0, initial_state="stopped",
+                          events=events)  # fmt: skip
+        one = MillMonitor(config)
+        for name, t0, fs, x in blocks(scene, 100):
+            if name in channels:
+                one.push(name, t0, fs, x)
+        want = report(one)
+        assert _queued_report(config, scene, channels, rng, 400) == want
+        rep = json.loads(want)
+        assert rep["starts"] and rep["barring"] and rep["steady_state"]
+
+
+def test_process_until_stops_at_that_sample_and_snapshot_needs_an_empty_queue():
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    scene = get_scene("steady", config, seed=1, duration_s=30.0)
+    m = MillMonitor(config)
+    for b in blocks(scene, 100):
+        m.add(*b)
+    assert m.backlog == 30_000
+    try:
+        m.snapshot()
+    except RuntimeError:
+        pass
+    else:
+        raise AssertionError("a snapshot with frames waiting must be refused")
+    for until in (1, 7_777, 7_777, 20_000):
+        m.process(until=until)
+        assert m.analyzer.n == until
+    m.process()
+    assert m.backlog == 0 and m.analyzer.n == 30_000 - m.faults.delay
+    assert m.snapshot()["kind"] == "mill_monitor"

@@ -52,6 +52,7 @@ def test_tiny_increments_are_not_lost_on_a_large_total() -> None:
     assert _rel_error(total.value, exact) < EPS
 
 
+@settings(deadline=None)  # the first example loads the compiled exact sum (analytics.exact_sum)
 @given(st.lists(st.floats(0.0, 1e300), max_size=200), st.integers(1, 50))
 def test_exact_blocks_give_the_exact_sum_for_any_blocking(values: list[float], size: int) -> None:
     total = MinerSum()

@@ -56,3 +56,77 @@ def test_a_new_run_starts_a_new_window():
     m.end_run()
     out = m.feed(20_000, speed[5000:], {k: v[5000:] for k, v in data.items()})
     assert [w.sample for w in out] == [20_000]
+
+
+class _NumpyFold:
+    """The numpy formulation the compiled fold replaced (reference for bitwise equality)."""
+
+    def __init__(self, m: SteadyStateMeter) -> None:
+        self.m = m
+
+    def fold(self, speed: np.ndarray, data: dict[str, np.ndarray]) -> None:
+        m = self.m
+        if speed.size == 0:
+            return
+        s = np.nan_to_num(speed, nan=0.0)
+        revs = np.cumsum(np.concatenate(([m.revs], s * m.rev_per_sample)))[1:]
+        r = np.floor(revs).astype(np.int64)
+        m.revs = float(revs[-1])
+        m.speed_sum = float(np.cumsum(np.concatenate(([m.speed_sum], s)))[-1])
+        starts = np.concatenate(([0], np.flatnonzero(np.diff(r)) + 1))
+        first_new = m.rev_index != int(r[0])
+        keep_partial = first_new and m.rev_index > int(m.first_rev)
+        for name, x in data.items():
+            ok = np.isfinite(x)
+            m.sums[name] = float(np.cumsum(np.concatenate(([m.sums[name]], x[ok])))[-1])
+            m.counts[name] += int(ok.sum())
+            hi = np.maximum.reduceat(np.where(ok, x, -np.inf), starts)
+            lo = np.minimum.reduceat(np.where(ok, x, np.inf), starts)
+            self.merge(name, hi, lo, first_new, keep_partial, r[starts])
+        m.rev_index = int(r[-1])
+
+    def merge(self, name, hi, lo, first_new, keep_partial, rev_numbers) -> None:
+        m = self.m
+        if first_new:
+            if keep_partial:
+                self.keep(name, m.part_max[name], m.part_min[name])
+            pm, pn = float(hi[0]), float(lo[0])
+        else:
+            pm = max(m.part_max[name], float(hi[0]))
+            pn = min(m.part_min[name], float(lo[0]))
+        if hi.size == 1:
+            m.part_max[name], m.part_min[name] = pm, pn
+            return
+        if int(rev_numbers[0]) > m.first_rev:
+            self.keep(name, pm, pn)
+        for h, lw in zip(hi[1:-1].tolist(), lo[1:-1].tolist(), strict=True):
+            self.keep(name, h, lw)
+        m.part_max[name], m.part_min[name] = float(hi[-1]), float(lo[-1])
+
+    def keep(self, name: str, h: float, lw: float) -> None:
+        if np.isfinite(h) and np.isfinite(lw):
+            self.m.rev_max[name].append(h)
+            self.m.rev_min[name].append(lw)
+
+
+def test_compiled_fold_equals_the_numpy_formulation_bitwise():
+    rng = np.random.default_rng(7)
+    n = 40_000
+    speed, data = signal(n)
+    speed = speed * (1.0 + 0.05 * rng.standard_normal(n))
+    data = {k: v + rng.standard_normal(n) for k, v in data.items()}
+    for k, (a, b) in enumerate(rng.integers(0, n, (30, 2))):  # dropouts and infinities
+        data["tq" if k % 2 else "b"][min(a, b) : min(a, b) + 50] = np.nan
+        speed[a : a + 3] = np.nan
+    data["b"][1234] = np.inf
+    fast, slow = meter(), meter()
+    reference = _NumpyFold(slow)
+    slow._fold = reference.fold  # type: ignore[method-assign]
+    cuts = [0, *sorted(rng.choice(n, 200, replace=False).tolist()), n]
+    got, want = [], []
+    for a, b in itertools.pairwise(cuts):
+        piece = {k: v[a:b] for k, v in data.items()}
+        got += fast.feed(a, speed[a:b], piece)
+        want += slow.feed(a, speed[a:b], piece)
+    assert got and json.dumps([w.__repr__() for w in got]) == json.dumps([repr(w) for w in want])
+    assert fast.snapshot() == slow.snapshot()

@@ -6,8 +6,11 @@ Starts the real runtime (zenoh on 127.0.0.1, MCAP archive, SQLite store) and N s
 gateways in two separate processes (one zenoh session and thread per mill, publishing the
 5.2 MW mill's steady scene at real time in 100-sample blocks). Reports the latency from the
 zenoh callback enqueuing a block to the commit of the batch holding its results (p50, p99,
-max), queue drops, and the worker process's peak resident memory at the start and the end.
-Worker and gateways share this machine's two cores.
+max), queue drops, the per-mill checkpoints written (count, MB; each mill every
+``--checkpoint-s``, the mills' turns spread over the interval), the worker process's CPU time
+(worker thread, zenoh threads, store) and its peak resident memory at the start and the end.
+Worker and gateways share this machine's two cores: on a busy machine the wall-clock latency
+mostly measures the other processes, the CPU time does not.
 """
 
 from __future__ import annotations
@@ -36,6 +39,11 @@ GATEWAY_PROCESSES = 2
 
 def rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
 
 
 def gateway(config: MillConfig, port: int, seconds: float, stop: threading.Event) -> None:
@@ -69,7 +77,7 @@ def run(n_mills: int, seconds: float, checkpoint_s: float) -> dict:
         })  # fmt: skip
         runtime = ServiceRuntime(settings, {c.id: c for c in configs}, AnalyzerPipeline)
         runtime.start()
-        rss0 = rss_mb()
+        rss0, cpu0 = rss_mb(), cpu_s()
         ctx = multiprocessing.get_context("spawn")
         procs = [ctx.Process(target=gateways, args=(configs[i::GATEWAY_PROCESSES], port, seconds))
                  for i in range(GATEWAY_PROCESSES)]  # fmt: skip
@@ -78,11 +86,15 @@ def run(n_mills: int, seconds: float, checkpoint_s: float) -> dict:
         for p in procs:
             p.join(timeout=seconds + 120)
         time.sleep(1.0)
-        latency = runtime.worker.latency.quantiles()
+        worker = runtime.worker
+        latency = worker.latency.quantiles()
         dropped = runtime.queue.dropped
+        checkpoints = {"checkpoints": worker.checkpoints_written,
+                       "checkpoint_mb": worker.checkpoint_bytes / 2**20}  # fmt: skip
+        cpu = cpu_s() - cpu0
         runtime.stop()
     return {"mills": n_mills, "seconds": seconds, "checkpoint_s": checkpoint_s, **latency,
-            "queue_dropped": dropped,
+            "queue_dropped": dropped, **checkpoints, "worker_cpu_s": cpu,
             "rss_mb_start": rss0, "rss_mb_end": rss_mb()}  # fmt: skip
 
 

@@ -56,16 +56,42 @@ def test_damage_rows_are_set_not_added(tmp_path):
         assert store.damage("m1", since_day="2026-11-22") == []
 
 
-def test_only_the_newest_checkpoints_are_kept(tmp_path):
+def test_only_the_newest_checkpoints_of_each_part_are_kept(tmp_path):
     with Store(tmp_path / "s.db") as store:
-        assert store.latest_checkpoint() is None
+        assert store.latest_checkpoint() is None and store.latest_checkpoints() == {}
         for i in range(CHECKPOINTS_KEPT + 2):
-            with store.transaction() as db:
-                Store.put_checkpoint(db, i, {"file": "a.mcap", "index": i}, {"n": i})
-        position, state = store.latest_checkpoint()
-        assert position["index"] == state["n"] == CHECKPOINTS_KEPT + 1
-        count = store._query("SELECT COUNT(*) FROM checkpoints", ())[0][0]
-        assert count == CHECKPOINTS_KEPT
+            for part in ("m1", "m2"):
+                with store.transaction() as db:
+                    state = {"pipelines": {part: {"n": i}}, "when": i}
+                    Store.put_checkpoint(db, part, i, {"file": "a.mcap", "index": i}, state)
+        with store.transaction() as db:  # m1 again, later than m2
+            Store.put_checkpoint(db, "m1", 9, {"file": "a.mcap", "index": 9}, {"pipelines": {}})
+        latest = store.latest_checkpoints()
+        assert latest["m2"] == ({"file": "a.mcap", "index": CHECKPOINTS_KEPT + 1},
+                                {"pipelines": {"m2": {"n": CHECKPOINTS_KEPT + 1}},
+                                 "when": CHECKPOINTS_KEPT + 1})  # fmt: skip
+        assert latest["m1"][0]["index"] == 9
+        positions, state = store.latest_checkpoint()  # the parts merged key by key
+        assert positions == {"m1": latest["m1"][0], "m2": latest["m2"][0]}
+        assert state["pipelines"] == {"m2": {"n": CHECKPOINTS_KEPT + 1}}
+        count = store._query("SELECT part, COUNT(*) FROM checkpoint_parts GROUP BY part", ())
+        assert dict(count) == {"m1": CHECKPOINTS_KEPT, "m2": CHECKPOINTS_KEPT}
+
+
+def test_checkpoints_of_the_old_format_are_dropped_with_a_warning(tmp_path, caplog):
+    path = tmp_path / "s.db"
+    Store(path).close()
+    db = sqlite3.connect(path)  # what schema 3 had: one whole-worker checkpoint table
+    db.execute("DROP TABLE checkpoint_parts")
+    db.execute("CREATE TABLE checkpoints (id INTEGER PRIMARY KEY, created_ns INTEGER NOT NULL, "
+               "position_json TEXT NOT NULL, state_json TEXT NOT NULL)")  # fmt: skip
+    db.execute("INSERT INTO checkpoints VALUES (1, 5, '{}', '{\"pipelines\": {}}')")
+    db.execute("PRAGMA user_version = 3")
+    db.commit()
+    db.close()
+    with Store(path) as store:
+        assert store.schema_version == SCHEMA_VERSION and store.latest_checkpoint() is None
+    assert "replaying the whole archive once" in caplog.text
 
 
 def test_a_failed_transaction_leaves_nothing_behind(tmp_path):

@@ -1,0 +1,151 @@
+"""The worker's fast lane for many archived blocks at once (replay after a crash).
+
+:meth:`service.worker.Worker.handle` costs ~25 µs a block in Python (decode, health, routing,
+alignment); replaying an hour of 50 mills is 7.2 million blocks. :class:`BatchLane` takes a
+:class:`~ingest.archive_batches.MessageBatch` and, per mill, treats the blocks as arrays when
+they are *regular* — every block well-formed at the mill's rate, all of one length and dtype, and
+each channel's sequence numbers following on from the last one seen (no gap, no repeat). Then the
+health counters move in one step per channel, the samples are gathered in one step, and the
+mill's aligner takes them all at once (:meth:`analytics.mill_monitor.MillMonitor.add_blocks`,
+which itself falls back block by block when the timing is not regular). A mill with anything
+irregular in the batch — a malformed or foreign block, a gap, a repeat — goes block by block
+through ``Worker.handle`` in arrival order instead, so every count, data-quality event and sample
+is exactly what block-by-block handling gives. Blocks on keys of no configured mill go through
+``Worker.handle`` too (they are only counted).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numba import njit
+
+from ingest.archive import ArchivePosition, archive_file_order
+from ingest.archive_batches import MessageBatch
+from ingest.wire import DType, decode_headers
+from service.block_queue import QueuedBlock
+
+if TYPE_CHECKING:
+    from service.worker import Worker
+
+__all__ = ["BatchLane"]
+
+log = logging.getLogger(__name__)
+
+_NUMPY = {int(d): d.numpy for d in DType}
+
+
+@njit(cache=True, nogil=True)
+def _gather(buf, starts, width):
+    """The ``width`` bytes at each of ``starts`` in ``buf``, back to back (samples of blocks)."""
+    out = np.empty(starts.shape[0] * width, dtype=np.uint8)
+    for k in range(starts.shape[0]):
+        out[k * width : (k + 1) * width] = buf[starts[k] : starts[k] + width]
+    return out
+
+
+class BatchLane:
+    """Hands message batches to a :class:`~service.worker.Worker` (see the module docstring).
+    ``regular_blocks`` / ``slow_blocks`` count what took which path."""
+
+    def __init__(self, worker: Worker) -> None:
+        self.worker = worker
+        self.mills = list(worker.mills)
+        self._channels = {m: list(c.channels) for m, c in worker.mills.items()}
+        self.regular_blocks = 0
+        self.slow_blocks = 0
+
+    def handle(
+        self, batch: MessageBatch, covered: dict[str, ArchivePosition | None] | None = None
+    ) -> tuple[int, int]:
+        """Handle the messages of ``batch`` in order, except those a mill's checkpoint in
+        ``covered`` already holds (see :func:`service.checkpoints.covers`); returns (handled,
+        skipped)."""
+        uniq, inverse = np.unique(batch.channel, return_inverse=True)
+        routes = [self.worker.routes.get(batch.topics[int(c)]) for c in uniq.tolist()]
+        mill_of = np.array([-1 if r is None else self.mills.index(r[0]) for r in routes])
+        chan_of = np.array([-1 if r is None else self._channels[r[0]].index(r[1]) for r in routes])
+        mill = mill_of[inverse]
+        chan = chan_of[inverse]
+        keep = self._not_covered(batch, mill, covered or {})
+        head, ok = decode_headers(batch.buf, batch.offset, batch.length)
+        for k in np.flatnonzero(keep & (mill < 0)).tolist():
+            self._slow(batch, k)
+        for m in np.unique(mill[keep & (mill >= 0)]).tolist():
+            idx = np.flatnonzero(keep & (mill == m))
+            if not self._regular(self.mills[m], batch, idx, chan[idx], head[idx], ok[idx]):
+                for k in idx.tolist():
+                    self._slow(batch, k)
+        handled = int(np.count_nonzero(keep))
+        return handled, len(batch) - handled
+
+    def _not_covered(
+        self, batch: MessageBatch, mill: np.ndarray, covered: dict[str, ArchivePosition | None]
+    ) -> np.ndarray:
+        keep = np.ones(len(batch), dtype=bool)
+        for m, position in covered.items():
+            if position is None or m not in self.mills:
+                continue
+            mine = mill == self.mills.index(m)
+            if position.file == batch.file:
+                keep &= ~(mine & (batch.index < position.index))
+            elif archive_file_order(batch.file) < archive_file_order(position.file):
+                keep &= ~mine
+        return keep
+
+    def _slow(self, batch: MessageBatch, k: int) -> None:
+        self.slow_blocks += 1
+        key = batch.topics[int(batch.channel[k])]
+        item = QueuedBlock(key, batch.payload(k), int(batch.log_time[k]))
+        self.worker.handle(item, archive=False)
+
+    def _regular(
+        self, mill_id: str, batch: MessageBatch, idx: np.ndarray, chan: np.ndarray,
+        head: np.ndarray, ok: np.ndarray,
+    ) -> bool:  # fmt: skip
+        """Handle a mill's blocks as arrays if they are regular; False (nothing done) if not."""
+        fs = float(self.worker.mills[mill_id].sample_rate_hz)
+        n, code = int(head["n"][0]), int(head["dtype"][0])
+        if not (ok.all() and n > 0 and np.all(head["fs"] == fs) and np.all(head["n"] == n)
+                and np.all(head["dtype"] == code)):  # fmt: skip
+            return False
+        health = self.worker.health[mill_id].channels
+        names = self._channels[mill_id]
+        per_channel = {}
+        for ci in np.unique(chan).tolist():
+            sel = np.flatnonzero(chan == ci)
+            seq = head["seq"][sel]
+            last = health[names[ci]].last_seq
+            first, final = int(seq[0]), int(seq[-1])
+            if (last is not None and first != last + 1) or final - first != sel.size - 1:
+                return False
+            if np.any(np.diff(seq) != 1):
+                return False
+            per_channel[ci] = sel
+        start = batch.offset[idx] + head["header_len"].astype(np.int64)
+        width = n * _NUMPY[code].itemsize
+        raw = _gather(batch.buf, start, width).view(_NUMPY[code]).reshape(len(idx), n)
+        t0 = head["t0_ns"].astype(np.int64)
+        self._observe(health, names, per_channel, head, raw, batch.log_time[idx], n, fs)
+        self.worker.blocks_handled += len(idx)
+        self.regular_blocks += len(idx)
+        self.worker.pipelines[mill_id].add_blocks(chan, t0, raw)  # type: ignore[attr-defined]
+        self.worker._unfinished[mill_id] = None
+        return True
+
+    @staticmethod
+    def _observe(health, names, per_channel, head, raw, recv, n: int, fs: float) -> None:
+        """:meth:`~service.health.ChannelHealth.observe` of each block, per channel at once."""
+        floats = raw.dtype.kind == "f"
+        duration = round(n * 1e9 / fs)
+        for ci, sel in per_channel.items():
+            h = health[names[ci]]
+            h.blocks += sel.size
+            h.samples += sel.size * n
+            if floats:
+                h.nonfinite_samples += sel.size * n - int(np.count_nonzero(np.isfinite(raw[sel])))
+            h.last_seq = int(head["seq"][sel[-1]])
+            h.last_sample_ns = int(head["t0_ns"][sel[-1]]) + duration
+            h.last_recv_ns = int(recv[sel[-1]])

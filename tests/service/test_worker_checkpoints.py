@@ -1,0 +1,164 @@
+"""Per-mill checkpoints: the turns spread over the interval, and a recovery from mills
+checkpointed at different archive positions equals the uninterrupted run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from ingest.archive import ArchivedBlock, ArchivePosition, ArchiveReader, ArchiveWriter
+from ingest.mill_files import load_mill_config
+from ingest.scene_blocks import scene_blocks
+from ingest.scene_publisher import starting_now
+from ingest.scenes import get_scene
+from ingest.wire import decode_block
+from service.block_queue import BlockQueue, QueuedBlock
+from service.checkpoints import CheckpointSchedule, covers, earliest
+from service.mill_pipeline import AnalyzerPipeline
+from service.store import Store
+from service.worker import Worker
+
+MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
+BASE = load_mill_config(MILL)
+CONFIGS = {m: BASE.model_copy(update={"id": m}) for m in ("mill-a", "mill-b")}
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_turns_are_spread_over_the_interval_and_late_ones_do_not_pile_up() -> None:
+    clock = FakeClock()
+    schedule = CheckpointSchedule(["c", "a", "b", "d"], 60.0, clock)
+    seen = []
+    for _ in range(8):  # 2 minutes in 15 s steps
+        clock.t += 15.0
+        for part in schedule.due():
+            seen.append((clock.t - 100.0, part))
+            schedule.done(part)
+    assert seen == [(15.0, "a"), (30.0, "b"), (45.0, "c"), (60.0, "d"),
+                    (75.0, "a"), (90.0, "b"), (105.0, "c"), (120.0, "d")]  # fmt: skip
+    clock.t += 600.0  # the worker was busy for 10 minutes: everyone is due, longest first
+    assert schedule.due() == ["a", "b", "c", "d"]
+    schedule.done("a")
+    assert schedule.due() == ["b", "c", "d"]
+    clock.t += 30.0
+    assert "a" in schedule.due()  # half an interval later, not at once and not a burst
+
+
+def test_interval_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="interval"):
+        CheckpointSchedule(["a"], 0.0)
+
+
+def test_covers_and_earliest_follow_archive_order() -> None:
+    f1, f2 = "w_20261121T000000Z.mcap", "w_20261121T010000Z.mcap"
+    at = ArchivePosition(f2, 5)
+    assert covers(at, ArchivedBlock("k", 0, b"", f1, 900))
+    assert covers(at, ArchivedBlock("k", 0, b"", f2, 4))
+    assert not covers(at, ArchivedBlock("k", 0, b"", f2, 5))
+    assert not covers(None, ArchivedBlock("k", 0, b"", f1, 0))
+    assert earliest([at, ArchivePosition(f1, 7), ArchivePosition(f2, 1)]) == ArchivePosition(f1, 7)
+    assert earliest([at, None]) is None and earliest([]) is None
+
+
+def _blocks() -> list[QueuedBlock]:
+    """Both mills' start scenes, interleaved in time order as a gateway would send them."""
+    out = []
+    for seed, config in enumerate(CONFIGS.values()):
+        scene = starting_now(get_scene("start-lrs", config, seed=seed + 5, duration_s=20.0))
+        out += [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
+    return sorted(out, key=lambda b: b.recv_ns)
+
+
+def _worker(store: Store, archive: ArchiveWriter | None) -> Worker:
+    pipelines = {m: AnalyzerPipeline(c) for m, c in CONFIGS.items()}
+    return Worker(CONFIGS, pipelines, store, archive, checkpoint_seconds=3600.0)  # type: ignore[arg-type]
+
+
+def _damage(worker: Worker) -> dict[str, str]:
+    out = {}
+    for mill_id, pipeline in worker.pipelines.items():
+        monitor = pipeline.monitor  # type: ignore[attr-defined]
+        monitor.flush()
+        out[mill_id] = json.dumps(monitor.report()["damage"], sort_keys=True)
+    return out
+
+
+def test_recovery_from_mills_checkpointed_at_different_positions(tmp_path) -> None:
+    blocks = _blocks()
+    cut_a, cut_b, crash = len(blocks) // 4, len(blocks) // 2, 3 * len(blocks) // 4
+    with Store(tmp_path / "ref.db") as store:
+        reference = _worker(store, None)
+        for item in blocks:
+            reference.handle(item)
+        reference.commit()
+        expected = _damage(reference)
+
+    with Store(tmp_path / "mw.db") as store:
+        archive = ArchiveWriter(tmp_path / "archive", "w")
+        first = _worker(store, archive)
+        for i, item in enumerate(blocks[:crash]):
+            if i == cut_a:
+                first.checkpoint(["mill-a"])
+            if i == cut_b:
+                first.checkpoint(["mill-b"])
+            first.handle(item)
+        archive.close()  # the crash: every handled block reached the archive
+        assert first.checkpoints_written == 2 and first.checkpoint_bytes > 0
+        positions, _ = store.latest_checkpoint()
+        assert positions["mill-a"]["index"] < positions["mill-b"]["index"]
+
+        second = _worker(store, ArchiveWriter(tmp_path / "archive", "w"))
+        replayed = second.recover(ArchiveReader(tmp_path / "archive", "w"))
+        # from mill-a's position on, except mill-b's blocks that its own checkpoint holds
+        held_by_b = sum(1 for b in blocks[cut_a:cut_b] if second.routes[b.key][0] == "mill-b")
+        assert replayed == crash - cut_a - held_by_b > 0
+        for item in blocks[crash:]:
+            second.handle(item)
+        second.commit()
+        assert _damage(second) == expected
+        second.archive.close()  # type: ignore[union-attr]
+
+
+def test_steps_checkpoint_one_mill_at_a_time_spread_over_the_interval(tmp_path) -> None:
+    clock = FakeClock()
+    with Store(tmp_path / "mw.db") as store:
+        worker = _worker(store, None)
+        worker._schedule = CheckpointSchedule(CONFIGS, 60.0, clock)
+        queue = BlockQueue(10)
+        written = []
+        for _ in range(12):  # two minutes in 10 s steps
+            clock.t += 10.0
+            worker.step(queue, timeout_s=0.0)
+            written.append(worker.checkpoints_written)
+        assert written == [0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4]
+        assert set(store.latest_checkpoints()) == set(CONFIGS)
+
+
+def test_the_live_analyzer_keeps_few_windows_yet_every_one_is_stored(monkeypatch) -> None:
+    monkeypatch.setattr("service.mill_pipeline.WINDOWS_KEPT", 2)
+    config = CONFIGS["mill-a"]
+    scene = get_scene("steady", config, seed=2, duration_s=330.0)
+    pipeline = AnalyzerPipeline(config)
+    stored = []
+    for b in scene_blocks(scene):
+        pipeline.add_block(pipeline_channel(config, b.key), decode_block(b.payload))
+        stored += [r for r in pipeline.finish().records if r[0] == "steady"]
+    restored = AnalyzerPipeline(config)
+    restored.restore(json.loads(json.dumps(pipeline.snapshot())))
+    assert len(stored) == 5  # 60 s windows
+    for p in (pipeline, restored):
+        a = p.monitor.analyzer
+        assert len(a.windows) == 2 and a.windows[-1]["t_ns"] == stored[-1][1]
+        assert a.keep_events < 100
+
+
+def pipeline_channel(config, key: str) -> str:
+    return next(n for n, c in config.channels.items() if key.endswith("/" + c.key))
