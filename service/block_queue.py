@@ -43,8 +43,10 @@ class BlockQueue:
 
     def offer(self, key: str, payload: bytes, recv_ns: int | None = None) -> bool:
         """Enqueue a block (from any thread); returns False and counts a drop when full."""
-        item = QueuedBlock(key, payload, time.time_ns() if recv_ns is None else recv_ns)
         with self._cond:
+            # The receive time is taken under the lock, so queue order is receive-time order
+            # even when zenoh delivers from several threads (the archive's log times follow).
+            item = QueuedBlock(key, payload, time.time_ns() if recv_ns is None else recv_ns)
             self.offered += 1
             if len(self._items) >= self.capacity:
                 self.dropped += 1
