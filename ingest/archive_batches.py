@@ -79,6 +79,16 @@ class MessageBatch:
                             self.log_time[keep], self.offset[keep], self.length[keep],
                             self.topics)  # fmt: skip
 
+    def compact(self) -> MessageBatch:
+        """The same messages with a buffer of only their payloads, back to back (a batch to
+        send to another process: :meth:`select` keeps the whole chunk's buffer)."""
+        offset = np.zeros(len(self), dtype=np.int64)
+        if len(self) > 1:
+            np.cumsum(self.length[:-1], out=offset[1:])
+        buf = _pack(self.buf, self.offset, self.length, int(self.length.sum()))
+        return MessageBatch(self.file, buf, self.index, self.channel, self.log_time, offset,
+                            self.length.copy(), self.topics)  # fmt: skip
+
     @staticmethod
     def concat(batches: list[MessageBatch]) -> MessageBatch:
         """One batch of the messages of ``batches`` (consecutive, one file), in order."""
@@ -98,6 +108,17 @@ class MessageBatch:
             np.concatenate([b.length for b in batches]),
             topics,
         )
+
+
+@njit(cache=True, nogil=True)
+def _pack(buf, offset, length, total):
+    """The byte ranges ``buf[offset[k] : offset[k] + length[k]]``, back to back."""
+    out = np.empty(total, dtype=np.uint8)
+    at = 0
+    for k in range(offset.shape[0]):
+        out[at : at + length[k]] = buf[offset[k] : offset[k] + length[k]]
+        at += length[k]
+    return out
 
 
 def _scan_from(data: np.ndarray, pos: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:

@@ -97,7 +97,9 @@ class ServiceRuntime:
         self._subscribe()
         self.worker.on_alarms = self._on_alarms
         self.recovered_blocks = self.worker.recover(
-            ArchiveReader(s.archive.directory, ARCHIVE_PREFIX)
+            ArchiveReader(s.archive.directory, ARCHIVE_PREFIX),
+            jobs=s.worker.recovery_jobs,
+            factory=self._pipeline_factory,
         )
         self._refresh_status()
         self._thread = threading.Thread(target=self._run, name="millwatch-worker", daemon=True)

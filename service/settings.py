@@ -82,6 +82,9 @@ class WorkerSettings(_Strict):
       ``["millwatch/v1/rustenburg/**"]``. Empty (default): every configured mill.
     * ``name``: the worker's name in its liveliness tokens and in API errors
       (``[a-z0-9][a-z0-9_-]*``); default: the host name.
+    * ``recovery_jobs``: processes that replay a long archive tail at start, the mills split
+      between them (0, the default: one per available core; 1: the worker alone). A tail under
+      32 MB is always replayed by the worker alone.
     """
 
     queue_blocks: Annotated[int, Field(gt=0)] = 200_000
@@ -89,6 +92,7 @@ class WorkerSettings(_Strict):
     stale_after_s: Annotated[float, Field(gt=0)] = 10.0
     name: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$")] | None = None
     partition: tuple[str, ...] = ()
+    recovery_jobs: Annotated[int, Field(ge=0, le=256)] = 0
 
     @field_validator("partition")
     @classmethod

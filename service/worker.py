@@ -42,12 +42,13 @@ from alarms.observations import Observation
 from analytics.mill_config import MillConfig
 from ingest import keys
 from ingest.archive import ArchivePosition, ArchiveReader, ArchiveWriter
-from ingest.archive_batches import archive_batches
+from ingest.archive_batches import MessageBatch, archive_batches
 from ingest.wire import Block, WireError, decode_block
 from service.batch_lane import BatchLane
 from service.block_queue import BlockQueue, QueuedBlock
 from service.checkpoints import STEP_BUDGET_S, CheckpointSchedule, earliest
 from service.health import LatencyReservoir, MillHealth, PerMinute
+from service.parallel_replay import ParallelReplay, replay_jobs, split_mills, tail_bytes
 from service.store import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
 
 __all__ = ["AckRequest", "MillPipeline", "MillUpdate", "Worker"]
@@ -361,34 +362,65 @@ class Worker:
         self._schedule.done(mill_id)
 
     # ------------------------------------------------------------------ recovery
-    def recover(self, reader: ArchiveReader) -> int:
+    def recover(
+        self,
+        reader: ArchiveReader,
+        *,
+        jobs: int = 1,
+        factory: Callable[[MillConfig], MillPipeline] | None = None,
+    ) -> int:
         """Restore every mill's newest checkpoint and replay the archive after them; returns
         the number of archived blocks replayed. Call before going live.
 
         The replay starts at the earliest mill's position; each mill skips the blocks before
         its own position. A configured mill without a checkpoint starts fresh at that earliest
-        position (at the archive's start when no mill has one)."""
-        covered = self._restore(self.store.latest_checkpoints())
+        position (at the archive's start when no mill has one). With ``factory`` (how the
+        pipelines were built) a long tail is replayed by up to ``jobs`` processes (0: one per
+        core), the mills split between them (:mod:`service.parallel_replay`); same results."""
+        covered = self.restore_checkpoints(self.store.latest_checkpoints())
+        after = earliest(covered.values())
+        batches = archive_batches(reader.directory, reader.prefix, after=after,
+                                  min_messages=REPLAY_BATCH_BLOCKS // 2)  # fmt: skip
+        n_jobs = 1
+        if factory is not None:
+            tail = tail_bytes(reader.directory, reader.prefix, after)
+            n_jobs = replay_jobs(jobs, len(self.mills), tail)
+        if n_jobs > 1:
+            parallel = ParallelReplay(self, split_mills(self.mills, n_jobs), factory)  # type: ignore[arg-type]
+            replayed, skipped = parallel.run(batches, covered)
+        else:
+            replayed, skipped = self._replay(batches, covered)
+        self._schedule.restart()
+        log.info(
+            "recovered: %d mill checkpoint(s), %d archived blocks replayed by %d process(es), "
+            "%d skipped (already in their mill's checkpoint)",
+            len(covered),
+            replayed,
+            n_jobs,
+            skipped,
+        )
+        return replayed
+
+    def _replay(
+        self, batches: Iterable[MessageBatch], covered: dict[str, ArchivePosition | None]
+    ) -> tuple[int, int]:
+        """Replay ``batches`` in this process; returns (handled, skipped)."""
         replayed = skipped = 0
         lane = BatchLane(self)  # whole batches of blocks as arrays; irregular ones one by one
-        batches = archive_batches(reader.directory, reader.prefix,
-                                  after=earliest(covered.values()),
-                                  min_messages=REPLAY_BATCH_BLOCKS // 2)  # fmt: skip
         for batch in batches:
             handled, skip = lane.handle(batch, covered)
             replayed, skipped = replayed + handled, skipped + skip
             if replayed // REPLAY_BATCH_BLOCKS != (replayed - handled) // REPLAY_BATCH_BLOCKS:
                 self.commit()
         self.commit()
-        self._schedule.restart()
-        log.info(
-            "recovered: %d mill checkpoint(s), %d archived blocks replayed, %d skipped (already "
-            "in their mill's checkpoint)",
-            len(covered),
-            replayed,
-            skipped,
-        )
-        return replayed
+        return replayed, skipped
+
+    def restore_checkpoints(
+        self, parts: dict[str, tuple[dict[str, Any], dict[str, Any]]]
+    ) -> dict[str, ArchivePosition | None]:
+        """Restore the mills of ``parts`` (:meth:`Store.latest_checkpoints`); returns the
+        archive position each mill was restored at."""
+        return self._restore(parts)
 
     def _restore(
         self, parts: dict[str, tuple[dict[str, Any], dict[str, Any]]]

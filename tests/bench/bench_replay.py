@@ -12,12 +12,15 @@
    ``--distinct`` mills are simulated (seeds 0..k−1); the others carry the same samples under
    their own keys (same analysis cost, a fraction of the set-up time).
 2. Replays it with ``Worker.recover`` (the crash-recovery path: archive read, decode, health, each
-   mill's analyzer fed long contiguous chunks, alarms, store) into a fresh store, and reports CPU
-   (``time.process_time``, robust on a shared machine) and wall seconds, × real time (recording
-   seconds / replay seconds, all mills together), and the share of only reading the archive
-   in batches (+ decoding the block headers).
+   mill's analyzer fed long contiguous chunks, alarms, store) into a fresh store, once per
+   ``--jobs`` entry: 1 = the worker process alone (the figures per core), N = N replay processes
+   with the mills split between them (0 = one per available core; :mod:`service.parallel_replay`),
+   and reports CPU seconds of all processes (``os.times``: this one and its finished children —
+   robust on a shared machine), wall seconds, × real time (recording seconds / replay seconds,
+   all mills together), and the cost of only reading the archive in batches (+ decoding the
+   block headers).
 
-One process, numpy/BLAS limited to one thread: the figures are per core.
+numpy/BLAS limited to one thread per process.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from ingest.scene_blocks import SceneBlock, scene_blocks
 from ingest.scenes import get_scene
 from ingest.wire import DType, decode_headers
 from service.mill_pipeline import AnalyzerPipeline
+from service.parallel_replay import replay_jobs
 from service.store import Store
 from service.worker import REPLAY_BATCH_BLOCKS, Worker
 
@@ -82,17 +86,23 @@ def write_archive(directory: Path, configs, scene: str, seconds: float, distinct
     return blocks
 
 
+def _cpu() -> float:
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
 def timed(fn) -> tuple[float, float, object]:
-    cpu, wall = time.process_time(), time.perf_counter()
+    cpu, wall = _cpu(), time.perf_counter()
     out = fn()
-    return time.process_time() - cpu, time.perf_counter() - wall, out
+    return _cpu() - cpu, time.perf_counter() - wall, out
 
 
-def replay(directory: Path, configs) -> int:
+def replay(directory: Path, configs, jobs: int = 1) -> int:
     with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
         pipelines = {c.id: AnalyzerPipeline(c) for c in configs}
         worker = Worker({c.id: c for c in configs}, pipelines, store, None)
-        return worker.recover(ArchiveReader(directory, PREFIX))
+        reader = ArchiveReader(directory, PREFIX)
+        return worker.recover(reader, jobs=jobs, factory=AnalyzerPipeline)
 
 
 def read_only(directory: Path, decode: bool) -> int:
@@ -111,8 +121,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3600.0, help="recorded seconds")
     parser.add_argument("--scene", choices=("steady", "stopped", "month"), default="steady")
     parser.add_argument("--distinct", type=int, default=5, help="mills actually simulated")
+    parser.add_argument(
+        "--jobs", default="1,0", help="replay processes per run, comma-separated (0: one per core)"
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    runs = [int(j) for j in args.jobs.split(",")]
     configs = mill_configs(args.mills)
     with tempfile.TemporaryDirectory() as d:
         warm = Path(d) / "warm"
@@ -126,11 +140,13 @@ def main() -> None:
         rows = {"mills": args.mills, "seconds": args.seconds, "scene": args.scene,
                 "blocks": blocks, "archive_mb": size / 2**20,
                 "generate_wall_s": wall_w, "generate_cpu_s": cpu_w}  # fmt: skip
-        for name, fn in (
-            ("read", lambda: read_only(directory, False)),
-            ("read_decode", lambda: read_only(directory, True)),
-            ("replay", lambda: replay(directory, configs)),
-        ):
+        passes = [("read", lambda: read_only(directory, False)),
+                  ("read_decode", lambda: read_only(directory, True))]  # fmt: skip
+        size_b = sum(p.stat().st_size for p in directory.glob("*.mcap"))
+        for j in runs:
+            n = replay_jobs(j, len(configs), size_b)
+            passes.append((f"replay x{n}", lambda j=j: replay(directory, configs, j)))
+        for name, fn in passes:
             cpu, wall, n = timed(fn)
             assert n == blocks, (name, n, blocks)
             rows[name] = {"cpu_s": cpu, "wall_s": wall, "x_real_time_cpu": args.seconds / cpu,
@@ -145,7 +161,7 @@ def main() -> None:
     )
     print(f"{'pass':12} {'cpu s':>8} {'wall s':>8} {'x rt (cpu)':>10} {'x rt (wall)':>11} "
           f"{'µs/block':>9}")  # fmt: skip
-    for name in ("read", "read_decode", "replay"):
+    for name in [n for n in rows if n.startswith(("read", "replay"))]:
         r = rows[name]
         print(f"{name:12} {r['cpu_s']:8.1f} {r['wall_s']:8.1f} {r['x_real_time_cpu']:10.1f} "
               f"{r['x_real_time_wall']:11.1f} {r['us_per_block_cpu']:9.2f}")  # fmt: skip

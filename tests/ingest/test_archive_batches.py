@@ -97,6 +97,10 @@ def test_concat_and_select_keep_payloads(tmp_path: Path) -> None:
     assert [both.payload(k) for k in range(len(both))] == flat
     odd = both.select(both.index % 2 == 1)
     assert [odd.payload(k) for k in range(len(odd))] == flat[1::2]
+    packed = odd.compact()
+    assert [packed.payload(k) for k in range(len(packed))] == flat[1::2]
+    assert packed.buf.shape[0] == sum(len(p) for p in flat[1::2]) < both.buf.shape[0]
+    assert np.array_equal(packed.index, odd.index) and packed.file == odd.file
 
 
 def _mcap_bytes(fast: bool, chunk_size: int) -> bytes:

@@ -1,0 +1,147 @@
+"""Replaying the archive with several processes (the mills split between them) leaves exactly
+what a single-process replay leaves: stored rows, pipeline state, health; a failing job stops the
+replay with an error that names its mills."""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import signal
+from pathlib import Path
+
+import pytest
+
+from analytics.mill_config import MillConfig
+from ingest.archive import ArchiveReader, ArchiveWriter
+from service import parallel_replay
+from service.mill_pipeline import AnalyzerPipeline
+from service.parallel_replay import ReplayJobError, replay_jobs, split_mills
+from service.store import Store
+from service.worker import Worker
+from tests.service.test_batch_lane import CONFIGS, _items, _state
+
+
+class FailingPipeline(AnalyzerPipeline):
+    """A pipeline whose analysis fails for ``mill-1`` (module level: a job process imports it)."""
+
+    def finish(self):  # type: ignore[no-untyped-def]
+        if self.config.id == "mill-1":
+            raise RuntimeError("analysis broke on purpose")
+        return super().finish()
+
+
+class DyingPipeline(AnalyzerPipeline):
+    """A pipeline whose process is killed (SIGKILL) in ``mill-2``'s analysis."""
+
+    def finish(self):  # type: ignore[no-untyped-def]
+        if self.config.id == "mill-2":
+            os.kill(os.getpid(), signal.SIGKILL)
+        return super().finish()
+
+
+def _archive(directory: Path) -> ArchiveReader:
+    with ArchiveWriter(directory, "w", chunk_size=8192) as archive:
+        for item in _items():
+            archive.write(item.key, item.payload, item.recv_ns)
+    return ArchiveReader(directory, "w")
+
+
+def _worker(store: Store, factory=AnalyzerPipeline) -> Worker:  # type: ignore[no-untyped-def]
+    return Worker({c.id: c for c in CONFIGS}, {c.id: factory(c) for c in CONFIGS}, store, None)
+
+
+@pytest.fixture
+def always_parallel(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Job processes even for the small test archive."""
+    monkeypatch.setattr(parallel_replay, "PARALLEL_MIN_BYTES", 0)
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("always_parallel")
+def test_parallel_replay_equals_one_process(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    reader = _archive(tmp_path / "a")
+    with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
+        one, two = _worker(s1), _worker(s2)
+        alarms_one: list = []
+        alarms_two: list = []
+        one.on_alarms, two.on_alarms = alarms_one.extend, alarms_two.extend
+        n = one.recover(reader)
+        with caplog.at_level(logging.INFO, logger="service"):
+            assert two.recover(reader, jobs=2, factory=AnalyzerPipeline) == n == len(_items())
+        assert "replayed by 2 process(es)" in caplog.text
+        assert _state(two, s2) == _state(one, s1)
+        assert sorted(t.to_row()["alarm_id"] for t in alarms_two) == sorted(
+            t.to_row()["alarm_id"] for t in alarms_one
+        )
+        for m in one.mills:  # the parent's pipelines hold the final state: they go on alike
+            assert two.pipelines[m].snapshot() == one.pipelines[m].snapshot()
+            assert two.health[m] == one.health[m]
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("always_parallel")
+def test_parallel_replay_after_checkpoints_skips_what_they_hold(tmp_path: Path) -> None:
+    """Checkpoints at different archive positions per mill: every mill sees each of its blocks
+    once, as in one process."""
+    with ArchiveWriter(tmp_path / "a", "w", chunk_size=8192) as archive, Store(
+        tmp_path / "one.db"
+    ) as live_store:  # fmt: skip
+        live = _worker(live_store)
+        live.archive = archive
+        for k, item in enumerate(_items()):
+            live.handle(item)
+            if k in (1500, 4000):  # mill-0 at the first position, mill-2 at the second
+                live.checkpoint(["mill-0"] if k == 1500 else ["mill-2"])
+    shutil.copy(tmp_path / "one.db", tmp_path / "two.db")
+    reader = ArchiveReader(tmp_path / "a", "w")
+    with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
+        one, two = _worker(s1), _worker(s2)
+        one.recover(reader)
+        two.recover(reader, jobs=2, factory=AnalyzerPipeline)
+        assert _state(two, s2) == _state(one, s1)
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("always_parallel")
+def test_a_failing_job_names_its_mills(tmp_path: Path) -> None:
+    reader = _archive(tmp_path / "a")
+    with Store(tmp_path / "mw.db") as store:
+        worker = _worker(store, FailingPipeline)
+        with pytest.raises(ReplayJobError, match=r"mill-1.*analysis broke on purpose"):
+            worker.recover(reader, jobs=3, factory=FailingPipeline)
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("always_parallel")
+def test_a_killed_job_stops_the_replay(tmp_path: Path) -> None:
+    reader = _archive(tmp_path / "a")
+    with Store(tmp_path / "mw.db") as store:
+        worker = _worker(store, DyingPipeline)
+        with pytest.raises(ReplayJobError, match=r"mill-2.*exited with code -9"):
+            worker.recover(reader, jobs=3, factory=DyingPipeline)
+
+
+def test_job_count_follows_the_tail_the_mills_and_the_cores() -> None:
+    big = 10 * parallel_replay.PARALLEL_MIN_BYTES
+    assert replay_jobs(4, 50, big) == 4
+    assert replay_jobs(4, 3, big) == 3  # at most one per mill
+    assert replay_jobs(4, 50, parallel_replay.PARALLEL_MIN_BYTES - 1) == 1  # short tail
+    assert 1 <= replay_jobs(0, 50, big) <= parallel_replay.available_cores()
+    with pytest.raises(ValueError, match="recovery_jobs"):
+        replay_jobs(-1, 50, big)
+
+
+def test_mills_are_dealt_round_robin() -> None:
+    ids = [f"m{i}" for i in range(5)]
+    assert split_mills(reversed(ids), 2) == [["m0", "m2", "m4"], ["m1", "m3"]]
+    assert split_mills(ids[:1], 3) == [["m0"]]
+
+
+def test_configs_pickle_for_the_job_processes() -> None:
+    import pickle
+
+    assert pickle.loads(pickle.dumps(CONFIGS[0])) == CONFIGS[0]
+    assert isinstance(CONFIGS[0], MillConfig)
