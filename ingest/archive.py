@@ -391,11 +391,12 @@ class ArchivedBlock:
         return ArchivePosition(self.file, self.index + 1, self.log_time_ns)
 
 
-def _decompress(chunk: Chunk) -> bytes:
+def _decompress(chunk: Chunk, zstd: zstandard.ZstdDecompressor | None = None) -> bytes:
+    """The chunk's records, CRC-checked; ``zstd``: a decompressor to reuse (one per reader)."""
     if chunk.compression == "":
         data = chunk.data
     elif chunk.compression == "zstd":
-        data = zstandard.ZstdDecompressor().decompress(
+        data = (zstd or zstandard.ZstdDecompressor()).decompress(
             chunk.data, max_output_size=chunk.uncompressed_size
         )
     else:

@@ -169,8 +169,22 @@ class BatchReader(TailTolerantReader):
     :class:`MessageBatch` per chunk (and per unchunked message) instead of one object per
     message; the same messages, the same stopping rules and the same attributes afterwards."""
 
+    _zstd: zstandard.ZstdDecompressor | None = None
+    _known: tuple[int, np.ndarray, dict[int, str]] | None = None
+
+    def _known_channels(self) -> tuple[np.ndarray, dict[int, str]]:
+        """Whether each u16 channel id is registered, and the topics (kept until a channel
+        record adds one: channels are only ever added)."""
+        if self._known is None or self._known[0] != len(self.channels):
+            known = np.zeros(1 << 16, dtype=bool)
+            known[list(self.channels)] = True
+            topics = {c: ch.topic for c, ch in self.channels.items()}
+            self._known = (len(self.channels), known, topics)
+        return self._known[1], self._known[2]
+
     def messages(self) -> Iterator[MessageBatch]:  # type: ignore[override]
         """Batches of all messages in file order (single pass; the file is read at once)."""
+        self._zstd = zstandard.ZstdDecompressor()
         with open(self.path, "rb") as stream:
             data = stream.read()  # a live file may grow: this is a snapshot
         if data[: len(MCAP_MAGIC)] != MCAP_MAGIC:
@@ -208,7 +222,7 @@ class BatchReader(TailTolerantReader):
     def _record(self, opcode: int, body: bytes | memoryview) -> Iterator[MessageBatch]:  # type: ignore[override]
         if opcode == Opcode.CHUNK:
             chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-            data = np.frombuffer(_decompress(chunk), dtype=np.uint8)
+            data = np.frombuffer(_decompress(chunk, self._zstd), dtype=np.uint8)
             yield from self._chunk(data)
         elif opcode == Opcode.MESSAGE:
             data = np.frombuffer(bytes(body), dtype=np.uint8)
@@ -247,13 +261,12 @@ class BatchReader(TailTolerantReader):
         heads = padded[at[:, None] + np.arange(size)]
         head = heads.reshape(-1).view(_MESSAGE_HEAD)
         channel = head["channel"].astype(np.int64)
-        known = np.isin(channel, np.fromiter(self.channels, dtype=np.int64))
-        bad = np.flatnonzero(short | ~known)
+        known, topics = self._known_channels()
+        bad = np.flatnonzero(short | ~known[channel])
         n = int(bad[0]) if bad.size else starts.size
         if n:
             index = self.message_count + np.arange(n, dtype=np.int64)
             self.message_count += n
-            topics = {c: ch.topic for c, ch in self.channels.items()}
             yield MessageBatch(self.path.name, data, index, channel[:n],
                                head["log_time"][:n].astype(np.int64), starts[:n] + size,
                                lengths[:n] - size, topics)  # fmt: skip
