@@ -312,35 +312,99 @@ def _pending(st_i):
     return st_i[_PKIND] != _P_NONE or st_i[_QST] >= 0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _run_quietly(speed, torque, j, st_f, par, shown):
+    """Running, nothing pending: samples from ``j`` that change nothing but the torque EMA
+    (no NaN, no torque drop, no speed collapse); returns the first sample not taken. Exactly
+    what :func:`_running_step` does to them, with the EMA kept in a register."""
+    ema, drop, rate = st_f[_EMA], par[8], par[14]
+    m = speed.shape[0]
+    while j < m:
+        s, q = speed[j], torque[j]
+        if q != -np.inf:
+            if not (s == s and q == q) or q < drop * ema or s < 0.5:
+                break
+            ema += rate * (q - ema)
+        shown[j] = _RUN
+        j += 1
+    st_f[_EMA] = ema
+    return j
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _stay_stopped(speed, torque, j, st_i, par, shown):
+    """Stopped, nothing pending: samples from ``j`` with no energised torque and no NaN (they
+    only reset the energised-run start, as :func:`_stopped_step` does); returns the first
+    sample not taken."""
+    on = par[0]
+    m = speed.shape[0]
+    taken = False
+    while j < m:
+        s, q = speed[j], torque[j]
+        if q != -np.inf:
+            if not (s == s and q == q) or q > on:
+                break
+            taken = True
+        shown[j] = _STOP
+        j += 1
+    if taken:
+        st_i[_ONST] = -1
+    return j
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fast(speed, torque, j, st_i, st_f, par, shown):
+    """The quiet stretches of the two long-lived states without the general step: returns
+    the first sample from ``j`` that needs :func:`_step` (``j`` itself when none is quiet)."""
+    mode = st_i[_MODE]
+    if st_i[_SHOWN] != mode or st_i[_PKIND] != _P_NONE:
+        return j
+    if mode == _RUN:
+        return _run_quietly(speed, torque, j, st_f, par, shown)
+    if mode == _STOP:
+        return _stay_stopped(speed, torque, j, st_i, par, shown)
+    return j
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _general(s, q, st_i, st_f, par, n, out_i, out_s, k):
+    """Stream sample ``n`` through the full machine (flagged, missing, or a state step);
+    returns the new transition count ``k``."""
+    if q == -np.inf:  # flagged: ignored
+        return k
+    if not (s == s and q == q):  # NaN: missing
+        if st_i[_SHOWN] != _UNK and not _pending(st_i):
+            k = _emit(out_i, out_s, k, n, _UNK)
+            st_i[_SHOWN] = _UNK
+        st_i[_ONST] = -1
+        st_i[_QST] = -1
+        return k
+    if st_i[_SHOWN] != st_i[_MODE]:
+        if st_i[_SHOWN] == _UNK and st_i[_MODE] != _UNK:
+            k = _emit(out_i, out_s, k, n, st_i[_MODE])
+        st_i[_SHOWN] = st_i[_MODE]
+    k0 = k
+    k = _step(st_i, st_f, par, s, q, n, out_i, out_s, k)
+    if k > k0:
+        st_i[_SHOWN] = st_i[_MODE]
+    return k
+
+
 @njit(cache=True, nogil=True)
 def _feed(speed, torque, st_i, st_f, par, out_i, out_s, shown):
     """One block; returns the number of transitions written to ``out_i``/``out_s``, and
     writes the tentative (shown) state after each sample into ``shown``."""
     k = 0
-    for j in range(speed.shape[0]):
-        n = st_i[_N] + j
-        s, q = speed[j], torque[j]
-        if q == -np.inf:
-            shown[j] = st_i[_SHOWN]
-            continue
-        if not (s == s and q == q):  # NaN: missing
-            if st_i[_SHOWN] != _UNK and not _pending(st_i):
-                k = _emit(out_i, out_s, k, n, _UNK)
-                st_i[_SHOWN] = _UNK
-            st_i[_ONST] = -1
-            st_i[_QST] = -1
-            shown[j] = st_i[_SHOWN]
-            continue
-        if st_i[_SHOWN] != st_i[_MODE]:
-            if st_i[_SHOWN] == _UNK and st_i[_MODE] != _UNK:
-                k = _emit(out_i, out_s, k, n, st_i[_MODE])
-            st_i[_SHOWN] = st_i[_MODE]
-        k0 = k
-        k = _step(st_i, st_f, par, s, q, n, out_i, out_s, k)
-        if k > k0:
-            st_i[_SHOWN] = st_i[_MODE]
+    j = 0
+    m = speed.shape[0]
+    while j < m:
+        j = _fast(speed, torque, j, st_i, st_f, par, shown)
+        if j >= m:
+            break
+        k = _general(speed[j], torque[j], st_i, st_f, par, st_i[_N] + j, out_i, out_s, k)
         shown[j] = st_i[_SHOWN]
-    st_i[_N] += speed.shape[0]
+        j += 1
+    st_i[_N] += m
     return k
 
 

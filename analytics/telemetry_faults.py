@@ -119,7 +119,8 @@ _LOG_Q, _STUCK_VALUE = 0, 1
 _PREV_KIND, _STUCK_KIND, _GOOD_RUN, _N_DECIDED = 0, 1, 2, 3
 _C_SPIKES, _C_DROPOUTS, _C_ZERO_RUNS, _C_RAIL_HITS, _C_FLAGGED = 4, 5, 6, 7, 8
 _N_INTS = 9
-_EXP_SLOTS = 4096  # exp cache of the noise tracker (a power of two)
+_NOISE_ENTRIES = 2048  # noise-tracker table (a cache, see _track_noise): entries (~88 kB)
+_NOISE_SLOTS = 4096  # and its direct-mapped index (a power of two)
 # Kernel parameters: [noise_k, m3_allowance, slew, rail_low, rail_high, eta, log_q_floor]
 _P_K, _P_M3, _P_SLEW, _P_LO, _P_HI, _P_ETA, _P_FLOOR = range(7)
 
@@ -174,33 +175,92 @@ def _classify(x, j, thr, slew, low, high, good_run):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _exp(log_q, inv_eta, keys, values):
-    """exp(log_q) through a direct-mapped cache: the noise tracker's log_q walks in steps of
-    ±eta over a small set of floats (~1300 distinct values in 10⁶ samples), so exp runs
-    rarely; a hit returns the very float exp gave (bitwise the uncached result)."""
-    slot = np.int64(log_q * inv_eta) & (keys.shape[0] - 1)  # any slot works: keys decide
-    if keys[slot] != log_q:
-        keys[slot] = log_q
-        values[slot] = math.exp(log_q)
-    return values[slot]
+def _chain_stats(x, s):
+    """(Δ³, largest step, finite) of the 4-sample chain x[s..s+3], the threshold-free part of
+    :func:`_chain`: the chain is smooth under ``thr``/``slew`` when finite, ``|Δ³| ≤ thr`` and
+    the largest step ≤ ``slew + thr`` (the same comparisons, bit for bit)."""
+    a, b, c, d = x[s], x[s + 1], x[s + 2], x[s + 3]
+    d3 = d - 3.0 * c + 3.0 * b - a
+    return d3, max(abs(a - b), abs(b - c), abs(c - d)), np.isfinite(d3)
 
 
 @njit(cache=True, nogil=True)
-def _scan(x, start, stop, out, p, fs, si, keys, values):
-    """Decide samples x[start:stop] (x holds 3 samples of context on each side) into ``out``.
+def _entry(log_q, tf, links, slots, k_noise, m3, inv_eta):
+    """Index of the noise-table entry of ``log_q``, added if missing (the table is a cache:
+    when full it starts afresh). An entry holds log_q, q = exp(log_q), the threshold
+    k·q/0.6745 + M3 (functions of log_q alone, so cached values are the computed ones, bit for
+    bit) and the links of :func:`_track_noise`."""
+    n_slots = slots.shape[0] - 1
+    slot = np.int64(log_q * inv_eta) & (n_slots - 1)  # any slot works: the key decides
+    e = slots[slot]
+    if e >= 0 and tf[0, e] == log_q:
+        return e
+    e = slots[n_slots]
+    if e == tf.shape[1]:  # full: forget everything (rare: ~1300 values in 10⁶ samples)
+        links[:, 1:] = -1
+        slots[:] = -1
+        e = 0
+    slots[n_slots] = e + 1
+    q = math.exp(log_q)
+    tf[0, e], tf[1, e], tf[2, e] = log_q, q, k_noise * q / MEDIAN_TO_SIGMA + m3
+    links[e, 0], links[e, 1], links[e, 2] = e, -1, -1
+    slots[slot] = e
+    return e
+
+
+@njit(cache=True, nogil=True)
+def _link(e, col, eta, floor, tf, links, slots, k_noise, m3, inv_eta):
+    """The entry after ``e`` going down (col 1: log_q − eta) or up (col 2: + eta), floored."""
+    log_q = tf[0, e]
+    log_q += eta if col == 2 else -eta
+    used = slots[slots.shape[0] - 1]
+    nxt = _entry(max(log_q, floor), tf, links, slots, k_noise, m3, inv_eta)
+    if slots[slots.shape[0] - 1] >= used:  # no reset while adding nxt (else e is gone)
+        links[e, col] = nxt
+    return nxt
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _track_noise(x, start, stop, thr, log_q, p, tf, links, slots):
+    """The noise tracker over x[start:stop]: the threshold T of each sample into ``thr``;
+    returns the new log_q. log_q walks in steps of ±eta over a small set of floats, kept in a
+    table whose entries link to their successors, so the serial chain per sample is two loads
+    and a compare (column 0: no step, for a non-finite Δ³; 1: down; 2: up). It reads only the
+    samples, not the decisions, so it runs ahead of the classification."""
+    k_noise, m3, eta, floor = p[_P_K], p[_P_M3], p[_P_ETA], p[_P_FLOOR]
+    inv_eta = 1.0 / eta
+    e = _entry(log_q, tf, links, slots, k_noise, m3, inv_eta)
+    for j in range(start, stop):
+        thr[j - start] = tf[2, e]
+        d3 = x[j] - 3.0 * x[j - 1] + 3.0 * x[j - 2] - x[j - 3]  # noise: median of |Δ³x|
+        col = np.int64(np.isfinite(d3)) * (1 + np.int64(abs(d3) > tf[1, e]))
+        nxt = links[e, col]
+        if nxt < 0:
+            nxt = _link(e, col, eta, floor, tf, links, slots, k_noise, m3, inv_eta)
+        e = nxt
+    return tf[0, e]
+
+
+@njit(cache=True, nogil=True)
+def _scan(x, start, stop, out, p, fs, si, tf, links, slots):
+    """Decide samples x[start:stop] (x holds 4 samples of context on each side) into ``out``.
 
     The state lives in locals for the loop (loaded from and stored back to ``fs``/``si``);
-    ``keys``/``values`` are the exp cache of :func:`_exp`."""
-    k_noise, m3, slew, low, high, eta, floor = p[_P_K], p[_P_M3], p[_P_SLEW], p[_P_LO], \
-        p[_P_HI], p[_P_ETA], p[_P_FLOOR]  # fmt: skip
-    log_q, stuck_value = fs[_LOG_Q], fs[_STUCK_VALUE]
-    inv_eta = 1.0 / eta
+    ``tf``/``links``/``slots`` are the noise table of :func:`_track_noise`. The thresholds come
+    first (:func:`_track_noise`); then the newest left chain x[j-3..j] is measured once per
+    sample (:func:`_chain_stats`): it is the older left chain of sample j+1 (the fast path of
+    :func:`_classify`, written out here with the carried statistics)."""
+    slew, low, high = p[_P_SLEW], p[_P_LO], p[_P_HI]
+    thr_of = np.empty(stop - start)
+    fs[_LOG_Q] = _track_noise(x, start, stop, thr_of, fs[_LOG_Q], p, tf, links, slots)
+    stuck_value = fs[_STUCK_VALUE]
     prev_kind, stuck_kind, good_run = si[_PREV_KIND], si[_STUCK_KIND], si[_GOOD_RUN]
     counts = si[_C_SPIKES : _C_FLAGGED + 1].copy()  # spikes, dropouts, zero runs, rail, flagged
+    d3_old, mx_old, fin_old = _chain_stats(x, start - 4)  # the older left chain of x[start]
     for j in range(start, stop):
         v = x[j]
-        q = _exp(log_q, inv_eta, keys, values)  # the classification does not change it
-        thr = k_noise * q / MEDIAN_TO_SIGMA + m3
+        thr = thr_of[j - start]
+        d3, mx, fin = _chain_stats(x, j - 3)
         if not np.isfinite(v):
             kind = 2
             stuck_kind = 0
@@ -208,13 +268,15 @@ def _scan(x, start, stop, out, p, fs, si, keys, values):
             kind = stuck_kind
         else:
             stuck_kind = 0
-            kind = _classify(x, j, thr, slew, low, high, good_run)
+            lim = slew + thr
+            if fin_old and fin and mx_old <= lim and mx <= lim and abs(d3_old) <= thr \
+                    and abs(d3) <= thr:  # fmt: skip
+                repeated = v == x[j + 1] or v == x[j - 1]
+                kind = 4 if repeated and (v <= low or v >= high) else 0
+            else:
+                kind = _classify(x, j, thr, slew, low, high, good_run)
             if kind != 0 and (v == x[j + 1] or v == x[j - 1]):
                 stuck_kind, stuck_value = kind, v
-        d3 = x[j] - 3.0 * x[j - 1] + 3.0 * x[j - 2] - x[j - 3]  # noise: median of |Δ³x|
-        if np.isfinite(d3):
-            log_q += eta if abs(d3) > q else -eta
-            log_q = max(log_q, floor)
         if kind != 0:
             counts[4] += 1
             if kind != prev_kind:
@@ -224,10 +286,20 @@ def _scan(x, start, stop, out, p, fs, si, keys, values):
             good_run += 1
         prev_kind = kind
         out[j - start] = kind
-    fs[_LOG_Q], fs[_STUCK_VALUE] = log_q, stuck_value
+        d3_old, mx_old, fin_old = d3, mx, fin
+    fs[_STUCK_VALUE] = stuck_value
     si[_PREV_KIND], si[_STUCK_KIND], si[_GOOD_RUN] = prev_kind, stuck_kind, good_run
     si[_C_SPIKES : _C_FLAGGED + 1] = counts
     si[_N_DECIDED] += stop - start
+
+
+def _noise_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An empty table for :func:`_track_noise`: floats (log_q, q, T) per entry, links per
+    entry, and the slot index (its last element counts the entries in use)."""
+    slots = np.full(_NOISE_SLOTS + 1, -1, dtype=np.int32)
+    slots[-1] = 0
+    links = np.full((_NOISE_ENTRIES, 3), -1, dtype=np.int32)
+    return np.zeros((3, _NOISE_ENTRIES)), links, slots
 
 
 @dataclass(frozen=True)
@@ -330,7 +402,7 @@ class TelemetryFaultDetector:
         )
         self._f = np.array([math.log(max(noise, 1e-9 * span) * MEDIAN_TO_SIGMA * 20**0.5), 0.0])
         self._i = np.zeros(_N_INTS, dtype=np.int64)
-        self._exp_cache = (np.full(_EXP_SLOTS, np.nan), np.zeros(_EXP_SLOTS))  # see _exp
+        self._noise_table = _noise_table()  # a cache (see _track_noise), not state
         self._buf = np.full(_HIST, np.nan)  # left context, then the undecided samples
 
     @classmethod
@@ -380,7 +452,7 @@ class TelemetryFaultDetector:
         buf = np.concatenate((self._buf, x))
         stop = max(buf.shape[0] - LOOKAHEAD, _HIST)
         kinds = np.zeros(stop - _HIST, dtype=np.uint8)
-        _scan(buf, _HIST, stop, kinds, self._p, self._f, self._i, *self._exp_cache)
+        _scan(buf, _HIST, stop, kinds, self._p, self._f, self._i, *self._noise_table)
         self._buf = buf[stop - _HIST :]
         return buf[_HIST:stop], kinds  # views of a buffer nothing writes to again
 
