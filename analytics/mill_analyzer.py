@@ -326,10 +326,12 @@ class MillAnalyzer:
         return _keep(self.starts, d, self.keep_events)
 
     def _start_alarm(self, pct: float | None) -> str | None:
+        """The start's level: strictly above the warning / alarm peak (% of rated motor
+        torque), as the alarm rules judge it (seed 000 §7.2)."""
         a = self.config.alarms
-        if pct is None or pct < a.start_peak_warn_pct:
+        if pct is None or pct <= a.start_peak_warn_pct:
             return None
-        return "alarm" if pct >= a.start_peak_alarm_pct else "warning"
+        return "alarm" if pct > a.start_peak_alarm_pct else "warning"
 
     def _stop_event(self, n0: int, n1: int) -> dict[str, Any]:
         from_start = self.stop_after_start

@@ -135,3 +135,11 @@ def test_starts_status_is_strictly_above_the_levels_like_the_alarm_rules():
         "warning",
         "alarm",
     ]
+
+
+def test_start_level_is_strictly_above_the_peaks_like_the_alarm_rules():
+    a = MillAnalyzer(mill("sag-5200-lrs"))
+    levels = a.config.alarms  # warning above 250 %, alarm above 300 % (seed 000 §7.2)
+    warn, alarm = levels.start_peak_warn_pct, levels.start_peak_alarm_pct
+    got = [a._start_alarm(p) for p in (None, warn, warn + 0.1, alarm, alarm + 0.1)]
+    assert got == [None, None, "warning", "warning", "alarm"]
