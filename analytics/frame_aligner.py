@@ -193,7 +193,7 @@ class FrameAligner:
             g_all = np.concatenate((np.array(g_old, dtype=np.int64), group[mine]))
             parts = [old[g][name] for g in g_old]
             if np.all(np.diff(g_all) > 0):  # the usual case: already in grid order
-                stream = np.concatenate([*parts, rows[mine].reshape(-1)])
+                stream = _joined_rows(parts, rows, mine, n)
             else:
                 pieces = parts + list(rows[mine])
                 order = np.argsort(g_all, kind="stable")
@@ -282,3 +282,18 @@ class FrameAligner:
         }
         a.missing_blocks, a.gap_samples, a.dropped_blocks = snap["counters"]
         return a
+
+
+def _joined_rows(parts: list[np.ndarray], rows: np.ndarray, mine: np.ndarray, n: int) -> np.ndarray:
+    """``parts`` then the rows ``mine`` of ``rows`` (each ``n`` samples) as one new 1-D array,
+    each sample copied once."""
+    if rows.dtype != np.float64 or any(p.dtype != np.float64 for p in parts):
+        return np.concatenate([*parts, rows[mine].reshape(-1)])
+    held = sum(p.shape[0] for p in parts)
+    out = np.empty(held + mine.shape[0] * n)
+    a = 0
+    for p in parts:
+        out[a : a + p.shape[0]] = p
+        a += p.shape[0]
+    np.take(rows, mine, axis=0, out=out[held:].reshape(mine.shape[0], n))
+    return out

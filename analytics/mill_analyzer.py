@@ -195,7 +195,6 @@ class MillAnalyzer:
         elif frame.t0_ns != self.t_ns(self.n):
             self._discontinuity(frame.t0_ns)
         block, flagged_all = self._block(frame, n)
-        self.ring.write(block)
         events: list[dict[str, Any]] = []
         for tr in self.sm.feed(*self._state_inputs(block, flagged_all)):
             events += self._on_transition(tr)
@@ -221,14 +220,17 @@ class MillAnalyzer:
         self.discontinuities += 1
 
     def _block(self, frame: Frame, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """Rows in ring order, flagged samples as NaN; and where every motor channel is flagged."""
-        block = np.full((len(self.rows), n), np.nan)
+        """Rows in ring order, flagged samples as NaN, written to the ring (built in place when
+        the ring's next samples are in one piece); and where every motor channel is flagged."""
+        slot = self.ring.slot(n)
+        block = np.empty((len(self.rows), n)) if slot is None else slot
         flags = frame.flags or {}
         flagged_all = np.zeros(n, dtype=bool)
         motor_flags = []
         for r, name in enumerate(self.rows):
             x = frame.data.get(name)
             if x is None:
+                block[r] = np.nan
                 continue
             block[r] = x
             f = flags.get(name)
@@ -238,6 +240,10 @@ class MillAnalyzer:
                     motor_flags.append(f)
         if motor_flags:
             flagged_all = np.logical_and.reduce(motor_flags)
+        if slot is None:
+            self.ring.write(block)
+        else:
+            self.ring.advance(n)
         return block, flagged_all
 
     def _state_inputs(self, block: np.ndarray, flagged: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -391,13 +397,9 @@ class MillAnalyzer:
     # ------------------------------------------------------------ damage
     def _stress(self, block: np.ndarray) -> dict[str, np.ndarray]:
         cfg, out = self.config, {}
-        rows = {name: r for r, name in enumerate(self.rows)}
-        nan = np.full(block.shape[1], np.nan)
-        for k, side in enumerate(self.sides):
+        for k, side in enumerate(self.sides):  # rows: speed, then motor, pinion, bending per side
             sfx = f"_{side}" if side else ""
-            tp = block[rows[self.pinion[k]]] if self.pinion[k] else nan
-            tm = block[rows[self.motor[k]]] if self.motor[k] else nan
-            sb = block[rows[self.bending[k]]] if self.bending[k] else nan
+            tm, tp, sb = block[1 + 3 * k], block[2 + 3 * k], block[3 + 3 * k]  # missing: NaN
             tau_p = shear_stress_from_torque(tp, cfg.shafts.pinion_diameter_m)
             out[f"pinion_combined{sfx}"] = combined_stress(sb, tau_p, THETA_SEED)
             out[f"pinion_torsion{sfx}"] = tau_p
@@ -458,18 +460,12 @@ class MillAnalyzer:
         self.steady_until = b
 
     def _steady_feed(self, lo: int, hi: int) -> None:
+        """Running samples ``[lo, hi)`` to the steady-state meter. The ring's rows after speed
+        are motor, pinion, bending per side (a missing channel's row is NaN): the meter's
+        channels in order (:meth:`_meter`), so they go as one array."""
         start, data = self.ring.read(lo, hi)
-        rows = {name: r for r, name in enumerate(self.rows)}
-        chans = {}
-        for k in range(len(self.sides)):
-            for key, name in (
-                (f"motor_torque{k}", self.motor[k]),
-                (f"pinion_torque{k}", self.pinion[k]),
-                (f"bending{k}", self.bending[k]),
-            ):
-                chans[key] = data[rows[name]] if name else np.full(data.shape[1], np.nan)
         speed = np.abs(data[0]) / self.rated_rpm
-        for w in self.meter.feed(start, speed, chans):
+        for w in self.meter.feed_rows(start, speed, data[1:]):
             _keep(self.windows, self._window_dict(w), self.keep_windows)
 
     def _window_dict(self, w: SteadyWindow) -> dict[str, Any]:

@@ -214,9 +214,18 @@ class DamageRecorder:
 
     def block_damage(self, cycles: Cycles) -> np.ndarray:
         """Damage of each cycle, count included (a new array); nothing is recorded."""
-        means = cycles.mean * self.scale if self.mean_correction is not None else None
-        d = self.curve.damage_per_cycle(cycles.range * self.scale, means, self.mean_correction)
-        return d * cycles.count
+        return self.damage_of(cycles.range, cycles.mean, cycles.count)
+
+    def damage_of(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> np.ndarray:
+        """:meth:`block_damage` of cycles given as parallel arrays (range and mean in signal
+        units, before ``scale``; counts 1 or 0.5): a new array."""
+        if self.mean_correction is None:  # the usual case: compiled passes, the same floats
+            d = self.curve.damage_of_ranges(ranges, self.scale)
+        else:
+            d = self.curve.damage_per_cycle(
+                ranges * self.scale, means * self.scale, self.mean_correction
+            )
+        return np.multiply(d, counts, out=d)
 
     def record(self, cycles: Cycles) -> float:
         """Add the damage of ``cycles`` (a counter's view may be passed; it is only read).

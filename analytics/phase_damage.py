@@ -27,8 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from analytics import damage_kernel as _dk
 from analytics.cycles import Cycles
-from analytics.exact_sum import fsum
+from analytics.exact_sum import DIGITS, digits_value, fsum, hilo
 from analytics.miner import DamageRecorder, MinerSum
 from analytics.operating_states import OperatingState, Transition
 from analytics.snapshot_arrays import pack_array, unpack_array
@@ -127,7 +128,9 @@ class PhaseDamage:
         self.by_day: dict[str, dict[str, MinerSum]] = {}
         self.total = MinerSum()
         self.batch = 4096
-        self._raw: list[tuple[np.ndarray, ...]] = []
+        # cycles not yet costed: rows range, mean, count; and stream i_end (grown on demand)
+        self._raw_f = np.empty((3, 0))
+        self._raw_i = np.empty(0, dtype=np.int64)
         self._n_raw = 0
         self._pend: list[tuple[np.ndarray, np.ndarray]] = []
 
@@ -140,29 +143,45 @@ class PhaseDamage:
         Work is batched: cycles are kept raw until ``batch`` of them wait, then their damage is
         computed and attributed in one vectorised pass (the sums are exact, so batching does
         not change them; a stopped mill's noise cycles cost a copy per frame)."""
-        if len(cycles):
-            self._raw.append(
-                (cycles.range.copy(), cycles.mean.copy(), cycles.count.copy(),
-                 cycles.i_end + offset)
-            )  # fmt: skip
-            self._n_raw += len(cycles)
+        k = len(cycles)
+        if k:
+            a = self._n_raw
+            if a + k > self._raw_i.shape[0]:
+                self._grow(a + k)
+            self._raw_f[0, a : a + k] = cycles.range
+            self._raw_f[1, a : a + k] = cycles.mean
+            self._raw_f[2, a : a + k] = cycles.count
+            np.add(cycles.i_end, offset, out=self._raw_i[a : a + k])
+            self._n_raw = a + k
         if self._n_raw >= self.batch:
             self.attribute(timeline, decided_until)
 
+    def _grow(self, need: int) -> None:
+        """Room for ``need`` raw cycles (at least doubled), keeping those held."""
+        size = max(need, 2 * self._raw_i.shape[0], self.batch + 1024)
+        n = self._n_raw
+        f, i = np.empty((3, size)), np.empty(size, dtype=np.int64)
+        f[:, :n], i[:n] = self._raw_f[:, :n], self._raw_i[:n]
+        self._raw_f, self._raw_i = f, i
+
     def _compute(self) -> None:
         """Damage of the raw cycles: added to the total, kept pending for attribution."""
-        if not self._raw:
+        n = self._n_raw
+        if not n:
             return
-        r, m, c, i = (np.concatenate(col) for col in zip(*self._raw, strict=True))
-        self._raw, self._n_raw = [], 0
-        d = self.recorder.block_damage(Cycles.from_arrays(r, m, c, i, i))
+        r, m, c = self._raw_f[:, :n]
+        i = self._raw_i[:n].copy()
+        self._n_raw = 0
+        d = self.recorder.damage_of(r, m, c)
         self.total.add_block(d, exact=True)
         self._pend.append((d, i))
 
     @property
     def oldest_pending(self) -> int | None:
         """Smallest stream ``i_end`` of a cycle not yet attributed (the timeline must keep it)."""
-        ends = [int(i.min()) for *_, i in self._raw] + [int(i.min()) for _, i in self._pend]
+        ends = [int(i.min()) for _, i in self._pend]
+        if self._n_raw:
+            ends.append(int(self._raw_i[: self._n_raw].min()))
         return min(ends, default=None)
 
     def attribute(self, timeline: PhaseTimeline, decided_until: int) -> None:
@@ -170,12 +189,52 @@ class PhaseDamage:
         self._compute()
         if not self._pend:
             return
-        dmg = np.concatenate([d for d, _ in self._pend])
-        i_end = np.concatenate([i for _, i in self._pend])
-        ready = i_end < decided_until
-        self._pend = [(dmg[~ready], i_end[~ready])] if not ready.all() else []
-        if ready.any():
-            self._attribute(dmg[ready], i_end[ready], timeline)
+        if len(self._pend) == 1:
+            dmg, i_end = self._pend[0]
+        else:
+            dmg = np.concatenate([d for d, _ in self._pend])
+            i_end = np.concatenate([i for _, i in self._pend])
+        if not self._attribute_one_day(dmg, i_end, timeline, decided_until):
+            ready = i_end < decided_until
+            self._pend = [(dmg[~ready], i_end[~ready])] if not ready.all() else []
+            if ready.any():
+                self._attribute(dmg[ready], i_end[ready], timeline)
+
+    def _attribute_one_day(
+        self, dmg: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline, decided_until: int
+    ) -> bool:
+        """The usual case in one compiled pass (:func:`analytics.damage_kernel.attribute_split`):
+        the decided cycles all closed on one local day. Books them as :meth:`_attribute` does
+        (the same exact sums per state, in state order) and keeps the rest pending; False, and
+        nothing changed, in any other case."""
+        n_states = max(timeline.states) + 1
+        digits = np.zeros((n_states, DIGITS), dtype=np.int64)
+        counts = np.zeros(n_states, dtype=np.int64)
+        left_d, left_i = np.empty_like(dmg), np.empty_like(i_end)
+        n_left, lo, hi, ok = _dk.attribute_split(
+            dmg, i_end, decided_until, np.asarray(timeline.samples, dtype=np.int64),
+            np.asarray(timeline.states, dtype=np.int64), digits, counts, left_d, left_i,
+        )  # fmt: skip
+        if not ok:
+            return False
+        if n_left == dmg.shape[0]:
+            self._pend = [(dmg, i_end)]
+            return True
+        day = self._day(int(lo))
+        if self._day(int(hi)) != day:
+            return False
+        sums = [(st, hilo(digits_value(digits[st]))) for st in np.flatnonzero(counts).tolist()]
+        if not all(math.isfinite(h) for _, (h, _) in sums):
+            return False  # the checked path raises
+        self._pend = [(left_d[:n_left], left_i[:n_left])] if n_left else []
+        per_day = self.by_day.setdefault(day, {})
+        for st, (h, lw) in sums:
+            block = (h, lw, int(counts[st]))
+            phase = PHASE_OF_STATE[OperatingState(st)]
+            self.by_phase[phase].add_sum(block)
+            per_day.setdefault(phase, MinerSum()).add_sum(block)
+        self._prune_days()
+        return True
 
     def _attribute(self, dmg: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline) -> None:
         states = timeline.states_at(i_end)
@@ -192,6 +251,9 @@ class PhaseDamage:
                 by_phase = self.by_phase[phase]
                 by_phase.add_block(dmg[sel], exact=True)
                 per_day.setdefault(phase, MinerSum()).add_sum(by_phase.last_block)
+        self._prune_days()
+
+    def _prune_days(self) -> None:
         while len(self.by_day) > self.keep_days:
             del self.by_day[min(self.by_day)]
 

@@ -45,14 +45,30 @@ class SampleRing:
             self._buf[:, : n - first] = block[:, first:]
         self.end += n
 
+    def slot(self, n: int) -> np.ndarray | None:
+        """A writable ``(rows, n)`` view of the ring's next samples ``[end, end + n)`` when they
+        lie in one piece (else None: use :meth:`write`). Fill every sample, then
+        :meth:`advance`; this saves the copy of a block built elsewhere."""
+        a = self.end % self.capacity
+        if n >= self.capacity or a + n > self.capacity:
+            return None
+        return self._buf[:, a : a + n]
+
+    def advance(self, n: int) -> None:
+        """The ``n`` samples of a filled :meth:`slot` are written."""
+        self.end += n
+
     def read(self, n0: int, n1: int) -> tuple[int, np.ndarray]:
         """Samples ``[max(n0, start), min(n1, end))`` as a new ``(rows, m)`` array, and the
         stream index of its first column."""
         n0, n1 = max(n0, self.start), min(n1, self.end)
         if n1 <= n0:
             return n0, np.empty((self.rows, 0))
-        idx = np.arange(n0, n1) % self.capacity
-        return n0, self._buf[:, idx]
+        a = n0 % self.capacity
+        b = a + (n1 - n0)
+        if b <= self.capacity:
+            return n0, self._buf[:, a:b].copy()
+        return n0, np.concatenate((self._buf[:, a:], self._buf[:, : b - self.capacity]), axis=1)
 
     def snapshot(self, keep_from: int) -> dict[str, Any]:
         """The samples from ``keep_from`` (clipped to what is held) and the write position."""

@@ -188,6 +188,15 @@ class SteadyStateMeter:
     ) -> list[SteadyWindow]:
         """Samples ``[start, start + n)`` of a running phase (contiguous with the previous call
         unless a new run begins). Returns the windows completed."""
+        names = list(self.channels)
+        rows = np.empty((len(names), speed_frac.shape[0]))
+        for c, name in enumerate(names):
+            rows[c] = data[name]
+        return self.feed_rows(start, speed_frac, rows)
+
+    def feed_rows(self, start: int, speed_frac: np.ndarray, rows: np.ndarray) -> list[SteadyWindow]:
+        """:meth:`feed` with the channels as the rows of one float64 array, in the order of
+        ``channels`` (no per-channel dict; the rows may be a view of a larger array)."""
         if start != self.next:
             self._reset_run(start)
         out: list[SteadyWindow] = []
@@ -196,23 +205,22 @@ class SteadyStateMeter:
         while a < n:
             w_end = self.run_start + self.window * (1 + (start + a - self.run_start) // self.window)
             b = min(n, w_end - start)
-            self._fold(speed_frac[a:b], {k: v[a:b] for k, v in data.items()})
+            self._fold(speed_frac[a:b], rows[:, a:b])
             if start + b == w_end:
                 out.append(self._close(w_end))
             a = b
         self.next = start + n
         return out
 
-    def _fold(self, speed: np.ndarray, data: dict[str, np.ndarray]) -> None:
-        """Fold samples of one window into the sums and the per-revolution extremes (one
-        compiled pass, :func:`_fold_kernel`; bitwise what the numpy formulation gave)."""
+    def _fold(self, speed: np.ndarray, x: np.ndarray) -> None:
+        """Fold samples of one window (``x``: one row per channel) into the sums and the
+        per-revolution extremes (one compiled pass, :func:`_fold_kernel`; bitwise what the
+        numpy formulation gave)."""
         n = speed.shape[0]
         if n == 0:
             return
         names = list(self.channels)
-        x = np.empty((len(names), n))
-        for c, name in enumerate(names):
-            x[c] = data[name]
+        x = np.ascontiguousarray(x, dtype=np.float64)
         st_f = np.array([self.revs, self.speed_sum])
         sums = np.array([self.sums[k] for k in names])
         counts = np.array([self.counts[k] for k in names], dtype=np.int64)

@@ -64,10 +64,11 @@ class _NumpyFold:
     def __init__(self, m: SteadyStateMeter) -> None:
         self.m = m
 
-    def fold(self, speed: np.ndarray, data: dict[str, np.ndarray]) -> None:
+    def fold(self, speed: np.ndarray, rows: np.ndarray) -> None:
         m = self.m
         if speed.size == 0:
             return
+        data = dict(zip(m.channels, rows, strict=True))  # the meter's channels, in order
         s = np.nan_to_num(speed, nan=0.0)
         revs = np.cumsum(np.concatenate(([m.revs], s * m.rev_per_sample)))[1:]
         r = np.floor(revs).astype(np.int64)
