@@ -60,7 +60,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from analytics.kinematics import ExpectedLine, KinematicsOptions, expected_lines
 from analytics.mill_config import MillConfig
 from analytics.order_kernels import catmull_rom, cosine_window, demodulate
-from analytics.running_median import running_median
+from analytics.running_median import NoiseFloor, local_maxima
 from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = [
@@ -87,6 +87,7 @@ COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
     "flattop": (0.21557895, 0.41663158, 0.277263158, 0.083578947, 0.006947368),
 }
 _SPEED_BLOCKS = 10  # speed block means per segment for the drift estimate
+_TINY = float(np.finfo(float).tiny)
 #: Largest deferral of a complete segment's spectrum, in hops (``stagger`` → 1): under one hop,
 #: so a segment never waits behind the next one.
 MAX_DEFER_HOPS = 0.8
@@ -167,6 +168,19 @@ def window_response(name: str, eps: np.ndarray | float) -> np.ndarray:
     for k in range(1, len(a)):
         s = s + 0.5 * a[k] * (np.sinc(e - k) + np.sinc(e + k))
     return np.abs(s) / a[0]
+
+
+def _spread(dphi: np.ndarray) -> float:
+    """(max − min) / mean of the means of ``np.array_split(dphi, _SPEED_BLOCKS)``: the blocks of
+    equal length summed as rows of one array (numpy's row sums are its 1-D sums: bitwise the
+    blocks' ``mean()``, without a call per block)."""
+    q, r = divmod(dphi.shape[0], _SPEED_BLOCKS)
+    if q == 0:
+        means = np.array([b.mean() for b in np.array_split(dphi, _SPEED_BLOCKS)])
+    else:
+        long = dphi[: r * (q + 1)].reshape(r, q + 1).sum(axis=1) / (q + 1)
+        means = np.concatenate((long, dphi[r * (q + 1) :].reshape(-1, q).sum(axis=1) / q))
+    return float((means.max() - means.min()) / means.mean())
 
 
 def _sinc(x: float) -> float:
@@ -291,8 +305,7 @@ class HarmonicWindow:
 
 def _db(power: float, floor: float) -> float:
     """10 log10(power / floor), 0 dB for an all-zero spectrum."""
-    tiny = np.finfo(float).tiny
-    return 10.0 * math.log10(max(float(power), tiny) / max(float(floor), tiny))
+    return 10.0 * math.log10(max(float(power), _TINY) / max(float(floor), _TINY))
 
 
 def _jsonable(v: Any) -> Any:
@@ -434,12 +447,14 @@ class HarmonicTracker:
             ln for ln in expected_lines(config, None, self.settings.kinematics) if ln.observable
         ]
         self._all_lines = expected_lines(config, None, self.settings.kinematics)
+        self._unobservable_rows: dict[str, list[LineMeasurement]] = {}
         self._grid: tuple[np.ndarray, np.ndarray] | None = None  # see _grid_taper
         self._rho, self._delta = _interp_table(self.settings.window)
         nc, nl = len(self.channels), len(self._lines)
         self._buf = np.zeros((nc + 1, self.capacity + self.defer_samples))
         self._len = 0
         self._due: tuple[int, int] | None = None  # a complete segment: (end, length when due)
+        self._due_phi = np.empty(0)  # its angle phi[: end + 2] (revolutions)
         self._approx_revs = 0.0
         self._anchor_ns: int | None = None
         self._anchor_offset = 0  # run sample index of buffer[0]
@@ -612,12 +627,14 @@ class HarmonicTracker:
         end = int(np.searchsorted(phi, self.revs, side="left"))
         if end + 2 > self._len:
             return None
+        self._due_phi = phi[: end + 2]  # (a prefix of a cumsum: the same in _cut)
         return end, min(end + 2 + self.defer_samples, self._buf.shape[1])
 
     def _cut(self, end: int, out: list[HarmonicWindow]) -> None:
-        """Spectrum of the segment ``[0, end + 2)``, then drop one hop from the buffer."""
-        phi = np.concatenate(([0.0], np.cumsum(self._buf[-1, : self._len])))
-        seg = self._segment(self._buf[:, : end + 2], phi[: end + 2], end)
+        """Spectrum of the segment ``[0, end + 2)``, then drop one hop from the buffer
+        (``_due_phi``: its angle, from :meth:`_complete_segment`; a hop is < ``end``)."""
+        phi = self._due_phi
+        seg = self._segment(self._buf[:, : end + 2], phi, end)
         window = self._add(seg)
         if window is not None:
             out.append(window)
@@ -656,9 +673,7 @@ class HarmonicTracker:
 
     def _spread(self, dphi: np.ndarray) -> float:
         """Relative spread (max − min) / mean of the segment's speed block means."""
-        blocks = np.array_split(dphi, _SPEED_BLOCKS)
-        means = np.array([b.mean() for b in blocks])
-        return float((means.max() - means.min()) / means.mean())
+        return _spread(dphi)
 
     def _use_angle(self, spread: float) -> bool:
         mode = self.settings.tracking
@@ -673,11 +688,14 @@ class HarmonicTracker:
         """|FFT|² of the segment resampled to ``P`` points per revolution, tapered."""
         grid, taper = self._grid_taper()
         s = np.interp(grid, phi[: end + 1], np.arange(end + 1, dtype=np.float64))
-        y = catmull_rom(data, s)
-        y -= y.mean(axis=1, keepdims=True)
-        y *= taper
-        spec = np.fft.rfft(y, axis=1)
-        return spec.real**2 + spec.imag**2
+        power = np.empty((data.shape[0], self.bins))
+        for r in range(data.shape[0]):  # channel by channel: the FFT's input is still in cache
+            y = catmull_rom(data[r : r + 1], s)
+            y -= y.mean(axis=1, keepdims=True)
+            y *= taper
+            spec = np.fft.rfft(y[0])
+            np.add(spec.real**2, spec.imag**2, out=power[r])
+        return power
 
     def _grid_taper(self) -> tuple[np.ndarray, np.ndarray]:
         """The angle grid of a segment (revolutions) and the taper on it (computed once)."""
@@ -698,9 +716,9 @@ class HarmonicTracker:
         dphi = np.diff(phi[: end + 1])
         q = cosine_window(p, self.revs, COSINE_WINDOWS[self.settings.window]) * dphi
         qs = q.sum()
-        centred = data - (data @ q / qs)[:, None]
+        mean = data @ q / qs  # (the kernel demodulates data − mean)
         rev_hz = phi[end] / (end / self.fs)
-        amp = 2.0 * demodulate(centred, q, p, self._orders(rev_hz)) / qs  # (lines, channels)
+        amp = 2.0 * demodulate(data, q, p, self._orders(rev_hz), mean) / qs  # (lines, channels)
         return (amp.real**2 + amp.imag**2).T
 
     def _add(self, seg: _Segment) -> HarmonicWindow | None:
@@ -736,9 +754,10 @@ class HarmonicTracker:
             peaks=tuple(peaks),
         )
 
-    def _floor(self, power: np.ndarray) -> np.ndarray:
-        """Running median of the power spectrum over ± ``floor_bins`` bins (noise floor)."""
-        return np.maximum(running_median(power, self.settings.floor_bins), np.finfo(float).tiny)
+    def _floor(self, power: np.ndarray) -> NoiseFloor:
+        """Running median of the power spectrum over ± ``floor_bins`` bins (noise floor),
+        taken at the bins read (:class:`analytics.running_median.NoiseFloor`)."""
+        return NoiseFloor(power, self.settings.floor_bins)
 
     def _amplitude(self, power: float) -> float:
         """Amplitude of a bin-centred line whose |FFT|² is ``power``."""
@@ -755,43 +774,76 @@ class HarmonicTracker:
         self,
         ch: _Channel,
         power: np.ndarray,
-        floor: np.ndarray,
+        floor: NoiseFloor,
         demod_amp: np.ndarray,
         rev_hz: float,
         locked: bool,
     ) -> list[LineMeasurement]:
         mag = np.sqrt(power)
         orders = self._orders(rev_hz)
+        bins = orders * self.revs
+        k = self._line_peaks(mag, bins)
+        peak = (k, self._interpolate_many(mag, k), floor.at(k))
         out = []
         for j, ln in enumerate(self._lines):
             lock = locked and ln.order is not None
             out.append(
-                self._measure_line(ch, ln, orders[j], mag, floor, demod_amp[j], rev_hz, lock)
-            )
-        out += [self._unobservable(ch, ln) for ln in self._all_lines if not ln.observable]
-        return out
+                self._measure_line(
+                    ch, ln, orders[j], bins[j], [v[j] for v in peak], mag, demod_amp[j], rev_hz,
+                    lock,
+                )
+            )  # fmt: skip
+        unobservable = self._unobservable_rows.get(ch.name)
+        if unobservable is None:  # (constant per channel: frozen rows made once)
+            unobservable = [
+                self._unobservable(ch, ln) for ln in self._all_lines if not ln.observable
+            ]
+            self._unobservable_rows[ch.name] = unobservable
+        return out + unobservable
+
+    def _line_peaks(self, mag: np.ndarray, bins: np.ndarray) -> np.ndarray:
+        """The largest bin within ± ``search_bins`` of each expected bin (the first of equals;
+        the window clipped to bins 1 … len − 2)."""
+        r = self.settings.search_bins
+        centre = np.rint(bins).astype(np.int64)  # (round half to even, as round())
+        lo = np.maximum(1, centre - r)
+        hi = np.minimum(mag.shape[0] - 2, centre + r)
+        if np.any(hi < lo):
+            raise ValueError("an expected line lies outside the spectrum")
+        idx = np.minimum(lo[:, None] + np.arange(2 * r + 1), hi[:, None])  # (repeats hi)
+        return lo + np.argmax(mag[idx], axis=1)
+
+    def _interpolate_many(self, mag: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """:meth:`_interpolate` of each peak bin of ``k`` (one ``np.interp`` call)."""
+        n = mag.shape[0]
+        if n < 3:
+            return np.zeros(k.shape[0])
+        kk = np.clip(k, 1, n - 2)
+        valid = (k > 0) & (k < n - 1) & (mag[kk] > 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rho = np.where(valid, (mag[kk + 1] - mag[kk - 1]) / mag[kk], 0.0)
+        return np.where(valid, np.interp(rho, self._rho, self._delta), 0.0)
 
     def _measure_line(
         self,
         ch: _Channel,
         ln: ExpectedLine,
         order: float,
+        b: float,
+        peak: list[Any],
         mag: np.ndarray,
-        floor: np.ndarray,
         demod: float,
         rev_hz: float,
         locked: bool,
     ) -> LineMeasurement:
-        """Peak search ± ``search_bins`` around the expected bin; amplitude from the demodulated
-        value (window-response corrected), or — for a peak more than ½ bin off — from the
-        interpolated FFT bin. ``locked``: order-tracked shaft line, which cannot leave its order,
-        so a far-off maximum (a neighbour's lobe) is ignored and the exact order is used."""
-        b = order * self.revs
-        r = self.settings.search_bins
-        lo, hi = max(1, round(b) - r), min(mag.shape[0] - 2, round(b) + r)
-        k = lo + int(np.argmax(mag[lo : hi + 1]))
-        delta = self._interpolate(mag, k)
-        snr = _db(mag[k] ** 2, floor[k])
+        """Peak ``peak`` = (bin ``k``, its interpolated offset, the floor there) of the search
+        ± ``search_bins`` around the expected bin ``b`` (:meth:`_line_peaks`); amplitude from
+        the demodulated value (window-response corrected), or — for a peak more than ½ bin off —
+        from the interpolated FFT bin. ``locked``: order-tracked shaft line, which cannot leave
+        its order, so a far-off maximum (a neighbour's lobe) is ignored and the exact order is
+        used."""
+        k, delta, floor = int(peak[0]), float(peak[1]), float(peak[2])
+        snr = _db(mag[k] ** 2, floor)
         detected = snr >= self.settings.peak_snr_db
         eps = (k + delta - b) if detected else 0.0
         if locked and abs(eps) > 0.5:
@@ -819,12 +871,8 @@ class HarmonicTracker:
         return None if ch.rated is None else 100.0 * amp / ch.rated
 
     # ------------------------------------------------------------------ unexplained peaks
-    def _candidates(self, power: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    def _candidates(self, power: np.ndarray, floor: NoiseFloor) -> np.ndarray:
         """Local maxima ``peak_snr_db`` above the floor within the low/high order limits."""
-        p = power
-        local = (p[1:-1] > p[:-2]) & (p[1:-1] >= p[2:])
-        snr_ok = p[1:-1] >= floor[1:-1] * 10.0 ** (self.settings.peak_snr_db / 10.0)
-        k = np.flatnonzero(local & snr_ok) + 1
         mill = self.config.excitation_orders()["mill_speed"]
         lo = max(2.5, 0.5 * mill * self.revs)
         limit_hz = min(
@@ -832,10 +880,11 @@ class HarmonicTracker:
             self.fs / 2.0,
         )
         hi = limit_hz / (self.config.pinion_speed_rpm / 60.0) * self.revs
-        return k[(k >= lo) & (k <= hi)]
+        k = local_maxima(power, lo, hi)
+        return floor.exceeded(k, 10.0 ** (self.settings.peak_snr_db / 10.0))
 
     def _peaks(
-        self, ch: _Channel, power: np.ndarray, floor: np.ndarray, rev_hz: float, acc: _Acc
+        self, ch: _Channel, power: np.ndarray, floor: NoiseFloor, rev_hz: float, acc: _Acc
     ) -> list[UnexplainedPeak]:
         mag = np.sqrt(power)
         line_bins = self._orders(rev_hz) * self.revs

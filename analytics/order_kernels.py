@@ -3,232 +3,386 @@
 * :func:`demodulate` — the line demodulation of step 4 of the tracker's algorithm:
   ``X(o) = Σ x̃ₙ qₙ e^{−2πi o φₙ}`` for every tracked line order ``o`` on every channel, with
   ``φₙ`` the measured pinion angle (revolutions) of each raw sample and ``qₙ`` the window × angle
-  step weights. numpy built the (lines × samples) complex phase matrix with ``np.exp`` (~0.5 µs
-  a sample for 14 lines); here a line's phasors ``e^{−2πi o φₙ}`` are either computed — turned
-  from sample to sample by the small angle step (Taylor), recomputed exactly every 256 samples
-  — or, when the line's order is the sum or difference of two lines already computed (a mesh
-  harmonic, a ±mill-speed sideband), the products of their phasors; :func:`phasor_plan` finds
-  those relations. The sums run over the rows with four running sums each (no BLAS: no
-  threads, the same result everywhere). ~0.1 µs a sample for 14 lines and 3 channels; the
-  phases agree with ``np.exp`` to ~1e-11 rad.
-* :func:`cosine_window` — the taper at each sample's angle, from the same recurrence.
+  step weights. The samples are taken in blocks of :data:`_BLOCK`; in each block a few phasor
+  rows are computed directly — an exact anchor ``e^{−2πi o φ_a}`` at the block's first sample
+  times the small turn ``e^{−2πi o (φₙ − φ_a)}`` (Taylor; for a large order the turn of
+  ``o / 2^k`` squared ``k`` times) — and every other row is the product of two earlier rows
+  (``o = o_a ± o_b``): most tracked orders are integer multiples of the mill order (mesh
+  harmonics, ±mill-speed sidebands, pinion lines), so one computed row per such family and an
+  addition chain of products (helper rows that are no line) give them all;
+  :func:`phasor_plan` finds the rows. The block's rows stay in cache and are summed at once
+  into per-lane running sums (elementwise: vectorised, the same result everywhere; no BLAS, no
+  threads), added pairwise at the end. The phases agree with ``np.exp`` to ~1e-12 rad (the
+  rounding of ``2π o φ`` itself).
+* :func:`cosine_window` — the taper at each sample's angle, from the same rows.
 * :func:`catmull_rom` — cubic (Catmull-Rom) interpolation of the rows of a uniformly sampled
   array at fractional indices, clamped at the ends: the resampling to the angle grid of step 3;
-  the same arithmetic as the numpy formulation it replaced, fused in one pass.
+  the cubic's four weights once per point for all rows (the numpy formulation it replaced to
+  rounding, ~1e-15).
 
-Demodulated sums agree with the numpy formulation to ~1e-11 relative.
+Demodulated sums agree with the numpy formulation to ~1e-12 relative.
 """
 
 from __future__ import annotations
 
 import math
-import threading
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-__all__ = ["catmull_rom", "cosine_window", "demodulate", "phasor_plan"]
+__all__ = [
+    "PhasorPlan",
+    "catmull_rom",
+    "cosine_window",
+    "demodulate",
+    "phasor_plan",
+]
 
-_DIRECT, _SUM, _DIFF = 0, 1, 2
-_TOL = 1e-12  # relative: orders that are sums of others up to rounding of the kinematics
-_ANCHOR = 256  # samples between exact phasors of the computed lines
-_SMALL = 0.6  # rad: largest step advanced by the Taylor rotation
+_SUM, _DIFF = 1, 2
+_TOL = 1e-12  # relative: orders that are sums / multiples of others up to rounding
+_MAX_MULTIPLE = 4096  # largest multiple of a family's order built by products
+_BLOCK = 256  # samples per block (rows of a block stay in L1 cache)
+_THETA = 0.25  # rad: largest turn taken from the Taylor series (error < 1e-19)
 
 
-_PLANS: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+class PhasorPlan(NamedTuple):
+    """How to get the phasor rows ``e^{−2πi o_r φ}`` of a set of line orders.
+
+    ``omega``: (F,) ``2π o`` of each directly computed row (rad per revolution); ``direct``:
+    (F,) its row; ``steps``: (S, 4) ``[row, op, a, b]`` in evaluation order, op 1 = ``z_a z_b``
+    (``o_a + o_b``), op 2 = ``z_a z̄_b`` (``o_a − o_b``), ``a``, ``b`` earlier rows;
+    ``line_rows``: (lines,) the row of each line; ``row_orders``: (rows,) each row's order.
+    """
+
+    omega: np.ndarray
+    direct: np.ndarray
+    steps: np.ndarray
+    line_rows: np.ndarray
+    row_orders: np.ndarray
 
 
-def phasor_plan(orders: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_plan` of ``orders``, remembered (a mill's orders rarely change; a few kept)."""
+_PLANS: dict[bytes, PhasorPlan] = {}
+
+
+def phasor_plan(orders: np.ndarray) -> PhasorPlan:
+    """The :class:`PhasorPlan` of ``orders``, remembered (a mill's orders rarely change)."""
     key = np.asarray(orders, dtype=np.float64).tobytes()
     plan = _PLANS.get(key)
     if plan is None:
         if len(_PLANS) >= 64:
             _PLANS.clear()
-        plan = _PLANS[key] = _plan(orders)
+        plan = _PLANS[key] = _Planner().plan(np.asarray(orders, dtype=np.float64))
     return plan
 
 
-def _plan(orders: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """How to get each line's phasor: ``(op, a, b)`` per line, op 0 = compute it, 1 = product
-    of lines ``a`` and ``b`` (o = o_a + o_b), 2 = line ``a`` times the conjugate of ``b``
-    (o = o_a − o_b). Lines are planned in increasing order; ``a``, ``b`` always come earlier in
-    the returned evaluation order (the plan is applied to lines sorted by order)."""
-    o = np.asarray(orders, dtype=np.float64)
-    order = np.argsort(np.abs(o), kind="stable")
-    op = np.zeros(o.size, dtype=np.int64)
-    a = np.zeros(o.size, dtype=np.int64)
-    b = np.zeros(o.size, dtype=np.int64)
-    done: list[int] = []
-    for k in order.tolist():
-        tol = _TOL * max(abs(o[k]), 1.0)
-        found = _relation(o, done, k, tol)
-        if found is not None:
-            op[k], a[k], b[k] = found
-        done.append(k)
-    return order.astype(np.int64), np.stack([op, a, b]), o
+class _Planner:
+    """Rows for the lines in increasing |order|: a repeated order reuses its row; an order that
+    is the sum or difference of two rows is their product; an integer multiple ``n`` of a
+    family's first order ``g`` is built from the family's rows by an addition chain (helper
+    rows for the missing multiples); any other order is computed directly and starts a family.
+    The phase error of a built row is ~``n`` times its family row's (~1e-16 of ``2π g φ``), i.e.
+    the rounding of ``2π o φ`` itself."""
+
+    def __init__(self) -> None:
+        self.orders: list[float] = []
+        self.omega: list[float] = []
+        self.direct: list[int] = []
+        self.steps: list[tuple[int, int, int, int]] = []
+        self.families: list[_Family] = []
+
+    def plan(self, o: np.ndarray) -> PhasorPlan:
+        line_rows = np.zeros(o.size, dtype=np.int64)
+        for k in np.argsort(np.abs(o), kind="stable").tolist():
+            line_rows[k] = self.row_for(float(o[k]))
+        for fam in self.families:
+            fam.settle(self)
+        return PhasorPlan(
+            np.array(self.omega, dtype=np.float64),
+            np.array(self.direct, dtype=np.int64),
+            np.array(self.steps, dtype=np.int64).reshape(-1, 4),
+            line_rows,
+            np.array(self.orders, dtype=np.float64),
+        )
+
+    def row_for(self, order: float) -> int:
+        tol = _TOL * max(abs(order), 1.0)
+        v = np.array(self.orders)
+        same = np.flatnonzero(np.abs(v - order) <= tol)
+        if same.size:
+            return int(same[0])
+        for sign, op in ((1.0, _SUM), (-1.0, _DIFF)):
+            hit = np.argwhere(np.abs(v[:, None] + sign * v[None, :] - order) <= tol)
+            if hit.size:
+                return self._product(order, op, int(hit[0, 0]), int(hit[0, 1]))
+        for fam in self.families:
+            n = round(order / fam.g)
+            if 1 <= n <= _MAX_MULTIPLE and abs(n * fam.g - order) <= tol:
+                fam.lines.append((n, order))
+                return self._multiple(fam.g, fam.rows, n)
+        row = self._row(order)
+        self.omega.append(2.0 * math.pi * order)
+        self.direct.append(row)
+        if order > 0.0:
+            self.families.append(_Family(len(self.omega) - 1, order, {1: row}, [(1, order)]))
+        return row
+
+    def _row(self, order: float) -> int:
+        self.orders.append(order)
+        return len(self.orders) - 1
+
+    def _product(self, order: float, op: int, a: int, b: int) -> int:
+        row = self._row(order)
+        self.steps.append((row, op, a, b))
+        return row
+
+    @staticmethod
+    def _one_step(rows: dict[int, int], n: int) -> tuple[int, int, int] | None:
+        for a in rows:
+            if n - a in rows:
+                return _SUM, a, n - a
+            if a - n in rows:
+                return _DIFF, a, a - n
+        return None
+
+    def _multiple(self, g: float, rows: dict[int, int], n: int) -> int:
+        """Row of ``n·g`` in the family ``rows`` (multiple → row), adding helper rows."""
+        if n in rows:
+            return rows[n]
+        step = self._one_step(rows, n)
+        if step is None:
+            for a in sorted(rows):  # two products: n = a ± r, r one product away
+                r = n - a if n > a else a - n
+                if r not in rows and self._one_step(rows, r) is not None:
+                    self._multiple(g, rows, r)
+                    return self._multiple(g, rows, n)
+            self._multiple(g, rows, n // 2)  # else halve (bounded: n ≤ _MAX_MULTIPLE)
+            self._multiple(g, rows, 2 * (n // 2))
+            if n in rows:
+                return rows[n]
+            step = self._one_step(rows, n)
+            assert step is not None
+        op, a, b = step
+        rows[n] = self._product(n * g, op, rows[a], rows[b])
+        return rows[n]
 
 
-def _relation(o: np.ndarray, done: list[int], k: int, tol: float) -> tuple[int, int, int] | None:
-    for i in done:
-        for j in done:
-            if abs(o[i] + o[j] - o[k]) <= tol:
-                return _SUM, i, j
-            if abs(o[i] - o[j] - o[k]) <= tol:
-                return _DIFF, i, j
-    return None
+@dataclass
+class _Family:
+    """Rows ``rows[n]`` of the multiples ``n·g`` of a directly computed order ``g`` (the
+    ``index``-th direct row); ``lines``: (n, order) of the lines it serves."""
+
+    index: int
+    g: float
+    rows: dict[int, int]
+    lines: list[tuple[int, float]]
+
+    def settle(self, planner: _Planner) -> None:
+        """Set ``g`` to the least-squares fit ``Σ n·o / Σ n²`` of its lines (the high
+        multiples then miss their orders by ~1 ulp of the order, not ~n ulp of ``g``)."""
+        self.g = sum(n * o for n, o in self.lines) / sum(n * n for n, _ in self.lines)
+        planner.omega[self.index] = 2.0 * math.pi * self.g
+        for n, row in self.rows.items():
+            planner.orders[row] = n * self.g
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _small_turn(x):
-    """(cos x, sin x) of a small angle |x| ≤ :data:`_SMALL` (Taylor to x¹³: error < 1e-14)."""
+def _turn(x):
+    """(cos x, sin x) of a small angle |x| ≤ :data:`_THETA` (Taylor to x¹³: error < 1e-19)."""
     x2 = x * x
-    c = 1.0 / 479001600
-    for coef in (-1.0 / 3628800, 1.0 / 40320, -1.0 / 720, 1.0 / 24, -1.0 / 2, 1.0):
-        c = coef + x2 * c
-    s = 1.0 / 6227020800
-    for coef in (-1.0 / 39916800, 1.0 / 362880, -1.0 / 5040, 1.0 / 120, -1.0 / 6, 1.0):
-        s = coef + x2 * s
+    c = 1.0 + x2 * (-1.0 / 2 + x2 * (1.0 / 24 + x2 * (-1.0 / 720 + x2 * (
+        1.0 / 40320 + x2 * (-1.0 / 3628800 + x2 * (1.0 / 479001600))))))  # fmt: skip
+    s = 1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (
+        1.0 / 362880 + x2 * (-1.0 / 39916800 + x2 * (1.0 / 6227020800))))))  # fmt: skip
     return c, s * x
 
 
 @njit(cache=True, nogil=True)
-def _computed(p, orders, lines, re_out, im_out):
-    """e^{−2πi·orders[l]·p[n]} for every n, for the ``lines`` l at once (independent chains
-    side by side): each advanced from the previous sample by its small angle step and
-    recomputed exactly every :data:`_ANCHOR` samples (or when the step is not small), so
-    rounding cannot build up (< 1e-11 rad)."""
-    m = lines.shape[0]
-    w = np.empty(m)
-    re = np.ones(m)
-    im = np.zeros(m)
-    for t in range(m):
-        w[t] = 2.0 * math.pi * orders[lines[t]]
-    for n in range(p.shape[0]):
-        step = p[n] - p[n - 1] if n else 0.0
-        anchor = n % _ANCHOR == 0
-        for t in range(m):
-            x = w[t] * step
-            if anchor or abs(x) > _SMALL:
-                re[t], im[t] = math.cos(w[t] * p[n]), -math.sin(w[t] * p[n])
-            else:
-                c, s = _small_turn(x)
-                re[t], im[t] = re[t] * c + im[t] * s, im[t] * c - re[t] * s
-            re_out[lines[t], n] = re[t]
-            im_out[lines[t], n] = im[t]
+def _direct_row(p, s, m, span, w, re, im):
+    """``re + i·im`` = e^{−iwφ} at samples ``p[s : s + m]`` (``span`` ≥ their distance from
+    ``p[s]``): the exact anchor e^{−iwp[s]} times the turn e^{−i(w/2^k)(φ−p[s])} squared k
+    times, ``k`` the least with a turn ≤ :data:`_THETA`."""
+    pa = p[s]
+    scale = 1.0
+    k = 0
+    while abs(w) * span * scale > _THETA and k < 1000:
+        scale *= 0.5
+        k += 1
+    ws = w * scale
+    for j in range(m):
+        c, sn = _turn(ws * (p[s + j] - pa))
+        re[j] = c
+        im[j] = -sn
+    for _ in range(k):
+        for j in range(m):
+            a, b = re[j], im[j]
+            re[j] = a * a - b * b
+            im[j] = 2.0 * a * b
+    ca, sa = math.cos(w * pa), math.sin(w * pa)
+    for j in range(m):
+        a, b = re[j], im[j]
+        re[j] = ca * a + sa * b
+        im[j] = ca * b - sa * a
 
 
 @njit(cache=True, nogil=True)
-def _phasors(p, orders, sequence, plan, re, im):
-    """Rows ``re[l] + i·im[l]`` = e^{−2πi o_l p} for every line: the computed ones first, then
-    in plan order the products of two earlier rows (see :func:`phasor_plan`; independent
-    samples: vectorised)."""
-    _computed(p, orders, np.flatnonzero(plan[0] == _DIRECT), re, im)
-    for s in range(orders.shape[0]):
-        k = sequence[s]
-        op = plan[0, k]
-        if op == _DIRECT:
-            continue
-        i, j = plan[1, k], plan[2, k]
+def _product_row(ar, ai, br, bi, sign, re, im, m):
+    """``re + i·im`` = a·b (``sign`` 1) or a·b̄ (``sign`` −1), elementwise over ``m``."""
+    for j in range(m):
+        b = sign * bi[j]
+        re[j] = ar[j] * br[j] - ai[j] * b
+        im[j] = ar[j] * b + ai[j] * br[j]
+
+
+@njit(cache=True, nogil=True)
+def _block_rows(p, s, m, omega, direct, steps, re, im):
+    """Every row of the plan at samples ``p[s : s + m]`` into ``re[:, :m]``, ``im[:, :m]``."""
+    span = 0.0
+    for j in range(m):
+        span = max(span, abs(p[s + j] - p[s]))
+    for f in range(omega.shape[0]):
+        r = direct[f]
+        _direct_row(p, s, m, span, omega[f], re[r], im[r])
+    for t in range(steps.shape[0]):
+        r, op, a, b = steps[t, 0], steps[t, 1], steps[t, 2], steps[t, 3]
         sign = 1.0 if op == _SUM else -1.0
-        for n in range(p.shape[0]):
-            bi = sign * im[j, n]
-            re[k, n] = re[i, n] * re[j, n] - im[i, n] * bi
-            im[k, n] = re[i, n] * bi + im[i, n] * re[j, n]
+        _product_row(re[a], im[a], re[b], im[b], sign, re[r], im[r], m)
+
+
+@njit(cache=True, nogil=True, fastmath={"reassoc"})
+def _dot(w, re, im, m):
+    """``(Σ_j w[j]·re[j], Σ_j w[j]·im[j])`` over ``j < m``, vectorised: the only kernel allowed
+    to reassociate (the compiled code fixes the order: the same result for every call on a
+    machine; across CPUs the last bits may differ)."""
+    r = 0.0
+    i = 0.0
+    for j in range(m):
+        r += w[j] * re[j]
+        i += w[j] * im[j]
+    return r, i
 
 
 @njit(cache=True, nogil=True)
-def _sums(re, im, w, out):
-    """``out[l, c] = (Σₙ w[c, n]·re[l, n], Σₙ w[c, n]·im[l, n])``, four running sums each
-    (independent chains keep the multiply-adds flowing; deterministic, no threads)."""
-    n = w.shape[1]
-    m = n - n % 4
-    for k in range(re.shape[0]):
-        for c in range(w.shape[0]):
-            r0 = r1 = r2 = r3 = 0.0
-            i0 = i1 = i2 = i3 = 0.0
-            for j in range(0, m, 4):
-                r0 += w[c, j] * re[k, j]
-                r1 += w[c, j + 1] * re[k, j + 1]
-                r2 += w[c, j + 2] * re[k, j + 2]
-                r3 += w[c, j + 3] * re[k, j + 3]
-                i0 += w[c, j] * im[k, j]
-                i1 += w[c, j + 1] * im[k, j + 1]
-                i2 += w[c, j + 2] * im[k, j + 2]
-                i3 += w[c, j + 3] * im[k, j + 3]
-            for j in range(m, n):
-                r0 += w[c, j] * re[k, j]
-                i0 += w[c, j] * im[k, j]
-            out[k, c, 0] = (r0 + r1) + (r2 + r3)
-            out[k, c, 1] = (i0 + i1) + (i2 + i3)
+def _demodulate(y, offset, q, p, omega, direct, steps, line_rows, rows, out):
+    """``out[l, c] = Σₙ (y[c, n] − offset[c]) q[n] (re, im)(e^{−2πi o_l p[n]})`` by blocks."""
+    n = p.shape[0]
+    channels = y.shape[0]
+    re = np.zeros((rows, _BLOCK))
+    im = np.zeros((rows, _BLOCK))
+    w = np.zeros((channels, _BLOCK))
+    out[:] = 0.0
+    for s in range(0, n, _BLOCK):
+        m = min(_BLOCK, n - s)
+        _block_rows(p, s, m, omega, direct, steps, re, im)
+        for c in range(channels):
+            for j in range(m):
+                w[c, j] = (y[c, s + j] - offset[c]) * q[s + j]
+        for li in range(line_rows.shape[0]):
+            r = line_rows[li]
+            for c in range(channels):
+                a, b = _dot(w[c], re[r], im[r], m)
+                out[li, c, 0] += a
+                out[li, c, 1] += b
 
 
-class _Rows:
-    """Reused phasor rows: fresh 5 MB arrays per segment cost more in page faults than the
-    arithmetic."""
+def demodulate(
+    y: np.ndarray,
+    q: np.ndarray,
+    p: np.ndarray,
+    orders: np.ndarray,
+    offset: np.ndarray | None = None,
+) -> np.ndarray:
+    """Complex sums ``Σₙ (y[c, n] − offset[c])·q[n]·e^{−2πi o_l p[n]}`` as a (lines, channels)
+    array.
 
-    def __init__(self) -> None:
-        self.re = np.empty((0, 0))
-        self.im = np.empty((0, 0))
-
-    def get(self, lines: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-        if self.re.shape[0] < lines or self.re.shape[1] < n:
-            self.re = np.empty((lines, n))
-            self.im = np.empty((lines, n))
-        return self.re[:lines, :n], self.im[:lines, :n]
-
-
-_ROWS = threading.local()
-
-
-def demodulate(y: np.ndarray, q: np.ndarray, p: np.ndarray, orders: np.ndarray) -> np.ndarray:
-    """Complex sums ``Σₙ y[c, n]·q[n]·e^{−2πi o_l p[n]}`` as a (lines, channels) array.
-
-    ``y``: (channels, n) samples; ``q``: (n,) weights; ``p``: (n,) angle in revolutions;
-    ``orders``: (lines,) orders (cycles per revolution)."""
-    sequence, plan, o = phasor_plan(orders)
-    rows = getattr(_ROWS, "rows", None)
-    if rows is None:
-        rows = _ROWS.rows = _Rows()
-    re, im = rows.get(o.size, p.shape[0])
-    _phasors(np.ascontiguousarray(p, dtype=np.float64), o, sequence, plan, re, im)
-    w = np.ascontiguousarray(np.asarray(y, dtype=np.float64) * q)
-    out = np.empty((o.size, w.shape[0], 2))
-    _sums(re, im, w, out)
+    ``y``: (channels, n) samples (rows may be strided views); ``q``: (n,) weights; ``p``: (n,)
+    angle in revolutions; ``orders``: (lines,) orders (cycles per revolution); ``offset``:
+    (channels,) subtracted from each row first (``y − offset`` rounded as numpy would), zero
+    when None."""
+    plan = phasor_plan(orders)
+    y2 = np.asarray(y, dtype=np.float64)
+    off = np.zeros(y2.shape[0]) if offset is None else np.asarray(offset, dtype=np.float64)
+    out = np.empty((plan.line_rows.shape[0], y2.shape[0], 2))
+    _demodulate(
+        y2,
+        np.ascontiguousarray(off),
+        np.ascontiguousarray(q, dtype=np.float64),
+        np.ascontiguousarray(p, dtype=np.float64),
+        plan.omega,
+        plan.direct,
+        plan.steps,
+        plan.line_rows,
+        plan.row_orders.shape[0],
+        out,
+    )
     return out[..., 0] + 1j * out[..., 1]
+
+
+@njit(cache=True, nogil=True)
+def _cosine_sum(p, omega, direct, steps, line_rows, rows, coef, out):
+    """``out[n] = coef[0] + Σ_k coef[k]·cos(2π o_k p[n])`` (k ≥ 1, in order), block by block."""
+    re = np.zeros((rows, _BLOCK))
+    im = np.zeros((rows, _BLOCK))
+    for s in range(0, p.shape[0], _BLOCK):
+        m = min(_BLOCK, p.shape[0] - s)
+        _block_rows(p, s, m, omega, direct, steps, re, im)
+        for j in range(m):
+            out[s + j] = coef[0]
+        for k in range(line_rows.shape[0]):
+            r = line_rows[k]
+            for j in range(m):
+                out[s + j] += coef[k + 1] * re[r, j]
 
 
 def cosine_window(p: np.ndarray, period: float, coefficients: tuple[float, ...]) -> np.ndarray:
     """``Σ_k a_k (−1)^k cos(2πk·p/period)`` — a cosine-sum window over angles ``p`` — with the
-    cosines from the phasor recurrence of :func:`_computed` (no ``np.cos`` per sample)."""
+    cosines from the phasor rows of :func:`demodulate` (no ``np.cos`` per sample)."""
     p = np.ascontiguousarray(p, dtype=np.float64)
-    out = np.full(p.shape[0], coefficients[0])
     terms = len(coefficients) - 1
     if terms == 0:
-        return out
-    orders = np.arange(1, terms + 1) / period
-    re, im = np.empty((terms, p.shape[0])), np.empty((terms, p.shape[0]))
-    _computed(p, orders, np.arange(terms), re, im)
-    for k in range(1, terms + 1):
-        out += (-1) ** k * coefficients[k] * re[k - 1]
+        return np.full(p.shape[0], coefficients[0])
+    plan = phasor_plan(np.arange(1, terms + 1) / period)
+    coef = np.array([coefficients[0]] + [(-1) ** k * coefficients[k] for k in range(1, terms + 1)])
+    out = np.empty(p.shape[0])
+    _cosine_sum(
+        p,
+        plan.omega,
+        plan.direct,
+        plan.steps,
+        plan.line_rows,
+        plan.row_orders.shape[0],
+        coef,
+        out,
+    )
     return out
 
 
 @njit(cache=True, nogil=True)
 def _catmull_rom(x, s, out):
+    """Catmull-Rom as four weights of ``t`` shared by the rows (the same cubic as
+    ``p1 + ½t(p2 − p0 + t(2p0 − 5p1 + 4p2 − p3 + t(3(p1 − p2) + p3 − p0)))``)."""
     n = x.shape[1]
     for k in range(s.shape[0]):
         sk = s[k]
         i = np.int64(math.floor(sk))
         t = sk - i
-        i0 = min(max(i - 1, 0), n - 1)
-        i1 = min(max(i, 0), n - 1)
-        i2 = min(max(i + 1, 0), n - 1)
-        i3 = min(max(i + 2, 0), n - 1)
-        for r in range(x.shape[0]):
-            p0, p1, p2, p3 = x[r, i0], x[r, i1], x[r, i2], x[r, i3]
-            inner = 2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + t * (3.0 * (p1 - p2) + p3 - p0)
-            out[r, k] = p1 + 0.5 * t * (p2 - p0 + t * inner)
+        t2 = t * t
+        t3 = t2 * t
+        c0 = 0.5 * (2.0 * t2 - t3 - t)
+        c1 = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0)
+        c2 = 0.5 * (4.0 * t2 - 3.0 * t3 + t)
+        c3 = 0.5 * (t3 - t2)
+        if i >= 1 and i + 2 < n:  # interior: no clamping
+            for r in range(x.shape[0]):
+                out[r, k] = c0 * x[r, i - 1] + c1 * x[r, i] + c2 * x[r, i + 1] + c3 * x[r, i + 2]
+        else:
+            i0 = min(max(i - 1, 0), n - 1)
+            i1 = min(max(i, 0), n - 1)
+            i2 = min(max(i + 1, 0), n - 1)
+            i3 = min(max(i + 2, 0), n - 1)
+            for r in range(x.shape[0]):
+                out[r, k] = c0 * x[r, i0] + c1 * x[r, i1] + c2 * x[r, i2] + c3 * x[r, i3]
 
 
 def catmull_rom(x: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ from analytics.harmonics import (
     HarmonicSettings,
     HarmonicTracker,
     HarmonicWindow,
+    _spread,
     harmonics_report,
     is_running,
     stagger_for,
@@ -327,3 +328,11 @@ def test_daily_trend_recorder(short_run) -> None:
         shifted = dataclasses.replace(windows[0], t_start_ns=windows[0].t_start_ns + k * day)
         again.add(shifted)
     assert sorted({r["day"] for r in again.rows()}) == ["2024-01-03", "2024-01-04"]
+
+
+def test_speed_spread_is_bitwise_the_block_means() -> None:
+    rng = np.random.default_rng(11)
+    for n in [10, 11, 19, 25, 1001, 22_000, 22_009]:
+        dphi = rng.uniform(0.9, 1.1, n) * 2.9e-3
+        means = np.array([b.mean() for b in np.array_split(dphi, 10)])
+        assert _spread(dphi) == float((means.max() - means.min()) / means.mean())
