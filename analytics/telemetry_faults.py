@@ -119,7 +119,8 @@ _LOG_Q, _STUCK_VALUE = 0, 1
 _PREV_KIND, _STUCK_KIND, _GOOD_RUN, _N_DECIDED = 0, 1, 2, 3
 _C_SPIKES, _C_DROPOUTS, _C_ZERO_RUNS, _C_RAIL_HITS, _C_FLAGGED = 4, 5, 6, 7, 8
 _N_INTS = 9
-_NOISE_ENTRIES = 2048  # noise-tracker table (a cache, see _track_noise): entries (~88 kB)
+_NOISE_ENTRIES = 2048  # noise-tracker table (a cache, see _track_noise): entries (~120 kB)
+_Q_DOWN = 3  # its column of the successors' q (down; up is the next column)
 _NOISE_SLOTS = 4096  # and its direct-mapped index (a power of two)
 # Kernel parameters: [noise_k, m3_allowance, slew, rail_low, rail_high, eta, log_q_floor]
 _P_K, _P_M3, _P_SLEW, _P_LO, _P_HI, _P_ETA, _P_FLOOR = range(7)
@@ -174,16 +175,6 @@ def _classify(x, j, thr, slew, low, high, good_run):
     return 1
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _chain_stats(x, s):
-    """(Δ³, largest step, finite) of the 4-sample chain x[s..s+3], the threshold-free part of
-    :func:`_chain`: the chain is smooth under ``thr``/``slew`` when finite, ``|Δ³| ≤ thr`` and
-    the largest step ≤ ``slew + thr`` (the same comparisons, bit for bit)."""
-    a, b, c, d = x[s], x[s + 1], x[s + 2], x[s + 3]
-    d3 = d - 3.0 * c + 3.0 * b - a
-    return d3, max(abs(a - b), abs(b - c), abs(c - d)), np.isfinite(d3)
-
-
 @njit(cache=True, nogil=True)
 def _entry(log_q, tf, links, slots, k_noise, m3, inv_eta):
     """Index of the noise-table entry of ``log_q``, added if missing (the table is a cache:
@@ -193,16 +184,16 @@ def _entry(log_q, tf, links, slots, k_noise, m3, inv_eta):
     n_slots = slots.shape[0] - 1
     slot = np.int64(log_q * inv_eta) & (n_slots - 1)  # any slot works: the key decides
     e = slots[slot]
-    if e >= 0 and tf[0, e] == log_q:
+    if e >= 0 and tf[e, 0] == log_q:
         return e
     e = slots[n_slots]
-    if e == tf.shape[1]:  # full: forget everything (rare: ~1300 values in 10⁶ samples)
+    if e == tf.shape[0]:  # full: forget everything (rare: ~1300 values in 10⁶ samples)
         links[:, 1:] = -1
         slots[:] = -1
         e = 0
     slots[n_slots] = e + 1
     q = math.exp(log_q)
-    tf[0, e], tf[1, e], tf[2, e] = log_q, q, k_noise * q / MEDIAN_TO_SIGMA + m3
+    tf[e, 0], tf[e, 1], tf[e, 2] = log_q, q, k_noise * q / MEDIAN_TO_SIGMA + m3
     links[e, 0], links[e, 1], links[e, 2] = e, -1, -1
     slots[slot] = e
     return e
@@ -211,7 +202,7 @@ def _entry(log_q, tf, links, slots, k_noise, m3, inv_eta):
 @njit(cache=True, nogil=True)
 def _link(e, col, eta, floor, tf, links, slots, k_noise, m3, inv_eta):
     """The entry after ``e`` going down (col 1: log_q − eta) or up (col 2: + eta), floored."""
-    log_q = tf[0, e]
+    log_q = tf[e, 0]
     log_q += eta if col == 2 else -eta
     used = slots[slots.shape[0] - 1]
     nxt = _entry(max(log_q, floor), tf, links, slots, k_noise, m3, inv_eta)
@@ -224,21 +215,49 @@ def _link(e, col, eta, floor, tf, links, slots, k_noise, m3, inv_eta):
 def _track_noise(x, start, stop, thr, log_q, p, tf, links, slots):
     """The noise tracker over x[start:stop]: the threshold T of each sample into ``thr``;
     returns the new log_q. log_q walks in steps of ±eta over a small set of floats, kept in a
-    table whose entries link to their successors, so the serial chain per sample is two loads
-    and a compare (column 0: no step, for a non-finite Δ³; 1: down; 2: up). It reads only the
-    samples, not the decisions, so it runs ahead of the classification."""
+    table whose entries link to their successors (column 1 of ``links``: down, 2: up; a
+    non-finite Δ³ keeps the entry) and hold the successors' q (columns 3, 4 of ``tf``), so the
+    serial chain per sample is a compare and one load, with q carried in a register. It reads
+    only the samples, not the decisions, so it runs ahead of the classification."""
     k_noise, m3, eta, floor = p[_P_K], p[_P_M3], p[_P_ETA], p[_P_FLOOR]
     inv_eta = 1.0 / eta
-    e = _entry(log_q, tf, links, slots, k_noise, m3, inv_eta)
+    e = np.uint64(_entry(log_q, tf, links, slots, k_noise, m3, inv_eta))  # unsigned: no wraparound
+    q = tf[e, 1]
     for j in range(start, stop):
-        thr[j - start] = tf[2, e]
+        thr[j - start] = tf[e, 2]
         d3 = x[j] - 3.0 * x[j - 1] + 3.0 * x[j - 2] - x[j - 3]  # noise: median of |Δ³x|
-        col = np.int64(np.isfinite(d3)) * (1 + np.int64(abs(d3) > tf[1, e]))
-        nxt = links[e, col]
-        if nxt < 0:
-            nxt = _link(e, col, eta, floor, tf, links, slots, k_noise, m3, inv_eta)
-        e = nxt
-    return tf[0, e]
+        up = np.uint64(abs(d3) > q)
+        nxt = links[e, np.uint64(1) + up]
+        nq = tf[e, np.uint64(_Q_DOWN) + up]
+        if not np.isfinite(d3):
+            nxt, nq = np.int64(e), q
+        if nxt < 0:  # a new step: link it (and keep its q in the entry)
+            col = 1 + np.int64(up)
+            nxt = _link(np.int64(e), col, eta, floor, tf, links, slots, k_noise, m3, inv_eta)
+            nq = tf[nxt, 1]
+            tf[e, _Q_DOWN - 1 + col] = nq
+        e = np.uint64(nxt)
+        q = nq
+    return tf[e, 0]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _quiet(x, start, stop, thr_of, slew, low, high, quiet):
+    """Whether each sample of x[start:stop] is *quiet*: both its left chains x[j-4..j-1] and
+    x[j-3..j] smooth under its threshold (:func:`_chain`, the same comparisons bit for bit) and
+    its value strictly inside the rails — then it is good whatever its right side holds (the
+    fast path of :func:`_classify`). Branch-free, so it vectorises."""
+    n = stop - start
+    x4, x3, x2, x1, x0 = x[start - 4 :], x[start - 3 :], x[start - 2 :], x[start - 1 :], x[start:]
+    for i in range(n):  # indices from 0: no wraparound checks, so it vectorises
+        thr = thr_of[i]
+        lim = slew + thr
+        a, b, c, d, v = x4[i], x3[i], x2[i], x1[i], x0[i]
+        d3_old = d - 3.0 * c + 3.0 * b - a
+        d3 = v - 3.0 * d + 3.0 * c - b
+        smooth = (abs(d3_old) <= thr) & (abs(d3) <= thr) & np.isfinite(d3_old) & np.isfinite(d3)
+        steps = (abs(a - b) <= lim) & (abs(b - c) <= lim) & (abs(c - d) <= lim)
+        quiet[i] = smooth & steps & (abs(d - v) <= lim) & (v > low) & (v < high)
 
 
 @njit(cache=True, nogil=True)
@@ -247,20 +266,24 @@ def _scan(x, start, stop, out, p, fs, si, tf, links, slots):
 
     The state lives in locals for the loop (loaded from and stored back to ``fs``/``si``);
     ``tf``/``links``/``slots`` are the noise table of :func:`_track_noise`. The thresholds come
-    first (:func:`_track_noise`); then the newest left chain x[j-3..j] is measured once per
-    sample (:func:`_chain_stats`): it is the older left chain of sample j+1 (the fast path of
-    :func:`_classify`, written out here with the carried statistics)."""
+    first (:func:`_track_noise`), then the quiet samples (:func:`_quiet`); a quiet sample
+    outside a stuck run is good and only advances the good run, the others take the full
+    path (:func:`_classify`)."""
     slew, low, high = p[_P_SLEW], p[_P_LO], p[_P_HI]
     thr_of = np.empty(stop - start)
     fs[_LOG_Q] = _track_noise(x, start, stop, thr_of, fs[_LOG_Q], p, tf, links, slots)
+    quiet = np.empty(stop - start, dtype=np.bool_)
+    _quiet(x, start, stop, thr_of, slew, low, high, quiet)
     stuck_value = fs[_STUCK_VALUE]
     prev_kind, stuck_kind, good_run = si[_PREV_KIND], si[_STUCK_KIND], si[_GOOD_RUN]
     counts = si[_C_SPIKES : _C_FLAGGED + 1].copy()  # spikes, dropouts, zero runs, rail, flagged
-    d3_old, mx_old, fin_old = _chain_stats(x, start - 4)  # the older left chain of x[start]
     for j in range(start, stop):
+        if quiet[j - start] and stuck_kind == 0:
+            good_run += 1
+            prev_kind = 0
+            out[j - start] = 0
+            continue
         v = x[j]
-        thr = thr_of[j - start]
-        d3, mx, fin = _chain_stats(x, j - 3)
         if not np.isfinite(v):
             kind = 2
             stuck_kind = 0
@@ -268,13 +291,7 @@ def _scan(x, start, stop, out, p, fs, si, tf, links, slots):
             kind = stuck_kind
         else:
             stuck_kind = 0
-            lim = slew + thr
-            if fin_old and fin and mx_old <= lim and mx <= lim and abs(d3_old) <= thr \
-                    and abs(d3) <= thr:  # fmt: skip
-                repeated = v == x[j + 1] or v == x[j - 1]
-                kind = 4 if repeated and (v <= low or v >= high) else 0
-            else:
-                kind = _classify(x, j, thr, slew, low, high, good_run)
+            kind = _classify(x, j, thr_of[j - start], slew, low, high, good_run)
             if kind != 0 and (v == x[j + 1] or v == x[j - 1]):
                 stuck_kind, stuck_value = kind, v
         if kind != 0:
@@ -286,7 +303,6 @@ def _scan(x, start, stop, out, p, fs, si, tf, links, slots):
             good_run += 1
         prev_kind = kind
         out[j - start] = kind
-        d3_old, mx_old, fin_old = d3, mx, fin
     fs[_STUCK_VALUE] = stuck_value
     si[_PREV_KIND], si[_STUCK_KIND], si[_GOOD_RUN] = prev_kind, stuck_kind, good_run
     si[_C_SPIKES : _C_FLAGGED + 1] = counts
@@ -294,12 +310,13 @@ def _scan(x, start, stop, out, p, fs, si, tf, links, slots):
 
 
 def _noise_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """An empty table for :func:`_track_noise`: floats (log_q, q, T) per entry, links per
+    """An empty table for :func:`_track_noise`: floats (log_q, q, T, q of the entry below,
+    q of the entry above) per entry, links per
     entry, and the slot index (its last element counts the entries in use)."""
     slots = np.full(_NOISE_SLOTS + 1, -1, dtype=np.int32)
     slots[-1] = 0
     links = np.full((_NOISE_ENTRIES, 3), -1, dtype=np.int32)
-    return np.zeros((3, _NOISE_ENTRIES)), links, slots
+    return np.zeros((_NOISE_ENTRIES, 5)), links, slots
 
 
 @dataclass(frozen=True)
