@@ -39,6 +39,7 @@ from ingest.archive import (
     archive_file_order,
     list_archive_files,
 )
+from ingest.byte_copy import copy_bytes
 
 __all__ = ["BatchReader", "MessageBatch", "archive_batches"]
 
@@ -116,7 +117,7 @@ def _pack(buf, offset, length, total):
     out = np.empty(total, dtype=np.uint8)
     at = 0
     for k in range(offset.shape[0]):
-        out[at : at + length[k]] = buf[offset[k] : offset[k] + length[k]]
+        copy_bytes(out, at, buf, offset[k], length[k])
         at += length[k]
     return out
 

@@ -24,6 +24,7 @@ from numba import njit
 
 from ingest.archive import ArchivePosition, archive_file_order
 from ingest.archive_batches import MessageBatch
+from ingest.byte_copy import copy_bytes
 from ingest.wire import DType, decode_headers
 from service.block_queue import QueuedBlock
 
@@ -42,7 +43,7 @@ def _gather(buf, starts, width):
     """The ``width`` bytes at each of ``starts`` in ``buf``, back to back (samples of blocks)."""
     out = np.empty(starts.shape[0] * width, dtype=np.uint8)
     for k in range(starts.shape[0]):
-        out[k * width : (k + 1) * width] = buf[starts[k] : starts[k] + width]
+        copy_bytes(out, k * width, buf, starts[k], width)
     return out
 
 
