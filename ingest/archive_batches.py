@@ -122,6 +122,27 @@ def _pack(buf, offset, length, total):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _message_heads(data, starts, lengths, known, channel, log_time):
+    """Channel id (u16) and log time (u64, little-endian) of each message record body at
+    ``starts``; returns how many lead the records before the first invalid one (too short
+    for the message header, or on a channel id not in ``known``), whose channel is set."""
+    size = 22  # channel u16, sequence u32, log_time u64, publish_time u64
+    for k in range(starts.shape[0]):
+        if lengths[k] < size:
+            return k
+        a = starts[k]
+        c = np.int64(data[a]) | (np.int64(data[a + 1]) << 8)
+        channel[k] = c
+        if not known[c]:
+            return k
+        t = np.uint64(0)
+        for i in range(8):
+            t |= np.uint64(data[a + 6 + i]) << np.uint64(8 * i)
+        log_time[k] = np.int64(t)
+    return starts.shape[0]
+
+
 def _scan_from(data: np.ndarray, pos: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(opcode, body start, body length) of the complete records from byte ``pos`` on, and
     the status where the scan stopped: 0 at the end, 1 torn header, 2 torn body."""
@@ -256,23 +277,17 @@ class BatchReader(TailTolerantReader):
         """Message records with bodies at ``starts``/``lengths``: the valid prefix as a batch,
         then the error the per-message reader raises at the first invalid one."""
         size = _MESSAGE_HEAD.itemsize
-        short = lengths < size
-        padded = data if data.shape[0] >= size else np.concatenate((data, np.zeros(size, np.uint8)))
-        at = np.minimum(starts, padded.shape[0] - size)
-        heads = padded[at[:, None] + np.arange(size)]
-        head = heads.reshape(-1).view(_MESSAGE_HEAD)
-        channel = head["channel"].astype(np.int64)
         known, topics = self._known_channels()
-        bad = np.flatnonzero(short | ~known[channel])
-        n = int(bad[0]) if bad.size else starts.size
+        channel = np.empty(starts.shape[0], dtype=np.int64)
+        log_time = np.empty(starts.shape[0], dtype=np.int64)
+        n = _message_heads(data, starts, lengths, known, channel, log_time)
         if n:
             index = self.message_count + np.arange(n, dtype=np.int64)
             self.message_count += n
-            yield MessageBatch(self.path.name, data, index, channel[:n],
-                               head["log_time"][:n].astype(np.int64), starts[:n] + size,
-                               lengths[:n] - size, topics)  # fmt: skip
-        if bad.size:
-            if short[n]:
+            yield MessageBatch(self.path.name, data, index, channel[:n], log_time[:n],
+                               starts[:n] + size, lengths[:n] - size, topics)  # fmt: skip
+        if n < starts.shape[0]:
+            if lengths[n] < size:
                 raise ArchiveError(f"message record of {int(lengths[n])} bytes is too short")
             raise ArchiveError(f"message on unknown channel id {int(channel[n])}")
 
