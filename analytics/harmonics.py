@@ -59,7 +59,14 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from analytics.kinematics import ExpectedLine, KinematicsOptions, expected_lines
 from analytics.mill_config import MillConfig
-from analytics.order_kernels import catmull_rom, cosine_window, demodulate
+from analytics.order_kernels import (
+    angle_prefix,
+    center_taper,
+    cosine_window,
+    demodulate,
+    power_of,
+    resample,
+)
 from analytics.running_median import NoiseFloor, local_maxima
 from analytics.snapshot_arrays import pack_array, unpack_array
 
@@ -623,11 +630,10 @@ class HarmonicTracker:
         (samples ``[0, end]``, one more for interpolation), cut once ``due`` samples are in."""
         if self._approx_revs < self.revs * (1.0 - 1e-6):
             return None
-        phi = np.concatenate(([0.0], np.cumsum(self._buf[-1, : self._len])))
-        end = int(np.searchsorted(phi, self.revs, side="left"))
+        phi, end = angle_prefix(self._buf[-1, : self._len], self.revs)  # (only as far as used)
         if end + 2 > self._len:
             return None
-        self._due_phi = phi[: end + 2]  # (a prefix of a cumsum: the same in _cut)
+        self._due_phi = phi  # (the angle φ[: end + 2]: the same in _cut)
         return end, min(end + 2 + self.defer_samples, self._buf.shape[1])
 
     def _cut(self, end: int, out: list[HarmonicWindow]) -> None:
@@ -687,14 +693,13 @@ class HarmonicTracker:
     def _power(self, data: np.ndarray, phi: np.ndarray, end: int) -> np.ndarray:
         """|FFT|² of the segment resampled to ``P`` points per revolution, tapered."""
         grid, taper = self._grid_taper()
-        s = np.interp(grid, phi[: end + 1], np.arange(end + 1, dtype=np.float64))
+        xp = phi[: end + 1]  # (the grid's sample positions: np.interp fused into the cubic)
+        resampled = resample(data, grid, xp)  # (every channel at once: one walk along xp)
         power = np.empty((data.shape[0], self.bins))
-        for r in range(data.shape[0]):  # channel by channel: the FFT's input is still in cache
-            y = catmull_rom(data[r : r + 1], s)
-            y -= y.mean(axis=1, keepdims=True)
-            y *= taper
-            spec = np.fft.rfft(y[0])
-            np.add(spec.real**2, spec.imag**2, out=power[r])
+        for r in range(data.shape[0]):
+            y = resampled[r]
+            center_taper(y, y.mean(), taper)  # (y − mean) × taper
+            power_of(np.fft.rfft(y), power[r])  # |FFT|²
         return power
 
     def _grid_taper(self) -> tuple[np.ndarray, np.ndarray]:
@@ -783,16 +788,24 @@ class HarmonicTracker:
         orders = self._orders(rev_hz)
         bins = orders * self.revs
         k = self._line_peaks(mag, bins)
-        peak = (k, self._interpolate_many(mag, k), floor.at(k))
-        out = []
-        for j, ln in enumerate(self._lines):
-            lock = locked and ln.order is not None
-            out.append(
-                self._measure_line(
-                    ch, ln, orders[j], bins[j], [v[j] for v in peak], mag, demod_amp[j], rev_hz,
-                    lock,
-                )
-            )  # fmt: skip
+        rows = zip(  # (plain floats: no numpy scalar per line)
+            self._lines, orders.tolist(), bins.tolist(), k.tolist(),
+            self._interpolate_many(mag, k).tolist(), floor.at(k).tolist(), mag[k].tolist(),
+            demod_amp.tolist(), strict=True,
+        )  # fmt: skip
+        out = [
+            self._measure_line(
+                ch,
+                ln,
+                order,
+                b,
+                (kj, delta, fl, mk),
+                demod,
+                rev_hz,
+                locked and ln.order is not None,
+            )
+            for ln, order, b, kj, delta, fl, mk, demod in rows
+        ]
         unobservable = self._unobservable_rows.get(ch.name)
         if unobservable is None:  # (constant per channel: frozen rows made once)
             unobservable = [
@@ -830,20 +843,20 @@ class HarmonicTracker:
         ln: ExpectedLine,
         order: float,
         b: float,
-        peak: list[Any],
-        mag: np.ndarray,
+        peak: tuple[int, float, float, float],
         demod: float,
         rev_hz: float,
         locked: bool,
     ) -> LineMeasurement:
-        """Peak ``peak`` = (bin ``k``, its interpolated offset, the floor there) of the search
+        """Peak ``peak`` = (bin ``k``, its interpolated offset, the floor there, the magnitude
+        ``|FFT|`` there) of the search
         ± ``search_bins`` around the expected bin ``b`` (:meth:`_line_peaks`); amplitude from
         the demodulated value (window-response corrected), or — for a peak more than ½ bin off —
         from the interpolated FFT bin. ``locked``: order-tracked shaft line, which cannot leave
         its order, so a far-off maximum (a neighbour's lobe) is ignored and the exact order is
         used."""
-        k, delta, floor = int(peak[0]), float(peak[1]), float(peak[2])
-        snr = _db(mag[k] ** 2, floor)
+        k, delta, floor, mag_k = peak
+        snr = _db(mag_k**2, floor)
         detected = snr >= self.settings.peak_snr_db
         eps = (k + delta - b) if detected else 0.0
         if locked and abs(eps) > 0.5:
@@ -851,7 +864,7 @@ class HarmonicTracker:
         if abs(eps) <= 0.5:
             amp = demod / _response(self.settings.window, eps)
         else:
-            amp = self._amplitude(mag[k] ** 2) / _response(self.settings.window, delta)
+            amp = self._amplitude(mag_k**2) / _response(self.settings.window, delta)
         measured = (b + eps) / self.revs
         return LineMeasurement(
             ch.name, ln.name, ln.family, ln.kind, ln.order, order * rev_hz, measured,
@@ -886,18 +899,22 @@ class HarmonicTracker:
     def _peaks(
         self, ch: _Channel, power: np.ndarray, floor: NoiseFloor, rev_hz: float, acc: _Acc
     ) -> list[UnexplainedPeak]:
-        mag = np.sqrt(power)
+        cand = self._candidates(power, floor)
+        if cand.shape[0] == 0:
+            return []
+        deltas = self._interpolate_many(np.sqrt(power), cand)  # (each as _interpolate's)
         line_bins = self._orders(rev_hz) * self.revs
-        all_lines = self._all_lines
+        tol = self.settings.match_bins + acc.spread * line_bins
+        positions = cand + deltas
+        explained = (np.abs(line_bins[None, :] - positions[:, None]) <= tol).any(axis=1)
+        all_lines, min_peak = self._all_lines, self._min_peak(ch)
         out = []
-        for k in self._candidates(power, floor):
-            delta = self._interpolate(mag, int(k))
+        rows = zip(
+            cand.tolist(), deltas.tolist(), positions.tolist(), explained.tolist(), strict=True
+        )
+        for k, delta, bin_pos, known in rows:
             amp = self._amplitude(power[k]) / _response(self.settings.window, delta)
-            if amp < self._min_peak(ch):
-                continue
-            bin_pos = k + delta
-            tol = self.settings.match_bins + acc.spread * line_bins
-            if np.any(np.abs(line_bins - bin_pos) <= tol):
+            if amp < min_peak or known:
                 continue
             f = bin_pos / self.revs * rev_hz
             near = min(all_lines, key=lambda ln: abs(ln.frequency_hz - f), default=None)

@@ -34,10 +34,14 @@ from numba import njit
 
 __all__ = [
     "PhasorPlan",
+    "angle_prefix",
     "catmull_rom",
+    "center_taper",
     "cosine_window",
     "demodulate",
     "phasor_plan",
+    "power_of",
+    "resample",
 ]
 
 _SUM, _DIFF = 1, 2
@@ -391,3 +395,124 @@ def catmull_rom(x: np.ndarray, s: np.ndarray) -> np.ndarray:
     out = np.empty((x2.shape[0], s.shape[0]))
     _catmull_rom(x2, np.ascontiguousarray(s, dtype=np.float64), out)
     return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _interp_index(g, xp, j):
+    """``(np.interp(g, xp, arange(len(xp))), j)`` and the segment ``j`` of ``g`` found by a
+    walk from the previous one (``0 ≤ j < len(xp) − 1`` on entry): numpy's cases and formula
+    (the slope ``1 / Δxp``: the index steps are exactly 1), so bitwise its value."""
+    m = xp.shape[0]
+    if g < xp[0]:
+        return 0.0, j
+    if g >= xp[m - 1]:
+        return float(m - 1), j
+    while xp[j + 1] <= g:
+        j += 1
+    while xp[j] > g:  # (a grid step back: walk back)
+        j -= 1
+    if xp[j] == g:
+        return float(j), j
+    slope = 1.0 / (xp[j + 1] - xp[j])
+    return slope * (g - xp[j]) + j, j
+
+
+@njit(cache=True, nogil=True)
+def _resample(x, grid, xp, out):
+    """Rows of ``x`` at the fractional indices ``np.interp(grid, xp, arange(len(xp)))`` (a
+    merge walk: cheap for an increasing ``grid``; ``xp`` non-decreasing), Catmull-Rom as
+    :func:`_catmull_rom`."""
+    n = x.shape[1]
+    j = 0
+    for k in range(grid.shape[0]):
+        sk, j = _interp_index(grid[k], xp, j)
+        i = np.int64(math.floor(sk))
+        t = sk - i
+        t2 = t * t
+        t3 = t2 * t
+        c0 = 0.5 * (2.0 * t2 - t3 - t)
+        c1 = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0)
+        c2 = 0.5 * (4.0 * t2 - 3.0 * t3 + t)
+        c3 = 0.5 * (t3 - t2)
+        if i >= 1 and i + 2 < n:  # interior: no clamping
+            for r in range(x.shape[0]):
+                out[r, k] = c0 * x[r, i - 1] + c1 * x[r, i] + c2 * x[r, i + 1] + c3 * x[r, i + 2]
+        else:
+            i0 = min(max(i - 1, 0), n - 1)
+            i1 = min(max(i, 0), n - 1)
+            i2 = min(max(i + 1, 0), n - 1)
+            i3 = min(max(i + 2, 0), n - 1)
+            for r in range(x.shape[0]):
+                out[r, k] = c0 * x[r, i0] + c1 * x[r, i1] + c2 * x[r, i2] + c3 * x[r, i3]
+
+
+def resample(x: np.ndarray, grid: np.ndarray, xp: np.ndarray) -> np.ndarray:
+    """``catmull_rom(x, np.interp(grid, xp, np.arange(len(xp))))`` in one pass (bitwise): the
+    rows of ``x`` (uniformly sampled) at the abscissae ``grid`` (best increasing) of the sample
+    positions ``xp`` (non-decreasing, e.g. the pinion angle of each sample)."""
+    x2 = np.asarray(x, dtype=np.float64)  # (strided rows welcome: no copy)
+    g = np.ascontiguousarray(grid, dtype=np.float64)
+    p = np.ascontiguousarray(xp, dtype=np.float64)
+    if p.shape[0] == 0:
+        raise ValueError("resample needs at least one sample position")
+    out = np.empty((x2.shape[0], g.shape[0]))
+    _resample(x2, g, p, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _angle_prefix(dphi, revs, out):
+    """``out[: end + 2]`` = ``[0, cumsum(dphi)]`` up to one past the first ``end`` with
+    ``out[end] ≥ revs`` (sequential sums: bitwise ``np.cumsum``); returns ``end``
+    (``len(dphi) + 1`` when the angle never reaches ``revs``)."""
+    n = dphi.shape[0]
+    out[0] = 0.0
+    end = n + 1
+    acc = 0.0
+    for k in range(n):
+        if end > n and acc >= revs:
+            end = k
+        if k > end:
+            break
+        acc += dphi[k]
+        out[k + 1] = acc
+    if end > n and acc >= revs:
+        end = n
+    return end
+
+
+def angle_prefix(dphi: np.ndarray, revs: float) -> tuple[np.ndarray, int]:
+    """``(phi, end)``: ``end`` = ``np.searchsorted(φ, revs, side="left")`` of the angle
+    ``φ = [0, cumsum(dphi)]`` (revolutions, one more entry than ``dphi``) and ``phi`` its prefix
+    ``φ[: end + 2]`` (bitwise; shorter when ``end + 2`` exceeds ``len(φ)``), computed only that
+    far. ``dphi``: angle steps (revolutions per sample, finite and ≥ 0)."""
+    d = np.ascontiguousarray(dphi, dtype=np.float64)
+    out = np.empty(d.shape[0] + 1)
+    end = int(_angle_prefix(d, float(revs), out))
+    return out[: min(end + 2, d.shape[0] + 1)], end
+
+
+@njit(cache=True, nogil=True)
+def _center_taper(y, mean, taper):
+    """``y ← (y − mean) × taper`` in place, in one pass (the two numpy steps' rounding)."""
+    for j in range(y.shape[0]):
+        y[j] = (y[j] - mean) * taper[j]
+
+
+@njit(cache=True, nogil=True)
+def _abs2(spec, out):
+    """``out ← spec.real² + spec.imag²`` in one pass (numpy's rounding: no fused multiply-add)."""
+    for j in range(spec.shape[0]):
+        a = spec[j].real
+        b = spec[j].imag
+        out[j] = a * a + b * b
+
+
+def center_taper(y: np.ndarray, mean: float, taper: np.ndarray) -> None:
+    """``y -= mean; y *= taper`` (1-D float64 ``y`` and ``taper`` of its length) in one pass."""
+    _center_taper(y, float(mean), taper)
+
+
+def power_of(spec: np.ndarray, out: np.ndarray) -> None:
+    """``out[:] = spec.real**2 + spec.imag**2`` (complex128 ``spec``) in one pass."""
+    _abs2(spec, out)

@@ -8,10 +8,14 @@ from analytics.harmonics import COSINE_WINDOWS, window_values
 from analytics.order_kernels import (
     _BLOCK,
     _block_rows,
+    angle_prefix,
     catmull_rom,
+    center_taper,
     cosine_window,
     demodulate,
     phasor_plan,
+    power_of,
+    resample,
 )
 
 SAG_ORDERS = np.array([1 / 13, 1.0, 30 / 13, 3.0, 5.65, 285 / 13, 22.0, 287 / 13, 571 / 13,
@@ -122,3 +126,48 @@ def test_demodulation_of_a_strided_view_minus_an_offset() -> None:
     offset = y @ q / q.sum()
     got = demodulate(y, q, p, SAG_ORDERS, offset)
     assert got.tobytes() == demodulate(y - offset[:, None], q, p, SAG_ORDERS).tobytes()
+
+
+def test_resample_is_bitwise_interp_then_catmull_rom() -> None:
+    rng = np.random.default_rng(5)
+    for trial in range(12):
+        n = int(rng.integers(3, 6000))
+        dphi = (1 + 0.05 * rng.standard_normal(n)) / 100
+        if trial % 3 == 0:
+            dphi[rng.integers(0, n, 4)] = 0.0  # repeated positions
+        xp = np.concatenate(([0.0], np.cumsum(dphi)))
+        span = xp[-1] * rng.uniform(0.5, 1.2)  # (beyond the end: clamped)
+        grid = np.arange(int(rng.integers(2, 8000))) * (span / 7000) - (trial % 4 == 0) * 0.01
+        x = rng.standard_normal((3, n + 5))[:, : n + 1]  # (strided rows)
+        s = np.interp(grid, xp, np.arange(n + 1, dtype=np.float64))
+        assert np.array_equal(resample(x, grid, xp), catmull_rom(x, s))
+        back = rng.permutation(grid)  # (any grid order: the walk goes back too)
+        s_back = np.interp(back, xp, np.arange(n + 1, dtype=np.float64))
+        assert np.array_equal(resample(x[1:], back, xp), catmull_rom(x[1:], s_back))
+
+
+def test_angle_prefix_is_bitwise_cumsum_and_searchsorted() -> None:
+    rng = np.random.default_rng(6)
+    for trial in range(500):
+        n = int(rng.integers(0, 40))
+        d = rng.uniform(0.0, 1.0, n)
+        if trial % 5 == 0 and n:
+            d[rng.integers(0, n, 3)] = 0.0
+        phi = np.concatenate(([0.0], np.cumsum(d)))
+        revs = [rng.uniform(-1.0, phi[-1] + 2.0), phi[rng.integers(0, n + 1)]][trial % 2]
+        end = int(np.searchsorted(phi, revs, side="left"))
+        got, got_end = angle_prefix(d, revs)
+        assert got_end == end
+        assert np.array_equal(got, phi[: end + 2])
+
+
+def test_center_taper_and_power_of_are_the_numpy_steps() -> None:
+    rng = np.random.default_rng(7)
+    y, taper = rng.standard_normal(1001), rng.random(1001)
+    want = (y - y.mean()) * taper
+    center_taper(y, y.mean(), taper)
+    assert np.array_equal(y, want)
+    spec = np.fft.rfft(y)
+    out = np.empty(spec.shape[0])
+    power_of(spec, out)
+    assert np.array_equal(out, spec.real**2 + spec.imag**2)
