@@ -34,6 +34,7 @@ __all__ = ["Frame", "FrameAligner"]
 log = logging.getLogger(__name__)
 
 _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_GATHERED = (np.dtype(np.float64), np.dtype(np.float32))  # row dtypes _gather_rows takes
 
 
 @dataclass(frozen=True)
@@ -135,7 +136,8 @@ class FrameAligner:
     ) -> list[Frame] | None:
         """Many blocks at once, as :meth:`push` of each in order would take them — for the
         regular case only: block ``k`` (arrival order) is of channel ``self.channels[chan[k]]``,
-        starts at ``t0_ns[k]`` and holds ``rows[k]`` (all blocks ``n`` samples at ``fs``).
+        starts at ``t0_ns[k]`` and holds ``rows[k]`` (all blocks ``n`` samples at ``fs``; any
+        numeric dtype, taken as float64 like :meth:`push` does).
 
         Regular means that, pushed one by one, every block would land on the grid of whole
         blocks after the last frame, no block would be late or repeated and no group would be
@@ -195,7 +197,7 @@ class FrameAligner:
             if np.all(np.diff(g_all) > 0):  # the usual case: already in grid order
                 stream = _joined_rows(parts, rows, mine, n)
             else:
-                pieces = parts + list(rows[mine])
+                pieces = parts + list(rows[mine].astype(np.float64, copy=False))
                 order = np.argsort(g_all, kind="stable")
                 g_all = g_all[order]
                 stream = np.concatenate([pieces[k] for k in order.tolist()])
@@ -284,16 +286,28 @@ class FrameAligner:
         return a
 
 
+@njit(cache=True, nogil=True)
+def _gather_rows(rows, mine, out, a):
+    """Rows ``mine`` of ``rows`` back to back into ``out`` from index ``a``, each sample cast to
+    ``out``'s dtype (float32 → float64 is exact) on the way: one pass over the samples."""
+    n = rows.shape[1]
+    for k in range(mine.shape[0]):
+        r = mine[k]
+        b = a + k * n
+        for i in range(n):
+            out[b + i] = rows[r, i]
+
+
 def _joined_rows(parts: list[np.ndarray], rows: np.ndarray, mine: np.ndarray, n: int) -> np.ndarray:
-    """``parts`` then the rows ``mine`` of ``rows`` (each ``n`` samples) as one new 1-D array,
-    each sample copied once."""
-    if rows.dtype != np.float64 or any(p.dtype != np.float64 for p in parts):
-        return np.concatenate([*parts, rows[mine].reshape(-1)])
+    """``parts`` then the rows ``mine`` of ``rows`` (each ``n`` samples) as one new 1-D float64
+    array, each sample copied once (float32 or float64 rows are cast while gathered)."""
+    if rows.dtype not in _GATHERED or any(p.dtype != np.float64 for p in parts):
+        return np.concatenate([*parts, rows[mine].reshape(-1)]).astype(np.float64, copy=False)
     held = sum(p.shape[0] for p in parts)
     out = np.empty(held + mine.shape[0] * n)
     a = 0
     for p in parts:
         out[a : a + p.shape[0]] = p
         a += p.shape[0]
-    np.take(rows, mine, axis=0, out=out[held:].reshape(mine.shape[0], n))
+    _gather_rows(rows, mine, out, held)
     return out

@@ -247,15 +247,18 @@ class MillAnalyzer:
         return block, flagged_all
 
     def _state_inputs(self, block: np.ndarray, flagged: np.ndarray) -> tuple[np.ndarray, ...]:
-        s = np.abs(block[0]) / self.rated_rpm
+        s = np.abs(block[0])
+        s /= self.rated_rpm
         rows = [self.rows.index(m) for m in self.motor if m is not None]
         if not rows:
             rows = [self.rows.index(p) for p in self.pinion if p is not None]
             scale = self.config.pinion_rated_torque_knm
         else:
             scale = self.config.motor_rated_torque_knm
-        tq = np.abs(block[rows])
-        q = np.fmax.reduce(tq, axis=0) / scale  # NaN only where every side is missing
+        q = np.abs(block[rows[0]])
+        for r in rows[1:]:  # fmax.reduce over the rows, pairwise in place (the same values)
+            np.fmax(q, np.abs(block[r]), out=q)
+        q /= scale  # NaN only where every side is missing
         q[flagged] = -np.inf
         return s, q
 

@@ -131,13 +131,15 @@ class MillMonitor:
         one length, at the mill's rate). Regular runs are aligned in one go
         (:meth:`~analytics.frame_aligner.FrameAligner.push_blocks`), anything else block by
         block — the same frames either way."""
-        rows = np.array(raw, dtype=np.float64)
         names = self.aligner.channels
-        for ci in np.unique(chan).tolist():
-            gain, offset = self._gain.get(names[ci], (1.0, 0.0))
-            if gain != 1.0 or offset != 0.0:
-                sel = chan == ci
-                rows[sel] = gain * (rows[sel] - offset)
+        scaled = [ci for ci in np.unique(chan).tolist() if self._scaled(names[ci])]
+        rows = raw  # uncalibrated float rows: the aligner casts them while it gathers
+        if scaled or raw.dtype.kind != "f":
+            rows = np.array(raw, dtype=np.float64)
+        for ci in scaled:
+            gain, offset = self._gain[names[ci]]
+            sel = chan == ci
+            rows[sel] = gain * (rows[sel] - offset)
         frames = self.aligner.push_blocks(chan, t0_ns, rows)
         if frames is None:
             frames = []
@@ -145,6 +147,11 @@ class MillMonitor:
                 frames += self.aligner.push(names[ci], int(t0_ns[k]), self.aligner.fs, rows[k])
         if frames:
             self._queue_frames(frames)
+
+    def _scaled(self, channel: str) -> bool:
+        """Whether ``channel`` has a calibration other than the identity."""
+        gain, offset = self._gain.get(channel, (1.0, 0.0))
+        return gain != 1.0 or offset != 0.0
 
     def _queue_frames(self, frames: list[Frame]) -> None:
         self._queued.extend(frames)
