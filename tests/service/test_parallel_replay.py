@@ -134,10 +134,14 @@ def test_job_count_follows_the_tail_the_mills_and_the_cores() -> None:
         replay_jobs(-1, 50, big)
 
 
-def test_mills_are_dealt_round_robin() -> None:
-    ids = [f"m{i}" for i in range(5)]
-    assert split_mills(reversed(ids), 2) == [["m0", "m2", "m4"], ["m1", "m3"]]
-    assert split_mills(ids[:1], 3) == [["m0"]]
+def test_mills_are_split_in_id_order_the_reader_taking_a_smaller_share() -> None:
+    ids = [f"m{i:02d}" for i in range(50)]
+    groups = split_mills(reversed(ids), 2)
+    assert [len(g) for g in groups] == [24, 26]  # the reader also reads the archive
+    assert [m for g in groups for m in g] == ids
+    assert [len(g) for g in split_mills(ids, 4)] == [12, 13, 13, 12]
+    assert split_mills(ids[:2], 2) == [["m00"], ["m01"]]
+    assert split_mills(ids[:1], 3) == [["m00"]]
 
 
 def test_configs_pickle_for_the_job_processes() -> None:
