@@ -7,7 +7,7 @@ the mills (issue 5: an hour of 50 mills replayed at ≥ 50× real time):
 
 * the worker process reads each batch of archived messages once
   (:func:`ingest.archive_batches.archive_batches`), replays the first group of mills itself
-  (a smaller one: reading is its extra work) and sends each job process the messages of its
+  and sends each job process the messages of its
   mills, packed (:meth:`~ingest.archive_batches.MessageBatch.compact`), through a pipe; one
   sender thread per job, batches queued, so a job goes on while the worker analyses;
 * each job process (started with ``spawn``: the worker already holds zenoh's threads, which a
@@ -34,6 +34,7 @@ import multiprocessing
 import os
 import queue
 import threading
+import time
 import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -63,9 +64,6 @@ PARALLEL_MIN_BYTES = 32 * 2**20
 #: Packed batches waiting per job (each ~REPLAY_BATCH_BLOCKS / jobs blocks, a few MB): enough
 #: for a job to go on while the reading process analyses its own mills' share (~0.3 s).
 QUEUED_BATCHES = 12
-#: The reading process analyses a share of the mills too, smaller than a job's by the cost of
-#: reading the archive (~1.3 µs a block, ~8 % of a running mill's analysis).
-READER_SHARE = 0.92
 #: Seconds between checks that a job process is still alive while waiting for its result.
 _POLL_S = 0.5
 
@@ -104,18 +102,15 @@ def tail_bytes(directory: str | Path, prefix: str, after: ArchivePosition | None
 
 
 def split_mills(mill_ids: Iterable[str], jobs: int) -> list[list[str]]:
-    """``jobs`` groups of mills in id order (running mills cost alike); the first group, which
-    the reading process analyses itself, is smaller by :data:`READER_SHARE`."""
+    """``jobs`` groups of mills in id order, as equal as can be (running mills cost alike; the
+    worker, which reads the archive, takes the first group: reading costs it about what
+    starting and feeding a job process costs the job)."""
     ids = sorted(mill_ids)
-    if jobs <= 1 or len(ids) <= 1:
-        return [ids] if ids else []
-    first = max(1, round(len(ids) * READER_SHARE / (jobs - 1 + READER_SHARE)))
-    rest = ids[first:]
-    size, extra = divmod(len(rest), jobs - 1)
-    groups, at = [ids[:first]], 0
-    for k in range(jobs - 1):
+    size, extra = divmod(len(ids), max(1, jobs))
+    groups, at = [], 0
+    for k in range(max(1, jobs)):
         n = size + (1 if k < extra else 0)
-        groups.append(rest[at : at + n])
+        groups.append(ids[at : at + n])
         at += n
     return [g for g in groups if g]
 
@@ -238,11 +233,15 @@ class ParallelReplay:
         """Replay ``batches``; returns (blocks handled, blocks skipped as already covered by
         their mill's checkpoint). The worker's pipelines and health end as a single-process
         replay leaves them."""
+        started = time.monotonic()
         jobs = self._start()
         try:
             handled, skipped = self._feed(jobs, batches, covered)
             self.worker.commit()
+            own = time.monotonic() - started
             results = [self._result(job) for job in jobs]
+            log.info("replay: the worker's own share done after %.1f s, the jobs' after %.1f s",
+                     own, time.monotonic() - started)  # fmt: skip
         except BaseException:
             self._stop(jobs, abort=True)
             raise
