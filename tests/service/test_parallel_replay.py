@@ -134,12 +134,13 @@ def test_job_count_follows_the_tail_the_mills_and_the_cores() -> None:
         replay_jobs(-1, 50, big)
 
 
-def test_mills_are_split_in_id_order_into_equal_groups() -> None:
+def test_mills_are_split_in_id_order_the_reader_taking_a_smaller_share() -> None:
     ids = [f"m{i:02d}" for i in range(50)]
     groups = split_mills(reversed(ids), 2)
-    assert [len(g) for g in groups] == [25, 25]
+    assert [len(g) for g in groups] == [24, 26]  # the reader also reads the archive
     assert [m for g in groups for m in g] == ids
-    assert [len(g) for g in split_mills(ids, 4)] == [13, 13, 12, 12]
+    assert [len(g) for g in split_mills(ids, 4)] == [12, 13, 13, 12]
+    assert split_mills(ids[:2], 2) == [["m00"], ["m01"]]
     assert split_mills(ids[:1], 3) == [["m00"]]
 
 
