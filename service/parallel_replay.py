@@ -330,7 +330,8 @@ class ParallelReplay:
                 raise self._error(job, f"exited with code {job.process.exitcode}")
         try:
             message = job.conn.recv()
-        except (EOFError, OSError) as exc:
+        except (EOFError, OSError) as exc:  # the pipe closed: the process has ended or is ending
+            job.process.join(timeout=5.0)
             raise self._error(job, f"exited with code {job.process.exitcode} ({exc!r})") from exc
         if isinstance(message, JobFailed):
             raise self._error(job, message.error)
