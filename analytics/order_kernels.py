@@ -362,31 +362,38 @@ def cosine_window(p: np.ndarray, period: float, coefficients: tuple[float, ...])
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cubic_at(x, sk, k, out):
+    """Column ``k`` of ``out``: the rows of ``x`` at fractional index ``sk`` (Catmull-Rom as
+    four weights of ``t`` shared by the rows, clamped at the ends)."""
+    n = x.shape[1]
+    i = np.int64(math.floor(sk))
+    t = sk - i
+    t2 = t * t
+    t3 = t2 * t
+    c0 = 0.5 * (2.0 * t2 - t3 - t)
+    c1 = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0)
+    c2 = 0.5 * (4.0 * t2 - 3.0 * t3 + t)
+    c3 = 0.5 * (t3 - t2)
+    if i >= 1 and i + 2 < n:  # interior: no clamping
+        for r in range(x.shape[0]):
+            out[r, k] = c0 * x[r, i - 1] + c1 * x[r, i] + c2 * x[r, i + 1] + c3 * x[r, i + 2]
+    else:
+        i0 = min(max(i - 1, 0), n - 1)
+        i1 = min(max(i, 0), n - 1)
+        i2 = min(max(i + 1, 0), n - 1)
+        i3 = min(max(i + 2, 0), n - 1)
+        for r in range(x.shape[0]):
+            out[r, k] = c0 * x[r, i0] + c1 * x[r, i1] + c2 * x[r, i2] + c3 * x[r, i3]
+
+
 @njit(cache=True, nogil=True)
 def _catmull_rom(x, s, out):
     """Catmull-Rom as four weights of ``t`` shared by the rows (the same cubic as
     ``p1 + ½t(p2 − p0 + t(2p0 − 5p1 + 4p2 − p3 + t(3(p1 − p2) + p3 − p0)))``)."""
-    n = x.shape[1]
     for k in range(s.shape[0]):
         sk = s[k]
-        i = np.int64(math.floor(sk))
-        t = sk - i
-        t2 = t * t
-        t3 = t2 * t
-        c0 = 0.5 * (2.0 * t2 - t3 - t)
-        c1 = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0)
-        c2 = 0.5 * (4.0 * t2 - 3.0 * t3 + t)
-        c3 = 0.5 * (t3 - t2)
-        if i >= 1 and i + 2 < n:  # interior: no clamping
-            for r in range(x.shape[0]):
-                out[r, k] = c0 * x[r, i - 1] + c1 * x[r, i] + c2 * x[r, i + 1] + c3 * x[r, i + 2]
-        else:
-            i0 = min(max(i - 1, 0), n - 1)
-            i1 = min(max(i, 0), n - 1)
-            i2 = min(max(i + 1, 0), n - 1)
-            i3 = min(max(i + 2, 0), n - 1)
-            for r in range(x.shape[0]):
-                out[r, k] = c0 * x[r, i0] + c1 * x[r, i1] + c2 * x[r, i2] + c3 * x[r, i3]
+        _cubic_at(x, sk, k, out)
 
 
 def catmull_rom(x: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -422,28 +429,10 @@ def _resample(x, grid, xp, out):
     """Rows of ``x`` at the fractional indices ``np.interp(grid, xp, arange(len(xp)))`` (a
     merge walk: cheap for an increasing ``grid``; ``xp`` non-decreasing), Catmull-Rom as
     :func:`_catmull_rom`."""
-    n = x.shape[1]
     j = 0
     for k in range(grid.shape[0]):
         sk, j = _interp_index(grid[k], xp, j)
-        i = np.int64(math.floor(sk))
-        t = sk - i
-        t2 = t * t
-        t3 = t2 * t
-        c0 = 0.5 * (2.0 * t2 - t3 - t)
-        c1 = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0)
-        c2 = 0.5 * (4.0 * t2 - 3.0 * t3 + t)
-        c3 = 0.5 * (t3 - t2)
-        if i >= 1 and i + 2 < n:  # interior: no clamping
-            for r in range(x.shape[0]):
-                out[r, k] = c0 * x[r, i - 1] + c1 * x[r, i] + c2 * x[r, i + 1] + c3 * x[r, i + 2]
-        else:
-            i0 = min(max(i - 1, 0), n - 1)
-            i1 = min(max(i, 0), n - 1)
-            i2 = min(max(i + 1, 0), n - 1)
-            i3 = min(max(i + 2, 0), n - 1)
-            for r in range(x.shape[0]):
-                out[r, k] = c0 * x[r, i0] + c1 * x[r, i1] + c2 * x[r, i2] + c3 * x[r, i3]
+        _cubic_at(x, sk, k, out)
 
 
 def resample(x: np.ndarray, grid: np.ndarray, xp: np.ndarray) -> np.ndarray:
