@@ -768,13 +768,6 @@ class HarmonicTracker:
         """Amplitude of a bin-centred line whose |FFT|² is ``power``."""
         return 2.0 * math.sqrt(power) / self._win_sum
 
-    def _interpolate(self, mag: np.ndarray, k: int) -> float:
-        """Fractional bin offset δ ∈ [−½, ½] of a peak at bin ``k`` (3-bin ratio method)."""
-        if k <= 0 or k >= mag.shape[0] - 1 or mag[k] <= 0:
-            return 0.0
-        rho = (mag[k + 1] - mag[k - 1]) / mag[k]
-        return float(np.interp(rho, self._rho, self._delta))
-
     def _measure(
         self,
         ch: _Channel,
@@ -827,7 +820,8 @@ class HarmonicTracker:
         return lo + np.argmax(mag[idx], axis=1)
 
     def _interpolate_many(self, mag: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """:meth:`_interpolate` of each peak bin of ``k`` (one ``np.interp`` call)."""
+        """Fractional bin offset δ ∈ [−½, ½] of the peak at each bin of ``k`` (3-bin ratio
+        method, one ``np.interp`` call); 0 at the ends or where the bin is empty."""
         n = mag.shape[0]
         if n < 3:
             return np.zeros(k.shape[0])
