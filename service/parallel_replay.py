@@ -136,15 +136,13 @@ class ReplayJob:
 @dataclass
 class JobResult:
     """What a job sends back: per mill the pipeline snapshot (JSON text) and channel health,
-    the stored alarm transitions in order, and its counts."""
+    the stored alarm transitions in order, and the blocks it handled and skipped."""
 
     snapshots: dict[str, str]
     health: dict[str, MillHealth]
     transitions: list[Transition]
     handled: int
     skipped: int
-    regular_blocks: int
-    slow_blocks: int
 
 
 @dataclass(frozen=True)
@@ -197,8 +195,6 @@ def _replay(conn: Connection, job: ReplayJob) -> JobResult:
         transitions,
         handled,
         skipped,
-        lane.regular_blocks,
-        lane.slow_blocks,
     )
 
 
@@ -230,8 +226,6 @@ class ParallelReplay:
         self.groups = groups
         self.factory = factory
         self._group_of_mill = {m: g for g, mills in enumerate(groups) for m in mills}
-        self.regular_blocks = 0
-        self.slow_blocks = 0
 
     def run(
         self, batches: Iterable[MessageBatch], covered: dict[str, ArchivePosition | None]
@@ -350,8 +344,6 @@ class ParallelReplay:
             worker.pipelines[mill_id].restore(json.loads(text))
             worker.health[mill_id] = result.health[mill_id]
         worker.blocks_handled += result.handled
-        self.regular_blocks += result.regular_blocks
-        self.slow_blocks += result.slow_blocks
         if result.transitions and worker.on_alarms is not None:
             worker.on_alarms(result.transitions)
 

@@ -106,22 +106,21 @@ def test_parallel_replay_after_checkpoints_skips_what_they_hold(tmp_path: Path) 
 
 @pytest.mark.slow
 @pytest.mark.usefixtures("always_parallel")
-def test_a_failing_job_names_its_mills(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("factory", "error"),
+    [
+        (FailingPipeline, r"mill-1.*analysis broke on purpose"),  # an exception in the job
+        (DyingPipeline, r"mill-2.*exited with code -9"),  # the job process SIGKILLed
+    ],
+)
+def test_a_failing_or_killed_job_stops_the_replay_naming_its_mills(
+    tmp_path: Path, factory: type[AnalyzerPipeline], error: str
+) -> None:
     reader = _archive(tmp_path / "a")
     with Store(tmp_path / "mw.db") as store:
-        worker = _worker(store, FailingPipeline)
-        with pytest.raises(ReplayJobError, match=r"mill-1.*analysis broke on purpose"):
-            worker.recover(reader, jobs=3, factory=FailingPipeline)
-
-
-@pytest.mark.slow
-@pytest.mark.usefixtures("always_parallel")
-def test_a_killed_job_stops_the_replay(tmp_path: Path) -> None:
-    reader = _archive(tmp_path / "a")
-    with Store(tmp_path / "mw.db") as store:
-        worker = _worker(store, DyingPipeline)
-        with pytest.raises(ReplayJobError, match=r"mill-2.*exited with code -9"):
-            worker.recover(reader, jobs=3, factory=DyingPipeline)
+        worker = _worker(store, factory)
+        with pytest.raises(ReplayJobError, match=error):
+            worker.recover(reader, jobs=3, factory=factory)
 
 
 def test_job_count_follows_the_tail_the_mills_and_the_cores() -> None:
