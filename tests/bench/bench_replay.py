@@ -3,6 +3,7 @@
     .venv/bin/python tests/bench/bench_replay.py                     # 50 mills, 1 h, steady
     .venv/bin/python tests/bench/bench_replay.py --scene month --seconds 3600
     .venv/bin/python tests/bench/bench_replay.py --mills 50 --seconds 600 --json
+    .venv/bin/python tests/bench/bench_replay.py --archive /tmp/replay-archive   # kept, reused
 
 1. Writes an archive the way the live worker does (``ArchiveWriter``, every block of every mill
    in time order, log time = the block's end), into a temporary directory: ``--mills`` mills
@@ -19,6 +20,10 @@
    robust on a shared machine), wall seconds, × real time (recording seconds / replay seconds,
    all mills together), and the cost of only reading the archive in batches (+ decoding the
    block headers).
+
+``--archive DIR`` keeps the archive in DIR and reuses it on the next run with the same
+``--mills``/``--seconds``/``--scene``/``--distinct`` (a ``bench.json`` there says what it holds),
+so replay changes can be measured without the ~140 s of generation each time.
 
 numpy/BLAS limited to one thread per process.
 """
@@ -86,6 +91,29 @@ def write_archive(directory: Path, configs, scene: str, seconds: float, distinct
     return blocks
 
 
+def archive_for(directory: Path, configs, args: argparse.Namespace) -> dict:
+    """Write the archive into ``directory``, or reuse the one a previous run left there for
+    the same arguments; returns what it holds (``bench.json``)."""
+    what = {"mills": args.mills, "seconds": args.seconds, "scene": args.scene,
+            "distinct": args.distinct}  # fmt: skip
+    info = directory / "bench.json"
+    if info.exists():
+        rows = json.loads(info.read_text())
+        if {k: rows.get(k) for k in what} == what:
+            return rows | {"reused": True}
+        raise SystemExit(f"{directory} holds another archive ({info}); name an empty directory")
+    if directory.exists() and any(directory.iterdir()):
+        raise SystemExit(f"{directory} is not empty and holds no bench.json; name an empty one")
+    cpu_w, wall_w, blocks = timed(
+        lambda: write_archive(directory, configs, args.scene, args.seconds, args.distinct)
+    )
+    size = sum(p.stat().st_size for p in directory.glob("*.mcap"))
+    rows = what | {"blocks": blocks, "archive_mb": size / 2**20, "generate_wall_s": wall_w,
+                   "generate_cpu_s": cpu_w}  # fmt: skip
+    info.write_text(json.dumps(rows))
+    return rows
+
+
 def _cpu() -> float:
     t = os.times()
     return t.user + t.system + t.children_user + t.children_system
@@ -124,6 +152,7 @@ def main() -> None:
     parser.add_argument(
         "--jobs", default="1,0", help="replay processes per run, comma-separated (0: one per core)"
     )
+    parser.add_argument("--archive", type=Path, help="keep the archive here and reuse it")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     runs = [int(j) for j in args.jobs.split(",")]
@@ -132,14 +161,9 @@ def main() -> None:
         warm = Path(d) / "warm"
         write_archive(warm, configs[:1], "steady", 120.0, 1)
         replay(warm, configs[:1])  # compiled kernels loaded
-        directory = Path(d) / "archive"
-        cpu_w, wall_w, blocks = timed(
-            lambda: write_archive(directory, configs, args.scene, args.seconds, args.distinct)
-        )
-        size = sum(p.stat().st_size for p in directory.glob("*.mcap"))
-        rows = {"mills": args.mills, "seconds": args.seconds, "scene": args.scene,
-                "blocks": blocks, "archive_mb": size / 2**20,
-                "generate_wall_s": wall_w, "generate_cpu_s": cpu_w}  # fmt: skip
+        directory = args.archive or Path(d) / "archive"
+        rows = archive_for(directory, configs, args)
+        blocks = rows["blocks"]
         passes = [("read", lambda: read_only(directory, False)),
                   ("read_decode", lambda: read_only(directory, True))]  # fmt: skip
         size_b = sum(p.stat().st_size for p in directory.glob("*.mcap"))
@@ -157,7 +181,8 @@ def main() -> None:
         return
     print(
         f"archive: {args.mills} mills x {args.seconds:.0f} s of '{args.scene}' = {blocks} blocks,"
-        f" {rows['archive_mb']:.0f} MB; generated in {wall_w:.0f} s wall ({cpu_w:.0f} s CPU)"
+        f" {rows['archive_mb']:.0f} MB; generated in {rows['generate_wall_s']:.0f} s wall"
+        f" ({rows['generate_cpu_s']:.0f} s CPU){' (reused)' if rows.get('reused') else ''}"
     )
     print(f"{'pass':12} {'cpu s':>8} {'wall s':>8} {'x rt (cpu)':>10} {'x rt (wall)':>11} "
           f"{'µs/block':>9}")  # fmt: skip
