@@ -31,11 +31,27 @@ from service.block_queue import QueuedBlock
 if TYPE_CHECKING:
     from service.worker import Worker
 
-__all__ = ["BatchLane"]
+__all__ = ["REPLAY_BLOCKS_PER_MILL", "BatchLane", "replay_batch_blocks"]
 
 log = logging.getLogger(__name__)
 
 _NUMPY = {int(d): d.numpy for d in DType}
+#: Archived blocks per configured mill between two commits of a replay (about 40 s of a
+#: four-channel mill in 100-sample blocks): the worker analyses what it queued at each commit,
+#: so every mill's analyzer is then fed whole chunks of ``analytics.mill_monitor.MAX_CHUNK_S``.
+#: Measured (50 mills, 300 s, one core): 20 000 blocks a commit 430 µs of CPU per mill-second,
+#: 80 000 blocks 383 µs; no gain beyond. Results do not depend on it.
+REPLAY_BLOCKS_PER_MILL = 1600
+#: Least and most blocks a commit: a batch is held in memory while it is analysed (about
+#: 1.3 kB a 100-sample block read, decoded and aligned: ≤ ~260 MB).
+REPLAY_BATCH_BOUNDS = (20_000, 200_000)
+
+
+def replay_batch_blocks(mills: int) -> int:
+    """Archived blocks a replay of ``mills`` mills handles between commits (and reads at
+    least half of per batch)."""
+    lo, hi = REPLAY_BATCH_BOUNDS
+    return min(hi, max(lo, mills * REPLAY_BLOCKS_PER_MILL))
 
 
 @njit(cache=True, nogil=True)
@@ -49,14 +65,31 @@ def _gather(buf, starts, width):
 
 class BatchLane:
     """Hands message batches to a :class:`~service.worker.Worker` (see the module docstring).
-    ``regular_blocks`` / ``slow_blocks`` count what took which path."""
+    ``regular_blocks`` / ``slow_blocks`` count what took which path; ``commit_every``: blocks
+    :meth:`replay` handles between the worker's commits (default: for all the worker's mills;
+    a process that replays only some of them passes its own)."""
 
-    def __init__(self, worker: Worker) -> None:
+    def __init__(self, worker: Worker, commit_every: int | None = None) -> None:
         self.worker = worker
         self.mills = list(worker.mills)
         self._channels = {m: list(c.channels) for m, c in worker.mills.items()}
         self.regular_blocks = 0
         self.slow_blocks = 0
+        self.commit_every = commit_every or replay_batch_blocks(len(self.mills))
+        self._since_commit = 0
+
+    def replay(
+        self, batch: MessageBatch, covered: dict[str, ArchivePosition | None] | None = None
+    ) -> tuple[int, int]:
+        """:meth:`handle` for a replay: the worker commits (and so analyses what is queued)
+        each time another :attr:`commit_every` blocks have been handled. The caller commits
+        once more at the end."""
+        handled, skipped = self.handle(batch, covered)
+        self._since_commit += handled
+        if self._since_commit >= self.commit_every:
+            self._since_commit = 0
+            self.worker.commit()
+        return handled, skipped
 
     def handle(
         self, batch: MessageBatch, covered: dict[str, ArchivePosition | None] | None = None

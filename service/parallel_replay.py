@@ -48,7 +48,7 @@ from alarms.lifecycle import Transition
 from analytics.mill_config import MillConfig
 from ingest.archive import ArchivePosition, archive_file_order, list_archive_files
 from ingest.archive_batches import MessageBatch
-from service.batch_lane import BatchLane
+from service.batch_lane import BatchLane, replay_batch_blocks
 from service.health import MillHealth
 
 if TYPE_CHECKING:
@@ -61,9 +61,10 @@ log = logging.getLogger(__name__)
 #: Archive bytes to replay below which one process replays alone: starting a job process
 #: (~0.7 s of imports) pays only for a tail of more than ~a minute of 50 mills.
 PARALLEL_MIN_BYTES = 32 * 2**20
-#: Packed batches waiting per job (each ~REPLAY_BATCH_BLOCKS / jobs blocks, a few MB): enough
-#: for a job to go on while the reading process analyses its own mills' share (~0.3 s).
-QUEUED_BATCHES = 12
+#: Packed batches waiting per job (each about half of
+#: :func:`~service.batch_lane.replay_batch_blocks` / jobs blocks, ~10 MB for 50 mills): enough
+#: for a job to go on while the reading process analyses its own mills' share of a batch (~1 s).
+QUEUED_BATCHES = 4
 #: The reading process analyses a share of the mills too, smaller than a job's by the cost of
 #: reading the archive (~1.3 µs a block, ~8 % of a running mill's analysis).
 READER_SHARE = 0.92
@@ -171,7 +172,7 @@ def _job_main(conn: Connection, job: ReplayJob) -> None:
 
 def _replay(conn: Connection, job: ReplayJob) -> JobResult:
     from service.store import Store
-    from service.worker import REPLAY_BATCH_BLOCKS, Worker
+    from service.worker import Worker
 
     mills = {c.id: c for c in job.configs}
     pipelines = {m: job.factory(c) for m, c in mills.items()}
@@ -184,10 +185,8 @@ def _replay(conn: Connection, job: ReplayJob) -> JobResult:
         lane = BatchLane(worker)
         handled = skipped = 0
         while (batch := conn.recv()) is not None:
-            h, s = lane.handle(batch, covered)
+            h, s = lane.replay(batch, covered)
             handled, skipped = handled + h, skipped + s
-            if handled // REPLAY_BATCH_BLOCKS != (handled - h) // REPLAY_BATCH_BLOCKS:
-                worker.commit()
         worker.commit()
     return JobResult(
         {m: json.dumps(p.snapshot()) for m, p in pipelines.items()},
@@ -284,9 +283,7 @@ class ParallelReplay:
     ) -> tuple[int, int]:
         """Send each job its mills' messages; replay the first group's (and count blocks of no
         configured mill) here. Returns what was handled and skipped here."""
-        from service.worker import REPLAY_BATCH_BLOCKS
-
-        lane = BatchLane(self.worker)
+        lane = BatchLane(self.worker, replay_batch_blocks(len(self.groups[0])))
         handled = skipped = 0
         for batch in batches:
             group = self._groups(batch)
@@ -297,10 +294,8 @@ class ParallelReplay:
                     job.batches.put(batch.select(mine).compact())
             here = group <= 0
             if here.any():
-                h, s = lane.handle(batch.select(here), covered)
+                h, s = lane.replay(batch.select(here), covered)
                 handled, skipped = handled + h, skipped + s
-                if handled // REPLAY_BATCH_BLOCKS != (handled - h) // REPLAY_BATCH_BLOCKS:
-                    self.worker.commit()
         for job in jobs:
             job.batches.put(None)
         return handled, skipped

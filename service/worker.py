@@ -44,7 +44,7 @@ from ingest import keys
 from ingest.archive import ArchivePosition, ArchiveReader, ArchiveWriter
 from ingest.archive_batches import MessageBatch, archive_batches
 from ingest.wire import Block, WireError, decode_block
-from service.batch_lane import BatchLane
+from service.batch_lane import BatchLane, replay_batch_blocks
 from service.block_queue import BlockQueue, QueuedBlock
 from service.checkpoints import STEP_BUDGET_S, CheckpointSchedule, earliest
 from service.health import LatencyReservoir, MillHealth, PerMinute
@@ -56,10 +56,6 @@ __all__ = ["AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 log = logging.getLogger(__name__)
 
 BATCH_BLOCKS = 2000
-#: Blocks replayed from the archive per commit in :meth:`Worker.recover`: ~10 s of 50 mills, so
-#: each mill's blocks reach its analyzer as chunks of seconds (the cost per sample then drops
-#: several-fold; the results do not depend on it).
-REPLAY_BATCH_BLOCKS = 20_000
 
 
 @dataclass
@@ -379,8 +375,8 @@ class Worker:
         core), the mills split between them (:mod:`service.parallel_replay`); same results."""
         covered = self.restore_checkpoints(self.store.latest_checkpoints())
         after = earliest(covered.values())
-        batches = archive_batches(reader.directory, reader.prefix, after=after,
-                                  min_messages=REPLAY_BATCH_BLOCKS // 2)  # fmt: skip
+        size = replay_batch_blocks(len(self.mills)) // 2  # (read at least half a commit's)
+        batches = archive_batches(reader.directory, reader.prefix, after=after, min_messages=size)
         n_jobs = 1
         if factory is not None:
             tail = tail_bytes(reader.directory, reader.prefix, after)
@@ -408,10 +404,8 @@ class Worker:
         replayed = skipped = 0
         lane = BatchLane(self)  # whole batches of blocks as arrays; irregular ones one by one
         for batch in batches:
-            handled, skip = lane.handle(batch, covered)
+            handled, skip = lane.replay(batch, covered)
             replayed, skipped = replayed + handled, skipped + skip
-            if replayed // REPLAY_BATCH_BLOCKS != (replayed - handled) // REPLAY_BATCH_BLOCKS:
-                self.commit()
         self.commit()
         return replayed, skipped
 

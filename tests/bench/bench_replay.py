@@ -50,10 +50,11 @@ from ingest.mill_files import load_mill_config
 from ingest.scene_blocks import SceneBlock, scene_blocks
 from ingest.scenes import get_scene
 from ingest.wire import DType, decode_headers
+from service.batch_lane import replay_batch_blocks
 from service.mill_pipeline import AnalyzerPipeline
 from service.parallel_replay import replay_jobs
 from service.store import Store
-from service.worker import REPLAY_BATCH_BLOCKS, Worker
+from service.worker import Worker
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 PREFIX = "replay-bench"
@@ -133,10 +134,11 @@ def replay(directory: Path, configs, jobs: int = 1) -> int:
         return worker.recover(reader, jobs=jobs, factory=AnalyzerPipeline)
 
 
-def read_only(directory: Path, decode: bool) -> int:
+def read_only(directory: Path, mills: int, decode: bool) -> int:
     """Messages read the way the replay reads them (batches of arrays), headers decoded."""
     n = 0
-    for batch in archive_batches(directory, PREFIX, min_messages=REPLAY_BATCH_BLOCKS // 2):
+    size = replay_batch_blocks(mills) // 2
+    for batch in archive_batches(directory, PREFIX, min_messages=size):
         if decode:
             decode_headers(batch.buf, batch.offset, batch.length)
         n += len(batch)
@@ -164,8 +166,8 @@ def main() -> None:
         directory = args.archive or Path(d) / "archive"
         rows = archive_for(directory, configs, args)
         blocks = rows["blocks"]
-        passes = [("read", lambda: read_only(directory, False)),
-                  ("read_decode", lambda: read_only(directory, True))]  # fmt: skip
+        passes = [("read", lambda: read_only(directory, args.mills, False)),
+                  ("read_decode", lambda: read_only(directory, args.mills, True))]  # fmt: skip
         size_b = sum(p.stat().st_size for p in directory.glob("*.mcap"))
         for j in runs:
             n = replay_jobs(j, len(configs), size_b)
