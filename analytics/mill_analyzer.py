@@ -73,6 +73,10 @@ _PREROLL_S = 1.0
 _RING_S = 90.0
 _KEEP_EVENTS = 2000
 _KEEP_WINDOWS = 1440
+#: Local days and calendar months of start counts kept (state stays bounded; 400 days ≈ 14
+#: months). The total since the start of the record is kept apart (``starts_total``).
+KEEP_START_DAYS = 400
+KEEP_START_MONTHS = 14
 _SNAPSHOT_VERSION = 1
 
 
@@ -137,6 +141,7 @@ class MillAnalyzer:
         self.keep_events = _KEEP_EVENTS
         self.starts_per_day: dict[str, int] = {}
         self.starts_per_month: dict[str, dict[str, int]] = {}
+        self.starts_total = 0
         self.phase_samples = dict.fromkeys(PHASE_OF_STATE.values(), 0)
         self.discontinuities = 0
 
@@ -389,13 +394,17 @@ class MillAnalyzer:
         return datetime.fromtimestamp(self.t_ns(sample) / 1e9, tz=tz)
 
     def _count_start(self, sample: int) -> None:
-        """Starts per local day and calendar month (seed 000 §6.1.3, §6.2.8)."""
+        """Starts per local day and calendar month (seed 000 §6.1.3, §6.2.8), the last
+        :data:`KEEP_START_DAYS` days and :data:`KEEP_START_MONTHS` months, and in total."""
         day = self._local(sample).date().isoformat()
         self.starts_per_day[day] = self.starts_per_day.get(day, 0) + 1
         month = self.starts_per_month.setdefault(day[:7], {"starts": 0})
         month["starts"] += 1
-        while len(self.starts_per_day) > 400:
+        self.starts_total += 1
+        while len(self.starts_per_day) > KEEP_START_DAYS:
             del self.starts_per_day[min(self.starts_per_day)]
+        while len(self.starts_per_month) > KEEP_START_MONTHS:
+            del self.starts_per_month[min(self.starts_per_month)]
 
     # ------------------------------------------------------------ damage
     def _stress(self, block: np.ndarray) -> dict[str, np.ndarray]:

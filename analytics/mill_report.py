@@ -89,7 +89,7 @@ def _phase_seconds(a: MillAnalyzer) -> dict[str, float]:
 
 def _damage(a: MillAnalyzer, seconds: dict[str, float]) -> dict[str, Any]:
     out = {}
-    n_starts = sum(m["starts"] for m in a.starts_per_month.values())
+    n_starts = a.starts_total
     elapsed = a.n / a.fs
     scenarios = dict(APP_D_SCENARIOS)
     if elapsed > 0:

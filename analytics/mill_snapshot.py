@@ -49,6 +49,7 @@ def snapshot_analyzer(a: MillAnalyzer) -> dict[str, Any]:
     d["damage"] = {c: p.snapshot() for c, p in a.damage.items()}
     d["meter"] = a.meter.snapshot()
     d["barring"] = None if a.barring is None else a.barring.snapshot()
+    d["starts_total"] = a.starts_total
     return d
 
 
@@ -68,4 +69,8 @@ def restore_analyzer(a: MillAnalyzer, d: dict[str, Any]) -> MillAnalyzer:
     a.damage = {c: PhaseDamage.restore(s) for c, s in d["damage"].items()}
     a.meter.restore_state(d["meter"])
     a.barring = None if d["barring"] is None else BarringAccumulator.restore(d["barring"])
+    # (a snapshot from before the total was kept counted every month it had seen)
+    a.starts_total = int(
+        d.get("starts_total", sum(m["starts"] for m in a.starts_per_month.values()))
+    )
     return a

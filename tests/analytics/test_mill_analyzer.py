@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 
 from analytics.frame_aligner import Frame
-from analytics.mill_analyzer import MillAnalyzer, component_names
+from analytics.mill_analyzer import (
+    KEEP_START_DAYS,
+    KEEP_START_MONTHS,
+    MillAnalyzer,
+    component_names,
+)
 from tests.analytics.scene_helpers import custom, mill, run, scene
 
 
@@ -143,3 +148,24 @@ def test_start_level_is_strictly_above_the_peaks_like_the_alarm_rules():
     warn, alarm = levels.start_peak_warn_pct, levels.start_peak_alarm_pct
     got = [a._start_alarm(p) for p in (None, warn, warn + 0.1, alarm, alarm + 0.1)]
     assert got == [None, None, "warning", "warning", "alarm"]
+
+
+def test_start_counts_are_bounded_and_the_total_is_kept():
+    """Years of starts keep KEEP_START_DAYS days and KEEP_START_MONTHS months of counts; the
+    total (the report's observed start rate) counts every start, and survives a restore —
+    also of a snapshot taken before the total was kept."""
+    a = MillAnalyzer(mill("sag-5200-lrs"))
+    a.t0_ns = 1_704_067_200_000_000_000  # 2024-01-01T00:00:00Z
+    day = round(86_400 * a.fs)
+    for k in range(3 * 365):  # one start a day for three years
+        a._count_start(k * day + day // 2)
+    assert len(a.starts_per_day) == KEEP_START_DAYS
+    assert len(a.starts_per_month) == KEEP_START_MONTHS
+    assert min(a.starts_per_month) == "2025-11" and max(a.starts_per_month) == "2026-12"
+    assert a.starts_total == 3 * 365
+    b = MillAnalyzer.restore(a.config, a.snapshot())
+    assert b.starts_total == a.starts_total and b.starts_per_month == a.starts_per_month
+    old = a.snapshot()
+    del old["starts_total"]
+    c = MillAnalyzer.restore(a.config, old)
+    assert c.starts_total == sum(m["starts"] for m in a.starts_per_month.values())
