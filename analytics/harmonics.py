@@ -76,6 +76,7 @@ __all__ = [
     "HarmonicTracker",
     "HarmonicWindow",
     "LineMeasurement",
+    "SnapshotMismatch",
     "UnexplainedPeak",
     "harmonics_report",
     "is_running",
@@ -98,6 +99,14 @@ _TINY = float(np.finfo(float).tiny)
 #: Largest deferral of a complete segment's spectrum, in hops (``stagger`` → 1): under one hop,
 #: so a segment never waits behind the next one.
 MAX_DEFER_HOPS = 0.8
+
+
+class SnapshotMismatch(ValueError):
+    """A sound snapshot taken under another mill configuration whose arrays do not fit the
+    tracker this configuration builds (segment length, bins, buffer or tracked lines differ);
+    the message names the mill and what differs. The tracker's state is only spectra in
+    progress, so a caller may start a fresh tracker instead (:meth:`MillMonitor.restore
+    <analytics.mill_monitor.MillMonitor.restore>` does)."""
 
 
 class HarmonicSettings(BaseModel):
@@ -979,6 +988,7 @@ class HarmonicTracker:
             "settings": self.settings.model_dump(mode="json"),
             "stagger": self.stagger,
             "shape": [nc, self.bins, nl, self.capacity],
+            "layout": self._layout(),
             "buffer": pack_array(self._buf[:, : self._len]),
             "len": self._len,
             "approx_revs": self._approx_revs,
@@ -1009,9 +1019,13 @@ class HarmonicTracker:
             natural_frequencies_hz,
             float(snapshot["stagger"]),
         )
-        nc, bins, nl, cap = snapshot["shape"]
-        if (nc, bins, nl, cap) != (len(t.channels), t.bins, len(t._lines), t.capacity):
-            raise ValueError("snapshot does not fit this mill configuration")
+        misfit = t._misfit(snapshot)
+        if misfit:
+            raise SnapshotMismatch(
+                f"mill {config.id!r}: the harmonic tracker's snapshot does not fit the mill's "
+                f"configuration now: {misfit}"
+            )
+        nc, bins, nl, _ = snapshot["shape"]
         n = int(snapshot["len"])
         t._buf[:, :n] = unpack_array(snapshot["buffer"], shape=(nc + 1, n))
         t._len, t._approx_revs = n, float(snapshot["approx_revs"])
@@ -1021,6 +1035,41 @@ class HarmonicTracker:
         t.counters.update(snapshot["counters"])
         t.latest = None if snapshot["latest"] is None else _window_from_dict(snapshot["latest"])
         return t
+
+    def _layout(self) -> dict[str, Any]:
+        """What the snapshot's arrays are laid out by, beyond their shape: the segment length
+        (pinion revolutions) and the tracked lines as ``[name, order, fixed Hz]`` (the fixed
+        frequency only for a line without an order)."""
+        lines = [[ln.name, ln.order, ln.frequency_hz if ln.order is None else None]
+                 for ln in self._lines]  # fmt: skip
+        return {"revs": self.revs, "lines": lines}
+
+    def _misfit(self, snapshot: dict[str, Any]) -> str:
+        """How ``snapshot``'s geometry differs from this tracker's, in words ("" if it fits).
+        Snapshots from before ``layout`` was recorded are checked by their shape alone."""
+        _, bins, nl, cap = snapshot["shape"]
+        layout = snapshot.get("layout", {})
+        revs = layout.get("revs")
+        problems = []
+        if bins != self.bins or revs not in (None, self.revs):
+            problems.append(f"segment of {'?' if revs is None else revs} pinion revolutions / "
+                            f"{bins} bins in the snapshot, {self.revs} / {self.bins} with the "
+                            "configuration now")  # fmt: skip
+        if cap != self.capacity:
+            problems.append(f"segment buffer of {cap} samples in the snapshot, "
+                            f"{self.capacity} now")  # fmt: skip
+        problems += self._line_misfit(nl, layout.get("lines"))
+        return "; ".join(problems)
+
+    def _line_misfit(self, count: int, lines: list[list[Any]] | None) -> list[str]:
+        """The tracked lines' difference from a snapshot's (``count`` lines, ``lines`` if known)."""
+        if count != len(self._lines):
+            return [f"{count} tracked lines in the snapshot, {len(self._lines)} now"]
+        now = self._layout()["lines"]
+        if lines is None or lines == now:
+            return []
+        moved = [a[0] for a, b in zip(lines, now, strict=True) if a != b]
+        return [f"tracked lines now at other orders or names: {', '.join(moved)}"]
 
 
 def _window_from_dict(d: dict[str, Any]) -> HarmonicWindow:

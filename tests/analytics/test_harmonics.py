@@ -16,6 +16,7 @@ from analytics.harmonics import (
     HarmonicSettings,
     HarmonicTracker,
     HarmonicWindow,
+    SnapshotMismatch,
     _spread,
     harmonics_report,
     is_running,
@@ -169,6 +170,52 @@ def test_restore_refuses_other_mills(short_run) -> None:
         HarmonicTracker.restore(config("rod-1100-grid"), snap)
     with pytest.raises(ValueError, match="snapshot"):
         HarmonicTracker.restore(sc.config, {"kind": "rainflow"})
+
+
+def with_drive(cfg: MillConfig, **drive) -> MillConfig:
+    """``cfg`` with some drive fields changed, as an operator's edit of the TOML would."""
+    return cfg.model_copy(update={"drive": cfg.drive.model_copy(update=drive)})
+
+
+def half_fed(sc: Scene, data: dict) -> HarmonicTracker:
+    """A tracker 30 s into the scene: segments averaged and one buffered."""
+    tracker = HarmonicTracker(sc.config, settings=SHORT)
+    tracker.feed(sc.t_ns(0), sc.fs, {k: v[:30_000] for k, v in data.items()}, True)
+    assert tracker.counters["segments"] > 0 and tracker._len > 0
+    return tracker
+
+
+def test_restore_under_another_pinion_speed_names_the_mill_and_the_geometry(short_run) -> None:
+    sc, data, _ = short_run
+    snap = json.loads(json.dumps(half_fed(sc, data).snapshot()))
+    faster = with_drive(sc.config, motor_speed_rpm=1000.0)  # pinion 176.1 → 177.0 rpm
+    then, now = HarmonicTracker(sc.config), HarmonicTracker(faster)
+    assert (then.revs, then.bins) == (65, 11083) and now.bins != then.bins
+    with pytest.raises(SnapshotMismatch) as caught:
+        HarmonicTracker.restore(faster, snap)
+    text = str(caught.value)
+    assert text.startswith("mill 'sag-5200-lrs': ")
+    assert f"65 pinion revolutions / 11083 bins in the snapshot, 65 / {now.bins} " in text
+    assert f"buffer of {then.capacity} samples in the snapshot, {now.capacity} now" in text
+
+
+def test_restore_refuses_lines_that_moved_even_when_the_shape_fits(short_run) -> None:
+    sc, data, _ = short_run
+    snap = json.loads(json.dumps(half_fed(sc, data).snapshot()))
+    relined = with_drive(sc.config, liner_count=32)  # same segment and bins, another liner order
+    with pytest.raises(SnapshotMismatch, match=r"other orders or names: liner_passing$"):
+        HarmonicTracker.restore(relined, snap)
+
+
+def test_snapshots_without_layout_restore_and_are_checked_by_shape(short_run) -> None:
+    sc, data, _ = short_run
+    first = half_fed(sc, data)
+    snap = json.loads(json.dumps(first.snapshot()))
+    del snap["layout"]  # as checkpoints written before it was recorded
+    assert harmonics_report(HarmonicTracker.restore(sc.config, snap)) == harmonics_report(first)
+    faster = with_drive(sc.config, motor_speed_rpm=1000.0)
+    with pytest.raises(SnapshotMismatch, match=r"segment of [?] pinion revolutions / 11083 bins"):
+        HarmonicTracker.restore(faster, snap)
 
 
 def test_stopped_mill_costs_next_to_nothing(short_run) -> None:
