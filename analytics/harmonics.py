@@ -102,11 +102,11 @@ MAX_DEFER_HOPS = 0.8
 
 
 class SnapshotMismatch(ValueError):
-    """A sound snapshot taken under another mill configuration whose arrays do not fit the
-    tracker this configuration builds (segment length, bins, buffer or tracked lines differ);
-    the message names the mill and what differs. The tracker's state is only spectra in
-    progress, so a caller may start a fresh tracker instead (:meth:`MillMonitor.restore
-    <analytics.mill_monitor.MillMonitor.restore>` does)."""
+    """A sound snapshot taken under another mill configuration that does not fit the object
+    this configuration builds; the message names the mill and what differs. From
+    :meth:`HarmonicTracker.restore` (segment length, bins, buffer or tracked lines differ) it
+    concerns only spectra in progress, so a caller may start a fresh tracker instead
+    (:meth:`MillMonitor.restore <analytics.mill_monitor.MillMonitor.restore>` does)."""
 
 
 class HarmonicSettings(BaseModel):

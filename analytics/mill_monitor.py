@@ -36,7 +36,13 @@ import numpy as np
 
 from analytics.fault_stage import FaultStage
 from analytics.frame_aligner import Frame, FrameAligner
-from analytics.harmonics import HarmonicTracker, HarmonicWindow, harmonics_report, stagger_for
+from analytics.harmonics import (
+    HarmonicTracker,
+    HarmonicWindow,
+    SnapshotMismatch,
+    harmonics_report,
+    stagger_for,
+)
 from analytics.mill_analyzer import MillAnalyzer
 from analytics.mill_config import ChannelConfig, MillConfig
 from analytics.operating_states import OperatingState
@@ -97,6 +103,8 @@ class MillMonitor:
         self._max_chunk = max(1, round(MAX_CHUNK_S * fs))
         self._queued: deque[Frame] = deque()
         self.backlog = 0  # samples aligned but not yet analysed
+        #: Why :meth:`restore` started the spectra afresh (the snapshot's did not fit), or None.
+        self.spectra_restarted: str | None = None
 
     def _tacho(self, fs: float) -> tuple[str, TachoSpeed] | None:
         if DERIVED_SPEED not in self.analysis_config.channels:
@@ -306,17 +314,43 @@ class MillMonitor:
 
     @classmethod
     def restore(cls, config: MillConfig, snap: dict[str, Any]) -> MillMonitor:
+        """A monitor that continues exactly where the snapshotted one stood.
+
+        After a configuration change that moves the harmonic tracker's geometry (pinion
+        speed, tooth counts, liner count, telemetry bandwidth) its snapshot no longer fits
+        (:class:`~analytics.harmonics.SnapshotMismatch`): the tracker then starts afresh — its
+        state is only spectra in progress — while everything else (damage, rainflow residues,
+        operating states, events) continues; :attr:`spectra_restarted` says why. A snapshot
+        at another sample rate raises :class:`~analytics.harmonics.SnapshotMismatch`: its sample
+        counts would mean other times."""
         if snap.get("kind") != "mill_monitor" or snap.get("version") != _SNAPSHOT_VERSION:
             raise ValueError(f"not a mill monitor snapshot of version {_SNAPSHOT_VERSION}")
         if snap["mill"] != config.id:
             raise ValueError(f"snapshot of mill {snap['mill']!r}, configuration is {config.id!r}")
+        was_fs, fs = float(snap["aligner"]["fs"]), float(config.sample_rate_hz)
+        if was_fs != fs:  # every sample count in the snapshot would mean another time
+            raise SnapshotMismatch(f"mill {config.id!r}: sample rate {was_fs:g} Hz in the "
+                                   f"snapshot, {fs:g} Hz with the configuration now")  # fmt: skip
         m = cls(config)
         m.aligner = FrameAligner.restore(snap["aligner"])
         m.faults.restore(snap["faults"])
         if m.tacho is not None and snap["tacho"] is not None:
             m.tacho = (m.tacho[0], TachoSpeed.restore(snap["tacho"]))
         m.analyzer = MillAnalyzer.restore(m.analysis_config, snap["analyzer"])
-        m.harmonics = HarmonicTracker.restore(m.analysis_config, snap["harmonics"])
+        m._restore_harmonics(snap["harmonics"])
         last = snap["last_good"]
         m._last_good = {k: (np.nan if v is None else float(v)) for k, v in last.items()}
         return m
+
+    def _restore_harmonics(self, snap: dict[str, Any]) -> None:
+        """The tracker of ``snap``, or (when it does not fit) the fresh one ``__init__`` built."""
+        try:
+            self.harmonics = HarmonicTracker.restore(self.analysis_config, snap)
+        except SnapshotMismatch as exc:
+            self.spectra_restarted = str(exc)
+            log.warning(
+                "%s. Its spectra restart from nothing (the next harmonic table after a full "
+                "window of steady running); damage, operating states and events continue from "
+                "the snapshot",
+                exc,
+            )

@@ -6,7 +6,9 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from analytics.harmonics import SnapshotMismatch
 from analytics.mill_monitor import DERIVED_SPEED, MillMonitor, analysis_config
 from ingest.mill_files import load_mill_config
 from ingest.scenes import get_scene
@@ -136,3 +138,56 @@ def test_process_until_stops_at_that_sample_and_snapshot_needs_an_empty_queue():
     m.process()
     assert m.backlog == 0 and m.analyzer.n == 30_000 - m.faults.delay
     assert m.snapshot()["kind"] == "mill_monitor"
+
+
+def _faster(config):
+    """``config`` after an operator's edit that moves the harmonic geometry: motor 995 → 1000
+    rpm, so the pinion turns at 177.0 rpm instead of 176.1."""
+    return config.model_copy(update={"drive": config.drive.model_copy(
+        update={"motor_speed_rpm": 1000.0})})  # fmt: skip
+
+
+def test_restore_after_a_pinion_speed_change_restarts_only_the_spectra(caplog):
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    scene = get_scene("start-lrs", config, seed=2, duration_s=60.0)
+    all_blocks = list(blocks(scene, 1000))
+    ref = MillMonitor(config)
+    for b in all_blocks:
+        ref.push(*b)
+    first = MillMonitor(config)
+    for b in all_blocks[: 4 * 40]:  # 40 s: started, running, spectra in progress
+        first.push(*b)
+    snap = json.loads(json.dumps(first.snapshot()))
+    assert first.state == "running" and first.harmonics.counters["running_samples"] > 0
+
+    with caplog.at_level("WARNING", logger="analytics.mill_monitor"):
+        second = MillMonitor.restore(_faster(config), snap)
+    again = json.loads(json.dumps(second.snapshot()))
+    for part in ("aligner", "faults", "tacho", "analyzer", "last_good"):  # all but the spectra
+        assert again[part] == snap[part], part
+    assert second.analyzer.report()["damage"] == first.analyzer.report()["damage"]
+    assert second.state == "running"
+    fresh = second.harmonics
+    assert fresh.bins != first.harmonics.bins and fresh._len == 0 and fresh.latest is None
+    assert set(fresh.counters.values()) == {0}
+    assert fresh.stagger == first.harmonics.stagger  # built as __init__ builds it
+    [record] = caplog.records
+    assert "mill 'sag-5200-lrs'" in record.message and "65 / 11018" in record.message
+    assert "spectra restart" in record.message and "damage" in record.message
+    assert second.spectra_restarted and "11083 bins" in second.spectra_restarted
+
+    for b in all_blocks[4 * 40 :]:  # the mill goes on being analysed
+        second.push(*b)
+    assert second.analyzer.n == ref.analyzer.n
+    assert second.harmonics.counters["running_samples"] > 0
+    # damage does not depend on the speed: the continued totals are the uninterrupted ones
+    assert json.loads(report(second))["damage"] == json.loads(report(ref))["damage"]
+
+
+def test_restore_refuses_another_sample_rate_naming_the_mill():
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    snap = MillMonitor(config).snapshot()
+    faster = config.model_copy(update={"sample_rate_hz": 2000.0})
+    with pytest.raises(SnapshotMismatch, match=r"'sag-5200-lrs': sample rate 1000 Hz in the "
+                       r"snapshot, 2000 Hz with the configuration now"):  # fmt: skip
+        MillMonitor.restore(faster, snap)
