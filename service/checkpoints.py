@@ -18,14 +18,40 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
+from datetime import UTC, datetime
 
 from ingest.archive import ArchivedBlock, ArchivePosition, archive_file_order
 
-__all__ = ["CheckpointSchedule", "covers", "earliest"]
+__all__ = ["CheckpointRestoreError", "CheckpointSchedule", "covers", "earliest"]
 
 #: Checkpoint work allowed per worker step (s) once the first due mill is done; mills left over
 #: are checkpointed at the next steps (they wait at most a few steps).
 STEP_BUDGET_S = 0.05
+
+
+class CheckpointRestoreError(RuntimeError):
+    """A mill's checkpoint could not be restored at start; the message names the mill, the
+    checkpoint's archive position and time, what went wrong and what the operator can do."""
+
+    def __init__(self, mill_id: str, position: ArchivePosition | None, cause: Exception) -> None:
+        self.mill_id = mill_id
+        super().__init__(
+            f"mill {mill_id}: its checkpoint {_where(position)} cannot be restored: {cause}. "
+            "The worker does not start the mill afresh by itself, as today's stored damage "
+            "would be overwritten with a partial total: if the mill's configuration was changed "
+            "since that checkpoint, revert the change and start the worker again"
+        )
+
+
+def _where(position: ArchivePosition | None) -> str:
+    """A checkpoint's archive position in words."""
+    if position is None:
+        return "(taken without an archive position)"
+    at = f"at archive file {position.file}, message {position.index}"
+    if position.log_time_ns:
+        t = datetime.fromtimestamp(position.log_time_ns / 1e9, tz=UTC)
+        at += f", logged {t.isoformat(timespec='seconds').replace('+00:00', 'Z')}"
+    return f"({at})"
 
 
 class CheckpointSchedule:

@@ -46,7 +46,12 @@ from ingest.archive_batches import MessageBatch, archive_batches
 from ingest.wire import Block, WireError, decode_block
 from service.batch_lane import BatchLane, replay_batch_blocks
 from service.block_queue import BlockQueue, QueuedBlock
-from service.checkpoints import STEP_BUDGET_S, CheckpointSchedule, earliest
+from service.checkpoints import (
+    STEP_BUDGET_S,
+    CheckpointRestoreError,
+    CheckpointSchedule,
+    earliest,
+)
 from service.health import LatencyReservoir, MillHealth, PerMinute
 from service.parallel_replay import ParallelReplay, replay_jobs, split_mills, tail_bytes
 from service.store import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
@@ -427,13 +432,22 @@ class Worker:
                 if mill_id not in self.pipelines:
                     log.warning("checkpoint holds mill %s, which is no longer configured", mill_id)
                     continue
-                self.pipelines[mill_id].restore(snap)
+                self._restore_mill(mill_id, snap, at)
                 covered[mill_id] = at
             for mill_id, seqs in state.get("last_seq", {}).items():
                 for channel, seq in seqs.items():
                     if mill_id in self.health and channel in self.health[mill_id].channels:
                         self.health[mill_id].channels[channel].last_seq = seq
         return covered
+
+    def _restore_mill(self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None) -> None:
+        """Restore one mill's pipeline; :class:`CheckpointRestoreError` (naming the mill, the
+        checkpoint and the cause) if it cannot be. A configuration change that only moves the
+        spectra's geometry is no failure: the monitor restarts its spectra and logs why."""
+        try:
+            self.pipelines[mill_id].restore(snap)
+        except Exception as exc:
+            raise CheckpointRestoreError(mill_id, at, exc) from exc
 
     # ------------------------------------------------------------------ reading
     def status(self, stale_after_s: float) -> dict[str, Any]:

@@ -8,18 +8,21 @@ import logging
 import os
 import shutil
 import signal
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
+from analytics.harmonics import HarmonicTracker
 from analytics.mill_config import MillConfig
 from ingest.archive import ArchiveReader, ArchiveWriter
 from service import parallel_replay
+from service.checkpoints import CheckpointRestoreError
 from service.mill_pipeline import AnalyzerPipeline
 from service.parallel_replay import ReplayJobError, replay_jobs, split_mills
 from service.store import Store
 from service.worker import Worker
-from tests.service.test_batch_lane import CONFIGS, _items, _state
+from tests.service.test_batch_lane import BASE, CONFIGS, _items, _state
 
 
 class FailingPipeline(AnalyzerPipeline):
@@ -121,6 +124,70 @@ def test_a_failing_or_killed_job_stops_the_replay_naming_its_mills(
         worker = _worker(store, factory)
         with pytest.raises(ReplayJobError, match=error):
             worker.recover(reader, jobs=3, factory=factory)
+
+
+def _checkpointed_archive(tmp_path: Path) -> ArchiveReader:
+    """The test archive, with every mill checkpointed (configuration of then) halfway."""
+    with ArchiveWriter(tmp_path / "a", "w", chunk_size=8192) as archive, Store(
+        tmp_path / "one.db"
+    ) as live_store:  # fmt: skip
+        live = _worker(live_store)
+        live.archive = archive
+        for k, item in enumerate(_items()):
+            live.handle(item)
+            if k == 3000:
+                live.checkpoint()
+    shutil.copy(tmp_path / "one.db", tmp_path / "two.db")
+    return ArchiveReader(tmp_path / "a", "w")
+
+
+def _edited(edit: Callable[[MillConfig], MillConfig]) -> dict[str, MillConfig]:
+    """Each mill's configuration after the operator's ``edit``."""
+    return {c.id: edit(c) for c in CONFIGS}
+
+
+def _faster(c: MillConfig) -> MillConfig:
+    """Motor 995 → 1000 rpm: the pinion speed, hence the spectra's bins, change."""
+    return c.model_copy(update={"drive": c.drive.model_copy(update={"motor_speed_rpm": 1000.0})})
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("always_parallel")
+def test_after_a_pinion_speed_change_jobs_restart_the_spectra_as_one_process_does(
+    tmp_path: Path,
+) -> None:
+    reader = _checkpointed_archive(tmp_path)
+    mills = _edited(_faster)
+    with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
+        one, two = (Worker(mills, {m: AnalyzerPipeline(c) for m, c in mills.items()}, s, None)
+                    for s in (s1, s2))  # fmt: skip
+        one.recover(reader)
+        two.recover(reader, jobs=2, factory=AnalyzerPipeline)
+        assert _state(two, s2) == _state(one, s1)
+    for m, config in mills.items():
+        harmonics = two.pipelines[m].monitor.harmonics  # type: ignore[attr-defined]
+        assert harmonics.bins == HarmonicTracker(config).bins != HarmonicTracker(BASE).bins
+        assert harmonics.counters["running_samples"] > 0
+
+
+@pytest.mark.usefixtures("always_parallel")
+def test_a_checkpoint_that_cannot_be_restored_stops_a_parallel_recovery_naming_the_mill(
+    tmp_path: Path,
+) -> None:
+    reader = _checkpointed_archive(tmp_path)
+
+    def drop_bending(c: MillConfig) -> MillConfig:
+        if c.id != "mill-1":
+            return c
+        kept = {n: ch for n, ch in c.channels.items() if n != "pinion_bending"}
+        return c.model_copy(update={"channels": kept})
+
+    mills = _edited(drop_bending)
+    with Store(tmp_path / "two.db") as store:
+        worker = Worker(mills, {m: AnalyzerPipeline(c) for m, c in mills.items()}, store, None)
+        with pytest.raises(CheckpointRestoreError, match=r"^mill mill-1: its checkpoint .*"
+                           r"'pinion_bending' is not a torque or bending channel"):  # fmt: skip
+            worker.recover(reader, jobs=3, factory=AnalyzerPipeline)
 
 
 def test_job_count_follows_the_tail_the_mills_and_the_cores() -> None:

@@ -4,10 +4,13 @@ checkpointed at different archive positions equals the uninterrupted run."""
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import pytest
 
+from analytics.harmonics import HarmonicTracker
+from analytics.mill_config import MillConfig
 from ingest.archive import ArchivedBlock, ArchivePosition, ArchiveReader, ArchiveWriter
 from ingest.mill_files import load_mill_config
 from ingest.scene_blocks import scene_blocks
@@ -15,7 +18,7 @@ from ingest.scene_publisher import starting_now
 from ingest.scenes import get_scene
 from ingest.wire import decode_block
 from service.block_queue import BlockQueue, QueuedBlock
-from service.checkpoints import CheckpointSchedule, covers, earliest
+from service.checkpoints import CheckpointRestoreError, CheckpointSchedule, covers, earliest
 from service.mill_pipeline import AnalyzerPipeline
 from service.store import Store
 from service.worker import Worker
@@ -162,3 +165,93 @@ def test_the_live_analyzer_keeps_few_windows_yet_every_one_is_stored(monkeypatch
 
 def pipeline_channel(config, key: str) -> str:
     return next(n for n, c in config.channels.items() if key.endswith("/" + c.key))
+
+
+# ---------------------------------------------------------------- configuration changed since
+MILL_A = CONFIGS["mill-a"]
+#: The operator's edit: motor 995 → 1000 rpm, so the pinion turns at 177.0 rpm, not 176.1, and
+#: the harmonic tracker's segments have other bins than the checkpoint's.
+FASTER = MILL_A.model_copy(
+    update={"drive": MILL_A.drive.model_copy(update={"motor_speed_rpm": 1000.0})}
+)
+
+
+def _one_mill(store: Store, archive: ArchiveWriter | None, config: MillConfig) -> Worker:
+    """A worker of mill-a alone, storing its daily damage every 5 s of samples."""
+    pipelines = {config.id: AnalyzerPipeline(config, damage_every_s=5.0)}
+    return Worker({config.id: config}, pipelines, store, archive, checkpoint_seconds=3600.0)  # type: ignore[arg-type]
+
+
+def _mill_a_blocks() -> list[QueuedBlock]:
+    scene = starting_now(get_scene("start-lrs", MILL_A, seed=5, duration_s=40.0))
+    return [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
+
+
+def _crash_after_a_checkpoint(tmp_path: Path, store: Store, blocks: list[QueuedBlock]) -> int:
+    """Run mill-a with its configuration of then, checkpoint at half the blocks, store the
+    results up to three quarters and stop there; returns how many blocks were handled."""
+    archive = ArchiveWriter(tmp_path / "archive", "w")
+    first = _one_mill(store, archive, MILL_A)
+    crash = 3 * len(blocks) // 4
+    for i, item in enumerate(blocks[:crash]):
+        if i == len(blocks) // 2:
+            first.checkpoint()
+        first.handle(item)
+    first.commit()
+    archive.close()
+    return crash
+
+
+def test_recovery_after_a_pinion_speed_change_keeps_damage_and_restarts_spectra(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    blocks = _mill_a_blocks()
+    with Store(tmp_path / "ref.db") as store:
+        reference = _one_mill(store, None, MILL_A)
+        for item in blocks:
+            reference.handle(item)
+        reference.commit()
+        uninterrupted = store.damage("mill-a")
+
+    with Store(tmp_path / "mw.db") as store:
+        crash = _crash_after_a_checkpoint(tmp_path, store, blocks)
+        at_crash = store.damage("mill-a")
+        assert sum(r.damage for r in at_crash) > 0.0
+
+        second = _one_mill(store, None, FASTER)
+        with caplog.at_level(logging.WARNING, logger="analytics.mill_monitor"):
+            assert second.recover(ArchiveReader(tmp_path / "archive", "w")) > 0
+        assert "mill 'mill-a'" in caplog.text and "spectra restart" in caplog.text
+        # the day's damage was not overwritten by a partial total from a fresh analyzer
+        assert store.damage("mill-a") == at_crash
+        for item in blocks[crash:]:  # and the mill goes on being analysed
+            second.handle(item)
+        second.commit()
+        assert store.damage("mill-a") == uninterrupted
+
+    monitor = second.pipelines["mill-a"].monitor  # type: ignore[attr-defined]
+    assert monitor.analyzer.n == reference.pipelines["mill-a"].monitor.analyzer.n  # type: ignore[attr-defined]
+    assert monitor.harmonics.bins == HarmonicTracker(FASTER).bins != HarmonicTracker(MILL_A).bins
+    assert monitor.harmonics.counters["running_samples"] > 0
+
+
+def test_a_checkpoint_that_cannot_be_restored_names_the_mill_and_the_way_out(
+    tmp_path: Path,
+) -> None:
+    blocks = _mill_a_blocks()
+    channels = {n: c for n, c in MILL_A.channels.items() if n != "pinion_bending"}
+    without_bending = MILL_A.model_copy(update={"channels": channels})
+    with Store(tmp_path / "mw.db") as store:
+        _crash_after_a_checkpoint(tmp_path, store, blocks)
+        ((position, _),) = store.latest_checkpoints().values()
+        second = _one_mill(store, None, without_bending)
+        with pytest.raises(CheckpointRestoreError) as caught:
+            second.recover(ArchiveReader(tmp_path / "archive", "w"))
+    text = str(caught.value)
+    assert text.startswith(
+        f"mill mill-a: its checkpoint (at archive file {position['file']}, message "
+        f"{position['index']}, logged 20"
+    )
+    assert "cannot be restored: channel 'pinion_bending' is not a torque or bending" in text
+    assert "revert the change and start the worker again" in text
+    assert caught.value.mill_id == "mill-a"
