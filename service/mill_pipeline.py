@@ -11,7 +11,11 @@ new steady-state windows) into
 * alarm observations → alarm transitions (:mod:`alarms`), and
 * daily damage totals per component and phase, taken every ``damage_every_s`` seconds of
   *sample* time (not wall time): the analysis stops at exactly those samples, so the rows and the
-  remaining-life observations are the same however the blocks were batched.
+  remaining-life observations are the same however the blocks were batched, and
+* a ``spectra_restarted`` data-quality event per tracked channel when a restore had to start
+  the spectra afresh (the mill's configuration moved their geometry since the checkpoint; see
+  :meth:`MillMonitor.restore <analytics.mill_monitor.MillMonitor.restore>`), stored with the
+  next results, at the checkpoint's sample time.
 
 Everything is derived from the samples alone, so replaying the archive tail after a crash
 reproduces the same rows, which the store writes idempotently.
@@ -68,6 +72,7 @@ class AnalyzerPipeline:
         self._last_window_ns = -1
         self._latest_window: dict[str, Any] | None = None
         self._next_harmonics_ns = 0
+        self._held_events: list[EventRow] = []  # stored with the next finish()
 
     # ------------------------------------------------------------------ feeding
     def feed_block(self, channel: str, block: Block) -> MillUpdate:
@@ -95,7 +100,8 @@ class AnalyzerPipeline:
         The analysis stops at every multiple of the damage interval (stream samples), where
         the daily damage rows and remaining-life observations are taken, so they are the same
         however the blocks were batched (live, replayed after a crash, or one at a time)."""
-        update = MillUpdate()
+        update = MillUpdate(events=self._held_events)
+        self._held_events = []
         while True:
             out = self.monitor.process(until=self._next_damage)
             self._fold(out, update)
@@ -229,6 +235,22 @@ class AnalyzerPipeline:
         self._last_window_ns = int(snapshot["last_window_ns"])
         self._latest_window = snapshot["latest_window"]
         self._next_harmonics_ns = int(snapshot["next_harmonics_ns"])
+        self._held_events += self._restart_events()
+
+    def _restart_events(self) -> list[EventRow]:
+        """Data-quality events when the restore started the spectra afresh: one per tracked
+        channel, at the checkpoint's last sample time (a repeated recovery from the same
+        checkpoint stores the same rows again, not new ones)."""
+        why, a = self.monitor.spectra_restarted, self.monitor.analyzer
+        if why is None or a.t0_ns is None:  # no samples analysed: no spectra were lost
+            return []
+        t_ns, problem = a.t_ns(a.n), "spectra_restarted"
+        events = []
+        for ch in self.monitor.harmonics.channels:
+            data = {"channel": ch.name, "problem": problem, "reason": why}
+            events.append(EventRow(self.config.id, "data_quality", t_ns, data,
+                                   subject=f"{ch.name}:{problem}"))  # fmt: skip
+        return events
 
 
 def _compact(table: dict[str, Any]) -> dict[str, Any]:

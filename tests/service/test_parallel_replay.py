@@ -164,6 +164,9 @@ def test_after_a_pinion_speed_change_jobs_restart_the_spectra_as_one_process_doe
         one.recover(reader)
         two.recover(reader, jobs=2, factory=AnalyzerPipeline)
         assert _state(two, s2) == _state(one, s1)
+        for m in mills:  # mill-1 and mill-2's stored by the job that replayed them
+            events = s2.events(m, "data_quality")
+            assert sum(e.data["problem"] == "spectra_restarted" for e in events) == 3
     for m, config in mills.items():
         harmonics = two.pipelines[m].monitor.harmonics  # type: ignore[attr-defined]
         assert harmonics.bins == HarmonicTracker(config).bins != HarmonicTracker(BASE).bins

@@ -228,7 +228,16 @@ def test_recovery_after_a_pinion_speed_change_keeps_damage_and_restarts_spectra(
             second.handle(item)
         second.commit()
         assert store.damage("mill-a") == uninterrupted
+        restarts = store.events("mill-a", "data_quality")
 
+    # visible beyond the log: one data-quality event per tracked channel, at the checkpoint
+    assert sorted(e.subject for e in restarts) == [
+        "motor_torque:spectra_restarted", "pinion_bending:spectra_restarted",
+        "pinion_torque:spectra_restarted",
+    ]  # fmt: skip
+    assert len({e.t_ns for e in restarts}) == 1
+    assert blocks[0].recv_ns < restarts[0].t_ns < blocks[crash].recv_ns
+    assert "11083 bins in the snapshot" in restarts[0].data["reason"]
     monitor = second.pipelines["mill-a"].monitor  # type: ignore[attr-defined]
     assert monitor.analyzer.n == reference.pipelines["mill-a"].monitor.analyzer.n  # type: ignore[attr-defined]
     assert monitor.harmonics.bins == HarmonicTracker(FASTER).bins != HarmonicTracker(MILL_A).bins
