@@ -8,7 +8,9 @@ gateways in two separate processes (one zenoh session and thread per mill, publi
 zenoh callback enqueuing a block to the commit of the batch holding its results (p50, p99,
 max), queue drops, the per-mill checkpoints written (count, MB; each mill every
 ``--checkpoint-s``, the mills' turns spread over the interval), the worker process's CPU time
-(worker thread, zenoh threads, store) and its peak resident memory at the start and the end.
+(worker thread, zenoh threads, store), its peak resident memory at the start and the end, and
+the full (generation 2) garbage collections of the worker process while it ran: how many, and
+the longest pause (every Python thread stops for one).
 Worker and gateways share this machine's two cores: on a busy machine the wall-clock latency
 mostly measures the other processes, the CPU time does not.
 """
@@ -16,6 +18,7 @@ mostly measures the other processes, the CPU time does not.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import multiprocessing
 import resource
@@ -44,6 +47,25 @@ def rss_mb() -> float:
 def cpu_s() -> float:
     usage = resource.getrusage(resource.RUSAGE_SELF)
     return usage.ru_utime + usage.ru_stime
+
+
+class FullCollections:
+    """Counts the worker process's generation-2 collections and their pauses (ms)."""
+
+    def __init__(self) -> None:
+        self.pauses_ms: list[float] = []
+        self._started = 0.0
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if info["generation"] != 2:
+            return
+        if phase == "start":
+            self._started = time.perf_counter()
+        else:
+            self.pauses_ms.append((time.perf_counter() - self._started) * 1e3)
+
+    def summary(self) -> dict:
+        return {"gc_full": len(self.pauses_ms), "gc_full_max_ms": max(self.pauses_ms, default=0.0)}
 
 
 def gateway(config: MillConfig, port: int, seconds: float, stop: threading.Event) -> None:
@@ -78,6 +100,8 @@ def run(n_mills: int, seconds: float, checkpoint_s: float) -> dict:
         runtime = ServiceRuntime(settings, {c.id: c for c in configs}, AnalyzerPipeline)
         runtime.start()
         rss0, cpu0 = rss_mb(), cpu_s()
+        collections = FullCollections()
+        gc.callbacks.append(collections)
         ctx = multiprocessing.get_context("spawn")
         procs = [ctx.Process(target=gateways, args=(configs[i::GATEWAY_PROCESSES], port, seconds))
                  for i in range(GATEWAY_PROCESSES)]  # fmt: skip
@@ -92,9 +116,10 @@ def run(n_mills: int, seconds: float, checkpoint_s: float) -> dict:
         checkpoints = {"checkpoints": worker.checkpoints_written,
                        "checkpoint_mb": worker.checkpoint_bytes / 2**20}  # fmt: skip
         cpu = cpu_s() - cpu0
+        gc.callbacks.remove(collections)
         runtime.stop()
     return {"mills": n_mills, "seconds": seconds, "checkpoint_s": checkpoint_s, **latency,
-            "queue_dropped": dropped, **checkpoints, "worker_cpu_s": cpu,
+            "queue_dropped": dropped, **checkpoints, "worker_cpu_s": cpu, **collections.summary(),
             "rss_mb_start": rss0, "rss_mb_end": rss_mb()}  # fmt: skip
 
 

@@ -3,6 +3,7 @@ archive analysed offline gives bitwise the same damage as the live worker."""
 
 from __future__ import annotations
 
+import gc
 import json
 import time
 from pathlib import Path
@@ -52,6 +53,7 @@ def test_live_results_equal_offline_analysis_of_the_archive(tmp_path):
     config = mills["sag-5200-lrs"]
     runtime = ServiceRuntime(settings, mills, AnalyzerPipeline)
     runtime.start()
+    assert gc.get_freeze_count() > 0  # start-up state frozen: full collections skip it
     try:
         scene = starting_now(get_scene("start-lrs", config, seed=0, duration_s=120.0))
         heard: list[dict] = []
@@ -68,6 +70,7 @@ def test_live_results_equal_offline_analysis_of_the_archive(tmp_path):
             scada.undeclare()
     finally:
         runtime.stop()
+    assert gc.get_freeze_count() == 0  # and collectable again once the service stopped
     # the live side: the final checkpoint holds the worker's analyzer
     with Store(settings.store.path) as store:
         _, state = store.latest_checkpoint()
