@@ -321,8 +321,10 @@ class MillMonitor:
         (:class:`~analytics.harmonics.SnapshotMismatch`): the tracker then starts afresh — its
         state is only spectra in progress — while everything else (damage, rainflow residues,
         operating states, events) continues; :attr:`spectra_restarted` says why. A snapshot
-        at another sample rate raises :class:`~analytics.harmonics.SnapshotMismatch`: its sample
-        counts would mean other times."""
+        at another sample rate, or of another set of channels, raises
+        :class:`~analytics.harmonics.SnapshotMismatch`: its sample counts would mean other
+        times, or its aligner would go on framing the old channels (an added channel's blocks
+        ignored for good, a removed one's waited for)."""
         if snap.get("kind") != "mill_monitor" or snap.get("version") != _SNAPSHOT_VERSION:
             raise ValueError(f"not a mill monitor snapshot of version {_SNAPSHOT_VERSION}")
         if snap["mill"] != config.id:
@@ -331,6 +333,9 @@ class MillMonitor:
         if was_fs != fs:  # every sample count in the snapshot would mean another time
             raise SnapshotMismatch(f"mill {config.id!r}: sample rate {was_fs:g} Hz in the "
                                    f"snapshot, {fs:g} Hz with the configuration now")  # fmt: skip
+        changed = _channel_change(snap["aligner"]["channels"], list(config.channels))
+        if changed:  # the aligner's frames (and every stage after it) hold the old channels
+            raise SnapshotMismatch(f"mill {config.id!r}: {changed}")
         m = cls(config)
         m.aligner = FrameAligner.restore(snap["aligner"])
         m.faults.restore(snap["faults"])
@@ -354,3 +359,16 @@ class MillMonitor:
                 "the snapshot",
                 exc,
             )
+
+
+def _channel_change(was: list[str], now: list[str]) -> str | None:
+    """The channels added to and removed from the configuration since a snapshot of ``was``,
+    in words; None when the set is the same."""
+    added = [c for c in now if c not in was]
+    removed = [c for c in was if c not in now]
+    if not added and not removed:
+        return None
+    words = [f"{what} {', '.join(repr(c) for c in names)}"
+             for what, names in (("added", added), ("removed", removed)) if names]  # fmt: skip
+    return (f"channel(s) {' and '.join(words)} in the configuration since the snapshot, "
+            f"which holds channels {', '.join(repr(c) for c in was)}")  # fmt: skip

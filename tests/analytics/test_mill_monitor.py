@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from analytics.harmonics import SnapshotMismatch
+from analytics.mill_config import ChannelConfig
 from analytics.mill_monitor import DERIVED_SPEED, MillMonitor, analysis_config
 from ingest.mill_files import load_mill_config
 from ingest.scenes import get_scene
@@ -191,3 +192,23 @@ def test_restore_refuses_another_sample_rate_naming_the_mill():
     with pytest.raises(SnapshotMismatch, match=r"'sag-5200-lrs': sample rate 1000 Hz in the "
                        r"snapshot, 2000 Hz with the configuration now"):  # fmt: skip
         MillMonitor.restore(faster, snap)
+
+
+def _with_channels(config, channels):
+    return config.model_copy(update={"channels": channels})
+
+
+def test_restore_refuses_an_added_or_removed_channel_naming_the_mill_and_the_channels():
+    """An added channel would otherwise be ignored for good (the aligner frames the snapshot's
+    channels), a removed one waited for: the snapshot does not fit, whatever the spectra do."""
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    snap = json.loads(json.dumps(MillMonitor(config).snapshot()))
+    spare = ChannelConfig(key="motor_speed", kind="rpm", shaft="motor", units="rpm")
+    added = _with_channels(config, {**config.channels, "motor_speed": spare})
+    with pytest.raises(SnapshotMismatch, match=r"^mill 'sag-5200-lrs': channel\(s\) added "
+                       r"'motor_speed' in the configuration since the snapshot"):  # fmt: skip
+        MillMonitor.restore(added, snap)
+    swapped = {n: c for n, c in added.channels.items() if n != "pinion_bending"}
+    with pytest.raises(SnapshotMismatch, match=r"added 'motor_speed' and removed "
+                       r"'pinion_bending'"):  # fmt: skip
+        MillMonitor.restore(_with_channels(config, swapped), snap)

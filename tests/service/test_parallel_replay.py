@@ -189,7 +189,7 @@ def test_a_checkpoint_that_cannot_be_restored_stops_a_parallel_recovery_naming_t
     with Store(tmp_path / "two.db") as store:
         worker = Worker(mills, {m: AnalyzerPipeline(c) for m, c in mills.items()}, store, None)
         with pytest.raises(CheckpointRestoreError, match=r"^mill mill-1: its checkpoint .*"
-                           r"'pinion_bending' is not a torque or bending channel"):  # fmt: skip
+                           r"channel\(s\) removed 'pinion_bending'"):  # fmt: skip
             worker.recover(reader, jobs=3, factory=AnalyzerPipeline)
 
 

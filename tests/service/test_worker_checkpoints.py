@@ -261,6 +261,6 @@ def test_a_checkpoint_that_cannot_be_restored_names_the_mill_and_the_way_out(
         f"mill mill-a: its checkpoint (at archive file {position['file']}, message "
         f"{position['index']}, logged 20"
     )
-    assert "cannot be restored: channel 'pinion_bending' is not a torque or bending" in text
+    assert "cannot be restored: mill 'mill-a': channel(s) removed 'pinion_bending'" in text
     assert "revert the change and start the worker again" in text
     assert caught.value.mill_id == "mill-a"
