@@ -272,11 +272,16 @@ class FrameAligner:
         }
 
     @classmethod
-    def restore(cls, snap: dict[str, Any]) -> FrameAligner:
-        """An aligner that continues exactly where the snapshotted one stood."""
+    def restore(cls, snap: dict[str, Any], channels: list[str] | None = None) -> FrameAligner:
+        """An aligner that continues exactly where the snapshotted one stood. ``channels``: the
+        snapshot's channels in the order the caller numbers them now (:meth:`push_blocks` takes
+        channel numbers; a configuration may list them in another order than when the snapshot
+        was taken); default the snapshot's order."""
         if snap.get("kind") != "frame_aligner" or snap.get("version") != _SNAPSHOT_VERSION:
             raise ValueError(f"not a frame aligner snapshot of version {_SNAPSHOT_VERSION}")
-        a = cls(snap["channels"], snap["fs"], max_pending=snap["max_pending"],
+        if channels is not None and sorted(channels) != sorted(snap["channels"]):
+            raise ValueError(f"channels {channels} are not the snapshot's {snap['channels']}")
+        a = cls(channels or snap["channels"], snap["fs"], max_pending=snap["max_pending"],
                 gap_chunk=snap["gap_chunk"])  # fmt: skip
         a._next_t0 = snap["next_t0"]
         a._pending = {

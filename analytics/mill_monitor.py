@@ -337,7 +337,8 @@ class MillMonitor:
         if changed:  # the aligner's frames (and every stage after it) hold the old channels
             raise SnapshotMismatch(f"mill {config.id!r}: {changed}")
         m = cls(config)
-        m.aligner = FrameAligner.restore(snap["aligner"])
+        # in the configuration's order, which add_blocks' channel numbers follow
+        m.aligner = FrameAligner.restore(snap["aligner"], list(config.channels))
         m.faults.restore(snap["faults"])
         if m.tacho is not None and snap["tacho"] is not None:
             m.tacho = (m.tacho[0], TachoSpeed.restore(snap["tacho"]))

@@ -212,3 +212,23 @@ def test_restore_refuses_an_added_or_removed_channel_naming_the_mill_and_the_cha
     with pytest.raises(SnapshotMismatch, match=r"added 'motor_speed' and removed "
                        r"'pinion_bending'"):  # fmt: skip
         MillMonitor.restore(_with_channels(config, swapped), snap)
+
+
+def test_restore_with_the_channels_listed_in_another_order_continues_bitwise():
+    """add_blocks numbers channels in the configuration's order: a configuration that lists the
+    same channels in another order than at the snapshot must not swap them."""
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    reordered = _with_channels(config, dict(reversed(list(config.channels.items()))))
+    all_blocks = list(blocks(get_scene("start-lrs", config, seed=2, duration_s=30.0), 100))
+    ref = MillMonitor(config)
+    for b in all_blocks:
+        ref.push(*b)
+    first = MillMonitor(config)
+    for b in all_blocks[:400]:
+        first.push(*b)
+    second = MillMonitor.restore(reordered, json.loads(json.dumps(first.snapshot())))
+    rest, names = all_blocks[400:], list(reordered.channels)
+    chan = np.array([names.index(b[0]) for b in rest])
+    second.add_blocks(chan, np.array([b[1] for b in rest]), np.stack([b[3] for b in rest]))
+    second.process()
+    assert report(second) == report(ref)
