@@ -36,6 +36,7 @@ from service.api_errors import (
     Unauthorized,
     Unavailable,
 )
+from service.checkpoints import MillHeldError
 from service.runtime import ServiceRuntime
 from service.store import AlarmRow, Store
 
@@ -158,6 +159,10 @@ def _ack_on_worker(runtime: ServiceRuntime, mill_id: str, alarm_id: str, by: str
             "Worker busy",
             f"The worker did not apply the acknowledgement within "
             f"{ACK_TIMEOUT_S:.0f} s; it is still queued.",
+        ) from exc
+    except MillHeldError as exc:
+        raise Conflict(
+            "Mill held", f"Alarm {alarm_id!r} cannot be acknowledged now: {exc}."
         ) from exc
     except UnknownAlarmError as exc:
         raise Conflict(

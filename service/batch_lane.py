@@ -11,7 +11,8 @@ which itself falls back block by block when the timing is not regular). A mill w
 irregular in the batch — a malformed or foreign block, a gap, a repeat — goes block by block
 through ``Worker.handle`` in arrival order instead, so every count, data-quality event and sample
 is exactly what block-by-block handling gives. Blocks on keys of no configured mill go through
-``Worker.handle`` too (they are only counted).
+``Worker.handle`` too (they are only counted). A held mill's blocks (``Worker.held``) move its
+health counters either way but never reach its pipeline.
 """
 
 from __future__ import annotations
@@ -165,6 +166,9 @@ class BatchLane:
         self._observe(health, names, per_channel, head, raw, batch.log_time[idx], n, fs)
         self.worker.blocks_handled += len(idx)
         self.regular_blocks += len(idx)
+        if mill_id in self.worker.held:
+            self.worker.held_blocks[mill_id] += len(idx)
+            return True
         self.worker.pipelines[mill_id].add_blocks(chan, t0, raw)  # type: ignore[attr-defined]
         self.worker._unfinished[mill_id] = None
         return True

@@ -12,6 +12,10 @@ mill's newest checkpoint, replays the archive from the earliest of those positio
 skips the blocks that lie before the mill's own position (:func:`covers`): their effect is
 already in the snapshot. Every mill so sees each of its blocks exactly once, as in an
 uninterrupted run.
+
+A mill whose checkpoint cannot be restored (:class:`CheckpointRestoreError`) is *held* by the
+worker: left out of the positions the replay starts from and out of the schedule, and never
+checkpointed, so its last good checkpoint stays as it is until the configuration is reverted.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from datetime import UTC, datetime
 
 from ingest.archive import ArchivedBlock, ArchivePosition, archive_file_order
 
-__all__ = ["CheckpointRestoreError", "CheckpointSchedule", "covers", "earliest"]
+__all__ = ["CheckpointRestoreError", "CheckpointSchedule", "MillHeldError", "covers", "earliest"]
 
 #: Checkpoint work allowed per worker step (s) once the first due mill is done; mills left over
 #: are checkpointed at the next steps (they wait at most a few steps).
@@ -37,10 +41,20 @@ class CheckpointRestoreError(RuntimeError):
         self.mill_id = mill_id
         super().__init__(
             f"mill {mill_id}: its checkpoint {_where(position)} cannot be restored: {cause}. "
-            "The worker does not start the mill afresh by itself, as today's stored damage "
-            "would be overwritten with a partial total: if the mill's configuration was changed "
-            "since that checkpoint, revert the change and start the worker again"
+            "If the mill's configuration was changed since that checkpoint, revert the change "
+            "and start the worker again: the mill then restores from that checkpoint, kept as "
+            "it is, and replays the archive it missed"
         )
+
+
+class MillHeldError(RuntimeError):
+    """An action needs the analysis of a mill the worker holds (its checkpoint could not be
+    restored), e.g. acknowledging one of its alarms; the message names the mill and why."""
+
+    def __init__(self, mill_id: str, reason: str) -> None:
+        self.mill_id = mill_id
+        super().__init__(f"mill {mill_id} is not analysed (held) until its checkpoint can be "
+                         f"restored: {reason}")  # fmt: skip
 
 
 def _where(position: ArchivePosition | None) -> str:
@@ -76,6 +90,12 @@ class CheckpointSchedule:
         """Spread the next turns over one interval from now (at start, after a recovery)."""
         now, n = self._clock(), len(self.parts)
         self._next = {p: now + self.interval_s * (i + 1) / n for i, p in enumerate(self.parts)}
+
+    def drop(self, part: str) -> None:
+        """No more turns for ``part`` (a held mill)."""
+        if part in self._next:
+            self.parts.remove(part)
+            del self._next[part]
 
     def due(self) -> list[str]:
         """The parts whose turn has come, the longest waiting first."""

@@ -20,9 +20,12 @@ the mills (issue 5: an hour of 50 mills replayed at ≥ 50× real time):
   hold exactly the state a single-process replay leaves (restoring a snapshot continues bitwise,
   as crash recovery relies on), and hands the transitions to ``on_alarms``.
 
-Blocks on keys of no configured mill stay with the worker (they are only counted). A job that
-fails stops the replay with :class:`ReplayJobError` naming its mills; what it stored before stays
-in the store, as after a crash during a single-process replay, and the next start replays again.
+Blocks on keys of no configured mill stay with the worker (they are only counted), and so do
+held mills' (:attr:`service.worker.Worker.held`: their checkpoints could not be restored):
+they are in no job's group, so no job tries to restore them, and the worker's own lane observes
+their health without analysing them. A job that fails stops the replay with
+:class:`ReplayJobError` naming its mills; what it stored before stays in the store, as after a
+crash during a single-process replay, and the next start replays again.
 """
 
 from __future__ import annotations
@@ -181,6 +184,8 @@ def _replay(conn: Connection, job: ReplayJob) -> JobResult:
         worker = Worker(mills, pipelines, store, None)
         parts = {m: p for m, p in store.latest_checkpoints().items() if m in mills}
         covered = worker.restore_checkpoints(parts)
+        if worker.held:  # the worker restored these; sending back a fresh pipeline would be wrong
+            raise RuntimeError("; ".join(worker.held.values()))
         transitions: list[Transition] = []
         worker.on_alarms = transitions.extend
         lane = BatchLane(worker)

@@ -22,6 +22,14 @@ path (without archiving again), skipping for each mill the blocks its checkpoint
 so the results equal an uninterrupted run; only blocks that never reached the archive (at most
 ~0.1 s) are lost.
 
+A mill whose checkpoint cannot be restored (e.g. a channel removed from its configuration since)
+is *held*, not fatal — a worker that refused to start would archive nothing for any mill: its
+blocks are archived and its channel health observed as always, but nothing reaches its pipeline
+(live or replayed), it gets no alarm observations, and it is never checkpointed, so its last
+good checkpoint stays as it is. ``status`` (hence ``/mills`` and ``/ready``) says why. Once the
+configuration change is reverted, the next start restores that checkpoint and replays the archive
+from it: nothing is lost.
+
 Bad input never stops the worker: an undecodable block is archived, counted per channel and kind
 and logged once per kind; a block whose key belongs to no configured mill is archived and counted.
 """
@@ -50,17 +58,20 @@ from service.checkpoints import (
     STEP_BUDGET_S,
     CheckpointRestoreError,
     CheckpointSchedule,
+    MillHeldError,
     earliest,
 )
 from service.health import LatencyReservoir, MillHealth, PerMinute
 from service.parallel_replay import ParallelReplay, replay_jobs, split_mills, tail_bytes
 from service.store import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
 
-__all__ = ["AckRequest", "MillPipeline", "MillUpdate", "Worker"]
+__all__ = ["HELD", "AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 
 log = logging.getLogger(__name__)
 
 BATCH_BLOCKS = 2000
+#: The ``state`` in the status of a mill that is held (not analysed; see the module docstring).
+HELD = "held"
 
 
 @dataclass
@@ -132,6 +143,10 @@ class Worker:
         self.unrouted: Counter[str] = Counter()
         self.archive_errors = 0
         self.blocks_handled = 0
+        #: Held mills (see the module docstring): mill id → why (the restore error's message).
+        self.held: dict[str, str] = {}
+        #: Blocks of held mills handled (archived, health observed) but not analysed, per mill.
+        self.held_blocks: Counter[str] = Counter()
         self._logged: set[tuple[str, str]] = set()
         self._pending = PendingResults()
         self._unfinished: dict[str, None] = {}  # mills with queued blocks, in arrival order
@@ -148,7 +163,8 @@ class Worker:
 
     # ------------------------------------------------------------------ one block
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
-        """Archive (unless replaying the archive), decode, route, analyse one block."""
+        """Archive (unless replaying the archive), decode, route, analyse one block (a held
+        mill's: all but analyse)."""
         if archive and self.archive is not None:
             self._archive(item)
         self.blocks_handled += 1
@@ -185,13 +201,16 @@ class Worker:
                 (item.key, "repeat"), "%s: repeated block seq %d ignored", item.key, block.seq
             )
             return
+        if mill_id in self.held:
+            self.held_blocks[mill_id] += 1
+            return
         self.pipelines[mill_id].add_block(channel, block)
         self._unfinished[mill_id] = None
 
     def finish_analysis(self) -> None:
         """Analyse the blocks :meth:`handle` queued, mill by mill: each mill's blocks of a
         batch go through its analyzer as long contiguous chunks (the results do not depend on
-        the batching). :meth:`commit` calls this first."""
+        the batching). :meth:`commit` calls this first. (Held mills queue nothing.)"""
         unfinished, self._unfinished = self._unfinished, {}
         for mill_id in unfinished:
             self._pending.add(mill_id, self.pipelines[mill_id].finish())
@@ -217,6 +236,13 @@ class Worker:
             for channel in sorted(was - stale):
                 self._quality(mill_id, channel, now, "fresh")
             self._stale[mill_id] = stale
+            if mill_id in self.held:
+                # Its pipeline's alarm engine was not restored: a fresh one knows nothing of the
+                # mill's open alarms, so it would raise them again under new ids, and what it
+                # raised is in no checkpoint (a held mill gets none), so the restored engine
+                # would never clear them after the revert. The stale/fresh events above stay:
+                # they are about the data arriving, which is archived.
+                continue
             observations = self._silence(mill_id, now) + self._rates(mill_id, now)
             observations.append(Observation(mill_id, "archive_write_failures",
                                             float(archive_failures), now))  # fmt: skip
@@ -297,13 +323,20 @@ class Worker:
             except queue.Empty:
                 return applied
             try:
-                engine = self.pipelines[request.mill_id].alarms  # type: ignore[attr-defined]
-                transitions = engine.acknowledge(request.alarm_id, request.by, self._clock())
+                transitions = self._acknowledge(request)
             except Exception as exc:  # handed to the waiting caller, who maps it
                 request.done.set_exception(exc)
                 continue
             self._pending.add(request.mill_id, MillUpdate(alarm_transitions=transitions))
             applied.append((request, transitions))
+
+    def _acknowledge(self, request: AckRequest) -> list[Transition]:
+        """Apply one acknowledgement; :class:`MillHeldError` for a held mill (its alarm engine
+        was not restored, so it does not know the mill's open alarms)."""
+        if request.mill_id in self.held:
+            raise MillHeldError(request.mill_id, self.held[request.mill_id])
+        engine = self.pipelines[request.mill_id].alarms  # type: ignore[attr-defined]
+        return engine.acknowledge(request.alarm_id, request.by, self._clock())
 
     def _finish_acks(self, acked: list[tuple[AckRequest, list[Transition]]]) -> None:
         """After the acks' transitions are stored: checkpoint at once, because an ack is a
@@ -329,7 +362,8 @@ class Worker:
     # ------------------------------------------------------------------ checkpoints
     def checkpoint(self, mills: Iterable[str] | None = None) -> ArchivePosition | None:
         """Store the results so far, flush the archive and store the snapshot of each of
-        ``mills`` (default: every mill) with the archive position, one transaction per mill."""
+        ``mills`` (default: every mill; never a held one) with the archive position, one
+        transaction per mill."""
         self.commit()
         position = self.archive.flush() if self.archive is not None else None
         for mill_id in self.pipelines if mills is None else mills:
@@ -351,7 +385,10 @@ class Worker:
 
     def _checkpoint_mill(self, mill_id: str, position: ArchivePosition | None) -> None:
         """One mill's snapshot (exact at ``position``: taken on this thread between blocks),
-        serialised and stored at once, so it shares nothing mutable with the live pipeline."""
+        serialised and stored at once, so it shares nothing mutable with the live pipeline.
+        Nothing for a held mill: its last good checkpoint must stay for the revert."""
+        if mill_id in self.held:
+            return
         seqs = {c: h.last_seq for c, h in self.health[mill_id].channels.items()}
         state = {"pipelines": {mill_id: self.pipelines[mill_id].snapshot()},
                  "last_seq": {mill_id: seqs}}  # fmt: skip
@@ -375,29 +412,36 @@ class Worker:
 
         The replay starts at the earliest mill's position; each mill skips the blocks before
         its own position. A configured mill without a checkpoint starts fresh at that earliest
-        position (at the archive's start when no mill has one). With ``factory`` (how the
-        pipelines were built) a long tail is replayed by up to ``jobs`` processes (0: one per
-        core), the mills split between them (:mod:`service.parallel_replay`); same results."""
+        position (at the archive's start when no mill has one). A held mill (its checkpoint
+        could not be restored) does not pull the start back to its old position, and no replay
+        is needed when every mill is held. With ``factory`` (how the pipelines were built) a
+        long tail is replayed by up to ``jobs`` processes (0: one per core), the analysed mills
+        split between them (:mod:`service.parallel_replay`); same results."""
         covered = self.restore_checkpoints(self.store.latest_checkpoints())
+        analysed = [m for m in self.mills if m not in self.held]
         after = earliest(covered.values())
         size = replay_batch_blocks(len(self.mills)) // 2  # (read at least half a commit's)
-        batches = archive_batches(reader.directory, reader.prefix, after=after, min_messages=size)
+        batches: Iterable[MessageBatch] = []
+        if analysed:
+            batches = archive_batches(reader.directory, reader.prefix, after=after,
+                                      min_messages=size)  # fmt: skip
         n_jobs = 1
-        if factory is not None:
+        if factory is not None and analysed:
             tail = tail_bytes(reader.directory, reader.prefix, after)
-            n_jobs = replay_jobs(jobs, len(self.mills), tail)
+            n_jobs = replay_jobs(jobs, len(analysed), tail)
         if n_jobs > 1:
-            parallel = ParallelReplay(self, split_mills(self.mills, n_jobs), factory)  # type: ignore[arg-type]
+            parallel = ParallelReplay(self, split_mills(analysed, n_jobs), factory)  # type: ignore[arg-type]
             replayed, skipped = parallel.run(batches, covered)
         else:
             replayed, skipped = self._replay(batches, covered)
         self._schedule.restart()
         log.info(
-            "recovered: %d mill checkpoint(s), %d archived blocks replayed by %d process(es), "
-            "%d skipped (already in their mill's checkpoint)",
+            "recovered: %d mill checkpoint(s), %d archived blocks replayed by %d process(es) "
+            "(%d of held mills, not analysed), %d skipped (already in their mill's checkpoint)",
             len(covered),
             replayed,
             n_jobs,
+            sum(self.held_blocks.values()),
             skipped,
         )
         return replayed
@@ -418,7 +462,7 @@ class Worker:
         self, parts: dict[str, tuple[dict[str, Any], dict[str, Any]]]
     ) -> dict[str, ArchivePosition | None]:
         """Restore the mills of ``parts`` (:meth:`Store.latest_checkpoints`); returns the
-        archive position each mill was restored at."""
+        archive position each mill was restored at (held mills: none, see :attr:`held`)."""
         return self._restore(parts)
 
     def _restore(
@@ -429,16 +473,45 @@ class Worker:
         for position, state in parts.values():
             at = ArchivePosition.from_dict(position) if position else None
             for mill_id, snap in state.get("pipelines", {}).items():
-                if mill_id not in self.pipelines:
-                    log.warning("checkpoint holds mill %s, which is no longer configured", mill_id)
-                    continue
-                self._restore_mill(mill_id, snap, at)
-                covered[mill_id] = at
-            for mill_id, seqs in state.get("last_seq", {}).items():
-                for channel, seq in seqs.items():
-                    if mill_id in self.health and channel in self.health[mill_id].channels:
-                        self.health[mill_id].channels[channel].last_seq = seq
+                if self._restore_or_hold(mill_id, snap, at):
+                    covered[mill_id] = at
+            self._restore_seqs(state.get("last_seq", {}))
         return covered
+
+    def _restore_or_hold(
+        self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None
+    ) -> bool:
+        """Restore one mill's pipeline; False when the mill is not configured, or is held
+        because its checkpoint cannot be restored (logged once, at ERROR)."""
+        if mill_id not in self.pipelines:
+            log.warning("checkpoint holds mill %s, which is no longer configured", mill_id)
+            return False
+        try:
+            self._restore_mill(mill_id, snap, at)
+        except CheckpointRestoreError as exc:
+            self.held[mill_id] = str(exc)
+            self._schedule.drop(mill_id)
+            log.error(
+                "%s. Until then mill %s is held: its blocks are archived but not analysed, and "
+                "it is not checkpointed (starting it afresh would overwrite today's stored "
+                "damage with a partial total); nothing is lost",
+                exc,
+                mill_id,
+            )
+            return False
+        return True
+
+    def _restore_seqs(self, last_seq: dict[str, dict[str, int]]) -> None:
+        """The channels' last sequence numbers. Not a held mill's: its checkpoint lies before
+        the blocks the replay and live data bring now, so those in between would be counted
+        (and stored as a data-quality event) as lost; its health starts afresh instead."""
+        for mill_id, seqs in last_seq.items():
+            if mill_id in self.held or mill_id not in self.health:
+                continue
+            channels = self.health[mill_id].channels
+            for channel, seq in seqs.items():
+                if channel in channels:
+                    channels[channel].last_seq = seq
 
     def _restore_mill(self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None) -> None:
         """Restore one mill's pipeline; :class:`CheckpointRestoreError` (naming the mill, the
@@ -451,14 +524,20 @@ class Worker:
 
     # ------------------------------------------------------------------ reading
     def status(self, stale_after_s: float) -> dict[str, Any]:
+        """Per mill: channel health, the pipeline's status and ``held_reason`` (None unless
+        held). A held mill's pipeline holds nothing of it, so its status is only the health,
+        ``state`` :data:`HELD` and the reason."""
         now = self._clock()
-        return {
-            mill_id: {
-                "health": self.health[mill_id].as_dict(now, stale_after_s),
-                **self.pipelines[mill_id].status(),
-            }
-            for mill_id in self.mills
-        }
+        out = {}
+        for mill_id in self.mills:
+            health = self.health[mill_id].as_dict(now, stale_after_s)
+            reason = self.held.get(mill_id)
+            if reason is None:
+                out[mill_id] = {"health": health, **self.pipelines[mill_id].status(),
+                                "held_reason": None}  # fmt: skip
+            else:
+                out[mill_id] = {"health": health, "state": HELD, "held_reason": reason}
+        return out
 
 
 class PendingResults:

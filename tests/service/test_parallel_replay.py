@@ -17,7 +17,6 @@ from analytics.harmonics import HarmonicTracker
 from analytics.mill_config import MillConfig
 from ingest.archive import ArchiveReader, ArchiveWriter
 from service import parallel_replay
-from service.checkpoints import CheckpointRestoreError
 from service.mill_pipeline import AnalyzerPipeline
 from service.parallel_replay import ReplayJobError, replay_jobs, split_mills
 from service.store import Store
@@ -173,10 +172,13 @@ def test_after_a_pinion_speed_change_jobs_restart_the_spectra_as_one_process_doe
         assert harmonics.counters["running_samples"] > 0
 
 
+@pytest.mark.slow
 @pytest.mark.usefixtures("always_parallel")
-def test_a_checkpoint_that_cannot_be_restored_stops_a_parallel_recovery_naming_the_mill(
-    tmp_path: Path,
+def test_a_held_mill_fails_no_job_and_the_others_replay_as_in_one_process(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
+    """mill-1's checkpoint cannot be restored (a channel removed since): it is held, in no job's
+    group, its blocks observed by the worker's own lane and never analysed."""
     reader = _checkpointed_archive(tmp_path)
 
     def drop_bending(c: MillConfig) -> MillConfig:
@@ -186,11 +188,19 @@ def test_a_checkpoint_that_cannot_be_restored_stops_a_parallel_recovery_naming_t
         return c.model_copy(update={"channels": kept})
 
     mills = _edited(drop_bending)
-    with Store(tmp_path / "two.db") as store:
-        worker = Worker(mills, {m: AnalyzerPipeline(c) for m, c in mills.items()}, store, None)
-        with pytest.raises(CheckpointRestoreError, match=r"^mill mill-1: its checkpoint .*"
-                           r"channel\(s\) removed 'pinion_bending'"):  # fmt: skip
-            worker.recover(reader, jobs=3, factory=AnalyzerPipeline)
+    with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
+        one, two = (Worker(mills, {m: AnalyzerPipeline(c) for m, c in mills.items()}, s, None)
+                    for s in (s1, s2))  # fmt: skip
+        one.recover(reader)
+        with caplog.at_level(logging.INFO, logger="service"):
+            two.recover(reader, jobs=3, factory=AnalyzerPipeline)
+        assert "replaying the archive with 2 processes: mill-0; mill-2" in caplog.text
+        assert list(two.held) == list(one.held) == ["mill-1"]
+        assert two.held["mill-1"].startswith("mill mill-1: its checkpoint (at archive file")
+        assert "channel(s) removed 'pinion_bending'" in two.held["mill-1"]
+        assert two.held_blocks["mill-1"] == one.held_blocks["mill-1"] > 0
+        assert two.pipelines["mill-1"].monitor.analyzer.n == 0  # type: ignore[attr-defined]
+        assert _state(two, s2) == _state(one, s1)
 
 
 def test_job_count_follows_the_tail_the_mills_and_the_cores() -> None:

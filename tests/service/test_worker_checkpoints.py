@@ -6,11 +6,12 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from analytics.harmonics import HarmonicTracker
-from analytics.mill_config import MillConfig
+from analytics.mill_config import ChannelConfig, MillConfig
 from ingest.archive import ArchivedBlock, ArchivePosition, ArchiveReader, ArchiveWriter
 from ingest.mill_files import load_mill_config
 from ingest.scene_blocks import scene_blocks
@@ -18,7 +19,7 @@ from ingest.scene_publisher import starting_now
 from ingest.scenes import get_scene
 from ingest.wire import decode_block
 from service.block_queue import BlockQueue, QueuedBlock
-from service.checkpoints import CheckpointRestoreError, CheckpointSchedule, covers, earliest
+from service.checkpoints import CheckpointSchedule, MillHeldError, covers, earliest
 from service.mill_pipeline import AnalyzerPipeline
 from service.store import Store
 from service.worker import Worker
@@ -53,6 +54,20 @@ def test_turns_are_spread_over_the_interval_and_late_ones_do_not_pile_up() -> No
     assert schedule.due() == ["b", "c", "d"]
     clock.t += 30.0
     assert "a" in schedule.due()  # half an interval later, not at once and not a burst
+
+
+def test_a_dropped_part_gets_no_more_turns() -> None:
+    """A held mill is dropped: it is never due again (a due mill that is never checkpointed
+    would stay due, and every step would commit and flush the archive for it)."""
+    clock = FakeClock()
+    schedule = CheckpointSchedule(["a", "b"], 60.0, clock)
+    schedule.drop("a")
+    schedule.drop("unknown")  # nothing to drop: no error
+    schedule.restart()
+    clock.t += 60.0
+    assert schedule.due() == ["b"]
+    clock.t += 600.0
+    assert schedule.due() == ["b"]
 
 
 def test_interval_must_be_positive() -> None:
@@ -244,23 +259,136 @@ def test_recovery_after_a_pinion_speed_change_keeps_damage_and_restarts_spectra(
     assert monitor.harmonics.counters["running_samples"] > 0
 
 
-def test_a_checkpoint_that_cannot_be_restored_names_the_mill_and_the_way_out(
-    tmp_path: Path,
+WITHOUT_BENDING = MILL_A.model_copy(
+    update={"channels": {n: c for n, c in MILL_A.channels.items() if n != "pinion_bending"}}
+)
+#: A channel added to the configuration: the snapshot's aligner frames only its own channels.
+SPARE = ChannelConfig(key="tacho", kind="tacho", units="V", pulses_per_rev=1)
+WITH_TACHO = MILL_A.model_copy(update={"channels": {**MILL_A.channels, "tacho": SPARE}})
+
+
+@pytest.mark.parametrize(
+    ("edited", "cause"),
+    [
+        (WITHOUT_BENDING, "mill 'mill-a': channel(s) removed 'pinion_bending'"),
+        (WITH_TACHO, "mill 'mill-a': channel(s) added 'tacho'"),
+    ],
+)
+def test_a_checkpoint_that_cannot_be_restored_holds_the_mill_naming_it_and_the_way_out(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, edited: MillConfig, cause: str
 ) -> None:
     blocks = _mill_a_blocks()
-    channels = {n: c for n, c in MILL_A.channels.items() if n != "pinion_bending"}
-    without_bending = MILL_A.model_copy(update={"channels": channels})
     with Store(tmp_path / "mw.db") as store:
         _crash_after_a_checkpoint(tmp_path, store, blocks)
         ((position, _),) = store.latest_checkpoints().values()
-        second = _one_mill(store, None, without_bending)
-        with pytest.raises(CheckpointRestoreError) as caught:
-            second.recover(ArchiveReader(tmp_path / "archive", "w"))
-    text = str(caught.value)
+        second = _one_mill(store, None, edited)
+        with caplog.at_level(logging.ERROR, logger="service.worker"):
+            assert second.recover(ArchiveReader(tmp_path / "archive", "w")) == 0  # all held
+    text = second.held["mill-a"]
     assert text.startswith(
         f"mill mill-a: its checkpoint (at archive file {position['file']}, message "
         f"{position['index']}, logged 20"
     )
-    assert "cannot be restored: mill 'mill-a': channel(s) removed 'pinion_bending'" in text
+    assert f"cannot be restored: {cause} in the configuration since the snapshot" in text
     assert "revert the change and start the worker again" in text
-    assert caught.value.mill_id == "mill-a"
+    [record] = caplog.records  # logged once, naming the consequence
+    assert record.levelno == logging.ERROR and record.getMessage().startswith(text)
+    assert "mill mill-a is held: its blocks are archived but not analysed" in record.getMessage()
+    assert second.status(10.0)["mill-a"]["state"] == "held"
+    # its alarm engine was not restored: an acknowledgement is refused, saying why
+    request = second.request_ack("mill-a", "mill-a:start_peak:-:1", "op")
+    second.step(BlockQueue(10), timeout_s=0.0)
+    with pytest.raises(MillHeldError, match=r"^mill mill-a is not analysed \(held\)"):
+        request.done.result(timeout=1.0)
+
+
+# ---------------------------------------------------------------- a held mill loses nothing
+def _two_mills(
+    store: Store, archive: ArchiveWriter | None, mill_a: MillConfig = MILL_A, **kw: Any
+) -> Worker:
+    """mill-a (as configured by ``mill_a``) and mill-b, daily damage stored every 5 s."""
+    configs = {"mill-a": mill_a, "mill-b": CONFIGS["mill-b"]}
+    pipelines = {m: AnalyzerPipeline(c, damage_every_s=5.0) for m, c in configs.items()}
+    return Worker(configs, pipelines, store, archive, checkpoint_seconds=3600.0, **kw)  # type: ignore[arg-type]
+
+
+def _results(store: Store) -> dict[str, Any]:
+    """Each mill's stored damage and events, but the stale/fresh data-quality events: those are
+    wall-clock facts of one run (the worker's clock), not derived from the samples."""
+    return {
+        m: (store.damage(m), [(e.kind, e.t_ns, e.subject, e.data) for e in store.events(m)
+                              if e.data.get("problem") not in ("stale", "fresh")])
+        for m in ("mill-a", "mill-b")
+    }  # fmt: skip
+
+
+def _checkpoint_rows(store: Store, mill_id: str) -> list[tuple[Any, ...]]:
+    sql = "SELECT * FROM checkpoint_parts WHERE part = ? ORDER BY id"
+    return [tuple(r) for r in store._query(sql, (mill_id,))]
+
+
+def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothing(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A restart after mill-a lost a channel from its configuration: the worker starts, mill-b
+    is analysed as if nothing happened, mill-a's blocks are archived and its health observed but
+    its pipeline gets nothing and its checkpoint stays; once the edit is reverted, the next start
+    restores that checkpoint, replays what mill-a missed, and the results are the uninterrupted
+    run's."""
+    blocks = _blocks()
+    n = len(blocks)
+    cut_a, cut_b, crash, stop = n // 4, n // 2, 5 * n // 8, 3 * n // 4
+    with Store(tmp_path / "ref.db") as store:
+        reference = _two_mills(store, None)
+        for item in blocks:
+            reference.handle(item)
+        reference.commit()
+        uninterrupted = _results(store)
+
+    archive = tmp_path / "archive"
+    with Store(tmp_path / "mw.db") as store:
+        first = _two_mills(store, ArchiveWriter(archive, "w"))
+        for i, item in enumerate(blocks[:crash]):
+            if i in (cut_a, cut_b):  # mill-a checkpointed before mill-b
+                first.checkpoint(["mill-a" if i == cut_a else "mill-b"])
+            first.handle(item)
+        first.commit()
+        first.archive.close()  # type: ignore[union-attr]
+        kept = _checkpoint_rows(store, "mill-a")
+
+        an_hour_later = blocks[-1].recv_ns + 3600 * 10**9  # every channel stale by then
+        second = _two_mills(store, ArchiveWriter(archive, "w"), WITHOUT_BENDING,
+                            clock=lambda: an_hour_later)  # fmt: skip
+        with caplog.at_level(logging.ERROR, logger="service.worker"):
+            replayed = second.recover(ArchiveReader(archive, "w"))
+        assert list(second.held) == ["mill-a"] and len(caplog.records) == 1
+        # from mill-b's position: the held mill does not pull the replay back to its own
+        assert replayed == crash - cut_b
+        for item in blocks[crash:stop]:  # live
+            second.handle(item)
+        second.check_staleness(10.0)
+        second.checkpoint()
+        second.archive.close()  # type: ignore[union-attr]
+        monitor = second.pipelines["mill-a"].monitor  # type: ignore[attr-defined]
+        assert monitor.analyzer.n == 0 and monitor.backlog == 0  # its pipeline got nothing
+        mill_a = [b for b in blocks[cut_b:stop] if second.routes.get(b.key, ("",))[0] == "mill-a"]
+        assert second.held_blocks["mill-a"] == len(mill_a) > 0
+        health = second.status(10.0)["mill-a"]
+        assert health["state"] == "held" and health["held_reason"] == second.held["mill-a"]
+        torque = health["health"]["channels"]["motor_torque"]
+        assert torque["blocks"] == len(mill_a) // 3  # motor, pinion torque, speed (no bending)
+        # no alarm observations reached the held mill's fresh engine; mill-b's did
+        assert {a.mill_id for a in store.alarms() if a.rule == "stale_channel"} == {"mill-b"}
+        assert second.checkpoints_written == 1  # mill-b's only
+        assert _checkpoint_rows(store, "mill-a") == kept  # byte for byte
+        archived = [b.payload for b in ArchiveReader(archive, "w").blocks()]
+        assert archived == [b.payload for b in blocks[:stop]]  # the held mill's blocks too
+
+        third = _two_mills(store, ArchiveWriter(archive, "w"))  # the edit reverted
+        third.recover(ArchiveReader(archive, "w"))
+        assert third.held == {}
+        for item in blocks[stop:]:
+            third.handle(item)
+        third.commit()
+        third.archive.close()  # type: ignore[union-attr]
+        assert _results(store) == uninterrupted
