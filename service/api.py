@@ -21,6 +21,7 @@ from service.api_alarms import alarms_router
 from service.api_errors import NotFound, install_problem_handlers, problem_responses
 from service.api_metrics import metrics_router
 from service.api_mills import mills_router
+from service.api_models import MillDetail, MillSummary
 from service.api_reports import register_report_routes
 from service.backend import Backend
 from service.local_backend import LocalBackend
@@ -53,20 +54,25 @@ def create_app(source: ServiceRuntime | Backend) -> FastAPI:
 
     @app.get(
         "/ready",
-        summary="Readiness: zenoh up, data fresh, archive writable, store ok",
+        summary="Readiness: zenoh up, data fresh, every mill analysed, archive writable, store ok",
         responses={503: {"description": "Not ready; the same body says which check failed."}},
     )
     def ready() -> JSONResponse:
         report = backend.readiness()
         return JSONResponse(report, status_code=200 if report["ready"] else 503)
 
-    @app.get("/mills", summary="The mills this service analyses, with their state")
+    @app.get(
+        "/mills",
+        summary="The mills this service analyses, with their state",
+        response_model=list[MillSummary],
+    )
     def mills() -> list[dict[str, Any]]:
         return backend.mills_overview()
 
     @app.get(
         "/mills/{mill_id}",
         summary="One mill: state, latest metrics, data health",
+        response_model=MillDetail,
         responses=problem_responses(404),
     )
     def mill(mill_id: str) -> dict[str, Any]:

@@ -1,5 +1,6 @@
-"""Response and request bodies of the life, starts, spectrum and alarm endpoints, for the OpenAPI
-schema (with examples) and for validating what the API sends. Units are in the field names."""
+"""Response and request bodies of the mill, life, starts, spectrum and alarm endpoints, for the
+OpenAPI schema (with examples) and for validating what the API sends. Units are in the field
+names."""
 
 from __future__ import annotations
 
@@ -14,11 +15,75 @@ __all__ = [
     "AlarmOut",
     "ComponentLife",
     "Life",
+    "MillDetail",
+    "MillSummary",
     "MonthStarts",
     "Spectrum",
     "StartOut",
     "TransitionOut",
 ]
+
+
+_HELD_EXAMPLE = (
+    "mill sag-5200-lrs: its checkpoint (at archive file millwatch_20240501T060000Z.mcap, "
+    "message 81234, logged 2024-05-01T06:10:00Z) cannot be restored: mill 'sag-5200-lrs': "
+    "channel(s) removed 'pinion_bending' in the configuration since the snapshot, … If the "
+    "mill's configuration was changed since that checkpoint, revert the change and start the "
+    "worker again: …"
+)
+
+
+class MillSummary(BaseModel):
+    """One mill in ``GET /mills``."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "id": "sag-5200-lrs",
+                    "site": "rustenburg",
+                    "drive": "single",
+                    "starter": "LRS",
+                    "state": "held",
+                    "stale_channels": [],
+                    "worker": "w1",
+                    "held_reason": _HELD_EXAMPLE,
+                }
+            ]
+        }
+    )
+
+    id: str
+    site: str
+    drive: str = Field(description="single or dual.")
+    starter: str
+    state: str = Field(
+        description="The operating state (e.g. stopped, running); held: the mill is not "
+        "analysed (see held_reason); unreachable: its worker is gone; unknown: no status yet."
+    )
+    stale_channels: list[str]
+    worker: str | None = Field(description="The worker that analyses the mill.")
+    held_reason: str | None = Field(
+        description="Why the mill is held — its checkpoint could not be restored at start, "
+        "usually after a change to its configuration — and how to resolve it. Its blocks are "
+        "archived and its channel health observed, but it is not analysed until the change is "
+        "reverted and the worker restarted; it then replays the archive it missed. null: "
+        "analysed."
+    )
+
+
+class MillDetail(MillSummary):
+    """``GET /mills/{mill_id}``."""
+
+    rated_torque_knm: dict[str, float] = Field(description="motor and pinion, kN·m.")
+    status: dict[str, Any] = Field(
+        description="The worker's status of the mill: health per channel, state, samples, "
+        "damage so far, open alarms, held_reason."
+    )
+    worker_status: dict[str, Any] = Field(
+        description="The worker: name, partition, counters, its own readiness checks; live "
+        "false when it is gone."
+    )
 
 
 class ComponentLife(BaseModel):

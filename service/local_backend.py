@@ -30,7 +30,7 @@ from service.mill_views import (
 )
 from service.monthly_report import MonthlyReport
 from service.partition import worker_identity
-from service.runtime import ServiceRuntime
+from service.runtime import MILL_CHECKS, ServiceRuntime
 
 __all__ = ["LocalBackend"]
 
@@ -78,10 +78,11 @@ class LocalBackend:
         return self.runtime.status.get(mill_id, {})
 
     def worker_info(self) -> dict[str, Any]:
-        """This worker: name, partition, counters and its own readiness checks."""
+        """This worker: name, partition, counters and its own readiness checks (the per-mill
+        ones are in each mill's status)."""
         rt = self.runtime
         w = rt.worker
-        checks = {k: v for k, v in rt.readiness()["checks"].items() if k != "data_fresh"}
+        checks = {k: v for k, v in rt.readiness()["checks"].items() if k not in MILL_CHECKS}
         return {
             "name": self.worker_name,
             "live": True,

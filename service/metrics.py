@@ -79,7 +79,8 @@ class RuntimeCollector(Collector):
 
 
 def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[Metric]:
-    """Decode errors, missing blocks, samples and state per mill, from the workers' statuses."""
+    """Decode errors, missing blocks, samples, state and whether held per mill, from the
+    workers' statuses."""
     errors = CounterMetricFamily(
         "millwatch_decode_errors",
         "Undecodable blocks per channel and kind.",
@@ -94,6 +95,12 @@ def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[M
     state = GaugeMetricFamily(
         "millwatch_mill_state", "1 for the mill's operating state.", labels=["mill", "state"]
     )
+    held = GaugeMetricFamily(
+        "millwatch_mill_held",
+        "1 while the mill is held: its checkpoint could not be restored, its blocks are "
+        "archived but not analysed (GET /mills/{id} says why).",
+        labels=["mill"],
+    )
     for mill in sorted(mills):
         s = status.get(mill, {})
         for channel, ch in s.get("health", {}).get("channels", {}).items():
@@ -102,7 +109,8 @@ def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[M
             missing.add_metric([mill, channel], ch.get("missing_blocks", 0))
         samples.add_metric([mill], s.get("samples", 0))
         state.add_metric([mill, str(s.get("state", "unknown"))], 1)
-    yield from (errors, missing, samples, state)
+        held.add_metric([mill], 1 if s.get("held_reason") else 0)
+    yield from (errors, missing, samples, state, held)
 
 
 def open_alarms(rows: Iterable[AlarmRow]) -> Metric:

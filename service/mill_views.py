@@ -48,13 +48,15 @@ def config_of(mills: Mapping[str, MillConfig], mill_id: str) -> MillConfig:
 def mill_summary(
     config: MillConfig, status: Mapping[str, Any] | None, worker: str | None
 ) -> dict[str, Any]:
-    """One line of ``GET /mills``: state and stale channels from the worker's status; a mill
-    without status (``None``: its worker is gone) is ``unreachable`` with every channel stale."""
+    """One line of ``GET /mills``: state, stale channels and why the mill is held (if it is)
+    from the worker's status; a mill without status (``None``: its worker is gone) is
+    ``unreachable`` with every channel stale."""
     if status is None:
-        state, stale = UNREACHABLE, list(config.channels)
+        state, stale, held = UNREACHABLE, list(config.channels), None
     else:
         state = status.get("state", "unknown")
         stale = status.get("health", {}).get("stale_channels", [])
+        held = status.get("held_reason")
     return {
         "id": config.id,
         "site": config.site,
@@ -63,6 +65,7 @@ def mill_summary(
         "state": state,
         "stale_channels": stale,
         "worker": worker,
+        "held_reason": held,
     }
 
 

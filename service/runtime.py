@@ -35,12 +35,14 @@ from service.settings import ServiceSettings
 from service.store import Store
 from service.worker import AckRequest, MillPipeline, Worker, mill_patterns
 
-__all__ = ["ARCHIVE_PREFIX", "ServiceRuntime"]
+__all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
 
 log = logging.getLogger(__name__)
 
 ARCHIVE_PREFIX = "millwatch"
 STATUS_EVERY_S = 0.5
+#: The readiness checks given per mill (``{mill: bool}``); the others are one bool each.
+MILL_CHECKS = ("data_fresh", "analysed")
 
 
 class ServiceRuntime:
@@ -226,8 +228,10 @@ class ServiceRuntime:
 
     # ------------------------------------------------------------------ readiness
     def readiness(self) -> dict[str, Any]:
-        """What ``GET /ready`` reports: zenoh up, archive writable, store reachable, fresh data."""
+        """What ``GET /ready`` reports: zenoh up, archive writable, store reachable, fresh data,
+        every mill analysed (``held_mills``: why a held mill is not; see :mod:`service.worker`)."""
         stale = {m: s["health"]["stale_channels"] for m, s in self.status.items()}
+        held = {m: s["held_reason"] for m, s in self.status.items() if s.get("held_reason")}
         checks = {
             "zenoh": self.session is not None,
             "worker": self._thread is not None and self._thread.is_alive(),
@@ -235,11 +239,12 @@ class ServiceRuntime:
             and (self.worker is None or self.worker.archive_errors == 0),
             "store": self._store_ok(),
             "data_fresh": {m: not s for m, s in stale.items()},
+            "analysed": {m: m not in held for m in self.status},
         }
-        ready = all(v for k, v in checks.items() if k != "data_fresh") and all(
-            checks["data_fresh"].values()
+        ready = all(v for k, v in checks.items() if k not in MILL_CHECKS) and all(
+            all(checks[k].values()) for k in MILL_CHECKS
         )
-        return {"ready": ready, "checks": checks, "stale_channels": stale}
+        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held}
 
     def _store_ok(self) -> bool:
         if self.store is None:

@@ -287,7 +287,8 @@ class ZenohBackend:
 
     def readiness(self) -> dict[str, Any]:
         """Ready when zenoh is connected, every mill's worker answers and is ready itself
-        (archive, store, worker thread), and every mill's data is fresh."""
+        (archive, store, worker thread), every mill's data is fresh and every mill is analysed
+        (``held_mills``: why a held one is not), as the in-process ``/ready`` says."""
         gathered = self.statuses()
         stale = {
             m: gathered[m]["status"].get("health", {}).get("stale_channels", [])
@@ -295,6 +296,8 @@ class ZenohBackend:
             else list(c.channels)
             for m, c in self.mills.items()
         }
+        held = {m: a["status"]["held_reason"] for m, a in gathered.items()
+                if a["status"].get("held_reason")}  # fmt: skip
         workers = {
             a["worker"].get("name"): a["worker"].get("checks", {}) for a in gathered.values()
         }
@@ -303,14 +306,16 @@ class ZenohBackend:
             "workers": workers,
             "reachable": {m: m in gathered for m in self.mills},
             "data_fresh": {m: not s for m, s in stale.items()},
+            "analysed": {m: m not in held for m in self.mills},
         }
         ready = (
             checks["zenoh"]
             and all(all(c.values()) for c in workers.values())
             and all(checks["reachable"].values())
             and all(checks["data_fresh"].values())
+            and all(checks["analysed"].values())
         )
-        return {"ready": ready, "checks": checks, "stale_channels": stale}
+        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held}
 
     def registry(self) -> CollectorRegistry:
         if self._registry is None:

@@ -1,13 +1,16 @@
 """Shared fixture of the API tests: a real runtime (zenoh on 127.0.0.1, MCAP archive, SQLite
-store) fed one simulated LRS start, served by uvicorn on 127.0.0.1."""
+store) fed one simulated LRS start, served by uvicorn on 127.0.0.1; and a runtime whose mill is
+held (:func:`held_runtime`)."""
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 import uvicorn
@@ -41,13 +44,14 @@ def _wait_until(predicate, timeout_s: float) -> bool:
     return predicate()
 
 
-def _settings(tmp: Path, zenoh_port: int) -> ServiceSettings:
+def _settings(tmp: Path, zenoh_port: int, **worker: Any) -> ServiceSettings:
     return ServiceSettings.model_validate(
         {
             "zenoh": {"listen": [tcp_endpoint(zenoh_port)]},
             "archive": {"directory": str(tmp / "archive")},
             "store": {"path": str(tmp / "mw.db")},
             "api": {"api_key": API_KEY},
+            "worker": worker,
             "mills": {"files": [str(MILLS / f"{MILL}.toml")]},
         }
     )
@@ -61,6 +65,29 @@ def _feed(runtime: ServiceRuntime, zenoh_port: int, duration_s: float) -> None:
     assert _wait_until(lambda: runtime.worker.blocks_handled >= report.blocks, 30.0)
     before = runtime.status
     assert _wait_until(lambda: runtime.status is not before, 5.0)  # a fresh status snapshot
+
+
+@contextlib.contextmanager
+def held_runtime(tmp: Path) -> Iterator[tuple[ServiceRuntime, int]]:
+    """A started runtime whose mill is held, and its zenoh port: checkpointed (by a stop) as
+    configured, then started with ``pinion_bending`` removed from its configuration, and fed a
+    10 s start (the data stay fresh for a minute)."""
+    settings = _settings(tmp, free_loopback_port(), stale_after_s=60.0)
+    mills = settings.load_mills()
+    first = ServiceRuntime(settings, mills, AnalyzerPipeline)
+    first.start()
+    first.stop()  # the final checkpoint, with the configuration of then
+    kept = {n: c for n, c in mills[MILL].channels.items() if n != "pinion_bending"}
+    edited = {MILL: mills[MILL].model_copy(update={"channels": kept})}
+    port = free_loopback_port()
+    settings = _settings(tmp, port, stale_after_s=60.0)
+    runtime = ServiceRuntime(settings, edited, AnalyzerPipeline)
+    runtime.start()
+    try:
+        _feed(runtime, port, duration_s=10.0)
+        yield runtime, port
+    finally:
+        runtime.stop()
 
 
 def serve(app, port: int) -> tuple[uvicorn.Server, threading.Thread]:

@@ -17,7 +17,7 @@ from service.api import create_app
 from service.mill_pipeline import AnalyzerPipeline
 from service.runtime import ServiceRuntime
 from service.settings import ServiceSettings
-from tests.service.conftest import API_KEY, MILL, serve
+from tests.service.conftest import API_KEY, MILL, held_runtime, serve
 
 pytestmark = pytest.mark.slow
 PROBLEM = "application/problem+json"
@@ -190,6 +190,33 @@ def test_ack_is_forbidden_when_no_key_is_configured(tmp_path):
     assert r.status_code == 403 and "api_key" in r.json()["detail"]
 
 
+# ---------------------------------------------------------------------- a held mill
+def test_a_held_mill_makes_ready_503_naming_it_and_mills_say_why(tmp_path):
+    with held_runtime(tmp_path) as (runtime, _):
+        reason = runtime.worker.held[MILL]
+        server, thread = serve(create_app(runtime), free_loopback_port())
+        try:
+            with httpx.Client(base_url=f"http://127.0.0.1:{server.config.port}", timeout=10) as c:
+                ready, mills, detail = (c.get(p) for p in ("/ready", "/mills", f"/mills/{MILL}"))
+                metrics = c.get("/metrics").text
+        finally:
+            server.should_exit = True
+            thread.join(timeout=10)
+    assert reason.startswith(f"mill {MILL}: its checkpoint (")
+    assert "channel(s) removed 'pinion_bending'" in reason
+    assert ready.status_code == 503
+    body = ready.json()
+    assert body["held_mills"] == {MILL: reason} and body["checks"]["analysed"] == {MILL: False}
+    assert body["checks"]["data_fresh"] == {MILL: True}  # its data arrive: the hold is why
+    [summary] = mills.json()
+    assert summary["state"] == "held" and summary["held_reason"] == reason
+    assert summary["stale_channels"] == []
+    assert detail.status_code == 200
+    assert detail.json()["held_reason"] == reason
+    assert detail.json()["status"]["health"]["channels"]["motor_torque"]["blocks"] > 0
+    assert f'millwatch_mill_held{{mill="{MILL}"}} 1.0' in metrics
+
+
 # ---------------------------------------------------------------------- metrics, openapi
 def test_metrics_in_prometheus_text_format(client, live_api):
     r = client.get("/metrics")
@@ -207,6 +234,7 @@ def test_metrics_in_prometheus_text_format(client, live_api):
     state = live_api.runtime.status[MILL]["state"]
     assert samples[("millwatch_mill_state", (("mill", MILL), ("state", state)))] == 1
     assert samples[("millwatch_samples_analysed_total", (("mill", MILL),))] > 0
+    assert samples[("millwatch_mill_held", (("mill", MILL),))] == 0
     assert any(name == "millwatch_open_alarms" for name, _ in samples)
 
 

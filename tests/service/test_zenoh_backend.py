@@ -30,7 +30,7 @@ from service.report_codec import report_from_dict
 from service.runtime import ServiceRuntime
 from service.settings import ServiceSettings
 from service.zenoh_backend import ZenohBackend
-from tests.service.conftest import serve
+from tests.service.conftest import held_runtime, serve
 
 pytestmark = pytest.mark.slow
 
@@ -214,3 +214,33 @@ def test_a_hung_worker_is_a_504_within_the_timeout_and_a_gone_one_a_503(pair):
             backend.close()
             queryable.undeclare()
             held.clear()
+
+
+def test_a_held_mill_is_reported_by_the_remote_api_as_by_the_local_one(tmp_path):
+    with held_runtime(tmp_path) as (runtime, port):
+        worker_side = LocalBackend(runtime, worker="w1")
+        queryables = WorkerQueryables(runtime.session, worker_side)
+        queryables.start()
+        try:
+            with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
+                backend = ZenohBackend(session, runtime.mills, timeout_s=5.0)
+                backend.start()
+                try:
+                    assert _wait(lambda: backend.live_workers() == {MILL: "w1"}, 10.0)
+                    with _served(create_app(worker_side)) as local, \
+                            _served(create_app(backend)) as remote:  # fmt: skip
+                        answers = [(c.get("/ready"), c.get("/mills").json(), c.get("/metrics").text)
+                                   for c in (local, remote)]  # fmt: skip
+                finally:
+                    backend.close()
+        finally:
+            queryables.close()
+        reason = runtime.worker.held[MILL]
+    (local_ready, local_mills, _), (ready, mills, metrics) = answers
+    assert ready.status_code == local_ready.status_code == 503
+    body = ready.json()
+    assert body["held_mills"] == local_ready.json()["held_mills"] == {MILL: reason}
+    assert body["checks"]["analysed"] == {MILL: False} and body["checks"]["reachable"][MILL]
+    assert "analysed" not in body["checks"]["workers"]["w1"]  # per mill, not a worker's check
+    assert mills == local_mills and mills[0]["held_reason"] == reason
+    assert f'millwatch_mill_held{{mill="{MILL}"}} 1.0' in metrics
