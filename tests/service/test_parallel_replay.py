@@ -88,17 +88,8 @@ def test_parallel_replay_equals_one_process(
 def test_parallel_replay_after_checkpoints_skips_what_they_hold(tmp_path: Path) -> None:
     """Checkpoints at different archive positions per mill: every mill sees each of its blocks
     once, as in one process."""
-    with ArchiveWriter(tmp_path / "a", "w", chunk_size=8192) as archive, Store(
-        tmp_path / "one.db"
-    ) as live_store:  # fmt: skip
-        live = _worker(live_store)
-        live.archive = archive
-        for k, item in enumerate(_items()):
-            live.handle(item)
-            if k in (1500, 4000):  # mill-0 at the first position, mill-2 at the second
-                live.checkpoint(["mill-0"] if k == 1500 else ["mill-2"])
-    shutil.copy(tmp_path / "one.db", tmp_path / "two.db")
-    reader = ArchiveReader(tmp_path / "a", "w")
+    # mill-0 at the first position, mill-2 at the second
+    reader = _checkpointed_archive(tmp_path, {1500: ["mill-0"], 4000: ["mill-2"]})
     with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
         one, two = _worker(s1), _worker(s2)
         one.recover(reader)
@@ -125,8 +116,13 @@ def test_a_failing_or_killed_job_stops_the_replay_naming_its_mills(
             worker.recover(reader, jobs=3, factory=factory)
 
 
-def _checkpointed_archive(tmp_path: Path) -> ArchiveReader:
-    """The test archive, with every mill checkpointed (configuration of then) halfway."""
+def _checkpointed_archive(
+    tmp_path: Path, at: dict[int, list[str] | None] | None = None
+) -> ArchiveReader:
+    """The test archive written by a live worker into ``one.db`` (copied to ``two.db``), which
+    checkpoints the mills of ``at[k]`` (None: every mill) after block ``k``; by default every
+    mill halfway (configuration of then)."""
+    at = {3000: None} if at is None else at
     with ArchiveWriter(tmp_path / "a", "w", chunk_size=8192) as archive, Store(
         tmp_path / "one.db"
     ) as live_store:  # fmt: skip
@@ -134,8 +130,8 @@ def _checkpointed_archive(tmp_path: Path) -> ArchiveReader:
         live.archive = archive
         for k, item in enumerate(_items()):
             live.handle(item)
-            if k == 3000:
-                live.checkpoint()
+            if k in at:
+                live.checkpoint(at[k])
     shutil.copy(tmp_path / "one.db", tmp_path / "two.db")
     return ArchiveReader(tmp_path / "a", "w")
 
