@@ -2,7 +2,7 @@
 
 Observations in (:mod:`alarms.observations`), rules from the field evidence
 (:mod:`alarms.rules`), the lifecycle (:mod:`alarms.lifecycle`) driven by the engine
-(:mod:`alarms.engine`), transitions out; the caller stores them (``service.store``) and
+(:mod:`alarms.engine`), transitions out; the caller stores them (``service.store.database``) and
 publishes them (:mod:`alarms.wire`). No I/O here: imports only :mod:`analytics`.
 """
 

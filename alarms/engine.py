@@ -36,7 +36,7 @@ from alarms import lifecycle
 from alarms.lifecycle import Alarm, AlarmState, Transition
 from alarms.observations import Kind, Observation
 from alarms.rules import Rule, RuleBook, RuleOptions, Severity, build_rules
-from analytics.mill_config import MillConfig
+from analytics.drivetrain.mill_config import MillConfig
 
 __all__ = ["AlarmEngine", "UnknownAlarmError"]
 

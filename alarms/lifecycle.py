@@ -131,14 +131,14 @@ class Transition:
 
     def to_row(self) -> dict[str, Any]:
         """Plain JSON data of the transition alone (the fields of
-        ``service.store.AlarmTransitionRow``)."""
+        ``service.store.database.AlarmTransitionRow``)."""
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "alarm"}
         d.update(kind=str(self.kind), severity=str(self.severity), state=str(self.state))
         return d
 
     def to_dict(self) -> dict[str, Any]:
         """:meth:`to_row` plus ``alarm`` as :meth:`Alarm.to_dict` (the fields of
-        ``service.store.AlarmRow``)."""
+        ``service.store.database.AlarmRow``)."""
         return {**self.to_row(), "alarm": self.alarm.to_dict()}
 
 

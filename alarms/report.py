@@ -17,7 +17,7 @@ from alarms.engine import AlarmEngine
 from alarms.lifecycle import Transition
 from alarms.observations import Observation, derive_start_counts
 from alarms.rules import RuleOptions
-from analytics.mill_config import MillConfig
+from analytics.drivetrain.mill_config import MillConfig
 
 __all__ = ["alarms_for_report", "history"]
 

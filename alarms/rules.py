@@ -61,7 +61,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from alarms.observations import QUANTITIES, Kind, Observation, local_month
-from analytics.mill_config import MillConfig
+from analytics.drivetrain.mill_config import MillConfig
 
 __all__ = ["Level", "Rule", "RuleBook", "RuleOptions", "Severity", "build_rules"]
 

@@ -7,10 +7,11 @@ This module is the library behind ``millwatch replay``; it has no command-line c
 Three parts, each usable alone:
 
 - **Sources** — :func:`collect_archive_files` expands files and directories into archive files;
-  :func:`archive_blocks` reads them as one stream of :class:`~ingest.archive.ArchivedBlock`,
+  :func:`archive_blocks` reads them as one stream of :class:`~ingest.archive.writer.ArchivedBlock`,
   filtered by key pattern and log-time range and merged across writers in log-time order.
   Rotated files of one writer (``<prefix>_<stamp>Z.mcap`` in one directory) are read in file
-  order through :class:`~ingest.archive.ArchiveReader` (which skips finished files outside the
+  order through :class:`~ingest.archive.writer.ArchiveReader` (which skips finished files outside
+  the
   time range from their summary); other files are read alone, front to back, torn tail
   tolerated.
 - **Keys** — :class:`KeyRemap` decides where replayed blocks go. By default each block goes to
@@ -40,7 +41,7 @@ from pathlib import Path
 import zenoh
 
 from ingest import keys
-from ingest.archive import (
+from ingest.archive.writer import (
     MCAP_MAGIC,
     ArchivedBlock,
     ArchivePosition,
@@ -375,7 +376,7 @@ ProgressCallback = Callable[[ReplayProgress], None]
 class Replayer:
     """Publish archived blocks on ``session``, paced by their log time.
 
-    ``blocks`` is any iterable of :class:`~ingest.archive.ArchivedBlock` (usually
+    ``blocks`` is any iterable of :class:`~ingest.archive.writer.ArchivedBlock` (usually
     :func:`archive_blocks`); payloads go out exactly as archived, malformed ones included
     (the receiver counts them, as it would live). ``remap`` chooses the output keys;
     ``speed`` is × real time (``None`` = as fast as possible); ``late_threshold_s`` see

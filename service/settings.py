@@ -33,7 +33,7 @@ from typing import Annotated, Literal
 import zenoh
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from analytics.mill_config import MillConfig, describe_validation_error
+from analytics.drivetrain.mill_config import MillConfig, describe_validation_error
 from ingest.keys import LAYOUT_VERSION, ROOT
 from ingest.mill_files import load_mill_config, load_mill_configs
 

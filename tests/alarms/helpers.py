@@ -11,7 +11,7 @@ from alarms.engine import AlarmEngine
 from alarms.lifecycle import Transition
 from alarms.observations import Observation
 from alarms.rules import RuleOptions
-from analytics.mill_config import MillConfig
+from analytics.drivetrain.mill_config import MillConfig
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 NS = 1_000_000_000

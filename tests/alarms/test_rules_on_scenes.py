@@ -14,10 +14,10 @@ import pytest
 
 from alarms.from_analysis import report_observations
 from alarms.report import alarms_for_report
-from analytics.mill_config import MillConfig
-from analytics.mill_monitor import MillMonitor
+from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.analyzer import MillMonitor
 from ingest.mill_files import load_mill_config
-from ingest.scenes import get_scene
+from ingest.sim.scenes import get_scene
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 SAG = load_mill_config(MILLS / "sag-5200-lrs.toml")

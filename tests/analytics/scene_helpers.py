@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from analytics.frame_aligner import Frame
-from analytics.mill_analyzer import MillAnalyzer
-from analytics.mill_config import MillConfig
+from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.loads import MillAnalyzer
+from analytics.signal.frame_aligner import Frame
 from ingest.mill_files import load_mill_config
-from ingest.scenes import get_scene
-from ingest.simulator import Scene, SceneSpec
+from ingest.sim.scenes import get_scene
+from ingest.sim.simulator import Scene, SceneSpec
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 

@@ -33,13 +33,13 @@ from urllib.parse import urlsplit
 import numpy as np
 import uvicorn
 
-from ingest.scene_publisher import ScenePublisher, starting_now
-from ingest.scenes import get_scene
+from ingest.sim.publisher import ScenePublisher, starting_now
+from ingest.sim.scenes import get_scene
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.api import create_app
-from service.mill_pipeline import AnalyzerPipeline
-from service.runtime import ServiceRuntime
+from service.api.app import create_app
 from service.settings import ServiceSettings
+from service.worker.mill_job import AnalyzerPipeline
+from service.worker.runtime import ServiceRuntime
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 IDLE_S = 3.0

@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from analytics.telemetry_faults import TelemetryFaultDetector
+from analytics.signal.telemetry_faults import TelemetryFaultDetector
 from ingest.mill_files import load_mill_config
-from ingest.scenes import get_scene
-from ingest.simulator import Scene
+from ingest.sim.scenes import get_scene
+from ingest.sim.simulator import Scene
 
 log = logging.getLogger("bench_faults")
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "ball-dual-lrs.toml"

@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from analytics.harmonics import HarmonicSettings, HarmonicTracker, HarmonicWindow
+from analytics.spectra.harmonics import HarmonicSettings, HarmonicTracker, HarmonicWindow
 from ingest.mill_files import load_mill_config
-from ingest.scenes import get_scene
-from ingest.simulator import Scene, SceneParams
+from ingest.sim.scenes import get_scene
+from ingest.sim.simulator import Scene, SceneParams
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 DURATION_S = 180.0

@@ -27,14 +27,14 @@ import threading
 import time
 from pathlib import Path
 
-from analytics.mill_config import MillConfig
+from analytics.drivetrain.mill_config import MillConfig
 from ingest.mill_files import load_mill_config
-from ingest.scene_publisher import ScenePublisher, starting_now
-from ingest.scenes import get_scene
+from ingest.sim.publisher import ScenePublisher, starting_now
+from ingest.sim.scenes import get_scene
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.mill_pipeline import AnalyzerPipeline
-from service.runtime import ServiceRuntime
 from service.settings import ServiceSettings
+from service.worker.mill_job import AnalyzerPipeline
+from service.worker.runtime import ServiceRuntime
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 GATEWAY_PROCESSES = 2

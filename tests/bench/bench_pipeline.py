@@ -27,15 +27,15 @@ import time
 from pathlib import Path
 
 from ingest import keys
-from ingest.archive import ArchiveWriter
+from ingest.archive.writer import ArchiveWriter
 from ingest.mill_files import load_mill_config
-from ingest.scene_blocks import scene_blocks
-from ingest.scenes import get_scene
+from ingest.sim.blocks import scene_blocks
+from ingest.sim.scenes import get_scene
 from ingest.wire import DType
-from service.block_queue import QueuedBlock
-from service.mill_pipeline import AnalyzerPipeline
-from service.store import Store
-from service.worker import BATCH_BLOCKS, Worker
+from service.store.database import Store
+from service.worker.block_queue import QueuedBlock
+from service.worker.mill_job import AnalyzerPipeline
+from service.worker.worker import BATCH_BLOCKS, Worker
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 

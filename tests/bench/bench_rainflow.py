@@ -37,11 +37,11 @@ import numpy as np
 import rainflow
 from numba import njit
 
-from analytics.cycles import Cycles
-from analytics.matrices import RangeMeanMatrix, uniform_edges
-from analytics.miner import DamageRecorder
-from analytics.rainflow import RainflowCounter, count_cycles
-from analytics.sn_models import build_sn_curve
+from analytics.fatigue.cycles import Cycles
+from analytics.fatigue.matrices import RangeMeanMatrix, uniform_edges
+from analytics.fatigue.miner import DamageRecorder
+from analytics.fatigue.rainflow import RainflowCounter, count_cycles
+from analytics.fatigue.sn_models import build_sn_curve
 
 FS = 1000.0
 RATED_MPA = 48.2  # pinion shaft shear stress at rated torque

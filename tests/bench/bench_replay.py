@@ -15,7 +15,8 @@
 2. Replays it with ``Worker.recover`` (the crash-recovery path: archive read, decode, health, each
    mill's analyzer fed long contiguous chunks, alarms, store) into a fresh store, once per
    ``--jobs`` entry: 1 = the worker process alone (the figures per core), N = N replay processes
-   with the mills split between them (0 = one per available core; :mod:`service.parallel_replay`),
+   with the mills split between them (0 = one per available core;
+   :mod:`service.worker.parallel_replay`),
    and reports CPU seconds of all processes (``os.times``: this one and its finished children —
    robust on a shared machine), wall seconds, × real time (recording seconds / replay seconds,
    all mills together), and the cost of only reading the archive in batches (+ decoding the
@@ -44,17 +45,17 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from ingest import keys
-from ingest.archive import ArchiveReader, ArchiveWriter
-from ingest.archive_batches import archive_batches
+from ingest.archive.batches import archive_batches
+from ingest.archive.writer import ArchiveReader, ArchiveWriter
 from ingest.mill_files import load_mill_config
-from ingest.scene_blocks import SceneBlock, scene_blocks
-from ingest.scenes import get_scene
+from ingest.sim.blocks import SceneBlock, scene_blocks
+from ingest.sim.scenes import get_scene
 from ingest.wire import DType, decode_headers
-from service.batch_lane import replay_batch_blocks
-from service.mill_pipeline import AnalyzerPipeline
-from service.parallel_replay import replay_jobs
-from service.store import Store
-from service.worker import Worker
+from service.store.database import Store
+from service.worker.batch_lane import replay_batch_blocks
+from service.worker.mill_job import AnalyzerPipeline
+from service.worker.parallel_replay import replay_jobs
+from service.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 PREFIX = "replay-bench"

@@ -6,7 +6,7 @@ Simulating and analysing a whole month takes long, so the store is filled in two
    stop) is simulated and analysed through the real pipeline (``Worker.handle``, in process),
    giving real start/stop events, steady windows, harmonic tables and daily damage rows;
 2. those rows are tiled over the local calendar month on the schedule of the ``month`` scene
-   (:func:`ingest.scenes.month_events`: ~84 cycles, failed starts, trips; seed 000 §6.2.8):
+   (:func:`ingest.sim.scenes.month_events`: ~84 cycles, failed starts, trips; seed 000 §6.2.8):
    each cycle copies the events, fills its running time with the steady windows and harmonic
    tables at their measured cadence, and adds the measured start/stop damage plus the run damage
    rate × running hours to its day. A handful of data-quality events are added.
@@ -36,16 +36,16 @@ from typing import Any
 import numpy as np
 
 from ingest.mill_files import load_mill_config
-from ingest.scene_blocks import scene_blocks
-from ingest.scenes import get_scene, month_events
-from ingest.simulator import DEFAULT_T0_NS, FailedStartEvent, StartEvent, StopEvent, TripEvent
-from service.api_reports import FORMATS
-from service.block_queue import QueuedBlock
-from service.mill_pipeline import AnalyzerPipeline
-from service.monthly_report import build_monthly_report
-from service.starts import month_bounds_ns
-from service.store import DamageRow, EventRow, Store
-from service.worker import Worker
+from ingest.sim.blocks import scene_blocks
+from ingest.sim.scenes import get_scene, month_events
+from ingest.sim.simulator import DEFAULT_T0_NS, FailedStartEvent, StartEvent, StopEvent, TripEvent
+from service.api.routes.reports import FORMATS
+from service.reports.monthly import build_monthly_report
+from service.reports.starts import month_bounds_ns
+from service.store.database import DamageRow, EventRow, Store
+from service.worker.block_queue import QueuedBlock
+from service.worker.mill_job import AnalyzerPipeline
+from service.worker.worker import Worker
 
 log = logging.getLogger("bench_report")
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"

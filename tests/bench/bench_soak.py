@@ -45,14 +45,14 @@ from typing import Any
 
 import numpy as np
 
-from analytics.mill_config import MillConfig
+from analytics.drivetrain.mill_config import MillConfig
 from ingest.mill_files import load_mill_config
-from ingest.scene_blocks import SceneBlock, scene_blocks
-from ingest.scenes import get_scene
-from service.block_queue import BlockQueue
-from service.mill_pipeline import AnalyzerPipeline
-from service.store import Store
-from service.worker import BATCH_BLOCKS, Worker
+from ingest.sim.blocks import SceneBlock, scene_blocks
+from ingest.sim.scenes import get_scene
+from service.store.database import Store
+from service.worker.block_queue import BlockQueue
+from service.worker.mill_job import AnalyzerPipeline
+from service.worker.worker import BATCH_BLOCKS, Worker
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 CONFIG_FILES = ("sag-5200-lrs.toml", "ball-dual-lrs.toml", "rod-1100-grid.toml")

@@ -6,7 +6,7 @@ Run::
 
 Simulates the ``month`` scene (seed 000 §6.2.8: ~90 switch-ons a month, failed starts, trips,
 barring after long stops, telemetry spikes and dropouts) for ``--days`` days, feeds it through
-:class:`analytics.mill_analyzer.MillAnalyzer` in 1 s frames and compares with the simulator's
+:class:`analytics.mill.loads.MillAnalyzer` in 1 s frames and compares with the simulator's
 truth: missed and false starts, stops and barring sessions (matched within 1 s), switch-on and
 short-circuit peak errors (% of motor rated torque), 10–90 % rise-time errors (ms), trip/stop
 classification. Then the cost per frame of a stopped and of a running mill (100-sample frames).
@@ -22,11 +22,11 @@ from typing import Any
 
 import numpy as np
 
-from analytics.frame_aligner import Frame
-from analytics.mill_analyzer import MillAnalyzer
+from analytics.mill.loads import MillAnalyzer
+from analytics.signal.frame_aligner import Frame
 from ingest.mill_files import load_mill_config
-from ingest.scenes import get_scene
-from ingest.simulator import Scene, SceneSpec
+from ingest.sim.scenes import get_scene
+from ingest.sim.simulator import Scene, SceneSpec
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 TOL_NS = 1_000_000_000

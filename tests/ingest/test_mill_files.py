@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from analytics.mill_config import MillConfigError
+from analytics.drivetrain.mill_config import MillConfigError
 from ingest.mill_files import load_mill_config, load_mill_configs
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"

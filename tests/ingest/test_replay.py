@@ -20,7 +20,7 @@ import pytest
 import zenoh
 
 from ingest import keys, wire
-from ingest.archive import ArchivedBlock, ArchiveWriter, list_archive_files
+from ingest.archive.writer import ArchivedBlock, ArchiveWriter, list_archive_files
 from ingest.pacing import PacingClock, PacingError
 from ingest.replay import (
     KeyRemap,

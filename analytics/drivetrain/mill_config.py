@@ -1,0 +1,402 @@
+"""Mill configuration: one validated, frozen description of a grinding-mill drivetrain.
+
+A mill is described by one TOML file (DESIGN.md, "Conventions"); this module holds the pydantic v2
+model and its derived kinematics. It is pure: :meth:`MillConfig.from_toml_text` parses text, the
+file is read by :func:`ingest.mill_files.load_mill_config`.
+
+Sources of the defaults (seed 000 = Diering 2011, seed 001 = Fedin & Vinogradov 2018):
+
+* rated torque ``T_rated = P / (2π n / 60)``; pinion rated torque = ``T_rated × reducer ratio``
+  (seed 000 §6.2.1: 5200 kW, 995 rpm, 113/20 → 49.91 kN·m and 281.97 kN·m),
+* telemetry bandwidth 0–250 Hz, 1 kHz per channel (seed 000 §5.1.2–5.1.3),
+* shaft diameters 0.2 m / 0.31 m, E = 207 GPa, ν = 0.3 (seed 000 §5.2.3),
+* 820M17, S_ut = 980 MPa, Marin factors 0.68/0.75/0.897/1.0, K_t = 2.2 at the keyway
+  (seed 000 §8.1); K_t = 2 on the torque trace and the FAT 160/100 curves (seed 000 App. D),
+* alarm thresholds: start peak 250/300 % (seed 000 Tables 4, 6: LRS 233 % average);
+  starts/month 5 (supplier norm 3–5, §6.1.3) and 20 (field average 20–22, §6.2.8);
+  steady-state oscillation range 25/45 % (Table 14: 23.6 % average, 45.4 % max);
+  bending amplitude 25/43/90 MPa (§8.1); barring peak 185 % single / 314 % dual (Tables 12–13),
+* excitation orders: mill, pinion, liner passing (20–35 liners), motor, pinion/girth mesh and
+  reducer mesh (seed 000 §6.1.2) and 3× drive-gear rotation (seed 001 eq. 12, ``p_p = 3ω₁``).
+
+Errors: a :class:`pydantic.ValidationError` converts to one line per problem with
+:func:`describe_validation_error`, e.g. ``drive.reducer_ratio: must be > 0``.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+import zoneinfo
+from enum import StrEnum
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from analytics.fatigue.sn_curves import SNCurve
+from analytics.fatigue.sn_models import SN_MODEL_PARAMETERS, SNModelParameters, build_sn_curve
+
+__all__ = [
+    "AlarmThresholds",
+    "ChannelConfig",
+    "DriveConfig",
+    "DriveLayout",
+    "MaterialConfig",
+    "MillConfig",
+    "MillConfigError",
+    "SNModel",
+    "ShaftConfig",
+    "Starter",
+    "describe_validation_error",
+]
+
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Teeth = Annotated[int, Field(ge=5, le=1000)]
+Fraction = Annotated[float, Field(gt=0, le=1)]
+
+
+class MillConfigError(ValueError):
+    """A mill configuration that cannot be used; ``problems`` holds one line per bad field."""
+
+    def __init__(self, source: str, problems: list[str]) -> None:
+        self.source = source
+        self.problems = problems
+        super().__init__(f"{source}: " + "; ".join(problems))
+
+
+class _Frozen(BaseModel):
+    """Base: frozen, unknown fields are errors (a typo names the field)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class DriveLayout(StrEnum):
+    """Single or dual pinion drive (seed 000 §5, Table 2)."""
+
+    SINGLE = "single"
+    DUAL = "dual"
+
+
+class Starter(StrEnum):
+    """Soft-start device (seed 000 §6.2.1): fixed grid resistor, liquid resistance, enhanced LRS."""
+
+    GRID = "Grid"
+    LRS = "LRS"
+    E_LRS = "E-LRS"
+
+
+class DriveConfig(_Frozen):
+    """Drivetrain kinematics. Power and rated speed are per motor (one motor per pinion)."""
+
+    layout: DriveLayout
+    starter: Starter
+    motor_power_kw: Positive
+    motor_speed_rpm: Positive
+    reducer_ratio: Positive = Field(description="motor speed / pinion speed, e.g. 113/20")
+    reducer_stages: tuple[tuple[Teeth, Teeth], ...] = Field(
+        min_length=1, description="(driver teeth, driven teeth) per stage, motor side first"
+    )
+    pinion_teeth: Teeth
+    girth_teeth: Teeth
+    liner_count: Annotated[int, Field(ge=1, le=200)]
+
+    @model_validator(mode="after")
+    def _stages_match_ratio(self) -> DriveConfig:
+        ratio = math.prod(driven / driver for driver, driven in self.reducer_stages)
+        if abs(ratio / self.reducer_ratio - 1.0) > 0.01:
+            raise ValueError(
+                f"reducer_stages give ratio {ratio:.4f}, reducer_ratio is {self.reducer_ratio:.4f}"
+            )
+        if self.girth_teeth <= self.pinion_teeth:
+            raise ValueError("girth_teeth must exceed pinion_teeth")
+        return self
+
+
+class ShaftConfig(_Frozen):
+    """Shaft diameters (m) at the gauges, stress-concentration factors (seed 000 §5.2.3, §8.1)."""
+
+    motor_diameter_m: Positive = 0.2
+    pinion_diameter_m: Positive = 0.31
+    kt_bending: Annotated[float, Field(ge=1.0, le=10.0)] = 2.2
+    kt_torsion: Annotated[float, Field(ge=1.0, le=10.0)] = 2.0
+    notch_sensitivity: Fraction = 1.0
+
+
+class SNModel(_Frozen):
+    """S-N model by name (:data:`analytics.fatigue.sn_models.SN_MODEL_PARAMETERS`) with
+    overrides."""
+
+    name: str = "shigley"
+    params: dict[str, Finite] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _known(self) -> SNModel:
+        if self.name not in SN_MODEL_PARAMETERS:
+            known = ", ".join(SN_MODEL_PARAMETERS)
+            raise ValueError(f"unknown S-N model {self.name!r}; known: {known}")
+        unknown = sorted(set(self.params) - set(SN_MODEL_PARAMETERS[self.name]))
+        if unknown:
+            raise ValueError(f"unknown parameters for {self.name!r}: {unknown}")
+        return self
+
+    def resolved_params(self) -> dict[str, float | None]:
+        """The model's parameters: the model's defaults (None: derive from the
+        material) updated by ``params``."""
+        return {**SN_MODEL_PARAMETERS[self.name], **self.params}
+
+
+class MaterialConfig(_Frozen):
+    """Shaft material (stress in MPa, modulus in GPa) and S-N model (seed 000 §5.2.3, §8.1)."""
+
+    name: str = "820M17"
+    s_ut_mpa: Annotated[float, Field(gt=100, le=3000)] = 980.0
+    elastic_modulus_gpa: Positive = 207.0
+    poisson_ratio: Annotated[float, Field(gt=0, lt=0.5)] = 0.3
+    ka: Fraction = 0.68
+    kb: Fraction = 0.75
+    kc: Fraction = 0.897
+    kd: Fraction = 1.0
+    sn: SNModel = Field(default_factory=SNModel)
+
+    @property
+    def endurance_limit_mpa(self) -> float:
+        """S_e = k_a k_b k_c k_d · 0.5 S_ut in MPa (seed 000 §8.1 eqs. 2–4)."""
+        return self.ka * self.kb * self.kc * self.kd * 0.5 * self.s_ut_mpa
+
+    def sn_curve(self) -> SNCurve:
+        """The configured S-N curve; S_e defaults to this material's Marin endurance limit."""
+        p = self.sn.resolved_params()
+        s_e = p.get("S_e")
+        params = SNModelParameters(
+            S_ut=self.s_ut_mpa,
+            S_e=self.endurance_limit_mpa if s_e is None else s_e,
+            fat=p.get("fat"),
+        )
+        return build_sn_curve(self.sn.name, params)
+
+
+_KEY_PATTERN = r"^[a-z0-9][a-z0-9_\-]*(/[a-z0-9][a-z0-9_\-]*)*$"
+_UNITS = {"torque": "kN·m", "bending": "MPa", "rpm": "rpm", "tacho": "V"}
+
+
+class ChannelConfig(_Frozen):
+    """One telemetry channel.
+
+    ``value = gain · (raw − offset)`` converts raw samples to engineering units (zero offset
+    subtracted, then the shunt-calibration gain, seed 000 §5.2.6). ``full_scale`` is the fixed
+    range (engineering units) that sets rainflow bin edges. ``kind`` is ``torque`` (kN·m),
+    ``bending`` (MPa), ``rpm`` (speed, rpm) or ``tacho`` (reflector pulse train in V, converted
+    to speed with ``pulses_per_rev``, seed 000 §5.2.5).
+    """
+
+    key: Annotated[str, Field(pattern=_KEY_PATTERN, max_length=120)]
+    kind: Literal["torque", "bending", "rpm", "tacho"]
+    shaft: Literal["motor", "pinion"] = "pinion"
+    side: Literal["bs", "nbs"] | None = None
+    units: str
+    gain: Finite = 1.0
+    offset: Finite = 0.0
+    full_scale: tuple[Finite, Finite] | None = None
+    pulses_per_rev: Annotated[int, Field(ge=1, le=1000)] | None = None
+
+    @field_validator("gain")
+    @classmethod
+    def _nonzero_gain(cls, gain: float) -> float:
+        if gain == 0.0:
+            raise ValueError("must be non-zero")
+        return gain
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ChannelConfig:
+        if self.units != _UNITS[self.kind]:
+            raise ValueError(f"units of a {self.kind} channel must be {_UNITS[self.kind]!r}")
+        if self.kind in ("torque", "bending") and self.full_scale is None:
+            raise ValueError("full_scale [low, high] is required for torque and bending")
+        if self.full_scale is not None and not self.full_scale[0] < self.full_scale[1]:
+            raise ValueError("full_scale must be [low, high] with low < high")
+        if self.kind == "tacho" and self.pulses_per_rev is None:
+            raise ValueError("pulses_per_rev is required for a tacho channel")
+        if self.kind == "bending" and self.shaft != "pinion":
+            raise ValueError("bending is measured on the pinion shaft")
+        return self
+
+
+class AlarmThresholds(_Frozen):
+    """Alarm thresholds; % are of motor rated torque. Sources in the module docstring."""
+
+    start_peak_warn_pct: Positive = 250.0
+    start_peak_alarm_pct: Positive = 300.0
+    starts_per_month_warn: Annotated[int, Field(ge=1)] = 5
+    starts_per_month_alarm: Annotated[int, Field(ge=1)] = 20
+    oscillation_range_warn_pct: Positive = 25.0
+    oscillation_range_alarm_pct: Positive = 45.0
+    bending_amplitude_warn_mpa: Positive = 25.0
+    bending_amplitude_alarm_mpa: Positive = 43.0
+    bending_amplitude_critical_mpa: Positive = 90.0
+    barring_peak_pct: Positive | None = Field(
+        default=None, description="None: 185 % single drive, 314 % dual drive (Tables 12-13)"
+    )
+
+    @model_validator(mode="after")
+    def _ordered(self) -> AlarmThresholds:
+        pairs = [
+            ("start_peak", self.start_peak_warn_pct, self.start_peak_alarm_pct),
+            ("starts_per_month", self.starts_per_month_warn, self.starts_per_month_alarm),
+            ("oscillation_range", self.oscillation_range_warn_pct,
+             self.oscillation_range_alarm_pct),
+            ("bending_amplitude", self.bending_amplitude_warn_mpa,
+             self.bending_amplitude_alarm_mpa),
+            ("bending_amplitude", self.bending_amplitude_alarm_mpa,
+             self.bending_amplitude_critical_mpa),
+        ]  # fmt: skip
+        for name, low, high in pairs:
+            if not low < high:
+                raise ValueError(f"{name}: warning level {low} must be below alarm level {high}")
+        return self
+
+
+#: Barring peak limits in % of motor rated torque (seed 000 Tables 12–13, §6.2.3).
+BARRING_LIMIT_PCT = {DriveLayout.SINGLE: 185.0, DriveLayout.DUAL: 314.0}
+
+
+class MillConfig(_Frozen):
+    """A mill: identity, drivetrain, shafts, material, channels, alarms (DESIGN.md)."""
+
+    id: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_\-]*$", max_length=64)]
+    site: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_\-]*$", max_length=64)]
+    time_zone: str = "UTC"
+    design_life_years: Annotated[float, Field(gt=0, le=100)] = 20.0
+    sample_rate_hz: Positive = 1000.0
+    telemetry_bandwidth_hz: Positive = 250.0
+    drive: DriveConfig
+    shafts: ShaftConfig = Field(default_factory=ShaftConfig)
+    material: MaterialConfig = Field(default_factory=MaterialConfig)
+    channels: dict[Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$")], ChannelConfig] = Field(
+        min_length=1
+    )
+    alarms: AlarmThresholds = Field(default_factory=AlarmThresholds)
+
+    @field_validator("time_zone")
+    @classmethod
+    def _known_zone(cls, name: str) -> str:
+        try:
+            zoneinfo.ZoneInfo(name)
+        except (zoneinfo.ZoneInfoNotFoundError, ValueError) as exc:
+            raise ValueError(f"unknown IANA time zone {name!r}") from exc
+        return name
+
+    @model_validator(mode="after")
+    def _consistent(self) -> MillConfig:
+        if self.telemetry_bandwidth_hz > self.sample_rate_hz / 2:
+            raise ValueError("telemetry_bandwidth_hz must not exceed sample_rate_hz / 2")
+        keys = [ch.key for ch in self.channels.values()]
+        if len(set(keys)) != len(keys):
+            raise ValueError("channel keys must be unique")
+        dual = self.drive.layout is DriveLayout.DUAL
+        for name, ch in self.channels.items():
+            if ch.kind in ("torque", "bending") and dual != (ch.side is not None):
+                need = "needs side 'bs' or 'nbs'" if dual else "must not set side"
+                raise ValueError(f"channel {name!r} on a {self.drive.layout} drive {need}")
+        return self
+
+    @classmethod
+    def from_toml_text(cls, text: str) -> MillConfig:
+        """Parse and validate TOML text; raises ``TOMLDecodeError`` or ``ValidationError``."""
+        return cls.model_validate(tomllib.loads(text))
+
+    @property
+    def sides(self) -> tuple[str | None, ...]:
+        """Drive sides: ``(None,)`` single drive, ``("bs", "nbs")`` dual (barring/non-barring)."""
+        return ("bs", "nbs") if self.drive.layout is DriveLayout.DUAL else (None,)
+
+    @property
+    def motor_rated_torque_knm(self) -> float:
+        """T_rated = P / (2π n / 60) per motor, kN·m (seed 000 §6.2.1)."""
+        return self.drive.motor_power_kw / (2.0 * math.pi * self.drive.motor_speed_rpm / 60.0)
+
+    @property
+    def pinion_rated_torque_knm(self) -> float:
+        """Motor rated torque × reducer ratio, kN·m (seed 000 §6.2.1)."""
+        return self.motor_rated_torque_knm * self.drive.reducer_ratio
+
+    @property
+    def pinion_speed_rpm(self) -> float:
+        """Motor speed / reducer ratio, rpm."""
+        return self.drive.motor_speed_rpm / self.drive.reducer_ratio
+
+    @property
+    def mill_speed_rpm(self) -> float:
+        """Pinion speed × pinion teeth / girth teeth, rpm."""
+        return self.pinion_speed_rpm * self.drive.pinion_teeth / self.drive.girth_teeth
+
+    @property
+    def barring_peak_limit_pct(self) -> float:
+        """Barring peak limit, % motor rated torque (configured, else Tables 12–13)."""
+        configured = self.alarms.barring_peak_pct
+        return configured if configured is not None else BARRING_LIMIT_PCT[self.drive.layout]
+
+    def excitation_orders(self) -> dict[str, float]:
+        """Expected excitations as orders of pinion rotation (cycles per pinion revolution).
+
+        Seed 000 §6.1.2 lists mill speed, pinion speed, liner passing, motor speed, pinion/girth
+        mesh and reducer mesh; seed 001 eq. 12 adds 3× the drive-gear (pinion) rotation.
+        """
+        d = self.drive
+        mill = d.pinion_teeth / d.girth_teeth
+        orders = {
+            "mill_speed": mill,
+            "pinion_speed": 1.0,
+            "pinion_3x": 3.0,
+            "liner_passing": d.liner_count * mill,
+            "girth_mesh": float(d.pinion_teeth),
+            "motor_speed": d.reducer_ratio,
+        }
+        shaft = d.reducer_ratio  # speed of the stage's input shaft, in pinion orders
+        for i, (driver, driven) in enumerate(d.reducer_stages, start=1):
+            orders[f"reducer_mesh_{i}"] = shaft * driver
+            shaft *= driver / driven
+        return orders
+
+    def excitation_frequencies_hz(self) -> dict[str, float]:
+        """:meth:`excitation_orders` at rated pinion speed, in Hz."""
+        rev_hz = self.pinion_speed_rpm / 60.0
+        return {name: order * rev_hz for name, order in self.excitation_orders().items()}
+
+    def observable(self, frequency_hz: float) -> bool:
+        """Whether a frequency lies within the telemetry bandwidth and below Nyquist."""
+        return 0.0 <= frequency_hz <= min(self.telemetry_bandwidth_hz, self.sample_rate_hz / 2)
+
+
+_MESSAGES = {
+    "greater_than": "must be > {gt}",
+    "greater_than_equal": "must be >= {ge}",
+    "less_than": "must be < {lt}",
+    "less_than_equal": "must be <= {le}",
+    "extra_forbidden": "unknown field (typo?)",
+    "missing": "required field is missing",
+    "string_pattern_mismatch": "must match {pattern}",
+}
+
+
+def _message(error: Any) -> str:
+    template = _MESSAGES.get(error["type"])
+    if template is not None:
+        return template.format(**error.get("ctx", {}))
+    return str(error["msg"]).removeprefix("Value error, ")
+
+
+def describe_validation_error(exc: ValidationError) -> list[str]:
+    """One ``dotted.loc: message`` line per error, e.g. ``drive.reducer_ratio: must be > 0``."""
+    lines = []
+    for error in exc.errors():
+        loc = ".".join(str(part) for part in error["loc"]) or "(top level)"
+        lines.append(f"{loc}: {_message(error)}")
+    return lines

@@ -1,0 +1,367 @@
+"""Fatigue damage by operating phase and day; the cost of a start; monthly projections.
+
+Sources: seed 000 (Diering 2011) §8.2 and App. D (rainflow + Miner on pinion-shaft stress; the
+record cut into start, run and stop portions; damage per month for 5 starts/day, 1/day, 1/week and
+1/month, a month being 4 weeks), §8.3 (start transients and starts per month drive damage; bending
+dominates), §6.1.3 (starts are counted per month, norm 3–5).
+
+Attribution: every rainflow cycle belongs to the phase of the sample where it *closed*, its
+``i_end`` (the second reversal), looked up in the operating-state timeline. Transitions can be
+decided a few seconds late (:attr:`analytics.operation.operating_states.OperatingStateMachine.
+decided_until`): cycles whose ``i_end`` is not yet decided wait in a small pending list (bounded by
+the decision delay). Days are the local calendar days of the site's time zone at ``i_end``.
+
+Sums are :class:`analytics.fatigue.miner.MinerSum` with exact block sums (attribution is batched),
+so the
+result does not depend on how the samples were blocked. State is bounded: the timeline is pruned
+behind the oldest open rainflow reversal, and only the last ``keep_days`` days are kept.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import zoneinfo
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+
+from analytics.fatigue import damage_kernel as _dk
+from analytics.fatigue.cycles import Cycles
+from analytics.fatigue.exact_sum import DIGITS, digits_value, fsum, hilo
+from analytics.fatigue.miner import DamageRecorder, MinerSum
+from analytics.operation.operating_states import OperatingState, Transition
+from analytics.snapshot_arrays import pack_array, unpack_array
+
+__all__ = [
+    "APP_D_SCENARIOS",
+    "MONTH_S",
+    "PhaseDamage",
+    "PhaseTimeline",
+    "StartCost",
+    "project_monthly_damage",
+    "start_cost",
+]
+
+PHASE_OF_STATE = {
+    OperatingState.UNKNOWN: "unknown",
+    OperatingState.STOPPED: "stopped",
+    OperatingState.STARTING: "start",
+    OperatingState.RUNNING: "run",
+    OperatingState.STOPPING: "stop",
+    OperatingState.BARRING: "barring",
+}
+PHASES = tuple(PHASE_OF_STATE.values())
+
+MONTH_S = 28 * 86_400.0
+"""A month as App. D counts it: 4 weeks (``tm = tw*4``)."""
+
+APP_D_SCENARIOS = {"5/day": 140.0, "1/day": 28.0, "1/week": 4.0, "1/month": 1.0}
+"""Starts per (4-week) month of the four App. D scenarios."""
+
+
+class PhaseTimeline:
+    """Operating-state transitions ``(sample, state)`` in sample order; bounded by :meth:`prune`."""
+
+    def __init__(self) -> None:
+        self.samples: list[int] = [0]
+        self.states: list[int] = [int(OperatingState.UNKNOWN)]
+
+    def add(self, tr: Transition) -> None:
+        """Append a transition (samples must not go back)."""
+        if tr.sample < self.samples[-1]:
+            raise ValueError(f"transition at {tr.sample} before {self.samples[-1]}")
+        if tr.sample == self.samples[-1]:
+            self.states[-1] = int(tr.state)
+        else:
+            self.samples.append(tr.sample)
+            self.states.append(int(tr.state))
+
+    def states_at(self, samples: np.ndarray) -> np.ndarray:
+        """The state (int) at each stream sample."""
+        k = np.searchsorted(np.asarray(self.samples), samples, side="right") - 1
+        return np.asarray(self.states)[np.maximum(k, 0)]
+
+    def state_at(self, sample: int) -> int:
+        return self.states[max(bisect.bisect_right(self.samples, sample) - 1, 0)]
+
+    def prune(self, before: int) -> None:
+        """Forget transitions no sample ≥ ``before`` needs."""
+        k = bisect.bisect_right(self.samples, before) - 1
+        if k > 0:
+            del self.samples[:k]
+            del self.states[:k]
+
+    def snapshot(self) -> dict[str, Any]:
+        return {"samples": list(self.samples), "states": list(self.states)}
+
+    @classmethod
+    def restore(cls, d: dict[str, Any]) -> PhaseTimeline:
+        t = cls()
+        t.samples, t.states = [int(x) for x in d["samples"]], [int(x) for x in d["states"]]
+        return t
+
+
+class PhaseDamage:
+    """Damage of one component (a :class:`DamageRecorder`: curve, K_t scale) by phase and day.
+
+    ``record(cycles, timeline, decided_until)`` attributes the decided cycles and keeps the rest
+    pending. ``t0_ns``/``fs`` convert stream samples to time; ``time_zone`` names the site's days.
+    """
+
+    def __init__(
+        self,
+        recorder: DamageRecorder,
+        t0_ns: int,
+        fs: float,
+        time_zone: str = "UTC",
+        keep_days: int = 400,
+    ) -> None:
+        self.recorder = recorder
+        self.t0_ns = int(t0_ns)
+        self.fs = float(fs)
+        self.time_zone = time_zone
+        self._tz = zoneinfo.ZoneInfo(time_zone)
+        self.keep_days = keep_days
+        self.by_phase: dict[str, MinerSum] = {p: MinerSum() for p in PHASES}
+        self.by_day: dict[str, dict[str, MinerSum]] = {}
+        self.total = MinerSum()
+        self.batch = 4096
+        # cycles not yet costed: rows range, mean, count; and stream i_end (grown on demand)
+        self._raw_f = np.empty((3, 0))
+        self._raw_i = np.empty(0, dtype=np.int64)
+        self._n_raw = 0
+        self._pend: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def record(
+        self, cycles: Cycles, timeline: PhaseTimeline, decided_until: int, offset: int = 0
+    ) -> None:
+        """Fold in ``cycles`` (a counter's view is fine: it is copied); ``offset`` converts the
+        counter's sample indices to stream samples (samples the counter never saw).
+
+        Work is batched: cycles are kept raw until ``batch`` of them wait, then their damage is
+        computed and attributed in one vectorised pass (the sums are exact, so batching does
+        not change them; a stopped mill's noise cycles cost a copy per frame)."""
+        k = len(cycles)
+        if k:
+            a = self._n_raw
+            if a + k > self._raw_i.shape[0]:
+                self._grow(a + k)
+            self._raw_f[0, a : a + k] = cycles.range
+            self._raw_f[1, a : a + k] = cycles.mean
+            self._raw_f[2, a : a + k] = cycles.count
+            np.add(cycles.i_end, offset, out=self._raw_i[a : a + k])
+            self._n_raw = a + k
+        if self._n_raw >= self.batch:
+            self.attribute(timeline, decided_until)
+
+    def _grow(self, need: int) -> None:
+        """Room for ``need`` raw cycles (at least doubled), keeping those held."""
+        size = max(need, 2 * self._raw_i.shape[0], self.batch + 1024)
+        n = self._n_raw
+        f, i = np.empty((3, size)), np.empty(size, dtype=np.int64)
+        f[:, :n], i[:n] = self._raw_f[:, :n], self._raw_i[:n]
+        self._raw_f, self._raw_i = f, i
+
+    def _compute(self) -> None:
+        """Damage of the raw cycles: added to the total, kept pending for attribution."""
+        n = self._n_raw
+        if not n:
+            return
+        r, m, c = self._raw_f[:, :n]
+        i = self._raw_i[:n].copy()
+        self._n_raw = 0
+        d = self.recorder.damage_of(r, m, c)
+        self.total.add_block(d, exact=True)
+        self._pend.append((d, i))
+
+    @property
+    def oldest_pending(self) -> int | None:
+        """Smallest stream ``i_end`` of a cycle not yet attributed (the timeline must keep it)."""
+        ends = [int(i.min()) for _, i in self._pend]
+        if self._n_raw:
+            ends.append(int(self._raw_i[: self._n_raw].min()))
+        return min(ends, default=None)
+
+    def attribute(self, timeline: PhaseTimeline, decided_until: int) -> None:
+        """Compute the waiting cycles' damage; attribute those closed before ``decided_until``."""
+        self._compute()
+        if not self._pend:
+            return
+        if len(self._pend) == 1:
+            dmg, i_end = self._pend[0]
+        else:
+            dmg = np.concatenate([d for d, _ in self._pend])
+            i_end = np.concatenate([i for _, i in self._pend])
+        if not self._attribute_one_day(dmg, i_end, timeline, decided_until):
+            ready = i_end < decided_until
+            self._pend = [(dmg[~ready], i_end[~ready])] if not ready.all() else []
+            if ready.any():
+                self._attribute(dmg[ready], i_end[ready], timeline)
+
+    def _attribute_one_day(
+        self, dmg: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline, decided_until: int
+    ) -> bool:
+        """The usual case in one compiled pass
+        (:func:`analytics.fatigue.damage_kernel.attribute_split`):
+        the decided cycles all closed on one local day. Books them as :meth:`_attribute` does
+        (the same exact sums per state, in state order) and keeps the rest pending; False, and
+        nothing changed, in any other case."""
+        n_states = max(timeline.states) + 1
+        digits = np.zeros((n_states, DIGITS), dtype=np.int64)
+        counts = np.zeros(n_states, dtype=np.int64)
+        left_d, left_i = np.empty_like(dmg), np.empty_like(i_end)
+        n_left, lo, hi, ok = _dk.attribute_split(
+            dmg, i_end, decided_until, np.asarray(timeline.samples, dtype=np.int64),
+            np.asarray(timeline.states, dtype=np.int64), digits, counts, left_d, left_i,
+        )  # fmt: skip
+        if not ok:
+            return False
+        if n_left == dmg.shape[0]:
+            self._pend = [(dmg, i_end)]
+            return True
+        day = self._day(int(lo))
+        if self._day(int(hi)) != day:
+            return False
+        sums = [(st, hilo(digits_value(digits[st]))) for st in np.flatnonzero(counts).tolist()]
+        if not all(math.isfinite(h) for _, (h, _) in sums):
+            return False  # the checked path raises
+        self._pend = [(left_d[:n_left], left_i[:n_left])] if n_left else []
+        per_day = self.by_day.setdefault(day, {})
+        for st, (h, lw) in sums:
+            block = (h, lw, int(counts[st]))
+            phase = PHASE_OF_STATE[OperatingState(st)]
+            self.by_phase[phase].add_sum(block)
+            per_day.setdefault(phase, MinerSum()).add_sum(block)
+        self._prune_days()
+        return True
+
+    def _attribute(self, dmg: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline) -> None:
+        states = timeline.states_at(i_end)
+        lo, hi = self._day(int(i_end.min())), self._day(int(i_end.max()))
+        one_day = lo == hi  # the usual case: no per-cycle dates needed
+        days = None if one_day else np.array([self._day(int(s)) for s in i_end])
+        for day in [lo] if days is None else np.unique(days):
+            in_day = None if days is None else days == day
+            per_day = self.by_day.setdefault(str(day), {})
+            in_states = states if in_day is None else states[in_day]
+            for st in np.flatnonzero(np.bincount(in_states)).tolist():  # the states, in order
+                sel = states == st if in_day is None else in_day & (states == st)
+                phase = PHASE_OF_STATE[OperatingState(st)]
+                by_phase = self.by_phase[phase]
+                by_phase.add_block(dmg[sel], exact=True)
+                per_day.setdefault(phase, MinerSum()).add_sum(by_phase.last_block)
+        self._prune_days()
+
+    def _prune_days(self) -> None:
+        while len(self.by_day) > self.keep_days:
+            del self.by_day[min(self.by_day)]
+
+    def _day(self, sample: int) -> str:
+        t = self.t0_ns + sample * 1e9 / self.fs
+        return datetime.fromtimestamp(t / 1e9, tz=self._tz).date().isoformat()
+
+    # ------------------------------------------------------------ reading
+    @property
+    def committed(self) -> float:
+        """Damage of all closed cycles (attributed or pending)."""
+        self._compute()
+        return self.total.value
+
+    def with_residue(self, residue: Cycles) -> float:
+        """Committed damage plus that of the open residue closed now (``counter.close()``)."""
+        self._compute()
+        extra = fsum(self.recorder.block_damage(residue)) if len(residue) else 0.0
+        return self.total.peek(extra)
+
+    def phases(self) -> dict[str, float]:
+        """Attributed damage per phase."""
+        return {p: s.value for p, s in self.by_phase.items()}
+
+    def days(self) -> dict[str, dict[str, float]]:
+        """Attributed damage per local day and phase."""
+        return {d: {p: s.value for p, s in ph.items()} for d, ph in sorted(self.by_day.items())}
+
+    # ------------------------------------------------------------ persistence
+    def snapshot(self) -> dict[str, Any]:
+        self._compute()
+        return {
+            "kind": "phase_damage",
+            "recorder": self.recorder.snapshot(),
+            "t0_ns": self.t0_ns,
+            "fs": self.fs,
+            "time_zone": self.time_zone,
+            "keep_days": self.keep_days,
+            "by_phase": {p: s.snapshot() for p, s in self.by_phase.items()},
+            "by_day": {d: {p: s.snapshot() for p, s in v.items()} for d, v in self.by_day.items()},
+            "total": self.total.snapshot(),
+            "pending_damage": pack_array(_joined([d for d, _ in self._pend], np.float64)),
+            "pending_i_end": pack_array(_joined([i for _, i in self._pend], np.int64), "<i8"),
+        }
+
+    @classmethod
+    def restore(cls, d: dict[str, Any]) -> PhaseDamage:
+        pd = cls(
+            DamageRecorder.restore(d["recorder"]),
+            d["t0_ns"],
+            d["fs"],
+            d["time_zone"],
+            d["keep_days"],
+        )
+        pd.by_phase = {p: MinerSum.restore(s) for p, s in d["by_phase"].items()}
+        pd.by_day = {
+            day: {p: MinerSum.restore(s) for p, s in v.items()} for day, v in d["by_day"].items()
+        }
+        pd.total = MinerSum.restore(d["total"])
+        dmg = unpack_array(d["pending_damage"])
+        i_end = unpack_array(d["pending_i_end"], "<i8", shape=dmg.shape)
+        if dmg.size:
+            pd._pend = [(dmg, i_end)]
+        return pd
+
+
+def _joined(parts: list[np.ndarray], dtype: type) -> np.ndarray:
+    """One 1-D array of ``parts`` in order (empty when there are none)."""
+    return np.concatenate(parts).astype(dtype, copy=False) if parts else np.empty(0, dtype)
+
+
+# ---------------------------------------------------------------- start cost and projection
+@dataclass(frozen=True, slots=True)
+class StartCost:
+    """Damage of one start-stop cycle (start + stop phases per switch-on), the steady damage
+    rate, and the start expressed as hours of steady running (seed 000 §8.3, App. D)."""
+
+    starts: int
+    damage_per_start: float | None
+    start_stop_seconds: float | None
+    run_damage_per_hour: float | None
+    hours_of_running: float | None
+
+
+def start_cost(
+    phase_damage: dict[str, float], starts: int, start_stop_s: float, run_s: float
+) -> StartCost:
+    """Cost of a start from the phases measured so far: (start + stop damage) / starts, against
+    the run damage per hour. ``start_stop_s`` and ``run_s``: seconds spent in those phases."""
+    per = (phase_damage["start"] + phase_damage["stop"]) / starts if starts else None
+    rate = phase_damage["run"] / (run_s / 3600.0) if run_s > 0 else None
+    hours = per / rate if per is not None and rate else None
+    return StartCost(
+        starts=starts,
+        damage_per_start=per,
+        start_stop_seconds=start_stop_s / starts if starts else None,
+        run_damage_per_hour=rate,
+        hours_of_running=hours,
+    )
+
+
+def project_monthly_damage(cost: StartCost, starts_per_month: float) -> float | None:
+    """App. D: damage per (4-week) month with ``starts_per_month`` start-stop cycles and steady
+    running the rest of the time, D = N·d_ss + max(T − N·t_ss, 0)·r_run."""
+    if cost.damage_per_start is None or cost.run_damage_per_hour is None:
+        return None
+    t_ss = cost.start_stop_seconds or 0.0
+    run_h = max(MONTH_S - starts_per_month * t_ss, 0.0) / 3600.0
+    return math.fsum([starts_per_month * cost.damage_per_start, run_h * cost.run_damage_per_hour])

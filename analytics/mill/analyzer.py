@@ -1,0 +1,376 @@
+"""The one analyzer per mill: decoded channel blocks in, events, reports and snapshots out.
+
+DESIGN.md asks that live ingest, ``millwatch replay`` through zenoh and offline
+``millwatch analyze`` give identical results for the same samples. They all feed this class,
+block by block, in arrival order::
+
+    block (channel, t0, fs, raw samples)
+      → calibration (value = gain·(raw − offset), mill config)
+      → FrameAligner       blocks of equal t0 → aligned frames; gaps and dead channels as NaN
+      → FaultStage         spike/dropout/rail flags per channel (seed 000 §5.2.2), aligned delay
+      → tacho → rpm        when the mill has a pulse channel and no rpm channel (seed 000 App. C
+                           routine 5, seed 003 ch. IV)
+      → MillAnalyzer       states, starts/stops/barring, steady-state windows, rainflow damage
+                           by component, phase and day (seed 000 §6, §8, App. D)
+      → HarmonicTracker    order-tracked spectra, only while running (seed 000 §6.2.7, seed 001)
+
+Work follows the scene: the harmonic tracker skips every sample that is not steady running (the
+state after each sample decides, so spectra do not depend on the framing), and the analyzer
+skips per-revolution work when stopped. Everything is snapshot-able as plain data.
+
+Batches: :meth:`MillMonitor.push` analyses a block at once; :meth:`~MillMonitor.add` (or
+:meth:`~MillMonitor.add_blocks` for many) only aligns it, and :meth:`~MillMonitor.process`
+runs the analysis over everything aligned so far as contiguous chunks of up to
+:data:`MAX_CHUNK_S` — a few times cheaper per sample than 100-sample blocks, and bitwise the same
+results, since every stage is a function of the sample stream (tests split records at random).
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
+from analytics.mill.loads import MillAnalyzer
+from analytics.operation.operating_states import OperatingState
+from analytics.signal.fault_stage import FaultStage
+from analytics.signal.frame_aligner import Frame, FrameAligner
+from analytics.signal.tacho import TachoSpeed
+from analytics.signal.telemetry_faults import hold_last_good
+from analytics.spectra.harmonics import (
+    HarmonicTracker,
+    HarmonicWindow,
+    SnapshotMismatch,
+    harmonics_report,
+    stagger_for,
+)
+
+__all__ = ["DERIVED_SPEED", "MillMonitor", "MonitorOutput"]
+
+log = logging.getLogger(__name__)
+
+#: Name of the rpm channel derived from a tacho pulse channel when the mill has no rpm channel.
+DERIVED_SPEED = "speed_from_tacho"
+#: Longest contiguous chunk (s of samples) analysed in one go: long enough that per-call costs
+#: vanish, short enough that an event window is still in the analyzer's 90 s ring.
+MAX_CHUNK_S = 10.0
+_RUNNING = np.int8(OperatingState.RUNNING)
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+
+
+class MonitorOutput:
+    """What one block completed: analyzer events and harmonic windows (usually none)."""
+
+    __slots__ = ("events", "harmonics")
+
+    def __init__(self) -> None:
+        self.events: list[dict[str, Any]] = []
+        self.harmonics: list[HarmonicWindow] = []
+
+    def __bool__(self) -> bool:
+        return bool(self.events or self.harmonics)
+
+
+def analysis_config(config: MillConfig) -> MillConfig:
+    """``config`` plus a derived rpm channel when speed comes only from tacho pulses."""
+    kinds = {ch.kind for ch in config.channels.values()}
+    if "rpm" in kinds or "tacho" not in kinds:
+        return config
+    tacho = next(ch for ch in config.channels.values() if ch.kind == "tacho")
+    derived = ChannelConfig(key="speed", kind="rpm", shaft=tacho.shaft, units="rpm")
+    return config.model_copy(update={"channels": {**config.channels, DERIVED_SPEED: derived}})
+
+
+class MillMonitor:
+    """See the module docstring. ``push`` one decoded block at a time, in arrival order."""
+
+    def __init__(self, config: MillConfig) -> None:
+        self.config = config
+        self.analysis_config = analysis_config(config)
+        fs = float(config.sample_rate_hz)
+        self.aligner = FrameAligner(list(config.channels), fs)
+        self.faults = FaultStage(config)
+        self.tacho = self._tacho(fs)
+        self.analyzer = MillAnalyzer(self.analysis_config)
+        # mills started together compute their spectra at different samples (issue 5 latency)
+        self.harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
+        self._gain = {n: (ch.gain, ch.offset) for n, ch in config.channels.items()}
+        self._last_good: dict[str, float] = {}
+        self._max_chunk = max(1, round(MAX_CHUNK_S * fs))
+        self._queued: deque[Frame] = deque()
+        self.backlog = 0  # samples aligned but not yet analysed
+        #: Why :meth:`restore` started the spectra afresh (the snapshot's did not fit), or None.
+        self.spectra_restarted: str | None = None
+
+    def _tacho(self, fs: float) -> tuple[str, TachoSpeed] | None:
+        if DERIVED_SPEED not in self.analysis_config.channels:
+            return None
+        name, ch = next((n, c) for n, c in self.config.channels.items() if c.kind == "tacho")
+        return name, TachoSpeed.for_channel(ch, fs)
+
+    # ------------------------------------------------------------------ feeding
+    def push(self, channel: str, t0_ns: int, fs: float, raw: np.ndarray) -> MonitorOutput:
+        """One decoded block of a configured channel (raw units before calibration), analysed
+        at once: :meth:`add` then :meth:`process`."""
+        self.add(channel, t0_ns, fs, raw)
+        return self.process()
+
+    def add(self, channel: str, t0_ns: int, fs: float, raw: np.ndarray) -> None:
+        """Calibrate and align one block; the frames it completes wait for :meth:`process`.
+
+        Callers with many blocks at hand (a worker's batch, a replay) add them all and process
+        once: the analysis then runs over long contiguous chunks, which costs far less per
+        sample than block by block and gives bitwise the same results."""
+        gain, offset = self._gain.get(channel, (1.0, 0.0))
+        x = np.asarray(raw, dtype=np.float64)
+        if gain != 1.0 or offset != 0.0:
+            x = gain * (x - offset)
+        frames = self.aligner.push(channel, t0_ns, fs, x)
+        if frames:
+            self._queue_frames(frames)
+
+    def add_blocks(self, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray) -> None:
+        """Many blocks at once, as :meth:`add` of each in order: block ``k`` is of channel
+        ``list(config.channels)[chan[k]]``, starts at ``t0_ns[k]`` and holds ``raw[k]`` (all of
+        one length, at the mill's rate). Regular runs are aligned in one go
+        (:meth:`~analytics.signal.frame_aligner.FrameAligner.push_blocks`), anything else block by
+        block — the same frames either way."""
+        names = self.aligner.channels
+        scaled = [ci for ci in np.unique(chan).tolist() if self._scaled(names[ci])]
+        rows = raw  # uncalibrated float rows: the aligner casts them while it gathers
+        if scaled or raw.dtype.kind != "f":
+            rows = np.array(raw, dtype=np.float64)
+        for ci in scaled:
+            gain, offset = self._gain[names[ci]]
+            sel = chan == ci
+            rows[sel] = gain * (rows[sel] - offset)
+        frames = self.aligner.push_blocks(chan, t0_ns, rows)
+        if frames is None:
+            frames = []
+            for k, ci in enumerate(chan.tolist()):
+                frames += self.aligner.push(names[ci], int(t0_ns[k]), self.aligner.fs, rows[k])
+        if frames:
+            self._queue_frames(frames)
+
+    def _scaled(self, channel: str) -> bool:
+        """Whether ``channel`` has a calibration other than the identity."""
+        gain, offset = self._gain.get(channel, (1.0, 0.0))
+        return gain != 1.0 or offset != 0.0
+
+    def _queue_frames(self, frames: list[Frame]) -> None:
+        self._queued.extend(frames)
+        self.backlog += sum(len(f) for f in frames)
+
+    def process(self, until: int | None = None) -> MonitorOutput:
+        """Analyse the aligned frames waiting, concatenated into chunks of at most
+        :data:`MAX_CHUNK_S`; with ``until``, stop once the analyzer has reached stream sample
+        ``until`` (the rest keeps waiting), so a caller can read totals at exact sample counts."""
+        out = MonitorOutput()
+        while self._queued:
+            take = self._room(until)
+            if take <= 0:
+                break
+            self._frame(self._take(take), out)
+        return out
+
+    def _room(self, until: int | None) -> int:
+        """Input samples to feed now: a chunk, or what brings the analyzer to ``until`` (the
+        fault stage holds back ``delay`` samples, so feeding m gives max(0, held + m − delay))."""
+        room = self._max_chunk
+        if until is not None:
+            want = until - self.analyzer.n
+            if want <= 0:
+                return 0
+            room = min(room, want + self.faults.delay - self.faults.held)
+        return room
+
+    def _take(self, m: int) -> Frame:
+        """The first ``m`` queued samples as one frame (frames are contiguous by construction)."""
+        parts: list[Frame] = []
+        got = 0
+        while self._queued and got < m:
+            f = self._queued[0]
+            n = len(f)
+            if got + n <= m:
+                parts.append(self._queued.popleft())
+                got += n
+                continue
+            k = m - got
+            parts.append(Frame(f.t0_ns, f.fs, {c: x[:k] for c, x in f.data.items()}))
+            t_rest = f.t0_ns + round(k * 1e9 / f.fs)
+            self._queued[0] = Frame(t_rest, f.fs, {c: x[k:] for c, x in f.data.items()})
+            got = m
+        self.backlog -= got
+        if len(parts) == 1:
+            return parts[0]
+        data = {c: np.concatenate([p.data[c] for p in parts]) for c in parts[0].data}
+        return Frame(parts[0].t0_ns, parts[0].fs, data)
+
+    def flush(self) -> MonitorOutput:
+        """End of a record: emit what the aligner and the fault stage still hold."""
+        self._queue_frames(self.aligner.flush())
+        out = self.process()
+        tail = self.faults.flush()
+        if tail is not None:
+            self._analyse(tail, out)
+        out.harmonics += self.harmonics.flush()  # spectra put off by the stagger
+        return out
+
+    def _frame(self, frame: Frame, out: MonitorOutput) -> None:
+        flagged = self.faults.feed(frame)
+        if flagged is not None:
+            self._analyse(flagged, out)
+
+    def _analyse(self, frame: Frame, out: MonitorOutput) -> None:
+        if self.tacho is not None:
+            name, conv = self.tacho
+            frame.data[DERIVED_SPEED] = conv.feed(frame.data[name])
+        out.events += self.analyzer.feed(frame)
+        self._harmonics(frame, out)
+
+    def _harmonics(self, frame: Frame, out: MonitorOutput) -> None:
+        """Feed the harmonic tracker the running samples: the state after each sample decides
+        (not the state at the end of a frame), so spectra do not depend on the framing."""
+        n = len(frame)
+        shown = self.analyzer.sm.shown
+        if n == 0 or shown.shape[0] != n:
+            return
+        running = shown == _RUNNING
+        if not running[0] and not running.any():  # a stopped mill costs no spectra
+            self._note_last_good(frame)
+            out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, {}, False)
+            return
+        held = self._held(frame)
+        if running.all():
+            out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, held, True)
+            return
+        cuts = [0, *(np.flatnonzero(running[1:] != running[:-1]) + 1).tolist(), n]
+        first = self.analyzer.n - n  # stream index of the frame's first sample
+        for a, b in itertools.pairwise(cuts):
+            t_ns = self.faults.time_of(first + a)
+            piece = {c: x[a:b] for c, x in held.items()} if running[a] else {}
+            out.harmonics += self.harmonics.feed(t_ns, frame.fs, piece, bool(running[a]))
+
+    def _held(self, frame: Frame) -> dict[str, np.ndarray]:
+        """Flagged samples replaced by the last good value (spectra must not see spikes)."""
+        if not frame.flags:
+            return frame.data
+        data = dict(frame.data)
+        for name, mask in frame.flags.items():
+            if mask.any():
+                held, last = hold_last_good(data[name], mask, self._last_good.get(name, np.nan))
+                data[name] = held
+                self._last_good[name] = last
+            elif data[name].size:
+                self._last_good[name] = float(data[name][-1])
+        return data
+
+    def _note_last_good(self, frame: Frame) -> None:
+        """What :meth:`_held` would leave in ``_last_good``, without holding anything."""
+        for name, mask in (frame.flags or {}).items():
+            if mask.shape[0] and not mask[-1]:  # the usual case: the last sample is good
+                self._last_good[name] = float(frame.data[name][-1])
+                continue
+            good = np.flatnonzero(~mask)
+            if good.size:
+                self._last_good[name] = float(frame.data[name][good[-1]])
+
+    # ------------------------------------------------------------------ reading
+    @property
+    def state(self) -> str:
+        return self.analyzer.sm.state.label
+
+    def report(self) -> dict[str, Any]:
+        """The analyzer's report plus harmonics, unexplained peaks and data quality."""
+        rep = self.analyzer.report()
+        rep |= harmonics_report(self.harmonics)
+        rep["data_quality"] = {
+            "faults": {n: c.to_dict() for n, c in self.faults.totals().items()},
+            "missing_blocks": self.aligner.missing_blocks,
+            "gap_samples": self.aligner.gap_samples,
+            "late_blocks": self.aligner.dropped_blocks,
+        }
+        return rep
+
+    # ------------------------------------------------------------------ persistence
+    def snapshot(self) -> dict[str, Any]:
+        if self._queued:
+            raise RuntimeError("process() the aligned frames before taking a snapshot")
+        return {
+            "kind": "mill_monitor",
+            "version": _SNAPSHOT_VERSION,
+            "mill": self.config.id,
+            "aligner": self.aligner.snapshot(),
+            "faults": self.faults.snapshot(),
+            "tacho": None if self.tacho is None else self.tacho[1].snapshot(),
+            "analyzer": self.analyzer.snapshot(),
+            "harmonics": self.harmonics.snapshot(),
+            "last_good": {k: (v if np.isfinite(v) else None) for k, v in self._last_good.items()},
+        }
+
+    @classmethod
+    def restore(cls, config: MillConfig, snap: dict[str, Any]) -> MillMonitor:
+        """A monitor that continues exactly where the snapshotted one stood.
+
+        After a configuration change that moves the harmonic tracker's geometry (pinion
+        speed, tooth counts, liner count, telemetry bandwidth) its snapshot no longer fits
+        (:class:`~analytics.spectra.harmonics.SnapshotMismatch`): the tracker then starts afresh —
+        its
+        state is only spectra in progress — while everything else (damage, rainflow residues,
+        operating states, events) continues; :attr:`spectra_restarted` says why. A snapshot
+        at another sample rate, or of another set of channels, raises
+        :class:`~analytics.spectra.harmonics.SnapshotMismatch`: its sample counts would mean other
+        times, or its aligner would go on framing the old channels (an added channel's blocks
+        ignored for good, a removed one's waited for)."""
+        if snap.get("kind") != "mill_monitor" or snap.get("version") != _SNAPSHOT_VERSION:
+            raise ValueError(f"not a mill monitor snapshot of version {_SNAPSHOT_VERSION}")
+        if snap["mill"] != config.id:
+            raise ValueError(f"snapshot of mill {snap['mill']!r}, configuration is {config.id!r}")
+        was_fs, fs = float(snap["aligner"]["fs"]), float(config.sample_rate_hz)
+        if was_fs != fs:  # every sample count in the snapshot would mean another time
+            raise SnapshotMismatch(f"mill {config.id!r}: sample rate {was_fs:g} Hz in the "
+                                   f"snapshot, {fs:g} Hz with the configuration now")  # fmt: skip
+        changed = _channel_change(snap["aligner"]["channels"], list(config.channels))
+        if changed:  # the aligner's frames (and every stage after it) hold the old channels
+            raise SnapshotMismatch(f"mill {config.id!r}: {changed}")
+        m = cls(config)
+        # in the configuration's order, which add_blocks' channel numbers follow
+        m.aligner = FrameAligner.restore(snap["aligner"], list(config.channels))
+        m.faults.restore(snap["faults"])
+        if m.tacho is not None and snap["tacho"] is not None:
+            m.tacho = (m.tacho[0], TachoSpeed.restore(snap["tacho"]))
+        m.analyzer = MillAnalyzer.restore(m.analysis_config, snap["analyzer"])
+        m._restore_harmonics(snap["harmonics"])
+        last = snap["last_good"]
+        m._last_good = {k: (np.nan if v is None else float(v)) for k, v in last.items()}
+        return m
+
+    def _restore_harmonics(self, snap: dict[str, Any]) -> None:
+        """The tracker of ``snap``, or (when it does not fit) the fresh one ``__init__`` built."""
+        try:
+            self.harmonics = HarmonicTracker.restore(self.analysis_config, snap)
+        except SnapshotMismatch as exc:
+            self.spectra_restarted = str(exc)
+            log.warning(
+                "%s. Its spectra restart from nothing (the next harmonic table after a full "
+                "window of steady running); damage, operating states and events continue from "
+                "the snapshot",
+                exc,
+            )
+
+
+def _channel_change(was: list[str], now: list[str]) -> str | None:
+    """The channels added to and removed from the configuration since a snapshot of ``was``,
+    in words; None when the set is the same."""
+    added = [c for c in now if c not in was]
+    removed = [c for c in was if c not in now]
+    if not added and not removed:
+        return None
+    words = [f"{what} {', '.join(repr(c) for c in names)}"
+             for what, names in (("added", added), ("removed", removed)) if names]  # fmt: skip
+    return (f"channel(s) {' and '.join(words)} in the configuration since the snapshot, "
+            f"which holds channels {', '.join(repr(c) for c in was)}")  # fmt: skip

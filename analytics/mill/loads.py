@@ -1,0 +1,544 @@
+"""Per-mill analyzer: operating states, start/stop/barring events, steady-state metrics and fatigue
+damage by phase, fed with aligned multi-channel frames.
+
+Composition (DESIGN.md "Shape of the analytics code"): the state machine
+(:mod:`analytics.operation.operating_states`) turns speed and torque into transitions; each closed
+phase is
+measured from a ring buffer (:mod:`analytics.operation.transients`); running samples feed
+:mod:`analytics.operation.steady_state`; one :class:`~analytics.fatigue.rainflow.RainflowCounter`
+and
+:class:`~analytics.fatigue.miner.DamageRecorder` per component feed
+:mod:`analytics.fatigue.phase_damage`.
+
+Components (seed 000 §8.2, App. D), per drive side, on the material's S-N curve and scaled by
+K_t (``shafts.kt_torsion``, App. D applies one K_t = 2 to the whole stress trace):
+
+* ``pinion_combined`` — σ_θ at θ = 45° (eq. 12 with σ_y = 0): ½σ_b + ½σ_b·cos 2θ + τ·sin 2θ,
+  σ_b the pinion bending stress (MPa), τ = 16T/(πd³) from the pinion torque;
+* ``pinion_torsion`` — τ of the pinion shaft; ``motor_torsion`` — τ of the motor shaft.
+
+Missing and flagged samples (policy). NaN samples (dropouts) and samples flagged by a telemetry
+fault detector are never peaks (they are NaN in the ring). For rainflow counting the last valid
+value is held across them: the counter sees the signal with the gap closed (a plateau has no
+reversal), so no real reversal is lost and none is invented inside the gap; samples before the
+first valid one are skipped. The state machine labels missing samples ``unknown``; flagged ones
+are ignored.
+
+Framing: every stage is a function of the sample stream, not of the blocking (the state machine
+and rainflow are per-sample kernels; phase measurements wait until the phase is decided; sums are
+exact or sequential), so the same samples give bitwise the same report however they are framed.
+Cost: a stopped mill costs the ring write, the state kernel and the rainflow kernels per frame;
+per-revolution work runs only over decided running samples, spectra are not computed here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import zoneinfo
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+
+from analytics.drivetrain.mill_config import MillConfig
+from analytics.drivetrain.stress import THETA_SEED, combined_stress, shear_stress_from_torque
+from analytics.fatigue.miner import DamageRecorder
+from analytics.fatigue.phase_damage import (
+    PHASE_OF_STATE,
+    PhaseDamage,
+    PhaseTimeline,
+)
+from analytics.fatigue.rainflow import RainflowCounter
+from analytics.operation.operating_states import (
+    OperatingState,
+    OperatingStateMachine,
+    StateThresholds,
+    Transition,
+)
+from analytics.operation.steady_state import SteadyStateMeter, SteadyWindow
+from analytics.operation.transients import (
+    BarringAccumulator,
+    PhaseWindow,
+    TransientSettings,
+    measure_start,
+    measure_stop,
+)
+from analytics.signal.frame_aligner import Frame
+from analytics.signal.sample_ring import SampleRing
+
+__all__ = ["MillAnalyzer", "component_names"]
+
+log = logging.getLogger(__name__)
+
+_PREROLL_S = 1.0
+_RING_S = 90.0
+_KEEP_EVENTS = 2000
+_KEEP_WINDOWS = 1440
+#: Local days and calendar months of start counts kept (state stays bounded; 400 days ≈ 14
+#: months). The total since the start of the record is kept apart (``starts_total``).
+KEEP_START_DAYS = 400
+KEEP_START_MONTHS = 14
+_SNAPSHOT_VERSION = 1
+
+
+def _channel(config: MillConfig, kind: str, shaft: str, side: str | None) -> str | None:
+    for name, ch in config.channels.items():
+        if ch.kind == kind and ch.shaft == shaft and ch.side == side:
+            return name
+    return None
+
+
+def component_names(config: MillConfig) -> list[str]:
+    """Damage components of a mill: combined/torsion per side (see the module docstring)."""
+    out = []
+    for side in config.sides:
+        sfx = f"_{side}" if side else ""
+        out += [f"pinion_combined{sfx}", f"pinion_torsion{sfx}", f"motor_torsion{sfx}"]
+    return out
+
+
+class MillAnalyzer:
+    """Streaming analyzer of one mill; see the module docstring.
+
+    ``feed(frame)`` takes an aligned frame (channel names of the mill config; missing channels
+    or samples NaN; optional ``flags`` masks) and returns the events completed in it (plain
+    dicts). ``report()`` is plain data; ``snapshot()``/``restore()`` continue exactly.
+    """
+
+    def __init__(
+        self,
+        config: MillConfig,
+        thresholds: StateThresholds | None = None,
+        settings: TransientSettings | None = None,
+        window_s: float = 60.0,
+    ) -> None:
+        self.config = config
+        self.fs = float(config.sample_rate_hz)
+        self.settings = settings or TransientSettings()
+        self._roles()
+        self.sm = OperatingStateMachine(self.fs, thresholds)
+        self.timeline = PhaseTimeline()
+        self.ring = SampleRing(len(self.rows), round(_RING_S * self.fs))
+        self.counters = {c: RainflowCounter() for c in self.components}
+        self.damage: dict[str, PhaseDamage] = {}
+        self.t0_ns: int | None = None
+        self.n = 0
+        self.lead = dict.fromkeys(self.components, 0)
+        self.last = dict.fromkeys(self.components, math.nan)
+        self.window_s = window_s
+        self.meter = self._meter()
+        self.steady_until = 0
+        self.barring: BarringAccumulator | None = None
+        self.open_start = -1
+        self.open_stop = -1
+        self.stop_after_start = False
+        self.starts: list[dict[str, Any]] = []
+        self.stops: list[dict[str, Any]] = []
+        self.barrings: list[dict[str, Any]] = []
+        self.windows: list[dict[str, Any]] = []
+        #: Steady windows and start/stop/barring events (each kind) kept for :meth:`report`;
+        #: a caller that stores each as it comes (the live worker) may keep far fewer.
+        self.keep_windows = _KEEP_WINDOWS
+        self.keep_events = _KEEP_EVENTS
+        self.starts_per_day: dict[str, int] = {}
+        self.starts_per_month: dict[str, dict[str, int]] = {}
+        self.starts_total = 0
+        self.phase_samples = dict.fromkeys(PHASE_OF_STATE.values(), 0)
+        self.discontinuities = 0
+
+    # ------------------------------------------------------------ configuration
+    def _roles(self) -> None:
+        cfg = self.config
+        speed = [n for n, ch in cfg.channels.items() if ch.kind == "rpm"]
+        if not speed:
+            raise ValueError(f"mill {cfg.id}: no rpm speed channel (tacho conversion not wired)")
+        self.speed_ch = speed[0]
+        shaft = cfg.channels[self.speed_ch].shaft
+        self.rated_rpm = cfg.drive.motor_speed_rpm if shaft == "motor" else cfg.pinion_speed_rpm
+        self.sides = cfg.sides
+        rows = [self.speed_ch]
+        self.motor, self.pinion, self.bending = [], [], []
+        for side in self.sides:
+            for lst, kind, sh in (
+                (self.motor, "torque", "motor"),
+                (self.pinion, "torque", "pinion"),
+                (self.bending, "bending", "pinion"),
+            ):
+                name = _channel(cfg, kind, sh, side)
+                lst.append(name)
+                rows.append(name or f"(missing {kind} {sh} {side})")
+        self.rows = rows
+        self.components = component_names(cfg)
+
+    def _meter(self) -> SteadyStateMeter:
+        t_m = 100.0 / self.config.motor_rated_torque_knm
+        ratio = self.config.drive.reducer_ratio
+        chans: dict[str, float | None] = {}
+        for k in range(len(self.sides)):
+            chans[f"motor_torque{k}"] = t_m
+            chans[f"pinion_torque{k}"] = t_m / ratio
+            chans[f"bending{k}"] = None
+        imb = ("motor_torque0", "motor_torque1") if len(self.sides) == 2 else None
+        rev = self.config.pinion_speed_rpm / 60.0 / self.fs
+        return SteadyStateMeter(chans, rev, self.fs, self.window_s, imb)
+
+    def _new_damage(self, t0_ns: int) -> None:
+        cfg = self.config
+        curve = cfg.material.sn_curve()
+        for c in self.components:
+            rec = DamageRecorder(curve, scale=cfg.shafts.kt_torsion)
+            self.damage[c] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone)
+
+    # ------------------------------------------------------------ feeding
+    def feed(self, frame: Frame) -> list[dict[str, Any]]:
+        """Analyse one aligned frame; returns the events (start/stop/barring dicts) it closed."""
+        n = len(frame)
+        if n == 0:
+            return []
+        if self.t0_ns is None:
+            self.t0_ns = int(frame.t0_ns)
+            self._new_damage(self.t0_ns)
+        elif frame.t0_ns != self.t_ns(self.n):
+            self._discontinuity(frame.t0_ns)
+        block, flagged_all = self._block(frame, n)
+        events: list[dict[str, Any]] = []
+        for tr in self.sm.feed(*self._state_inputs(block, flagged_all)):
+            events += self._on_transition(tr)
+        self._barring_progress()
+        self._count(block)
+        self.n += n
+        self._steady_progress()
+        if len(self.timeline.samples) > 32:
+            self.timeline.prune(self._oldest_needed())
+        return events
+
+    def _discontinuity(self, t0_ns: int) -> None:
+        """Frames must be contiguous (the aligner fills gaps with NaN); a jump is counted and
+        logged once, and the samples are taken as following on."""
+        if self.discontinuities == 0:
+            log.warning(
+                "mill %s: frame at %d ns, expected %d ns (frames must be contiguous; further "
+                "jumps counted)",
+                self.config.id,
+                t0_ns,
+                self.t_ns(self.n),
+            )
+        self.discontinuities += 1
+
+    def _block(self, frame: Frame, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rows in ring order, flagged samples as NaN, written to the ring (built in place when
+        the ring's next samples are in one piece); and where every motor channel is flagged."""
+        slot = self.ring.slot(n)
+        block = np.empty((len(self.rows), n)) if slot is None else slot
+        flags = frame.flags or {}
+        flagged_all = np.zeros(n, dtype=bool)
+        motor_flags = []
+        for r, name in enumerate(self.rows):
+            x = frame.data.get(name)
+            if x is None:
+                block[r] = np.nan
+                continue
+            block[r] = x
+            f = flags.get(name)
+            if f is not None:
+                block[r, f] = np.nan
+                if name in self.motor:
+                    motor_flags.append(f)
+        if motor_flags:
+            flagged_all = np.logical_and.reduce(motor_flags)
+        if slot is None:
+            self.ring.write(block)
+        else:
+            self.ring.advance(n)
+        return block, flagged_all
+
+    def _state_inputs(self, block: np.ndarray, flagged: np.ndarray) -> tuple[np.ndarray, ...]:
+        s = np.abs(block[0])
+        s /= self.rated_rpm
+        rows = [self.rows.index(m) for m in self.motor if m is not None]
+        if not rows:
+            rows = [self.rows.index(p) for p in self.pinion if p is not None]
+            scale = self.config.pinion_rated_torque_knm
+        else:
+            scale = self.config.motor_rated_torque_knm
+        q = np.abs(block[rows[0]])
+        for r in rows[1:]:  # fmax.reduce over the rows, pairwise in place (the same values)
+            np.fmax(q, np.abs(block[r]), out=q)
+        q /= scale  # NaN only where every side is missing
+        q[flagged] = -np.inf
+        return s, q
+
+    def t_ns(self, sample: int) -> int:
+        """Time of stream sample ``sample``, ns since the Unix epoch."""
+        t0 = self.t0_ns or 0
+        if self.fs.is_integer():
+            return t0 + (sample * 1_000_000_000) // int(self.fs)
+        return t0 + round(sample * 1e9 / self.fs)
+
+    # ------------------------------------------------------------ phases and events
+    def _on_transition(self, tr: Transition) -> list[dict[str, Any]]:
+        """Book the phase that ended; measure the events it closed; open new ones."""
+        prev, prev_at = self.timeline.states[-1], self.timeline.samples[-1]
+        self.timeline.add(tr)
+        self.phase_samples[PHASE_OF_STATE[OperatingState(prev)]] += tr.sample - prev_at
+        events: list[dict[str, Any]] = []
+        st = tr.state
+        if st in (OperatingState.RUNNING, OperatingState.STOPPING) and self.open_start >= 0:
+            events.append(self._start_event(self.open_start, tr))
+            self.stop_after_start = st == OperatingState.STOPPING
+            self.open_start = -1
+        if st == OperatingState.STOPPING and self.open_stop < 0:
+            self.open_stop = tr.sample
+        elif st == OperatingState.STOPPED:
+            if self.open_stop >= 0:
+                events.append(self._stop_event(self.open_stop, tr.sample))
+                self.open_stop = -1
+            if self.barring is not None:
+                events.append(self._barring_event(tr.sample))
+        elif st == OperatingState.STARTING and self.open_start < 0:
+            self.open_start = tr.sample
+            self._count_start(tr.sample)
+        elif st == OperatingState.BARRING and self.barring is None:
+            idle = self.settings.torque_idle * self.config.motor_rated_torque_knm
+            self.barring = BarringAccumulator(tr.sample, idle)
+        return events
+
+    def _window(self, n0: int, n1: int) -> PhaseWindow:
+        pre = round(_PREROLL_S * self.fs)
+        start, data = self.ring.read(n0 - pre, n1)
+        rows = {name: r for r, name in enumerate(self.rows)}
+
+        def pick(names: list[str | None]) -> list[np.ndarray]:
+            return [data[rows[n]] if n else np.full(data.shape[1], np.nan) for n in names]
+
+        cfg = self.config
+        return PhaseWindow(
+            n0=start, first=max(n0 - start, 0), fs=self.fs,
+            motor=pick(self.motor), pinion=pick(self.pinion), bending=pick(self.bending),
+            speed=data[0] / self.rated_rpm, sides=self.sides,
+            motor_rated_knm=cfg.motor_rated_torque_knm,
+            pinion_rated_knm=cfg.pinion_rated_torque_knm, mill_rpm_rated=cfg.mill_speed_rpm,
+        )  # fmt: skip
+
+    def _start_event(self, n0: int, tr: Transition) -> dict[str, Any]:
+        failed = tr.state != OperatingState.RUNNING
+        m = measure_start(self._window(n0, tr.sample), failed, self.settings)
+        d = dataclasses.asdict(m)
+        on = max(m.switch_on, key=lambda p: p.motor_pct, default=None)
+        sc = max(m.short_circuit, key=lambda p: p.motor_pct, default=None)
+        d |= {
+            "event": "start",
+            "t_ns": self.t_ns(m.sample),
+            "end_t_ns": self.t_ns(m.end_sample),
+            "truncated": max(n0 - round(_PREROLL_S * self.fs), 0) < self.ring.start,
+            "switch_on_peak_pct": None if on is None else on.motor_pct,
+            "short_circuit_peak_pct": None if sc is None else sc.motor_pct,
+            "rise_time_10_90_ms": None if on is None else on.rise_10_90_ms,
+            "rise_time_20_80_ms": None if on is None else on.rise_20_80_ms,
+            "shock_load": bool(on is not None and on.shock),
+            "alarm": self._start_alarm(on.motor_pct if on else None),
+        }
+        return _keep(self.starts, d, self.keep_events)
+
+    def _start_alarm(self, pct: float | None) -> str | None:
+        """The start's level: strictly above the warning / alarm peak (% of rated motor
+        torque), as the alarm rules judge it (seed 000 §7.2)."""
+        a = self.config.alarms
+        if pct is None or pct <= a.start_peak_warn_pct:
+            return None
+        return "alarm" if pct > a.start_peak_alarm_pct else "warning"
+
+    def _stop_event(self, n0: int, n1: int) -> dict[str, Any]:
+        from_start = self.stop_after_start
+        m = measure_stop(self._window(n0, n1), from_start, self.settings)
+        d = dataclasses.asdict(m) | {
+            "event": "stop",
+            "t_ns": self.t_ns(m.sample),
+            "end_t_ns": self.t_ns(m.end_sample),
+            "after_failed_start": from_start,
+            "truncated": max(n0 - round(_PREROLL_S * self.fs), 0) < self.ring.start,
+        }
+        return _keep(self.stops, d, self.keep_events)
+
+    def _barring_event(self, end: int) -> dict[str, Any]:
+        acc = self.barring
+        assert acc is not None
+        self._barring_add(end)
+        m = acc.result(self.config.motor_rated_torque_knm, self.fs)
+        self.barring = None
+        d = dataclasses.asdict(m) | {
+            "event": "barring",
+            "t_ns": self.t_ns(m.sample),
+            "end_t_ns": self.t_ns(m.end_sample),
+            "peak_limit_pct": self.config.barring_peak_limit_pct,
+            "above_limit": m.peak_pct > self.config.barring_peak_limit_pct,
+        }
+        return _keep(self.barrings, d, self.keep_events)
+
+    def _barring_add(self, until: int) -> None:
+        acc = self.barring
+        if acc is None or until <= acc.until:
+            return
+        start, data = self.ring.read(acc.until, until)
+        acc.until = start
+        rows = {name: r for r, name in enumerate(self.rows)}
+        bend = data[rows[self.bending[0]]] if self.bending[0] else None
+        motor = data[rows[self.motor[0]]] if self.motor[0] else data[rows[self.pinion[0]]]
+        acc.add(motor, bend)
+
+    def _barring_progress(self) -> None:
+        if self.barring is not None:
+            self._barring_add(self.sm.decided_until)
+
+    def _local(self, sample: int) -> datetime:
+        tz = zoneinfo.ZoneInfo(self.config.time_zone)
+        return datetime.fromtimestamp(self.t_ns(sample) / 1e9, tz=tz)
+
+    def _count_start(self, sample: int) -> None:
+        """Starts per local day and calendar month (seed 000 §6.1.3, §6.2.8), the last
+        :data:`KEEP_START_DAYS` days and :data:`KEEP_START_MONTHS` months, and in total."""
+        day = self._local(sample).date().isoformat()
+        self.starts_per_day[day] = self.starts_per_day.get(day, 0) + 1
+        month = self.starts_per_month.setdefault(day[:7], {"starts": 0})
+        month["starts"] += 1
+        self.starts_total += 1
+        while len(self.starts_per_day) > KEEP_START_DAYS:
+            del self.starts_per_day[min(self.starts_per_day)]
+        while len(self.starts_per_month) > KEEP_START_MONTHS:
+            del self.starts_per_month[min(self.starts_per_month)]
+
+    # ------------------------------------------------------------ damage
+    def _stress(self, block: np.ndarray) -> dict[str, np.ndarray]:
+        cfg, out = self.config, {}
+        for k, side in enumerate(self.sides):  # rows: speed, then motor, pinion, bending per side
+            sfx = f"_{side}" if side else ""
+            tm, tp, sb = block[1 + 3 * k], block[2 + 3 * k], block[3 + 3 * k]  # missing: NaN
+            tau_p = shear_stress_from_torque(tp, cfg.shafts.pinion_diameter_m)
+            out[f"pinion_combined{sfx}"] = combined_stress(sb, tau_p, THETA_SEED)
+            out[f"pinion_torsion{sfx}"] = tau_p
+            out[f"motor_torsion{sfx}"] = shear_stress_from_torque(tm, cfg.shafts.motor_diameter_m)
+        return out
+
+    def _count(self, block: np.ndarray) -> None:
+        decided = self.sm.decided_until
+        for comp, x in self._stress(block).items():
+            filled = self._hold(comp, x)
+            cycles = self.counters[comp].feed(filled)
+            self.damage[comp].record(cycles, self.timeline, decided, offset=self.lead[comp])
+
+    def _hold(self, comp: str, x: np.ndarray) -> np.ndarray:
+        """The NaN policy: hold the last valid value; skip samples before the first one."""
+        ok = np.isfinite(x)
+        if ok.all():
+            self.last[comp] = float(x[-1])
+            return x
+        idx = np.where(ok, np.arange(x.shape[0]), -1)
+        np.maximum.accumulate(idx, out=idx)
+        if math.isnan(self.last[comp]):
+            lead = int(np.count_nonzero(idx < 0))
+            if self.counters[comp].samples_seen == 0:
+                self.lead[comp] += lead
+            out = x[idx[lead:]]
+        else:
+            out = np.where(idx >= 0, x[np.maximum(idx, 0)], self.last[comp])
+        if out.size:
+            self.last[comp] = float(out[-1])
+        return out
+
+    def _oldest_needed(self) -> int:
+        oldest = self.sm.decided_until
+        for comp, counter in self.counters.items():
+            _, idx = counter.residue()
+            if idx.size:
+                oldest = min(oldest, int(idx[0]) + self.lead[comp])
+            pending = self.damage[comp].oldest_pending
+            if pending is not None:
+                oldest = min(oldest, pending)
+        return min(oldest, self.steady_until)
+
+    # ------------------------------------------------------------ steady state
+    def _steady_progress(self) -> None:
+        a, b = self.steady_until, self.sm.decided_until
+        if b <= a:
+            return
+        samples, states = self.timeline.samples, self.timeline.states
+        for k, (s0, st) in enumerate(zip(samples, states, strict=True)):
+            s1 = samples[k + 1] if k + 1 < len(samples) else b
+            lo, hi = max(a, s0), min(b, s1)
+            if hi <= lo or st != OperatingState.RUNNING:
+                continue
+            self._steady_feed(lo, hi)
+            if s1 < b:
+                self.meter.end_run()
+        self.steady_until = b
+
+    def _steady_feed(self, lo: int, hi: int) -> None:
+        """Running samples ``[lo, hi)`` to the steady-state meter. The ring's rows after speed
+        are motor, pinion, bending per side (a missing channel's row is NaN): the meter's
+        channels in order (:meth:`_meter`), so they go as one array."""
+        start, data = self.ring.read(lo, hi)
+        speed = np.abs(data[0]) / self.rated_rpm
+        for w in self.meter.feed_rows(start, speed, data[1:]):
+            _keep(self.windows, self._window_dict(w), self.keep_windows)
+
+    def _window_dict(self, w: SteadyWindow) -> dict[str, Any]:
+        return dataclasses.asdict(w) | {"t_ns": self.t_ns(w.sample)}
+
+    # ------------------------------------------------------------ report
+    def damage_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
+        """Attributed damage per component, local day and phase, so far (cheap: no residue
+        closure, no projections). Attribution only books cycles whose phase is decided, so
+        calling this often or rarely gives the same totals (the sums are exact)."""
+        out = {}
+        for comp, pd in self.damage.items():
+            pd.attribute(self.timeline, self.sm.decided_until)
+            out[comp] = pd.days()
+        return out
+
+    def report(self) -> dict[str, Any]:
+        """Everything measured so far, as plain JSON-ready data."""
+        from analytics.mill.report import build_report
+
+        return build_report(self)
+
+    # ------------------------------------------------------------ persistence
+    def snapshot(self) -> dict[str, Any]:
+        """Complete state as plain JSON-serialisable data."""
+        from analytics.mill.snapshot import snapshot_analyzer
+
+        return snapshot_analyzer(self)
+
+    @classmethod
+    def restore(
+        cls,
+        config: MillConfig,
+        snapshot: dict[str, Any],
+        settings: TransientSettings | None = None,
+        window_s: float = 60.0,
+    ) -> MillAnalyzer:
+        """An analyzer for ``config`` that continues exactly where the snapshotted one stood
+        (pass the same ``settings``/``window_s`` as the original; thresholds are restored)."""
+        from analytics.mill.snapshot import restore_analyzer
+
+        return restore_analyzer(cls(config, settings=settings, window_s=window_s), snapshot)
+
+
+def _plain(obj: Any) -> Any:
+    """JSON-normal form: tuples as lists, numpy scalars as Python numbers."""
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def _keep(store: list[dict[str, Any]], item: dict[str, Any], limit: int = _KEEP_EVENTS) -> Any:
+    item = _plain(item)
+    store.append(item)
+    if len(store) > limit:
+        del store[:-limit]
+    return item

@@ -1,0 +1,1173 @@
+"""Harmonic tracking of steady-state torque oscillations: order-tracked Welch spectra while running.
+
+Sources: seed 000 (Diering 2011) §6.1.2 and §6.2.7 — PSD plots of the steady-state torque compared
+with the drivetrain's expected excitation frequencies tell which cause to fix, and peaks that match
+none of them (10–15 Hz in Figure 36) point to torsional resonance; §6.2.4 — steady oscillations of
+10–45 % of motor rated torque; §10.5 — simple frequency analysis for operators; seed 001 eq. 12 —
+the 3× drive-gear line; seed 003 — the grinding-media line. The expected lines come from
+:mod:`analytics.drivetrain.kinematics`.
+
+Algorithm (:class:`HarmonicTracker`, a counter emitting :class:`HarmonicWindow` facts):
+
+1. Only running frames are used (``feed(..., running=False)`` returns at once). Samples of the
+   torque and bending channels and the pinion angle (integrated from the speed channel, left
+   rectangle rule, in pinion revolutions) are buffered in fixed-size arrays.
+2. A *segment* is ``M`` whole pinion revolutions; ``M ≥ window_s × rated pinion rev/s`` so the
+   resolution is ≤ ``1/window_s`` Hz (≤ 0.05 Hz for the default 20 s), and ``M`` is rounded up to
+   whole mill revolutions when that costs < 2× — then every mill-locked line (mill, pinion, 3×
+   pinion, liner passing, girth mesh and its ±mill-speed sidebands) falls exactly on a bin and
+   the sidebands lie exactly ``M × mill order`` bins from the mesh. Segments overlap by
+   ``overlap``; ``segments_per_window`` of them are averaged (Welch) into one window.
+3. Speed drift (``tracking``): ``"angle"`` resamples each segment to ``P`` points per pinion
+   revolution (Catmull-Rom) before the FFT, so shaft-locked lines stay sharp whatever the drift
+   (computed order tracking); ``"time"`` assumes the segment's mean speed; ``"auto"`` (default)
+   uses the angle only when the drift within a segment would smear the highest observable line
+   by more than ``auto_threshold_bins`` bins.
+4. Amplitudes are not taken from the FFT bins (resampling attenuates high orders, and bins
+   scallop). Each expected line is demodulated on the raw samples at its exact order:
+   ``X(o) = Σ x̃ₙ w(φₙ/M) e^{−2πi o φₙ} Δφₙ / Σ w(φₙ/M) Δφₙ``, amplitude ``2|X|``, which is exact
+   for a line locked to the shaft (no scalloping, no interpolation loss); a measured frequency
+   offset ``ε`` (bins, from the interpolated peak of the averaged spectrum) is corrected by the
+   window's response ``|W(ε)|``. Frequencies: interpolated peak order × mean pinion speed.
+5. Unexplained peaks: local maxima of the averaged spectrum ``peak_snr_db`` above a running-median
+   noise floor and above ``min_peak_pct`` % of rated torque (``min_peak_mpa`` for bending), that
+   lie more than ``match_bins`` bins from every expected line, harmonic or sideband → reported
+   as possible torsional resonance with the nearest natural frequency (seed 001 model).
+
+Knobs with measured errors (``tests/bench/bench_harmonics.py``): ``window_s``, ``overlap``,
+``window`` (hann, blackmanharris, flattop), ``tracking``. State is bounded: buffers sized from the
+configuration, spectra of fixed length, nothing grows with running time.
+
+Units: torque kN·m and % of the shaft's rated torque (motor rated on the motor shaft, motor rated ×
+reducer ratio on the pinion shaft, i.e. % of motor rated torque referred through the reducer as in
+seed 000 Table 14), bending MPa, speed rpm, frequency Hz, time int64 ns since the Unix epoch.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import zlib
+import zoneinfo
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from analytics.drivetrain.kinematics import ExpectedLine, KinematicsOptions, expected_lines
+from analytics.drivetrain.mill_config import MillConfig
+from analytics.snapshot_arrays import pack_array, unpack_array
+from analytics.spectra.order_kernels import (
+    angle_prefix,
+    center_taper,
+    cosine_window,
+    demodulate,
+    power_of,
+    resample,
+)
+from analytics.spectra.running_median import NoiseFloor, local_maxima
+
+__all__ = [
+    "DailyHarmonicTrend",
+    "HarmonicSettings",
+    "HarmonicTracker",
+    "HarmonicWindow",
+    "LineMeasurement",
+    "SnapshotMismatch",
+    "UnexplainedPeak",
+    "harmonics_report",
+    "is_running",
+    "stagger_for",
+    "window_response",
+]
+
+log = logging.getLogger(__name__)
+
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_KIND = ("harmonic_tracker", _SNAPSHOT_VERSION)
+#: Cosine-sum windows ``w(u) = Σ a_k (−1)^k cos 2πku`` on ``u ∈ [0, 1)`` (periodic).
+COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
+    "hann": (0.5, 0.5),
+    "blackmanharris": (0.35875, 0.48829, 0.14128, 0.01168),
+    "flattop": (0.21557895, 0.41663158, 0.277263158, 0.083578947, 0.006947368),
+}
+_SPEED_BLOCKS = 10  # speed block means per segment for the drift estimate
+_TINY = float(np.finfo(float).tiny)
+#: Largest deferral of a complete segment's spectrum, in hops (``stagger`` → 1): under one hop,
+#: so a segment never waits behind the next one.
+MAX_DEFER_HOPS = 0.8
+
+
+class SnapshotMismatch(ValueError):
+    """A sound snapshot taken under another mill configuration that does not fit the object
+    this configuration builds; the message names the mill and what differs. From
+    :meth:`HarmonicTracker.restore` (segment length, bins, buffer or tracked lines differ) it
+    concerns only spectra in progress, so a caller may start a fresh tracker instead
+    (:meth:`MillMonitor.restore <analytics.mill.analyzer.MillMonitor.restore>` does)."""
+
+
+class HarmonicSettings(BaseModel):
+    """Knobs of the harmonic tracker. Proposed as an optional ``MillConfig.harmonics`` field.
+
+    ``window_s``: minimum segment length (s at rated speed; resolution ≤ 1/window_s Hz);
+    ``overlap``: segment overlap fraction; ``segments_per_window``: segments averaged per window;
+    ``window``: taper; ``tracking``: ``angle``/``time``/``auto`` (module docstring, step 3);
+    ``search_bins``: ± bins searched for an expected line's peak; ``match_bins``: ± bins within
+    which a peak is explained by an expected line; ``peak_snr_db``: peak over the noise floor;
+    ``min_peak_pct`` (% rated torque) / ``min_peak_mpa``: smallest unexplained peak reported;
+    ``floor_bins``: half-width of the running-median noise floor; ``running_band``: pinion speed
+    band (fraction of rated) of :func:`is_running`.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    window_s: Annotated[float, Field(ge=1.0, le=600.0)] = 20.0
+    overlap: Annotated[float, Field(ge=0.0, le=0.9)] = 0.5
+    segments_per_window: Annotated[int, Field(ge=1, le=100)] = 4
+    window: Literal["hann", "blackmanharris", "flattop"] = "hann"
+    tracking: Literal["angle", "time", "auto"] = "auto"
+    auto_threshold_bins: Annotated[float, Field(gt=0)] = 0.25
+    search_bins: Annotated[int, Field(ge=1, le=10)] = 2
+    match_bins: Annotated[float, Field(ge=0.5, le=50)] = 3.0
+    peak_snr_db: Annotated[float, Field(ge=0)] = 15.0
+    min_peak_pct: Annotated[float, Field(ge=0)] = 0.5
+    min_peak_mpa: Annotated[float, Field(ge=0)] = 0.5
+    floor_bins: Annotated[int, Field(ge=5, le=500)] = 25
+    running_band: tuple[float, float] = (0.95, 1.05)
+    kinematics: KinematicsOptions = Field(default_factory=KinematicsOptions)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def is_running(
+    speed_rpm: float | np.ndarray,
+    config: MillConfig,
+    *,
+    shaft: Literal["pinion", "motor"] = "pinion",
+    band: tuple[float, float] = (0.95, 1.05),
+) -> bool:
+    """Speed-band running test: every finite sample within ``band`` × rated speed of ``shaft``.
+
+    A stop-gap until the operating-state machine lands; False for empty or all-NaN input.
+    """
+    rated = config.pinion_speed_rpm if shaft == "pinion" else config.drive.motor_speed_rpm
+    x = np.asarray(speed_rpm, dtype=np.float64).ravel()
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return False
+    return bool(x.min() >= band[0] * rated and x.max() <= band[1] * rated)
+
+
+def stagger_for(key: str) -> float:
+    """A fraction in [0, 1) fixed by ``key`` (CRC-32), e.g. a mill id → its ``stagger``."""
+    return zlib.crc32(key.encode()) / 2**32
+
+
+def window_values(name: str, u: np.ndarray) -> np.ndarray:
+    """Cosine-sum window ``name`` at fractions ``u ∈ [0, 1)`` of the segment."""
+    a = COSINE_WINDOWS[name]
+    w = np.full_like(u, a[0], dtype=np.float64)
+    for k in range(1, len(a)):
+        w += (-1) ** k * a[k] * np.cos(2.0 * np.pi * k * u)
+    return w
+
+
+def window_response(name: str, eps: np.ndarray | float) -> np.ndarray:
+    """|W(ε)| / W(0): the window's amplitude response ``ε`` bins off a line (scalloping)."""
+    a = COSINE_WINDOWS[name]
+    e = np.asarray(eps, dtype=np.float64)
+    s = a[0] * np.sinc(e)
+    for k in range(1, len(a)):
+        s = s + 0.5 * a[k] * (np.sinc(e - k) + np.sinc(e + k))
+    return np.abs(s) / a[0]
+
+
+def _spread(dphi: np.ndarray) -> float:
+    """(max − min) / mean of the means of ``np.array_split(dphi, _SPEED_BLOCKS)``: the blocks of
+    equal length summed as rows of one array (numpy's row sums are its 1-D sums: bitwise the
+    blocks' ``mean()``, without a call per block)."""
+    q, r = divmod(dphi.shape[0], _SPEED_BLOCKS)
+    if q == 0:
+        means = np.array([b.mean() for b in np.array_split(dphi, _SPEED_BLOCKS)])
+    else:
+        long = dphi[: r * (q + 1)].reshape(r, q + 1).sum(axis=1) / (q + 1)
+        means = np.concatenate((long, dphi[r * (q + 1) :].reshape(-1, q).sum(axis=1) / q))
+    return float((means.max() - means.min()) / means.mean())
+
+
+def _sinc(x: float) -> float:
+    """``np.sinc`` of one float (the same formula, without array overhead)."""
+    y = math.pi * (x if x != 0.0 else 1.0e-20)
+    return math.sin(y) / y
+
+
+def _response(name: str, eps: float) -> float:
+    """:func:`window_response` of one offset (per line in every table: scalar math)."""
+    a = COSINE_WINDOWS[name]
+    s = a[0] * _sinc(eps)
+    for k in range(1, len(a)):
+        s = s + 0.5 * a[k] * (_sinc(eps - k) + _sinc(eps + k))
+    return abs(s) / a[0]
+
+
+def _interp_table(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(ρ, δ): ρ(δ) = (|W(1−δ)| − |W(1+δ)|) / |W(δ)| for the 3-bin peak interpolation."""
+    d = np.linspace(-0.5, 0.5, 2001)
+    rho = (window_response(name, 1.0 - d) - window_response(name, 1.0 + d)) / window_response(
+        name, d
+    )
+    return rho, d
+
+
+# --------------------------------------------------------------------------- facts
+
+
+@dataclass(frozen=True)
+class LineMeasurement:
+    """One expected line on one channel in one window.
+
+    ``amplitude`` is half the peak-to-peak of the line in ``unit`` (kN·m or MPa),
+    ``amplitude_pct`` % of the shaft's rated torque (None for bending); ``frequency_hz`` and
+    ``order`` are measured (expected values when not ``detected``); ``snr_db`` over the floor.
+    Lines that are not ``observable`` carry no measurement (NaN).
+    """
+
+    channel: str
+    name: str
+    family: str
+    kind: str
+    expected_order: float | None
+    expected_hz: float
+    order: float
+    frequency_hz: float
+    amplitude: float
+    unit: str
+    amplitude_pct: float | None
+    snr_db: float
+    detected: bool
+    observable: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data; NaN becomes None (JSON-ready)."""
+        return {k: _jsonable(v) for k, v in vars(self).items()}  # flat: no asdict deep copy
+
+
+@dataclass(frozen=True)
+class UnexplainedPeak:
+    """A spectral peak matching no expected line: possible torsional resonance (seed 000 §6.2.7).
+
+    ``nearest_line``/``nearest_line_hz``: the closest expected line; ``nearest_natural_hz``: the
+    closest natural frequency of the torsional model, if one was given.
+    """
+
+    channel: str
+    frequency_hz: float
+    order: float
+    amplitude: float
+    unit: str
+    amplitude_pct: float | None
+    snr_db: float
+    nearest_line: str | None
+    nearest_line_hz: float | None
+    nearest_natural_hz: float | None
+    note: str = "possible torsional resonance"
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (JSON-ready)."""
+        return {k: _jsonable(v) for k, v in vars(self).items()}  # flat: no asdict deep copy
+
+
+@dataclass(frozen=True)
+class HarmonicWindow:
+    """The harmonic table of one Welch window (all channels).
+
+    ``segments`` are the (start, end) ns of the averaged segments; ``pinion_speed_rpm`` their mean
+    speed (total revolutions / total time); ``resolution_hz`` the bin width at that speed.
+    """
+
+    t_start_ns: int
+    t_end_ns: int
+    segments: tuple[tuple[int, int], ...]
+    pinion_speed_rpm: float
+    resolution_hz: float
+    tracking: str
+    lines: tuple[LineMeasurement, ...]
+    peaks: tuple[UnexplainedPeak, ...]
+
+    def line(self, channel: str, name: str) -> LineMeasurement:
+        """The measurement of line ``name`` on ``channel`` (KeyError if absent)."""
+        for m in self.lines:
+            if m.channel == channel and m.name == name:
+                return m
+        raise KeyError(f"no line {name!r} on channel {channel!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (JSON-ready)."""
+        return {
+            "t_start_ns": self.t_start_ns,
+            "t_end_ns": self.t_end_ns,
+            "segments": [list(s) for s in self.segments],
+            "pinion_speed_rpm": self.pinion_speed_rpm,
+            "resolution_hz": self.resolution_hz,
+            "tracking": self.tracking,
+            "lines": [m.to_dict() for m in self.lines],
+            "peaks": [p.to_dict() for p in self.peaks],
+        }
+
+
+def _db(power: float, floor: float) -> float:
+    """10 log10(power / floor), 0 dB for an all-zero spectrum."""
+    return 10.0 * math.log10(max(float(power), _TINY) / max(float(floor), _TINY))
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+# --------------------------------------------------------------------------- accumulator
+
+
+@dataclass
+class _Acc:
+    """Welch sums over segments: power spectra (channels × bins), demodulated line powers
+    (channels × lines), revolutions, seconds, angle-tracked count, worst speed spread."""
+
+    spec: np.ndarray
+    lines: np.ndarray
+    count: int = 0
+    revs: float = 0.0
+    seconds: float = 0.0
+    angle: int = 0
+    spread: float = 0.0
+    spans: list[tuple[int, int]] = field(default_factory=list)
+
+    @classmethod
+    def zeros(cls, channels: int, bins: int, lines: int) -> _Acc:
+        return cls(np.zeros((channels, bins)), np.zeros((channels, lines)))
+
+    def add(self, seg: _Segment, keep_spans: bool) -> None:
+        self.spec += seg.power
+        self.lines += seg.line_power
+        self.count += 1
+        self.revs += seg.revs
+        self.seconds += seg.seconds
+        self.angle += int(seg.angle)
+        self.spread = max(self.spread, seg.spread)
+        if keep_spans:
+            self.spans.append((seg.t_start_ns, seg.t_end_ns))
+
+    def reset(self) -> None:
+        self.spec[:] = 0.0
+        self.lines[:] = 0.0
+        self.count, self.revs, self.seconds, self.angle, self.spread = 0, 0.0, 0.0, 0, 0.0
+        self.spans = []
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "spec": pack_array(self.spec) if self.count else None,  # all zeros when empty
+            "lines": pack_array(self.lines),
+            "count": self.count,
+            "revs": self.revs,
+            "seconds": self.seconds,
+            "angle": self.angle,
+            "spread": self.spread,
+            "spans": [list(s) for s in self.spans],
+        }
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any], channels: int, bins: int, lines: int) -> _Acc:
+        spec = d["spec"]
+        return cls(
+            np.zeros((channels, bins))
+            if spec is None
+            else unpack_array(spec, shape=(channels, bins)),
+            unpack_array(d["lines"], shape=(channels, lines)),
+            int(d["count"]),
+            float(d["revs"]),
+            float(d["seconds"]),
+            int(d["angle"]),
+            float(d["spread"]),
+            [(int(a), int(b)) for a, b in d["spans"]],
+        )
+
+
+@dataclass(frozen=True)
+class _Segment:
+    power: np.ndarray
+    line_power: np.ndarray
+    revs: float
+    seconds: float
+    angle: bool
+    spread: float
+    t_start_ns: int
+    t_end_ns: int
+
+
+# --------------------------------------------------------------------------- the tracker
+
+
+@dataclass(frozen=True)
+class _Channel:
+    name: str
+    kind: str
+    unit: str
+    rated: float | None  # kN·m for torque, None for bending
+
+
+class HarmonicTracker:
+    """Streaming order-tracked Welch spectra and harmonic tables of torque and bending channels.
+
+    ``feed(t0_ns, fs, frame, running)`` takes one frame (``frame[channel]`` float arrays of equal
+    length, including the speed channel when the mill has one) and returns the
+    :class:`HarmonicWindow` facts it completed. ``snapshot()``/``restore()`` continue exactly;
+    the results do not depend on how the samples are split into frames (except that running
+    flags and gaps, by design, restart the segmentation).
+
+    ``stagger`` ∈ [0, 1) puts off the spectrum of a complete segment (the costly part: FFT,
+    line demodulation, and every ``segments_per_window``-th time the table) by that fraction of
+    :data:`MAX_DEFER_HOPS` hops of samples, so that mills started together do not all compute
+    their spectra in the same instant (issue 5: sample-to-store latency). The segment's samples
+    stay in the buffer meanwhile, so every window is bitwise what it is without stagger; only
+    the sample at which it is returned moves (deterministically: at the deferral's end, at a
+    stop, gap or non-finite sample, or at :meth:`flush`). ``stagger_for(mill id)`` spreads mills.
+    """
+
+    def __init__(
+        self,
+        config: MillConfig,
+        channels: Sequence[str] | None = None,
+        settings: HarmonicSettings | None = None,
+        natural_frequencies_hz: Sequence[float] = (),
+        stagger: float = 0.0,
+    ) -> None:
+        self.config = config
+        self.settings = settings or HarmonicSettings()
+        self.natural_frequencies_hz = tuple(float(f) for f in natural_frequencies_hz)
+        self.fs = float(config.sample_rate_hz)
+        self.channels = self._channels(config, channels)
+        self.speed_channel = next((n for n, c in config.channels.items() if c.kind == "rpm"), None)
+        self._speed_scale = self._speed_to_revs_per_sample()
+        self._geometry()
+        if not 0.0 <= stagger < 1.0:
+            raise ValueError(f"stagger must be in [0, 1), got {stagger!r}")
+        self.stagger = float(stagger)
+        hop_samples = self.hop_revs / (config.pinion_speed_rpm / 60.0) * self.fs
+        self.defer_samples = math.floor(self.stagger * MAX_DEFER_HOPS * hop_samples)
+        self._lines = [
+            ln for ln in expected_lines(config, None, self.settings.kinematics) if ln.observable
+        ]
+        self._all_lines = expected_lines(config, None, self.settings.kinematics)
+        self._unobservable_rows: dict[str, list[LineMeasurement]] = {}
+        self._grid: tuple[np.ndarray, np.ndarray] | None = None  # see _grid_taper
+        self._rho, self._delta = _interp_table(self.settings.window)
+        nc, nl = len(self.channels), len(self._lines)
+        self._buf = np.zeros((nc + 1, self.capacity + self.defer_samples))
+        self._len = 0
+        self._due: tuple[int, int] | None = None  # a complete segment: (end, length when due)
+        self._due_phi = np.empty(0)  # its angle phi[: end + 2] (revolutions)
+        self._approx_revs = 0.0
+        self._anchor_ns: int | None = None
+        self._anchor_offset = 0  # run sample index of buffer[0]
+        self._window = _Acc.zeros(nc, self.bins, nl)
+        self._total = _Acc.zeros(nc, self.bins, nl)
+        self.counters = {
+            "frames_skipped": 0,
+            "running_samples": 0,
+            "breaks": 0,
+            "stalls": 0,
+            "segments": 0,
+        }
+        self.latest: HarmonicWindow | None = None
+
+    # ------------------------------------------------------------------ construction
+    @staticmethod
+    def _channels(config: MillConfig, names: Sequence[str] | None) -> tuple[_Channel, ...]:
+        if names is None:
+            names = [n for n, c in config.channels.items() if c.kind in ("torque", "bending")]
+        out = []
+        for name in names:
+            ch = config.channels.get(name)
+            if ch is None or ch.kind not in ("torque", "bending"):
+                raise ValueError(f"channel {name!r} is not a torque or bending channel")
+            rated = None
+            if ch.kind == "torque":
+                motor = ch.shaft == "motor"
+                rated = config.motor_rated_torque_knm if motor else config.pinion_rated_torque_knm
+            out.append(_Channel(name, ch.kind, ch.units, rated))
+        if not out:
+            raise ValueError("no torque or bending channel to track")
+        return tuple(out)
+
+    def _speed_to_revs_per_sample(self) -> float:
+        """Factor from the speed channel's rpm to pinion revolutions per sample."""
+        if self.speed_channel is None:
+            return 0.0
+        ch = self.config.channels[self.speed_channel]
+        ratio = self.config.drive.reducer_ratio if ch.shaft == "motor" else 1.0
+        return 1.0 / (60.0 * self.fs * ratio)
+
+    def _geometry(self) -> None:
+        """Segment length M (pinion revs), hop, points per rev P, bins, buffer capacity."""
+        cfg, s = self.config, self.settings
+        rev_hz = cfg.pinion_speed_rpm / 60.0
+        m_min = math.ceil(s.window_s * rev_hz)
+        g, p = cfg.drive.girth_teeth, cfg.drive.pinion_teeth
+        q = g // math.gcd(g, p)  # pinion revs per whole number of mill revs
+        self.revs = math.ceil(m_min / q) * q if q <= 2 * m_min else m_min
+        self.hop_revs = self.revs * (1.0 - s.overlap)
+        self.points_per_rev = math.ceil(self.fs / rev_hz)
+        self.n_grid = self.revs * self.points_per_rev
+        self.bins = self.n_grid // 2 + 1
+        slowest = s.running_band[0] * 0.9 * rev_hz
+        self.capacity = math.ceil(self.revs / slowest * self.fs) + 16
+        self._win_sum = COSINE_WINDOWS[s.window][0] * self.n_grid
+
+    # ------------------------------------------------------------------ streaming
+    def feed(
+        self, t0_ns: int, fs: float, frame: dict[str, np.ndarray], running: bool
+    ) -> list[HarmonicWindow]:
+        """Add one frame; returns the windows it completed (usually none)."""
+        out: list[HarmonicWindow] = []
+        if not running:
+            self.counters["frames_skipped"] += 1
+            if self._anchor_ns is not None:  # a run ends: its buffered samples are of no use
+                self.flush(out)
+                self._break_at(self._anchor_offset + self._len)
+                self._anchor_ns = None
+            return out
+        if fs != self.fs:
+            raise ValueError(f"frame at {fs} Hz, mill {self.config.id} is at {self.fs} Hz")
+        x = self._stack(frame)
+        self.counters["running_samples"] += x.shape[1]
+        if not self._continuous(t0_ns):
+            self.flush(out)
+            self._anchor_ns = t0_ns
+            self._break_at(0)
+        first = self._anchor_offset + self._len  # run offset of the frame's first sample
+        start = 0
+        for j in np.flatnonzero(~np.isfinite(x).all(axis=0)):  # non-finite samples break the run
+            self._append(x[:, start:j], out)
+            self.flush(out)
+            self._break_at(first + int(j) + 1)
+            start = int(j) + 1
+        self._append(x[:, start:], out)
+        return out
+
+    def flush(self, out: list[HarmonicWindow] | None = None) -> list[HarmonicWindow]:
+        """Compute at once the complete segments still put off by ``stagger`` (before a break,
+        and at the end of a record); returns the windows they completed (appended to ``out``
+        if given)."""
+        out = [] if out is None else out
+        if self._anchor_ns is not None:
+            self._cut_segments(out, force=True)
+        return out
+
+    def _stack(self, frame: dict[str, np.ndarray]) -> np.ndarray:
+        names = [c.name for c in self.channels]
+        try:
+            rows = [np.asarray(frame[n], dtype=np.float64) for n in names]
+            n = rows[0].shape[0]
+            if self.speed_channel is not None:
+                rows.append(np.asarray(frame[self.speed_channel]) * self._speed_scale)
+            else:
+                rows.append(np.full(n, self.config.pinion_speed_rpm / 60.0 / self.fs))
+        except KeyError as exc:
+            raise ValueError(f"frame lacks channel {exc.args[0]!r}") from None
+        if any(r.ndim != 1 or r.shape[0] != n for r in rows):
+            raise ValueError("frame channels must be 1-D arrays of equal length")
+        return np.vstack(rows)
+
+    def _run_time(self, offset: int) -> int:
+        """Time (ns) of run sample ``offset``."""
+        assert self._anchor_ns is not None
+        return self._anchor_ns + round(offset * 1e9 / self.fs)
+
+    def _continuous(self, t0_ns: int) -> bool:
+        if self._anchor_ns is None:
+            return False
+        expected = self._run_time(self._anchor_offset + self._len)
+        return abs(t0_ns - expected) <= 0.5e9 / self.fs
+
+    def _break_at(self, offset: int) -> None:
+        """Drop the buffer; the run continues at run sample ``offset``."""
+        if self._len:
+            self.counters["breaks"] += 1
+        self._anchor_offset, self._len, self._approx_revs = offset, 0, 0.0
+        self._due = None
+
+    def _append(self, x: np.ndarray, out: list[HarmonicWindow]) -> None:
+        """Buffer ``x`` and cut the segments it completes. Without a complete segment waiting
+        the buffer holds ``capacity`` samples (full: the mill is too slow to complete one, and
+        the buffer is dropped); a waiting one may use the ``defer_samples`` beyond."""
+        self._cut_segments(out)  # finds a waiting segment again after a restore
+        pos = 0
+        while pos < x.shape[1]:
+            limit = self.capacity if self._due is None else self._buf.shape[1]
+            take = min(x.shape[1] - pos, limit - self._len)
+            piece = x[:, pos : pos + take]
+            self._buf[:, self._len : self._len + take] = piece
+            self._len += take
+            self._approx_revs += float(piece[-1].sum())
+            pos += take
+            self._cut_segments(out)
+            if self._len >= self.capacity and self._due is None:  # too slow: drop the buffer
+                self.counters["stalls"] += 1
+                self._anchor_offset += self._len
+                self._len, self._approx_revs = 0, 0.0
+
+    def _cut_segments(self, out: list[HarmonicWindow], force: bool = False) -> None:
+        """Cut every complete segment whose deferral is over (every one with ``force``)."""
+        while True:
+            if self._due is None:
+                self._due = self._complete_segment()
+                if self._due is None:
+                    return
+            end, due = self._due
+            if self._len < due and not force:
+                return
+            self._due = None
+            self._cut(end, out)
+
+    def _complete_segment(self) -> tuple[int, int] | None:
+        """``(end, due)`` when the buffer starts with a complete segment of ``M`` revolutions
+        (samples ``[0, end]``, one more for interpolation), cut once ``due`` samples are in."""
+        if self._approx_revs < self.revs * (1.0 - 1e-6):
+            return None
+        phi, end = angle_prefix(self._buf[-1, : self._len], self.revs)  # (only as far as used)
+        if end + 2 > self._len:
+            return None
+        self._due_phi = phi  # (the angle φ[: end + 2]: the same in _cut)
+        return end, min(end + 2 + self.defer_samples, self._buf.shape[1])
+
+    def _cut(self, end: int, out: list[HarmonicWindow]) -> None:
+        """Spectrum of the segment ``[0, end + 2)``, then drop one hop from the buffer
+        (``_due_phi``: its angle, from :meth:`_complete_segment`; a hop is < ``end``)."""
+        phi = self._due_phi
+        seg = self._segment(self._buf[:, : end + 2], phi, end)
+        window = self._add(seg)
+        if window is not None:
+            out.append(window)
+        hop = max(1, int(np.searchsorted(phi, self.hop_revs, side="left")))
+        self._compact(hop)
+
+    def _compact(self, hop: int) -> None:
+        rest = self._len - hop
+        self._buf[:, :rest] = self._buf[:, hop : self._len]
+        self._len = rest
+        self._anchor_offset += hop
+        self._approx_revs = float(self._buf[-1, :rest].sum())
+
+    # ------------------------------------------------------------------ one segment
+    def _segment(self, x: np.ndarray, phi: np.ndarray, end: int) -> _Segment:
+        """Spectrum and line demodulation of samples ``[0, end)`` covering ``M`` revolutions."""
+        self.counters["segments"] += 1
+        data, dphi = x[:-1], x[-1]
+        spread = self._spread(dphi[:end])
+        use_angle = self._use_angle(spread)
+        if not use_angle:  # constant speed: the segment's mean
+            phi = np.arange(phi.shape[0]) * (phi[end] / end)
+        power = self._power(data, phi, end)
+        line_power = self._demodulate(data[:, :end], phi, end)
+        t0 = self._run_time(self._anchor_offset)
+        return _Segment(
+            power,
+            line_power,
+            float(phi[end]),
+            end / self.fs,
+            use_angle,
+            spread,
+            t0,
+            self._run_time(self._anchor_offset + end),
+        )
+
+    def _spread(self, dphi: np.ndarray) -> float:
+        """Relative spread (max − min) / mean of the segment's speed block means."""
+        return _spread(dphi)
+
+    def _use_angle(self, spread: float) -> bool:
+        mode = self.settings.tracking
+        if mode != "auto":
+            return mode == "angle" and self.speed_channel is not None
+        top = max((ln.order or 0.0) for ln in self._lines)
+        return self.speed_channel is not None and spread * top * self.revs > (
+            self.settings.auto_threshold_bins
+        )
+
+    def _power(self, data: np.ndarray, phi: np.ndarray, end: int) -> np.ndarray:
+        """|FFT|² of the segment resampled to ``P`` points per revolution, tapered."""
+        grid, taper = self._grid_taper()
+        xp = phi[: end + 1]  # (the grid's sample positions: np.interp fused into the cubic)
+        resampled = resample(data, grid, xp)  # (every channel at once: one walk along xp)
+        power = np.empty((data.shape[0], self.bins))
+        for r in range(data.shape[0]):
+            y = resampled[r]
+            center_taper(y, y.mean(), taper)  # (y − mean) × taper
+            power_of(np.fft.rfft(y), power[r])  # |FFT|²
+        return power
+
+    def _grid_taper(self) -> tuple[np.ndarray, np.ndarray]:
+        """The angle grid of a segment (revolutions) and the taper on it (computed once)."""
+        if self._grid is None:
+            grid = np.arange(self.n_grid) * (self.revs / self.n_grid)
+            self._grid = grid, window_values(self.settings.window, grid / self.revs)
+        return self._grid
+
+    def _orders(self, rev_hz: float) -> np.ndarray:
+        """Orders of the tracked lines; fixed-frequency lines converted at ``rev_hz``."""
+        return np.array(
+            [ln.order if ln.order is not None else ln.frequency_hz / rev_hz for ln in self._lines]
+        )
+
+    def _demodulate(self, data: np.ndarray, phi: np.ndarray, end: int) -> np.ndarray:
+        """Squared amplitudes of every tracked line, demodulated at its exact order."""
+        p = phi[:end]
+        dphi = np.diff(phi[: end + 1])
+        q = cosine_window(p, self.revs, COSINE_WINDOWS[self.settings.window]) * dphi
+        qs = q.sum()
+        mean = data @ q / qs  # (the kernel demodulates data − mean)
+        rev_hz = phi[end] / (end / self.fs)
+        amp = 2.0 * demodulate(data, q, p, self._orders(rev_hz), mean) / qs  # (lines, channels)
+        return (amp.real**2 + amp.imag**2).T
+
+    def _add(self, seg: _Segment) -> HarmonicWindow | None:
+        self._window.add(seg, keep_spans=True)
+        self._total.add(seg, keep_spans=False)
+        if self._window.count < self.settings.segments_per_window:
+            return None
+        window = self._table(self._window)
+        self._window.reset()
+        self.latest = window
+        return window
+
+    # ------------------------------------------------------------------ tables
+    def _table(self, acc: _Acc) -> HarmonicWindow:
+        rev_hz = acc.revs / acc.seconds
+        spec = acc.spec / acc.count
+        line_amp = np.sqrt(acc.lines / acc.count)
+        lines: list[LineMeasurement] = []
+        peaks: list[UnexplainedPeak] = []
+        for k, ch in enumerate(self.channels):
+            floor = self._floor(spec[k])
+            lines += self._measure(ch, spec[k], floor, line_amp[k], rev_hz, acc.angle > 0)
+            peaks += self._peaks(ch, spec[k], floor, rev_hz, acc)
+        spans = tuple(acc.spans)
+        return HarmonicWindow(
+            t_start_ns=spans[0][0] if spans else 0,
+            t_end_ns=spans[-1][1] if spans else 0,
+            segments=spans,
+            pinion_speed_rpm=60.0 * rev_hz,
+            resolution_hz=rev_hz / self.revs,
+            tracking="angle" if acc.angle * 2 >= acc.count else "time",
+            lines=tuple(lines),
+            peaks=tuple(peaks),
+        )
+
+    def _floor(self, power: np.ndarray) -> NoiseFloor:
+        """Running median of the power spectrum over ± ``floor_bins`` bins (noise floor),
+        taken at the bins read (:class:`analytics.spectra.running_median.NoiseFloor`)."""
+        return NoiseFloor(power, self.settings.floor_bins)
+
+    def _amplitude(self, power: float) -> float:
+        """Amplitude of a bin-centred line whose |FFT|² is ``power``."""
+        return 2.0 * math.sqrt(power) / self._win_sum
+
+    def _measure(
+        self,
+        ch: _Channel,
+        power: np.ndarray,
+        floor: NoiseFloor,
+        demod_amp: np.ndarray,
+        rev_hz: float,
+        locked: bool,
+    ) -> list[LineMeasurement]:
+        mag = np.sqrt(power)
+        orders = self._orders(rev_hz)
+        bins = orders * self.revs
+        k = self._line_peaks(mag, bins)
+        rows = zip(  # (plain floats: no numpy scalar per line)
+            self._lines, orders.tolist(), bins.tolist(), k.tolist(),
+            self._interpolate_many(mag, k).tolist(), floor.at(k).tolist(), mag[k].tolist(),
+            demod_amp.tolist(), strict=True,
+        )  # fmt: skip
+        out = [
+            self._measure_line(
+                ch,
+                ln,
+                order,
+                b,
+                (kj, delta, fl, mk),
+                demod,
+                rev_hz,
+                locked and ln.order is not None,
+            )
+            for ln, order, b, kj, delta, fl, mk, demod in rows
+        ]
+        unobservable = self._unobservable_rows.get(ch.name)
+        if unobservable is None:  # (constant per channel: frozen rows made once)
+            unobservable = [
+                self._unobservable(ch, ln) for ln in self._all_lines if not ln.observable
+            ]
+            self._unobservable_rows[ch.name] = unobservable
+        return out + unobservable
+
+    def _line_peaks(self, mag: np.ndarray, bins: np.ndarray) -> np.ndarray:
+        """The largest bin within ± ``search_bins`` of each expected bin (the first of equals;
+        the window clipped to bins 1 … len − 2)."""
+        r = self.settings.search_bins
+        centre = np.rint(bins).astype(np.int64)  # (round half to even, as round())
+        lo = np.maximum(1, centre - r)
+        hi = np.minimum(mag.shape[0] - 2, centre + r)
+        if np.any(hi < lo):
+            raise ValueError("an expected line lies outside the spectrum")
+        idx = np.minimum(lo[:, None] + np.arange(2 * r + 1), hi[:, None])  # (repeats hi)
+        return lo + np.argmax(mag[idx], axis=1)
+
+    def _interpolate_many(self, mag: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Fractional bin offset δ ∈ [−½, ½] of the peak at each bin of ``k`` (3-bin ratio
+        method, one ``np.interp`` call); 0 at the ends or where the bin is empty."""
+        n = mag.shape[0]
+        if n < 3:
+            return np.zeros(k.shape[0])
+        kk = np.clip(k, 1, n - 2)
+        valid = (k > 0) & (k < n - 1) & (mag[kk] > 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rho = np.where(valid, (mag[kk + 1] - mag[kk - 1]) / mag[kk], 0.0)
+        return np.where(valid, np.interp(rho, self._rho, self._delta), 0.0)
+
+    def _measure_line(
+        self,
+        ch: _Channel,
+        ln: ExpectedLine,
+        order: float,
+        b: float,
+        peak: tuple[int, float, float, float],
+        demod: float,
+        rev_hz: float,
+        locked: bool,
+    ) -> LineMeasurement:
+        """Peak ``peak`` = (bin ``k``, its interpolated offset, the floor there, the magnitude
+        ``|FFT|`` there) of the search
+        ± ``search_bins`` around the expected bin ``b`` (:meth:`_line_peaks`); amplitude from
+        the demodulated value (window-response corrected), or — for a peak more than ½ bin off —
+        from the interpolated FFT bin. ``locked``: order-tracked shaft line, which cannot leave
+        its order, so a far-off maximum (a neighbour's lobe) is ignored and the exact order is
+        used."""
+        k, delta, floor, mag_k = peak
+        snr = _db(mag_k**2, floor)
+        detected = snr >= self.settings.peak_snr_db
+        eps = (k + delta - b) if detected else 0.0
+        if locked and abs(eps) > 0.5:
+            eps = 0.0
+        if abs(eps) <= 0.5:
+            amp = demod / _response(self.settings.window, eps)
+        else:
+            amp = self._amplitude(mag_k**2) / _response(self.settings.window, delta)
+        measured = (b + eps) / self.revs
+        return LineMeasurement(
+            ch.name, ln.name, ln.family, ln.kind, ln.order, order * rev_hz, measured,
+            measured * rev_hz, amp, ch.unit, self._pct(ch, amp), snr, detected, True,
+        )  # fmt: skip
+
+    @staticmethod
+    def _unobservable(ch: _Channel, ln: ExpectedLine) -> LineMeasurement:
+        nan = math.nan
+        return LineMeasurement(
+            ch.name, ln.name, ln.family, ln.kind, ln.order, ln.frequency_hz, nan, nan, nan,
+            ch.unit, None, nan, False, False,
+        )  # fmt: skip
+
+    @staticmethod
+    def _pct(ch: _Channel, amp: float) -> float | None:
+        return None if ch.rated is None else 100.0 * amp / ch.rated
+
+    # ------------------------------------------------------------------ unexplained peaks
+    def _candidates(self, power: np.ndarray, floor: NoiseFloor) -> np.ndarray:
+        """Local maxima ``peak_snr_db`` above the floor within the low/high order limits."""
+        mill = self.config.excitation_orders()["mill_speed"]
+        lo = max(2.5, 0.5 * mill * self.revs)
+        limit_hz = min(
+            self.settings.kinematics.bandwidth_hz or self.config.telemetry_bandwidth_hz,
+            self.fs / 2.0,
+        )
+        hi = limit_hz / (self.config.pinion_speed_rpm / 60.0) * self.revs
+        k = local_maxima(power, lo, hi)
+        return floor.exceeded(k, 10.0 ** (self.settings.peak_snr_db / 10.0))
+
+    def _peaks(
+        self, ch: _Channel, power: np.ndarray, floor: NoiseFloor, rev_hz: float, acc: _Acc
+    ) -> list[UnexplainedPeak]:
+        cand = self._candidates(power, floor)
+        if cand.shape[0] == 0:
+            return []
+        deltas = self._interpolate_many(np.sqrt(power), cand)  # (each as _interpolate's)
+        line_bins = self._orders(rev_hz) * self.revs
+        tol = self.settings.match_bins + acc.spread * line_bins
+        positions = cand + deltas
+        explained = (np.abs(line_bins[None, :] - positions[:, None]) <= tol).any(axis=1)
+        all_lines, min_peak = self._all_lines, self._min_peak(ch)
+        out = []
+        rows = zip(
+            cand.tolist(), deltas.tolist(), positions.tolist(), explained.tolist(), strict=True
+        )
+        for k, delta, bin_pos, known in rows:
+            amp = self._amplitude(power[k]) / _response(self.settings.window, delta)
+            if amp < min_peak or known:
+                continue
+            f = bin_pos / self.revs * rev_hz
+            near = min(all_lines, key=lambda ln: abs(ln.frequency_hz - f), default=None)
+            out.append(
+                UnexplainedPeak(
+                    ch.name, f, bin_pos / self.revs, amp, ch.unit, self._pct(ch, amp),
+                    _db(power[k], floor[k]),
+                    near.name if near else None, near.frequency_hz if near else None,
+                    self._nearest_natural(f),
+                )
+            )  # fmt: skip
+        return out
+
+    def _min_peak(self, ch: _Channel) -> float:
+        if ch.rated is None:
+            return self.settings.min_peak_mpa
+        return self.settings.min_peak_pct / 100.0 * ch.rated
+
+    def _nearest_natural(self, f: float) -> float | None:
+        if not self.natural_frequencies_hz:
+            return None
+        return min(self.natural_frequencies_hz, key=lambda fn: abs(fn - f))
+
+    # ------------------------------------------------------------------ reading
+    @property
+    def running_segments(self) -> int:
+        """Segments averaged since the start (or the last :meth:`reset_total`)."""
+        return self._total.count
+
+    def total_table(self) -> HarmonicWindow | None:
+        """The harmonic table over every running segment so far (None before the first)."""
+        return self._table(self._total) if self._total.count else None
+
+    def reset_total(self) -> None:
+        """Forget the long-run average (e.g. after maintenance)."""
+        self._total.reset()
+
+    def average_spectrum(self, channel: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Long-run average of ``channel``: (frequency Hz, PSD unit²/Hz, line amplitude unit)
+        at the mean running speed; empty arrays before the first segment."""
+        k = [c.name for c in self.channels].index(channel)
+        acc = self._total
+        if acc.count == 0:
+            return np.empty(0), np.empty(0), np.empty(0)
+        rev_hz = acc.revs / acc.seconds
+        power = acc.spec[k] / acc.count
+        freq = np.arange(self.bins) / self.revs * rev_hz
+        rate = self.points_per_rev * rev_hz  # angle-domain samples per second
+        taper = window_values(self.settings.window, np.arange(self.n_grid) / self.n_grid)
+        psd = 2.0 * power / (rate * float(np.sum(taper**2)))
+        return freq, psd, 2.0 * np.sqrt(power) / self._win_sum
+
+    def expected(self) -> list[ExpectedLine]:
+        """Expected lines at the long-run mean speed (rated before any segment)."""
+        acc = self._total
+        rpm = 60.0 * acc.revs / acc.seconds if acc.count else None
+        return expected_lines(self.config, rpm, self.settings.kinematics)
+
+    # ------------------------------------------------------------------ persistence
+    def snapshot(self) -> dict[str, Any]:
+        """The complete state as plain JSON-serialisable data (arrays packed, exact)."""
+        nc, nl = len(self.channels), len(self._lines)
+        return {
+            "kind": "harmonic_tracker",
+            "version": _SNAPSHOT_VERSION,
+            "mill": self.config.id,
+            "channels": [c.name for c in self.channels],
+            "settings": self.settings.model_dump(mode="json"),
+            "stagger": self.stagger,
+            "shape": [nc, self.bins, nl, self.capacity],
+            "layout": self._layout(),
+            "buffer": pack_array(self._buf[:, : self._len]),
+            "len": self._len,
+            "approx_revs": self._approx_revs,
+            "anchor_ns": self._anchor_ns,
+            "anchor_offset": self._anchor_offset,
+            "window": self._window.to_json(),
+            "total": self._total.to_json(),
+            "counters": dict(self.counters),
+            "latest": None if self.latest is None else self.latest.to_dict(),
+        }
+
+    @classmethod
+    def restore(
+        cls,
+        config: MillConfig,
+        snapshot: dict[str, Any],
+        natural_frequencies_hz: Sequence[float] = (),
+    ) -> HarmonicTracker:
+        """A tracker that continues exactly where the snapshotted one stood."""
+        if (snapshot.get("kind"), snapshot.get("version")) != _SNAPSHOT_KIND:
+            raise ValueError(f"not a harmonic tracker snapshot of version {_SNAPSHOT_VERSION}")
+        if snapshot["mill"] != config.id:
+            raise ValueError(f"snapshot of mill {snapshot['mill']!r}, config is {config.id!r}")
+        t = cls(
+            config,
+            snapshot["channels"],
+            HarmonicSettings.model_validate(snapshot["settings"]),
+            natural_frequencies_hz,
+            float(snapshot["stagger"]),
+        )
+        misfit = t._misfit(snapshot)
+        if misfit:
+            raise SnapshotMismatch(
+                f"mill {config.id!r}: the harmonic tracker's snapshot does not fit the mill's "
+                f"configuration now: {misfit}"
+            )
+        nc, bins, nl, _ = snapshot["shape"]
+        n = int(snapshot["len"])
+        t._buf[:, :n] = unpack_array(snapshot["buffer"], shape=(nc + 1, n))
+        t._len, t._approx_revs = n, float(snapshot["approx_revs"])
+        t._anchor_ns, t._anchor_offset = snapshot["anchor_ns"], int(snapshot["anchor_offset"])
+        t._window = _Acc.from_json(snapshot["window"], nc, bins, nl)
+        t._total = _Acc.from_json(snapshot["total"], nc, bins, nl)
+        t.counters.update(snapshot["counters"])
+        t.latest = None if snapshot["latest"] is None else _window_from_dict(snapshot["latest"])
+        return t
+
+    def _layout(self) -> dict[str, Any]:
+        """What the snapshot's arrays are laid out by, beyond their shape: the segment length
+        (pinion revolutions) and the tracked lines as ``[name, order, fixed Hz]`` (the fixed
+        frequency only for a line without an order)."""
+        lines = [[ln.name, ln.order, ln.frequency_hz if ln.order is None else None]
+                 for ln in self._lines]  # fmt: skip
+        return {"revs": self.revs, "lines": lines}
+
+    def _misfit(self, snapshot: dict[str, Any]) -> str:
+        """How ``snapshot``'s geometry differs from this tracker's, in words ("" if it fits).
+        Snapshots from before ``layout`` was recorded are checked by their shape alone."""
+        _, bins, nl, cap = snapshot["shape"]
+        layout = snapshot.get("layout", {})
+        revs = layout.get("revs")
+        problems = []
+        if bins != self.bins or revs not in (None, self.revs):
+            problems.append(f"segment of {'?' if revs is None else revs} pinion revolutions / "
+                            f"{bins} bins in the snapshot, {self.revs} / {self.bins} with the "
+                            "configuration now")  # fmt: skip
+        if cap != self.capacity:
+            problems.append(f"segment buffer of {cap} samples in the snapshot, "
+                            f"{self.capacity} now")  # fmt: skip
+        problems += self._line_misfit(nl, layout.get("lines"))
+        return "; ".join(problems)
+
+    def _line_misfit(self, count: int, lines: list[list[Any]] | None) -> list[str]:
+        """The tracked lines' difference from a snapshot's (``count`` lines, ``lines`` if known)."""
+        if count != len(self._lines):
+            return [f"{count} tracked lines in the snapshot, {len(self._lines)} now"]
+        now = self._layout()["lines"]
+        if lines is None or lines == now:
+            return []
+        moved = [a[0] for a, b in zip(lines, now, strict=True) if a != b]
+        return [f"tracked lines now at other orders or names: {', '.join(moved)}"]
+
+
+def _window_from_dict(d: dict[str, Any]) -> HarmonicWindow:
+    def num(v: Any) -> Any:
+        return math.nan if v is None else v
+
+    lines = []
+    for m in d["lines"]:
+        m = dict(m)
+        for key in ("order", "frequency_hz", "amplitude", "snr_db"):
+            m[key] = num(m[key])
+        lines.append(LineMeasurement(**m))
+    return HarmonicWindow(
+        d["t_start_ns"], d["t_end_ns"], tuple(tuple(s) for s in d["segments"]),
+        d["pinion_speed_rpm"], d["resolution_hz"], d["tracking"], tuple(lines),
+        tuple(UnexplainedPeak(**p) for p in d["peaks"]),
+    )  # fmt: skip
+
+
+# --------------------------------------------------------------------------- recorders
+
+
+def harmonics_report(tracker: HarmonicTracker) -> dict[str, Any]:
+    """Report of the running portions so far (long-run Welch average over every segment).
+
+    Keys: ``harmonics`` (one row per channel and expected line), ``unexplained_peaks``, and
+    ``summary`` (segments, running seconds, mean pinion speed, resolution). JSON-ready.
+    """
+    table = tracker.total_table()
+    if table is None:
+        return {"harmonics": [], "unexplained_peaks": [], "summary": {"segments": 0}}
+    acc = tracker._total
+    return {
+        "harmonics": [m.to_dict() for m in table.lines],
+        "unexplained_peaks": [p.to_dict() for p in table.peaks],
+        "summary": {
+            "segments": acc.count,
+            "running_s": tracker.counters["running_samples"] / tracker.fs,
+            "pinion_speed_rpm": table.pinion_speed_rpm,
+            "resolution_hz": table.resolution_hz,
+            "tracking": table.tracking,
+        },
+    }
+
+
+class DailyHarmonicTrend:
+    """Per-day aggregates of each line's amplitude (mean, max) and frequency (mean).
+
+    Days are local calendar days in ``time_zone`` (the mill's); only the last ``max_days`` days
+    are kept (bounded). Consumes :class:`HarmonicWindow` facts via :meth:`add`.
+    """
+
+    def __init__(self, time_zone: str = "UTC", max_days: int = 400) -> None:
+        self.time_zone = time_zone
+        self._tz = zoneinfo.ZoneInfo(time_zone)
+        self.max_days = max_days
+        self._days: dict[str, dict[str, list[float]]] = {}
+
+    def _day(self, t_ns: int) -> str:
+        return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).astimezone(self._tz).date().isoformat()
+
+    def add(self, window: HarmonicWindow) -> None:
+        """Fold one window in (detected, observable lines only)."""
+        day = self._days.setdefault(self._day(window.t_start_ns), {})
+        for m in window.lines:
+            if not (m.observable and m.detected):
+                continue
+            agg = day.setdefault(f"{m.channel}/{m.name}", [0.0, 0.0, 0.0, 0.0])
+            agg[0] += 1.0
+            agg[1] += m.amplitude
+            agg[2] = max(agg[2], m.amplitude)
+            agg[3] += m.frequency_hz
+        for old in sorted(self._days)[: -self.max_days]:
+            del self._days[old]
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One row per day, channel and line: windows, mean/max amplitude, mean frequency."""
+        out = []
+        for day in sorted(self._days):
+            for key, (n, s, mx, fs) in sorted(self._days[day].items()):
+                channel, line = key.split("/", 1)
+                out.append({
+                    "day": day, "channel": channel, "line": line, "windows": int(n),
+                    "mean_amplitude": s / n, "max_amplitude": mx, "mean_frequency_hz": fs / n,
+                })  # fmt: skip
+        return out
+
+    def snapshot(self) -> dict[str, Any]:
+        """Plain JSON-serialisable state."""
+        return {"kind": "harmonic_trend", "version": 1, "time_zone": self.time_zone,
+                "max_days": self.max_days, "days": self._days}  # fmt: skip
+
+    @classmethod
+    def restore(cls, snapshot: dict[str, Any]) -> DailyHarmonicTrend:
+        """A recorder that continues where the snapshotted one stood."""
+        if snapshot.get("kind") != "harmonic_trend":
+            raise ValueError("not a harmonic trend snapshot")
+        trend = cls(snapshot["time_zone"], int(snapshot["max_days"]))
+        trend._days = {d: {k: list(v) for k, v in lines.items()}
+                       for d, lines in snapshot["days"].items()}  # fmt: skip
+        return trend

@@ -1,0 +1,178 @@
+"""What the alarm endpoints answer: the list (cheap to poll), one alarm, acknowledgement.
+
+Polling (SCADA/HMI every few seconds):
+
+* **ETag** — a strong validator of the listed alarms: a hash of their ``(alarm_id, seq)``
+  pairs. Every transition increments its alarm's ``seq``, and the row set changes when an alarm
+  enters or leaves the filter, so the tag changes exactly when the body would. A poller sending
+  ``If-None-Match`` gets ``304 Not Modified`` with no body while nothing changed.
+  (A max(``updated_ns``) + count tag misses an escalation of an older alarm: ``updated_ns`` is
+  the mill's sample clock, acknowledgements are wall clock, so the max need not move.)
+* **cursor** — ``since`` = the ``cursor`` of the previous answer (largest ``updated_ns`` seen):
+  only alarms changed at or after it come back (the boundary alarm again; de-duplicate on
+  ``(alarm_id, seq)``). ``updated_ns`` is sample time, so use the ETag on the open list when
+  mills' clocks may lag each other.
+
+Acknowledgement goes through the worker thread (:meth:`service.worker.worker.Worker.request_ack`),
+so
+its transitions are stored and published on ``…/@alarms`` like any other and the engine is never
+touched from an API thread.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+from concurrent.futures import TimeoutError as FutureTimeout
+from dataclasses import asdict
+from typing import Any
+
+from alarms.engine import UnknownAlarmError
+from alarms.lifecycle import AlarmState
+from service.api.errors import (
+    BadRequest,
+    Conflict,
+    Forbidden,
+    NotFound,
+    Unauthorized,
+    Unavailable,
+)
+from service.store.database import AlarmRow, Store
+from service.worker.checkpoints import MillHeldError
+from service.worker.runtime import ServiceRuntime
+
+__all__ = [
+    "ACK_TIMEOUT_S",
+    "STATE_PATTERN",
+    "acknowledge",
+    "alarm_detail",
+    "alarm_list",
+    "check_api_key",
+    "parse_states",
+]
+
+ACK_TIMEOUT_S = 5.0
+_STATES = tuple(s.value for s in AlarmState)
+_ALIASES = {"open": ("raised", "acknowledged"), "all": ()}
+_WORD = "(" + "|".join([*_STATES, *_ALIASES]) + ")"
+STATE_PATTERN = f"^{_WORD}(,{_WORD})*$"
+"""The ``state`` filter: states or aliases, comma-separated."""
+
+
+def parse_states(state: str | None) -> tuple[str, ...]:
+    """``raised``, ``acknowledged``, ``cleared``, comma-separated, or ``open``/``all``."""
+    out: list[str] = []
+    for part in filter(None, (p.strip() for p in (state or "").split(","))):
+        if part in _ALIASES:
+            out += _ALIASES[part]
+        elif part in _STATES:
+            out.append(part)
+        else:
+            known = ", ".join([*_STATES, *_ALIASES])
+            raise BadRequest("Invalid state", f"Unknown alarm state {part!r}; use {known}.")
+    return tuple(dict.fromkeys(out))
+
+
+def etag(rows: list[AlarmRow]) -> str:
+    """Strong ETag of a listing (module docstring)."""
+    h = hashlib.blake2b(digest_size=12)
+    for r in rows:
+        h.update(f"{r.alarm_id}:{r.seq};".encode())
+    return f'"{len(rows)}-{h.hexdigest()}"'
+
+
+def alarm_list(
+    store: Store, states: tuple[str, ...], since_ns: int | None, mill_id: str | None
+) -> tuple[dict[str, Any], str]:
+    """The listing (alarms, count, next cursor) and its ETag."""
+    rows = store.alarms(states or None, since_ns, mill_id)
+    cursor = max((r.updated_ns for r in rows), default=since_ns)
+    body = {"alarms": [asdict(r) for r in rows], "count": len(rows), "cursor": cursor}
+    return body, etag(rows)
+
+
+def matches(if_none_match: str | None, tag: str) -> bool:
+    """Whether an ``If-None-Match`` header names ``tag`` (or ``*``); weak tags compare equal."""
+    if not if_none_match:
+        return False
+    given = {t.strip().removeprefix("W/") for t in if_none_match.split(",")}
+    return "*" in given or tag in given
+
+
+def alarm_detail(store: Store, alarm_id: str) -> dict[str, Any]:
+    """One alarm with its transitions; :class:`NotFound` naming the id."""
+    row = store.alarm(alarm_id)
+    if row is None:
+        raise NotFound(
+            "Unknown alarm", f"No alarm {alarm_id!r} is stored here; GET /alarms lists the alarms."
+        )
+    transitions = [asdict(t) for t in store.alarm_transitions(alarm_id)]
+    return {**asdict(row), "transitions": transitions}
+
+
+def check_api_key(configured: str | None, given: str | None) -> None:
+    """401 without the right ``X-API-Key``; 403 when no key is configured (acks disabled)."""
+    if not configured:
+        raise Forbidden(
+            "Acknowledgement disabled",
+            "This service has no api.api_key configured, "
+            "so alarms cannot be acknowledged over the API.",
+        )
+    if not given:
+        raise Unauthorized(
+            "API key required",
+            "Send the service's API key in the X-API-Key header to acknowledge an alarm.",
+        )
+    if not hmac.compare_digest(given.encode(), configured.encode()):
+        raise Unauthorized(
+            "Wrong API key", "The X-API-Key header does not match this service's API key."
+        )
+
+
+def acknowledge(runtime: ServiceRuntime, store: Store, alarm_id: str, by: str) -> dict[str, Any]:
+    """Acknowledge through the worker thread and return the alarm as stored afterwards."""
+    row = store.alarm(alarm_id)
+    if row is None:
+        alarm_detail(store, alarm_id)  # raises NotFound naming the id
+    assert row is not None
+    if row.state == AlarmState.CLEARED:
+        raise Conflict(
+            "Alarm cleared",
+            f"Alarm {alarm_id!r} is already cleared; there is nothing to acknowledge.",
+        )
+    if row.state == AlarmState.RAISED:
+        _ack_on_worker(runtime, row.mill_id, alarm_id, by)
+    return alarm_detail(store, alarm_id)
+
+
+def _ack_on_worker(runtime: ServiceRuntime, mill_id: str, alarm_id: str, by: str) -> None:
+    request = runtime.request_ack(mill_id, alarm_id, by)
+    if request is None:
+        raise Unavailable(
+            "Worker stopped",
+            "The analysis worker is not running, so the "
+            "acknowledgement cannot be applied; try again shortly.",
+        )
+    try:
+        request.done.result(timeout=ACK_TIMEOUT_S)
+    except FutureTimeout as exc:
+        raise Unavailable(
+            "Worker busy",
+            f"The worker did not apply the acknowledgement within "
+            f"{ACK_TIMEOUT_S:.0f} s; it is still queued.",
+        ) from exc
+    except MillHeldError as exc:
+        raise Conflict(
+            "Mill held", f"Alarm {alarm_id!r} cannot be acknowledged now: {exc}."
+        ) from exc
+    except UnknownAlarmError as exc:
+        raise Conflict(
+            "Alarm not open",
+            f"Alarm {alarm_id!r} is no longer open in the alarm engine (it cleared meanwhile).",
+        ) from exc
+    except KeyError as exc:
+        raise Conflict(
+            "Mill not analysed",
+            f"Alarm {alarm_id!r} belongs to mill {mill_id!r}, "
+            "which this service no longer analyses.",
+        ) from exc

@@ -1,0 +1,129 @@
+"""The :class:`~service.api.backend.Backend` over a runtime in this process.
+
+Used by the in-process API (``millwatch serve``, the demo) and by every worker to answer zenoh
+queries (:mod:`service.remote.queryables`), so a remote API returns what an in-process one would.
+Reads go to the store (read-only connections) and to ``runtime.status``, the snapshot the worker
+thread refreshes every 0.5 s; acknowledgements go through the worker thread.
+
+The alarm board (:mod:`service.api.alarm_board`) is fed by the runtime's stored transitions (it
+registers on ``runtime.alarm_listeners``) and loaded once from the store when the store is open.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from prometheus_client import CollectorRegistry
+
+from service.api.alarm_board import AlarmBoard, row_from_dict
+from service.api.alarm_views import acknowledge, alarm_detail
+from service.api.metrics import metrics_registry
+from service.api.mill_views import (
+    config_of,
+    mill_detail,
+    mill_life,
+    mill_monthly_report,
+    mill_spectrum,
+    mill_starts,
+    mill_summary,
+    store_of,
+)
+from service.reports.monthly import MonthlyReport
+from service.worker.partition import worker_identity
+from service.worker.runtime import MILL_CHECKS, ServiceRuntime
+
+__all__ = ["LocalBackend"]
+
+
+class LocalBackend:
+    """Answers from ``runtime`` (started or not: without a store, reads are 503)."""
+
+    def __init__(self, runtime: ServiceRuntime, *, worker: str | None = None) -> None:
+        self.runtime = runtime
+        self.mills = runtime.mills
+        self.api_key = runtime.settings.api.api_key
+        self.worker_name = worker or worker_identity(runtime.settings)
+        self._board = AlarmBoard()
+        self._board_loaded = False
+        self._registry: CollectorRegistry | None = None
+        runtime.alarm_listeners.append(self._board.apply_transitions)
+        self._load_board()
+
+    # ------------------------------------------------------------------ alarms
+    def _load_board(self) -> bool:
+        if not self._board_loaded and self.runtime.store is not None:
+            self._board.merge(self.runtime.store.alarms())
+            self._board_loaded = True
+        return self._board_loaded
+
+    def alarm_board(self) -> AlarmBoard:
+        """The board, loaded from the store (503 while the store is not open)."""
+        if not self._load_board():
+            store_of(self.runtime)  # raises Unavailable naming the reason
+        return self._board
+
+    def alarm(self, alarm_id: str) -> dict[str, Any]:
+        return alarm_detail(store_of(self.runtime), alarm_id)
+
+    def ack(self, alarm_id: str, by: str) -> dict[str, Any]:
+        """Acknowledge through the worker thread (no API key check: the caller did it)."""
+        detail = acknowledge(self.runtime, store_of(self.runtime), alarm_id, by)
+        self._board.merge([row_from_dict(detail)])
+        return detail
+
+    # ------------------------------------------------------------------ mills
+    def status(self, mill_id: str) -> dict[str, Any]:
+        """The worker's status snapshot of one mill (404 for a mill not analysed here)."""
+        config_of(self.mills, mill_id)
+        return self.runtime.status.get(mill_id, {})
+
+    def worker_info(self) -> dict[str, Any]:
+        """This worker: name, partition, counters and its own readiness checks (the per-mill
+        ones are in each mill's status)."""
+        rt = self.runtime
+        w = rt.worker
+        checks = {k: v for k, v in rt.readiness()["checks"].items() if k not in MILL_CHECKS}
+        return {
+            "name": self.worker_name,
+            "live": True,
+            "partition": list(rt.settings.worker.partition),
+            "mills": list(self.mills),
+            "blocks_handled": w.blocks_handled if w else 0,
+            "archive_errors": w.archive_errors if w else 0,
+            "unrouted_blocks": sum(w.unrouted.values()) if w else 0,
+            "queue_depth_blocks": rt.queue.depth,
+            "queue_dropped_blocks": rt.queue.dropped,
+            "checks": checks,
+        }
+
+    def mills_overview(self) -> list[dict[str, Any]]:
+        return [
+            mill_summary(c, self.runtime.status.get(m, {}), self.worker_name)
+            for m, c in self.mills.items()
+        ]
+
+    def mill_detail(self, mill_id: str) -> dict[str, Any]:
+        config = config_of(self.mills, mill_id)
+        return mill_detail(config, self.runtime.status.get(mill_id, {}), self.worker_info())
+
+    def life(self, mill_id: str) -> dict[str, Any]:
+        return mill_life(self.runtime, mill_id)
+
+    def starts(self, mill_id: str, month: str | None) -> dict[str, Any]:
+        return mill_starts(self.runtime, mill_id, month)
+
+    def spectrum(self, mill_id: str) -> dict[str, Any]:
+        return mill_spectrum(self.runtime, mill_id)
+
+    def monthly_report(self, mill_id: str, month: str | None) -> MonthlyReport:
+        """The monthly report (default: this month in the site's time zone)."""
+        return mill_monthly_report(self.runtime, mill_id, month)
+
+    # ------------------------------------------------------------------ operations
+    def readiness(self) -> dict[str, Any]:
+        return self.runtime.readiness()
+
+    def registry(self) -> CollectorRegistry:
+        if self._registry is None:
+            self._registry = metrics_registry(self.runtime)
+        return self._registry

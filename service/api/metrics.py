@@ -1,0 +1,182 @@
+"""Prometheus metrics of a running service, read at scrape time from the runtime.
+
+A custom collector registered on an injected :class:`~prometheus_client.CollectorRegistry`
+(never the global default), so each app — and each test — has its own. Values come from
+counters the worker thread only ever increments (plain ints, read atomically) and from
+``runtime.status``, the snapshot the worker refreshes every 0.5 s; nothing here touches the
+analyzer or iterates a dict the worker mutates. Open alarms are counted from the store.
+
+Names follow Prometheus conventions: ``millwatch_`` prefix, unit suffixes, ``_total`` counters.
+
+``millwatch api`` (no worker in the process) exports the same per-mill families from the statuses
+the workers answer over zenoh, the worker counters with a ``worker`` label, and
+``millwatch_mill_reachable`` per mill (:func:`remote_registry`).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable, Iterator, Mapping
+from typing import TYPE_CHECKING, Any
+
+from prometheus_client import CollectorRegistry
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
+from prometheus_client.registry import Collector
+
+from service.api.mill_views import UNREACHABLE
+from service.store.database import AlarmRow
+from service.worker.runtime import ServiceRuntime
+
+if TYPE_CHECKING:
+    from service.remote.zenoh_backend import ZenohBackend
+
+__all__ = ["RemoteCollector", "RuntimeCollector", "metrics_registry", "remote_registry"]
+
+_OPEN = ("raised", "acknowledged")
+
+
+class RuntimeCollector(Collector):
+    """Worker, queue, archive, per-mill and alarm metrics of one runtime."""
+
+    def __init__(self, runtime: ServiceRuntime) -> None:
+        self.runtime = runtime
+
+    def collect(self) -> Iterator[Metric]:
+        yield from self._worker()
+        yield from self._queue()
+        yield from mill_families(self.runtime.mills, self.runtime.status)
+        store = self.runtime.store
+        yield open_alarms(store.alarms(_OPEN) if store else [])
+
+    def _worker(self) -> Iterator[Metric]:
+        w = self.runtime.worker
+        yield CounterMetricFamily(
+            "millwatch_blocks_handled",
+            "Blocks taken off the queue and handled (archived, decoded, analysed).",
+            value=w.blocks_handled if w else 0,
+        )
+        yield CounterMetricFamily(
+            "millwatch_archive_errors",
+            "Failed MCAP archive writes.",
+            value=w.archive_errors if w else 0,
+        )
+        yield CounterMetricFamily(
+            "millwatch_unrouted_blocks",
+            "Blocks on keys of no configured mill.",
+            value=sum(w.unrouted.values()) if w else 0,
+        )
+
+    def _queue(self) -> Iterator[Metric]:
+        q = self.runtime.queue
+        yield GaugeMetricFamily(
+            "millwatch_queue_depth_blocks", "Blocks waiting for the worker.", value=q.depth
+        )
+        yield CounterMetricFamily(
+            "millwatch_queue_dropped_blocks",
+            "Blocks dropped because the queue was full.",
+            value=q.dropped,
+        )
+
+
+def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[Metric]:
+    """Decode errors, missing blocks, samples, state and whether held per mill, from the
+    workers' statuses."""
+    errors = CounterMetricFamily(
+        "millwatch_decode_errors",
+        "Undecodable blocks per channel and kind.",
+        labels=["mill", "channel", "kind"],
+    )
+    missing = CounterMetricFamily(
+        "millwatch_missing_blocks", "Blocks lost in sequence gaps.", labels=["mill", "channel"]
+    )
+    samples = CounterMetricFamily(
+        "millwatch_samples_analysed", "Samples analysed per mill.", labels=["mill"]
+    )
+    state = GaugeMetricFamily(
+        "millwatch_mill_state", "1 for the mill's operating state.", labels=["mill", "state"]
+    )
+    held = GaugeMetricFamily(
+        "millwatch_mill_held",
+        "1 while the mill is held: its checkpoint could not be restored, its blocks are "
+        "archived but not analysed (GET /mills/{id} says why).",
+        labels=["mill"],
+    )
+    for mill in sorted(mills):
+        s = status.get(mill, {})
+        for channel, ch in s.get("health", {}).get("channels", {}).items():
+            for kind, n in ch.get("decode_errors", {}).items():
+                errors.add_metric([mill, channel, kind], n)
+            missing.add_metric([mill, channel], ch.get("missing_blocks", 0))
+        samples.add_metric([mill], s.get("samples", 0))
+        state.add_metric([mill, str(s.get("state", "unknown"))], 1)
+        held.add_metric([mill], 1 if s.get("held_reason") else 0)
+    yield from (errors, missing, samples, state, held)
+
+
+def open_alarms(rows: Iterable[AlarmRow]) -> Metric:
+    """Open alarms (raised or acknowledged) per mill and severity."""
+    g = GaugeMetricFamily(
+        "millwatch_open_alarms",
+        "Alarms raised or acknowledged, not yet cleared.",
+        labels=["mill", "severity"],
+    )
+    counts = Counter((a.mill_id, a.severity) for a in rows if a.state in _OPEN)
+    for (mill, severity), n in sorted(counts.items()):
+        g.add_metric([mill, severity], n)
+    return g
+
+
+_WORKER_COUNTERS = (
+    ("millwatch_blocks_handled", "blocks_handled", "Blocks taken off the queue and handled."),
+    ("millwatch_archive_errors", "archive_errors", "Failed MCAP archive writes."),
+    ("millwatch_unrouted_blocks", "unrouted_blocks", "Blocks on keys of no configured mill."),
+    ("millwatch_queue_dropped_blocks", "queue_dropped_blocks", "Blocks dropped: queue full."),
+)
+
+
+class RemoteCollector(Collector):
+    """What ``millwatch api`` exports: gathered from the workers at scrape time."""
+
+    def __init__(self, backend: ZenohBackend) -> None:
+        self.backend = backend
+
+    def collect(self) -> Iterator[Metric]:
+        gathered = self.backend.statuses()
+        workers = {a["worker"]["name"]: a["worker"] for a in gathered.values()}
+        for name, key, doc in _WORKER_COUNTERS:
+            family = CounterMetricFamily(name, doc, labels=["worker"])
+            for worker, info in sorted(workers.items()):
+                family.add_metric([worker], info.get(key, 0))
+            yield family
+        depth = GaugeMetricFamily(
+            "millwatch_queue_depth_blocks", "Blocks waiting for the worker.", labels=["worker"]
+        )
+        for worker, info in sorted(workers.items()):
+            depth.add_metric([worker], info.get("queue_depth_blocks", 0))
+        yield depth
+        reachable = GaugeMetricFamily(
+            "millwatch_mill_reachable",
+            "1 while a live worker answers for the mill.",
+            labels=["mill"],
+        )
+        for mill in sorted(self.backend.mills):
+            reachable.add_metric([mill], 1 if mill in gathered else 0)
+        yield reachable
+        status = {m: gathered[m]["status"] if m in gathered else {"state": UNREACHABLE}
+                  for m in self.backend.mills}  # fmt: skip
+        yield from mill_families(self.backend.mills, status)
+        yield open_alarms(self.backend.alarm_board().rows())
+
+
+def metrics_registry(runtime: ServiceRuntime) -> CollectorRegistry:
+    """A fresh registry holding the runtime's collector."""
+    registry = CollectorRegistry(auto_describe=False)
+    registry.register(RuntimeCollector(runtime))
+    return registry
+
+
+def remote_registry(backend: ZenohBackend) -> CollectorRegistry:
+    """A fresh registry holding the collector of ``millwatch api``."""
+    registry = CollectorRegistry(auto_describe=False)
+    registry.register(RemoteCollector(backend))
+    return registry

@@ -1,0 +1,140 @@
+"""What the per-mill endpoints answer: life, starts of a month, latest spectrum.
+
+The service layer between the routes (:mod:`service.api.routes.mills`) and the store/runtime: it
+finds
+the mill (or raises :class:`~service.api.errors.NotFound` naming it and the mills that exist),
+reads the store, and reads live values only from ``runtime.status`` — the snapshot the worker
+thread refreshes every 0.5 s — never from the analyzer itself.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import Any
+
+from analytics.drivetrain.mill_config import MillConfig
+from service.api.errors import NotFound, Unavailable
+from service.reports.life import LifeInputs, life_report
+from service.reports.monthly import MonthlyReport, build_monthly_report
+from service.reports.starts import current_month, starts_in_month
+from service.store.database import Store
+from service.worker.runtime import ServiceRuntime
+
+__all__ = [
+    "UNREACHABLE",
+    "config_of",
+    "mill_config",
+    "mill_detail",
+    "mill_life",
+    "mill_spectrum",
+    "mill_starts",
+    "mill_summary",
+    "store_of",
+]
+
+UNREACHABLE = "unreachable"
+"""The state of a mill whose worker is gone (``millwatch api``): every channel counts as stale."""
+
+
+def config_of(mills: Mapping[str, MillConfig], mill_id: str) -> MillConfig:
+    """The configuration of a known mill; :class:`NotFound` naming it and the known ones."""
+    config = mills.get(mill_id)
+    if config is None:
+        known = ", ".join(sorted(mills)) or "(none)"
+        raise NotFound("Unknown mill", f"No mill {mill_id!r} is configured here; mills: {known}.")
+    return config
+
+
+def mill_summary(
+    config: MillConfig, status: Mapping[str, Any] | None, worker: str | None
+) -> dict[str, Any]:
+    """One line of ``GET /mills``: state, stale channels and why the mill is held (if it is)
+    from the worker's status; a mill without status (``None``: its worker is gone) is
+    ``unreachable`` with every channel stale."""
+    if status is None:
+        state, stale, held = UNREACHABLE, list(config.channels), None
+    else:
+        state = status.get("state", "unknown")
+        stale = status.get("health", {}).get("stale_channels", [])
+        held = status.get("held_reason")
+    return {
+        "id": config.id,
+        "site": config.site,
+        "drive": config.drive.layout,
+        "starter": config.drive.starter,
+        "state": state,
+        "stale_channels": stale,
+        "worker": worker,
+        "held_reason": held,
+    }
+
+
+def mill_detail(
+    config: MillConfig, status: Mapping[str, Any] | None, worker: Mapping[str, Any]
+) -> dict[str, Any]:
+    """``GET /mills/{id}``: the summary, rated torques, the worker's status of the mill, and
+    the worker that analyses it (name, partition, counters; ``live`` False when it is gone)."""
+    return {
+        **mill_summary(config, status, worker.get("name")),
+        "rated_torque_knm": {
+            "motor": config.motor_rated_torque_knm,
+            "pinion": config.pinion_rated_torque_knm,
+        },
+        "status": dict(status or {}),
+        "worker_status": dict(worker),
+    }
+
+
+def mill_config(runtime: ServiceRuntime, mill_id: str) -> MillConfig:
+    """The configuration of a mill served here; :class:`NotFound` otherwise."""
+    return config_of(runtime.mills, mill_id)
+
+
+def store_of(runtime: ServiceRuntime) -> Store:
+    """The open store; :class:`Unavailable` while the service starts or stops."""
+    store = runtime.store
+    if store is None:
+        raise Unavailable(
+            "Store closed",
+            "The store is not open (the service is starting or "
+            "stopping); try again in a few seconds.",
+        )
+    return store
+
+
+def mill_life(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
+    """Damage so far, damage rate and remaining life per component (:mod:`service.reports.life`)."""
+    config = mill_config(runtime, mill_id)
+    rows = store_of(runtime).damage(mill_id)
+    status = runtime.status.get(mill_id, {})
+    return life_report(LifeInputs(config, rows, status, time.time_ns()))
+
+
+def mill_starts(runtime: ServiceRuntime, mill_id: str, month: str | None) -> dict[str, Any]:
+    """The starts of ``month`` (default: the current month in the site's time zone)."""
+    config = mill_config(runtime, mill_id)
+    month = month or current_month(config, time.time_ns())
+    return starts_in_month(store_of(runtime), config, month)
+
+
+def mill_monthly_report(runtime: ServiceRuntime, mill_id: str, month: str | None) -> MonthlyReport:
+    """The monthly report of ``month`` (default: the current month in the site's time zone);
+    a malformed month is a :class:`~service.reports.starts.MonthError` (422)."""
+    config = mill_config(runtime, mill_id)
+    month = month or current_month(config, time.time_ns())
+    return build_monthly_report(store_of(runtime), config, month)
+
+
+def mill_spectrum(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
+    """The latest stored harmonic table; :class:`NotFound` when none was computed yet."""
+    mill_config(runtime, mill_id)
+    latest = store_of(runtime).records(mill_id, "harmonics", limit=1)
+    if not latest:
+        raise NotFound(
+            "No spectrum yet",
+            f"Mill {mill_id!r} has no harmonic table yet: spectra "
+            "are computed only in steady running, once per Welch window.",
+        )
+    t_ns, data = latest[0]
+    return {"mill": mill_id, "t_ns": t_ns, "harmonics": data}

@@ -1,0 +1,92 @@
+"""Routes of the alarms: ``GET /alarms`` (ETag/cursor polling), ``GET /alarms/{id}``,
+``POST /alarms/{id}/ack`` (API key).
+
+``GET /alarms`` is an ``async`` route answered from the in-memory alarm board
+(:mod:`service.api.alarm_board`): no SQLite and no threadpool hop per poll, the body and ETag made
+once per board version. The other two go to the :class:`~service.api.backend.Backend` (the store
+in process, the mill's worker over zenoh); the API key is checked here, in the API process."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Header, Path, Query, Response, Security
+from fastapi.security import APIKeyHeader
+
+from service.api.alarm_views import STATE_PATTERN, check_api_key, matches, parse_states
+from service.api.backend import Backend
+from service.api.errors import problem_responses
+from service.api.mill_views import config_of
+from service.api.models import AckBody, AlarmDetail, AlarmList
+
+__all__ = ["alarms_router"]
+
+API_KEY = APIKeyHeader(name="X-API-Key", auto_error=False, description="The service's api_key.")
+INT64_MAX = 2**63 - 1
+AlarmId = Annotated[str, Path(max_length=200, description="The alarm's id.")]
+
+_STATE_HELP = (
+    "raised, acknowledged, cleared — comma-separated — or open (= raised,acknowledged) or all."
+)
+_POLL_RESPONSES: dict[int | str, dict[str, Any]] = {
+    200: {
+        "description": "The alarms; the ETag header identifies this listing.",
+        "headers": {
+            "ETag": {"schema": {"type": "string"}, "description": "Send back in If-None-Match."}
+        },
+    },
+    304: {"description": "Not modified since the ETag sent in If-None-Match (no body)."},
+}
+
+
+def alarms_router(backend: Backend) -> APIRouter:
+    """The alarm routes over a backend."""
+    router = APIRouter(tags=["alarms"])
+
+    @router.get(
+        "/alarms",
+        summary="Alarms, most recently changed first; cheap to poll (ETag, since cursor)",
+        response_model=AlarmList,
+        responses={**_POLL_RESPONSES, **problem_responses(404, 422, 503)},
+    )
+    async def alarms(
+        state: Annotated[str | None, Query(pattern=STATE_PATTERN, description=_STATE_HELP)] = None,
+        since: Annotated[
+            int | None, Query(ge=0, le=INT64_MAX, description="Changed at or after (ns UTC).")
+        ] = None,
+        mill: Annotated[str | None, Query(max_length=64, description="One mill only.")] = None,
+        if_none_match: Annotated[str | None, Header(max_length=1000)] = None,
+    ) -> Response:
+        if mill is not None:
+            config_of(backend.mills, mill)
+        listing = backend.alarm_board().listing(parse_states(state), since, mill)
+        headers = {"ETag": listing.etag, "Cache-Control": "no-cache"}
+        if matches(if_none_match, listing.etag):
+            return Response(status_code=304, headers=headers)
+        return Response(listing.body, media_type="application/json", headers=headers)
+
+    @router.get(
+        "/alarms/{alarm_id}",
+        summary="One alarm with its transitions",
+        response_model=AlarmDetail,
+        responses=problem_responses(404, 422, 503),
+    )
+    def alarm(alarm_id: AlarmId) -> dict[str, Any]:
+        return backend.alarm(alarm_id)
+
+    @router.post(
+        "/alarms/{alarm_id}/ack",
+        summary="Acknowledge an alarm (needs X-API-Key); returns it as stored afterwards",
+        response_model=AlarmDetail,
+        responses=problem_responses(401, 403, 404, 409, 422, 503),
+    )
+    def ack(
+        alarm_id: AlarmId,
+        body: AckBody | None = None,
+        api_key: Annotated[str | None, Security(API_KEY)] = None,
+    ) -> dict[str, Any]:
+        check_api_key(backend.api_key, api_key)
+        by = body.by if body is not None else "api"
+        return backend.ack(alarm_id, by)
+
+    return router

@@ -1,0 +1,78 @@
+"""``millwatch api --config FILE``: the REST API alone, asking the workers over zenoh.
+
+It analyses nothing and holds no store: it connects to the zenoh router (``[zenoh]``, usually
+``mode = "client"`` and ``connect = [the router]``), learns which worker holds which mill from
+their liveliness tokens, keeps the alarm board from their ``…/@alarms`` messages, and asks the
+mill's worker for everything else with a zenoh ``get`` (``[api] query_timeout_s``, default 10 s).
+The mills it serves are those of ``[mills]``: a mill no live worker holds is answered
+``unreachable`` (``/mills``) or 503 (its other routes). Run as many as you need, anywhere that
+reaches the router.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+import uvicorn
+
+from ingest.zenoh_session import build_config, open_session
+from service.api.app import create_app
+from service.remote.zenoh_backend import ZenohBackend
+from service.settings import ServiceSettings, load_service_settings
+
+__all__ = ["add_parser", "serve_api"]
+
+log = logging.getLogger(__name__)
+
+
+def serve_api(settings: ServiceSettings) -> int:
+    """Serve the API over zenoh until SIGINT/SIGTERM; returns the exit status."""
+    z = settings.zenoh
+    listen = z.listen if z.mode == "peer" else ()
+    with open_session(build_config(mode=z.mode, listen=listen, connect=z.connect)) as session:
+        backend = ZenohBackend(
+            session,
+            settings.load_mills(),
+            api_key=settings.api.api_key,
+            timeout_s=settings.api.query_timeout_s,
+        )
+        backend.start()
+        try:
+            config = uvicorn.Config(create_app(backend), host=settings.api.host,
+                                    port=settings.api.port, log_level="warning")  # fmt: skip
+            uvicorn.Server(config).run()  # returns on SIGINT/SIGTERM
+        finally:
+            backend.close()
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "api",
+        help="run the REST API alone; it asks the workers over zenoh (scale-out)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=(
+            "example:\n"
+            "  millwatch router &\n"
+            "  millwatch serve --config deploy/worker-rustenburg.toml --no-api &\n"
+            "  millwatch serve --config deploy/worker-carletonville.toml --no-api &\n"
+            "  millwatch api --config deploy/api.toml      # http://127.0.0.1:8080/mills"
+        ),
+    )
+    p.add_argument("--config", type=Path, required=True, help="settings .toml ([zenoh], [api], "
+                   "[mills]; [archive], [store], [worker] are not used)")  # fmt: skip
+    p.set_defaults(handler=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    settings = load_service_settings(args.config)
+    api = settings.api
+    sys.stderr.write(
+        f"millwatch api: http://{api.host}:{api.port} (GET /mills, /ready); asking the workers "
+        f"over zenoh {', '.join(settings.zenoh.connect) or '(peer)'}; Ctrl-C stops\n"
+    )
+    return serve_api(settings)

@@ -1,0 +1,291 @@
+"""``millwatch replay FILES...``: re-publish archived blocks to zenoh with their original pacing.
+
+Every archived payload goes out byte-identical, paced by its archived log time at ``--speed`` ×
+real time (``--max``: as fast as the subscribers take them; publishers use congestion control
+BLOCK, so nothing is dropped). FILES are ``.mcap`` archive files or directories of rotated
+files; rotated files of one writer are read in rotation order, different writers are merged by
+log time.
+
+Where the blocks go: by default to the replay keys of replay run ``--run``,
+``millwatch/v1/@replay/<run>/<site>/<mill>/<signal>``, which live subscribers
+(``millwatch/v1/**``) never receive. ``--remap PREFIX`` chooses another place:
+
+  millwatch/v1/@replay/<run>          replay run <run>, archived site kept (same as --run)
+  millwatch/v1/@replay/<run>/<site>   replay run <run>, site replaced by <site>
+  millwatch/v1/<site>                 LIVE keys of site <site> (a test site, e.g. 'lab'): the
+                                      live pipeline of that site processes the replay; a remap
+                                      onto the recorded site's own live keys is refused
+
+Zenoh defaults: peer mode, multicast scouting off, connect to tcp/127.0.0.1:7447 (a zenoh
+router or the ingest daemon on this host), listen nowhere. With --listen and no --connect the
+replayer only listens (subscribers dial in). Endpoints are never guessed beyond these.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import asdict
+from datetime import UTC, datetime
+from pathlib import Path
+
+import zenoh
+from tqdm import tqdm
+
+from ingest import keys
+from ingest.archive.writer import ArchiveError
+from ingest.replay import (
+    KeyRemap,
+    Replayer,
+    ReplayError,
+    ReplayProgress,
+    ReplayReport,
+    archive_blocks,
+    collect_archive_files,
+)
+from ingest.zenoh_session import build_config, open_session
+from service.cli.args import non_negative_float, positive_float
+
+__all__ = ["add_parser", "default_run_name", "key_pattern", "utc_time_ns"]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+_INT64_MAX = 2**63 - 1
+
+
+# ---------------------------------------------------------------- argument types
+def utc_time_ns(text: str) -> int:
+    """ISO-8601 with a zone (``2026-11-21T23:30:00Z``, ``...+01:00``) or integer ns since the
+    Unix epoch; returns int ns (UTC)."""
+    if text.strip().isdigit():
+        if int(text) > _INT64_MAX:
+            raise argparse.ArgumentTypeError(f"{text} ns does not fit int64")
+        return int(text)
+    try:
+        moment = datetime.fromisoformat(text.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected ISO-8601 UTC like 2026-11-21T23:30:00Z or ns since the epoch, got {text!r}"
+        ) from None
+    if moment.tzinfo is None:
+        raise argparse.ArgumentTypeError(f"{text!r} has no time zone; add Z for UTC")
+    delta = moment - _EPOCH  # exact: days, seconds, microseconds
+    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1_000
+
+
+def key_pattern(text: str) -> str:
+    """A zenoh key expression (``*``, ``**``; no ``$*``), checked by zenoh itself."""
+    try:
+        zenoh.KeyExpr(text)
+        keys.key_matches(text, keys.ROOT)
+    except (zenoh.ZError, keys.KeyFormatError) as exc:
+        reason = str(exc).split(" at /")[0]  # zenoh appends its Rust source location
+        raise argparse.ArgumentTypeError(f"{text!r} is not a key expression: {reason}") from None
+    return text
+
+
+def run_name(text: str) -> str:
+    """A replay run id (``[a-z0-9][a-z0-9_-]{0,63}``)."""
+    try:
+        KeyRemap(run=text)
+    except ReplayError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def remap_prefix(text: str) -> KeyRemap:
+    """``--remap PREFIX`` parsed by :meth:`ingest.replay.KeyRemap.from_prefix`."""
+    try:
+        return KeyRemap.from_prefix(text)
+    except ReplayError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def default_run_name(now: datetime | None = None) -> str:
+    """``r<YYYYmmdd>t<HHMMSS>`` of the UTC start time, e.g. ``r20261121t233000``."""
+    return (now or datetime.now(UTC)).strftime("r%Y%m%dt%H%M%S")
+
+
+# ---------------------------------------------------------------- command line
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "replay",
+        help="re-publish archived MCAP blocks to zenoh with their original pacing",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=(
+            "examples:\n"
+            "  millwatch replay archive/ --speed 10 --run test1\n"
+            "  millwatch replay m1_20261121T230000Z.mcap --max --from 2026-11-21T23:30:00Z "
+            "--to 2026-11-21T23:40:00Z\n"
+            "  millwatch replay archive/ --keys 'millwatch/v1/s1/m1/*' "
+            "--remap millwatch/v1/lab --connect tcp/10.1.2.3:7447"
+        ),
+    )
+    p.add_argument("files", nargs="+", type=Path, metavar="FILE", help=".mcap file or directory")
+    pace = p.add_mutually_exclusive_group()
+    pace.add_argument("--speed", type=positive_float, default=1.0, help="x real time (default 1)")
+    pace.add_argument("--max", action="store_true", help="as fast as possible (no pacing)")
+    _add_selection_options(p)
+    _add_zenoh_options(p)
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    p.set_defaults(handler=_main)
+
+
+def _add_selection_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("what to replay, and where to")
+    g.add_argument(
+        "--from",
+        dest="start",
+        type=utc_time_ns,
+        metavar="T",
+        help="first log time (inclusive): ISO-8601 UTC or ns",
+    )
+    g.add_argument(
+        "--to",
+        dest="end",
+        type=utc_time_ns,
+        metavar="T",
+        help="last log time (exclusive): ISO-8601 UTC or ns",
+    )
+    g.add_argument(
+        "--keys",
+        type=key_pattern,
+        metavar="PATTERN",
+        help="archived keys to replay, zenoh key expression (default: all)",
+    )
+    where = g.add_mutually_exclusive_group()
+    where.add_argument(
+        "--run",
+        type=run_name,
+        metavar="NAME",
+        help="replay run id (default: r<UTC start>, e.g. r20261121t233000)",
+    )
+    where.add_argument(
+        "--remap",
+        type=remap_prefix,
+        metavar="PREFIX",
+        help="publish under PREFIX instead (forms above)",
+    )
+
+
+def _add_zenoh_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("zenoh (multicast scouting is always off)")
+    g.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"endpoint to dial, repeatable (default {DEFAULT_CONNECT} unless --listen is given)",
+    )
+    g.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        default=[],
+        help="endpoint to listen on, repeatable (default: none)",
+    )
+    g.add_argument(
+        "--mode",
+        choices=("peer", "client"),
+        default="peer",
+        help="zenoh session mode (default peer)",
+    )
+    g.add_argument(
+        "--wait-subscribers",
+        type=non_negative_float,
+        default=5.0,
+        metavar="S",
+        help="wait up to S s for a subscriber, then replay anyway with a warning (default 5)",
+    )
+
+
+def _main(args: argparse.Namespace) -> int:
+    if args.start is not None and args.end is not None and args.start >= args.end:
+        raise ReplayError(f"--from ({args.start} ns) must be before --to ({args.end} ns)")
+    files = collect_archive_files(args.files)
+    remap = args.remap or KeyRemap(run=args.run or default_run_name())
+    blocks = archive_blocks(files, args.keys, args.start, args.end)
+    sys.stderr.write(f"millwatch replay: {len(files)} files -> {remap.subscription()}\n")
+    with (
+        _session(args) as session,
+        _progress(_show_progress(args)) as on_progress,
+        _archive_errors(),
+    ):
+        report = Replayer(
+            session,
+            blocks,
+            remap,
+            speed=None if args.max else args.speed,
+            on_progress=on_progress,
+            wait_subscribers_s=args.wait_subscribers,
+        ).run()
+    _print_report(report, remap, as_json=args.json)
+    if report.blocks == 0:
+        sys.stderr.write("millwatch replay: no archived block matched --keys/--from/--to\n")
+        return 1
+    return 0
+
+
+@contextmanager
+def _session(args: argparse.Namespace) -> Iterator[zenoh.Session]:
+    connect = args.connect if args.connect is not None else [] if args.listen else [DEFAULT_CONNECT]
+    config = build_config(mode=args.mode, listen=args.listen, connect=connect)
+    with ExitStack() as stack:
+        try:
+            session = stack.enter_context(open_session(config))
+        except zenoh.ZError as exc:
+            raise ReplayError(
+                f"cannot open a zenoh session (--listen {args.listen}, --connect {connect}): {exc}"
+            ) from exc
+        yield session
+
+
+@contextmanager
+def _archive_errors() -> Iterator[None]:
+    """An archive file that turns out unreadable mid-replay is a user error, not a crash."""
+    try:
+        yield
+    except ArchiveError as exc:
+        raise ReplayError(f"archive: {exc}") from exc
+
+
+def _show_progress(args: argparse.Namespace) -> bool:
+    return not args.no_progress and sys.stderr.isatty()
+
+
+@contextmanager
+def _progress(enabled: bool) -> Iterator[Callable[[ReplayProgress], None]]:
+    with tqdm(unit="block", disable=not enabled, file=sys.stderr, desc="replay") as bar:
+
+        def on_progress(p: ReplayProgress) -> None:
+            bar.update(p.blocks - bar.n)
+            if p.archive_time_ns is not None:
+                bar.set_postfix_str(f"{_iso(p.archive_time_ns)} {p.bytes / 1e6:.1f} MB")
+
+        yield on_progress
+
+
+def _iso(t_ns: int) -> str:
+    moment = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=UTC)
+    return moment.strftime("%Y-%m-%dT%H:%M:%S") + f".{t_ns % 1_000_000_000 // 1_000_000:03d}Z"
+
+
+def _print_report(report: ReplayReport, remap: KeyRemap, *, as_json: bool) -> None:
+    if as_json:
+        data = asdict(report)
+        data.update(
+            archive_span_s=report.archive_span_s,
+            x_real_time=report.x_real_time,
+            subscription=remap.subscription(),
+        )
+        json.dump(data, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return
+    sys.stdout.write(report.summary() + "\n")

@@ -1,0 +1,118 @@
+"""``millwatch serve --config FILE``: a worker, and (unless ``--no-api``) the REST API with it.
+
+The worker subscribes to its mills' keys on zenoh, archives every block to MCAP first, analyses
+it, stores results in SQLite and checkpoints. Its mills are the configured ones that its
+``[worker] partition`` covers (all of them by default), and it answers queries about them over
+zenoh (``…/@query/<what>``) while holding a liveliness token per mill, so ``millwatch api``
+elsewhere can serve them too. SIGTERM or SIGINT (Ctrl-C) stops it cleanly: tokens withdrawn,
+final checkpoint, archive file finished, zenoh session closed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+from pathlib import Path
+
+import uvicorn
+
+from analytics.drivetrain.mill_config import MillConfig
+from ingest.zenoh_session import build_config, open_session
+from service.api.app import create_app
+from service.api.local_backend import LocalBackend
+from service.remote.queryables import WorkerQueryables
+from service.settings import ServiceSettings, load_service_settings
+from service.worker.mill_job import AnalyzerPipeline
+from service.worker.partition import check_exclusive, partition_mills, worker_identity
+from service.worker.runtime import ServiceRuntime
+
+__all__ = ["add_parser", "serve", "wait_for_signal", "worker_mills"]
+
+log = logging.getLogger(__name__)
+
+
+def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
+    """The configured mills this worker's partition covers; when the zenoh settings connect
+    somewhere, also checks that no other live worker analyses one of them."""
+    mills = partition_mills(settings.load_mills(), settings.worker.partition)
+    z = settings.zenoh
+    if z.connect:
+        with open_session(build_config(mode="client", connect=z.connect)) as session:
+            check_exclusive(session, mills, worker_identity(settings))
+    return mills
+
+
+def serve(settings: ServiceSettings, *, api: bool = True) -> int:
+    """Run until SIGTERM/SIGINT; returns the exit status."""
+    runtime = ServiceRuntime(settings, worker_mills(settings), AnalyzerPipeline)
+    runtime.start()
+    backend = LocalBackend(runtime)
+    assert runtime.session is not None
+    queryables = WorkerQueryables(runtime.session, backend)
+    try:
+        queryables.start()
+        if api:
+            server = uvicorn.Server(
+                uvicorn.Config(
+                    create_app(backend),
+                    host=settings.api.host,
+                    port=settings.api.port,
+                    log_level="warning",
+                )
+            )
+            server.run()  # returns on SIGINT/SIGTERM
+        else:
+            wait_for_signal()
+    finally:
+        queryables.close()
+        runtime.stop()
+    return 0
+
+
+def wait_for_signal() -> None:
+    """Block until SIGINT or SIGTERM."""
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    stop.wait()
+
+
+_EPILOG = """\
+examples:
+  millwatch serve --config deploy/plant.toml                  # one process: worker + API
+  millwatch serve --config deploy/worker-rustenburg.toml --no-api   # one of several workers
+
+Scale-out: run a zenoh router (zenohd, or 'millwatch router'), one 'serve --no-api' per
+worker with disjoint [worker] partition key expressions and [zenoh] mode = "client",
+connect = [the router], and 'millwatch api' for the REST API (README "Scale-out").
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "serve",
+        help="run a worker (zenoh ingest, archive, analysis, store, queryables) and the REST API",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=_EPILOG,
+    )
+    p.add_argument("--config", type=Path, required=True, help="service settings .toml")
+    p.add_argument(
+        "--no-api",
+        action="store_true",
+        help="run the worker only (its mills are still served by 'millwatch api' over zenoh)",
+    )
+    p.set_defaults(handler=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    settings = load_service_settings(args.config)
+    where = "no API" if args.no_api else f"API on http://{settings.api.host}:{settings.api.port}"
+    sys.stderr.write(
+        f"millwatch serve: worker {worker_identity(settings)!r}, {where}; "
+        f"archive {settings.archive.directory}; Ctrl-C stops\n"
+    )
+    return serve(settings, api=not args.no_api)

@@ -1,0 +1,270 @@
+"""``millwatch spectrum``: the steady-state torque spectrum of a recording, expected lines marked.
+
+Reads one MCAP recording (``millwatch simulate --out`` or the ingest archive), keeps only the
+running portions (pinion speed within the running band for ``--settle`` seconds; the operating
+state machine will replace this test), feeds them to
+:class:`analytics.spectra.harmonics.HarmonicTracker`
+(order-tracked Welch PSD, see that module) and renders one PSD panel per torque/bending channel
+with the drivetrain's expected excitation lines marked and labelled — seed 000 §6.2.7, Figures
+35–36, with the seed's colours (mill speed orange, pinion speed blue, liner passing green, motor
+speed magenta, pinion/girth mesh red, reducer mesh cyan). Peaks that match no expected line are
+marked as possible torsional resonance. ``--report`` writes the harmonic table as JSON.
+
+Example::
+
+    millwatch simulate --scene resonance --duration 120s --out r.mcap
+    millwatch spectrum r.mcap --mill deploy/mills/sag-5200-lrs.toml --out r.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from analytics.drivetrain.kinematics import ExpectedLine
+from analytics.drivetrain.mill_config import MillConfig
+from analytics.spectra.harmonics import (
+    HarmonicSettings,
+    HarmonicTracker,
+    harmonics_report,
+    is_running,
+)
+from ingest import keys, wire
+from ingest.archive.writer import TailTolerantReader
+from ingest.mill_files import load_mill_config
+from service.cli.args import non_negative_float, positive_float
+
+__all__ = ["add_parser", "plot_spectrum", "track_recording"]
+
+log = logging.getLogger(__name__)
+
+#: Seed 000 §6.2.7 colours by line family; others get grey.
+COLOURS = {
+    "mill_speed": "tab:orange",
+    "pinion_speed": "tab:blue",
+    "liner_passing": "tab:green",
+    "motor_speed": "magenta",
+    "girth_mesh": "red",
+    "reducer_mesh": "cyan",
+    "pinion_3x": "tab:purple",
+    "media_oscillation": "tab:brown",
+}
+LOW_HZ = 0.1
+
+
+# ---------------------------------------------------------------- reading
+@dataclass
+class _Assembler:
+    """Aligns the blocks of several channels into common frames (by sample index); gaps are
+    filled with NaN (the tracker restarts after them), overlaps dropped."""
+
+    names: tuple[str, ...]
+    fs: float
+    t0_ns: int | None = None
+    parts: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    pos: dict[str, int] = field(default_factory=dict)
+    emitted: int = 0
+
+    def add(self, name: str, block: wire.Block) -> None:
+        if self.t0_ns is None:
+            self.t0_ns = block.t0_ns
+        start = round((block.t0_ns - self.t0_ns) * self.fs / 1e9)
+        x = np.asarray(block.samples, dtype=np.float64)
+        pos = self.pos.get(name, self.emitted)
+        if start > pos:
+            x = np.concatenate((np.full(start - pos, np.nan), x))
+        elif start < pos:
+            x = x[pos - start :]
+        self.parts.setdefault(name, []).append(x)
+        self.pos[name] = pos + x.shape[0]
+
+    def frame(self, minimum: int) -> tuple[int, dict[str, np.ndarray]] | None:
+        """The next common frame of at least ``minimum`` samples, if available."""
+        if self.t0_ns is None or any(n not in self.pos for n in self.names):
+            return None
+        n = min(self.pos.values()) - self.emitted
+        if n < max(1, minimum):
+            return None
+        out = {}
+        for name in self.names:
+            data = np.concatenate(self.parts[name])
+            out[name], rest = data[:n], data[n:]
+            self.parts[name] = [rest]
+        t0 = self.t0_ns + round(self.emitted * 1e9 / self.fs)
+        self.emitted += n
+        return t0, out
+
+
+def _channel_names(config: MillConfig) -> dict[str, str]:
+    """Key segment → configured channel name."""
+    return {ch.key: name for name, ch in config.channels.items()}
+
+
+def recording_frames(
+    path: Path, config: MillConfig, names: list[str], frame_s: float = 1.0
+) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
+    """(t0_ns, frame) of channels ``names`` of ``config`` from one MCAP file, in time order."""
+    by_segment = _channel_names(config)
+    asm = _Assembler(tuple(names), float(config.sample_rate_hz))
+    minimum = round(frame_s * config.sample_rate_hz)
+    bad = 0
+    for msg in TailTolerantReader(path).messages():
+        try:
+            key = keys.parse_key(msg.key)
+            block = wire.decode_block(msg.payload)
+        except (keys.KeyFormatError, wire.WireError):
+            bad += 1
+            continue
+        name = by_segment.get(key.signal_segment)
+        if key.site != config.site or key.mill != config.id or name not in names:
+            continue
+        asm.add(name, block)
+        while (out := asm.frame(minimum)) is not None:
+            yield out
+    if bad:
+        log.warning("%s: %d undecodable messages skipped", path, bad)
+    while (out := asm.frame(1)) is not None:
+        yield out
+
+
+def track_recording(
+    path: Path,
+    config: MillConfig,
+    settings: HarmonicSettings | None = None,
+    *,
+    settle_s: float = 5.0,
+    channels: list[str] | None = None,
+) -> HarmonicTracker:
+    """Feed the running portions of a recording to a new tracker and return it."""
+    tracker = HarmonicTracker(config, channels, settings)
+    speed = tracker.speed_channel
+    band = tracker.settings.running_band
+    shaft = config.channels[speed].shaft if speed is not None else "pinion"
+    running_s = 0.0
+    names = [c.name for c in tracker.channels] + ([speed] if speed is not None else [])
+    for t0, frame in recording_frames(path, config, names):
+        n = len(next(iter(frame.values())))
+        ok = speed is None or is_running(frame[speed], config, shaft=shaft, band=band)
+        running_s = running_s + n / config.sample_rate_hz if ok else 0.0
+        tracker.feed(t0, config.sample_rate_hz, frame, ok and running_s > settle_s)
+    return tracker
+
+
+# ---------------------------------------------------------------- plotting
+def _mark_lines(ax: Any, lines: list[ExpectedLine], top: float) -> None:
+    import matplotlib.transforms as mtransforms
+
+    trans = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
+    for ln in lines:
+        if not ln.observable or not LOW_HZ <= ln.frequency_hz <= top:
+            continue
+        colour = COLOURS.get(ln.family.rstrip("_0123456789"), "grey")
+        main = ln.kind in ("fundamental", "fixed")
+        ax.axvline(ln.frequency_hz, color=colour, ls=":", lw=1.0 if main else 0.6,
+                   alpha=1.0 if main else 0.6)  # fmt: skip
+        if ln.kind != "sideband":
+            ax.text(ln.frequency_hz, 0.98, f" {ln.name} {ln.frequency_hz:.2f} Hz", color=colour,
+                    rotation=90, va="top", ha="right", fontsize=6, transform=trans)  # fmt: skip
+
+
+def _panel(ax: Any, tracker: HarmonicTracker, channel: str, top: float) -> None:
+    freq, psd, _ = tracker.average_spectrum(channel)
+    keep = (freq >= LOW_HZ) & (freq <= top)
+    unit = tracker.config.channels[channel].units
+    ax.loglog(freq[keep], psd[keep], color="black", lw=0.6)
+    _mark_lines(ax, tracker.expected(), top)
+    table = tracker.total_table()
+    for p in table.peaks if table is not None else ():
+        if p.channel == channel:
+            y = float(np.interp(p.frequency_hz, freq, psd))
+            ax.plot([p.frequency_hz], [y], "v", color="darkred", ms=6)
+            label = f"? {p.frequency_hz:.2f} Hz (resonance?)"
+            ax.annotate(label, (p.frequency_hz, y), xytext=(4, 4), textcoords="offset points",
+                        fontsize=7, color="darkred")  # fmt: skip
+    ax.set_ylabel(f"PSD [{unit}²/Hz]")
+    ax.set_title(f"{tracker.config.id} — {channel}", fontsize=9)
+    ax.grid(True, which="both", alpha=0.2)
+
+
+def plot_spectrum(tracker: HarmonicTracker, out: Path, channels: list[str] | None = None) -> None:
+    """Render the long-run PSD of ``channels`` (default: all tracked) to ``out`` (.png/.svg)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = channels or [c.name for c in tracker.channels]
+    top = min(tracker.config.telemetry_bandwidth_hz, tracker.fs / 2.0)
+    fig, axes = plt.subplots(len(names), 1, figsize=(11, 3.2 * len(names)), squeeze=False)
+    for ax, name in zip(axes[:, 0], names, strict=True):
+        _panel(ax, tracker, name, top)
+    axes[-1, 0].set_xlabel("frequency [Hz] (order-tracked, at the mean running speed)")
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------- command line
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "spectrum",
+        help="PSD of the running portions of a recording with the expected lines marked",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("recording", type=Path, help="MCAP recording (one file)")
+    p.add_argument("--mill", type=Path, required=True, help="mill configuration .toml")
+    p.add_argument("--channel", action="append", help="channel to plot (repeatable; default all)")
+    p.add_argument("--out", type=Path, help="FILE.png or FILE.svg (default: RECORDING.png)")
+    p.add_argument("--report", type=Path, help="also write the harmonic table as JSON here")
+    p.add_argument("--window-s", type=positive_float, default=20.0,
+                   help="segment length, s (resolution 1/window, 20 s = 0.05 Hz)")  # fmt: skip
+    p.add_argument("--settle", type=non_negative_float, default=5.0,
+                   help="seconds of running before frames are used (default 5)")  # fmt: skip
+    p.set_defaults(handler=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    config = load_mill_config(args.mill)
+    out = args.out or args.recording.with_suffix(".png")
+    if out.suffix.lower() not in (".png", ".svg"):
+        raise ValueError(f"--out {out}: must end in .png or .svg")
+    if not args.recording.is_file():
+        raise OSError(f"{args.recording}: no such file")
+    settings = HarmonicSettings(window_s=args.window_s)
+    tracker = track_recording(
+        args.recording, config, settings, settle_s=args.settle, channels=args.channel
+    )
+    if tracker.running_segments == 0:
+        raise ValueError(
+            f"{args.recording}: no steady running long enough for one "
+            f"{tracker.revs}-revolution segment (~{args.window_s:g} s)"
+        )
+    plot_spectrum(tracker, out, args.channel)
+    report = harmonics_report(tracker)
+    if args.report is not None:
+        args.report.write_text(json.dumps(report, indent=2) + "\n")
+    _summary(report, out)
+    return 0
+
+
+def _summary(report: dict[str, Any], out: Path) -> None:
+    s = report["summary"]
+    sys.stdout.write(
+        f"{s['segments']} segments, {s['running_s']:.0f} s running at "
+        f"{s['pinion_speed_rpm']:.2f} rpm pinion, resolution {s['resolution_hz']:.4f} Hz → {out}\n"
+    )
+    for p in report["unexplained_peaks"]:
+        pct = f" ({p['amplitude_pct']:.1f} % rated)" if p["amplitude_pct"] is not None else ""
+        sys.stdout.write(
+            f"unexplained peak on {p['channel']}: {p['frequency_hz']:.2f} Hz, "
+            f"{p['amplitude']:.2f} {p['unit']}{pct}: possible torsional resonance\n"
+        )

@@ -1,0 +1,324 @@
+"""The :class:`~service.api.backend.Backend` of ``millwatch api``: the workers answer over zenoh.
+
+The API process holds no store and analyses nothing; it can run anywhere that reaches the zenoh
+router, and as many copies as needed. It keeps three things in memory:
+
+* **which worker holds which mill** — a liveliness subscriber (with history) on
+  ``millwatch/v1/*/*/@worker/*`` (:func:`ingest.keys.worker_token_pattern`). When a worker dies
+  its tokens vanish (measured: a SIGKILLed worker's tokens were gone at the API within 5 ms on
+  127.0.0.1; a frozen host is bounded by the zenoh lease, 10 s by default), and its mills are
+  answered ``unreachable`` at once, without waiting for a query timeout;
+* **the alarm board** (:mod:`service.api.alarm_board`) — fed by the workers' ``…/@alarms`` messages,
+  and gathered with one ``get`` on ``…/@query/alarms`` at start and whenever a worker (re)joins;
+* the **last status** each worker sent about itself (name, partition), to name it in errors.
+
+Everything else is a zenoh ``get`` on the mill's ``…/@query/<what>`` key
+(:mod:`service.remote.queryables`), with an explicit timeout (``api.query_timeout_s``, default 10
+s):
+a worker that does not answer in time is a 504 naming the mill, the worker and its partition,
+never a hang. Errors the worker raised come back as ``reply_err`` problem JSON and are raised
+again as the same :mod:`service.api.errors` exceptions, so the API answers what an in-process
+one would. ``GET /mills`` and ``/ready`` gather every mill's status with one ``get`` on
+``millwatch/v1/*/*/@query/status``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import zenoh
+from prometheus_client import CollectorRegistry
+
+from alarms.wire import AlarmWireError
+from analytics.drivetrain.mill_config import MillConfig
+from ingest.keys import (
+    KeyFormatError,
+    alarm_pattern,
+    parse_query_key,
+    parse_worker_token_key,
+    query_key,
+    query_pattern,
+    worker_token_pattern,
+)
+from service.api.alarm_board import AlarmBoard, row_from_dict
+from service.api.backend import problem_from
+from service.api.errors import GatewayTimeout, NotFound, Unavailable
+from service.api.metrics import remote_registry
+from service.api.mill_views import config_of, mill_detail, mill_summary
+from service.remote.report_codec import ReportDecodeError, report_from_dict
+from service.reports.monthly import MonthlyReport
+
+__all__ = ["DEFAULT_TIMEOUT_S", "ZenohBackend"]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_TIMEOUT_S = 10.0
+
+
+class ZenohBackend:
+    """Answers from the workers over ``session`` (a client of the router); see the module
+    docstring. Call :meth:`start` before serving and :meth:`close` after."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        mills: Mapping[str, MillConfig],
+        *,
+        api_key: str | None = None,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+    ) -> None:
+        self.session = session
+        self.mills = dict(mills)
+        self.api_key = api_key
+        self.timeout_s = timeout_s
+        self._board = AlarmBoard()
+        self._by_key = {(c.site, c.id): m for m, c in self.mills.items()}
+        self._lock = threading.Lock()
+        self._live: dict[str, str] = {}
+        self._left: dict[str, tuple[str, int]] = {}
+        self._workers: dict[str, dict[str, Any]] = {}
+        self._subscribers: list[zenoh.Subscriber[None]] = []
+        self._resync = ThreadPoolExecutor(1, thread_name_prefix="millwatch-alarm-sync")
+        self._resync_pending = threading.Event()
+        self._registry: CollectorRegistry | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        """Subscribe to alarm messages and worker tokens, then gather the alarms once."""
+        self._subscribers.append(self.session.declare_subscriber(alarm_pattern(), self._on_alarm))
+        self._subscribers.append(
+            self.session.liveliness().declare_subscriber(
+                worker_token_pattern(), self._on_token, history=True
+            )
+        )
+        self.sync_alarms()
+
+    def close(self) -> None:
+        for sub in self._subscribers:
+            sub.undeclare()
+        self._subscribers.clear()
+        self._resync.shutdown(wait=True, cancel_futures=True)
+
+    # ------------------------------------------------------------------ zenoh callbacks
+    def _on_alarm(self, sample: zenoh.Sample) -> None:
+        try:
+            self._board.apply_message(sample.payload.to_bytes())
+        except (AlarmWireError, TypeError, ValueError) as exc:
+            log.warning("ignored alarm message on %s: %s", sample.key_expr, exc)
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        try:
+            site, mill, worker = parse_worker_token_key(str(sample.key_expr))
+        except KeyFormatError:
+            return
+        mill_id = self._by_key.get((site, mill))
+        if mill_id is None:
+            log.info("worker %s analyses %s/%s, which this API does not serve", worker, site, mill)
+            return
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._live[mill_id] = worker
+                self._left.pop(mill_id, None)
+            elif self._live.get(mill_id) == worker:
+                del self._live[mill_id]
+                self._left[mill_id] = (worker, time.time_ns())
+        if sample.kind == zenoh.SampleKind.PUT and not self._resync_pending.is_set():
+            self._resync_pending.set()  # coalesce the joins of one worker's mills
+            self._resync.submit(self._resync_alarms)
+
+    def _resync_alarms(self) -> None:
+        self._resync_pending.clear()
+        try:
+            self.sync_alarms()
+        except Exception:
+            log.exception("alarm sync after a worker joined failed")
+
+    # ------------------------------------------------------------------ asking
+    def live_workers(self) -> dict[str, str]:
+        """Mill → name of the worker that holds its token now."""
+        with self._lock:
+            return dict(self._live)
+
+    def sync_alarms(self) -> int:
+        """Gather every live mill's alarms into the board; returns the rows that changed."""
+        gathered = self._gather("alarms")
+        return self._board.merge(row_from_dict(r) for rows in gathered.values() for r in rows)
+
+    def _gather(self, what: str) -> dict[str, Any]:
+        """One ``get`` on every mill's ``@query/<what>``: the answers by mill id (mills whose
+        worker is gone, or that did not answer within the timeout, are missing)."""
+        out: dict[str, Any] = {}
+        if not self.live_workers():
+            return out
+        for reply in self.session.get(query_pattern(what), timeout=self.timeout_s):
+            if reply.ok is None:
+                log.warning("a worker failed %s: %s", what, reply.err.payload.to_bytes()[:200])
+                continue
+            try:
+                site, mill, _ = parse_query_key(str(reply.ok.key_expr))
+            except KeyFormatError:
+                continue
+            mill_id = self._by_key.get((site, mill))
+            if mill_id is not None:
+                out[mill_id] = json.loads(reply.ok.payload.to_bytes())
+        return out
+
+    def _ask(self, mill_id: str, what: str, args: dict[str, Any] | None = None) -> Any:
+        """The answer of ``mill_id``'s worker to ``what`` (module docstring for the errors)."""
+        config = config_of(self.mills, mill_id)
+        worker = self.live_workers().get(mill_id)
+        if worker is None:
+            raise Unavailable("Mill unreachable", self._gone(mill_id))
+        t0 = time.monotonic()
+        payload = json.dumps(args or {}).encode("utf-8")
+        key = query_key(config.site, config.id, what)
+        text = "no reply"
+        for reply in self.session.get(key, payload=payload, timeout=self.timeout_s):
+            if reply.ok is not None:
+                return json.loads(reply.ok.payload.to_bytes())
+            raw = reply.err.payload.to_bytes()
+            problem = problem_from(raw)
+            if problem is not None:
+                raise problem
+            text = raw[:200].decode("utf-8", "replace")  # zenoh's own, e.g. "Timeout"
+        who = self._who(worker)
+        if time.monotonic() - t0 < self.timeout_s * 0.9:
+            detail = f"{who} did not answer about mill {mill_id!r} ({text}); it may have just "
+            raise Unavailable("Mill unreachable", detail + "stopped: try again shortly.")
+        raise GatewayTimeout("Worker did not answer", f"{who} did not answer about mill "
+                             f"{mill_id!r} within {self.timeout_s:g} s (api.query_timeout_s); "
+                             "it may be overloaded or hung.")  # fmt: skip
+
+    def _who(self, worker: str) -> str:
+        partition = self._workers.get(worker, {}).get("partition")
+        where = f" (partition {', '.join(partition)})" if partition else ""
+        return f"Worker {worker!r}{where}"
+
+    def _gone(self, mill_id: str) -> str:
+        with self._lock:
+            left = self._left.get(mill_id)
+        if left is None:
+            return (f"No worker analyses mill {mill_id!r}: no worker's [worker] partition covers "
+                    "it, or its worker has not started yet.")  # fmt: skip
+        worker, t_ns = left
+        when = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(t_ns / 1e9))
+        return (f"Mill {mill_id!r} is unreachable: {self._who(worker)} left at {when}; "
+                "its data is not analysed until it is back.")  # fmt: skip
+
+    def _remember(self, info: Mapping[str, Any]) -> None:
+        name = info.get("name")
+        if isinstance(name, str):
+            self._workers[name] = dict(info)
+
+    def _worker_gone(self, mill_id: str) -> dict[str, Any]:
+        with self._lock:
+            worker, t_ns = self._left.get(mill_id, (None, None))
+        info = dict(self._workers.get(worker, {})) if worker else {}
+        return {**info, "name": worker, "live": False, "left_ns": t_ns}
+
+    # ------------------------------------------------------------------ Backend
+    def alarm_board(self) -> AlarmBoard:
+        return self._board
+
+    def statuses(self) -> dict[str, dict[str, Any]]:
+        """Every reachable mill's ``{"status", "worker"}`` (one gather)."""
+        gathered = self._gather("status")
+        for answer in gathered.values():
+            self._remember(answer.get("worker", {}))
+        return gathered
+
+    def mills_overview(self) -> list[dict[str, Any]]:
+        gathered = self.statuses()
+        out = []
+        for mill_id, config in self.mills.items():
+            answer = gathered.get(mill_id)
+            if answer is None:
+                out.append(mill_summary(config, None, self._worker_gone(mill_id)["name"]))
+            else:
+                out.append(mill_summary(config, answer["status"], answer["worker"].get("name")))
+        return out
+
+    def mill_detail(self, mill_id: str) -> dict[str, Any]:
+        config = config_of(self.mills, mill_id)
+        if mill_id not in self.live_workers():
+            return mill_detail(config, None, self._worker_gone(mill_id))
+        answer = self._ask(mill_id, "status")
+        self._remember(answer["worker"])
+        return mill_detail(config, answer["status"], answer["worker"])
+
+    def life(self, mill_id: str) -> dict[str, Any]:
+        return self._ask(mill_id, "life")
+
+    def starts(self, mill_id: str, month: str | None) -> dict[str, Any]:
+        return self._ask(mill_id, "starts", {"month": month})
+
+    def spectrum(self, mill_id: str) -> dict[str, Any]:
+        return self._ask(mill_id, "spectrum")
+
+    def monthly_report(self, mill_id: str, month: str | None) -> MonthlyReport:
+        data = self._ask(mill_id, "report", {"month": month})
+        try:
+            return report_from_dict(data)
+        except ReportDecodeError as exc:
+            raise Unavailable("Report unreadable", f"The worker's report of {mill_id!r} does "
+                              f"not fit this API's version: {exc}.") from exc  # fmt: skip
+
+    def _alarm_row_mill(self, alarm_id: str) -> str:
+        row = self._board.get(alarm_id)
+        if row is None:
+            raise NotFound("Unknown alarm", f"No alarm {alarm_id!r} is stored here; "
+                           "GET /alarms lists the alarms.")  # fmt: skip
+        return row.mill_id
+
+    def alarm(self, alarm_id: str) -> dict[str, Any]:
+        return self._ask(self._alarm_row_mill(alarm_id), "alarm", {"alarm_id": alarm_id})
+
+    def ack(self, alarm_id: str, by: str) -> dict[str, Any]:
+        """Ask the alarm's worker to acknowledge it (the route checked the API key)."""
+        mill_id = self._alarm_row_mill(alarm_id)
+        detail = self._ask(mill_id, "ack", {"alarm_id": alarm_id, "by": by})
+        self._board.merge([row_from_dict(detail)])
+        return detail
+
+    def readiness(self) -> dict[str, Any]:
+        """Ready when zenoh is connected, every mill's worker answers and is ready itself
+        (archive, store, worker thread), every mill's data is fresh and every mill is analysed
+        (``held_mills``: why a held one is not), as the in-process ``/ready`` says."""
+        gathered = self.statuses()
+        stale = {
+            m: gathered[m]["status"].get("health", {}).get("stale_channels", [])
+            if m in gathered
+            else list(c.channels)
+            for m, c in self.mills.items()
+        }
+        held = {m: a["status"]["held_reason"] for m, a in gathered.items()
+                if a["status"].get("held_reason")}  # fmt: skip
+        workers = {
+            a["worker"].get("name"): a["worker"].get("checks", {}) for a in gathered.values()
+        }
+        checks = {
+            "zenoh": not self.session.is_closed() and bool(self.session.info.routers_zid()),
+            "workers": workers,
+            "reachable": {m: m in gathered for m in self.mills},
+            "data_fresh": {m: not s for m, s in stale.items()},
+            "analysed": {m: m not in held for m in self.mills},
+        }
+        ready = (
+            checks["zenoh"]
+            and all(all(c.values()) for c in workers.values())
+            and all(checks["reachable"].values())
+            and all(checks["data_fresh"].values())
+            and all(checks["analysed"].values())
+        )
+        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held}
+
+    def registry(self) -> CollectorRegistry:
+        if self._registry is None:
+            self._registry = remote_registry(self)
+        return self._registry

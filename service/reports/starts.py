@@ -1,0 +1,164 @@
+"""Calendar months of a site and the starts of one month, with peaks against their limits and the
+count against the supplier norm and the configured warning/alarm levels (seed 000 §6.1.3, §6.2.8,
+§7.2). The one place that owns both: ``GET /mills/{id}/starts`` and the monthly report
+(:mod:`service.reports.monthly`) use the same month bounds, the same norm and the same statuses.
+
+A month is ``YYYY-MM`` in the site's time zone; its bounds are the local midnights of its first
+day and of the next month's first day, converted to UTC ns, so a start at 23:30 local time on the
+last day counts in that month whatever the UTC date. Statuses are *strictly above* the levels, as
+the alarm rules (:mod:`alarms.rules`) decide.
+"""
+
+from __future__ import annotations
+
+import re
+import zoneinfo
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import date, datetime, timedelta
+from typing import Any
+
+from analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
+from analytics.mill.report import STARTS_NORM_PER_MONTH, starts_status
+from service.api.errors import BadRequest
+from service.store.database import EventRow, Store
+
+__all__ = [
+    "MONTH_PATTERN",
+    "STARTS_NORM_PER_MONTH",
+    "MonthError",
+    "StartCount",
+    "count_starts",
+    "current_month",
+    "day_starts_ns",
+    "month_bounds_ns",
+    "month_days",
+    "peak_status",
+    "starts_in_month",
+]
+
+MONTH_PATTERN = r"^(19[7-9]\d|2\d{3})-(0[1-9]|1[0-2])$"
+"""YYYY-MM, years 1970–2999."""
+
+
+class MonthError(BadRequest):
+    """A month that is not ``YYYY-MM`` (1970–2999); the message names it (HTTP 422)."""
+
+    def __init__(self, month: object) -> None:
+        super().__init__(
+            "Invalid month", f"month {month!r} is not YYYY-MM, 1970–2999 (e.g. 2024-05)."
+        )
+
+
+def _year_month(month: str) -> tuple[int, int]:
+    if not isinstance(month, str) or not re.fullmatch(MONTH_PATTERN, month):
+        raise MonthError(month)
+    return int(month[:4]), int(month[5:])
+
+
+def current_month(config: MillConfig, now_ns: int) -> str:
+    """``YYYY-MM`` of ``now_ns`` in the mill's time zone."""
+    tz = zoneinfo.ZoneInfo(config.time_zone)
+    return datetime.fromtimestamp(now_ns / 1e9, tz).strftime("%Y-%m")
+
+
+def month_days(month: str) -> list[str]:
+    """The local calendar days (``YYYY-MM-DD``) of ``month``; :class:`MonthError` if unusable."""
+    year, mon = _year_month(month)
+    first = date(year, mon, 1)
+    nxt = date(year + mon // 12, mon % 12 + 1, 1)
+    return [(first + timedelta(days=i)).isoformat() for i in range((nxt - first).days)]
+
+
+def day_starts_ns(days: Sequence[str], time_zone: str) -> list[int]:
+    """UTC ns of the local midnight starting each of ``days`` (``YYYY-MM-DD``)."""
+    tz = zoneinfo.ZoneInfo(time_zone)
+    out = []
+    for day in days:
+        d = date.fromisoformat(day)
+        out.append(int(datetime(d.year, d.month, d.day, tzinfo=tz).timestamp()) * 10**9)
+    return out
+
+
+def month_bounds_ns(month: str, time_zone: str) -> tuple[int, int]:
+    """``[start, end)`` in UTC ns of a local calendar month; :class:`MonthError` if unusable."""
+    year, mon = _year_month(month)
+    nxt = f"{year + mon // 12:04d}-{mon % 12 + 1:02d}-01"
+    start, end = day_starts_ns([f"{month}-01", nxt], time_zone)
+    return start, end
+
+
+def peak_status(pct: float | None, alarms: AlarmThresholds) -> str:
+    """A start's switch-on peak (% rated motor torque) against the start-peak levels (§7.2,
+    Tables 4–6): ``alarm`` / ``warning`` strictly above them, ``ok``, ``n/a`` without a peak."""
+    if pct is None:
+        return "n/a"
+    if pct > alarms.start_peak_alarm_pct:
+        return "alarm"
+    return "warning" if pct > alarms.start_peak_warn_pct else "ok"
+
+
+@dataclass(frozen=True, slots=True)
+class StartCount:
+    """A month's starts against the norm (3–5, §6.1.3) and the configured levels."""
+
+    count: int
+    failed: int
+    norm: tuple[int, int]
+    warn_above: int
+    alarm_above: int
+    status: str
+    peak_warn_pct: float
+    peak_alarm_pct: float
+
+
+def count_starts(failed: Sequence[bool], alarms: AlarmThresholds) -> StartCount:
+    """The count of a month's starts (``failed``: one flag per start) and its status."""
+    n = len(failed)
+    return StartCount(
+        count=n,
+        failed=sum(bool(f) for f in failed),
+        norm=STARTS_NORM_PER_MONTH,
+        warn_above=alarms.starts_per_month_warn,
+        alarm_above=alarms.starts_per_month_alarm,
+        status=starts_status(n, alarms),
+        peak_warn_pct=alarms.start_peak_warn_pct,
+        peak_alarm_pct=alarms.start_peak_alarm_pct,
+    )
+
+
+def _start(event: EventRow, tz: zoneinfo.ZoneInfo, alarms: AlarmThresholds) -> dict[str, Any]:
+    d = event.data
+    peak = d.get("switch_on_peak_pct")
+    return {
+        "t_ns": event.t_ns,
+        "local_time": datetime.fromtimestamp(event.t_ns / 1e9, tz).isoformat(),
+        "end_t_ns": event.t_end_ns,
+        "failed": bool(d.get("failed", False)),
+        "switch_on_peak_pct": peak,
+        "short_circuit_peak_pct": d.get("short_circuit_peak_pct"),
+        "rise_time_10_90_ms": d.get("rise_time_10_90_ms"),
+        "shock_load": bool(d.get("shock_load", False)),
+        "peak_status": "ok" if peak is None else peak_status(peak, alarms),  # API: ok|warning|alarm
+    }
+
+
+def starts_in_month(store: Store, config: MillConfig, month: str) -> dict[str, Any]:
+    """The month's starts (oldest first) and their count against norm and levels."""
+    since, until = month_bounds_ns(month, config.time_zone)
+    tz, a = zoneinfo.ZoneInfo(config.time_zone), config.alarms
+    starts = [_start(e, tz, a) for e in store.events(config.id, "start", since, until)]
+    c = count_starts([s["failed"] for s in starts], a)
+    return {
+        "mill": config.id,
+        "month": month,
+        "time_zone": config.time_zone,
+        "count": c.count,
+        "failed": c.failed,
+        "norm_per_month": list(c.norm),
+        "count_warn": c.warn_above,
+        "count_alarm": c.alarm_above,
+        "count_status": c.status,
+        "peak_limits_pct": {"warn": c.peak_warn_pct, "alarm": c.peak_alarm_pct},
+        "starts": starts,
+    }

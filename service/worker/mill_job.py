@@ -1,0 +1,261 @@
+"""A mill's analysis inside the worker: :class:`~analytics.mill.analyzer.MillMonitor` plus alarms,
+turned into rows for the store.
+
+The worker adds a batch's blocks (:meth:`AnalyzerPipeline.add_block` / ``add_blocks``: aligned
+only) and then calls :meth:`AnalyzerPipeline.finish` once: the monitor analyses everything as long
+chunks and returns the events and harmonic windows completed; this adapter turns them (and any
+new steady-state windows) into
+
+* event rows (starts, stops, barring sessions),
+* records (``steady`` windows, ``harmonics`` tables),
+* alarm observations → alarm transitions (:mod:`alarms`), and
+* daily damage totals per component and phase, taken every ``damage_every_s`` seconds of
+  *sample* time (not wall time): the analysis stops at exactly those samples, so the rows and the
+  remaining-life observations are the same however the blocks were batched, and
+* a ``spectra_restarted`` data-quality event per tracked channel when a restore had to start
+  the spectra afresh (the mill's configuration moved their geometry since the checkpoint; see
+  :meth:`MillMonitor.restore <analytics.mill.analyzer.MillMonitor.restore>`), stored with the
+  next results, at the checkpoint's sample time.
+
+Everything is derived from the samples alone, so replaying the archive tail after a crash
+reproduces the same rows, which the store writes idempotently.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+
+from alarms.engine import AlarmEngine
+from alarms.from_analysis import event_observations, peak_observations, window_observations
+from alarms.observations import Observation, local_month
+from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.analyzer import MillMonitor, MonitorOutput
+from analytics.spectra.harmonics import stagger_for
+from ingest.wire import Block
+from service.store.database import DamageRow, EventRow
+from service.worker.worker import MillUpdate
+
+__all__ = ["AnalyzerPipeline"]
+
+log = logging.getLogger(__name__)
+
+DAMAGE_EVERY_S = 60.0
+#: A harmonic table is stored at most every 5 minutes of sample time (a window completes about
+#: every 10 s while running; storing each, with every expected line, took ~1.8 MB per running
+#: hour), and at once whenever a window holds an unexplained peak.
+HARMONICS_EVERY_NS = 300 * 1_000_000_000
+#: Steady windows (an hour's) and events of each kind the live analyzer keeps in memory: each
+#: is stored when it comes, so what an offline report keeps (a day of windows, 2000 starts, ~6 kB
+#: each in memory) would only grow memory and checkpoints; more windows than one
+#: :meth:`AnalyzerPipeline.finish` step (a damage interval) makes.
+WINDOWS_KEPT = 60
+EVENTS_KEPT = 20
+SECONDS_PER_YEAR = 365.25 * 86400.0
+
+
+class AnalyzerPipeline:
+    """The worker's :class:`~service.worker.worker.MillPipeline` for one mill."""
+
+    def __init__(self, config: MillConfig, damage_every_s: float = DAMAGE_EVERY_S) -> None:
+        self.config = config
+        self.monitor = MillMonitor(config)
+        self.monitor.analyzer.keep_windows = WINDOWS_KEPT
+        self.monitor.analyzer.keep_events = EVENTS_KEPT
+        self.alarms = AlarmEngine.for_mills([config])
+        self._damage_every = round(damage_every_s * config.sample_rate_hz)
+        # the first interval is longer by a fraction fixed by the mill id, so mills started
+        # together do not all attribute their damage in the same instant (issue 5 latency)
+        self._next_damage = self._damage_every + round(stagger_for(config.id) * self._damage_every)
+        self._last_window_ns = -1
+        self._latest_window: dict[str, Any] | None = None
+        self._next_harmonics_ns = 0
+        self._held_events: list[EventRow] = []  # stored with the next finish()
+
+    # ------------------------------------------------------------------ feeding
+    def feed_block(self, channel: str, block: Block) -> MillUpdate:
+        """One block, analysed at once (:meth:`add_block` then :meth:`finish`)."""
+        self.add_block(channel, block)
+        return self.finish()
+
+    def add_block(self, channel: str, block: Block) -> None:
+        """Align one block; its analysis waits for :meth:`finish` (a worker adds a batch's
+        blocks, then finishes once: the analysis then runs over long chunks)."""
+        self.monitor.add(channel, block.t0_ns, block.fs, block.samples)
+
+    def add_blocks(self, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray) -> None:
+        """Many blocks of this mill at once (see :meth:`MillMonitor.add_blocks`)."""
+        self.monitor.add_blocks(chan, t0_ns, raw)
+
+    @property
+    def backlog(self) -> int:
+        """Samples aligned but not yet analysed."""
+        return self.monitor.backlog
+
+    def finish(self) -> MillUpdate:
+        """Analyse what :meth:`add_block` queued; returns the rows and alarm transitions.
+
+        The analysis stops at every multiple of the damage interval (stream samples), where
+        the daily damage rows and remaining-life observations are taken, so they are the same
+        however the blocks were batched (live, replayed after a crash, or one at a time)."""
+        update = MillUpdate(events=self._held_events)
+        self._held_events = []
+        while True:
+            out = self.monitor.process(until=self._next_damage)
+            self._fold(out, update)
+            if self.monitor.analyzer.n < self._next_damage:
+                return update
+            update.damage += self._damage_rows()
+            update.alarm_transitions += self.alarms.observe_all(self._life_observations())
+            self._next_damage = self.monitor.analyzer.n + self._damage_every
+
+    def _fold(self, out: MonitorOutput, update: MillUpdate) -> None:
+        """Events, steady windows and harmonic tables of ``out`` as rows and alarm input."""
+        observations: list[Observation] = []
+        for event in out.events:
+            update.events.append(self._event_row(event))
+            observations += self._event_observations(event)
+        for window in self._new_windows():
+            update.records.append(("steady", int(window["t_ns"]), window))
+            observations += window_observations(self.config.id, window)
+        for hw in out.harmonics:
+            peaks = [p.to_dict() for p in hw.peaks]
+            if peaks or hw.t_end_ns >= self._next_harmonics_ns:
+                update.records.append(("harmonics", int(hw.t_end_ns), _compact(hw.to_dict())))
+                self._next_harmonics_ns = int(hw.t_end_ns) + HARMONICS_EVERY_NS
+            observations += peak_observations(self.config.id, peaks, int(hw.t_end_ns))
+        if observations:
+            update.alarm_transitions += self.alarms.observe_all(observations)
+
+    def _event_row(self, event: dict[str, Any]) -> EventRow:
+        return EventRow(self.config.id, str(event["event"]), int(event["t_ns"]), event,
+                        event.get("end_t_ns"))  # fmt: skip
+
+    def _event_observations(self, event: dict[str, Any]) -> list[Observation]:
+        obs = event_observations(self.config.id, event)
+        if event.get("event") == "start":
+            month = local_month(int(event["t_ns"]), self.config.time_zone)
+            count = self.monitor.analyzer.starts_per_month.get(month, {}).get("starts", 0)
+            obs.append(Observation(self.config.id, "starts_this_month", float(count),
+                                   int(event["t_ns"]), {"month": month}))  # fmt: skip
+        return obs
+
+    def _new_windows(self) -> list[dict[str, Any]]:
+        new = [w for w in self.monitor.analyzer.windows if w["t_ns"] > self._last_window_ns]
+        if new:
+            self._last_window_ns = int(new[-1]["t_ns"])
+            self._latest_window = new[-1]
+        return new
+
+    def _life_observations(self) -> list[Observation]:
+        """``remaining_life_years`` per component: (1 − D) / (D per year so far), the damage
+        rate taken over everything this analyzer has seen (seed 000 §8.2; Miner limit 1)."""
+        a = self.monitor.analyzer
+        seconds = a.n / a.fs
+        out = []
+        for comp, pd in a.damage.items():
+            damage = pd.committed
+            if damage <= 0.0 or seconds <= 0.0:
+                continue
+            per_year = damage / seconds * SECONDS_PER_YEAR
+            out.append(Observation(self.config.id, "remaining_life_years",
+                                   (1.0 - damage) / per_year, a.t_ns(a.n), {
+                                       "component": comp,
+                                       "remaining_design_life_years":
+                                           self.config.design_life_years,
+                                       "rate_window_s": seconds,
+                                   }))  # fmt: skip
+        return out
+
+    def _damage_rows(self) -> list[DamageRow]:
+        rows = []
+        for comp, days in self.monitor.analyzer.damage_by_day().items():
+            for day, phases in days.items():
+                for phase, damage in phases.items():
+                    rows.append(DamageRow(self.config.id, comp, phase, day, damage, 0.0))
+        return rows
+
+    def observe(self, observations: list[Observation]) -> MillUpdate:
+        """Alarm observations from outside the analysis (the worker's data-quality checks)."""
+        return MillUpdate(alarm_transitions=self.alarms.observe_all(observations))
+
+    def spike_counts(self) -> dict[str, int]:
+        """Telemetry spikes flagged so far, per checked channel."""
+        return {n: c.spikes for n, c in self.monitor.faults.totals().items()}
+
+    # ------------------------------------------------------------------ reading
+    def status(self) -> dict[str, Any]:
+        a = self.monitor.analyzer
+        return {
+            "state": self.monitor.state,
+            "samples": a.n,
+            "last_sample_ns": a.t_ns(a.n) if a.t0_ns is not None else None,
+            "latest_steady": self._latest_window,
+            "open_alarms": len(self.alarms.open_alarms(self.config.id)),
+            "monitored_since_ns": a.t0_ns,
+            "damage": self._damage_summary(),
+        }
+
+    def _damage_summary(self) -> dict[str, dict[str, float]]:
+        """Miner damage per component so far: closed cycles (``committed``), what closing the
+        open rainflow residue now as half cycles would add (``pending_residue``), and their sum
+        (``with_residue``). Cheap (the residue is a few turning points); called by the worker
+        thread when it refreshes the status, so the API never touches the analyzer."""
+        a = self.monitor.analyzer
+        out = {}
+        for comp, pd in a.damage.items():
+            committed = pd.committed
+            with_residue = pd.with_residue(a.counters[comp].close())
+            out[comp] = {
+                "committed": committed,
+                "pending_residue": with_residue - committed,
+                "with_residue": with_residue,
+            }
+        return out
+
+    # ------------------------------------------------------------------ persistence
+    def snapshot(self) -> dict[str, Any]:
+        return {
+            "monitor": self.monitor.snapshot(),
+            "alarms": self.alarms.snapshot(),
+            "next_damage": self._next_damage,
+            "last_window_ns": self._last_window_ns,
+            "latest_window": self._latest_window,
+            "next_harmonics_ns": self._next_harmonics_ns,
+        }
+
+    def restore(self, snapshot: dict[str, Any]) -> None:
+        self.monitor = MillMonitor.restore(self.config, snapshot["monitor"])
+        self.monitor.analyzer.keep_windows = WINDOWS_KEPT
+        self.monitor.analyzer.keep_events = EVENTS_KEPT
+        self.alarms.restore(snapshot["alarms"])
+        self._next_damage = int(snapshot["next_damage"])
+        self._last_window_ns = int(snapshot["last_window_ns"])
+        self._latest_window = snapshot["latest_window"]
+        self._next_harmonics_ns = int(snapshot["next_harmonics_ns"])
+        self._held_events += self._restart_events()
+
+    def _restart_events(self) -> list[EventRow]:
+        """Data-quality events when the restore started the spectra afresh: one per tracked
+        channel, at the checkpoint's last sample time (a repeated recovery from the same
+        checkpoint stores the same rows again, not new ones)."""
+        why, a = self.monitor.spectra_restarted, self.monitor.analyzer
+        if why is None or a.t0_ns is None:  # no samples analysed: no spectra were lost
+            return []
+        t_ns, problem = a.t_ns(a.n), "spectra_restarted"
+        events = []
+        for ch in self.monitor.harmonics.channels:
+            data = {"channel": ch.name, "problem": problem, "reason": why}
+            events.append(EventRow(self.config.id, "data_quality", t_ns, data,
+                                   subject=f"{ch.name}:{problem}"))  # fmt: skip
+        return events
+
+
+def _compact(table: dict[str, Any]) -> dict[str, Any]:
+    """A harmonic table as stored: the lines that were detected, and the segment count."""
+    return table | {
+        "lines": [m for m in table["lines"] if m.get("detected")],
+        "segments": len(table["segments"]),
+    }

@@ -1,0 +1,257 @@
+"""The running service: zenoh subscribers, the worker thread, archive, store — composed here.
+
+:class:`ServiceRuntime` owns every long-lived resource and closes them in reverse order. The
+order of start-up matters:
+
+1. open the store and the archive writer;
+2. subscribe on zenoh (callbacks only enqueue), so nothing published during recovery is lost;
+3. recover: restore the newest checkpoint and replay the archive after it;
+4. start the worker thread, which drains the queue (archive first, then analysis).
+
+Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the worker thread after its current batch,
+write a final checkpoint, finish the archive file (footer and index), undeclare the subscribers,
+close the zenoh session and the store.
+"""
+
+from __future__ import annotations
+
+import gc
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from alarms.lifecycle import Transition
+from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
+from analytics.drivetrain.mill_config import MillConfig
+from ingest.archive.writer import ArchiveReader, ArchiveWriter
+from ingest.keys import alarm_key
+from ingest.zenoh_session import build_config, declare_block_subscriber
+from service.settings import ServiceSettings
+from service.store.database import Store
+from service.worker.block_queue import BlockQueue
+from service.worker.worker import AckRequest, MillPipeline, Worker, mill_patterns
+
+__all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
+
+log = logging.getLogger(__name__)
+
+ARCHIVE_PREFIX = "millwatch"
+STATUS_EVERY_S = 0.5
+#: The readiness checks given per mill (``{mill: bool}``); the others are one bool each.
+MILL_CHECKS = ("data_fresh", "analysed")
+
+
+class ServiceRuntime:
+    """Everything ``millwatch serve`` runs, in one object; see the module docstring."""
+
+    def __init__(
+        self,
+        settings: ServiceSettings,
+        mills: dict[str, MillConfig],
+        pipeline_factory: Callable[[MillConfig], MillPipeline],
+    ) -> None:
+        self.settings = settings
+        self.mills = mills
+        self._pipeline_factory = pipeline_factory
+        self.queue = BlockQueue(settings.worker.queue_blocks)
+        self.store: Store | None = None
+        self.archive: ArchiveWriter | None = None
+        self.worker: Worker | None = None
+        self.session: zenoh.Session | None = None
+        self._subscribers: list[zenoh.Subscriber] = []
+        self._alarm_publishers: dict[str, zenoh.Publisher] = {}
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.status: dict[str, Any] = {}
+        #: Called in the worker thread with each batch of stored alarm transitions (e.g. the
+        #: API's alarm board), before they are published on zenoh; must be quick.
+        self.alarm_listeners: list[Callable[[list[Transition]], None]] = []
+        self.recovered_blocks = 0
+        self.started_ns: int | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        s = self.settings
+        self.store = Store(s.store.path)
+        for mill_id, config in self.mills.items():
+            self.store.put_mill(
+                mill_id, config.site, config.model_dump(mode="json"), time.time_ns()
+            )
+        self.archive = ArchiveWriter(
+            s.archive.directory,
+            ARCHIVE_PREFIX,
+            s.archive.rotate_seconds,
+            s.archive.rotate_bytes,
+            s.archive.chunk_size,
+            max_latency_s=s.archive.max_latency_s,
+        )
+        pipelines = {m: self._pipeline_factory(c) for m, c in self.mills.items()}
+        self.worker = Worker(
+            self.mills,
+            pipelines,
+            self.store,
+            self.archive,
+            checkpoint_seconds=s.worker.checkpoint_seconds,
+        )
+        self._subscribe()
+        self.worker.on_alarms = self._on_alarms
+        self.recovered_blocks = self.worker.recover(
+            ArchiveReader(s.archive.directory, ARCHIVE_PREFIX),
+            jobs=s.worker.recovery_jobs,
+            factory=self._pipeline_factory,
+        )
+        self._refresh_status()
+        # What start-up built (modules, compiled kernels, configurations, pipelines) lives as
+        # long as the service: frozen, the full collections of later garbage skip it (50 mills:
+        # pauses of 48-57 ms became 19-20 ms, bench_latency.py's gc_full_max_ms).
+        gc.collect()
+        gc.freeze()
+        self._thread = threading.Thread(target=self._run, name="millwatch-worker", daemon=True)
+        self._thread.start()
+        self.started_ns = time.time_ns()
+        log.info(
+            "millwatch serving %d mill(s); archive %s; store %s",
+            len(self.mills),
+            s.archive.directory,
+            s.store.path,
+        )
+
+    def _subscribe(self) -> None:
+        z = self.settings.zenoh
+        self.session = zenoh.open(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
+        for pattern in mill_patterns(self.mills.values()):
+            self._subscribers.append(
+                declare_block_subscriber(self.session, pattern, self._on_block)
+            )
+
+    def _on_alarms(self, transitions: list[Transition]) -> None:
+        """Stored transitions: tell the listeners, then publish them."""
+        for listener in self.alarm_listeners:
+            try:
+                listener(transitions)
+            except Exception:
+                log.exception("alarm listener %r failed", listener)
+        self._publish_alarms(transitions)
+
+    def _publish_alarms(self, transitions: list[Transition]) -> None:
+        """Put each stored alarm transition on its mill's ``…/@alarms`` key (JSON), for SCADA
+        gateways. Transitions carry the alarm id and a sequence number, so a transition
+        published again after a crash recovery is recognisable as the same one."""
+        if self.session is None:
+            return
+        for t in transitions:
+            config = self.mills.get(t.alarm.mill_id)
+            if config is None:
+                continue
+            key = alarm_key(config.site, config.id)
+            publisher = self._alarm_publishers.get(key)
+            if publisher is None:
+                publisher = self.session.declare_publisher(
+                    key,
+                    encoding=zenoh.Encoding(ALARM_ENCODING).with_schema(ALARM_SCHEMA),
+                    congestion_control=zenoh.CongestionControl.BLOCK,
+                    reliability=zenoh.Reliability.RELIABLE,
+                )
+                self._alarm_publishers[key] = publisher
+            publisher.put(encode_transition(t, config.site))
+
+    def _on_block(self, key: str, payload: bytes) -> None:
+        self.queue.offer(key, payload)
+
+    def _run(self) -> None:
+        assert self.worker is not None
+        last_status = 0.0
+        while not self._stop.is_set():
+            try:
+                self.worker.step(self.queue, timeout_s=0.1)
+            except Exception:
+                log.exception("worker step failed; continuing with the next batch")
+            if time.monotonic() - last_status >= STATUS_EVERY_S:
+                self.worker.check_staleness(self.settings.worker.stale_after_s)
+                self._refresh_status()
+                last_status = time.monotonic()
+
+    def _refresh_status(self) -> None:
+        assert self.worker is not None
+        self.status = self.worker.status(self.settings.worker.stale_after_s)
+
+    def stop(self) -> None:
+        """Stop in reverse order; safe to call twice."""
+        self._stop.set()
+        for sub in self._subscribers:
+            sub.undeclare()
+        self._subscribers.clear()
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+            self._thread = None
+        if self.worker is not None:
+            self._drain_and_checkpoint()
+        if self.archive is not None:
+            self.archive.close()
+            self.archive = None
+        for publisher in self._alarm_publishers.values():
+            publisher.undeclare()
+        self._alarm_publishers.clear()
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+        if self.store is not None:
+            self.store.close()
+            self.store = None
+        gc.unfreeze()  # (what start() froze is ordinary garbage again once the service is gone)
+
+    def _drain_and_checkpoint(self) -> None:
+        assert self.worker is not None
+        while self.queue.depth:
+            self.worker.step(self.queue, timeout_s=0.0)
+        self.worker.checkpoint()
+        self._refresh_status()
+        self.worker = None
+
+    # ------------------------------------------------------------------ acknowledgements
+    @property
+    def worker_alive(self) -> bool:
+        """The worker thread runs (so a queued acknowledgement will be applied)."""
+        return self.worker is not None and self._thread is not None and self._thread.is_alive()
+
+    def request_ack(self, mill_id: str, alarm_id: str, by: str) -> AckRequest | None:
+        """Queue an acknowledgement for the worker thread (see :meth:`Worker.request_ack`);
+        None when the worker is not running."""
+        worker = self.worker
+        if worker is None or not self.worker_alive:
+            return None
+        return worker.request_ack(mill_id, alarm_id, by)
+
+    # ------------------------------------------------------------------ readiness
+    def readiness(self) -> dict[str, Any]:
+        """What ``GET /ready`` reports: zenoh up, archive writable, store reachable, fresh data,
+        every mill analysed (``held_mills``: why a held mill is not; see
+        :mod:`service.worker.worker`)."""
+        stale = {m: s["health"]["stale_channels"] for m, s in self.status.items()}
+        held = {m: s["held_reason"] for m, s in self.status.items() if s.get("held_reason")}
+        checks = {
+            "zenoh": self.session is not None,
+            "worker": self._thread is not None and self._thread.is_alive(),
+            "archive": self.archive is not None
+            and (self.worker is None or self.worker.archive_errors == 0),
+            "store": self._store_ok(),
+            "data_fresh": {m: not s for m, s in stale.items()},
+            "analysed": {m: m not in held for m in self.status},
+        }
+        ready = all(v for k, v in checks.items() if k not in MILL_CHECKS) and all(
+            all(checks[k].values()) for k in MILL_CHECKS
+        )
+        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held}
+
+    def _store_ok(self) -> bool:
+        if self.store is None:
+            return False
+        try:
+            self.store.mills()
+        except Exception:  # any failure means "not reachable"
+            return False
+        return True

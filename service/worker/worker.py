@@ -1,0 +1,585 @@
+"""The per-process worker: archive first, decode, route to the mill's pipeline, store, checkpoint.
+
+Data path for every received block (DESIGN.md "Data flow")::
+
+    queue → archive (raw bytes, before anything can fail) → decode + validate → health
+          → the mill's pipeline (aligner) → … end of the batch: each mill's analyzer over
+          everything its blocks brought (long chunks: far cheaper per sample, same results)
+          → store (one transaction per batch)
+
+A replay of the archive (:meth:`Worker.recover`) reads it in batches of messages held in arrays
+(:mod:`ingest.archive.batches`) and hands them to :class:`~service.worker.batch_lane.BatchLane`,
+which
+takes each mill's regular blocks as arrays and anything irregular through :meth:`Worker.handle`.
+
+Recovery (DESIGN.md "Persistence and recovery"): every ``checkpoint_seconds`` each mill is
+checkpointed — the mills' turns spread over the interval (:mod:`service.worker.checkpoints`), so no
+step stalls for all of them at once: the worker flushes the archive, takes the archive position
+and snapshots the mill's pipeline *in the same thread that processes blocks*, so the snapshot
+covers exactly the mill's blocks before the position, and stores it in a small transaction of
+its own. After a crash :meth:`Worker.recover` restores every mill's newest checkpoint and
+re-reads the archive from the earliest of their positions through the same :meth:`Worker.handle`
+path (without archiving again), skipping for each mill the blocks its checkpoint already holds,
+so the results equal an uninterrupted run; only blocks that never reached the archive (at most
+~0.1 s) are lost.
+
+A mill whose checkpoint cannot be restored (e.g. a channel removed from its configuration since)
+is *held*, not fatal — a worker that refused to start would archive nothing for any mill: its
+blocks are archived and its channel health observed as always, but nothing reaches its pipeline
+(live or replayed), it gets no alarm observations, and it is never checkpointed, so its last
+good checkpoint stays as it is. ``status`` (hence ``/mills`` and ``/ready``) says why. Once the
+configuration change is reverted, the next start restores that checkpoint and replays the archive
+from it: nothing is lost.
+
+Bad input never stops the worker: an undecodable block is archived, counted per channel and kind
+and logged once per kind; a block whose key belongs to no configured mill is archived and counted.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from alarms.lifecycle import Transition
+from alarms.observations import Observation
+from analytics.drivetrain.mill_config import MillConfig
+from ingest import keys
+from ingest.archive.batches import MessageBatch, archive_batches
+from ingest.archive.writer import ArchivePosition, ArchiveReader, ArchiveWriter
+from ingest.wire import Block, WireError, decode_block
+from service.store.database import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
+from service.worker.batch_lane import BatchLane, replay_batch_blocks
+from service.worker.block_queue import BlockQueue, QueuedBlock
+from service.worker.checkpoints import (
+    STEP_BUDGET_S,
+    CheckpointRestoreError,
+    CheckpointSchedule,
+    MillHeldError,
+    earliest,
+)
+from service.worker.health import LatencyReservoir, MillHealth, PerMinute
+from service.worker.parallel_replay import ParallelReplay, replay_jobs, split_mills, tail_bytes
+
+__all__ = ["HELD", "AckRequest", "MillPipeline", "MillUpdate", "Worker"]
+
+log = logging.getLogger(__name__)
+
+BATCH_BLOCKS = 2000
+#: The ``state`` in the status of a mill that is held (not analysed; see the module docstring).
+HELD = "held"
+
+
+@dataclass
+class MillUpdate:
+    """What one block changed: new events, daily damage totals, timestamped records, alarm
+    transitions with the alarms' new state."""
+
+    events: list[EventRow] = field(default_factory=list)
+    damage: list[DamageRow] = field(default_factory=list)
+    records: list[tuple[str, int, dict[str, Any]]] = field(default_factory=list)
+    alarm_transitions: list[Transition] = field(default_factory=list)
+
+    def __bool__(self) -> bool:
+        return bool(self.events or self.damage or self.records or self.alarm_transitions)
+
+
+@dataclass(frozen=True)
+class AckRequest:
+    """An acknowledgement asked for by another thread (the API), applied by the worker thread
+    in :meth:`Worker.step`; ``done`` gets the stored transitions, or the engine's exception
+    (e.g. :class:`alarms.engine.UnknownAlarmError` when the alarm is no longer open)."""
+
+    mill_id: str
+    alarm_id: str
+    by: str
+    done: Future[list[Transition]] = field(default_factory=Future)
+
+
+class MillPipeline(Protocol):
+    """One mill's analysis: fed decoded blocks per configured channel, in arrival order;
+    ``add_block`` only queues a block, ``finish`` analyses what was queued."""
+
+    def add_block(self, channel: str, block: Block) -> None: ...
+
+    def finish(self) -> MillUpdate: ...
+
+    def observe(self, observations: list[Observation]) -> MillUpdate: ...
+
+    def spike_counts(self) -> dict[str, int]: ...
+
+    def status(self) -> dict[str, Any]: ...
+
+    def snapshot(self) -> dict[str, Any]: ...
+
+    def restore(self, snapshot: dict[str, Any]) -> None: ...
+
+
+class Worker:
+    """Routes blocks of the configured mills to their pipelines; see the module docstring."""
+
+    def __init__(
+        self,
+        mills: dict[str, MillConfig],
+        pipelines: dict[str, MillPipeline],
+        store: Store,
+        archive: ArchiveWriter | None,
+        *,
+        checkpoint_seconds: float = 60.0,
+        clock: Callable[[], int] = time.time_ns,
+    ) -> None:
+        self.mills = mills
+        self.pipelines = pipelines
+        self.store = store
+        self.archive = archive
+        self.checkpoint_seconds = checkpoint_seconds
+        self._clock = clock
+        self.routes = _routes(mills)
+        self.health = {m: MillHealth.for_channels(list(c.channels)) for m, c in mills.items()}
+        self.unrouted: Counter[str] = Counter()
+        self.archive_errors = 0
+        self.blocks_handled = 0
+        #: Held mills (see the module docstring): mill id → why (the restore error's message).
+        self.held: dict[str, str] = {}
+        #: Blocks of held mills handled (archived, health observed) but not analysed, per mill.
+        self.held_blocks: Counter[str] = Counter()
+        self._logged: set[tuple[str, str]] = set()
+        self._pending = PendingResults()
+        self._unfinished: dict[str, None] = {}  # mills with queued blocks, in arrival order
+        self._schedule = CheckpointSchedule(pipelines, checkpoint_seconds)
+        self.checkpoints_written = 0
+        self.checkpoint_bytes = 0
+        self._stale: dict[str, set[str]] = {}
+        self._started_ns = clock()
+        self._rate_meters: dict[tuple[str, str, str], PerMinute] = {}
+        self.latency = LatencyReservoir()
+        self._archive_errors_reported = 0
+        self.on_alarms: Callable[[list[Transition]], None] | None = None
+        self._acks: queue.SimpleQueue[AckRequest] = queue.SimpleQueue()
+
+    # ------------------------------------------------------------------ one block
+    def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
+        """Archive (unless replaying the archive), decode, route, analyse one block (a held
+        mill's: all but analyse)."""
+        if archive and self.archive is not None:
+            self._archive(item)
+        self.blocks_handled += 1
+        route = self.routes.get(item.key)
+        if route is None:
+            self.unrouted[item.key] += 1
+            self._log_once(
+                ("unrouted", item.key), "blocks on %s belong to no configured mill", item.key
+            )
+            return
+        mill_id, channel = route
+        try:
+            block = decode_block(item.payload)
+        except WireError as exc:
+            self.health[mill_id].channels[channel].decode_error(exc.kind, item.recv_ns)
+            self._log_once(
+                (item.key, exc.kind), "%s: %s (counted; further ones not logged)", item.key, exc
+            )
+            return
+        health = self.health[mill_id].channels[channel]
+        missing_before = health.missing_blocks
+        verdict = health.observe(block, item.recv_ns)
+        if verdict == "gap":
+            self._quality(
+                mill_id,
+                channel,
+                block.t0_ns,
+                "sequence_gap",
+                missing_blocks=health.missing_blocks - missing_before,
+                seq=block.seq,
+            )
+        if verdict == "repeat":
+            self._log_once(
+                (item.key, "repeat"), "%s: repeated block seq %d ignored", item.key, block.seq
+            )
+            return
+        if mill_id in self.held:
+            self.held_blocks[mill_id] += 1
+            return
+        self.pipelines[mill_id].add_block(channel, block)
+        self._unfinished[mill_id] = None
+
+    def finish_analysis(self) -> None:
+        """Analyse the blocks :meth:`handle` queued, mill by mill: each mill's blocks of a
+        batch go through its analyzer as long contiguous chunks (the results do not depend on
+        the batching). :meth:`commit` calls this first. (Held mills queue nothing.)"""
+        unfinished, self._unfinished = self._unfinished, {}
+        for mill_id in unfinished:
+            self._pending.add(mill_id, self.pipelines[mill_id].finish())
+
+    def _quality(self, mill_id: str, channel: str, t_ns: int, problem: str, **data: Any) -> None:
+        """A data-quality event (stored with the mill's events)."""
+        row = EventRow(mill_id, "data_quality", int(t_ns),
+                       {"channel": channel, "problem": problem, **data},
+                       subject=f"{channel}:{problem}")  # fmt: skip
+        self._pending.add(mill_id, MillUpdate(events=[row]))
+
+    def check_staleness(self, stale_after_s: float) -> None:
+        """Data-quality events when a channel goes stale or comes back, and the data-quality
+        alarm observations (silence, spike rate, lost blocks, archive write failures); call
+        about once a second. These are wall-clock facts: they are not replayed from the archive."""
+        now = self._clock()
+        archive_failures = self.archive_errors - self._archive_errors_reported
+        for mill_id, mh in self.health.items():
+            stale = set(mh.stale_channels(now, stale_after_s))
+            was = self._stale.get(mill_id, set())
+            for channel in sorted(stale - was):
+                self._quality(mill_id, channel, now, "stale", stale_after_s=stale_after_s)
+            for channel in sorted(was - stale):
+                self._quality(mill_id, channel, now, "fresh")
+            self._stale[mill_id] = stale
+            if mill_id in self.held:
+                # Its pipeline's alarm engine was not restored: a fresh one knows nothing of the
+                # mill's open alarms, so it would raise them again under new ids, and what it
+                # raised is in no checkpoint (a held mill gets none), so the restored engine
+                # would never clear them after the revert. The stale/fresh events above stay:
+                # they are about the data arriving, which is archived.
+                continue
+            observations = self._silence(mill_id, now) + self._rates(mill_id, now)
+            observations.append(Observation(mill_id, "archive_write_failures",
+                                            float(archive_failures), now))  # fmt: skip
+            self._pending.add(mill_id, self.pipelines[mill_id].observe(observations))
+        self._archive_errors_reported = self.archive_errors
+
+    def _rates(self, mill_id: str, now: int) -> list[Observation]:
+        """``spike_rate`` and ``sequence_gaps`` per channel, per minute of wall time."""
+        out = []
+        spikes = self.pipelines[mill_id].spike_counts()
+        for channel, h in self.health[mill_id].channels.items():
+            for quantity, total in (("spike_rate", spikes.get(channel)),
+                                    ("sequence_gaps", h.missing_blocks)):  # fmt: skip
+                if total is None:
+                    continue
+                meter = self._rate_meters.setdefault((mill_id, channel, quantity), PerMinute())
+                out.append(Observation(mill_id, quantity, meter.rate(now, total), now,
+                                       {"channel": channel}))  # fmt: skip
+        return out
+
+    def _silence(self, mill_id: str, now: int) -> list[Observation]:
+        """``stale_channel`` observations: seconds since each channel last delivered data."""
+        out = []
+        for channel, h in self.health[mill_id].channels.items():
+            since = h.last_recv_ns if h.last_recv_ns is not None else self._started_ns
+            out.append(Observation(mill_id, "stale_channel", max(0, now - since) / 1e9, now,
+                                   {"channel": channel}))  # fmt: skip
+        return out
+
+    def _archive(self, item: QueuedBlock) -> None:
+        try:
+            self.archive.write(item.key, item.payload, item.recv_ns)  # type: ignore[union-attr]
+        except OSError as exc:
+            self.archive_errors += 1
+            self._log_once(("archive", type(exc).__name__), "archive write failed: %s", exc)
+
+    def _log_once(self, what: tuple[str, str], msg: str, *args: object) -> None:
+        if what not in self._logged:
+            self._logged.add(what)
+            log.warning(msg, *args)
+
+    # ------------------------------------------------------------------ batches
+    def step(self, queue: BlockQueue, timeout_s: float = 0.1) -> int:
+        """Drain and handle one batch, store its results, checkpoint when due."""
+        items = queue.drain(BATCH_BLOCKS, timeout_s)
+        for item in items:
+            self.handle(item)
+        acked = self._apply_acks()
+        try:
+            self.commit()
+            self.latency.add_batch(self._clock(), items)
+        except Exception as exc:
+            for request, _ in acked:
+                request.done.set_exception(exc)
+            raise
+        if acked:
+            self._finish_acks(acked)
+        if self.archive is not None:
+            self.archive.flush_if_due()
+        self._checkpoint_due()
+        return len(items)
+
+    # ------------------------------------------------------------------ acknowledgements
+    def request_ack(self, mill_id: str, alarm_id: str, by: str) -> AckRequest:
+        """Ask the worker thread to acknowledge an alarm (any thread may call this); wait on
+        the request's ``done`` future. The worker applies it at its next :meth:`step` (within
+        ~0.1 s), stores and publishes its transitions like any other, then checkpoints."""
+        request = AckRequest(mill_id, alarm_id, by)
+        self._acks.put(request)
+        return request
+
+    def _apply_acks(self) -> list[tuple[AckRequest, list[Transition]]]:
+        """Apply the queued acknowledgements to the mills' alarm engines (worker thread)."""
+        applied = []
+        while True:
+            try:
+                request = self._acks.get_nowait()
+            except queue.Empty:
+                return applied
+            try:
+                transitions = self._acknowledge(request)
+            except Exception as exc:  # handed to the waiting caller, who maps it
+                request.done.set_exception(exc)
+                continue
+            self._pending.add(request.mill_id, MillUpdate(alarm_transitions=transitions))
+            applied.append((request, transitions))
+
+    def _acknowledge(self, request: AckRequest) -> list[Transition]:
+        """Apply one acknowledgement; :class:`MillHeldError` for a held mill (its alarm engine
+        was not restored, so it does not know the mill's open alarms)."""
+        if request.mill_id in self.held:
+            raise MillHeldError(request.mill_id, self.held[request.mill_id])
+        engine = self.pipelines[request.mill_id].alarms  # type: ignore[attr-defined]
+        return engine.acknowledge(request.alarm_id, request.by, self._clock())
+
+    def _finish_acks(self, acked: list[tuple[AckRequest, list[Transition]]]) -> None:
+        """After the acks' transitions are stored: checkpoint at once, because an ack is a
+        wall-clock fact the archive cannot replay, then tell the callers."""
+        mills = {request.mill_id for request, transitions in acked if transitions}
+        if mills:
+            self.checkpoint(sorted(mills))
+        for request, transitions in acked:
+            request.done.set_result(transitions)
+
+    def commit(self) -> None:
+        """Write the pending results in one transaction, then hand the alarm transitions to
+        ``on_alarms`` (e.g. to publish them on zenoh) — only once they are stored."""
+        self.finish_analysis()
+        if not self._pending:
+            return
+        pending, self._pending = self._pending, PendingResults()
+        with self.store.transaction() as db:
+            pending.write(db)
+        if pending.transitions and self.on_alarms is not None:
+            self.on_alarms(pending.transitions)
+
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint(self, mills: Iterable[str] | None = None) -> ArchivePosition | None:
+        """Store the results so far, flush the archive and store the snapshot of each of
+        ``mills`` (default: every mill; never a held one) with the archive position, one
+        transaction per mill."""
+        self.commit()
+        position = self.archive.flush() if self.archive is not None else None
+        for mill_id in self.pipelines if mills is None else mills:
+            self._checkpoint_mill(mill_id, position)
+        return position
+
+    def _checkpoint_due(self) -> None:
+        """Checkpoint the mills whose turn has come: at least one, then as many as fit in
+        :data:`~service.worker.checkpoints.STEP_BUDGET_S` (the rest at the next steps)."""
+        due = self._schedule.due()
+        if not due:
+            return
+        started = time.monotonic()
+        position = self.checkpoint(due[:1])
+        for mill_id in due[1:]:
+            if time.monotonic() - started >= STEP_BUDGET_S:
+                return
+            self._checkpoint_mill(mill_id, position)
+
+    def _checkpoint_mill(self, mill_id: str, position: ArchivePosition | None) -> None:
+        """One mill's snapshot (exact at ``position``: taken on this thread between blocks),
+        serialised and stored at once, so it shares nothing mutable with the live pipeline.
+        Nothing for a held mill: its last good checkpoint must stay for the revert."""
+        if mill_id in self.held:
+            return
+        seqs = {c: h.last_seq for c, h in self.health[mill_id].channels.items()}
+        state = {"pipelines": {mill_id: self.pipelines[mill_id].snapshot()},
+                 "last_seq": {mill_id: seqs}}  # fmt: skip
+        where = position.as_dict() if position else {}
+        with self.store.transaction() as db:
+            size = Store.put_checkpoint(db, mill_id, self._clock(), where, state)
+        self.checkpoints_written += 1
+        self.checkpoint_bytes += size
+        self._schedule.done(mill_id)
+
+    # ------------------------------------------------------------------ recovery
+    def recover(
+        self,
+        reader: ArchiveReader,
+        *,
+        jobs: int = 1,
+        factory: Callable[[MillConfig], MillPipeline] | None = None,
+    ) -> int:
+        """Restore every mill's newest checkpoint and replay the archive after them; returns
+        the number of archived blocks replayed. Call before going live.
+
+        The replay starts at the earliest mill's position; each mill skips the blocks before
+        its own position. A configured mill without a checkpoint starts fresh at that earliest
+        position (at the archive's start when no mill has one). A held mill (its checkpoint
+        could not be restored) does not pull the start back to its old position, and no replay
+        is needed when every mill is held. With ``factory`` (how the pipelines were built) a
+        long tail is replayed by up to ``jobs`` processes (0: one per core), the analysed mills
+        split between them (:mod:`service.worker.parallel_replay`); same results."""
+        covered = self.restore_checkpoints(self.store.latest_checkpoints())
+        analysed = [m for m in self.mills if m not in self.held]
+        after = earliest(covered.values())
+        size = replay_batch_blocks(len(self.mills)) // 2  # (read at least half a commit's)
+        batches: Iterable[MessageBatch] = []
+        if analysed:
+            batches = archive_batches(reader.directory, reader.prefix, after=after,
+                                      min_messages=size)  # fmt: skip
+        n_jobs = 1
+        if factory is not None and analysed:
+            tail = tail_bytes(reader.directory, reader.prefix, after)
+            n_jobs = replay_jobs(jobs, len(analysed), tail)
+        if n_jobs > 1:
+            parallel = ParallelReplay(self, split_mills(analysed, n_jobs), factory)  # type: ignore[arg-type]
+            replayed, skipped = parallel.run(batches, covered)
+        else:
+            replayed, skipped = self._replay(batches, covered)
+        self._schedule.restart()
+        log.info(
+            "recovered: %d mill checkpoint(s), %d archived blocks replayed by %d process(es) "
+            "(%d of held mills, not analysed), %d skipped (already in their mill's checkpoint)",
+            len(covered),
+            replayed,
+            n_jobs,
+            sum(self.held_blocks.values()),
+            skipped,
+        )
+        return replayed
+
+    def _replay(
+        self, batches: Iterable[MessageBatch], covered: dict[str, ArchivePosition | None]
+    ) -> tuple[int, int]:
+        """Replay ``batches`` in this process; returns (handled, skipped)."""
+        replayed = skipped = 0
+        lane = BatchLane(self)  # whole batches of blocks as arrays; irregular ones one by one
+        for batch in batches:
+            handled, skip = lane.replay(batch, covered)
+            replayed, skipped = replayed + handled, skipped + skip
+        self.commit()
+        return replayed, skipped
+
+    def restore_checkpoints(
+        self, parts: dict[str, tuple[dict[str, Any], dict[str, Any]]]
+    ) -> dict[str, ArchivePosition | None]:
+        """Restore the mills of ``parts`` (:meth:`Store.latest_checkpoints`); returns the
+        archive position each mill was restored at (held mills: none, see :attr:`held`)."""
+        return self._restore(parts)
+
+    def _restore(
+        self, parts: dict[str, tuple[dict[str, Any], dict[str, Any]]]
+    ) -> dict[str, ArchivePosition | None]:
+        """Load each part's snapshots; returns the archive position each mill was restored at."""
+        covered: dict[str, ArchivePosition | None] = {}
+        for position, state in parts.values():
+            at = ArchivePosition.from_dict(position) if position else None
+            for mill_id, snap in state.get("pipelines", {}).items():
+                if self._restore_or_hold(mill_id, snap, at):
+                    covered[mill_id] = at
+            self._restore_seqs(state.get("last_seq", {}))
+        return covered
+
+    def _restore_or_hold(
+        self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None
+    ) -> bool:
+        """Restore one mill's pipeline; False when the mill is not configured, or is held
+        because its checkpoint cannot be restored (logged once, at ERROR)."""
+        if mill_id not in self.pipelines:
+            log.warning("checkpoint holds mill %s, which is no longer configured", mill_id)
+            return False
+        try:
+            self._restore_mill(mill_id, snap, at)
+        except CheckpointRestoreError as exc:
+            self.held[mill_id] = str(exc)
+            self._schedule.drop(mill_id)
+            log.error(
+                "%s. Until then mill %s is held: its blocks are archived but not analysed, and "
+                "it is not checkpointed (starting it afresh would overwrite today's stored "
+                "damage with a partial total); nothing is lost",
+                exc,
+                mill_id,
+            )
+            return False
+        return True
+
+    def _restore_seqs(self, last_seq: dict[str, dict[str, int]]) -> None:
+        """The channels' last sequence numbers. Not a held mill's: its checkpoint lies before
+        the blocks the replay and live data bring now, so those in between would be counted
+        (and stored as a data-quality event) as lost; its health starts afresh instead."""
+        for mill_id, seqs in last_seq.items():
+            if mill_id in self.held or mill_id not in self.health:
+                continue
+            channels = self.health[mill_id].channels
+            for channel, seq in seqs.items():
+                if channel in channels:
+                    channels[channel].last_seq = seq
+
+    def _restore_mill(self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None) -> None:
+        """Restore one mill's pipeline; :class:`CheckpointRestoreError` (naming the mill, the
+        checkpoint and the cause) if it cannot be. A configuration change that only moves the
+        spectra's geometry is no failure: the monitor restarts its spectra and logs why."""
+        try:
+            self.pipelines[mill_id].restore(snap)
+        except Exception as exc:
+            raise CheckpointRestoreError(mill_id, at, exc) from exc
+
+    # ------------------------------------------------------------------ reading
+    def status(self, stale_after_s: float) -> dict[str, Any]:
+        """Per mill: channel health, the pipeline's status and ``held_reason`` (None unless
+        held). A held mill's pipeline holds nothing of it, so its status is only the health,
+        ``state`` :data:`HELD` and the reason."""
+        now = self._clock()
+        out = {}
+        for mill_id in self.mills:
+            health = self.health[mill_id].as_dict(now, stale_after_s)
+            reason = self.held.get(mill_id)
+            if reason is None:
+                out[mill_id] = {"health": health, **self.pipelines[mill_id].status(),
+                                "held_reason": None}  # fmt: skip
+            else:
+                out[mill_id] = {"health": health, "state": HELD, "held_reason": reason}
+        return out
+
+
+class PendingResults:
+    """Pending results of a batch, per mill, with daily damage rows de-duplicated (last wins)."""
+
+    def __init__(self) -> None:
+        self.events: list[EventRow] = []
+        self.records: list[tuple[str, str, int, dict[str, Any]]] = []
+        self.damage: dict[tuple[str, str, str, str], DamageRow] = {}
+        self.transitions: list[Transition] = []
+
+    def add(self, mill_id: str, update: MillUpdate) -> None:
+        self.events += update.events
+        self.records += [(mill_id, kind, t, data) for kind, t, data in update.records]
+        for row in update.damage:
+            self.damage[(row.mill_id, row.component, row.phase, row.day)] = row
+        self.transitions += update.alarm_transitions
+
+    def __bool__(self) -> bool:
+        return bool(self.events or self.records or self.damage or self.transitions)
+
+    def write(self, db: Any) -> None:
+        Store.add_events(db, self.events)
+        Store.set_damage(db, list(self.damage.values()))
+        for mill_id, kind, t_ns, data in self.records:
+            Store.add_record(db, mill_id, kind, t_ns, data)
+        if self.transitions:
+            rows = [AlarmTransitionRow(**t.to_row()) for t in self.transitions]
+            latest = {t.alarm_id: AlarmRow(**t.alarm.to_dict()) for t in self.transitions}
+            Store.put_alarm_transitions(db, rows, list(latest.values()))
+
+
+def _routes(mills: dict[str, MillConfig]) -> dict[str, tuple[str, str]]:
+    """zenoh key → (mill id, configured channel name)."""
+    routes: dict[str, tuple[str, str]] = {}
+    for mill_id, config in mills.items():
+        for name, channel in config.channels.items():
+            routes[keys.channel_key(config.site, config.id, channel.key)] = (mill_id, name)
+    return routes
+
+
+def mill_patterns(mills: Iterable[MillConfig]) -> list[str]:
+    """The zenoh key expressions that cover the configured mills' live channels."""
+    return [keys.mill_pattern(c.site, c.id) for c in mills]

@@ -1,0 +1,234 @@
+"""The one analyzer per mill: same blocks, same results, however framed or interrupted."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analytics.drivetrain.mill_config import ChannelConfig
+from analytics.mill.analyzer import DERIVED_SPEED, MillMonitor, analysis_config
+from analytics.spectra.harmonics import SnapshotMismatch
+from ingest.mill_files import load_mill_config
+from ingest.sim.scenes import get_scene
+
+MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
+
+
+def blocks(scene, size: int):
+    """(channel, t0, fs, samples) per channel per block, like the wire carries them."""
+    data = scene.render(0, scene.n_samples)
+    for a in range(0, scene.n_samples, size):
+        for name, x in data.items():
+            yield name, scene.t_ns(a), scene.fs, x[a : a + size]
+
+
+def report(monitor: MillMonitor) -> str:
+    monitor.flush()
+    return json.dumps(monitor.report(), sort_keys=True, default=float)
+
+
+def test_block_size_does_not_change_anything():
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    scene = get_scene("telemetry-faults", config, seed=5, duration_s=90.0)
+    reports = []
+    for size in (100, 1000):
+        m = MillMonitor(config)
+        for b in blocks(scene, size):
+            m.push(*b)
+        reports.append(report(m))
+    assert reports[0] == reports[1]
+    assert json.loads(reports[0])["data_quality"]["faults"]["motor_torque"]["spikes"] > 0
+
+
+def test_snapshot_restore_mid_stream_gives_the_uninterrupted_result():
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    scene = get_scene("start-lrs", config, seed=2, duration_s=60.0)
+    all_blocks = list(blocks(scene, 100))
+    ref = MillMonitor(config)
+    for b in all_blocks:
+        ref.push(*b)
+    first = MillMonitor(config)
+    cut = 4 * 80 + 2  # mid switch-on, and between the channels of one block
+    for b in all_blocks[:cut]:
+        first.push(*b)
+    second = MillMonitor.restore(config, json.loads(json.dumps(first.snapshot())))
+    for b in all_blocks[cut:]:
+        second.push(*b)
+    assert report(second) == report(ref)
+
+
+def test_speed_from_tacho_pulses_when_no_rpm_channel_is_configured():
+    full = load_mill_config(MILLS / "ball-dual-lrs.toml")
+    channels = {n: c for n, c in full.channels.items() if c.kind != "rpm"}
+    config = full.model_copy(update={"channels": channels})
+    assert DERIVED_SPEED in analysis_config(config).channels
+    scene = get_scene("start-lrs", full, seed=1, duration_s=150.0)
+    m = MillMonitor(config)
+    for name, t0, fs, x in blocks(scene, 200):
+        if name in channels:
+            m.push(name, t0, fs, x)
+    m.flush()
+    rep = m.report()
+    assert len(rep["starts"]) == 1
+    assert not rep["starts"][0]["failed"]
+    assert rep["steady_state"], "running was recognised from the tacho-derived speed"
+    assert np.isfinite(rep["steady_state"][0]["speed_pct"])
+
+
+def _queued_report(config, scene, names, rng, max_batch: int) -> str:
+    """Blocks added in random batches of 1..max_batch block times, processed in between."""
+    m = MillMonitor(config)
+    block_times = list(range(0, scene.n_samples, 100))
+    data = scene.render(0, scene.n_samples)
+    k = 0
+    while k < len(block_times):
+        n = int(rng.integers(1, max_batch + 1))
+        for a in block_times[k : k + n]:
+            for name, x in data.items():
+                if name in names:
+                    m.add(name, scene.t_ns(a), scene.fs, x[a : a + 100])
+        k += n
+        m.process()
+    return report(m)
+
+
+def test_long_chunks_give_the_block_by_block_report_bitwise():
+    """Starts, stops, barring, faults, steady windows, damage and spectra: the analysis of
+    chunks up to MAX_CHUNK_S equals the analysis block by block (random batching)."""
+    from ingest.sim.simulator import BarringEvent, DropoutEvent, SpikesEvent, StartEvent, TripEvent
+
+    rng = np.random.default_rng(3)
+    for mill, drop_rpm in (("sag-5200-lrs.toml", False), ("ball-dual-lrs.toml", True)):
+        full = load_mill_config(MILLS / mill)
+        channels = {n: c for n, c in full.channels.items() if not (drop_rpm and c.kind == "rpm")}
+        config = full.model_copy(update={"channels": channels})
+        events = (StartEvent(at_s=10.0), TripEvent(at_s=130.0), BarringEvent(at_s=200.0, sweeps=1),
+                  SpikesEvent(at_s=20.0, bursts=15, spread_s=300.0),
+                  DropoutEvent(at_s=90.0, duration_s=1.5))  # fmt: skip
+        scene = get_scene("steady", full, seed=7, duration_s=420.0, initial_state="stopped",
+                          events=events)  # fmt: skip
+        one = MillMonitor(config)
+        for name, t0, fs, x in blocks(scene, 100):
+            if name in channels:
+                one.push(name, t0, fs, x)
+        want = report(one)
+        assert _queued_report(config, scene, channels, rng, 400) == want
+        rep = json.loads(want)
+        assert rep["starts"] and rep["barring"] and rep["steady_state"]
+
+
+def test_process_until_stops_at_that_sample_and_snapshot_needs_an_empty_queue():
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    scene = get_scene("steady", config, seed=1, duration_s=30.0)
+    m = MillMonitor(config)
+    for b in blocks(scene, 100):
+        m.add(*b)
+    assert m.backlog == 30_000
+    try:
+        m.snapshot()
+    except RuntimeError:
+        pass
+    else:
+        raise AssertionError("a snapshot with frames waiting must be refused")
+    for until in (1, 7_777, 7_777, 20_000):
+        m.process(until=until)
+        assert m.analyzer.n == until
+    m.process()
+    assert m.backlog == 0 and m.analyzer.n == 30_000 - m.faults.delay
+    assert m.snapshot()["kind"] == "mill_monitor"
+
+
+def _faster(config):
+    """``config`` after an operator's edit that moves the harmonic geometry: motor 995 → 1000
+    rpm, so the pinion turns at 177.0 rpm instead of 176.1."""
+    return config.model_copy(update={"drive": config.drive.model_copy(
+        update={"motor_speed_rpm": 1000.0})})  # fmt: skip
+
+
+def test_restore_after_a_pinion_speed_change_restarts_only_the_spectra(caplog):
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    scene = get_scene("start-lrs", config, seed=2, duration_s=60.0)
+    all_blocks = list(blocks(scene, 1000))
+    ref = MillMonitor(config)
+    for b in all_blocks:
+        ref.push(*b)
+    first = MillMonitor(config)
+    for b in all_blocks[: 4 * 40]:  # 40 s: started, running, spectra in progress
+        first.push(*b)
+    snap = json.loads(json.dumps(first.snapshot()))
+    assert first.state == "running" and first.harmonics.counters["running_samples"] > 0
+
+    with caplog.at_level("WARNING", logger="analytics.mill.analyzer"):
+        second = MillMonitor.restore(_faster(config), snap)
+    again = json.loads(json.dumps(second.snapshot()))
+    for part in ("aligner", "faults", "tacho", "analyzer", "last_good"):  # all but the spectra
+        assert again[part] == snap[part], part
+    assert second.analyzer.report()["damage"] == first.analyzer.report()["damage"]
+    assert second.state == "running"
+    fresh = second.harmonics
+    assert fresh.bins != first.harmonics.bins and fresh._len == 0 and fresh.latest is None
+    assert set(fresh.counters.values()) == {0}
+    assert fresh.stagger == first.harmonics.stagger  # built as __init__ builds it
+    [record] = caplog.records
+    assert "mill 'sag-5200-lrs'" in record.message and "65 / 11018" in record.message
+    assert "spectra restart" in record.message and "damage" in record.message
+    assert second.spectra_restarted and "11083 bins" in second.spectra_restarted
+
+    for b in all_blocks[4 * 40 :]:  # the mill goes on being analysed
+        second.push(*b)
+    assert second.analyzer.n == ref.analyzer.n
+    assert second.harmonics.counters["running_samples"] > 0
+    # damage does not depend on the speed: the continued totals are the uninterrupted ones
+    assert json.loads(report(second))["damage"] == json.loads(report(ref))["damage"]
+
+
+def test_restore_refuses_another_sample_rate_naming_the_mill():
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    snap = MillMonitor(config).snapshot()
+    faster = config.model_copy(update={"sample_rate_hz": 2000.0})
+    with pytest.raises(SnapshotMismatch, match=r"'sag-5200-lrs': sample rate 1000 Hz in the "
+                       r"snapshot, 2000 Hz with the configuration now"):  # fmt: skip
+        MillMonitor.restore(faster, snap)
+
+
+def _with_channels(config, channels):
+    return config.model_copy(update={"channels": channels})
+
+
+def test_restore_refuses_an_added_or_removed_channel_naming_the_mill_and_the_channels():
+    """An added channel would otherwise be ignored for good (the aligner frames the snapshot's
+    channels), a removed one waited for: the snapshot does not fit, whatever the spectra do."""
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    snap = json.loads(json.dumps(MillMonitor(config).snapshot()))
+    spare = ChannelConfig(key="motor_speed", kind="rpm", shaft="motor", units="rpm")
+    added = _with_channels(config, {**config.channels, "motor_speed": spare})
+    with pytest.raises(SnapshotMismatch, match=r"^mill 'sag-5200-lrs': channel\(s\) added "
+                       r"'motor_speed' in the configuration since the snapshot"):  # fmt: skip
+        MillMonitor.restore(added, snap)
+    swapped = {n: c for n, c in added.channels.items() if n != "pinion_bending"}
+    with pytest.raises(SnapshotMismatch, match=r"added 'motor_speed' and removed "
+                       r"'pinion_bending'"):  # fmt: skip
+        MillMonitor.restore(_with_channels(config, swapped), snap)
+
+
+def test_restore_with_the_channels_listed_in_another_order_continues_bitwise():
+    """add_blocks numbers channels in the configuration's order: a configuration that lists the
+    same channels in another order than at the snapshot must not swap them."""
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    reordered = _with_channels(config, dict(reversed(list(config.channels.items()))))
+    all_blocks = list(blocks(get_scene("start-lrs", config, seed=2, duration_s=30.0), 100))
+    ref = MillMonitor(config)
+    for b in all_blocks:
+        ref.push(*b)
+    first = MillMonitor(config)
+    for b in all_blocks[:400]:
+        first.push(*b)
+    second = MillMonitor.restore(reordered, json.loads(json.dumps(first.snapshot())))
+    rest, names = all_blocks[400:], list(reordered.channels)
+    chan = np.array([names.index(b[0]) for b in rest])
+    second.add_blocks(chan, np.array([b[1] for b in rest]), np.stack([b[3] for b in rest]))
+    second.process()
+    assert report(second) == report(ref)

@@ -1,0 +1,171 @@
+"""MillAnalyzer: events and damage on short scenes; framing invariance; snapshot/restore; NaN."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from analytics.mill.loads import (
+    KEEP_START_DAYS,
+    KEEP_START_MONTHS,
+    MillAnalyzer,
+    component_names,
+)
+from analytics.signal.frame_aligner import Frame
+from tests.analytics.scene_helpers import custom, mill, run, scene
+
+
+def dump(a: MillAnalyzer) -> str:
+    return json.dumps(a.report(), sort_keys=True)
+
+
+@pytest.fixture(scope="module")
+def dual_scene():
+    events = [{"kind": "start", "at_s": 3.0}, {"kind": "trip", "at_s": 95.0},
+              {"kind": "barring", "at_s": 130.0, "sweeps": 1}]  # fmt: skip
+    return custom("ball-dual-lrs", events, 230.0, seed=7)
+
+
+def test_start_lrs_report(tmp_path):
+    sc = scene("start-lrs", seed=1)
+    r = run(sc).report()
+    assert len(r["starts"]) == 1 and len(r["stops"]) == 1 and r["barring"] == []
+    s = r["starts"][0]
+    for key in ("t_ns", "switch_on_peak_pct", "short_circuit_peak_pct", "rise_time_10_90_ms"):
+        assert s[key] is not None
+    assert r["starts_per_month"] == {
+        "2024-01": {"starts": 1, "failed_starts": 0, "norm": [3, 5], "status": "ok"}
+    }
+    assert len(r["steady_state"]) >= 1 and r["state"] == "stopped"
+    w = r["steady_state"][0]
+    assert 80 < w["mean_pct"]["motor_torque0"] < 100 and w["range_per_rev"]["bending0"] > 10
+    assert set(r["damage"]) == set(component_names(sc.config))
+    for d in r["damage"].values():
+        assert sum(d["phases"].values()) == pytest.approx(d["committed"], rel=1e-12)
+        assert d["phases"]["start"] > d["phases"]["stop"] > 0
+        assert d["with_residue"] >= d["committed"]
+        proj = d["monthly_projection"]
+        assert proj["5/day"] > proj["1/day"] > proj["1/week"] > proj["1/month"] > 0
+    json.dumps(r)
+
+
+def test_dual_drive_events(dual_scene):
+    r = run(dual_scene).report()
+    assert [len(s["switch_on"]) for s in r["starts"]] == [2]
+    assert [s["kind"] for s in r["stops"]] == ["trip"]
+    assert len(r["barring"]) == 1
+    assert r["barring"][0]["peak_pct"] == pytest.approx(dual_scene.truth.barrings[0].peak_pct,
+                                                        abs=1.0)  # fmt: skip
+    assert r["steady_state"][0]["imbalance_pct"] > 0  # barring side carries more (Table 15)
+    assert r["damage"]["pinion_combined_nbs"]["phases"]["barring"] >= 0.0
+
+
+def test_framing_does_not_change_a_bit(dual_scene):
+    whole = dump(run(dual_scene, frame=100))
+    rng = np.random.default_rng(11)
+    cuts = sorted(rng.choice(dual_scene.n_samples, 300, replace=False).tolist())
+    assert dump(run(dual_scene, cuts=cuts)) == whole
+    assert dump(run(dual_scene, frame=7919)) == whole
+
+
+def test_snapshot_restore_continues_exactly(dual_scene):
+    sc = dual_scene
+    whole = dump(run(sc, frame=1000))
+    data = sc.render(0, sc.n_samples)
+    for cut in (4_010, 12_500, 96_000, 131_000):  # switch-on, accelerating, stopping, barring
+        a = MillAnalyzer(sc.config)
+        for lo in range(0, cut, 1000):
+            hi = min(cut, lo + 1000)
+            a.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo:hi] for k, v in data.items()}))
+        b = MillAnalyzer.restore(sc.config, json.loads(json.dumps(a.snapshot())))
+        bounds = [cut, *range((cut // 1000 + 1) * 1000, sc.n_samples, 1000), sc.n_samples]
+        for lo, hi in itertools.pairwise(bounds):
+            b.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo:hi] for k, v in data.items()}))
+        assert dump(b) == whole, cut
+
+
+def test_dropouts_and_spikes_do_not_crash_counting():
+    sc = scene("telemetry-faults", seed=2)
+    r = run(sc).report()
+    assert r["starts"] == [] and r["stops"] == []
+    assert r["phase_seconds"]["unknown"] == pytest.approx(2.5, abs=0.01)
+    assert all(np.isfinite(d["committed"]) for d in r["damage"].values())
+
+
+def test_flagged_samples_are_not_peaks():
+    """A flagged spike is NaN in the phase windows that peak detection reads."""
+    sc = scene("start-lrs", seed=1, duration_s=40.0)
+    data = sc.render(0, sc.n_samples)
+    n_spike = sc.truth.starts[0].sample + 200
+    data["motor_torque"][n_spike : n_spike + 5] = 340.0  # a telemetry spike (§5.2.2)
+    flags = {k: np.zeros(sc.n_samples, dtype=bool) for k in data}
+    flags["motor_torque"][n_spike : n_spike + 5] = True
+    a = MillAnalyzer(sc.config)
+    a.feed(Frame(sc.t0_ns, sc.fs, data, flags))
+    b = MillAnalyzer(sc.config)
+    b.feed(Frame(sc.t0_ns, sc.fs, data))
+    truth = sc.truth.starts[0].switch_on[0].pct
+    w = a._window(sc.truth.starts[0].sample, n_spike + 300)
+    assert np.nanmax(w.motor[0]) == pytest.approx(truth * sc.config.motor_rated_torque_knm / 100,
+                                                  rel=0.01)  # fmt: skip
+    assert np.nanmax(b._window(sc.truth.starts[0].sample, n_spike + 300).motor[0]) == 340.0
+
+
+def test_missing_speed_channel_is_an_error():
+    cfg = mill("sag-5200-lrs")
+    bad = cfg.model_copy(update={"channels": {k: v for k, v in cfg.channels.items()
+                                              if k != "speed"}})  # fmt: skip
+    with pytest.raises(ValueError, match="speed"):
+        MillAnalyzer(bad)
+
+
+def test_empty_frames_are_fine():
+    a = MillAnalyzer(mill("sag-5200-lrs"))
+    assert a.feed(Frame(0, 1000.0, {})) == []
+    assert a.report()["samples"] == 0
+
+
+def test_starts_status_is_strictly_above_the_levels_like_the_alarm_rules():
+    from analytics.drivetrain.mill_config import AlarmThresholds
+    from analytics.mill.report import starts_status
+
+    levels = AlarmThresholds()  # warning above 5, alarm above 20 (seed 000 §6.1.3, §10.3)
+    assert [starts_status(n, levels) for n in (4, 5, 6, 20, 21)] == [
+        "ok",
+        "ok",
+        "warning",
+        "warning",
+        "alarm",
+    ]
+
+
+def test_start_level_is_strictly_above_the_peaks_like_the_alarm_rules():
+    a = MillAnalyzer(mill("sag-5200-lrs"))
+    levels = a.config.alarms  # warning above 250 %, alarm above 300 % (seed 000 §7.2)
+    warn, alarm = levels.start_peak_warn_pct, levels.start_peak_alarm_pct
+    got = [a._start_alarm(p) for p in (None, warn, warn + 0.1, alarm, alarm + 0.1)]
+    assert got == [None, None, "warning", "warning", "alarm"]
+
+
+def test_start_counts_are_bounded_and_the_total_is_kept():
+    """Years of starts keep KEEP_START_DAYS days and KEEP_START_MONTHS months of counts; the
+    total (the report's observed start rate) counts every start, and survives a restore —
+    also of a snapshot taken before the total was kept."""
+    a = MillAnalyzer(mill("sag-5200-lrs"))
+    a.t0_ns = 1_704_067_200_000_000_000  # 2024-01-01T00:00:00Z
+    day = round(86_400 * a.fs)
+    for k in range(3 * 365):  # one start a day for three years
+        a._count_start(k * day + day // 2)
+    assert len(a.starts_per_day) == KEEP_START_DAYS
+    assert len(a.starts_per_month) == KEEP_START_MONTHS
+    assert min(a.starts_per_month) == "2025-11" and max(a.starts_per_month) == "2026-12"
+    assert a.starts_total == 3 * 365
+    b = MillAnalyzer.restore(a.config, a.snapshot())
+    assert b.starts_total == a.starts_total and b.starts_per_month == a.starts_per_month
+    old = a.snapshot()
+    del old["starts_total"]
+    c = MillAnalyzer.restore(a.config, old)
+    assert c.starts_total == sum(m["starts"] for m in a.starts_per_month.values())

@@ -1,0 +1,250 @@
+"""The REST API over a real runtime (zenoh on loopback, MCAP, SQLite) that analysed one LRS
+start, served by uvicorn on 127.0.0.1 (fixture ``live_api`` in conftest.py)."""
+
+from __future__ import annotations
+
+import json
+import time
+from datetime import date
+
+import httpx
+import pytest
+from prometheus_client.parser import text_string_to_metric_families
+
+from ingest.keys import alarm_pattern
+from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
+from service.api.app import create_app
+from service.settings import ServiceSettings
+from service.worker.mill_job import AnalyzerPipeline
+from service.worker.runtime import ServiceRuntime
+from tests.service.conftest import API_KEY, MILL, held_runtime, serve
+
+pytestmark = pytest.mark.slow
+PROBLEM = "application/problem+json"
+
+
+@pytest.fixture
+def client(live_api):
+    with httpx.Client(base_url=live_api.url, timeout=10) as c:
+        yield c
+
+
+def assert_problem(r: httpx.Response, status: int, *words: str) -> None:
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"].startswith(PROBLEM)
+    body = r.json()
+    assert body["status"] == status and body["title"] and body["instance"]
+    for word in words:
+        assert word in body["detail"], body["detail"]
+
+
+# ---------------------------------------------------------------------- life
+def test_life_gives_damage_rate_and_remaining_life_per_component(client, live_api):
+    body = client.get(f"/mills/{MILL}/life").json()
+    comps = body["components"]
+    assert {"pinion_combined", "pinion_torsion", "motor_torsion"} <= set(comps)
+    assert body["basis"]["miner_limit"] == 1.0 and "residue" in body["basis"]["damage"]
+    assert body["design_life_years"] == live_api.runtime.mills[MILL].design_life_years
+    window = body["rate_window"]
+    assert 100.0 < window["seconds"] < 200.0  # since monitoring began: the 120 s scene
+    c = comps["pinion_combined"]
+    assert c["live"] and c["damage_stored"] > 0 and c["damage_pending_residue"] >= 0
+    assert c["damage_committed"] >= c["damage_stored"]
+    assert c["damage"] == pytest.approx(c["damage_committed"] + c["damage_pending_residue"])
+    rate = c["damage_in_window"] / window["seconds"] * 365.25 * 86400
+    assert c["damage_rate_per_year"] == pytest.approx(rate)
+    assert c["remaining_life_years"] == pytest.approx((1 - c["damage"]) / rate)
+    assert date.fromisoformat(c["projected_end_date"]).year > date.today().year
+
+
+def test_life_damage_agrees_with_the_workers_live_summary(client, live_api):
+    live = live_api.runtime.status[MILL]["damage"]["pinion_combined"]
+    body = client.get(f"/mills/{MILL}/life").json()["components"]["pinion_combined"]
+    assert body["damage_committed"] == pytest.approx(live["committed"])
+    assert body["damage_pending_residue"] == pytest.approx(live["pending_residue"])
+
+
+# ---------------------------------------------------------------------- starts, spectrum
+def test_starts_of_this_month_with_peaks_against_limits(client):
+    body = client.get(f"/mills/{MILL}/starts").json()
+    assert body["count"] == 1 and body["failed"] == 0
+    assert body["norm_per_month"] == [3, 5] and body["count_status"] == "ok"
+    start = body["starts"][0]
+    assert start["switch_on_peak_pct"] > body["peak_limits_pct"]["warn"]  # seed 000 §7.2
+    assert start["peak_status"] in ("warning", "alarm")
+    other = client.get(f"/mills/{MILL}/starts", params={"month": "2001-02"}).json()
+    assert other["count"] == 0 and other["starts"] == [] and other["month"] == "2001-02"
+
+
+@pytest.mark.parametrize("month", ["2024-13", "May", "2024-5", "0001-01"])
+def test_a_bad_month_is_a_readable_422(client, month):
+    r = client.get(f"/mills/{MILL}/starts", params={"month": month})
+    assert_problem(r, 422, "month")
+
+
+def test_spectrum_is_the_latest_harmonic_table(client, live_api):
+    body = client.get(f"/mills/{MILL}/spectrum").json()
+    assert body["harmonics"]["lines"] and body["t_ns"] == body["harmonics"]["t_end_ns"]
+    assert body["t_ns"] <= live_api.runtime.status[MILL]["last_sample_ns"]
+
+
+@pytest.mark.parametrize("path", ["life", "starts", "spectrum"])
+def test_unknown_mill_is_a_404_naming_it(client, path):
+    assert_problem(client.get(f"/mills/ball-9/{path}"), 404, "'ball-9'", MILL)
+
+
+def test_unknown_route_and_method_are_problems_too(client):
+    assert_problem(client.get("/nowhere"), 404, "/nowhere")
+    assert_problem(client.delete("/alarms"), 405, "DELETE")
+
+
+# ---------------------------------------------------------------------- alarms: polling
+def test_alarms_etag_answers_304_while_nothing_changed(client):
+    first = client.get("/alarms", params={"state": "open"})
+    tag = first.headers["etag"]
+    assert first.json()["count"] >= 1 and tag.startswith('"')
+    again = client.get("/alarms", params={"state": "open"}, headers={"If-None-Match": tag})
+    assert again.status_code == 304 and again.content == b"" and again.headers["etag"] == tag
+    stale = client.get("/alarms", params={"state": "open"}, headers={"If-None-Match": '"x"'})
+    assert stale.status_code == 200
+    cleared = client.get("/alarms", params={"state": "cleared"}, headers={"If-None-Match": tag})
+    assert cleared.status_code == 200 and cleared.headers["etag"] != tag
+
+
+def test_alarms_since_cursor_returns_only_later_changes(client):
+    body = client.get("/alarms").json()
+    cursor = body["cursor"]
+    assert cursor == max(a["updated_ns"] for a in body["alarms"])
+    at = client.get("/alarms", params={"since": cursor}).json()
+    assert at["count"] >= 1 and all(a["updated_ns"] >= cursor for a in at["alarms"])
+    after = client.get("/alarms", params={"since": cursor + 1}).json()
+    assert after == {"alarms": [], "count": 0, "cursor": cursor + 1}
+
+
+def test_alarm_filters_are_validated(client):
+    assert_problem(client.get("/alarms", params={"state": "burning"}), 422, "'burning'")
+    assert_problem(client.get("/alarms", params={"since": -1}), 422, "since")
+    assert_problem(client.get("/alarms", params={"mill": "ball-9"}), 404, "'ball-9'")
+
+
+# ---------------------------------------------------------------------- alarms: ack
+def _start_alarm(client) -> dict:
+    alarms = client.get("/alarms", params={"mill": MILL}).json()["alarms"]
+    return next(a for a in alarms if a["rule"] == "start_peak")
+
+
+def test_ack_needs_the_api_key(client):
+    alarm_id = _start_alarm(client)["alarm_id"]
+    r = client.post(f"/alarms/{alarm_id}/ack")
+    assert_problem(r, 401, "X-API-Key")
+    assert "www-authenticate" in r.headers
+    assert_problem(client.post(f"/alarms/{alarm_id}/ack", headers={"X-API-Key": "no"}), 401)
+    assert _start_alarm(client)["state"] == "raised"
+
+
+def test_ack_of_an_unknown_alarm_is_a_404_naming_it(client):
+    r = client.post("/alarms/sag:nothing:1/ack", headers={"X-API-Key": API_KEY})
+    assert_problem(r, 404, "'sag:nothing:1'")
+    assert_problem(client.get("/alarms/sag:nothing:1"), 404, "'sag:nothing:1'")
+
+
+def test_ack_is_applied_by_the_worker_stored_published_and_checkpointed(client, live_api):
+    alarm = _start_alarm(client)
+    tag = client.get("/alarms").headers["etag"]
+    heard: list[dict] = []
+    with open_session(build_config(connect=[tcp_endpoint(live_api.zenoh_port)])) as session:
+        sub = session.declare_subscriber(
+            alarm_pattern(), lambda s: heard.append(json.loads(s.payload.to_bytes()))
+        )
+        time.sleep(0.5)  # let the subscription reach the runtime's zenoh peer
+        r = client.post(f"/alarms/{alarm['alarm_id']}/ack", headers={"X-API-Key": API_KEY},
+                        json={"by": "operator-7"})  # fmt: skip
+        deadline = time.monotonic() + 5
+        while not heard and time.monotonic() < deadline:
+            time.sleep(0.05)
+        sub.undeclare()
+    assert r.status_code == 200, r.text
+    acked = r.json()
+    assert acked["state"] == "acknowledged" and acked["acked_by"] == "operator-7"
+    assert acked["seq"] == alarm["seq"] + 1
+    assert [t["kind"] for t in acked["transitions"]][-1] == "acknowledged"
+    assert heard and heard[-1]["transition"]["kind"] == "acknowledged"
+    assert client.get("/alarms", headers={"If-None-Match": tag}).status_code == 200
+    _, state = live_api.runtime.store.latest_checkpoint()
+    conditions = state["pipelines"][MILL]["alarms"]["conditions"]
+    assert any((c["alarm"] or {}).get("state") == "acknowledged" for c in conditions)
+    again = client.post(f"/alarms/{alarm['alarm_id']}/ack", headers={"X-API-Key": API_KEY})
+    assert again.status_code == 200 and again.json()["seq"] == acked["seq"]  # idempotent
+
+
+def test_ack_is_forbidden_when_no_key_is_configured(tmp_path):
+    settings = ServiceSettings.model_validate({"store": {"path": str(tmp_path / "mw.db")}})
+    runtime = ServiceRuntime(settings, {}, AnalyzerPipeline)  # not started: never reached
+    server, thread = serve(create_app(runtime), free_loopback_port())
+    try:
+        r = httpx.post(f"http://127.0.0.1:{server.config.port}/alarms/x/ack",
+                       headers={"X-API-Key": "anything"}, timeout=10)  # fmt: skip
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)
+    assert r.status_code == 403 and "api_key" in r.json()["detail"]
+
+
+# ---------------------------------------------------------------------- a held mill
+def test_a_held_mill_makes_ready_503_naming_it_and_mills_say_why(tmp_path):
+    with held_runtime(tmp_path) as (runtime, _):
+        reason = runtime.worker.held[MILL]
+        server, thread = serve(create_app(runtime), free_loopback_port())
+        try:
+            with httpx.Client(base_url=f"http://127.0.0.1:{server.config.port}", timeout=10) as c:
+                ready, mills, detail = (c.get(p) for p in ("/ready", "/mills", f"/mills/{MILL}"))
+                metrics = c.get("/metrics").text
+        finally:
+            server.should_exit = True
+            thread.join(timeout=10)
+    assert reason.startswith(f"mill {MILL}: its checkpoint (")
+    assert "channel(s) removed 'pinion_bending'" in reason
+    assert ready.status_code == 503
+    body = ready.json()
+    assert body["held_mills"] == {MILL: reason} and body["checks"]["analysed"] == {MILL: False}
+    assert body["checks"]["data_fresh"] == {MILL: True}  # its data arrive: the hold is why
+    [summary] = mills.json()
+    assert summary["state"] == "held" and summary["held_reason"] == reason
+    assert summary["stale_channels"] == []
+    assert detail.status_code == 200
+    assert detail.json()["held_reason"] == reason
+    assert detail.json()["status"]["health"]["channels"]["motor_torque"]["blocks"] > 0
+    assert f'millwatch_mill_held{{mill="{MILL}"}} 1.0' in metrics
+
+
+# ---------------------------------------------------------------------- metrics, openapi
+def test_metrics_in_prometheus_text_format(client, live_api):
+    r = client.get("/metrics")
+    assert r.headers["content-type"].startswith("text/plain")
+    samples = {
+        (s.name, tuple(sorted(s.labels.items()))): s.value
+        for family in text_string_to_metric_families(r.text)
+        for s in family.samples
+    }
+    handled = samples[("millwatch_blocks_handled_total", ())]
+    assert handled >= 4800 and handled <= live_api.runtime.worker.blocks_handled
+    assert samples[("millwatch_queue_dropped_blocks_total", ())] == 0
+    assert ("millwatch_queue_depth_blocks", ()) in samples
+    assert samples[("millwatch_archive_errors_total", ())] == 0
+    state = live_api.runtime.status[MILL]["state"]
+    assert samples[("millwatch_mill_state", (("mill", MILL), ("state", state)))] == 1
+    assert samples[("millwatch_samples_analysed_total", (("mill", MILL),))] > 0
+    assert samples[("millwatch_mill_held", (("mill", MILL),))] == 0
+    assert any(name == "millwatch_open_alarms" for name, _ in samples)
+
+
+def test_openapi_documents_problems_examples_and_the_api_key(client):
+    spec = client.get("/openapi.json").json()
+    assert "Problem" in spec["components"]["schemas"]
+    assert spec["components"]["securitySchemes"]["APIKeyHeader"]["name"] == "X-API-Key"
+    ack = spec["paths"]["/alarms/{alarm_id}/ack"]["post"]
+    assert {"401", "403", "404", "409"} <= set(ack["responses"])
+    assert PROBLEM in ack["responses"]["404"]["content"]
+    assert "304" in spec["paths"]["/alarms"]["get"]["responses"]
+    for name in ("Life", "MonthStarts", "Spectrum", "AlarmList"):
+        assert spec["components"]["schemas"][name].get("examples"), name

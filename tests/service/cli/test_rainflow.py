@@ -1,0 +1,142 @@
+"""``millwatch rainflow``: summary, cycle export, input formats and the errors a user sees."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rainflow
+
+from analytics.fatigue.sn_models import build_sn_curve
+from service.cli.main import main
+
+
+@pytest.fixture
+def stress() -> np.ndarray:
+    rng = np.random.default_rng(11)
+    t = np.arange(20_000) / 1000.0
+    return 40.0 * np.sin(2 * np.pi * 2.93 * t) + 60.0 + rng.normal(0, 3.0, t.shape)
+
+
+@pytest.fixture
+def npy(tmp_path: Path, stress: np.ndarray) -> Path:
+    path = tmp_path / "stress.npy"
+    np.save(path, stress)
+    return path
+
+
+def run_json(capsys, *argv: str) -> dict:
+    assert main(["rainflow", *argv, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_summary_matches_the_reference_count_and_damage(capsys, npy, stress):
+    summary = run_json(capsys, str(npy), "--kt", "2")
+    ref = list(rainflow.extract_cycles(stress))
+    full = sum(1 for c in ref if c[2] == 1.0)
+    assert summary["samples"] == len(stress)
+    assert (summary["full_cycles"], summary["half_cycles"]) == (full, len(ref) - full)
+    curve = build_sn_curve("shigley")
+    ranges = np.array([c[0] for c in ref]) * 2.0
+    expected = curve.damage(ranges, [c[2] for c in ref])
+    assert summary["damage"] == pytest.approx(expected, rel=1e-13)
+    assert summary["damage"] == pytest.approx(
+        summary["damage_committed"] + summary["damage_residue"], rel=1e-15
+    )
+    for key in ("equivalent_range", "residue_length"):
+        assert summary[key] > 0
+
+
+def test_block_size_does_not_change_the_result(capsys, npy):
+    a = run_json(capsys, str(npy), "--block-size", "7")
+    b = run_json(capsys, str(npy), "--block-size", "100000")
+    assert a["full_cycles"] == b["full_cycles"] and a["half_cycles"] == b["half_cycles"]
+    assert a["damage"] == pytest.approx(b["damage"], rel=1e-14)
+
+
+def test_cycles_out_has_every_cycle_at_full_precision(capsys, tmp_path, npy, stress):
+    out = tmp_path / "cycles.csv"
+    run_json(capsys, str(npy), "--cycles-out", str(out), "--block-size", "333")
+    with out.open() as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == ["range", "mean", "count", "i_start", "i_end"]
+    got = [
+        (float(r["range"]), float(r["mean"]), float(r["count"]), int(r["i_start"]), int(r["i_end"]))
+        for r in rows
+    ]
+    assert got == [
+        (float(a), float(b), c, i, j) for a, b, c, i, j in rainflow.extract_cycles(stress)
+    ]
+
+
+def test_csv_input_by_column_name(capsys, tmp_path, stress):
+    path = tmp_path / "log.csv"
+    with path.open("w") as f:
+        f.write("time_s,pinion_stress\n")
+        for i, v in enumerate(stress[:2000]):
+            f.write(f"{i / 1000},{float(v)!r}\n")
+    summary = run_json(capsys, str(path), "--column", "pinion_stress")
+    assert summary["samples"] == 2000
+
+
+def test_repeat_residue_counts_only_full_cycles_at_the_end(capsys, npy):
+    half = run_json(capsys, str(npy), "--residue", "half")
+    repeat = run_json(capsys, str(npy), "--residue", "repeat")
+    assert repeat["half_cycles"] < half["half_cycles"]
+    assert repeat["damage"] >= half["damage"]
+
+
+@pytest.mark.parametrize(
+    ("content", "argv", "message"),
+    [
+        ("a,b\n1,2\n", ["--column", "stress"], "no column 'stress'; columns are: a, b"),
+        ("a,b\n1,2\n", [], "needs --column NAME; columns are: a, b"),
+        ("a,b\n1,2\n3,oops\n", ["--column", "b"], "line 3, column 'b': 'oops' is not a number"),
+        ("a,b\n1,2\n3,nan\n5,6\n", ["--column", "b"], "row 2 is nan"),
+    ],
+)
+def test_csv_errors_name_file_column_and_row(capsys, tmp_path, content, argv, message):
+    path = tmp_path / "bad.csv"
+    path.write_text(content)
+    assert main(["rainflow", str(path), *argv]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and message in err
+
+
+def test_missing_file_and_bad_options_are_reported(capsys, tmp_path):
+    assert main(["rainflow", str(tmp_path / "nope.npy")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["rainflow", "x.npy", "--block-size", "0"])
+    assert "--block-size: must be a whole number > 0" in capsys.readouterr().err
+
+
+def test_two_dimensional_npy_is_refused(capsys, tmp_path):
+    path = tmp_path / "m.npy"
+    np.save(path, np.zeros((3, 3)))
+    assert main(["rainflow", str(path)]) == 2
+    assert "expected a 1-D array" in capsys.readouterr().err
+
+
+def test_console_script_runs_and_prints_a_readable_summary(npy):
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "service.cli.main",
+            "rainflow",
+            str(npy),
+            "--sn-model",
+            "fat-normal",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    assert "damage" in proc.stdout and "FAT 160 normal" in proc.stdout

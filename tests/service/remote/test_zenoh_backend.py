@@ -1,0 +1,247 @@
+"""The REST API over zenoh (:class:`~service.remote.zenoh_backend.ZenohBackend`) answers what the
+in-process API answers: the same bodies, ETags and errors, because the worker's queryables
+(:mod:`service.remote.queryables`) answer with the same
+:class:`~service.api.local_backend.LocalBackend`.
+Also: acknowledgements over zenoh, a hung worker is a 504 within the timeout (never a hang),
+a worker that left is a 503 naming it. Everything on 127.0.0.1."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+import zenoh
+
+from ingest.keys import query_key, worker_token_key
+from ingest.sim.publisher import ScenePublisher, starting_now
+from ingest.sim.scenes import get_scene
+from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
+from service.api.app import create_app
+from service.api.local_backend import LocalBackend
+from service.remote.queryables import WorkerQueryables
+from service.remote.report_codec import report_from_dict
+from service.remote.zenoh_backend import ZenohBackend
+from service.reports.monthly import report_to_dict
+from service.settings import ServiceSettings
+from service.worker.mill_job import AnalyzerPipeline
+from service.worker.runtime import ServiceRuntime
+from tests.service.conftest import held_runtime, serve
+
+pytestmark = pytest.mark.slow
+
+MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
+MILL = "sag-5200-lrs"
+API_KEY = "remote-key"
+
+
+def _wait(predicate, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    for _ in range(int(timeout_s / 0.05) + 1):
+        if predicate() or time.monotonic() >= deadline:
+            break
+        time.sleep(0.05)
+    return bool(predicate())
+
+
+@contextlib.contextmanager
+def _served(app) -> Iterator[httpx.Client]:
+    """``app`` served by uvicorn on 127.0.0.1, and a client of it."""
+    server, thread = serve(app, free_loopback_port())
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{server.config.port}", timeout=20) as c:
+            yield c
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)
+
+
+@dataclass
+class Pair:
+    runtime: ServiceRuntime
+    local: httpx.Client
+    remote: httpx.Client
+    backend: ZenohBackend
+    port: int
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory) -> Iterator[Pair]:
+    """A runtime that analysed a 60 s LRS start, answering over zenoh as worker ``w1``; the API
+    in process (``local``) and over zenoh (``remote``) on the same runtime."""
+    tmp = tmp_path_factory.mktemp("zenoh-backend")
+    port = free_loopback_port()
+    settings = ServiceSettings.model_validate({
+        "zenoh": {"listen": [tcp_endpoint(port)]},
+        "archive": {"directory": str(tmp / "archive")},
+        "store": {"path": str(tmp / "mw.db")},
+        "api": {"api_key": API_KEY},
+        "worker": {"name": "w1"},
+        "mills": {"files": [str(MILLS / f"{MILL}.toml")]},
+    })  # fmt: skip
+    runtime = ServiceRuntime(settings, settings.load_mills(), AnalyzerPipeline)
+    runtime.start()
+    worker_side = LocalBackend(runtime)
+    queryables = WorkerQueryables(runtime.session, worker_side)
+    queryables.start()
+    try:
+        scene = starting_now(get_scene("start-lrs", runtime.mills[MILL], seed=0, duration_s=60))
+        with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
+            report = ScenePublisher(session, scene, speed=None, wait_subscribers_s=5.0).run()
+        assert _wait(lambda: runtime.worker.blocks_handled >= report.blocks, 30.0)
+        with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
+            backend = ZenohBackend(session, runtime.mills, api_key=API_KEY, timeout_s=5.0)
+            backend.start()
+            assert _wait(lambda: backend.live_workers() == {MILL: "w1"}, 10.0)
+            assert _wait(lambda: len(backend.alarm_board()) == len(runtime.store.alarms()), 5.0)
+            with _served(create_app(worker_side)) as local, _served(create_app(backend)) as remote:
+                yield Pair(runtime, local, remote, backend, port)
+            backend.close()
+    finally:
+        queryables.close()
+        runtime.stop()
+
+
+SAME = [
+    f"/mills/{MILL}/life",
+    f"/mills/{MILL}/starts",
+    f"/mills/{MILL}/starts?month=2001-02",
+    f"/mills/{MILL}/spectrum",
+    "/alarms",
+    "/alarms?state=open",
+    f"/alarms?mill={MILL}",
+    "/alarms?mill=ball-9",
+    "/mills/ball-9/life",
+    f"/mills/{MILL}/starts?month=2024-13",
+    "/alarms/sag:nothing:1",
+    "/mills",
+]
+
+
+@pytest.mark.parametrize("path", SAME)
+def test_remote_api_answers_the_same_bodies_and_errors(pair, path):
+    local, remote = pair.local.get(path), pair.remote.get(path)
+    assert remote.status_code == local.status_code, remote.text
+    assert remote.headers["content-type"] == local.headers["content-type"]
+    assert remote.json() == local.json()
+    assert remote.headers.get("etag") == local.headers.get("etag")
+
+
+def test_remote_alarm_detail_mill_detail_and_report(pair):
+    alarm_id = pair.local.get("/alarms").json()["alarms"][0]["alarm_id"]
+    assert (
+        pair.remote.get(f"/alarms/{alarm_id}").json()
+        == pair.local.get(f"/alarms/{alarm_id}").json()
+    )
+    local, remote = (c.get(f"/mills/{MILL}").json() for c in (pair.local, pair.remote))
+    assert local.pop("status").keys() == remote.pop("status").keys()
+    assert remote == local and remote["worker_status"]["name"] == "w1"
+    path = f"/mills/{MILL}/reports/monthly"
+    local, remote = (
+        c.get(path, params={"format": "json"}).json() for c in (pair.local, pair.remote)
+    )
+    local.pop("generated_ns"), remote.pop("generated_ns")
+    assert remote == local and local["starts"]["count"] == 1
+    for fmt in ("html", "csv"):
+        r = pair.remote.get(path, params={"format": fmt})
+        assert r.status_code == 200 and r.headers["content-type"].startswith(f"text/{fmt}")
+
+
+def test_report_json_round_trips_through_the_codec(pair):
+    data = pair.local.get(f"/mills/{MILL}/reports/monthly", params={"format": "json"}).json()
+    assert report_to_dict(report_from_dict(data)) == data
+
+
+def test_remote_ack_checks_the_key_in_the_api_and_the_worker_applies_it(pair):
+    alarms = pair.remote.get("/alarms", params={"state": "raised"})
+    tag, alarm = alarms.headers["etag"], alarms.json()["alarms"][0]
+    url = f"/alarms/{alarm['alarm_id']}/ack"
+    assert pair.remote.post(url).status_code == 401
+    r = pair.remote.post(url, headers={"X-API-Key": API_KEY}, json={"by": "remote-op"})
+    assert r.status_code == 200, r.text
+    assert r.json()["state"] == "acknowledged" and r.json()["acked_by"] == "remote-op"
+    assert pair.runtime.store.alarm(alarm["alarm_id"]).state == "acknowledged"
+    again = pair.remote.get("/alarms", params={"state": "raised"}, headers={"If-None-Match": tag})
+    assert again.status_code == 200 and alarm["alarm_id"] not in again.text
+    assert pair.local.get(f"/alarms/{alarm['alarm_id']}").json() == r.json()
+
+
+def test_an_unknown_query_is_a_problem_reply(pair):
+    with open_session(build_config(connect=[tcp_endpoint(pair.port)])) as session:
+        config = pair.runtime.mills[MILL]
+        replies = list(session.get(query_key(config.site, MILL, "nonsense"), timeout=5.0))
+    assert len(replies) == 1 and replies[0].err is not None
+    problem = json.loads(replies[0].err.payload.to_bytes())
+    assert problem["status"] == 404 and "'nonsense'" in problem["detail"]
+
+
+def test_metrics_and_readiness_over_zenoh(pair):
+    text = pair.remote.get("/metrics").text
+    assert 'millwatch_blocks_handled_total{worker="w1"}' in text
+    assert f'millwatch_mill_reachable{{mill="{MILL}"}} 1.0' in text
+    ready = pair.remote.get("/ready").json()
+    assert ready["checks"]["reachable"] == {MILL: True}
+    assert ready["checks"]["workers"]["w1"]["store"] is True
+
+
+def test_a_hung_worker_is_a_504_within_the_timeout_and_a_gone_one_a_503(pair):
+    config = pair.runtime.mills[MILL]
+    port = free_loopback_port()
+    held: list[zenoh.Query] = []  # never answered, never dropped: the worker "hangs"
+    with open_session(build_config(listen=[tcp_endpoint(port)])) as stuck, \
+            open_session(build_config(connect=[tcp_endpoint(port)])) as api:  # fmt: skip
+        queryable = stuck.declare_queryable(query_key(config.site, MILL, "life"), held.append)
+        token = stuck.liveliness().declare_token(worker_token_key(config.site, MILL, "stuck"))
+        backend = ZenohBackend(api, {MILL: config}, timeout_s=1.0)
+        backend.start()
+        try:
+            assert _wait(lambda: backend.live_workers() == {MILL: "stuck"}, 5.0)
+            with _served(create_app(backend)) as client:
+                t0 = time.monotonic()
+                r = client.get(f"/mills/{MILL}/life")
+                assert r.status_code == 504 and time.monotonic() - t0 < 3.0, r.text
+                assert "'stuck'" in r.json()["detail"] and MILL in r.json()["detail"]
+                token.undeclare()
+                assert _wait(lambda: not backend.live_workers(), 5.0)
+                r = client.get(f"/mills/{MILL}/life")
+                assert r.status_code == 503 and "'stuck'" in r.json()["detail"], r.text
+                assert client.get("/mills").json()[0]["state"] == "unreachable"
+        finally:
+            backend.close()
+            queryable.undeclare()
+            held.clear()
+
+
+def test_a_held_mill_is_reported_by_the_remote_api_as_by_the_local_one(tmp_path):
+    with held_runtime(tmp_path) as (runtime, port):
+        worker_side = LocalBackend(runtime, worker="w1")
+        queryables = WorkerQueryables(runtime.session, worker_side)
+        queryables.start()
+        try:
+            with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
+                backend = ZenohBackend(session, runtime.mills, timeout_s=5.0)
+                backend.start()
+                try:
+                    assert _wait(lambda: backend.live_workers() == {MILL: "w1"}, 10.0)
+                    with _served(create_app(worker_side)) as local, \
+                            _served(create_app(backend)) as remote:  # fmt: skip
+                        answers = [(c.get("/ready"), c.get("/mills").json(), c.get("/metrics").text)
+                                   for c in (local, remote)]  # fmt: skip
+                finally:
+                    backend.close()
+        finally:
+            queryables.close()
+        reason = runtime.worker.held[MILL]
+    (local_ready, local_mills, _), (ready, mills, metrics) = answers
+    assert ready.status_code == local_ready.status_code == 503
+    body = ready.json()
+    assert body["held_mills"] == local_ready.json()["held_mills"] == {MILL: reason}
+    assert body["checks"]["analysed"] == {MILL: False} and body["checks"]["reachable"][MILL]
+    assert "analysed" not in body["checks"]["workers"]["w1"]  # per mill, not a worker's check
+    assert mills == local_mills and mills[0]["held_reason"] == reason
+    assert f'millwatch_mill_held{{mill="{MILL}"}} 1.0' in metrics
