@@ -10,7 +10,7 @@ block by block, in arrival order::
       → FaultStage         spike/dropout/rail flags per channel (seed 000 §5.2.2), aligned delay
       → tacho → rpm        when the mill has a pulse channel and no rpm channel (seed 000 App. C
                            routine 5, seed 003 ch. IV)
-      → MillAnalyzer       states, starts/stops/barring, steady-state windows, rainflow damage
+      → LoadAnalysis       states, starts/stops/barring, steady-state windows, rainflow damage
                            by component, phase and day (seed 000 §6, §8, App. D)
       → HarmonicTracker    order-tracked spectra, only while running (seed 000 §6.2.7, seed 001)
 
@@ -18,8 +18,8 @@ Work follows the scene: the harmonic tracker skips every sample that is not stea
 state after each sample decides, so spectra do not depend on the framing), and the analyzer
 skips per-revolution work when stopped. Everything is snapshot-able as plain data.
 
-Batches: :meth:`MillMonitor.push` analyses a block at once; :meth:`~MillMonitor.add` (or
-:meth:`~MillMonitor.add_blocks` for many) only aligns it, and :meth:`~MillMonitor.process`
+Batches: :meth:`MillAnalyzer.push` analyses a block at once; :meth:`~MillAnalyzer.add` (or
+:meth:`~MillAnalyzer.add_blocks` for many) only aligns it, and :meth:`~MillAnalyzer.process`
 runs the analysis over everything aligned so far as contiguous chunks of up to
 :data:`MAX_CHUNK_S` — a few times cheaper per sample than 100-sample blocks, and bitwise the same
 results, since every stage is a function of the sample stream (tests split records at random).
@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
-from analytics.mill.loads import MillAnalyzer
+from analytics.mill.loads import LoadAnalysis
 from analytics.operation.operating_states import OperatingState
 from analytics.signal.fault_stage import FaultStage
 from analytics.signal.frame_aligner import Frame, FrameAligner
@@ -49,7 +49,7 @@ from analytics.spectra.harmonics import (
     stagger_for,
 )
 
-__all__ = ["DERIVED_SPEED", "MillMonitor", "MonitorOutput"]
+__all__ = ["DERIVED_SPEED", "AnalyzerOutput", "MillAnalyzer"]
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +62,7 @@ _RUNNING = np.int8(OperatingState.RUNNING)
 _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
-class MonitorOutput:
+class AnalyzerOutput:
     """What one block completed: analyzer events and harmonic windows (usually none)."""
 
     __slots__ = ("events", "harmonics")
@@ -85,7 +85,7 @@ def analysis_config(config: MillConfig) -> MillConfig:
     return config.model_copy(update={"channels": {**config.channels, DERIVED_SPEED: derived}})
 
 
-class MillMonitor:
+class MillAnalyzer:
     """See the module docstring. ``push`` one decoded block at a time, in arrival order."""
 
     def __init__(self, config: MillConfig) -> None:
@@ -95,7 +95,7 @@ class MillMonitor:
         self.aligner = FrameAligner(list(config.channels), fs)
         self.faults = FaultStage(config)
         self.tacho = self._tacho(fs)
-        self.analyzer = MillAnalyzer(self.analysis_config)
+        self.loads = LoadAnalysis(self.analysis_config)
         # mills started together compute their spectra at different samples (issue 5 latency)
         self.harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
         self._gain = {n: (ch.gain, ch.offset) for n, ch in config.channels.items()}
@@ -113,7 +113,7 @@ class MillMonitor:
         return name, TachoSpeed.for_channel(ch, fs)
 
     # ------------------------------------------------------------------ feeding
-    def push(self, channel: str, t0_ns: int, fs: float, raw: np.ndarray) -> MonitorOutput:
+    def push(self, channel: str, t0_ns: int, fs: float, raw: np.ndarray) -> AnalyzerOutput:
         """One decoded block of a configured channel (raw units before calibration), analysed
         at once: :meth:`add` then :meth:`process`."""
         self.add(channel, t0_ns, fs, raw)
@@ -165,11 +165,11 @@ class MillMonitor:
         self._queued.extend(frames)
         self.backlog += sum(len(f) for f in frames)
 
-    def process(self, until: int | None = None) -> MonitorOutput:
+    def process(self, until: int | None = None) -> AnalyzerOutput:
         """Analyse the aligned frames waiting, concatenated into chunks of at most
         :data:`MAX_CHUNK_S`; with ``until``, stop once the analyzer has reached stream sample
         ``until`` (the rest keeps waiting), so a caller can read totals at exact sample counts."""
-        out = MonitorOutput()
+        out = AnalyzerOutput()
         while self._queued:
             take = self._room(until)
             if take <= 0:
@@ -182,7 +182,7 @@ class MillMonitor:
         fault stage holds back ``delay`` samples, so feeding m gives max(0, held + m − delay))."""
         room = self._max_chunk
         if until is not None:
-            want = until - self.analyzer.n
+            want = until - self.loads.n
             if want <= 0:
                 return 0
             room = min(room, want + self.faults.delay - self.faults.held)
@@ -210,7 +210,7 @@ class MillMonitor:
         data = {c: np.concatenate([p.data[c] for p in parts]) for c in parts[0].data}
         return Frame(parts[0].t0_ns, parts[0].fs, data)
 
-    def flush(self) -> MonitorOutput:
+    def flush(self) -> AnalyzerOutput:
         """End of a record: emit what the aligner and the fault stage still hold."""
         self._queue_frames(self.aligner.flush())
         out = self.process()
@@ -220,23 +220,23 @@ class MillMonitor:
         out.harmonics += self.harmonics.flush()  # spectra put off by the stagger
         return out
 
-    def _frame(self, frame: Frame, out: MonitorOutput) -> None:
+    def _frame(self, frame: Frame, out: AnalyzerOutput) -> None:
         flagged = self.faults.feed(frame)
         if flagged is not None:
             self._analyse(flagged, out)
 
-    def _analyse(self, frame: Frame, out: MonitorOutput) -> None:
+    def _analyse(self, frame: Frame, out: AnalyzerOutput) -> None:
         if self.tacho is not None:
             name, conv = self.tacho
             frame.data[DERIVED_SPEED] = conv.feed(frame.data[name])
-        out.events += self.analyzer.feed(frame)
+        out.events += self.loads.feed(frame)
         self._harmonics(frame, out)
 
-    def _harmonics(self, frame: Frame, out: MonitorOutput) -> None:
+    def _harmonics(self, frame: Frame, out: AnalyzerOutput) -> None:
         """Feed the harmonic tracker the running samples: the state after each sample decides
         (not the state at the end of a frame), so spectra do not depend on the framing."""
         n = len(frame)
-        shown = self.analyzer.sm.shown
+        shown = self.loads.sm.shown
         if n == 0 or shown.shape[0] != n:
             return
         running = shown == _RUNNING
@@ -249,7 +249,7 @@ class MillMonitor:
             out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, held, True)
             return
         cuts = [0, *(np.flatnonzero(running[1:] != running[:-1]) + 1).tolist(), n]
-        first = self.analyzer.n - n  # stream index of the frame's first sample
+        first = self.loads.n - n  # stream index of the frame's first sample
         for a, b in itertools.pairwise(cuts):
             t_ns = self.faults.time_of(first + a)
             piece = {c: x[a:b] for c, x in held.items()} if running[a] else {}
@@ -282,11 +282,11 @@ class MillMonitor:
     # ------------------------------------------------------------------ reading
     @property
     def state(self) -> str:
-        return self.analyzer.sm.state.label
+        return self.loads.sm.state.label
 
     def report(self) -> dict[str, Any]:
         """The analyzer's report plus harmonics, unexplained peaks and data quality."""
-        rep = self.analyzer.report()
+        rep = self.loads.report()
         rep |= harmonics_report(self.harmonics)
         rep["data_quality"] = {
             "faults": {n: c.to_dict() for n, c in self.faults.totals().items()},
@@ -307,14 +307,14 @@ class MillMonitor:
             "aligner": self.aligner.snapshot(),
             "faults": self.faults.snapshot(),
             "tacho": None if self.tacho is None else self.tacho[1].snapshot(),
-            "analyzer": self.analyzer.snapshot(),
+            "analyzer": self.loads.snapshot(),
             "harmonics": self.harmonics.snapshot(),
             "last_good": {k: (v if np.isfinite(v) else None) for k, v in self._last_good.items()},
         }
 
     @classmethod
-    def restore(cls, config: MillConfig, snap: dict[str, Any]) -> MillMonitor:
-        """A monitor that continues exactly where the snapshotted one stood.
+    def restore(cls, config: MillConfig, snap: dict[str, Any]) -> MillAnalyzer:
+        """A analyzer that continues exactly where the snapshotted one stood.
 
         After a configuration change that moves the harmonic tracker's geometry (pinion
         speed, tooth counts, liner count, telemetry bandwidth) its snapshot no longer fits
@@ -327,7 +327,7 @@ class MillMonitor:
         times, or its aligner would go on framing the old channels (an added channel's blocks
         ignored for good, a removed one's waited for)."""
         if snap.get("kind") != "mill_monitor" or snap.get("version") != _SNAPSHOT_VERSION:
-            raise ValueError(f"not a mill monitor snapshot of version {_SNAPSHOT_VERSION}")
+            raise ValueError(f"not a mill analyzer snapshot of version {_SNAPSHOT_VERSION}")
         if snap["mill"] != config.id:
             raise ValueError(f"snapshot of mill {snap['mill']!r}, configuration is {config.id!r}")
         was_fs, fs = float(snap["aligner"]["fs"]), float(config.sample_rate_hz)
@@ -343,7 +343,7 @@ class MillMonitor:
         m.faults.restore(snap["faults"])
         if m.tacho is not None and snap["tacho"] is not None:
             m.tacho = (m.tacho[0], TachoSpeed.restore(snap["tacho"]))
-        m.analyzer = MillAnalyzer.restore(m.analysis_config, snap["analyzer"])
+        m.loads = LoadAnalysis.restore(m.analysis_config, snap["analyzer"])
         m._restore_harmonics(snap["harmonics"])
         last = snap["last_good"]
         m._last_good = {k: (np.nan if v is None else float(v)) for k, v in last.items()}

@@ -68,7 +68,7 @@ from analytics.operation.transients import (
 from analytics.signal.frame_aligner import Frame
 from analytics.signal.sample_ring import SampleRing
 
-__all__ = ["MillAnalyzer", "component_names"]
+__all__ = ["LoadAnalysis", "component_names"]
 
 log = logging.getLogger(__name__)
 
@@ -99,7 +99,7 @@ def component_names(config: MillConfig) -> list[str]:
     return out
 
 
-class MillAnalyzer:
+class LoadAnalysis:
     """Streaming analyzer of one mill; see the module docstring.
 
     ``feed(frame)`` takes an aligned frame (channel names of the mill config; missing channels
@@ -517,7 +517,7 @@ class MillAnalyzer:
         snapshot: dict[str, Any],
         settings: TransientSettings | None = None,
         window_s: float = 60.0,
-    ) -> MillAnalyzer:
+    ) -> LoadAnalysis:
         """An analyzer for ``config`` that continues exactly where the snapshotted one stood
         (pass the same ``settings``/``window_s`` as the original; thresholds are restored)."""
         from analytics.mill.snapshot import restore_analyzer

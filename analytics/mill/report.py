@@ -1,4 +1,4 @@
-"""The plain-data report of a :class:`~analytics.mill.loads.MillAnalyzer`.
+"""The plain-data report of a :class:`~analytics.mill.loads.LoadAnalysis`.
 
 Sources: seed 000 §6.1.3 and §6.2.8 (starts per month against the supplier norm of 3–5; field
 average 20–22, peak 90), §8.3 and App. D (damage by phase, the cost of a start, damage per month
@@ -18,7 +18,7 @@ from analytics.fatigue.phase_damage import (
 
 if TYPE_CHECKING:
     from analytics.drivetrain.mill_config import AlarmThresholds
-    from analytics.mill.loads import MillAnalyzer
+    from analytics.mill.loads import LoadAnalysis
 
 __all__ = ["STARTS_NORM_PER_MONTH", "build_report", "starts_status"]
 
@@ -38,7 +38,7 @@ def starts_status(n: int, alarms: AlarmThresholds) -> str:
     return "ok" if n <= STARTS_NORM_PER_MONTH[1] else "above norm"
 
 
-def build_report(a: MillAnalyzer) -> dict[str, Any]:
+def build_report(a: LoadAnalysis) -> dict[str, Any]:
     """Everything measured so far (JSON-ready)."""
     seconds = _phase_seconds(a)
     return {
@@ -60,7 +60,7 @@ def build_report(a: MillAnalyzer) -> dict[str, Any]:
     }
 
 
-def _months(a: MillAnalyzer) -> dict[str, dict[str, Any]]:
+def _months(a: LoadAnalysis) -> dict[str, dict[str, Any]]:
     """Starts per calendar month (site time zone), failed starts, and the status against the
     norm (3–5, §6.1.3) and the configured warning/alarm levels."""
     failed: dict[str, int] = {}
@@ -81,7 +81,7 @@ def _months(a: MillAnalyzer) -> dict[str, dict[str, Any]]:
     return out
 
 
-def _phase_seconds(a: MillAnalyzer) -> dict[str, float]:
+def _phase_seconds(a: LoadAnalysis) -> dict[str, float]:
     samples = dict(a.phase_samples)
     if a.timeline.samples:
         from analytics.fatigue.phase_damage import PHASE_OF_STATE
@@ -92,7 +92,7 @@ def _phase_seconds(a: MillAnalyzer) -> dict[str, float]:
     return {p: n / a.fs for p, n in samples.items()}
 
 
-def _damage(a: MillAnalyzer, seconds: dict[str, float]) -> dict[str, Any]:
+def _damage(a: LoadAnalysis, seconds: dict[str, float]) -> dict[str, Any]:
     out = {}
     n_starts = a.starts_total
     elapsed = a.n / a.fs

@@ -1,4 +1,4 @@
-"""Snapshot and restore of a :class:`~analytics.mill.loads.MillAnalyzer` as plain data.
+"""Snapshot and restore of a :class:`~analytics.mill.loads.LoadAnalysis` as plain data.
 
 The snapshot holds every piece of state (state machine, timeline, the ring-buffer samples that an
 open phase or the steady-state meter may still read, rainflow residues, damage sums, open
@@ -16,7 +16,7 @@ from analytics.operation.transients import BarringAccumulator
 from analytics.signal.sample_ring import SampleRing
 
 if TYPE_CHECKING:
-    from analytics.mill.loads import MillAnalyzer
+    from analytics.mill.loads import LoadAnalysis
 
 __all__ = ["restore_analyzer", "snapshot_analyzer"]
 
@@ -28,7 +28,7 @@ _PLAIN = (
 )  # fmt: skip
 
 
-def _keep_from(a: MillAnalyzer) -> int:
+def _keep_from(a: LoadAnalysis) -> int:
     pre = round(a.fs)  # the 1 s pre-roll of phase windows
     need = [a.n - pre, a.steady_until, a.sm.decided_until - pre]
     need += [x - pre for x in (a.open_start, a.open_stop) if x >= 0]
@@ -37,7 +37,7 @@ def _keep_from(a: MillAnalyzer) -> int:
     return min(need)
 
 
-def snapshot_analyzer(a: MillAnalyzer) -> dict[str, Any]:
+def snapshot_analyzer(a: LoadAnalysis) -> dict[str, Any]:
     """The analyzer's complete state (JSON-serialisable)."""
     d: dict[str, Any] = {"kind": "mill_analyzer", "version": _VERSION, "mill": a.config.id}
     d |= {k: getattr(a, k) for k in _PLAIN}
@@ -53,7 +53,7 @@ def snapshot_analyzer(a: MillAnalyzer) -> dict[str, Any]:
     return d
 
 
-def restore_analyzer(a: MillAnalyzer, d: dict[str, Any]) -> MillAnalyzer:
+def restore_analyzer(a: LoadAnalysis, d: dict[str, Any]) -> LoadAnalysis:
     """Load ``d`` into the fresh analyzer ``a`` (built from the same configuration)."""
     if d.get("kind") != "mill_analyzer" or d.get("version") != _VERSION:
         raise ValueError(f"not a mill_analyzer snapshot of version {_VERSION}")

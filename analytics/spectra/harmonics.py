@@ -106,7 +106,7 @@ class SnapshotMismatch(ValueError):
     this configuration builds; the message names the mill and what differs. From
     :meth:`HarmonicTracker.restore` (segment length, bins, buffer or tracked lines differ) it
     concerns only spectra in progress, so a caller may start a fresh tracker instead
-    (:meth:`MillMonitor.restore <analytics.mill.analyzer.MillMonitor.restore>` does)."""
+    (:meth:`MillAnalyzer.restore <analytics.mill.analyzer.MillAnalyzer.restore>` does)."""
 
 
 class HarmonicSettings(BaseModel):

@@ -5,7 +5,7 @@ sort by time), decodes the wire blocks of the mill's channels (live or replay ke
 channel calibration (``value = gain · (raw − offset)``), groups the channels into aligned frames
 (:mod:`analytics.signal.frame_aligner`: blocks of equal ``t0``; missing channels and gaps become
 NaN) and
-runs :class:`analytics.mill.loads.MillAnalyzer`: operating states, starts (switch-on and
+runs :class:`analytics.mill.loads.LoadAnalysis`: operating states, starts (switch-on and
 short-circuit peaks, rise times), stops, barring, starts per month against the norm (seed 000
 §6.1.3), steady-state metrics and fatigue damage per component and phase (§8.2, App. D).
 
@@ -29,7 +29,7 @@ from tqdm import tqdm
 from alarms.from_analysis import report_observations
 from alarms.report import alarms_for_report
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.analyzer import MillMonitor
+from analytics.mill.analyzer import MillAnalyzer
 from ingest import keys, wire
 from ingest.archive.writer import ArchiveError, RawMessage, TailTolerantReader
 from ingest.mill_files import load_mill_config
@@ -106,9 +106,9 @@ class _Blocks:
 
 def analyze_recording(
     files: list[Path], config: MillConfig, *, progress: bool = False
-) -> tuple[MillMonitor, dict[str, Any]]:
-    """Run the mill monitor over the recording; returns it and reading statistics."""
-    monitor = MillMonitor(config)
+) -> tuple[MillAnalyzer, dict[str, Any]]:
+    """Run the mill analyzer over the recording; returns it and reading statistics."""
+    analyzer = MillAnalyzer(config)
     blocks = _Blocks(config)
     total = sum(p.stat().st_size for p in files)
     with tqdm(total=total, unit="B", unit_scale=True, disable=not progress, file=sys.stderr,
@@ -119,19 +119,19 @@ def analyze_recording(
             if got is None:
                 continue
             name, block = got
-            monitor.add(name, block.t0_ns, block.fs, block.samples)
-            if monitor.backlog >= CHUNK_SAMPLES:  # analysed in long chunks: same results
-                monitor.process()
-        monitor.flush()
+            analyzer.add(name, block.t0_ns, block.fs, block.samples)
+            if analyzer.backlog >= CHUNK_SAMPLES:  # analysed in long chunks: same results
+                analyzer.process()
+        analyzer.flush()
     stats = {
         "files": [str(p) for p in files],
         "malformed_blocks": blocks.malformed,
         "foreign_blocks": blocks.foreign,
-        "missing_blocks": monitor.aligner.missing_blocks,
-        "gap_samples": monitor.aligner.gap_samples,
-        "dropped_blocks": monitor.aligner.dropped_blocks,
+        "missing_blocks": analyzer.aligner.missing_blocks,
+        "gap_samples": analyzer.aligner.gap_samples,
+        "dropped_blocks": analyzer.aligner.dropped_blocks,
     }
-    return monitor, stats
+    return analyzer, stats
 
 
 # ---------------------------------------------------------------- output
@@ -217,10 +217,10 @@ def _main(args: argparse.Namespace) -> int:
         raise ValueError(f"--mill {exc}") from exc
     files = recording_files(args.recording)
     progress = not args.no_progress and sys.stderr.isatty()
-    monitor, stats = analyze_recording(files, config, progress=progress)
-    if monitor.analyzer.n == 0:
+    analyzer, stats = analyze_recording(files, config, progress=progress)
+    if analyzer.loads.n == 0:
         raise ValueError(f"RECORDING {args.recording}: no blocks of mill {config.id!r} found")
-    report = monitor.report()
+    report = analyzer.report()
     report["alarms"] = alarms_for_report(report_observations(config.id, report), config)
     if args.json:
         sys.stdout.write(json.dumps({**report, "reading": stats}, indent=1) + "\n")

@@ -25,7 +25,7 @@ from ingest.zenoh_session import build_config, free_loopback_port, open_session,
 from service.api.app import create_app
 from service.cli.args import positive_float, positive_int
 from service.settings import ServiceSettings
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
 
 __all__ = ["add_parser"]
@@ -131,7 +131,7 @@ def _main(args: argparse.Namespace) -> int:
     directory = args.dir or Path(tempfile.mkdtemp(prefix="millwatch-demo-"))
     zenoh_port = free_loopback_port()
     settings = demo_settings(directory, zenoh_port, args.port, mills)
-    runtime = ServiceRuntime(settings, settings.load_mills(), AnalyzerPipeline)
+    runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
     runtime.start()
     gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene)
     server = uvicorn.Server(uvicorn.Config(create_app(runtime), host="127.0.0.1",

@@ -25,7 +25,7 @@ from service.api.app import create_app
 from service.api.local_backend import LocalBackend
 from service.remote.queryables import WorkerQueryables
 from service.settings import ServiceSettings, load_service_settings
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.partition import check_exclusive, partition_mills, worker_identity
 from service.worker.runtime import ServiceRuntime
 
@@ -47,7 +47,7 @@ def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
 
 def serve(settings: ServiceSettings, *, api: bool = True) -> int:
     """Run until SIGTERM/SIGINT; returns the exit status."""
-    runtime = ServiceRuntime(settings, worker_mills(settings), AnalyzerPipeline)
+    runtime = ServiceRuntime(settings, worker_mills(settings), MillJob)
     runtime.start()
     backend = LocalBackend(runtime)
     assert runtime.session is not None

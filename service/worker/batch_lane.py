@@ -6,7 +6,7 @@ alignment); replaying an hour of 50 mills is 7.2 million blocks. :class:`BatchLa
 they are *regular* — every block well-formed at the mill's rate, all of one length and dtype, and
 each channel's sequence numbers following on from the last one seen (no gap, no repeat). Then the
 health counters move in one step per channel, the samples are gathered in one step, and the
-mill's aligner takes them all at once (:meth:`analytics.mill.analyzer.MillMonitor.add_blocks`,
+mill's aligner takes them all at once (:meth:`analytics.mill.analyzer.MillAnalyzer.add_blocks`,
 which itself falls back block by block when the timing is not regular). A mill with anything
 irregular in the batch — a malformed or foreign block, a gap, a repeat — goes block by block
 through ``Worker.handle`` in arrival order instead, so every count, data-quality event and sample

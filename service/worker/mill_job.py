@@ -1,8 +1,8 @@
-"""A mill's analysis inside the worker: :class:`~analytics.mill.analyzer.MillMonitor` plus alarms,
+"""A mill's analysis inside the worker: :class:`~analytics.mill.analyzer.MillAnalyzer` plus alarms,
 turned into rows for the store.
 
-The worker adds a batch's blocks (:meth:`AnalyzerPipeline.add_block` / ``add_blocks``: aligned
-only) and then calls :meth:`AnalyzerPipeline.finish` once: the monitor analyses everything as long
+The worker adds a batch's blocks (:meth:`MillJob.add_block` / ``add_blocks``: aligned
+only) and then calls :meth:`MillJob.finish` once: the analyzer analyses everything as long
 chunks and returns the events and harmonic windows completed; this adapter turns them (and any
 new steady-state windows) into
 
@@ -14,7 +14,7 @@ new steady-state windows) into
   remaining-life observations are the same however the blocks were batched, and
 * a ``spectra_restarted`` data-quality event per tracked channel when a restore had to start
   the spectra afresh (the mill's configuration moved their geometry since the checkpoint; see
-  :meth:`MillMonitor.restore <analytics.mill.analyzer.MillMonitor.restore>`), stored with the
+  :meth:`MillAnalyzer.restore <analytics.mill.analyzer.MillAnalyzer.restore>`), stored with the
   next results, at the checkpoint's sample time.
 
 Everything is derived from the samples alone, so replaying the archive tail after a crash
@@ -32,13 +32,13 @@ from alarms.engine import AlarmEngine
 from alarms.from_analysis import event_observations, peak_observations, window_observations
 from alarms.observations import Observation, local_month
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.analyzer import MillMonitor, MonitorOutput
+from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
 from analytics.spectra.harmonics import stagger_for
 from ingest.wire import Block
 from service.store.database import DamageRow, EventRow
 from service.worker.worker import MillUpdate
 
-__all__ = ["AnalyzerPipeline"]
+__all__ = ["MillJob"]
 
 log = logging.getLogger(__name__)
 
@@ -50,20 +50,20 @@ HARMONICS_EVERY_NS = 300 * 1_000_000_000
 #: Steady windows (an hour's) and events of each kind the live analyzer keeps in memory: each
 #: is stored when it comes, so what an offline report keeps (a day of windows, 2000 starts, ~6 kB
 #: each in memory) would only grow memory and checkpoints; more windows than one
-#: :meth:`AnalyzerPipeline.finish` step (a damage interval) makes.
+#: :meth:`MillJob.finish` step (a damage interval) makes.
 WINDOWS_KEPT = 60
 EVENTS_KEPT = 20
 SECONDS_PER_YEAR = 365.25 * 86400.0
 
 
-class AnalyzerPipeline:
+class MillJob:
     """The worker's :class:`~service.worker.worker.MillPipeline` for one mill."""
 
     def __init__(self, config: MillConfig, damage_every_s: float = DAMAGE_EVERY_S) -> None:
         self.config = config
-        self.monitor = MillMonitor(config)
-        self.monitor.analyzer.keep_windows = WINDOWS_KEPT
-        self.monitor.analyzer.keep_events = EVENTS_KEPT
+        self.analyzer = MillAnalyzer(config)
+        self.analyzer.loads.keep_windows = WINDOWS_KEPT
+        self.analyzer.loads.keep_events = EVENTS_KEPT
         self.alarms = AlarmEngine.for_mills([config])
         self._damage_every = round(damage_every_s * config.sample_rate_hz)
         # the first interval is longer by a fraction fixed by the mill id, so mills started
@@ -83,16 +83,16 @@ class AnalyzerPipeline:
     def add_block(self, channel: str, block: Block) -> None:
         """Align one block; its analysis waits for :meth:`finish` (a worker adds a batch's
         blocks, then finishes once: the analysis then runs over long chunks)."""
-        self.monitor.add(channel, block.t0_ns, block.fs, block.samples)
+        self.analyzer.add(channel, block.t0_ns, block.fs, block.samples)
 
     def add_blocks(self, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray) -> None:
-        """Many blocks of this mill at once (see :meth:`MillMonitor.add_blocks`)."""
-        self.monitor.add_blocks(chan, t0_ns, raw)
+        """Many blocks of this mill at once (see :meth:`MillAnalyzer.add_blocks`)."""
+        self.analyzer.add_blocks(chan, t0_ns, raw)
 
     @property
     def backlog(self) -> int:
         """Samples aligned but not yet analysed."""
-        return self.monitor.backlog
+        return self.analyzer.backlog
 
     def finish(self) -> MillUpdate:
         """Analyse what :meth:`add_block` queued; returns the rows and alarm transitions.
@@ -103,15 +103,15 @@ class AnalyzerPipeline:
         update = MillUpdate(events=self._held_events)
         self._held_events = []
         while True:
-            out = self.monitor.process(until=self._next_damage)
+            out = self.analyzer.process(until=self._next_damage)
             self._fold(out, update)
-            if self.monitor.analyzer.n < self._next_damage:
+            if self.analyzer.loads.n < self._next_damage:
                 return update
             update.damage += self._damage_rows()
             update.alarm_transitions += self.alarms.observe_all(self._life_observations())
-            self._next_damage = self.monitor.analyzer.n + self._damage_every
+            self._next_damage = self.analyzer.loads.n + self._damage_every
 
-    def _fold(self, out: MonitorOutput, update: MillUpdate) -> None:
+    def _fold(self, out: AnalyzerOutput, update: MillUpdate) -> None:
         """Events, steady windows and harmonic tables of ``out`` as rows and alarm input."""
         observations: list[Observation] = []
         for event in out.events:
@@ -137,13 +137,13 @@ class AnalyzerPipeline:
         obs = event_observations(self.config.id, event)
         if event.get("event") == "start":
             month = local_month(int(event["t_ns"]), self.config.time_zone)
-            count = self.monitor.analyzer.starts_per_month.get(month, {}).get("starts", 0)
+            count = self.analyzer.loads.starts_per_month.get(month, {}).get("starts", 0)
             obs.append(Observation(self.config.id, "starts_this_month", float(count),
                                    int(event["t_ns"]), {"month": month}))  # fmt: skip
         return obs
 
     def _new_windows(self) -> list[dict[str, Any]]:
-        new = [w for w in self.monitor.analyzer.windows if w["t_ns"] > self._last_window_ns]
+        new = [w for w in self.analyzer.loads.windows if w["t_ns"] > self._last_window_ns]
         if new:
             self._last_window_ns = int(new[-1]["t_ns"])
             self._latest_window = new[-1]
@@ -152,7 +152,7 @@ class AnalyzerPipeline:
     def _life_observations(self) -> list[Observation]:
         """``remaining_life_years`` per component: (1 − D) / (D per year so far), the damage
         rate taken over everything this analyzer has seen (seed 000 §8.2; Miner limit 1)."""
-        a = self.monitor.analyzer
+        a = self.analyzer.loads
         seconds = a.n / a.fs
         out = []
         for comp, pd in a.damage.items():
@@ -171,7 +171,7 @@ class AnalyzerPipeline:
 
     def _damage_rows(self) -> list[DamageRow]:
         rows = []
-        for comp, days in self.monitor.analyzer.damage_by_day().items():
+        for comp, days in self.analyzer.loads.damage_by_day().items():
             for day, phases in days.items():
                 for phase, damage in phases.items():
                     rows.append(DamageRow(self.config.id, comp, phase, day, damage, 0.0))
@@ -183,13 +183,13 @@ class AnalyzerPipeline:
 
     def spike_counts(self) -> dict[str, int]:
         """Telemetry spikes flagged so far, per checked channel."""
-        return {n: c.spikes for n, c in self.monitor.faults.totals().items()}
+        return {n: c.spikes for n, c in self.analyzer.faults.totals().items()}
 
     # ------------------------------------------------------------------ reading
     def status(self) -> dict[str, Any]:
-        a = self.monitor.analyzer
+        a = self.analyzer.loads
         return {
-            "state": self.monitor.state,
+            "state": self.analyzer.state,
             "samples": a.n,
             "last_sample_ns": a.t_ns(a.n) if a.t0_ns is not None else None,
             "latest_steady": self._latest_window,
@@ -203,7 +203,7 @@ class AnalyzerPipeline:
         open rainflow residue now as half cycles would add (``pending_residue``), and their sum
         (``with_residue``). Cheap (the residue is a few turning points); called by the worker
         thread when it refreshes the status, so the API never touches the analyzer."""
-        a = self.monitor.analyzer
+        a = self.analyzer.loads
         out = {}
         for comp, pd in a.damage.items():
             committed = pd.committed
@@ -218,7 +218,7 @@ class AnalyzerPipeline:
     # ------------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
         return {
-            "monitor": self.monitor.snapshot(),
+            "monitor": self.analyzer.snapshot(),
             "alarms": self.alarms.snapshot(),
             "next_damage": self._next_damage,
             "last_window_ns": self._last_window_ns,
@@ -227,9 +227,9 @@ class AnalyzerPipeline:
         }
 
     def restore(self, snapshot: dict[str, Any]) -> None:
-        self.monitor = MillMonitor.restore(self.config, snapshot["monitor"])
-        self.monitor.analyzer.keep_windows = WINDOWS_KEPT
-        self.monitor.analyzer.keep_events = EVENTS_KEPT
+        self.analyzer = MillAnalyzer.restore(self.config, snapshot["monitor"])
+        self.analyzer.loads.keep_windows = WINDOWS_KEPT
+        self.analyzer.loads.keep_events = EVENTS_KEPT
         self.alarms.restore(snapshot["alarms"])
         self._next_damage = int(snapshot["next_damage"])
         self._last_window_ns = int(snapshot["last_window_ns"])
@@ -241,12 +241,12 @@ class AnalyzerPipeline:
         """Data-quality events when the restore started the spectra afresh: one per tracked
         channel, at the checkpoint's last sample time (a repeated recovery from the same
         checkpoint stores the same rows again, not new ones)."""
-        why, a = self.monitor.spectra_restarted, self.monitor.analyzer
+        why, a = self.analyzer.spectra_restarted, self.analyzer.loads
         if why is None or a.t0_ns is None:  # no samples analysed: no spectra were lost
             return []
         t_ns, problem = a.t_ns(a.n), "spectra_restarted"
         events = []
-        for ch in self.monitor.harmonics.channels:
+        for ch in self.analyzer.harmonics.channels:
             data = {"channel": ch.name, "problem": problem, "reason": why}
             events.append(EventRow(self.config.id, "data_quality", t_ns, data,
                                    subject=f"{ch.name}:{problem}"))  # fmt: skip

@@ -517,7 +517,7 @@ class Worker:
     def _restore_mill(self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None) -> None:
         """Restore one mill's pipeline; :class:`CheckpointRestoreError` (naming the mill, the
         checkpoint and the cause) if it cannot be. A configuration change that only moves the
-        spectra's geometry is no failure: the monitor restarts its spectra and logs why."""
+        spectra's geometry is no failure: the analyzer restarts its spectra and logs why."""
         try:
             self.pipelines[mill_id].restore(snap)
         except Exception as exc:

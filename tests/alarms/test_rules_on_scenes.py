@@ -1,6 +1,6 @@
 """Each rule fires on a simulated scene built to cross it and stays silent on a clean scene.
 
-The scenes go through the same path as ``millwatch analyze``: the mill monitor, then the
+The scenes go through the same path as ``millwatch analyze``: the mill analyzer, then the
 observations of its report, then the alarm engine. A scene "built to cross" a rule is a normal
 scene with that rule's threshold set below what the scene does (a per-mill setting), so the test
 checks the whole chain from samples to alarm, not a hand-made observation.
@@ -15,7 +15,7 @@ import pytest
 from alarms.from_analysis import report_observations
 from alarms.report import alarms_for_report
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.analyzer import MillMonitor
+from analytics.mill.analyzer import MillAnalyzer
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene
 
@@ -33,12 +33,12 @@ TWO_STARTS = [  # start, run, stop, then a second start: two starts in one calen
 
 def alarms_of(config: MillConfig, scene: str, seconds: float, **overrides: object) -> set[str]:
     s = get_scene(scene, config, duration_s=seconds, **overrides)
-    monitor = MillMonitor(config)
+    analyzer = MillAnalyzer(config)
     for chunk in s.chunks(1.0):
         for name, x in chunk.data.items():
-            monitor.push(name, chunk.t0_ns, s.fs, x)
-    monitor.flush()
-    report = monitor.report()
+            analyzer.push(name, chunk.t0_ns, s.fs, x)
+    analyzer.flush()
+    report = analyzer.report()
     return {a["rule"] for a in alarms_for_report(report_observations(config.id, report), config)}
 
 

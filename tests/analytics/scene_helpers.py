@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.loads import MillAnalyzer
+from analytics.mill.loads import LoadAnalysis
 from analytics.signal.frame_aligner import Frame
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene
@@ -45,10 +45,10 @@ def state_inputs(sc: Scene, data: dict[str, np.ndarray]) -> tuple[np.ndarray, np
     return np.abs(data[speed]) / rated, q / cfg.motor_rated_torque_knm
 
 
-def run(sc: Scene, cuts: list[int] | None = None, frame: int = 1000) -> MillAnalyzer:
+def run(sc: Scene, cuts: list[int] | None = None, frame: int = 1000) -> LoadAnalysis:
     """Feed a whole scene to a fresh analyzer, in frames of ``frame`` samples or at ``cuts``."""
     data = sc.render(0, sc.n_samples)
-    a = MillAnalyzer(sc.config)
+    a = LoadAnalysis(sc.config)
     bounds = sorted(set(cuts or range(0, sc.n_samples, frame)) | {0, sc.n_samples})
     for lo, hi in itertools.pairwise(bounds):
         a.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo:hi] for k, v in data.items()}))

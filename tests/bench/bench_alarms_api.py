@@ -38,7 +38,7 @@ from ingest.sim.scenes import get_scene
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.api.app import create_app
 from service.settings import ServiceSettings
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -53,7 +53,7 @@ def start_service(directory: Path) -> tuple[ServiceRuntime, uvicorn.Server, int]
         "store": {"path": str(directory / "mw.db")},
         "mills": {"files": [str(MILL)]},
     })  # fmt: skip
-    runtime = ServiceRuntime(settings, settings.load_mills(), AnalyzerPipeline)
+    runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
     runtime.start()
     config = runtime.mills["sag-5200-lrs"]
     scene = starting_now(get_scene("start-lrs", config, seed=0, duration_s=60.0))

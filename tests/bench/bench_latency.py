@@ -33,7 +33,7 @@ from ingest.sim.publisher import ScenePublisher, starting_now
 from ingest.sim.scenes import get_scene
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.settings import ServiceSettings
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -97,7 +97,7 @@ def run(n_mills: int, seconds: float, checkpoint_s: float) -> dict:
             "worker": {"checkpoint_seconds": checkpoint_s},
             "mills": {"files": [str(MILL)]},
         })  # fmt: skip
-        runtime = ServiceRuntime(settings, {c.id: c for c in configs}, AnalyzerPipeline)
+        runtime = ServiceRuntime(settings, {c.id: c for c in configs}, MillJob)
         runtime.start()
         rss0, cpu0 = rss_mb(), cpu_s()
         collections = FullCollections()

@@ -34,7 +34,7 @@ from ingest.sim.scenes import get_scene
 from ingest.wire import DType
 from service.store.database import Store
 from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.worker import BATCH_BLOCKS, Worker
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -67,7 +67,7 @@ def run(configs, items: list[QueuedBlock], archive: bool) -> tuple[float, float]
     with tempfile.TemporaryDirectory() as d:
         writer = ArchiveWriter(Path(d), "bench") if archive else None
         with Store(Path(d) / "mw.db") as store:
-            pipelines = {c.id: AnalyzerPipeline(c) for c in configs}
+            pipelines = {c.id: MillJob(c) for c in configs}
             worker = Worker({c.id: c for c in configs}, pipelines, store, writer)
             cpu, wall = time.process_time(), time.perf_counter()
             for a in range(0, len(items), BATCH_BLOCKS):

@@ -53,7 +53,7 @@ from ingest.sim.scenes import get_scene
 from ingest.wire import DType, decode_headers
 from service.store.database import Store
 from service.worker.batch_lane import replay_batch_blocks
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.parallel_replay import replay_jobs
 from service.worker.worker import Worker
 
@@ -129,10 +129,10 @@ def timed(fn) -> tuple[float, float, object]:
 
 def replay(directory: Path, configs, jobs: int = 1) -> int:
     with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
-        pipelines = {c.id: AnalyzerPipeline(c) for c in configs}
+        pipelines = {c.id: MillJob(c) for c in configs}
         worker = Worker({c.id: c for c in configs}, pipelines, store, None)
         reader = ArchiveReader(directory, PREFIX)
-        return worker.recover(reader, jobs=jobs, factory=AnalyzerPipeline)
+        return worker.recover(reader, jobs=jobs, factory=MillJob)
 
 
 def read_only(directory: Path, mills: int, decode: bool) -> int:

@@ -44,7 +44,7 @@ from service.reports.monthly import build_monthly_report
 from service.reports.starts import month_bounds_ns
 from service.store.database import DamageRow, EventRow, Store
 from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.worker import Worker
 
 log = logging.getLogger("bench_report")
@@ -58,7 +58,7 @@ def analyse_cycle(config: Any, path: Path, run_min: float) -> Store:
     events = (StartEvent(at_s=5.0), StopEvent(at_s=stop_at))
     scene = get_scene("start-lrs", config, seed=2, duration_s=stop_at + 60.0, events=events)
     store = Store(path)
-    pipeline = AnalyzerPipeline(config, damage_every_s=30.0)
+    pipeline = MillJob(config, damage_every_s=30.0)
     worker = Worker({config.id: config}, {config.id: pipeline}, store, None)
     for b in scene_blocks(scene):
         worker.handle(QueuedBlock(b.key, b.payload, b.t_end_ns))

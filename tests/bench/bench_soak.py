@@ -51,7 +51,7 @@ from ingest.sim.blocks import SceneBlock, scene_blocks
 from ingest.sim.scenes import get_scene
 from service.store.database import Store
 from service.worker.block_queue import BlockQueue
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.worker import BATCH_BLOCKS, Worker
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
@@ -104,7 +104,7 @@ def containers(worker: Worker) -> dict[str, float]:
     """Means over mills of what an analyzer keeps for its report."""
     out = {"windows": 0.0, "events": 0.0, "days": 0.0}
     for pipeline in worker.pipelines.values():
-        a = pipeline.monitor.analyzer  # type: ignore[attr-defined]
+        a = pipeline.analyzer.loads  # type: ignore[attr-defined]
         out["windows"] += len(a.windows)
         out["events"] += len(a.starts) + len(a.stops) + len(a.barrings)
         out["days"] += max((len(pd.by_day) for pd in a.damage.values()), default=0)
@@ -129,7 +129,7 @@ class Soak:
     """The worker and its queue, fed as the runtime's worker thread would be."""
 
     def __init__(self, configs: dict[str, MillConfig], store: Store, checkpoint_s: float) -> None:
-        pipelines = {m: AnalyzerPipeline(c) for m, c in configs.items()}
+        pipelines = {m: MillJob(c) for m, c in configs.items()}
         self.worker = Worker(configs, pipelines, store, None, checkpoint_seconds=checkpoint_s)  # type: ignore[arg-type]
         self.queue = BlockQueue(4 * BATCH_BLOCKS)
         self._last_status = 0.0

@@ -6,7 +6,7 @@ Run::
 
 Simulates the ``month`` scene (seed 000 §6.2.8: ~90 switch-ons a month, failed starts, trips,
 barring after long stops, telemetry spikes and dropouts) for ``--days`` days, feeds it through
-:class:`analytics.mill.loads.MillAnalyzer` in 1 s frames and compares with the simulator's
+:class:`analytics.mill.loads.LoadAnalysis` in 1 s frames and compares with the simulator's
 truth: missed and false starts, stops and barring sessions (matched within 1 s), switch-on and
 short-circuit peak errors (% of motor rated torque), 10–90 % rise-time errors (ms), trip/stop
 classification. Then the cost per frame of a stopped and of a running mill (100-sample frames).
@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from analytics.mill.loads import MillAnalyzer
+from analytics.mill.loads import LoadAnalysis
 from analytics.signal.frame_aligner import Frame
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene
@@ -47,8 +47,8 @@ def _match(truth: list[int], found: list[int]) -> tuple[list[tuple[int, int]], i
     return pairs, len(truth) - len(pairs), len(found) - len(used)
 
 
-def _run(scene: Scene, frame_s: float) -> tuple[MillAnalyzer, float]:
-    a = MillAnalyzer(scene.config)
+def _run(scene: Scene, frame_s: float) -> tuple[LoadAnalysis, float]:
+    a = LoadAnalysis(scene.config)
     busy = 0.0
     for ch in scene.chunks(frame_s):
         f = Frame(ch.t0_ns, scene.fs, ch.data)
@@ -126,7 +126,7 @@ def cost(mill: str, seconds: float) -> dict[str, float]:
         spec = SceneSpec(name=state, duration_s=seconds, initial_state=state)
         scene = Scene(config, spec)
         frames = [Frame(c.t0_ns, scene.fs, c.data) for c in scene.chunks(0.1)]
-        a = MillAnalyzer(config)
+        a = LoadAnalysis(config)
         for f in frames[:20]:  # warm-up (numba dispatch, first windows)
             a.feed(f)
         t = time.perf_counter()

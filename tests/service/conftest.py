@@ -20,7 +20,7 @@ from ingest.sim.scenes import get_scene
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.api.app import create_app
 from service.settings import ServiceSettings
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
@@ -74,14 +74,14 @@ def held_runtime(tmp: Path) -> Iterator[tuple[ServiceRuntime, int]]:
     10 s start (the data stay fresh for a minute)."""
     settings = _settings(tmp, free_loopback_port(), stale_after_s=60.0)
     mills = settings.load_mills()
-    first = ServiceRuntime(settings, mills, AnalyzerPipeline)
+    first = ServiceRuntime(settings, mills, MillJob)
     first.start()
     first.stop()  # the final checkpoint, with the configuration of then
     kept = {n: c for n, c in mills[MILL].channels.items() if n != "pinion_bending"}
     edited = {MILL: mills[MILL].model_copy(update={"channels": kept})}
     port = free_loopback_port()
     settings = _settings(tmp, port, stale_after_s=60.0)
-    runtime = ServiceRuntime(settings, edited, AnalyzerPipeline)
+    runtime = ServiceRuntime(settings, edited, MillJob)
     runtime.start()
     try:
         _feed(runtime, port, duration_s=10.0)
@@ -106,7 +106,7 @@ def live_api(tmp_path_factory) -> Iterator[LiveApi]:
     tmp = tmp_path_factory.mktemp("api")
     zenoh_port = free_loopback_port()
     settings = _settings(tmp, zenoh_port)
-    runtime = ServiceRuntime(settings, settings.load_mills(), AnalyzerPipeline)
+    runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
     runtime.start()
     server = thread = None
     try:

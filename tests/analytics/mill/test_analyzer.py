@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from analytics.drivetrain.mill_config import ChannelConfig
-from analytics.mill.analyzer import DERIVED_SPEED, MillMonitor, analysis_config
+from analytics.mill.analyzer import DERIVED_SPEED, MillAnalyzer, analysis_config
 from analytics.spectra.harmonics import SnapshotMismatch
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene
@@ -25,9 +25,9 @@ def blocks(scene, size: int):
             yield name, scene.t_ns(a), scene.fs, x[a : a + size]
 
 
-def report(monitor: MillMonitor) -> str:
-    monitor.flush()
-    return json.dumps(monitor.report(), sort_keys=True, default=float)
+def report(analyzer: MillAnalyzer) -> str:
+    analyzer.flush()
+    return json.dumps(analyzer.report(), sort_keys=True, default=float)
 
 
 def test_block_size_does_not_change_anything():
@@ -35,7 +35,7 @@ def test_block_size_does_not_change_anything():
     scene = get_scene("telemetry-faults", config, seed=5, duration_s=90.0)
     reports = []
     for size in (100, 1000):
-        m = MillMonitor(config)
+        m = MillAnalyzer(config)
         for b in blocks(scene, size):
             m.push(*b)
         reports.append(report(m))
@@ -47,14 +47,14 @@ def test_snapshot_restore_mid_stream_gives_the_uninterrupted_result():
     config = load_mill_config(MILLS / "sag-5200-lrs.toml")
     scene = get_scene("start-lrs", config, seed=2, duration_s=60.0)
     all_blocks = list(blocks(scene, 100))
-    ref = MillMonitor(config)
+    ref = MillAnalyzer(config)
     for b in all_blocks:
         ref.push(*b)
-    first = MillMonitor(config)
+    first = MillAnalyzer(config)
     cut = 4 * 80 + 2  # mid switch-on, and between the channels of one block
     for b in all_blocks[:cut]:
         first.push(*b)
-    second = MillMonitor.restore(config, json.loads(json.dumps(first.snapshot())))
+    second = MillAnalyzer.restore(config, json.loads(json.dumps(first.snapshot())))
     for b in all_blocks[cut:]:
         second.push(*b)
     assert report(second) == report(ref)
@@ -66,7 +66,7 @@ def test_speed_from_tacho_pulses_when_no_rpm_channel_is_configured():
     config = full.model_copy(update={"channels": channels})
     assert DERIVED_SPEED in analysis_config(config).channels
     scene = get_scene("start-lrs", full, seed=1, duration_s=150.0)
-    m = MillMonitor(config)
+    m = MillAnalyzer(config)
     for name, t0, fs, x in blocks(scene, 200):
         if name in channels:
             m.push(name, t0, fs, x)
@@ -80,7 +80,7 @@ def test_speed_from_tacho_pulses_when_no_rpm_channel_is_configured():
 
 def _queued_report(config, scene, names, rng, max_batch: int) -> str:
     """Blocks added in random batches of 1..max_batch block times, processed in between."""
-    m = MillMonitor(config)
+    m = MillAnalyzer(config)
     block_times = list(range(0, scene.n_samples, 100))
     data = scene.render(0, scene.n_samples)
     k = 0
@@ -110,7 +110,7 @@ def test_long_chunks_give_the_block_by_block_report_bitwise():
                   DropoutEvent(at_s=90.0, duration_s=1.5))  # fmt: skip
         scene = get_scene("steady", full, seed=7, duration_s=420.0, initial_state="stopped",
                           events=events)  # fmt: skip
-        one = MillMonitor(config)
+        one = MillAnalyzer(config)
         for name, t0, fs, x in blocks(scene, 100):
             if name in channels:
                 one.push(name, t0, fs, x)
@@ -123,7 +123,7 @@ def test_long_chunks_give_the_block_by_block_report_bitwise():
 def test_process_until_stops_at_that_sample_and_snapshot_needs_an_empty_queue():
     config = load_mill_config(MILLS / "sag-5200-lrs.toml")
     scene = get_scene("steady", config, seed=1, duration_s=30.0)
-    m = MillMonitor(config)
+    m = MillAnalyzer(config)
     for b in blocks(scene, 100):
         m.add(*b)
     assert m.backlog == 30_000
@@ -135,9 +135,9 @@ def test_process_until_stops_at_that_sample_and_snapshot_needs_an_empty_queue():
         raise AssertionError("a snapshot with frames waiting must be refused")
     for until in (1, 7_777, 7_777, 20_000):
         m.process(until=until)
-        assert m.analyzer.n == until
+        assert m.loads.n == until
     m.process()
-    assert m.backlog == 0 and m.analyzer.n == 30_000 - m.faults.delay
+    assert m.backlog == 0 and m.loads.n == 30_000 - m.faults.delay
     assert m.snapshot()["kind"] == "mill_monitor"
 
 
@@ -152,21 +152,21 @@ def test_restore_after_a_pinion_speed_change_restarts_only_the_spectra(caplog):
     config = load_mill_config(MILLS / "sag-5200-lrs.toml")
     scene = get_scene("start-lrs", config, seed=2, duration_s=60.0)
     all_blocks = list(blocks(scene, 1000))
-    ref = MillMonitor(config)
+    ref = MillAnalyzer(config)
     for b in all_blocks:
         ref.push(*b)
-    first = MillMonitor(config)
+    first = MillAnalyzer(config)
     for b in all_blocks[: 4 * 40]:  # 40 s: started, running, spectra in progress
         first.push(*b)
     snap = json.loads(json.dumps(first.snapshot()))
     assert first.state == "running" and first.harmonics.counters["running_samples"] > 0
 
     with caplog.at_level("WARNING", logger="analytics.mill.analyzer"):
-        second = MillMonitor.restore(_faster(config), snap)
+        second = MillAnalyzer.restore(_faster(config), snap)
     again = json.loads(json.dumps(second.snapshot()))
     for part in ("aligner", "faults", "tacho", "analyzer", "last_good"):  # all but the spectra
         assert again[part] == snap[part], part
-    assert second.analyzer.report()["damage"] == first.analyzer.report()["damage"]
+    assert second.loads.report()["damage"] == first.loads.report()["damage"]
     assert second.state == "running"
     fresh = second.harmonics
     assert fresh.bins != first.harmonics.bins and fresh._len == 0 and fresh.latest is None
@@ -179,7 +179,7 @@ def test_restore_after_a_pinion_speed_change_restarts_only_the_spectra(caplog):
 
     for b in all_blocks[4 * 40 :]:  # the mill goes on being analysed
         second.push(*b)
-    assert second.analyzer.n == ref.analyzer.n
+    assert second.loads.n == ref.loads.n
     assert second.harmonics.counters["running_samples"] > 0
     # damage does not depend on the speed: the continued totals are the uninterrupted ones
     assert json.loads(report(second))["damage"] == json.loads(report(ref))["damage"]
@@ -187,11 +187,11 @@ def test_restore_after_a_pinion_speed_change_restarts_only_the_spectra(caplog):
 
 def test_restore_refuses_another_sample_rate_naming_the_mill():
     config = load_mill_config(MILLS / "sag-5200-lrs.toml")
-    snap = MillMonitor(config).snapshot()
+    snap = MillAnalyzer(config).snapshot()
     faster = config.model_copy(update={"sample_rate_hz": 2000.0})
     with pytest.raises(SnapshotMismatch, match=r"'sag-5200-lrs': sample rate 1000 Hz in the "
                        r"snapshot, 2000 Hz with the configuration now"):  # fmt: skip
-        MillMonitor.restore(faster, snap)
+        MillAnalyzer.restore(faster, snap)
 
 
 def _with_channels(config, channels):
@@ -202,16 +202,16 @@ def test_restore_refuses_an_added_or_removed_channel_naming_the_mill_and_the_cha
     """An added channel would otherwise be ignored for good (the aligner frames the snapshot's
     channels), a removed one waited for: the snapshot does not fit, whatever the spectra do."""
     config = load_mill_config(MILLS / "sag-5200-lrs.toml")
-    snap = json.loads(json.dumps(MillMonitor(config).snapshot()))
+    snap = json.loads(json.dumps(MillAnalyzer(config).snapshot()))
     spare = ChannelConfig(key="motor_speed", kind="rpm", shaft="motor", units="rpm")
     added = _with_channels(config, {**config.channels, "motor_speed": spare})
     with pytest.raises(SnapshotMismatch, match=r"^mill 'sag-5200-lrs': channel\(s\) added "
                        r"'motor_speed' in the configuration since the snapshot"):  # fmt: skip
-        MillMonitor.restore(added, snap)
+        MillAnalyzer.restore(added, snap)
     swapped = {n: c for n, c in added.channels.items() if n != "pinion_bending"}
     with pytest.raises(SnapshotMismatch, match=r"added 'motor_speed' and removed "
                        r"'pinion_bending'"):  # fmt: skip
-        MillMonitor.restore(_with_channels(config, swapped), snap)
+        MillAnalyzer.restore(_with_channels(config, swapped), snap)
 
 
 def test_restore_with_the_channels_listed_in_another_order_continues_bitwise():
@@ -220,13 +220,13 @@ def test_restore_with_the_channels_listed_in_another_order_continues_bitwise():
     config = load_mill_config(MILLS / "sag-5200-lrs.toml")
     reordered = _with_channels(config, dict(reversed(list(config.channels.items()))))
     all_blocks = list(blocks(get_scene("start-lrs", config, seed=2, duration_s=30.0), 100))
-    ref = MillMonitor(config)
+    ref = MillAnalyzer(config)
     for b in all_blocks:
         ref.push(*b)
-    first = MillMonitor(config)
+    first = MillAnalyzer(config)
     for b in all_blocks[:400]:
         first.push(*b)
-    second = MillMonitor.restore(reordered, json.loads(json.dumps(first.snapshot())))
+    second = MillAnalyzer.restore(reordered, json.loads(json.dumps(first.snapshot())))
     rest, names = all_blocks[400:], list(reordered.channels)
     chan = np.array([names.index(b[0]) for b in rest])
     second.add_blocks(chan, np.array([b[1] for b in rest]), np.stack([b[3] for b in rest]))

@@ -1,4 +1,4 @@
-"""MillAnalyzer: events and damage on short scenes; framing invariance; snapshot/restore; NaN."""
+"""LoadAnalysis: events and damage on short scenes; framing invariance; snapshot/restore; NaN."""
 
 from __future__ import annotations
 
@@ -11,14 +11,14 @@ import pytest
 from analytics.mill.loads import (
     KEEP_START_DAYS,
     KEEP_START_MONTHS,
-    MillAnalyzer,
+    LoadAnalysis,
     component_names,
 )
 from analytics.signal.frame_aligner import Frame
 from tests.analytics.scene_helpers import custom, mill, run, scene
 
 
-def dump(a: MillAnalyzer) -> str:
+def dump(a: LoadAnalysis) -> str:
     return json.dumps(a.report(), sort_keys=True)
 
 
@@ -76,11 +76,11 @@ def test_snapshot_restore_continues_exactly(dual_scene):
     whole = dump(run(sc, frame=1000))
     data = sc.render(0, sc.n_samples)
     for cut in (4_010, 12_500, 96_000, 131_000):  # switch-on, accelerating, stopping, barring
-        a = MillAnalyzer(sc.config)
+        a = LoadAnalysis(sc.config)
         for lo in range(0, cut, 1000):
             hi = min(cut, lo + 1000)
             a.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo:hi] for k, v in data.items()}))
-        b = MillAnalyzer.restore(sc.config, json.loads(json.dumps(a.snapshot())))
+        b = LoadAnalysis.restore(sc.config, json.loads(json.dumps(a.snapshot())))
         bounds = [cut, *range((cut // 1000 + 1) * 1000, sc.n_samples, 1000), sc.n_samples]
         for lo, hi in itertools.pairwise(bounds):
             b.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo:hi] for k, v in data.items()}))
@@ -103,9 +103,9 @@ def test_flagged_samples_are_not_peaks():
     data["motor_torque"][n_spike : n_spike + 5] = 340.0  # a telemetry spike (§5.2.2)
     flags = {k: np.zeros(sc.n_samples, dtype=bool) for k in data}
     flags["motor_torque"][n_spike : n_spike + 5] = True
-    a = MillAnalyzer(sc.config)
+    a = LoadAnalysis(sc.config)
     a.feed(Frame(sc.t0_ns, sc.fs, data, flags))
-    b = MillAnalyzer(sc.config)
+    b = LoadAnalysis(sc.config)
     b.feed(Frame(sc.t0_ns, sc.fs, data))
     truth = sc.truth.starts[0].switch_on[0].pct
     w = a._window(sc.truth.starts[0].sample, n_spike + 300)
@@ -119,11 +119,11 @@ def test_missing_speed_channel_is_an_error():
     bad = cfg.model_copy(update={"channels": {k: v for k, v in cfg.channels.items()
                                               if k != "speed"}})  # fmt: skip
     with pytest.raises(ValueError, match="speed"):
-        MillAnalyzer(bad)
+        LoadAnalysis(bad)
 
 
 def test_empty_frames_are_fine():
-    a = MillAnalyzer(mill("sag-5200-lrs"))
+    a = LoadAnalysis(mill("sag-5200-lrs"))
     assert a.feed(Frame(0, 1000.0, {})) == []
     assert a.report()["samples"] == 0
 
@@ -143,7 +143,7 @@ def test_starts_status_is_strictly_above_the_levels_like_the_alarm_rules():
 
 
 def test_start_level_is_strictly_above_the_peaks_like_the_alarm_rules():
-    a = MillAnalyzer(mill("sag-5200-lrs"))
+    a = LoadAnalysis(mill("sag-5200-lrs"))
     levels = a.config.alarms  # warning above 250 %, alarm above 300 % (seed 000 §7.2)
     warn, alarm = levels.start_peak_warn_pct, levels.start_peak_alarm_pct
     got = [a._start_alarm(p) for p in (None, warn, warn + 0.1, alarm, alarm + 0.1)]
@@ -154,7 +154,7 @@ def test_start_counts_are_bounded_and_the_total_is_kept():
     """Years of starts keep KEEP_START_DAYS days and KEEP_START_MONTHS months of counts; the
     total (the report's observed start rate) counts every start, and survives a restore —
     also of a snapshot taken before the total was kept."""
-    a = MillAnalyzer(mill("sag-5200-lrs"))
+    a = LoadAnalysis(mill("sag-5200-lrs"))
     a.t0_ns = 1_704_067_200_000_000_000  # 2024-01-01T00:00:00Z
     day = round(86_400 * a.fs)
     for k in range(3 * 365):  # one start a day for three years
@@ -163,9 +163,9 @@ def test_start_counts_are_bounded_and_the_total_is_kept():
     assert len(a.starts_per_month) == KEEP_START_MONTHS
     assert min(a.starts_per_month) == "2025-11" and max(a.starts_per_month) == "2026-12"
     assert a.starts_total == 3 * 365
-    b = MillAnalyzer.restore(a.config, a.snapshot())
+    b = LoadAnalysis.restore(a.config, a.snapshot())
     assert b.starts_total == a.starts_total and b.starts_per_month == a.starts_per_month
     old = a.snapshot()
     del old["starts_total"]
-    c = MillAnalyzer.restore(a.config, old)
+    c = LoadAnalysis.restore(a.config, old)
     assert c.starts_total == sum(m["starts"] for m in a.starts_per_month.values())

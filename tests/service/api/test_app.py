@@ -15,7 +15,7 @@ from ingest.keys import alarm_pattern
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.api.app import create_app
 from service.settings import ServiceSettings
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
 from tests.service.conftest import API_KEY, MILL, held_runtime, serve
 
@@ -179,7 +179,7 @@ def test_ack_is_applied_by_the_worker_stored_published_and_checkpointed(client, 
 
 def test_ack_is_forbidden_when_no_key_is_configured(tmp_path):
     settings = ServiceSettings.model_validate({"store": {"path": str(tmp_path / "mw.db")}})
-    runtime = ServiceRuntime(settings, {}, AnalyzerPipeline)  # not started: never reached
+    runtime = ServiceRuntime(settings, {}, MillJob)  # not started: never reached
     server, thread = serve(create_app(runtime), free_loopback_port())
     try:
         r = httpx.post(f"http://127.0.0.1:{server.config.port}/alarms/x/ack",

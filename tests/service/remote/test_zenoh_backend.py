@@ -29,7 +29,7 @@ from service.remote.report_codec import report_from_dict
 from service.remote.zenoh_backend import ZenohBackend
 from service.reports.monthly import report_to_dict
 from service.settings import ServiceSettings
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
 from tests.service.conftest import held_runtime, serve
 
@@ -84,7 +84,7 @@ def pair(tmp_path_factory) -> Iterator[Pair]:
         "worker": {"name": "w1"},
         "mills": {"files": [str(MILLS / f"{MILL}.toml")]},
     })  # fmt: skip
-    runtime = ServiceRuntime(settings, settings.load_mills(), AnalyzerPipeline)
+    runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
     runtime.start()
     worker_side = LocalBackend(runtime)
     queryables = WorkerQueryables(runtime.session, worker_side)

@@ -33,7 +33,7 @@ from service.reports.render_pdf import render_pdf
 from service.reports.starts import month_bounds_ns, month_days
 from service.store.database import EventRow, Store
 from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -50,7 +50,7 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> Store:
     blocks = [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
     path = tmp_path_factory.mktemp("report") / "mw.db"
     with Store(path) as s:
-        pipeline = AnalyzerPipeline(CONFIG, damage_every_s=10.0)
+        pipeline = MillJob(CONFIG, damage_every_s=10.0)
         worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: pipeline}, s, None)
         for i, block in enumerate(blocks):
             if i != DROPPED:

@@ -17,7 +17,7 @@ from ingest.wire import DType
 from service.store.database import Store
 from service.worker.batch_lane import BatchLane
 from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -57,8 +57,8 @@ def _state(worker: Worker, store: Store) -> str:
             "steady": store.records(m, "steady"),
             "damage": store.damage(m),
             "health": worker.health[m].as_dict(0, 1e12),
-            "report": worker.pipelines[m].monitor.report(),  # type: ignore[attr-defined]
-            "samples": worker.pipelines[m].monitor.analyzer.n,  # type: ignore[attr-defined]
+            "report": worker.pipelines[m].analyzer.report(),  # type: ignore[attr-defined]
+            "samples": worker.pipelines[m].analyzer.loads.n,  # type: ignore[attr-defined]
         }
         for m in worker.mills
     }
@@ -67,7 +67,7 @@ def _state(worker: Worker, store: Store) -> str:
 
 
 def _worker(store: Store) -> Worker:
-    return Worker({c.id: c for c in CONFIGS}, {c.id: AnalyzerPipeline(c) for c in CONFIGS},
+    return Worker({c.id: c for c in CONFIGS}, {c.id: MillJob(c) for c in CONFIGS},
                   store, None)  # fmt: skip
 
 
@@ -100,4 +100,4 @@ def test_regular_mills_take_the_fast_lane(tmp_path: Path) -> None:
         for batch in archive_batches(tmp_path / "a", "w", min_messages=2000):
             lane.handle(batch)
         assert lane.regular_blocks > 0.6 * (lane.regular_blocks + lane.slow_blocks)
-        assert np.isfinite(worker.pipelines["mill-0"].monitor.analyzer.n)
+        assert np.isfinite(worker.pipelines["mill-0"].analyzer.loads.n)

@@ -21,7 +21,7 @@ from ingest.wire import decode_block
 from service.store.database import Store
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.checkpoints import CheckpointSchedule, MillHeldError, covers, earliest
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -96,16 +96,16 @@ def _blocks() -> list[QueuedBlock]:
 
 
 def _worker(store: Store, archive: ArchiveWriter | None) -> Worker:
-    pipelines = {m: AnalyzerPipeline(c) for m, c in CONFIGS.items()}
+    pipelines = {m: MillJob(c) for m, c in CONFIGS.items()}
     return Worker(CONFIGS, pipelines, store, archive, checkpoint_seconds=3600.0)  # type: ignore[arg-type]
 
 
 def _damage(worker: Worker) -> dict[str, str]:
     out = {}
     for mill_id, pipeline in worker.pipelines.items():
-        monitor = pipeline.monitor  # type: ignore[attr-defined]
-        monitor.flush()
-        out[mill_id] = json.dumps(monitor.report()["damage"], sort_keys=True)
+        analyzer = pipeline.analyzer  # type: ignore[attr-defined]
+        analyzer.flush()
+        out[mill_id] = json.dumps(analyzer.report()["damage"], sort_keys=True)
     return out
 
 
@@ -164,16 +164,16 @@ def test_the_live_analyzer_keeps_few_windows_yet_every_one_is_stored(monkeypatch
     monkeypatch.setattr("service.worker.mill_job.WINDOWS_KEPT", 2)
     config = CONFIGS["mill-a"]
     scene = get_scene("steady", config, seed=2, duration_s=330.0)
-    pipeline = AnalyzerPipeline(config)
+    pipeline = MillJob(config)
     stored = []
     for b in scene_blocks(scene):
         pipeline.add_block(pipeline_channel(config, b.key), decode_block(b.payload))
         stored += [r for r in pipeline.finish().records if r[0] == "steady"]
-    restored = AnalyzerPipeline(config)
+    restored = MillJob(config)
     restored.restore(json.loads(json.dumps(pipeline.snapshot())))
     assert len(stored) == 5  # 60 s windows
     for p in (pipeline, restored):
-        a = p.monitor.analyzer
+        a = p.analyzer.loads
         assert len(a.windows) == 2 and a.windows[-1]["t_ns"] == stored[-1][1]
         assert a.keep_events < 100
 
@@ -193,7 +193,7 @@ FASTER = MILL_A.model_copy(
 
 def _one_mill(store: Store, archive: ArchiveWriter | None, config: MillConfig) -> Worker:
     """A worker of mill-a alone, storing its daily damage every 5 s of samples."""
-    pipelines = {config.id: AnalyzerPipeline(config, damage_every_s=5.0)}
+    pipelines = {config.id: MillJob(config, damage_every_s=5.0)}
     return Worker({config.id: config}, pipelines, store, archive, checkpoint_seconds=3600.0)  # type: ignore[arg-type]
 
 
@@ -253,10 +253,10 @@ def test_recovery_after_a_pinion_speed_change_keeps_damage_and_restarts_spectra(
     assert len({e.t_ns for e in restarts}) == 1
     assert blocks[0].recv_ns < restarts[0].t_ns < blocks[crash].recv_ns
     assert "11083 bins in the snapshot" in restarts[0].data["reason"]
-    monitor = second.pipelines["mill-a"].monitor  # type: ignore[attr-defined]
-    assert monitor.analyzer.n == reference.pipelines["mill-a"].monitor.analyzer.n  # type: ignore[attr-defined]
-    assert monitor.harmonics.bins == HarmonicTracker(FASTER).bins != HarmonicTracker(MILL_A).bins
-    assert monitor.harmonics.counters["running_samples"] > 0
+    analyzer = second.pipelines["mill-a"].analyzer  # type: ignore[attr-defined]
+    assert analyzer.loads.n == reference.pipelines["mill-a"].analyzer.loads.n  # type: ignore[attr-defined]
+    assert analyzer.harmonics.bins == HarmonicTracker(FASTER).bins != HarmonicTracker(MILL_A).bins
+    assert analyzer.harmonics.counters["running_samples"] > 0
 
 
 WITHOUT_BENDING = MILL_A.model_copy(
@@ -308,7 +308,7 @@ def _two_mills(
 ) -> Worker:
     """mill-a (as configured by ``mill_a``) and mill-b, daily damage stored every 5 s."""
     configs = {"mill-a": mill_a, "mill-b": CONFIGS["mill-b"]}
-    pipelines = {m: AnalyzerPipeline(c, damage_every_s=5.0) for m, c in configs.items()}
+    pipelines = {m: MillJob(c, damage_every_s=5.0) for m, c in configs.items()}
     return Worker(configs, pipelines, store, archive, checkpoint_seconds=3600.0, **kw)  # type: ignore[arg-type]
 
 
@@ -369,8 +369,8 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         second.check_staleness(10.0)
         second.checkpoint()
         second.archive.close()  # type: ignore[union-attr]
-        monitor = second.pipelines["mill-a"].monitor  # type: ignore[attr-defined]
-        assert monitor.analyzer.n == 0 and monitor.backlog == 0  # its pipeline got nothing
+        analyzer = second.pipelines["mill-a"].analyzer  # type: ignore[attr-defined]
+        assert analyzer.loads.n == 0 and analyzer.backlog == 0  # its pipeline got nothing
         mill_a = [b for b in blocks[cut_b:stop] if second.routes.get(b.key, ("",))[0] == "mill-a"]
         assert second.held_blocks["mill-a"] == len(mill_a) > 0
         health = second.status(10.0)["mill-a"]

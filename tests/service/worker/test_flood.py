@@ -17,7 +17,7 @@ from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene
 from service.store.database import Store
 from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -32,14 +32,14 @@ FOREIGN = build_key("elsewhere", "other-mill", "pinion_torque")
 
 def run(items: list[QueuedBlock], directory: Path) -> tuple[Worker, str]:
     with Store(directory / "mw.db") as store, ArchiveWriter(directory / "a", "w") as archive:
-        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: AnalyzerPipeline(CONFIG)}, store,
+        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: MillJob(CONFIG)}, store,
                         archive)  # fmt: skip
         for item in items:
             worker.handle(item)
         worker.commit()
-        monitor = worker.pipelines[CONFIG.id].monitor
-        monitor.flush()
-        return worker, json.dumps(monitor.report()["damage"], sort_keys=True)
+        analyzer = worker.pipelines[CONFIG.id].analyzer
+        analyzer.flush()
+        return worker, json.dumps(analyzer.report()["damage"], sort_keys=True)
 
 
 def mangle(payload: bytes, how: int, junk: bytes) -> bytes:
@@ -93,7 +93,7 @@ def test_sequence_gaps_and_stale_channels_become_data_quality_events():
     items = [it for i, it in enumerate(GOOD) if i not in (41, 50)]  # one block of two channels
     with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
         clock = [10**18]
-        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: AnalyzerPipeline(CONFIG)}, store,
+        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: MillJob(CONFIG)}, store,
                         None, clock=lambda: clock[0])  # fmt: skip
         for item in items:
             worker.handle(QueuedBlock(item.key, item.payload, clock[0]))
@@ -120,7 +120,7 @@ def test_archive_write_failures_raise_the_data_quality_alarm():
             return False
 
     with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
-        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: AnalyzerPipeline(CONFIG)}, store,
+        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: MillJob(CONFIG)}, store,
                         FullDisk())  # fmt: skip
         for item in GOOD[:8]:
             worker.handle(item)
@@ -136,7 +136,7 @@ def test_a_mill_wearing_out_too_fast_raises_the_remaining_life_alarm():
     scene = get_scene("steady", fast, seed=1, duration_s=90.0)  # > the rule's 60 s raise delay
     items = [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
     with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
-        pipeline = AnalyzerPipeline(fast, damage_every_s=5.0)
+        pipeline = MillJob(fast, damage_every_s=5.0)
         worker = Worker({fast.id: fast}, {fast.id: pipeline}, store, None)
         for item in items:
             worker.handle(item)
@@ -149,7 +149,7 @@ def test_harmonic_tables_are_stored_thinned_and_compact():
     scene = get_scene("steady", CONFIG, seed=2, duration_s=400.0)
     items = [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
     with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
-        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: AnalyzerPipeline(CONFIG)}, store, None)
+        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: MillJob(CONFIG)}, store, None)
         for item in items:
             worker.handle(item)
         worker.commit()

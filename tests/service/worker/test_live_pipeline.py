@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from analytics.mill.analyzer import MillMonitor
+from analytics.mill.analyzer import MillAnalyzer
 from ingest.keys import alarm_pattern
 from ingest.sim.publisher import ScenePublisher, starting_now
 from ingest.sim.scenes import get_scene
@@ -18,7 +18,7 @@ from ingest.zenoh_session import build_config, free_loopback_port, open_session,
 from service.cli.analyze import analyze_recording, recording_files
 from service.settings import ServiceSettings
 from service.store.database import Store
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
@@ -51,7 +51,7 @@ def test_live_results_equal_offline_analysis_of_the_archive(tmp_path):
     settings = settings_for(tmp_path, port)
     mills = settings.load_mills()
     config = mills["sag-5200-lrs"]
-    runtime = ServiceRuntime(settings, mills, AnalyzerPipeline)
+    runtime = ServiceRuntime(settings, mills, MillJob)
     runtime.start()
     assert gc.get_freeze_count() > 0  # start-up state frozen: full collections skip it
     try:
@@ -76,7 +76,7 @@ def test_live_results_equal_offline_analysis_of_the_archive(tmp_path):
         _, state = store.latest_checkpoint()
         starts = store.events("sag-5200-lrs", "start")
         alarms = store.alarms()
-    live = MillMonitor.restore(config, state["pipelines"]["sag-5200-lrs"]["monitor"])
+    live = MillAnalyzer.restore(config, state["pipelines"]["sag-5200-lrs"]["monitor"])
     live.flush()
     # the offline side: the archive, analysed by `millwatch analyze`'s code path
     offline, stats = analyze_recording(recording_files(settings.archive.directory), config)

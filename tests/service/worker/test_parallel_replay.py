@@ -18,13 +18,13 @@ from analytics.spectra.harmonics import HarmonicTracker
 from ingest.archive.writer import ArchiveReader, ArchiveWriter
 from service.store.database import Store
 from service.worker import parallel_replay
-from service.worker.mill_job import AnalyzerPipeline
+from service.worker.mill_job import MillJob
 from service.worker.parallel_replay import ReplayJobError, replay_jobs, split_mills
 from service.worker.worker import Worker
 from tests.service.worker.test_batch_lane import BASE, CONFIGS, _items, _state
 
 
-class FailingPipeline(AnalyzerPipeline):
+class FailingPipeline(MillJob):
     """A pipeline whose analysis fails for ``mill-1`` (module level: a job process imports it)."""
 
     def finish(self):  # type: ignore[no-untyped-def]
@@ -33,7 +33,7 @@ class FailingPipeline(AnalyzerPipeline):
         return super().finish()
 
 
-class DyingPipeline(AnalyzerPipeline):
+class DyingPipeline(MillJob):
     """A pipeline whose process is killed (SIGKILL) in ``mill-2``'s analysis."""
 
     def finish(self):  # type: ignore[no-untyped-def]
@@ -49,7 +49,7 @@ def _archive(directory: Path) -> ArchiveReader:
     return ArchiveReader(directory, "w")
 
 
-def _worker(store: Store, factory=AnalyzerPipeline) -> Worker:  # type: ignore[no-untyped-def]
+def _worker(store: Store, factory=MillJob) -> Worker:  # type: ignore[no-untyped-def]
     return Worker({c.id: c for c in CONFIGS}, {c.id: factory(c) for c in CONFIGS}, store, None)
 
 
@@ -72,7 +72,7 @@ def test_parallel_replay_equals_one_process(
         one.on_alarms, two.on_alarms = alarms_one.extend, alarms_two.extend
         n = one.recover(reader)
         with caplog.at_level(logging.INFO, logger="service"):
-            assert two.recover(reader, jobs=2, factory=AnalyzerPipeline) == n == len(_items())
+            assert two.recover(reader, jobs=2, factory=MillJob) == n == len(_items())
         assert "replayed by 2 process(es)" in caplog.text
         assert _state(two, s2) == _state(one, s1)
         assert sorted(t.to_row()["alarm_id"] for t in alarms_two) == sorted(
@@ -93,7 +93,7 @@ def test_parallel_replay_after_checkpoints_skips_what_they_hold(tmp_path: Path) 
     with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
         one, two = _worker(s1), _worker(s2)
         one.recover(reader)
-        two.recover(reader, jobs=2, factory=AnalyzerPipeline)
+        two.recover(reader, jobs=2, factory=MillJob)
         assert _state(two, s2) == _state(one, s1)
 
 
@@ -107,7 +107,7 @@ def test_parallel_replay_after_checkpoints_skips_what_they_hold(tmp_path: Path) 
     ],
 )
 def test_a_failing_or_killed_job_stops_the_replay_naming_its_mills(
-    tmp_path: Path, factory: type[AnalyzerPipeline], error: str
+    tmp_path: Path, factory: type[MillJob], error: str
 ) -> None:
     reader = _archive(tmp_path / "a")
     with Store(tmp_path / "mw.db") as store:
@@ -154,16 +154,16 @@ def test_after_a_pinion_speed_change_jobs_restart_the_spectra_as_one_process_doe
     reader = _checkpointed_archive(tmp_path)
     mills = _edited(_faster)
     with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
-        one, two = (Worker(mills, {m: AnalyzerPipeline(c) for m, c in mills.items()}, s, None)
+        one, two = (Worker(mills, {m: MillJob(c) for m, c in mills.items()}, s, None)
                     for s in (s1, s2))  # fmt: skip
         one.recover(reader)
-        two.recover(reader, jobs=2, factory=AnalyzerPipeline)
+        two.recover(reader, jobs=2, factory=MillJob)
         assert _state(two, s2) == _state(one, s1)
         for m in mills:  # mill-1 and mill-2's stored by the job that replayed them
             events = s2.events(m, "data_quality")
             assert sum(e.data["problem"] == "spectra_restarted" for e in events) == 3
     for m, config in mills.items():
-        harmonics = two.pipelines[m].monitor.harmonics  # type: ignore[attr-defined]
+        harmonics = two.pipelines[m].analyzer.harmonics  # type: ignore[attr-defined]
         assert harmonics.bins == HarmonicTracker(config).bins != HarmonicTracker(BASE).bins
         assert harmonics.counters["running_samples"] > 0
 
@@ -185,17 +185,17 @@ def test_a_held_mill_fails_no_job_and_the_others_replay_as_in_one_process(
 
     mills = _edited(drop_bending)
     with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
-        one, two = (Worker(mills, {m: AnalyzerPipeline(c) for m, c in mills.items()}, s, None)
+        one, two = (Worker(mills, {m: MillJob(c) for m, c in mills.items()}, s, None)
                     for s in (s1, s2))  # fmt: skip
         one.recover(reader)
         with caplog.at_level(logging.INFO, logger="service"):
-            two.recover(reader, jobs=3, factory=AnalyzerPipeline)
+            two.recover(reader, jobs=3, factory=MillJob)
         assert "replaying the archive with 2 processes: mill-0; mill-2" in caplog.text
         assert list(two.held) == list(one.held) == ["mill-1"]
         assert two.held["mill-1"].startswith("mill mill-1: its checkpoint (at archive file")
         assert "channel(s) removed 'pinion_bending'" in two.held["mill-1"]
         assert two.held_blocks["mill-1"] == one.held_blocks["mill-1"] > 0
-        assert two.pipelines["mill-1"].monitor.analyzer.n == 0  # type: ignore[attr-defined]
+        assert two.pipelines["mill-1"].analyzer.loads.n == 0  # type: ignore[attr-defined]
         assert _state(two, s2) == _state(one, s1)
 
 

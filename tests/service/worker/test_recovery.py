@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from analytics.mill.analyzer import MillMonitor
+from analytics.mill.analyzer import MillAnalyzer
 from ingest.archive.writer import ArchiveReader
 from ingest.keys import channel_key
 from ingest.sim.blocks import scene_blocks
@@ -118,7 +118,7 @@ def test_sigkill_at_random_moments_then_restart_equals_offline_analysis(tmp_path
     with Store(settings.store.path) as store:
         _, state = store.latest_checkpoint()
         starts = store.events(config.id, "start")
-    live = MillMonitor.restore(config, state["pipelines"][config.id]["monitor"])
+    live = MillAnalyzer.restore(config, state["pipelines"][config.id]["monitor"])
     live.flush()
     offline, _ = analyze_recording(recording_files(settings.archive.directory), config)
     live_report, offline_report = live.report(), offline.report()
