@@ -23,8 +23,8 @@ from prometheus_client import CollectorRegistry
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
+from alarms.lifecycle import Alarm
 from service.api.mill_views import UNREACHABLE
-from service.store.database import AlarmRow
 from service.worker.runtime import ServiceRuntime
 
 if TYPE_CHECKING:
@@ -113,7 +113,7 @@ def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[M
     yield from (errors, missing, samples, state, held)
 
 
-def open_alarms(rows: Iterable[AlarmRow]) -> Metric:
+def open_alarms(rows: Iterable[Alarm]) -> Metric:
     """Open alarms (raised or acknowledged) per mill and severity."""
     g = GaugeMetricFamily(
         "millwatch_open_alarms",

@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from alarms.lifecycle import Alarm
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.fatigue.phase_damage import (
     APP_D_SCENARIOS,
@@ -57,7 +58,8 @@ from service.reports.starts import (
     month_days,
     peak_status,
 )
-from service.store.database import AlarmRow, DamageRow, EventRow, Store
+from service.store.database import Store
+from service.store.records import DamageRow, EventRow
 
 __all__ = [
     "STARTS_NORM_PER_MONTH",
@@ -694,7 +696,7 @@ def _peak_summaries(tables: list[tuple[int, list[dict[str, Any]]]]) -> list[Peak
 
 
 # ----------------------------------------------------------------------------- alarms, quality
-def _alarms(rows: list[AlarmRow], start_ns: int, end_ns: int) -> list[AlarmEntry]:
+def _alarms(rows: list[Alarm], start_ns: int, end_ns: int) -> list[AlarmEntry]:
     """Alarms active at some time in ``[start, end)``, oldest first."""
     active = [
         a

@@ -31,7 +31,8 @@ from service.reports.render_csv import damage_csv, render_csv, starts_csv
 from service.reports.render_html import day_positions, envelope, render_html
 from service.reports.render_pdf import render_pdf
 from service.reports.starts import month_bounds_ns, month_days
-from service.store.database import EventRow, Store
+from service.store.database import Store
+from service.store.records import EventRow
 from service.worker.block_queue import QueuedBlock
 from service.worker.mill_job import MillJob
 from service.worker.worker import Worker
