@@ -7,7 +7,9 @@ from __future__ import annotations
 import sqlite3
 
 from alarms.lifecycle import Alarm, TransitionRecord
+from analytics.drivetrain.mill_config import MillConfig
 from service.api.models import ALARM_EXAMPLE, AlarmDetail, AlarmOut, TransitionOut
+from service.api.routes.params import MILL_ID_PATTERN
 from service.store.database import Store
 from service.store.records import columns
 
@@ -26,3 +28,7 @@ def test_the_alarm_tables_have_the_columns_of_the_records(tmp_path):
         names = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
         assert names == set(columns(record)), table
     db.close()
+
+
+def test_a_mill_id_path_parameter_accepts_what_a_mill_config_may_be_called():
+    assert MillConfig.model_json_schema()["properties"]["id"]["pattern"] == MILL_ID_PATTERN

@@ -25,7 +25,7 @@ from ingest.sim.scenes import get_scene
 from ingest.sim.simulator import StartEvent, StopEvent, TripEvent
 from service.api.errors import install_problem_handlers
 from service.api.mill_views import mill_monthly_report
-from service.api.routes.reports import register_report_routes
+from service.api.routes.reports import reports_router
 from service.reports.monthly import MonthError, build_monthly_report, report_to_dict
 from service.reports.render_csv import damage_csv, render_csv, starts_csv
 from service.reports.render_html import day_positions, envelope, render_html
@@ -235,7 +235,7 @@ def client(store: Store) -> TestClient:
     install_problem_handlers(app)
     runtime = SimpleNamespace(mills={CONFIG.id: CONFIG}, store=store)
     backend = SimpleNamespace(monthly_report=partial(mill_monthly_report, runtime))
-    register_report_routes(app, backend)
+    app.include_router(reports_router(backend))
     return TestClient(app)
 
 
