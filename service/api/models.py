@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
+from pydantic.config import JsonDict
 
 __all__ = [
     "AckBody",
@@ -243,7 +244,7 @@ class Spectrum(BaseModel):
     )
 
 
-ALARM_EXAMPLE = {
+ALARM_EXAMPLE: JsonDict = {
     "alarm_id": "a-3f2c9e0b7d1a",
     "mill_id": "sag-5200-lrs",
     "rule": "start_peak",

@@ -25,6 +25,7 @@ query to a small thread pool, which answers (a monthly report takes a second or 
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -114,7 +115,7 @@ class WorkerQueryables:
             self._queryables.append(
                 self.session.declare_queryable(
                     query_pattern(site=config.site, mill=config.id),
-                    lambda q, m=mill_id: self._pool.submit(self._answer, m, q),
+                    functools.partial(self._submit, mill_id),
                 )
             )
         for config in self.backend.mills.values():
@@ -123,6 +124,10 @@ class WorkerQueryables:
         log.info(
             "worker %s answers for %s", self.backend.worker_name, ", ".join(self.backend.mills)
         )
+
+    def _submit(self, mill_id: str, query: zenoh.Query) -> None:
+        """The queryable's callback (a zenoh thread): hand the query to the pool."""
+        self._pool.submit(self._answer, mill_id, query)
 
     def _answer(self, mill_id: str, query: zenoh.Query) -> None:
         config = self.backend.mills[mill_id]

@@ -165,7 +165,7 @@ class ZenohBackend:
             return out
         for reply in self.session.get(query_pattern(what), timeout=self.timeout_s):
             if reply.ok is None:
-                log.warning("a worker failed %s: %s", what, reply.err.payload.to_bytes()[:200])
+                log.warning("a worker failed %s: %s", what, _error_payload(reply)[:200])
                 continue
             try:
                 site, mill, _ = parse_query_key(str(reply.ok.key_expr))
@@ -189,7 +189,7 @@ class ZenohBackend:
         for reply in self.session.get(key, payload=payload, timeout=self.timeout_s):
             if reply.ok is not None:
                 return decode(reply.ok.payload.to_bytes())
-            raw = reply.err.payload.to_bytes()
+            raw = _error_payload(reply)
             problem = problem_from(raw)
             if problem is not None:
                 raise problem
@@ -309,7 +309,7 @@ class ZenohBackend:
         workers = {
             a["worker"].get("name"): a["worker"].get("checks", {}) for a in gathered.values()
         }
-        checks = {
+        checks: dict[str, Any] = {
             "zenoh": not self.session.is_closed() and bool(self.session.info.routers_zid()),
             "workers": workers,
             "reachable": {m: m in gathered for m in self.mills},
@@ -329,3 +329,8 @@ class ZenohBackend:
         if self._registry is None:
             self._registry = remote_registry(self)
         return self._registry
+
+
+def _error_payload(reply: zenoh.Reply) -> bytes:
+    """What an error reply carries (empty for a reply that is not an error)."""
+    return b"" if reply.err is None else reply.err.payload.to_bytes()

@@ -587,8 +587,8 @@ def _steady_points(rows: _SteadyRows) -> list[SteadyPoint]:
     return [
         SteadyPoint(
             t,
-            {ch: v[i] for ch, v in ranges if v[i] is not None},
-            {ch: v[i] for ch, v in bending if v[i] is not None},
+            {ch: x for ch, v in ranges if (x := v[i]) is not None},
+            {ch: x for ch, v in bending if (x := v[i]) is not None},
         )
         for i, t in enumerate(rows.t_ns)
     ]
@@ -649,7 +649,7 @@ def _harmonics(reader: _MonthReader, time_zone: str) -> tuple[Harmonics, tuple[i
         tables_sampled=len(sampled),
         lines=_line_trends(sampled, zone),
         peaks=_peak_summaries([(t, p) for t, p in peaks if p]),
-    ), (None if lo is None else (int(lo), int(hi)))
+    ), (None if lo is None or hi is None else (lo, hi))
 
 
 def _line_trends(

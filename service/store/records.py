@@ -94,9 +94,10 @@ def to_params(cls: type, row: object) -> tuple[Any, ...]:
 
 def from_row(cls: type[R], row: sqlite3.Row | Mapping[str, Any]) -> R:
     """A row type from a SQL row, field by column name."""
-    readers = _readers(cls)
+    kind: type = cls
+    readers = _readers(kind)
     values = {}
-    for name in columns(cls):
+    for name in columns(kind):
         value = row[name]
         read = readers.get(name)
         values[name] = value if read is None or value is None else read(value)

@@ -31,7 +31,7 @@ def record_window(
     mill_id: str, kind: str, since_ns: int | None, until_ns: int | None
 ) -> tuple[str, tuple[Any, ...]]:
     """WHERE clause (on the ``records_unique`` index) and its arguments."""
-    where, args = "mill_id = ? AND kind = ?", [mill_id, kind]
+    where, args = "mill_id = ? AND kind = ?", list[Any]([mill_id, kind])
     for clause, value in (("t_ns >= ?", since_ns), ("t_ns < ?", until_ns)):
         if value is not None:
             where += " AND " + clause
