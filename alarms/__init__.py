@@ -1,9 +1,27 @@
 """Alarm rules and the alarm lifecycle (seed 000 §10.6: diagnostic alarms a control room acts on).
 
-Observations in (:mod:`alarms.observations`), rules from the field evidence
-(:mod:`alarms.rules`), the lifecycle (:mod:`alarms.lifecycle`) driven by the engine
-(:mod:`alarms.engine`), transitions out; the caller stores them (``service.store.database``) and
-publishes them (:mod:`alarms.wire`). No I/O here: imports only :mod:`analytics`.
+What is here:
+
+* :mod:`alarms.observations` — :class:`Observation`: one measured quantity of a mill at a time
+  (the engine's input) and the quantities rules may watch.
+* :mod:`alarms.from_analysis` — observations from the analyzer's facts (starts, steady windows,
+  spectra, data quality).
+* :mod:`alarms.rules` — the rules from the field evidence: levels, severities, delays, latching.
+* :mod:`alarms.lifecycle` — the alarm records (:class:`Alarm`, ``TransitionRecord``; the one
+  definition the store and the API map by field name) and the transitions
+  raised → acknowledged → cleared.
+* :mod:`alarms.engine` — :class:`AlarmEngine`: applies the rules to observations, drives the
+  lifecycle, snapshots and restores its state.
+* :mod:`alarms.wire` — the ``…/@alarms`` message of a transition (publish, decode).
+* :mod:`alarms.report` — the alarms a recording would have raised (``millwatch analyze``).
+
+Data flow: analyzer facts → ``from_analysis`` → observations → ``engine`` (``rules`` decide,
+``lifecycle`` records) → transitions out; the caller stores them (``service.store``) and
+publishes them (``wire``). No I/O here: imports only :mod:`analytics`.
+
+Where things go: a new rule is a rule in :mod:`alarms.rules` (and its quantity in
+:mod:`alarms.observations`); a new alarm field is a field of :class:`Alarm`, a store migration and
+the API model (``tests/service/api/test_models.py`` names what is missing).
 """
 
 from alarms.engine import AlarmEngine, UnknownAlarmError

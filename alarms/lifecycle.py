@@ -23,6 +23,13 @@ Transitions, each recorded with time, triggering value and threshold (:class:`Tr
 Severity never steps down while the alarm is open (see :mod:`alarms.rules`). The functions here
 mutate one :class:`Alarm` and return the :class:`Transition` they record; deciding *when* is
 :mod:`alarms.engine`'s job. Everything converts to plain JSON data (``to_dict``/``from_dict``).
+
+The records: :class:`Alarm` (an alarm's current state) and :class:`TransitionRecord` (one step of
+its history; a :class:`Transition` is that record plus the alarm right after it) are *the* alarm
+records of millwatch, defined here once. The store (``service.store``) maps them to its ``alarms``
+and ``alarm_transitions`` tables by field name, and the API's bodies (``service.api.models``) are
+checked against their fields by a test, so a new field is added here, in a migration and in the
+API model — and that test says which is missing.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ __all__ = [
     "AlarmState",
     "Transition",
     "TransitionKind",
+    "TransitionRecord",
     "acknowledge",
     "alarm_id_for",
     "clear",
@@ -72,9 +80,12 @@ def alarm_id_for(mill_id: str, rule: str, subject: str, raised_ns: int) -> str:
 
 @dataclass(slots=True)
 class Alarm:
-    """The current state of one alarm. ``value``/``threshold`` belong to the latest transition;
-    ``condition`` is False while a latched alarm waits for acknowledgement after its condition
-    returned to normal; ``seq`` counts the alarm's transitions."""
+    """The current state of one alarm — the alarm record (module docstring); times ns UTC.
+    ``value``/``threshold`` belong to the latest transition (``None`` once stored when not
+    finite: SQLite keeps NaN as NULL); ``condition`` is False while a latched alarm waits for
+    acknowledgement after its condition returned to normal; ``seq`` counts the alarm's
+    transitions. Readers that hold one (the API's alarm board) never mutate it; only the
+    lifecycle functions below do, on the engine's own copy."""
 
     alarm_id: str
     mill_id: str
@@ -86,8 +97,8 @@ class Alarm:
     state: AlarmState
     raised_ns: int
     updated_ns: int
-    value: float
-    threshold: float
+    value: float | None
+    threshold: float | None
     message: str
     condition: bool = True
     acked_ns: int | None = None
@@ -114,8 +125,9 @@ class Alarm:
 
 
 @dataclass(frozen=True, slots=True)
-class Transition:
-    """One recorded change of an alarm; ``alarm`` is the alarm's state right after it."""
+class TransitionRecord:
+    """One recorded change of an alarm, as stored (a row of ``alarm_transitions``); ``seq``
+    numbers an alarm's transitions from 1."""
 
     alarm_id: str
     seq: int
@@ -127,18 +139,22 @@ class Transition:
     threshold: float | None
     message: str
     by: str | None
-    alarm: Alarm
 
     def to_row(self) -> dict[str, Any]:
-        """Plain JSON data of the transition alone (the fields of
-        ``service.store.database.AlarmTransitionRow``)."""
-        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "alarm"}
+        """Plain JSON data of the transition alone (the fields of :class:`TransitionRecord`)."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(TransitionRecord)}
         d.update(kind=str(self.kind), severity=str(self.severity), state=str(self.state))
         return d
 
+
+@dataclass(frozen=True, slots=True)
+class Transition(TransitionRecord):
+    """A :class:`TransitionRecord` and ``alarm``, the alarm's state right after it."""
+
+    alarm: Alarm
+
     def to_dict(self) -> dict[str, Any]:
-        """:meth:`to_row` plus ``alarm`` as :meth:`Alarm.to_dict` (the fields of
-        ``service.store.database.AlarmRow``)."""
+        """:meth:`to_row` plus ``alarm`` as :meth:`Alarm.to_dict`."""
         return {**self.to_row(), "alarm": self.alarm.to_dict()}
 
 

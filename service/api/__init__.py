@@ -1,0 +1,29 @@
+"""The REST API (FastAPI): routes → backend → store/runtime (in process) or zenoh (remote).
+
+What is here:
+
+* :mod:`service.api.app` — :func:`~service.api.app.create_app`: the app over a backend.
+* :mod:`service.api.router` — the one router including every resource's routes.
+* :mod:`service.api.routes` — one router file per resource (its own map).
+* :mod:`service.api.backend` — the :class:`~service.api.backend.Backend` protocol: what the
+  routes ask, whoever answers.
+* :mod:`service.api.local_backend` — the backend over a runtime in this process (also what a
+  worker answers zenoh queries with).
+* :mod:`service.api.mill_views`, :mod:`service.api.alarm_views` — what the per-mill and alarm
+  endpoints answer, from the store and the worker's status snapshot.
+* :mod:`service.api.alarm_board` — every alarm's current state in memory (cheap ``/alarms``).
+* :mod:`service.api.models` — the request and response bodies (OpenAPI schema).
+* :mod:`service.api.errors` — domain errors and their ``application/problem+json`` answers.
+* :mod:`service.api.metrics` — the Prometheus collector of a runtime.
+
+Data flow: request → route (validates, calls one backend method) → ``LocalBackend`` → views →
+store/runtime status; or → ``service.remote.zenoh_backend.ZenohBackend`` → a worker's
+queryable → its ``LocalBackend``. Either way errors are :mod:`service.api.errors` exceptions,
+answered as problem JSON in one handler.
+
+Where things go: a new endpoint is a route in the resource's file under ``routes/`` (a new
+resource: a new file, included in :mod:`service.api.router`), a method of ``Backend``
+implemented by ``LocalBackend`` (a view function) and by ``ZenohBackend`` (a question of
+:mod:`service.remote.protocol`), and a body in :mod:`service.api.models`. The remote side of the
+API (``millwatch api``) lives in :mod:`service.remote`; api never imports it.
+"""

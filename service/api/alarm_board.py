@@ -1,8 +1,8 @@
 """The alarm board: every alarm's current state in memory, so ``GET /alarms`` costs no SQLite.
 
 Control rooms poll ``/alarms`` every second or so (issue 7: p99 ≤ 20 ms at 200 requests/s from
-50 pollers). The board mirrors the store's ``alarms`` table — one :class:`AlarmRow` per alarm —
-and is fed by whoever sees transitions first:
+50 pollers). The board mirrors the store's ``alarms`` table — one record
+(:class:`~alarms.lifecycle.Alarm`) per alarm — and is fed by whoever sees transitions first:
 
 * in-process (``millwatch serve``, the demo): the worker's stored transitions
   (:attr:`service.worker.worker.Worker.on_alarms`, after their transaction committed), plus one load
@@ -27,18 +27,17 @@ import json
 import math
 import threading
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from typing import Any
 
-from alarms.lifecycle import Transition
+from alarms.lifecycle import Alarm, Transition
 from alarms.wire import decode_transition
 from service.api.alarm_views import etag
-from service.store.database import AlarmRow
 
 __all__ = ["AlarmBoard", "Listing", "row_from_dict"]
 
 MAX_CACHED_LISTINGS = 256
-_ROW_FIELDS = frozenset(f.name for f in fields(AlarmRow))
+_ROW_FIELDS = frozenset(f.name for f in fields(Alarm))
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,14 +53,15 @@ def _finite(value: Any) -> Any:
     return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
-def row_from_dict(data: dict[str, Any]) -> AlarmRow:
-    """An :class:`AlarmRow` from its plain fields (extra keys, e.g. ``transitions``, ignored)."""
-    return AlarmRow(**{k: v for k, v in data.items() if k in _ROW_FIELDS})
+def row_from_dict(data: dict[str, Any]) -> Alarm:
+    """An :class:`~alarms.lifecycle.Alarm` from its plain fields (extra keys, e.g.
+    ``transitions``, ignored)."""
+    return Alarm.from_dict({k: v for k, v in data.items() if k in _ROW_FIELDS})
 
 
-def row_to_dict(row: AlarmRow) -> dict[str, Any]:
-    """Strict-JSON plain data of a row (non-finite numbers become None)."""
-    return {k: _finite(v) for k, v in asdict(row).items()}
+def row_to_dict(row: Alarm) -> dict[str, Any]:
+    """Strict-JSON plain data of an alarm (non-finite numbers become None)."""
+    return {k: _finite(v) for k, v in row.to_dict().items()}
 
 
 def _encode(body: dict[str, Any]) -> bytes:
@@ -76,10 +76,10 @@ class AlarmBoard:
     are the worker thread or zenoh callbacks, readers the API's event loop."""
 
     def __init__(self) -> None:
-        self._rows: dict[str, AlarmRow] = {}
+        self._rows: dict[str, Alarm] = {}
         self._lock = threading.Lock()
         self._version = 0
-        self._sorted: list[AlarmRow] | None = None
+        self._sorted: list[Alarm] | None = None
         self._listings: dict[tuple[tuple[str, ...], int | None, str | None], Listing] = {}
 
     @property
@@ -91,7 +91,7 @@ class AlarmBoard:
         return len(self._rows)
 
     # ------------------------------------------------------------------ writing
-    def merge(self, rows: Iterable[AlarmRow]) -> int:
+    def merge(self, rows: Iterable[Alarm]) -> int:
         """Take the rows that are newer (higher ``seq``) than the board's; returns how many."""
         changed = 0
         with self._lock:
@@ -108,18 +108,18 @@ class AlarmBoard:
 
     def apply_transitions(self, transitions: Iterable[Transition]) -> int:
         """Merge the alarms' states after stored transitions (``Worker.on_alarms``)."""
-        return self.merge(AlarmRow(**t.alarm.to_dict()) for t in transitions)
+        return self.merge(t.alarm for t in transitions)
 
     def apply_message(self, payload: bytes) -> int:
         """Merge one ``…/@alarms`` message; raises :class:`alarms.wire.AlarmWireError`."""
         return self.merge([row_from_dict(decode_transition(payload)["alarm"])])
 
     # ------------------------------------------------------------------ reading
-    def get(self, alarm_id: str) -> AlarmRow | None:
+    def get(self, alarm_id: str) -> Alarm | None:
         """One alarm's current state, or None."""
         return self._rows.get(alarm_id)
 
-    def rows(self, mill_id: str | None = None) -> list[AlarmRow]:
+    def rows(self, mill_id: str | None = None) -> list[Alarm]:
         """Alarms (of one mill), most recently changed first."""
         ordered = self._ordered()
         return ordered if mill_id is None else [r for r in ordered if r.mill_id == mill_id]
@@ -153,11 +153,11 @@ class AlarmBoard:
                 self._listings[key] = listing
         return listing
 
-    def _ordered(self) -> list[AlarmRow]:
+    def _ordered(self) -> list[Alarm]:
         with self._lock:
             return self._ordered_locked()
 
-    def _ordered_locked(self) -> list[AlarmRow]:
+    def _ordered_locked(self) -> list[Alarm]:
         if self._sorted is None:
             self._sorted = sorted(self._rows.values(), key=lambda r: (-r.updated_ns, r.alarm_id))
         return self._sorted

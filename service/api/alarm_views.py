@@ -24,11 +24,10 @@ from __future__ import annotations
 import hashlib
 import hmac
 from concurrent.futures import TimeoutError as FutureTimeout
-from dataclasses import asdict
 from typing import Any
 
 from alarms.engine import UnknownAlarmError
-from alarms.lifecycle import AlarmState
+from alarms.lifecycle import Alarm, AlarmState
 from service.api.errors import (
     BadRequest,
     Conflict,
@@ -37,7 +36,7 @@ from service.api.errors import (
     Unauthorized,
     Unavailable,
 )
-from service.store.database import AlarmRow, Store
+from service.store.database import Store
 from service.worker.checkpoints import MillHeldError
 from service.worker.runtime import ServiceRuntime
 
@@ -73,7 +72,7 @@ def parse_states(state: str | None) -> tuple[str, ...]:
     return tuple(dict.fromkeys(out))
 
 
-def etag(rows: list[AlarmRow]) -> str:
+def etag(rows: list[Alarm]) -> str:
     """Strong ETag of a listing (module docstring)."""
     h = hashlib.blake2b(digest_size=12)
     for r in rows:
@@ -87,7 +86,7 @@ def alarm_list(
     """The listing (alarms, count, next cursor) and its ETag."""
     rows = store.alarms(states or None, since_ns, mill_id)
     cursor = max((r.updated_ns for r in rows), default=since_ns)
-    body = {"alarms": [asdict(r) for r in rows], "count": len(rows), "cursor": cursor}
+    body = {"alarms": [r.to_dict() for r in rows], "count": len(rows), "cursor": cursor}
     return body, etag(rows)
 
 
@@ -106,8 +105,8 @@ def alarm_detail(store: Store, alarm_id: str) -> dict[str, Any]:
         raise NotFound(
             "Unknown alarm", f"No alarm {alarm_id!r} is stored here; GET /alarms lists the alarms."
         )
-    transitions = [asdict(t) for t in store.alarm_transitions(alarm_id)]
-    return {**asdict(row), "transitions": transitions}
+    transitions = [t.to_row() for t in store.alarm_transitions(alarm_id)]
+    return {**row.to_dict(), "transitions": transitions}
 
 
 def check_api_key(configured: str | None, given: str | None) -> None:

@@ -15,6 +15,7 @@ from typing import Any
 
 from prometheus_client import CollectorRegistry
 
+from alarms.lifecycle import Transition
 from service.api.alarm_board import AlarmBoard, row_from_dict
 from service.api.alarm_views import acknowledge, alarm_detail
 from service.api.metrics import metrics_registry
@@ -46,10 +47,14 @@ class LocalBackend:
         self._board = AlarmBoard()
         self._board_loaded = False
         self._registry: CollectorRegistry | None = None
-        runtime.alarm_listeners.append(self._board.apply_transitions)
+        runtime.alarm_listeners.append(self._on_transitions)
         self._load_board()
 
     # ------------------------------------------------------------------ alarms
+    def _on_transitions(self, transitions: list[Transition]) -> None:
+        """The runtime's stored transitions, onto the board."""
+        self._board.apply_transitions(transitions)
+
     def _load_board(self) -> bool:
         if not self._board_loaded and self.runtime.store is not None:
             self._board.merge(self.runtime.store.alarms())

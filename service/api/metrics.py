@@ -8,29 +8,25 @@ analyzer or iterates a dict the worker mutates. Open alarms are counted from the
 
 Names follow Prometheus conventions: ``millwatch_`` prefix, unit suffixes, ``_total`` counters.
 
-``millwatch api`` (no worker in the process) exports the same per-mill families from the statuses
-the workers answer over zenoh, the worker counters with a ``worker`` label, and
-``millwatch_mill_reachable`` per mill (:func:`remote_registry`).
+``millwatch api`` (no worker in the process) exports the same per-mill families
+(:func:`mill_families`, :func:`open_alarms`) from what the workers answer over zenoh:
+:mod:`service.remote.metrics`.
 """
 
 from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Iterable, Iterator, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from prometheus_client import CollectorRegistry
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
-from service.api.mill_views import UNREACHABLE
-from service.store.database import AlarmRow
+from alarms.lifecycle import Alarm
 from service.worker.runtime import ServiceRuntime
 
-if TYPE_CHECKING:
-    from service.remote.zenoh_backend import ZenohBackend
-
-__all__ = ["RemoteCollector", "RuntimeCollector", "metrics_registry", "remote_registry"]
+__all__ = ["RuntimeCollector", "metrics_registry", "mill_families", "open_alarms"]
 
 _OPEN = ("raised", "acknowledged")
 
@@ -113,7 +109,7 @@ def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[M
     yield from (errors, missing, samples, state, held)
 
 
-def open_alarms(rows: Iterable[AlarmRow]) -> Metric:
+def open_alarms(rows: Iterable[Alarm]) -> Metric:
     """Open alarms (raised or acknowledged) per mill and severity."""
     g = GaugeMetricFamily(
         "millwatch_open_alarms",
@@ -126,57 +122,8 @@ def open_alarms(rows: Iterable[AlarmRow]) -> Metric:
     return g
 
 
-_WORKER_COUNTERS = (
-    ("millwatch_blocks_handled", "blocks_handled", "Blocks taken off the queue and handled."),
-    ("millwatch_archive_errors", "archive_errors", "Failed MCAP archive writes."),
-    ("millwatch_unrouted_blocks", "unrouted_blocks", "Blocks on keys of no configured mill."),
-    ("millwatch_queue_dropped_blocks", "queue_dropped_blocks", "Blocks dropped: queue full."),
-)
-
-
-class RemoteCollector(Collector):
-    """What ``millwatch api`` exports: gathered from the workers at scrape time."""
-
-    def __init__(self, backend: ZenohBackend) -> None:
-        self.backend = backend
-
-    def collect(self) -> Iterator[Metric]:
-        gathered = self.backend.statuses()
-        workers = {a["worker"]["name"]: a["worker"] for a in gathered.values()}
-        for name, key, doc in _WORKER_COUNTERS:
-            family = CounterMetricFamily(name, doc, labels=["worker"])
-            for worker, info in sorted(workers.items()):
-                family.add_metric([worker], info.get(key, 0))
-            yield family
-        depth = GaugeMetricFamily(
-            "millwatch_queue_depth_blocks", "Blocks waiting for the worker.", labels=["worker"]
-        )
-        for worker, info in sorted(workers.items()):
-            depth.add_metric([worker], info.get("queue_depth_blocks", 0))
-        yield depth
-        reachable = GaugeMetricFamily(
-            "millwatch_mill_reachable",
-            "1 while a live worker answers for the mill.",
-            labels=["mill"],
-        )
-        for mill in sorted(self.backend.mills):
-            reachable.add_metric([mill], 1 if mill in gathered else 0)
-        yield reachable
-        status = {m: gathered[m]["status"] if m in gathered else {"state": UNREACHABLE}
-                  for m in self.backend.mills}  # fmt: skip
-        yield from mill_families(self.backend.mills, status)
-        yield open_alarms(self.backend.alarm_board().rows())
-
-
 def metrics_registry(runtime: ServiceRuntime) -> CollectorRegistry:
     """A fresh registry holding the runtime's collector."""
     registry = CollectorRegistry(auto_describe=False)
     registry.register(RuntimeCollector(runtime))
-    return registry
-
-
-def remote_registry(backend: ZenohBackend) -> CollectorRegistry:
-    """A fresh registry holding the collector of ``millwatch api``."""
-    registry = CollectorRegistry(auto_describe=False)
-    registry.register(RemoteCollector(backend))
     return registry

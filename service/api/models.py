@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
+from pydantic.config import JsonDict
 
 __all__ = [
     "AckBody",
@@ -243,7 +244,7 @@ class Spectrum(BaseModel):
     )
 
 
-_ALARM_EXAMPLE = {
+ALARM_EXAMPLE: JsonDict = {
     "alarm_id": "a-3f2c9e0b7d1a",
     "mill_id": "sag-5200-lrs",
     "rule": "start_peak",
@@ -268,7 +269,7 @@ _ALARM_EXAMPLE = {
 class AlarmOut(BaseModel):
     """The current state of one alarm; times ns UTC."""
 
-    model_config = ConfigDict(json_schema_extra={"examples": [_ALARM_EXAMPLE]})
+    model_config = ConfigDict(json_schema_extra={"examples": [ALARM_EXAMPLE]})
 
     alarm_id: str
     mill_id: str
@@ -308,7 +309,7 @@ class AlarmList(BaseModel):
         json_schema_extra={
             "examples": [
                 {
-                    "alarms": [_ALARM_EXAMPLE],
+                    "alarms": [ALARM_EXAMPLE],
                     "count": 1,
                     "cursor": 1714560000000000000,
                 }

@@ -5,26 +5,15 @@ For every mill it analyses, a worker declares
 * a **queryable** on ``millwatch/v1/<site>/<mill>/@query/*`` (:func:`ingest.keys.query_key`),
   answering with the JSON its :class:`~service.api.local_backend.LocalBackend` returns — the same
   bodies an in-process API returns — or with ``reply_err`` carrying problem JSON
-  (``status``, ``title``, ``detail``; :func:`service.api.backend.problem_of`);
+  (:func:`service.remote.protocol.problem_of`);
 * a **liveliness token** ``millwatch/v1/<site>/<mill>/@worker/<worker>``
   (:func:`ingest.keys.worker_token_key`): the API knows which mills have a live worker, and
   learns within milliseconds when a worker process dies (its TCP connection closes; a hung host
   is bounded by the zenoh lease, 10 s by default).
 
-What can be asked (``<what>``; arguments as a JSON object in the query payload):
-
-=========  ======================  ==============================================
-what       arguments               answer
-=========  ======================  ==============================================
-status     —                       ``{"status": <mill status>, "worker": <info>}``
-life       —                       ``GET /mills/{id}/life`` body
-starts     ``month`` (optional)    ``GET /mills/{id}/starts`` body
-spectrum   —                       ``GET /mills/{id}/spectrum`` body
-report     ``month`` (optional)    the monthly report as JSON (``report_to_dict``)
-alarms     —                       the mill's alarms (rows, most recent first)
-alarm      ``alarm_id``            ``GET /alarms/{id}`` body
-ack        ``alarm_id``, ``by``    the alarm after acknowledgement
-=========  ======================  ==============================================
+What can be asked, with which arguments, and how answers and errors are encoded:
+:mod:`service.remote.protocol` (the API's end, :mod:`service.remote.zenoh_backend`, reads the
+same module). :data:`ANSWERS` says how this worker answers each question.
 
 Trust: ``ack`` changes state and carries no API key — the API checks the key before it asks.
 The zenoh router network is the trust boundary: only the API, workers and gateways may connect
@@ -36,7 +25,7 @@ query to a small thread pool, which answers (a monthly report takes a second or 
 
 from __future__ import annotations
 
-import json
+import functools
 import logging
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -47,32 +36,26 @@ import zenoh
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.keys import query_key, query_pattern, worker_token_key
 from service.api.alarm_board import row_to_dict
-from service.api.backend import problem_of
-from service.api.errors import ApiError, BadRequest, NotFound, Unavailable
+from service.api.errors import ApiError, NotFound, Unavailable
 from service.api.local_backend import LocalBackend
+from service.remote.protocol import (
+    JSON,
+    Question,
+    alarm_id_of,
+    by_of,
+    decode_args,
+    encode,
+    month_of,
+    problem_of,
+)
 from service.reports.monthly import report_to_dict
 
-__all__ = ["ANSWERS", "JSON", "WorkerQueryables"]
+__all__ = ["ANSWERS", "WorkerQueryables"]
 
 log = logging.getLogger(__name__)
 
-JSON = "application/json"
 QUERY_THREADS = 4
 Answer = Callable[[LocalBackend, str, dict[str, Any]], Any]
-
-
-def _month(args: dict[str, Any]) -> str | None:
-    month = args.get("month")
-    if month is not None and not isinstance(month, str):
-        raise BadRequest("Malformed month", f"month must be a string YYYY-MM, got {month!r}.")
-    return month
-
-
-def _alarm_id(args: dict[str, Any]) -> str:
-    alarm_id = args.get("alarm_id")
-    if not isinstance(alarm_id, str):
-        raise BadRequest("Missing alarm id", "The query needs an alarm_id string.")
-    return alarm_id
 
 
 def _own_alarm(backend: LocalBackend, mill_id: str, alarm_id: str) -> None:
@@ -82,45 +65,33 @@ def _own_alarm(backend: LocalBackend, mill_id: str, alarm_id: str) -> None:
 
 
 def _alarm(backend: LocalBackend, mill_id: str, args: dict[str, Any]) -> Any:
-    alarm_id = _alarm_id(args)
+    alarm_id = alarm_id_of(args)
     _own_alarm(backend, mill_id, alarm_id)
     return backend.alarm(alarm_id)
 
 
 def _ack(backend: LocalBackend, mill_id: str, args: dict[str, Any]) -> Any:
-    alarm_id = _alarm_id(args)
+    alarm_id = alarm_id_of(args)
     _own_alarm(backend, mill_id, alarm_id)
-    by = args.get("by")
-    return backend.ack(alarm_id, by if isinstance(by, str) and by else "api")
+    return backend.ack(alarm_id, by_of(args))
 
 
-ANSWERS: dict[str, Answer] = {
-    "status": lambda b, m, _: {"status": b.status(m), "worker": b.worker_info()},
-    "life": lambda b, m, _: b.life(m),
-    "starts": lambda b, m, a: b.starts(m, _month(a)),
-    "spectrum": lambda b, m, _: b.spectrum(m),
-    "report": lambda b, m, a: report_to_dict(b.monthly_report(m, _month(a))),
-    "alarms": lambda b, m, _: [row_to_dict(r) for r in b.alarm_board().rows(m)],
-    "alarm": _alarm,
-    "ack": _ack,
+ANSWERS: dict[Question, Answer] = {
+    Question.STATUS: lambda b, m, _: {"status": b.status(m), "worker": b.worker_info()},
+    Question.LIFE: lambda b, m, _: b.life(m),
+    Question.STARTS: lambda b, m, a: b.starts(m, month_of(a)),
+    Question.SPECTRUM: lambda b, m, _: b.spectrum(m),
+    Question.REPORT: lambda b, m, a: report_to_dict(b.monthly_report(m, month_of(a))),
+    Question.ALARMS: lambda b, m, _: [row_to_dict(r) for r in b.alarm_board().rows(m)],
+    Question.ALARM: _alarm,
+    Question.ACK: _ack,
 }
-"""What a worker answers, by the last chunk of the query key (module docstring)."""
+"""How a worker answers each :class:`~service.remote.protocol.Question`."""
 
 
 def _arguments(query: zenoh.Query) -> dict[str, Any]:
     payload = query.payload
-    if payload is None:
-        return {}
-    raw = payload.to_bytes()
-    if not raw:
-        return {}
-    try:
-        args = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise BadRequest("Malformed query", "The query payload is not UTF-8 JSON.") from None
-    if not isinstance(args, dict):
-        raise BadRequest("Malformed query", "The query payload must be a JSON object.")
-    return args
+    return {} if payload is None else decode_args(payload.to_bytes())
 
 
 class WorkerQueryables:
@@ -144,7 +115,7 @@ class WorkerQueryables:
             self._queryables.append(
                 self.session.declare_queryable(
                     query_pattern(site=config.site, mill=config.id),
-                    lambda q, m=mill_id: self._pool.submit(self._answer, m, q),
+                    functools.partial(self._submit, mill_id),
                 )
             )
         for config in self.backend.mills.values():
@@ -154,12 +125,16 @@ class WorkerQueryables:
             "worker %s answers for %s", self.backend.worker_name, ", ".join(self.backend.mills)
         )
 
+    def _submit(self, mill_id: str, query: zenoh.Query) -> None:
+        """The queryable's callback (a zenoh thread): hand the query to the pool."""
+        self._pool.submit(self._answer, mill_id, query)
+
     def _answer(self, mill_id: str, query: zenoh.Query) -> None:
         config = self.backend.mills[mill_id]
         try:
             what = str(query.key_expr).rsplit("/", 1)[-1]
             body = self._dispatch(config, what, query)
-            query.reply(query_key(config.site, config.id, what), _dumps(body), encoding=JSON)
+            query.reply(query_key(config.site, config.id, what), encode(body), encoding=JSON)
             self.answered += 1
         except ApiError as exc:
             query.reply_err(problem_of(exc), encoding=JSON)
@@ -172,11 +147,12 @@ class WorkerQueryables:
             query.drop()
 
     def _dispatch(self, config: MillConfig, what: str, query: zenoh.Query) -> Any:
-        answer = ANSWERS.get(what)
-        if answer is None:
+        try:
+            question = Question(what)
+        except ValueError:
             known = ", ".join(ANSWERS)
-            raise NotFound("Unknown query", f"Workers answer {known}; not {what!r}.")
-        return answer(self.backend, config.id, _arguments(query))
+            raise NotFound("Unknown query", f"Workers answer {known}; not {what!r}.") from None
+        return ANSWERS[question](self.backend, config.id, _arguments(query))
 
     def close(self) -> None:
         """Undeclare the tokens first (the API stops asking), then the queryables."""
@@ -187,7 +163,3 @@ class WorkerQueryables:
             queryable.undeclare()
         self._queryables.clear()
         self._pool.shutdown(wait=True, cancel_futures=True)
-
-
-def _dumps(body: Any) -> bytes:
-    return json.dumps(body, ensure_ascii=False).encode("utf-8")

@@ -12,8 +12,9 @@ router, and as many copies as needed. It keeps three things in memory:
   and gathered with one ``get`` on ``…/@query/alarms`` at start and whenever a worker (re)joins;
 * the **last status** each worker sent about itself (name, partition), to name it in errors.
 
-Everything else is a zenoh ``get`` on the mill's ``…/@query/<what>`` key
-(:mod:`service.remote.queryables`), with an explicit timeout (``api.query_timeout_s``, default 10
+Everything else is a zenoh ``get`` on the mill's ``…/@query/<what>`` key (the questions, their
+arguments and encodings: :mod:`service.remote.protocol`; the worker's end:
+:mod:`service.remote.queryables`), with an explicit timeout (``api.query_timeout_s``, default 10
 s):
 a worker that does not answer in time is a 504 naming the mill, the worker and its partition,
 never a hang. Errors the worker raised come back as ``reply_err`` problem JSON and are raised
@@ -24,7 +25,6 @@ one would. ``GET /mills`` and ``/ready`` gather every mill's status with one ``g
 
 from __future__ import annotations
 
-import json
 import logging
 import threading
 import time
@@ -47,10 +47,17 @@ from ingest.keys import (
     worker_token_pattern,
 )
 from service.api.alarm_board import AlarmBoard, row_from_dict
-from service.api.backend import problem_from
 from service.api.errors import GatewayTimeout, NotFound, Unavailable
-from service.api.metrics import remote_registry
 from service.api.mill_views import config_of, mill_detail, mill_summary
+from service.remote.metrics import remote_registry
+from service.remote.protocol import (
+    Question,
+    alarm_args,
+    decode,
+    encode,
+    month_args,
+    problem_from,
+)
 from service.remote.report_codec import ReportDecodeError, report_from_dict
 from service.reports.monthly import MonthlyReport
 
@@ -147,10 +154,10 @@ class ZenohBackend:
 
     def sync_alarms(self) -> int:
         """Gather every live mill's alarms into the board; returns the rows that changed."""
-        gathered = self._gather("alarms")
+        gathered = self._gather(Question.ALARMS)
         return self._board.merge(row_from_dict(r) for rows in gathered.values() for r in rows)
 
-    def _gather(self, what: str) -> dict[str, Any]:
+    def _gather(self, what: Question) -> dict[str, Any]:
         """One ``get`` on every mill's ``@query/<what>``: the answers by mill id (mills whose
         worker is gone, or that did not answer within the timeout, are missing)."""
         out: dict[str, Any] = {}
@@ -158,7 +165,7 @@ class ZenohBackend:
             return out
         for reply in self.session.get(query_pattern(what), timeout=self.timeout_s):
             if reply.ok is None:
-                log.warning("a worker failed %s: %s", what, reply.err.payload.to_bytes()[:200])
+                log.warning("a worker failed %s: %s", what, _error_payload(reply)[:200])
                 continue
             try:
                 site, mill, _ = parse_query_key(str(reply.ok.key_expr))
@@ -166,23 +173,23 @@ class ZenohBackend:
                 continue
             mill_id = self._by_key.get((site, mill))
             if mill_id is not None:
-                out[mill_id] = json.loads(reply.ok.payload.to_bytes())
+                out[mill_id] = decode(reply.ok.payload.to_bytes())
         return out
 
-    def _ask(self, mill_id: str, what: str, args: dict[str, Any] | None = None) -> Any:
+    def _ask(self, mill_id: str, what: Question, args: dict[str, Any] | None = None) -> Any:
         """The answer of ``mill_id``'s worker to ``what`` (module docstring for the errors)."""
         config = config_of(self.mills, mill_id)
         worker = self.live_workers().get(mill_id)
         if worker is None:
             raise Unavailable("Mill unreachable", self._gone(mill_id))
         t0 = time.monotonic()
-        payload = json.dumps(args or {}).encode("utf-8")
+        payload = encode(args or {})
         key = query_key(config.site, config.id, what)
         text = "no reply"
         for reply in self.session.get(key, payload=payload, timeout=self.timeout_s):
             if reply.ok is not None:
-                return json.loads(reply.ok.payload.to_bytes())
-            raw = reply.err.payload.to_bytes()
+                return decode(reply.ok.payload.to_bytes())
+            raw = _error_payload(reply)
             problem = problem_from(raw)
             if problem is not None:
                 raise problem
@@ -228,7 +235,7 @@ class ZenohBackend:
 
     def statuses(self) -> dict[str, dict[str, Any]]:
         """Every reachable mill's ``{"status", "worker"}`` (one gather)."""
-        gathered = self._gather("status")
+        gathered = self._gather(Question.STATUS)
         for answer in gathered.values():
             self._remember(answer.get("worker", {}))
         return gathered
@@ -248,21 +255,21 @@ class ZenohBackend:
         config = config_of(self.mills, mill_id)
         if mill_id not in self.live_workers():
             return mill_detail(config, None, self._worker_gone(mill_id))
-        answer = self._ask(mill_id, "status")
+        answer = self._ask(mill_id, Question.STATUS)
         self._remember(answer["worker"])
         return mill_detail(config, answer["status"], answer["worker"])
 
     def life(self, mill_id: str) -> dict[str, Any]:
-        return self._ask(mill_id, "life")
+        return self._ask(mill_id, Question.LIFE)
 
     def starts(self, mill_id: str, month: str | None) -> dict[str, Any]:
-        return self._ask(mill_id, "starts", {"month": month})
+        return self._ask(mill_id, Question.STARTS, month_args(month))
 
     def spectrum(self, mill_id: str) -> dict[str, Any]:
-        return self._ask(mill_id, "spectrum")
+        return self._ask(mill_id, Question.SPECTRUM)
 
     def monthly_report(self, mill_id: str, month: str | None) -> MonthlyReport:
-        data = self._ask(mill_id, "report", {"month": month})
+        data = self._ask(mill_id, Question.REPORT, month_args(month))
         try:
             return report_from_dict(data)
         except ReportDecodeError as exc:
@@ -277,12 +284,12 @@ class ZenohBackend:
         return row.mill_id
 
     def alarm(self, alarm_id: str) -> dict[str, Any]:
-        return self._ask(self._alarm_row_mill(alarm_id), "alarm", {"alarm_id": alarm_id})
+        return self._ask(self._alarm_row_mill(alarm_id), Question.ALARM, alarm_args(alarm_id))
 
     def ack(self, alarm_id: str, by: str) -> dict[str, Any]:
         """Ask the alarm's worker to acknowledge it (the route checked the API key)."""
         mill_id = self._alarm_row_mill(alarm_id)
-        detail = self._ask(mill_id, "ack", {"alarm_id": alarm_id, "by": by})
+        detail = self._ask(mill_id, Question.ACK, alarm_args(alarm_id, by))
         self._board.merge([row_from_dict(detail)])
         return detail
 
@@ -302,7 +309,7 @@ class ZenohBackend:
         workers = {
             a["worker"].get("name"): a["worker"].get("checks", {}) for a in gathered.values()
         }
-        checks = {
+        checks: dict[str, Any] = {
             "zenoh": not self.session.is_closed() and bool(self.session.info.routers_zid()),
             "workers": workers,
             "reachable": {m: m in gathered for m in self.mills},
@@ -322,3 +329,8 @@ class ZenohBackend:
         if self._registry is None:
             self._registry = remote_registry(self)
         return self._registry
+
+
+def _error_payload(reply: zenoh.Reply) -> bytes:
+    """What an error reply carries (empty for a reply that is not an error)."""
+    return b"" if reply.err is None else reply.err.payload.to_bytes()

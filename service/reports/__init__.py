@@ -1,0 +1,18 @@
+"""Reports a person reads: the monthly damage report, remaining life, the starts of a month.
+
+What is here:
+
+* :mod:`service.reports.starts` — calendar months of a site and the starts of one month against
+  the norm and the limits (``GET /mills/{id}/starts`` and the report share it).
+* :mod:`service.reports.life` — damage so far, damage rate and remaining life per component.
+* :mod:`service.reports.monthly` — the monthly report as plain data, built from the store.
+* :mod:`service.reports.render_html`, :mod:`service.reports.render_pdf`,
+  :mod:`service.reports.render_csv` — the report rendered (HTML with SVG plots, PDF, CSV).
+
+Data flow: store rows (+ the worker's status for life) → plain dataclasses/dicts → renderers →
+bytes; the API's routes choose the format (:mod:`service.api.routes.reports`).
+
+Where things go: a new section of the monthly report is a field of ``MonthlyReport`` built in
+:mod:`service.reports.monthly` and shown by each renderer; a new format is a renderer and an entry
+of ``FORMATS`` in :mod:`service.api.routes.reports`.
+"""

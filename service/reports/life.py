@@ -27,7 +27,7 @@ from datetime import date, datetime, timedelta
 from typing import Any
 
 from analytics.drivetrain.mill_config import MillConfig
-from service.store.database import DamageRow
+from service.store.records import DamageRow
 
 __all__ = ["RATE_WINDOW_DAYS", "LifeInputs", "life_report"]
 

@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from alarms.lifecycle import Alarm
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.fatigue.phase_damage import (
     APP_D_SCENARIOS,
@@ -57,7 +58,8 @@ from service.reports.starts import (
     month_days,
     peak_status,
 )
-from service.store.database import AlarmRow, DamageRow, EventRow, Store
+from service.store.database import Store
+from service.store.records import DamageRow, EventRow
 
 __all__ = [
     "STARTS_NORM_PER_MONTH",
@@ -585,8 +587,8 @@ def _steady_points(rows: _SteadyRows) -> list[SteadyPoint]:
     return [
         SteadyPoint(
             t,
-            {ch: v[i] for ch, v in ranges if v[i] is not None},
-            {ch: v[i] for ch, v in bending if v[i] is not None},
+            {ch: x for ch, v in ranges if (x := v[i]) is not None},
+            {ch: x for ch, v in bending if (x := v[i]) is not None},
         )
         for i, t in enumerate(rows.t_ns)
     ]
@@ -647,7 +649,7 @@ def _harmonics(reader: _MonthReader, time_zone: str) -> tuple[Harmonics, tuple[i
         tables_sampled=len(sampled),
         lines=_line_trends(sampled, zone),
         peaks=_peak_summaries([(t, p) for t, p in peaks if p]),
-    ), (None if lo is None else (int(lo), int(hi)))
+    ), (None if lo is None or hi is None else (lo, hi))
 
 
 def _line_trends(
@@ -694,7 +696,7 @@ def _peak_summaries(tables: list[tuple[int, list[dict[str, Any]]]]) -> list[Peak
 
 
 # ----------------------------------------------------------------------------- alarms, quality
-def _alarms(rows: list[AlarmRow], start_ns: int, end_ns: int) -> list[AlarmEntry]:
+def _alarms(rows: list[Alarm], start_ns: int, end_ns: int) -> list[AlarmEntry]:
     """Alarms active at some time in ``[start, end)``, oldest first."""
     active = [
         a

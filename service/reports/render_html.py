@@ -24,6 +24,7 @@ from typing import Any
 
 import matplotlib
 import numpy as np
+import numpy.typing as npt
 from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
@@ -78,6 +79,10 @@ th{background:#f3f3f3}td.l,th.l{text-align:left}
 
 
 # ----------------------------------------------------------------------------- helpers
+Cell = str | float | None
+"""A table cell: text as it is, a number through :func:`fmt`."""
+
+
 def fmt(x: float | None, digits: int = 3) -> str:
     """A number for a table: significant digits, ``–`` for none."""
     if x is None:
@@ -131,14 +136,14 @@ def day_positions(r: MonthlyReport, t_ns: np.ndarray) -> np.ndarray:
     return i + 1 + (t_ns - edges[i]) / (edges[i + 1] - edges[i])
 
 
-def _bars(ax: Axes, values: Sequence[float], bottom: Sequence[float], **style: Any) -> None:
+def _bars(ax: Axes, values: npt.ArrayLike, bottom: npt.ArrayLike, **style: Any) -> None:
     """One bar per day of the month (value on top of bottom), as one collection."""
     v, b = np.asarray(values, dtype=float), np.asarray(bottom, dtype=float)
     x = np.arange(1, len(v) + 1) + 0.5
     keep = v != 0
     lo, hi, x0, x1 = b[keep], (b + v)[keep], x[keep] - 0.4, x[keep] + 0.4
     verts = np.stack([np.column_stack(p) for p in ((x0, lo), (x0, hi), (x1, hi), (x1, lo))], 1)
-    ax.add_collection(PolyCollection(verts, linewidths=0, **style), autolim=True)
+    ax.add_collection(PolyCollection(list(verts), linewidths=0, **style), autolim=True)
 
 
 def starts_figure(r: MonthlyReport) -> Figure | None:
@@ -279,7 +284,7 @@ def svg(build: Callable[[MonthlyReport], Figure | None], r: MonthlyReport) -> st
 
 
 # ----------------------------------------------------------------------------- tables
-def table(head: Sequence[str], rows: Iterable[Sequence[object]], left: int = 1) -> str:
+def table(head: Sequence[str], rows: Iterable[Sequence[Cell]], left: int = 1) -> str:
     """An HTML table; the first ``left`` columns are left-aligned text, the rest numbers."""
     th = "".join(f"<th class='{'l' if i < left else ''}'>{html.escape(h)}</th>"
                  for i, h in enumerate(head))  # fmt: skip
@@ -287,7 +292,7 @@ def table(head: Sequence[str], rows: Iterable[Sequence[object]], left: int = 1) 
     for row in rows:
         cells = []
         for i, v in enumerate(row):
-            text = v if isinstance(v, str) else fmt(v)  # type: ignore[arg-type]
+            text = v if isinstance(v, str) else fmt(v)
             cls = "l" if i < left else ""
             if text in ("ok", "warning", "alarm", "above norm", "critical"):
                 cls += " " + text.split()[0]

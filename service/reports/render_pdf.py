@@ -14,31 +14,38 @@ from __future__ import annotations
 
 import io
 from collections.abc import Iterable, Sequence
+from typing import Any
 
 import matplotlib
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
+from matplotlib.typing import RcKeyType
 
 from service.reports.monthly import MonthlyReport
-from service.reports.render_html import FIGURES, MPL_LOCK, fmt, local_time
+from service.reports.render_html import FIGURES, MPL_LOCK, Cell, fmt, local_time
 
 __all__ = ["render_pdf"]
 
 A4 = (8.27, 11.69)
 #: PDF core fonts (no embedding; their regular faces are "medium" in their metrics files);
 #: ASCII minus signs, which Windows-1252 has.
-PDF_RC = {"pdf.use14corefonts": True, "axes.unicode_minus": False, "font.family": "sans-serif",
-          "font.sans-serif": ["Helvetica"], "font.monospace": ["Courier"],
-          "font.weight": "medium", "axes.titleweight": "medium",
-          "axes.labelweight": "medium", "axes.formatter.use_mathtext": False}  # fmt: skip
+PDF_RC: dict[RcKeyType, Any] = {
+    "pdf.use14corefonts": True,
+    "axes.unicode_minus": False,
+    "font.family": "sans-serif",
+    "font.sans-serif": ["Helvetica"],
+    "font.monospace": ["Courier"],
+    "font.weight": "medium",
+    "axes.titleweight": "medium",
+    "axes.labelweight": "medium",
+    "axes.formatter.use_mathtext": False,
+}
 LINES_PER_PAGE = 70
 WIDTH = 110
 
 
-def _text_table(
-    head: Sequence[str], rows: Iterable[Sequence[object]], width: int = 12
-) -> list[str]:
-    cells = [[c if isinstance(c, str) else fmt(c) for c in row] for row in rows]  # type: ignore[arg-type]
+def _text_table(head: Sequence[str], rows: Iterable[Sequence[Cell]], width: int = 12) -> list[str]:
+    cells = [[c if isinstance(c, str) else fmt(c) for c in row] for row in rows]
     if not cells:
         return ["  (none this month)"]
     widths = [max(len(h), *(len(r[i]) for r in cells), 1) for i, h in enumerate(head)]
@@ -128,9 +135,9 @@ def render_pdf(r: MonthlyReport) -> bytes:
         for fig in _text_pages(_summary(r)):
             pdf.savefig(fig)
         for _name, build in FIGURES:
-            fig = build(r)
-            if fig is not None:
-                pdf.savefig(fig)
+            figure = build(r)
+            if figure is not None:
+                pdf.savefig(figure)
         for fig in _text_pages(_details(r)):
             pdf.savefig(fig)
     return buf.getvalue()

@@ -21,7 +21,8 @@ from typing import Any
 from analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
 from analytics.mill.report import STARTS_NORM_PER_MONTH, starts_status
 from service.api.errors import BadRequest
-from service.store.database import EventRow, Store
+from service.store.database import Store
+from service.store.records import EventRow
 
 __all__ = [
     "MONTH_PATTERN",

@@ -35,7 +35,7 @@ from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
 from analytics.spectra.harmonics import stagger_for
 from ingest.wire import Block
-from service.store.database import DamageRow, EventRow
+from service.store.records import DamageRow, EventRow
 from service.worker.worker import MillUpdate
 
 __all__ = ["MillJob"]

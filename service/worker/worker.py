@@ -53,7 +53,8 @@ from ingest import keys
 from ingest.archive.batches import MessageBatch, archive_batches
 from ingest.archive.writer import ArchivePosition, ArchiveReader, ArchiveWriter
 from ingest.wire import Block, WireError, decode_block
-from service.store.database import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
+from service.store.database import Store
+from service.store.records import DamageRow, EventRow
 from service.worker.batch_lane import BatchLane, replay_batch_blocks
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.checkpoints import (
@@ -566,9 +567,8 @@ class PendingResults:
         for mill_id, kind, t_ns, data in self.records:
             Store.add_record(db, mill_id, kind, t_ns, data)
         if self.transitions:
-            rows = [AlarmTransitionRow(**t.to_row()) for t in self.transitions]
-            latest = {t.alarm_id: AlarmRow(**t.alarm.to_dict()) for t in self.transitions}
-            Store.put_alarm_transitions(db, rows, list(latest.values()))
+            latest = {t.alarm_id: t.alarm for t in self.transitions}
+            Store.put_alarm_transitions(db, self.transitions, list(latest.values()))
 
 
 def _routes(mills: dict[str, MillConfig]) -> dict[str, tuple[str, str]]:

@@ -42,7 +42,8 @@ from ingest.sim.simulator import DEFAULT_T0_NS, FailedStartEvent, StartEvent, St
 from service.api.routes.reports import FORMATS
 from service.reports.monthly import build_monthly_report
 from service.reports.starts import month_bounds_ns
-from service.store.database import DamageRow, EventRow, Store
+from service.store.database import Store
+from service.store.records import DamageRow, EventRow
 from service.worker.block_queue import QueuedBlock
 from service.worker.mill_job import MillJob
 from service.worker.worker import Worker

@@ -1,0 +1,17 @@
+"""The REST routes, one file per resource, each returning an ``APIRouter`` over a backend;
+:func:`service.api.router.api_router` includes them all.
+
+* :mod:`~service.api.routes.health` — ``/health``, ``/ready``.
+* :mod:`~service.api.routes.mills` — ``/mills``, ``/mills/{id}``, ``/life``, ``/starts``,
+  ``/spectrum``.
+* :mod:`~service.api.routes.reports` — ``/mills/{id}/reports/monthly`` (json, html, csv, pdf).
+* :mod:`~service.api.routes.alarms` — ``/alarms`` (ETag/cursor polling), ``/alarms/{id}``,
+  ``/alarms/{id}/ack``.
+* :mod:`~service.api.routes.metrics` — ``/metrics`` (Prometheus).
+* :mod:`~service.api.routes.params` — the shared parameters (``MillId``, ``AlarmId``,
+  ``Month``): every path parameter is one of them.
+
+A route validates its parameters, calls one backend method and shapes the response; no SQL, no
+runtime access here. A new route goes in its resource's file; a new resource is a new file
+added to :func:`~service.api.router.api_router`.
+"""

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Header, Path, Query, Response, Security
+from fastapi import APIRouter, Header, Query, Response, Security
 from fastapi.security import APIKeyHeader
 
 from service.api.alarm_views import STATE_PATTERN, check_api_key, matches, parse_states
@@ -18,12 +18,12 @@ from service.api.backend import Backend
 from service.api.errors import problem_responses
 from service.api.mill_views import config_of
 from service.api.models import AckBody, AlarmDetail, AlarmList
+from service.api.routes.params import AlarmId
 
 __all__ = ["alarms_router"]
 
 API_KEY = APIKeyHeader(name="X-API-Key", auto_error=False, description="The service's api_key.")
 INT64_MAX = 2**63 - 1
-AlarmId = Annotated[str, Path(max_length=200, description="The alarm's id.")]
 
 _STATE_HELP = (
     "raised, acknowledged, cleared — comma-separated — or open (= raised,acknowledged) or all."

@@ -1,35 +1,42 @@
-"""Routes of one mill's analysis: ``/life``, ``/starts``, ``/spectrum``. The work is done by the
-:class:`~service.api.backend.Backend` (in process: :mod:`service.api.mill_views`; remote: a worker
-over
-zenoh); the monthly report has its own module."""
+"""Routes of the mills: ``GET /mills``, ``/mills/{id}`` and one mill's analysis: ``/life``,
+``/starts``, ``/spectrum``. The work is done by the :class:`~service.api.backend.Backend` (in
+process: :mod:`service.api.mill_views`; remote: a worker over zenoh); the monthly report has its
+own module (:mod:`service.api.routes.reports`)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Any
 
-from fastapi import APIRouter, Path, Query
+from fastapi import APIRouter
 
 from service.api.backend import Backend
 from service.api.errors import problem_responses
-from service.api.models import Life, MonthStarts, Spectrum
-from service.reports.starts import MONTH_PATTERN
+from service.api.models import Life, MillDetail, MillSummary, MonthStarts, Spectrum
+from service.api.routes.params import MillId, Month
 
 __all__ = ["mills_router"]
 
-MillId = Annotated[str, Path(max_length=64, description="The mill's id, e.g. sag-5200-lrs.")]
-Month = Annotated[
-    str | None,
-    Query(
-        pattern=MONTH_PATTERN,
-        description="YYYY-MM, a calendar month in the site's time zone; default: this month.",
-        examples=["2024-05"],
-    ),
-]
-
 
 def mills_router(backend: Backend) -> APIRouter:
-    """The per-mill analysis routes over a backend."""
+    """The mill routes over a backend."""
     router = APIRouter(tags=["mills"])
+
+    @router.get(
+        "/mills",
+        summary="The mills this service analyses, with their state",
+        response_model=list[MillSummary],
+    )
+    def mills() -> list[dict[str, Any]]:
+        return backend.mills_overview()
+
+    @router.get(
+        "/mills/{mill_id}",
+        summary="One mill: state, latest metrics, data health",
+        response_model=MillDetail,
+        responses=problem_responses(404, 422),
+    )
+    def mill(mill_id: MillId) -> dict[str, Any]:
+        return backend.mill_detail(mill_id)
 
     @router.get(
         "/mills/{mill_id}/life",

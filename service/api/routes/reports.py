@@ -10,8 +10,8 @@
   503 while the store is not open.
 
 Layering (STYLE.md): the route only parses and dispatches; :mod:`service.reports.monthly` reads
-the store and the renderers turn the plain report into bytes. Register with
-:func:`register_report_routes` from ``create_app``.
+the store and the renderers turn the plain report into bytes. :func:`reports_router` is included
+by :func:`service.api.router.api_router`.
 """
 
 from __future__ import annotations
@@ -19,18 +19,19 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Callable
-from typing import Annotated, Literal, Protocol
+from typing import Literal, Protocol
 
-from fastapi import FastAPI, Query, Request
+from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
 from service.api.errors import BadRequest, problem_responses
+from service.api.routes.params import MillId, Month
 from service.reports.monthly import MonthlyReport, report_to_dict
 from service.reports.render_csv import render_csv
 from service.reports.render_html import render_html
 from service.reports.render_pdf import render_pdf
 
-__all__ = ["FORMATS", "register_report_routes"]
+__all__ = ["FORMATS", "reports_router"]
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +41,6 @@ FORMATS: dict[str, tuple[str, Callable[[MonthlyReport], str | bytes]]] = {
     "csv": ("text/csv; charset=utf-8", render_csv),
     "pdf": ("application/pdf", render_pdf),
 }
-MONTH_PATTERN = r"^[0-9]{4}-(0[1-9]|1[0-2])$"
 _ACCEPT = {"text/html": "html", "text/csv": "csv", "application/pdf": "pdf",
            "application/json": "json"}  # fmt: skip
 
@@ -65,11 +65,12 @@ def negotiate(fmt: str | None, accept: str | None) -> str:
     return "json"
 
 
-def register_report_routes(app: FastAPI, backend: ReportSource) -> None:
-    """Add the monthly report route to ``app``; ``backend`` builds the report (a
+def reports_router(backend: ReportSource) -> APIRouter:
+    """The monthly report route; ``backend`` builds the report (a
     :class:`~service.api.backend.Backend`: in process, or a worker over zenoh)."""
+    router = APIRouter(tags=["reports"])
 
-    @app.get(
+    @router.get(
         "/mills/{mill_id}/reports/monthly",
         summary="Monthly damage report (json, html, csv or pdf)",
         responses={
@@ -79,8 +80,8 @@ def register_report_routes(app: FastAPI, backend: ReportSource) -> None:
     )
     def monthly_report(
         request: Request,
-        mill_id: str,
-        month: Annotated[str | None, Query(pattern=MONTH_PATTERN, examples=["2026-11"])] = None,
+        mill_id: MillId,
+        month: Month = None,
         format: Literal["json", "html", "csv", "pdf"] | None = None,
     ) -> Response:
         kind = negotiate(format, request.headers.get("accept"))
@@ -91,3 +92,5 @@ def register_report_routes(app: FastAPI, backend: ReportSource) -> None:
             name = f"{report.mill}-{report.month}-damage.{kind}"
             headers["Content-Disposition"] = f'attachment; filename="{name}"'
         return Response(render(report), media_type=media, headers=headers)
+
+    return router

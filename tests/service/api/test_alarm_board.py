@@ -8,11 +8,11 @@ import random
 
 import pytest
 
-from alarms.lifecycle import Transition
+from alarms.lifecycle import Alarm, Transition
 from alarms.wire import encode_transition
 from service.api.alarm_board import AlarmBoard
 from service.api.alarm_views import alarm_list
-from service.store.database import AlarmRow, Store
+from service.store.database import Store
 from tests.alarms.helpers import NS, T0, engine, feed
 from tests.service.store.test_alarms import _write
 
@@ -84,5 +84,5 @@ def test_wire_messages_merge_like_transitions():
     for t in fired:
         wired.apply_message(encode_transition(t, "rustenburg"))
     assert wired.listing((), None, None).body == direct.listing((), None, None).body
-    assert isinstance(wired.get(fired[0].alarm_id), AlarmRow)
+    assert isinstance(wired.get(fired[0].alarm_id), Alarm)
     assert wired.rows("sag-5200-lrs") == direct.rows() and wired.rows("ball-9") == []

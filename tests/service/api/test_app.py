@@ -170,7 +170,7 @@ def test_ack_is_applied_by_the_worker_stored_published_and_checkpointed(client, 
     assert [t["kind"] for t in acked["transitions"]][-1] == "acknowledged"
     assert heard and heard[-1]["transition"]["kind"] == "acknowledged"
     assert client.get("/alarms", headers={"If-None-Match": tag}).status_code == 200
-    _, state = live_api.runtime.store.latest_checkpoint()
+    _, state = live_api.runtime.store.latest_checkpoints()[MILL]
     conditions = state["pipelines"][MILL]["alarms"]["conditions"]
     assert any((c["alarm"] or {}).get("state") == "acknowledged" for c in conditions)
     again = client.post(f"/alarms/{alarm['alarm_id']}/ack", headers={"X-API-Key": API_KEY})

@@ -94,6 +94,7 @@ def pair(tmp_path_factory) -> Iterator[Pair]:
         with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
             report = ScenePublisher(session, scene, speed=None, wait_subscribers_s=5.0).run()
         assert _wait(lambda: runtime.worker.blocks_handled >= report.blocks, 30.0)
+        _wait_for_a_status_after_the_last_block(runtime)
         with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
             backend = ZenohBackend(session, runtime.mills, api_key=API_KEY, timeout_s=5.0)
             backend.start()
@@ -105,6 +106,18 @@ def pair(tmp_path_factory) -> Iterator[Pair]:
     finally:
         queryables.close()
         runtime.stop()
+
+
+def _wait_for_a_status_after_the_last_block(runtime: ServiceRuntime) -> None:
+    """Both APIs answer from ``runtime.status``, the snapshot the worker thread takes every
+    0.5 s after its step: until one is taken after the last block, ``/life`` reads a status
+    without the last samples (before any: its rate window ends at the wall clock of each
+    request, so the two answers differ by milliseconds). The second snapshot from now on was
+    begun after the step that handled the last block (the worker thread does one, then the
+    other), so it covers every block."""
+    for _ in range(2):
+        taken = runtime.status
+        assert _wait(lambda taken=taken: runtime.status is not taken, 5.0)
 
 
 SAME = [

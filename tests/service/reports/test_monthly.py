@@ -25,13 +25,14 @@ from ingest.sim.scenes import get_scene
 from ingest.sim.simulator import StartEvent, StopEvent, TripEvent
 from service.api.errors import install_problem_handlers
 from service.api.mill_views import mill_monthly_report
-from service.api.routes.reports import register_report_routes
+from service.api.routes.reports import reports_router
 from service.reports.monthly import MonthError, build_monthly_report, report_to_dict
 from service.reports.render_csv import damage_csv, render_csv, starts_csv
 from service.reports.render_html import day_positions, envelope, render_html
 from service.reports.render_pdf import render_pdf
 from service.reports.starts import month_bounds_ns, month_days
-from service.store.database import EventRow, Store
+from service.store.database import Store
+from service.store.records import EventRow
 from service.worker.block_queue import QueuedBlock
 from service.worker.mill_job import MillJob
 from service.worker.worker import Worker
@@ -234,7 +235,7 @@ def client(store: Store) -> TestClient:
     install_problem_handlers(app)
     runtime = SimpleNamespace(mills={CONFIG.id: CONFIG}, store=store)
     backend = SimpleNamespace(monthly_report=partial(mill_monthly_report, runtime))
-    register_report_routes(app, backend)
+    app.include_router(reports_router(backend))
     return TestClient(app)
 
 

@@ -4,22 +4,16 @@ from __future__ import annotations
 
 import sqlite3
 
-from alarms.lifecycle import Transition
-from service.store.database import (
-    MIGRATIONS,
-    SCHEMA_VERSION,
-    AlarmRow,
-    AlarmTransitionRow,
-    EventRow,
-    Store,
-)
+from alarms.lifecycle import Alarm, Transition, TransitionRecord
+from service.store.database import Store
+from service.store.migrations import MIGRATIONS, SCHEMA_VERSION
+from service.store.records import EventRow
 from tests.alarms.helpers import NS, T0, engine, feed
 
 
-def _rows(transitions: list[Transition]) -> tuple[list[AlarmTransitionRow], list[AlarmRow]]:
+def _rows(transitions: list[Transition]) -> tuple[list[TransitionRecord], list[Alarm]]:
     """What the worker does with the engine's output."""
-    steps = [AlarmTransitionRow(**t.to_row()) for t in transitions]
-    return steps, [AlarmRow(**t.alarm.to_dict()) for t in transitions]
+    return list(transitions), [t.alarm for t in transitions]
 
 
 def _write(store: Store, transitions: list[Transition]) -> None:
@@ -61,7 +55,7 @@ def test_round_trip_of_alarms_and_transitions_across_a_reopen(tmp_path):
     with Store(path) as store:
         start_id = fired[0].alarm_id
         start = store.alarm(start_id)
-        assert start == AlarmRow(**fired[2].alarm.to_dict())
+        assert start == fired[2].alarm
         assert (start.state, start.severity, start.acked_by) == ("acknowledged", "alarm", "ops")
         assert [t.kind for t in store.alarm_transitions(start_id)] == [
             "raised", "escalated", "acknowledged"

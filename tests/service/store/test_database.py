@@ -7,14 +7,9 @@ import threading
 
 import pytest
 
-from service.store.database import (
-    CHECKPOINTS_KEPT,
-    SCHEMA_VERSION,
-    DamageRow,
-    EventRow,
-    Store,
-    StoreError,
-)
+from service.store.database import CHECKPOINTS_KEPT, Store
+from service.store.migrations import SCHEMA_VERSION, StoreError
+from service.store.records import DamageRow, EventRow
 
 
 def test_a_new_file_gets_the_current_schema_in_wal_mode(tmp_path):
@@ -65,7 +60,7 @@ def test_damage_rows_are_set_not_added(tmp_path):
 
 def test_only_the_newest_checkpoints_of_each_part_are_kept(tmp_path):
     with Store(tmp_path / "s.db") as store:
-        assert store.latest_checkpoint() is None and store.latest_checkpoints() == {}
+        assert store.latest_checkpoints() == {}
         for i in range(CHECKPOINTS_KEPT + 2):
             for part in ("m1", "m2"):
                 with store.transaction() as db:
@@ -78,9 +73,6 @@ def test_only_the_newest_checkpoints_of_each_part_are_kept(tmp_path):
                                 {"pipelines": {"m2": {"n": CHECKPOINTS_KEPT + 1}},
                                  "when": CHECKPOINTS_KEPT + 1})  # fmt: skip
         assert latest["m1"][0]["index"] == 9
-        positions, state = store.latest_checkpoint()  # the parts merged key by key
-        assert positions == {"m1": latest["m1"][0], "m2": latest["m2"][0]}
-        assert state["pipelines"] == {"m2": {"n": CHECKPOINTS_KEPT + 1}}
         count = store._query("SELECT part, COUNT(*) FROM checkpoint_parts GROUP BY part", ())
         assert dict(count) == {"m1": CHECKPOINTS_KEPT, "m2": CHECKPOINTS_KEPT}
 
@@ -97,7 +89,7 @@ def test_checkpoints_of_the_old_format_are_dropped_with_a_warning(tmp_path, capl
     db.commit()
     db.close()
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION and store.latest_checkpoint() is None
+        assert store.schema_version == SCHEMA_VERSION and store.latest_checkpoints() == {}
     assert "replaying the whole archive once" in caplog.text
 
 

@@ -130,7 +130,7 @@ def test_recovery_from_mills_checkpointed_at_different_positions(tmp_path) -> No
             first.handle(item)
         archive.close()  # the crash: every handled block reached the archive
         assert first.checkpoints_written == 2 and first.checkpoint_bytes > 0
-        positions, _ = store.latest_checkpoint()
+        positions = {m: p for m, (p, _) in store.latest_checkpoints().items()}
         assert positions["mill-a"]["index"] < positions["mill-b"]["index"]
 
         second = _worker(store, ArchiveWriter(tmp_path / "archive", "w"))

@@ -73,7 +73,7 @@ def test_live_results_equal_offline_analysis_of_the_archive(tmp_path):
     assert gc.get_freeze_count() == 0  # and collectable again once the service stopped
     # the live side: the final checkpoint holds the worker's analyzer
     with Store(settings.store.path) as store:
-        _, state = store.latest_checkpoint()
+        _, state = store.latest_checkpoints()["sag-5200-lrs"]
         starts = store.events("sag-5200-lrs", "start")
         alarms = store.alarms()
     live = MillAnalyzer.restore(config, state["pipelines"]["sag-5200-lrs"]["monitor"])

@@ -116,7 +116,7 @@ def test_sigkill_at_random_moments_then_restart_equals_offline_analysis(tmp_path
     }
 
     with Store(settings.store.path) as store:
-        _, state = store.latest_checkpoint()
+        _, state = store.latest_checkpoints()[config.id]
         starts = store.events(config.id, "start")
     live = MillAnalyzer.restore(config, state["pipelines"][config.id]["monitor"])
     live.flush()

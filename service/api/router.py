@@ -1,0 +1,26 @@
+"""The one router of the REST API: every resource's routes (:mod:`service.api.routes`), included
+in one place. :func:`service.api.app.create_app` includes only this."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from service.api.backend import Backend
+from service.api.routes.alarms import alarms_router
+from service.api.routes.health import health_router
+from service.api.routes.metrics import metrics_router
+from service.api.routes.mills import mills_router
+from service.api.routes.reports import reports_router
+
+__all__ = ["api_router"]
+
+
+def api_router(backend: Backend) -> APIRouter:
+    """All routes over ``backend``: health, mills, reports, alarms, metrics."""
+    router = APIRouter()
+    router.include_router(health_router(backend))
+    router.include_router(mills_router(backend))
+    router.include_router(reports_router(backend))
+    router.include_router(alarms_router(backend))
+    router.include_router(metrics_router(backend.registry()))
+    return router

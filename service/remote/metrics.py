@@ -1,0 +1,83 @@
+"""Prometheus metrics of ``millwatch api``: gathered from the workers over zenoh at scrape time.
+
+No worker runs in the API process, so the families of :mod:`service.api.metrics` are rebuilt
+from what the workers answer (``status``, :mod:`service.remote.protocol`): the same per-mill
+families (:func:`~service.api.metrics.mill_families`) and open alarms (from the API's alarm
+board), the worker counters with a ``worker`` label, and ``millwatch_mill_reachable`` per mill.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from typing import Any, Protocol
+
+from prometheus_client import CollectorRegistry
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
+from prometheus_client.registry import Collector
+
+from analytics.drivetrain.mill_config import MillConfig
+from service.api.alarm_board import AlarmBoard
+from service.api.metrics import mill_families, open_alarms
+from service.api.mill_views import UNREACHABLE
+
+__all__ = ["RemoteCollector", "StatusSource", "remote_registry"]
+
+
+class StatusSource(Protocol):
+    """What the collector needs of :class:`~service.remote.zenoh_backend.ZenohBackend`."""
+
+    @property
+    def mills(self) -> Mapping[str, MillConfig]: ...
+
+    def statuses(self) -> dict[str, dict[str, Any]]: ...
+
+    def alarm_board(self) -> AlarmBoard: ...
+
+
+_WORKER_COUNTERS = (
+    ("millwatch_blocks_handled", "blocks_handled", "Blocks taken off the queue and handled."),
+    ("millwatch_archive_errors", "archive_errors", "Failed MCAP archive writes."),
+    ("millwatch_unrouted_blocks", "unrouted_blocks", "Blocks on keys of no configured mill."),
+    ("millwatch_queue_dropped_blocks", "queue_dropped_blocks", "Blocks dropped: queue full."),
+)
+
+
+class RemoteCollector(Collector):
+    """What ``millwatch api`` exports: gathered from the workers at scrape time."""
+
+    def __init__(self, backend: StatusSource) -> None:
+        self.backend = backend
+
+    def collect(self) -> Iterator[Metric]:
+        gathered = self.backend.statuses()
+        workers = {a["worker"]["name"]: a["worker"] for a in gathered.values()}
+        for name, key, doc in _WORKER_COUNTERS:
+            family = CounterMetricFamily(name, doc, labels=["worker"])
+            for worker, info in sorted(workers.items()):
+                family.add_metric([worker], info.get(key, 0))
+            yield family
+        depth = GaugeMetricFamily(
+            "millwatch_queue_depth_blocks", "Blocks waiting for the worker.", labels=["worker"]
+        )
+        for worker, info in sorted(workers.items()):
+            depth.add_metric([worker], info.get("queue_depth_blocks", 0))
+        yield depth
+        reachable = GaugeMetricFamily(
+            "millwatch_mill_reachable",
+            "1 while a live worker answers for the mill.",
+            labels=["mill"],
+        )
+        for mill in sorted(self.backend.mills):
+            reachable.add_metric([mill], 1 if mill in gathered else 0)
+        yield reachable
+        status = {m: gathered[m]["status"] if m in gathered else {"state": UNREACHABLE}
+                  for m in self.backend.mills}  # fmt: skip
+        yield from mill_families(self.backend.mills, status)
+        yield open_alarms(self.backend.alarm_board().rows())
+
+
+def remote_registry(backend: StatusSource) -> CollectorRegistry:
+    """A fresh registry holding the collector of ``millwatch api``."""
+    registry = CollectorRegistry(auto_describe=False)
+    registry.register(RemoteCollector(backend))
+    return registry

@@ -1,0 +1,34 @@
+"""One alarm record: the API's alarm bodies and the store's tables carry exactly the fields of
+:mod:`alarms.lifecycle`'s records, so a field added to the record and missed in the API model or
+in a migration fails here, naming it."""
+
+from __future__ import annotations
+
+import sqlite3
+
+from alarms.lifecycle import Alarm, TransitionRecord
+from analytics.drivetrain.mill_config import MillConfig
+from service.api.models import ALARM_EXAMPLE, AlarmDetail, AlarmOut, TransitionOut
+from service.api.routes.params import MILL_ID_PATTERN
+from service.store.database import Store
+from service.store.records import columns
+
+
+def test_the_alarm_bodies_have_the_fields_of_the_records_in_their_order():
+    assert tuple(AlarmOut.model_fields) == columns(Alarm)
+    assert tuple(ALARM_EXAMPLE) == columns(Alarm)
+    assert tuple(TransitionOut.model_fields) == columns(TransitionRecord)
+    assert tuple(AlarmDetail.model_fields) == (*columns(Alarm), "transitions")
+
+
+def test_the_alarm_tables_have_the_columns_of_the_records(tmp_path):
+    Store(tmp_path / "s.db").close()
+    db = sqlite3.connect(tmp_path / "s.db")
+    for table, record in (("alarms", Alarm), ("alarm_transitions", TransitionRecord)):
+        names = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
+        assert names == set(columns(record)), table
+    db.close()
+
+
+def test_a_mill_id_path_parameter_accepts_what_a_mill_config_may_be_called():
+    assert MillConfig.model_json_schema()["properties"]["id"]["pattern"] == MILL_ID_PATTERN
