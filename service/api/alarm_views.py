@@ -28,14 +28,7 @@ from typing import Any
 
 from alarms.engine import UnknownAlarmError
 from alarms.lifecycle import Alarm, AlarmState
-from service.api.errors import (
-    BadRequest,
-    Conflict,
-    Forbidden,
-    NotFound,
-    Unauthorized,
-    Unavailable,
-)
+from service.errors import BadRequest, Conflict, Forbidden, NotFound, Unauthorized, Unavailable
 from service.store.database import Store
 from service.worker.checkpoints import MillHeldError
 from service.worker.runtime import ServiceRuntime

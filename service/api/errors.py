@@ -1,10 +1,11 @@
-"""Errors the API's services raise, and the one place they become HTTP responses.
+"""The one place the service's domain errors become HTTP responses.
 
-Services raise domain errors (:class:`NotFound`, :class:`Conflict`, …) carrying a ``title`` and
-a ``detail`` sentence a person understands; :func:`install_problem_handlers` maps each class to
-its status code and answers ``application/problem+json`` (RFC 9457). FastAPI's own errors (bad
-query parameters, unknown routes, wrong methods) get the same shape, with a readable ``detail``.
-:data:`PROBLEM_RESPONSES` documents the shape in the OpenAPI schema.
+Services raise domain errors (:mod:`service.errors`: :class:`NotFound`, :class:`Conflict`, …)
+carrying a ``title`` and a ``detail`` sentence a person understands;
+:func:`install_problem_handlers`
+maps each class to its status code and answers ``application/problem+json`` (RFC 9457). FastAPI's
+own errors (bad query parameters, unknown routes, wrong methods) get the same shape, with a
+readable ``detail``. :data:`PROBLEM_RESPONSES` documents the shape in the OpenAPI schema.
 """
 
 from __future__ import annotations
@@ -19,17 +20,20 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from service.errors import (
+    ApiError,
+    BadRequest,
+    Conflict,
+    Forbidden,
+    GatewayTimeout,
+    NotFound,
+    Unauthorized,
+    Unavailable,
+)
+
 __all__ = [
     "PROBLEM",
-    "ApiError",
-    "BadRequest",
-    "Conflict",
-    "Forbidden",
-    "GatewayTimeout",
-    "NotFound",
     "Problem",
-    "Unauthorized",
-    "Unavailable",
     "error_for_status",
     "install_problem_handlers",
     "problem_responses",
@@ -39,43 +43,6 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 PROBLEM = "application/problem+json"
-
-
-class ApiError(Exception):
-    """A request the service cannot answer as asked; ``detail`` says why, for a person."""
-
-    def __init__(self, title: str, detail: str) -> None:
-        super().__init__(detail)
-        self.title = title
-        self.detail = detail
-
-
-class NotFound(ApiError, LookupError):
-    """A resource the client named does not exist; ``detail`` says which and what exists."""
-
-
-class BadRequest(ApiError, ValueError):
-    """A parameter is well-formed but unusable (e.g. a month outside the supported years)."""
-
-
-class Unauthorized(ApiError):
-    """The request needs an API key and has none, or a wrong one."""
-
-
-class Forbidden(ApiError):
-    """The action is switched off in this service's configuration."""
-
-
-class Conflict(ApiError):
-    """The resource's state does not allow the action (e.g. acknowledging a cleared alarm)."""
-
-
-class Unavailable(ApiError):
-    """The service cannot do it right now (worker stopped or busy); retrying may help."""
-
-
-class GatewayTimeout(ApiError):
-    """A worker asked over zenoh did not answer in time (``millwatch api``); retrying may help."""
 
 
 _STATUS: dict[type[ApiError], int] = {

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from analytics.drivetrain.mill_config import MillConfig
-from service.api.errors import NotFound, Unavailable
+from service.errors import NotFound, Unavailable
 from service.reports.life import LifeInputs, life_report
 from service.reports.monthly import MonthlyReport, build_monthly_report
 from service.reports.starts import current_month, starts_in_month

@@ -31,7 +31,8 @@ import json
 from enum import StrEnum
 from typing import Any
 
-from service.api.errors import ApiError, BadRequest, error_for_status, status_of
+from service.api.errors import error_for_status, status_of
+from service.errors import ApiError, BadRequest
 
 __all__ = [
     "JSON",

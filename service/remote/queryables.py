@@ -36,8 +36,8 @@ import zenoh
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.keys import query_key, query_pattern, worker_token_key
 from service.api.alarm_board import row_to_dict
-from service.api.errors import ApiError, NotFound, Unavailable
 from service.api.local_backend import LocalBackend
+from service.errors import ApiError, NotFound, Unavailable
 from service.remote.protocol import (
     JSON,
     Question,

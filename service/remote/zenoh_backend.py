@@ -47,8 +47,8 @@ from ingest.keys import (
     worker_token_pattern,
 )
 from service.api.alarm_board import AlarmBoard, row_from_dict
-from service.api.errors import GatewayTimeout, NotFound, Unavailable
 from service.api.mill_views import config_of, mill_detail, mill_summary
+from service.errors import GatewayTimeout, NotFound, Unavailable
 from service.remote.metrics import remote_registry
 from service.remote.protocol import (
     Question,

@@ -20,7 +20,7 @@ from typing import Any
 
 from analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
 from analytics.mill.report import STARTS_NORM_PER_MONTH, starts_status
-from service.api.errors import BadRequest
+from service.errors import BadRequest
 from service.store.database import Store
 from service.store.records import EventRow
 

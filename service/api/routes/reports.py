@@ -24,8 +24,9 @@ from typing import Literal, Protocol
 from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
-from service.api.errors import BadRequest, problem_responses
+from service.api.errors import problem_responses
 from service.api.routes.params import MillId, Month
+from service.errors import BadRequest
 from service.reports.monthly import MonthlyReport, report_to_dict
 from service.reports.render_csv import render_csv
 from service.reports.render_html import render_html

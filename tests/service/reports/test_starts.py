@@ -11,7 +11,8 @@ import pytest
 
 from analytics.drivetrain.mill_config import AlarmThresholds
 from ingest.mill_files import load_mill_config
-from service.api.errors import BadRequest, status_of
+from service.api.errors import status_of
+from service.errors import BadRequest
 from service.reports.starts import (
     MonthError,
     count_starts,
