@@ -55,6 +55,7 @@ from service.store.database import Store
 from service.worker.batch_lane import replay_batch_blocks
 from service.worker.mill_job import MillJob
 from service.worker.parallel_replay import replay_jobs
+from service.worker.recovery import recover
 from service.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -132,7 +133,7 @@ def replay(directory: Path, configs, jobs: int = 1) -> int:
         pipelines = {c.id: MillJob(c) for c in configs}
         worker = Worker({c.id: c for c in configs}, pipelines, store, None)
         reader = ArchiveReader(directory, PREFIX)
-        return worker.recover(reader, jobs=jobs, factory=MillJob)
+        return recover(worker, reader, jobs=jobs, factory=MillJob)
 
 
 def read_only(directory: Path, mills: int, decode: bool) -> int:
