@@ -358,9 +358,11 @@ class ParallelReplay:
             if job.process.is_alive():
                 job.process.kill()
                 job.process.join(timeout=5.0)
-            job.conn.close()
-            if job.sender is not None:
+            if job.sender is not None:  # before the pipe closes under a send in progress
+                with contextlib.suppress(queue.Full):
+                    job.batches.put_nowait(None)  # (the queue was full above: drained by now)
                 job.sender.join(timeout=5.0)
+            job.conn.close()
 
 
 def _send(job: _Job) -> None:
