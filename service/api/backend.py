@@ -34,8 +34,10 @@ __all__ = ["Backend", "problem_from", "problem_of"]
 class Backend(Protocol):
     """The answers the REST API needs; every method raises :mod:`service.api.errors` errors."""
 
-    mills: Mapping[str, MillConfig]
     api_key: str | None
+
+    @property
+    def mills(self) -> Mapping[str, MillConfig]: ...  # (read-only: a backend's dict fits)
 
     def alarm_board(self) -> AlarmBoard: ...
 
