@@ -12,7 +12,7 @@
    ``stopped``; ``month``: the first ``--seconds`` of the month scene — rest, a start, running).
    ``--distinct`` mills are simulated (seeds 0..k−1); the others carry the same samples under
    their own keys (same analysis cost, a fraction of the set-up time).
-2. Replays it with ``Worker.recover`` (the crash-recovery path: archive read, decode, health, each
+2. Replays it with ``recovery.recover`` (the crash-recovery path: archive read, decode, health, each
    mill's analyzer fed long contiguous chunks, alarms, store) into a fresh store, once per
    ``--jobs`` entry: 1 = the worker process alone (the figures per core), N = N replay processes
    with the mills split between them (0 = one per available core;
