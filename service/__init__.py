@@ -1,1 +1,20 @@
-"""Composition: per-mill worker, storage, REST API, reports, CLI."""
+"""Composition: the service around the analytics — commands, worker, store, API, reports.
+
+* ``cli/`` — the ``millwatch`` commands (one module each); the only entry points. ``serve`` runs
+  a worker (and the API with it), ``api`` the API alone; the offline commands use ``analytics``
+  and ``ingest`` directly.
+* ``settings`` — the validated ``millwatch serve`` TOML file, read by the command, never at import.
+* ``worker/`` — blocks from zenoh archived, analysed per mill (``MillJob``), stored,
+  checkpointed; crash recovery replays the archive; ``runtime`` owns the resources.
+* ``store/`` — SQLite (WAL): events, damage, records, alarms, checkpoints.
+* ``api/`` — the REST API (FastAPI; one router per resource under ``api/routes/``) over a
+  backend: the runtime in this process, or the workers over zenoh.
+* ``remote/`` — both ends of the zenoh query protocol: the workers' queryables and the API's
+  backend that asks them.
+* ``reports/`` — the monthly damage report, life and starts summaries, and their renderers.
+
+Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote``; ``worker`` → ``store``; ``api`` →
+``store``, ``reports``, and the ``worker`` runtime it serves; ``remote`` sits between ``api``
+and the workers. A new command goes in ``cli/``, a new route in ``api/routes/``, a new report in
+``reports/``, a new stored table in ``store/``.
+"""

@@ -1,0 +1,16 @@
+"""The ``millwatch`` command line: one module per sub-command, composed by ``main``.
+
+* ``main`` — :func:`~service.cli.main.main` (the console script and ``python -m service.cli``):
+  builds the parser from ``COMMANDS``, sets up logging, turns user errors into one line, exit 2.
+* one module per sub-command, each with ``add_parser(subparsers)`` that registers it and sets
+  its handler: ``demo``, ``rainflow``, ``simulate``, ``spectrum``, ``replay``, ``archive``,
+  ``serve`` (a worker, and the API with it), ``router``, ``api`` (the API alone, over zenoh),
+  ``analyze``.
+* ``args`` — argument types that name the rule a value broke; ``signal_files`` — ``.npy`` /
+  ``.csv`` signals read in blocks, for the offline commands.
+
+Commands only compose: they read settings and files, build objects from ``service.worker``,
+``service.api``, ``service.remote`` (and ``analytics`` / ``ingest`` for the offline ones) and run
+them; no analysis lives here. A new command: a new module with ``add_parser``, added to
+``main.COMMANDS``.
+"""

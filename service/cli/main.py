@@ -14,34 +14,16 @@ from collections.abc import Sequence
 
 from ingest.archive.writer import ArchiveError
 from service.cli import (
-    analyze as analyze_command,
-)
-from service.cli import (
-    api as api_command,
-)
-from service.cli import (
-    archive as archive_command,
-)
-from service.cli import (
-    demo as demo_command,
-)
-from service.cli import (
-    rainflow as rainflow_command,
-)
-from service.cli import (
-    replay as replay_command,
-)
-from service.cli import (
-    router as router_command,
-)
-from service.cli import (
-    serve as serve_command,
-)
-from service.cli import (
-    simulate as simulate_command,
-)
-from service.cli import (
-    spectrum as spectrum_command,
+    analyze,
+    api,
+    archive,
+    demo,
+    rainflow,
+    replay,
+    router,
+    serve,
+    simulate,
+    spectrum,
 )
 from service.cli.signal_files import SignalFileError
 
@@ -59,7 +41,12 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
 )
 
 
+#: The sub-command modules, in the order ``--help`` lists them.
+COMMANDS = (demo, rainflow, simulate, spectrum, replay, archive, serve, router, api, analyze)
+
+
 def build_parser() -> argparse.ArgumentParser:
+    """The ``millwatch`` parser: global options and every sub-command of :data:`COMMANDS`."""
     parser = argparse.ArgumentParser(
         prog="millwatch",
         description=(
@@ -70,20 +57,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    demo_command.add_parser(sub)
-    rainflow_command.add_parser(sub)
-    simulate_command.add_parser(sub)
-    spectrum_command.add_parser(sub)
-    replay_command.add_parser(sub)
-    archive_command.add_parser(sub)
-    serve_command.add_parser(sub)
-    router_command.add_parser(sub)
-    api_command.add_parser(sub)
-    analyze_command.add_parser(sub)
+    for command in COMMANDS:
+        command.add_parser(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the sub-command ``argv`` names (default: the process's arguments); the exit status."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=logging.WARNING - 10 * min(args.verbose, 2),

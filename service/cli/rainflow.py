@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-from tqdm import tqdm
+from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.miner import DamageRecorder, MinerSum

@@ -34,7 +34,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import zenoh
-from tqdm import tqdm
+from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
 from ingest import keys
 from ingest.archive.writer import ArchiveError

@@ -1,0 +1,32 @@
+"""The worker: every received block archived first, then analysed per mill and stored.
+
+Block path (``millwatch serve``; DESIGN.md "Data flow")::
+
+    zenoh callback ─▶ block_queue ─▶ worker.Worker.step: for each block
+        archive (raw bytes, first) ─▶ decode ─▶ health (per channel) ─▶ mill_job.MillJob (queued)
+    end of the batch: each mill's analysis ─▶ one store transaction ─▶ alarms to ``on_alarms``
+    every checkpoint interval, one mill at a time: snapshot + archive position ─▶ store
+
+Modules, low to high (a module imports only those above it):
+
+* ``block_queue`` — the bounded queue between zenoh callbacks and the worker; drops counted.
+* ``health`` — per-channel counters (sequence gaps, decode errors, staleness), rates, latency.
+* ``checkpoints`` — when each mill is checkpointed; which archived blocks a checkpoint covers.
+* ``partition`` — which configured mills this worker analyses when several share a router.
+* ``worker`` — :class:`~service.worker.worker.Worker`: routing, the block path above, commits,
+  checkpoints, restoring them (held mills), acknowledgements, status; the ``MillPipeline``
+  Protocol a mill's analysis meets.
+* ``mill_job`` — :class:`~service.worker.mill_job.MillJob`, the worker's unit per mill: the
+  analyzer plus alarms, turned into store rows.
+* ``batch_lane`` — archived blocks as arrays (replay), through the worker's public methods.
+* ``parallel_replay`` — a long archive tail replayed by several processes, mills split.
+* ``recovery`` — :func:`~service.worker.recovery.recover`: restore checkpoints, replay the
+  archive tail (one process or several), then go live.
+* ``runtime`` — :class:`~service.worker.runtime.ServiceRuntime` owns the resources (store,
+  archive, zenoh session, worker thread), starts them in order and closes them in reverse.
+
+Where things go: a new per-block check or counter → ``health`` (and ``Worker.handle``, and
+``batch_lane`` for the array path, which must count the same); a new per-mill result or store row
+→ ``mill_job``; a new start-up or shutdown step → ``runtime``; a new recovery step →
+``recovery``, calling only public ``Worker`` methods.
+"""

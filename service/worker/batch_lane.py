@@ -6,33 +6,39 @@ alignment); replaying an hour of 50 mills is 7.2 million blocks. :class:`BatchLa
 they are *regular* — every block well-formed at the mill's rate, all of one length and dtype, and
 each channel's sequence numbers following on from the last one seen (no gap, no repeat). Then the
 health counters move in one step per channel, the samples are gathered in one step, and the
-mill's aligner takes them all at once (:meth:`analytics.mill.analyzer.MillAnalyzer.add_blocks`,
-which itself falls back block by block when the timing is not regular). A mill with anything
-irregular in the batch — a malformed or foreign block, a gap, a repeat — goes block by block
-through ``Worker.handle`` in arrival order instead, so every count, data-quality event and sample
-is exactly what block-by-block handling gives. Blocks on keys of no configured mill go through
-``Worker.handle`` too (they are only counted). A held mill's blocks (``Worker.held``) move its
-health counters either way but never reach its pipeline.
+mill's aligner takes them all at once (``Worker.accept_regular`` →
+:meth:`analytics.mill.analyzer.MillAnalyzer.add_blocks`, which itself falls back block by block
+when the timing is not regular). A mill with anything irregular in the batch — a malformed or
+foreign block, a gap, a repeat — goes block by block through ``Worker.handle`` in arrival order
+instead, so every count, data-quality event and sample is exactly what block-by-block handling
+gives. Blocks on keys of no configured mill go through ``Worker.handle`` too (they are only
+counted). A held mill's blocks move its health counters either way but never reach its pipeline
+(the worker's ``accept_regular`` and ``handle`` see to that).
+
+The lane talks to the worker only through :class:`BlockSink`, the worker's public methods it
+needs, so it does not import the worker. Its Python work is per batch and per mill, never per
+block.
 """
 
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING
+from collections.abc import Iterable, Mapping
+from typing import Protocol
 
 import numpy as np
 from numba import njit
 
+from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.batches import MessageBatch
 from ingest.archive.byte_copy import copy_bytes
-from ingest.archive.writer import ArchivePosition, archive_file_order
+from ingest.archive.writer import ArchivePosition
 from ingest.wire import DType, decode_headers
 from service.worker.block_queue import QueuedBlock
+from service.worker.checkpoints import covers
+from service.worker.health import ChannelHealth, MillHealth
 
-if TYPE_CHECKING:
-    from service.worker.worker import Worker
-
-__all__ = ["REPLAY_BLOCKS_PER_MILL", "BatchLane", "replay_batch_blocks"]
+__all__ = ["REPLAY_BLOCKS_PER_MILL", "BatchLane", "BlockSink", "replay_batch_blocks"]
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +61,26 @@ def replay_batch_blocks(mills: int) -> int:
     return min(hi, max(lo, mills * REPLAY_BLOCKS_PER_MILL))
 
 
+class BlockSink(Protocol):
+    """What the lane needs of :class:`~service.worker.worker.Worker` (its public methods)."""
+
+    @property
+    def mills(self) -> Mapping[str, MillConfig]: ...
+
+    @property
+    def health(self) -> Mapping[str, MillHealth]: ...
+
+    def route(self, key: str) -> tuple[str, str] | None: ...
+
+    def handle(self, item: QueuedBlock, *, archive: bool = True) -> None: ...
+
+    def accept_regular(
+        self, mill_id: str, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray
+    ) -> None: ...
+
+    def commit(self) -> None: ...
+
+
 @njit(cache=True, nogil=True)
 def _gather(buf, starts, width):
     """The ``width`` bytes at each of ``starts`` in ``buf``, back to back (samples of blocks)."""
@@ -65,12 +91,12 @@ def _gather(buf, starts, width):
 
 
 class BatchLane:
-    """Hands message batches to a :class:`~service.worker.worker.Worker` (see the module docstring).
+    """Hands message batches to a :class:`BlockSink`, the worker (see the module docstring).
     ``regular_blocks`` / ``slow_blocks`` count what took which path; ``commit_every``: blocks
     :meth:`replay` handles between the worker's commits (default: for all the worker's mills;
     a process that replays only some of them passes its own)."""
 
-    def __init__(self, worker: Worker, commit_every: int | None = None) -> None:
+    def __init__(self, worker: BlockSink, commit_every: int | None = None) -> None:
         self.worker = worker
         self.mills = list(worker.mills)
         self._channels = {m: list(c.channels) for m, c in worker.mills.items()}
@@ -92,6 +118,20 @@ class BatchLane:
             self.worker.commit()
         return handled, skipped
 
+    def replay_all(
+        self,
+        batches: Iterable[MessageBatch],
+        covered: dict[str, ArchivePosition | None] | None = None,
+    ) -> tuple[int, int]:
+        """:meth:`replay` of each of ``batches``, then the final commit; returns (handled,
+        skipped)."""
+        handled = skipped = 0
+        for batch in batches:
+            h, s = self.replay(batch, covered)
+            handled, skipped = handled + h, skipped + s
+        self.worker.commit()
+        return handled, skipped
+
     def handle(
         self, batch: MessageBatch, covered: dict[str, ArchivePosition | None] | None = None
     ) -> tuple[int, int]:
@@ -99,7 +139,7 @@ class BatchLane:
         ``covered`` already holds (see :func:`service.worker.checkpoints.covers`); returns (handled,
         skipped)."""
         uniq, inverse = np.unique(batch.channel, return_inverse=True)
-        routes = [self.worker.routes.get(batch.topics[int(c)]) for c in uniq.tolist()]
+        routes = [self.worker.route(batch.topics[int(c)]) for c in uniq.tolist()]
         mill_of = np.array([-1 if r is None else self.mills.index(r[0]) for r in routes])
         chan_of = np.array([-1 if r is None else self._channels[r[0]].index(r[1]) for r in routes])
         mill = mill_of[inverse]
@@ -123,11 +163,7 @@ class BatchLane:
         for m, position in covered.items():
             if position is None or m not in self.mills:
                 continue
-            mine = mill == self.mills.index(m)
-            if position.file == batch.file:
-                keep &= ~(mine & (batch.index < position.index))
-            elif archive_file_order(batch.file) < archive_file_order(position.file):
-                keep &= ~mine
+            keep &= ~((mill == self.mills.index(m)) & covers(position, batch.file, batch.index))
         return keep
 
     def _slow(self, batch: MessageBatch, k: int) -> None:
@@ -148,7 +184,7 @@ class BatchLane:
             return False
         health = self.worker.health[mill_id].channels
         names = self._channels[mill_id]
-        per_channel = {}
+        per_channel: dict[int, np.ndarray] = {}
         for ci in np.unique(chan).tolist():
             sel = np.flatnonzero(chan == ci)
             seq = head["seq"][sel]
@@ -163,29 +199,26 @@ class BatchLane:
         width = n * _NUMPY[code].itemsize
         raw = _gather(batch.buf, start, width).view(_NUMPY[code]).reshape(len(idx), n)
         t0 = head["t0_ns"].astype(np.int64)
-        self._observe(health, names, per_channel, head, raw, batch.log_time[idx], n, fs)
-        self.worker.blocks_handled += len(idx)
+        _observe(health, names, per_channel, head, raw, batch.log_time[idx], n, fs)
         self.regular_blocks += len(idx)
-        if mill_id in self.worker.held:
-            self.worker.held_blocks[mill_id] += len(idx)
-            return True
-        self.worker.pipelines[mill_id].add_blocks(chan, t0, raw)  # type: ignore[attr-defined]
-        self.worker._unfinished[mill_id] = None
+        self.worker.accept_regular(mill_id, chan, t0, raw)
         return True
 
-    @staticmethod
-    def _observe(health, names, per_channel, head, raw, recv, n: int, fs: float) -> None:
-        """:meth:`~service.worker.health.ChannelHealth.observe` of each block, per channel at
-        once."""
-        # a finite sum proves every sample finite (one pass, no copies); otherwise count exactly
-        count = raw.dtype.kind == "f" and not np.isfinite(raw.sum())
-        duration = round(n * 1e9 / fs)
-        for ci, sel in per_channel.items():
-            h = health[names[ci]]
-            h.blocks += sel.size
-            h.samples += sel.size * n
-            if count:
-                h.nonfinite_samples += sel.size * n - int(np.count_nonzero(np.isfinite(raw[sel])))
-            h.last_seq = int(head["seq"][sel[-1]])
-            h.last_sample_ns = int(head["t0_ns"][sel[-1]]) + duration
-            h.last_recv_ns = int(recv[sel[-1]])
+
+def _observe(
+    health: dict[str, ChannelHealth], names: list[str], per_channel: dict[int, np.ndarray],
+    head: np.ndarray, raw: np.ndarray, recv: np.ndarray, n: int, fs: float,
+) -> None:  # fmt: skip
+    """:meth:`~service.worker.health.ChannelHealth.observe` of each block, per channel at once
+    (:meth:`~service.worker.health.ChannelHealth.observe_run`)."""
+    # a finite sum proves every sample finite (one pass, no copies); otherwise count exactly
+    count = raw.dtype.kind == "f" and not np.isfinite(raw.sum())
+    duration = round(n * 1e9 / fs)
+    for ci, sel in per_channel.items():
+        samples = sel.size * n
+        nonfinite = samples - int(np.count_nonzero(np.isfinite(raw[sel]))) if count else 0
+        last = sel[-1]
+        health[names[ci]].observe_run(
+            sel.size, samples, nonfinite, int(head["seq"][last]),
+            int(head["t0_ns"][last]) + duration, int(recv[last]),
+        )  # fmt: skip

@@ -24,7 +24,10 @@ import time
 from collections.abc import Callable, Iterable
 from datetime import UTC, datetime
 
-from ingest.archive.writer import ArchivedBlock, ArchivePosition, archive_file_order
+import numpy as np
+import numpy.typing as npt
+
+from ingest.archive.writer import ArchivePosition, archive_file_order
 
 __all__ = ["CheckpointRestoreError", "CheckpointSchedule", "MillHeldError", "covers", "earliest"]
 
@@ -112,20 +115,24 @@ class CheckpointSchedule:
         self._next[part] = max(self._next[part] + self.interval_s, now + self.interval_s / 2)
 
 
-def covers(position: ArchivePosition | None, block: ArchivedBlock) -> bool:
-    """True when ``block`` lies before ``position`` in the archive (so a checkpoint taken at
-    ``position`` already holds its effect); False for no position."""
+def covers(position: ArchivePosition | None, file: str, index: npt.ArrayLike) -> np.ndarray:
+    """Which of the messages at ``index`` of archive file ``file`` lie before ``position`` (so a
+    checkpoint taken at ``position`` already holds their effect): a boolean array shaped like
+    ``index``, all False for no position."""
+    at = np.asarray(index)
     if position is None:
-        return False
-    if block.file == position.file:
-        return block.index < position.index
-    return archive_file_order(block.file) < archive_file_order(position.file)
+        return np.zeros(at.shape, dtype=bool)
+    if file == position.file:
+        return at < position.index
+    before = archive_file_order(file) < archive_file_order(position.file)
+    return np.full(at.shape, before, dtype=bool)
 
 
 def earliest(positions: Iterable[ArchivePosition | None]) -> ArchivePosition | None:
     """The earliest of ``positions`` in archive order; ``None`` (replay from the archive's
     start) when there is none or one of them is ``None``."""
     items = list(positions)
-    if not items or any(p is None for p in items):
+    known = [p for p in items if p is not None]
+    if not items or len(known) < len(items):
         return None
-    return min(items, key=lambda p: (archive_file_order(p.file), p.index))  # type: ignore[union-attr]
+    return min(known, key=lambda p: (archive_file_order(p.file), p.index))

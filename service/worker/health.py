@@ -48,6 +48,21 @@ class ChannelHealth:
         self.last_recv_ns = recv_ns
         return verdict
 
+    def observe_run(
+        self, blocks: int, samples: int, nonfinite: int, last_seq: int, last_sample_ns: int,
+        last_recv_ns: int,
+    ) -> None:  # fmt: skip
+        """Account at once for a run of ``blocks`` decoded blocks (``samples`` in all,
+        ``nonfinite`` of them not finite) whose sequence numbers follow on from
+        :attr:`last_seq` up to ``last_seq``, without gap or repeat: what :meth:`observe` of
+        each would count (the batch lane's regular blocks)."""
+        self.blocks += blocks
+        self.samples += samples
+        self.nonfinite_samples += nonfinite
+        self.last_seq = last_seq
+        self.last_sample_ns = last_sample_ns
+        self.last_recv_ns = last_recv_ns
+
     def _sequence(self, seq: int) -> SeqVerdict:
         last, self.last_seq = self.last_seq, seq
         if last is None:

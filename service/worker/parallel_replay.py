@@ -1,10 +1,10 @@
 """Replay of the archive tail by several processes, the mills split between them.
 
 A worker that starts (or restarts after a crash) replays the archive after its mills'
-checkpoints before going live (:meth:`service.worker.worker.Worker.recover`). The mills are
-independent
-of each other, so a long tail is replayed faster by several processes, each analysing a share of
-the mills (issue 5: an hour of 50 mills replayed at ≥ 50× real time):
+checkpoints before going live (:func:`service.worker.recovery.recover`, which chooses between one
+process and several with :func:`replay_jobs`). The mills are independent of each other, so a
+long tail is replayed faster by several processes, each analysing a share of the mills (issue 5:
+an hour of 50 mills replayed at ≥ 50× real time):
 
 * the worker process reads each batch of archived messages once
   (:func:`ingest.archive.batches.archive_batches`), replays the first group of mills itself
@@ -15,12 +15,12 @@ the mills (issue 5: an hour of 50 mills replayed at ≥ 50× real time):
   ``fork`` would not carry over) builds its mills' pipelines with the worker's factory, restores
   their newest checkpoints, and runs the same :class:`~service.worker.batch_lane.BatchLane` and
   :class:`~service.worker.worker.Worker` code as a single-process replay, with its own connection
-  to the
-  same store (SQLite WAL: the jobs' transactions take turns);
+  to the same store (SQLite WAL: the jobs' transactions take turns);
 * at the end each job sends back its mills' pipeline snapshots (the JSON of a checkpoint), their
-  channel health and the alarm transitions it stored; the worker restores them, so its pipelines
-  hold exactly the state a single-process replay leaves (restoring a snapshot continues bitwise,
-  as crash recovery relies on), and hands the transitions to ``on_alarms``.
+  channel health and the alarm transitions it stored; the worker adopts them
+  (:meth:`~service.worker.worker.Worker.adopt_replayed`), so its pipelines hold exactly the state
+  a single-process replay leaves (restoring a snapshot continues bitwise, as crash recovery relies
+  on), and hands the transitions to ``on_alarms``.
 
 Blocks on keys of no configured mill stay with the worker (they are only counted), and so do
 held mills' (:attr:`service.worker.worker.Worker.held`: their checkpoints could not be restored):
@@ -41,11 +41,11 @@ import queue
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
@@ -53,11 +53,10 @@ from alarms.lifecycle import Transition
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.batches import MessageBatch
 from ingest.archive.writer import ArchivePosition, archive_file_order, list_archive_files
+from service.store.database import Store
 from service.worker.batch_lane import BatchLane, replay_batch_blocks
 from service.worker.health import MillHealth
-
-if TYPE_CHECKING:
-    from service.worker.worker import MillPipeline, Worker
+from service.worker.worker import MillPipeline, Worker
 
 __all__ = ["ParallelReplay", "ReplayJobError", "replay_jobs", "split_mills", "tail_bytes"]
 
@@ -177,9 +176,6 @@ def _job_main(conn: Connection, job: ReplayJob) -> None:
 
 
 def _replay(conn: Connection, job: ReplayJob) -> JobResult:
-    from service.store.database import Store
-    from service.worker.worker import Worker
-
     mills = {c.id: c for c in job.configs}
     pipelines = {m: job.factory(c) for m, c in mills.items()}
     with Store(job.store_path) as store:
@@ -190,12 +186,7 @@ def _replay(conn: Connection, job: ReplayJob) -> JobResult:
             raise RuntimeError("; ".join(worker.held.values()))
         transitions: list[Transition] = []
         worker.on_alarms = transitions.extend
-        lane = BatchLane(worker)
-        handled = skipped = 0
-        while (batch := conn.recv()) is not None:
-            h, s = lane.replay(batch, covered)
-            handled, skipped = handled + h, skipped + s
-        worker.commit()
+        handled, skipped = BatchLane(worker).replay_all(_received(conn), covered)
     return JobResult(
         {m: json.dumps(p.snapshot()) for m, p in pipelines.items()},
         worker.health,
@@ -203,6 +194,12 @@ def _replay(conn: Connection, job: ReplayJob) -> JobResult:
         handled,
         skipped,
     )
+
+
+def _received(conn: Connection) -> Iterator[MessageBatch]:
+    """The batches the worker sends, until its ``None``."""
+    while (batch := conn.recv()) is not None:
+        yield batch
 
 
 # ---------------------------------------------------------------------------- worker side
@@ -311,7 +308,7 @@ class ParallelReplay:
     def _groups(self, batch: MessageBatch) -> np.ndarray:
         """The job (group index) of each message's mill; −1 for keys of no configured mill."""
         uniq, inverse = np.unique(batch.channel, return_inverse=True)
-        routes = [self.worker.routes.get(batch.topics[int(c)]) for c in uniq.tolist()]
+        routes = [self.worker.route(batch.topics[int(c)]) for c in uniq.tolist()]
         of = np.array([-1 if r is None else self._group_of_mill.get(r[0], -1) for r in routes])
         return of[inverse]
 
@@ -342,13 +339,10 @@ class ParallelReplay:
         )
 
     def _apply(self, result: JobResult) -> None:
-        worker = self.worker
-        for mill_id, text in result.snapshots.items():
-            worker.pipelines[mill_id].restore(json.loads(text))
-            worker.health[mill_id] = result.health[mill_id]
-        worker.blocks_handled += result.handled
-        if result.transitions and worker.on_alarms is not None:
-            worker.on_alarms(result.transitions)
+        snapshots: dict[str, dict[str, Any]] = {
+            m: json.loads(text) for m, text in result.snapshots.items()
+        }
+        self.worker.adopt_replayed(snapshots, result.health, result.handled, result.transitions)
 
     @staticmethod
     def _stop(jobs: list[_Job], abort: bool) -> None:
@@ -364,9 +358,11 @@ class ParallelReplay:
             if job.process.is_alive():
                 job.process.kill()
                 job.process.join(timeout=5.0)
-            job.conn.close()
-            if job.sender is not None:
+            if job.sender is not None:  # before the pipe closes under a send in progress
+                with contextlib.suppress(queue.Full):
+                    job.batches.put_nowait(None)  # (the queue was full above: drained by now)
                 job.sender.join(timeout=5.0)
+            job.conn.close()
 
 
 def _send(job: _Job) -> None:

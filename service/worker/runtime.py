@@ -33,6 +33,7 @@ from ingest.zenoh_session import build_config, declare_block_subscriber
 from service.settings import ServiceSettings
 from service.store.database import Store
 from service.worker.block_queue import BlockQueue
+from service.worker.recovery import recover
 from service.worker.worker import AckRequest, MillPipeline, Worker, mill_patterns
 
 __all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
@@ -99,7 +100,8 @@ class ServiceRuntime:
         )
         self._subscribe()
         self.worker.on_alarms = self._on_alarms
-        self.recovered_blocks = self.worker.recover(
+        self.recovered_blocks = recover(
+            self.worker,
             ArchiveReader(s.archive.directory, ARCHIVE_PREFIX),
             jobs=s.worker.recovery_jobs,
             factory=self._pipeline_factory,
@@ -233,18 +235,19 @@ class ServiceRuntime:
         :mod:`service.worker.worker`)."""
         stale = {m: s["health"]["stale_channels"] for m, s in self.status.items()}
         held = {m: s["held_reason"] for m, s in self.status.items() if s.get("held_reason")}
-        checks = {
+        flags = {
             "zenoh": self.session is not None,
             "worker": self._thread is not None and self._thread.is_alive(),
             "archive": self.archive is not None
             and (self.worker is None or self.worker.archive_errors == 0),
             "store": self._store_ok(),
+        }
+        per_mill = {  # the MILL_CHECKS
             "data_fresh": {m: not s for m, s in stale.items()},
             "analysed": {m: m not in held for m in self.status},
         }
-        ready = all(v for k, v in checks.items() if k not in MILL_CHECKS) and all(
-            all(checks[k].values()) for k in MILL_CHECKS
-        )
+        ready = all(flags.values()) and all(all(v.values()) for v in per_mill.values())
+        checks: dict[str, Any] = {**flags, **per_mill}
         return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held}
 
     def _store_ok(self) -> bool:

@@ -7,21 +7,20 @@ Data path for every received block (DESIGN.md "Data flow")::
           everything its blocks brought (long chunks: far cheaper per sample, same results)
           → store (one transaction per batch)
 
-A replay of the archive (:meth:`Worker.recover`) reads it in batches of messages held in arrays
-(:mod:`ingest.archive.batches`) and hands them to :class:`~service.worker.batch_lane.BatchLane`,
-which
-takes each mill's regular blocks as arrays and anything irregular through :meth:`Worker.handle`.
+A replay of the archive reads it in batches of messages held in arrays and hands them to
+:class:`~service.worker.batch_lane.BatchLane`, which gives each mill's regular blocks to
+:meth:`Worker.accept_regular` as arrays and anything irregular to :meth:`Worker.handle`.
 
 Recovery (DESIGN.md "Persistence and recovery"): every ``checkpoint_seconds`` each mill is
 checkpointed — the mills' turns spread over the interval (:mod:`service.worker.checkpoints`), so no
 step stalls for all of them at once: the worker flushes the archive, takes the archive position
 and snapshots the mill's pipeline *in the same thread that processes blocks*, so the snapshot
 covers exactly the mill's blocks before the position, and stores it in a small transaction of
-its own. After a crash :meth:`Worker.recover` restores every mill's newest checkpoint and
-re-reads the archive from the earliest of their positions through the same :meth:`Worker.handle`
-path (without archiving again), skipping for each mill the blocks its checkpoint already holds,
-so the results equal an uninterrupted run; only blocks that never reached the archive (at most
-~0.1 s) are lost.
+its own. After a crash :func:`service.worker.recovery.recover` restores every mill's newest
+checkpoint (:meth:`Worker.restore_checkpoints`) and re-reads the archive from the earliest of
+their positions through the same path (without archiving again), skipping for each mill the
+blocks its checkpoint already holds, so the results equal an uninterrupted run; only blocks that
+never reached the archive (at most ~0.1 s) are lost.
 
 A mill whose checkpoint cannot be restored (e.g. a channel removed from its configuration since)
 is *held*, not fatal — a worker that refused to start would archive nothing for any mill: its
@@ -46,26 +45,25 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+import numpy as np
+
+from alarms.engine import AlarmEngine
 from alarms.lifecycle import Transition
 from alarms.observations import Observation
 from analytics.drivetrain.mill_config import MillConfig
 from ingest import keys
-from ingest.archive.batches import MessageBatch, archive_batches
-from ingest.archive.writer import ArchivePosition, ArchiveReader, ArchiveWriter
+from ingest.archive.writer import ArchivePosition, ArchiveWriter
 from ingest.wire import Block, WireError, decode_block
 from service.store.database import Store
 from service.store.records import DamageRow, EventRow
-from service.worker.batch_lane import BatchLane, replay_batch_blocks
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.checkpoints import (
     STEP_BUDGET_S,
     CheckpointRestoreError,
     CheckpointSchedule,
     MillHeldError,
-    earliest,
 )
 from service.worker.health import LatencyReservoir, MillHealth, PerMinute
-from service.worker.parallel_replay import ParallelReplay, replay_jobs, split_mills, tail_bytes
 
 __all__ = ["HELD", "AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 
@@ -104,9 +102,15 @@ class AckRequest:
 
 class MillPipeline(Protocol):
     """One mill's analysis: fed decoded blocks per configured channel, in arrival order;
-    ``add_block`` only queues a block, ``finish`` analyses what was queued."""
+    ``add_block`` / ``add_blocks`` only queue blocks, ``finish`` analyses what was queued;
+    ``alarms`` is the mill's alarm engine (acknowledgements go to it)."""
+
+    @property
+    def alarms(self) -> AlarmEngine: ...
 
     def add_block(self, channel: str, block: Block) -> None: ...
+
+    def add_blocks(self, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray) -> None: ...
 
     def finish(self) -> MillUpdate: ...
 
@@ -140,7 +144,7 @@ class Worker:
         self.archive = archive
         self.checkpoint_seconds = checkpoint_seconds
         self._clock = clock
-        self.routes = _routes(mills)
+        self._routes = _routes(mills)
         self.health = {m: MillHealth.for_channels(list(c.channels)) for m, c in mills.items()}
         self.unrouted: Counter[str] = Counter()
         self.archive_errors = 0
@@ -168,9 +172,9 @@ class Worker:
         """Archive (unless replaying the archive), decode, route, analyse one block (a held
         mill's: all but analyse)."""
         if archive and self.archive is not None:
-            self._archive(item)
+            self._archive(self.archive, item)
         self.blocks_handled += 1
-        route = self.routes.get(item.key)
+        route = self._routes.get(item.key)
         if route is None:
             self.unrouted[item.key] += 1
             self._log_once(
@@ -209,7 +213,25 @@ class Worker:
         self.pipelines[mill_id].add_block(channel, block)
         self._unfinished[mill_id] = None
 
-    def finish_analysis(self) -> None:
+    def route(self, key: str) -> tuple[str, str] | None:
+        """(mill id, configured channel name) of a zenoh key; None for no configured mill."""
+        return self._routes.get(key)
+
+    def accept_regular(
+        self, mill_id: str, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray
+    ) -> None:
+        """:meth:`handle` for a run of one mill's *regular* blocks at once (well-formed, one
+        length and dtype, sequence numbers following on; their channel health already
+        observed): count them and queue them for analysis — a held mill's are only counted.
+        ``chan`` indexes the mill's configured channels, ``raw`` holds one block a row."""
+        self.blocks_handled += len(raw)
+        if mill_id in self.held:
+            self.held_blocks[mill_id] += len(raw)
+            return
+        self.pipelines[mill_id].add_blocks(chan, t0_ns, raw)
+        self._unfinished[mill_id] = None
+
+    def _finish_analysis(self) -> None:
         """Analyse the blocks :meth:`handle` queued, mill by mill: each mill's blocks of a
         batch go through its analyzer as long contiguous chunks (the results do not depend on
         the batching). :meth:`commit` calls this first. (Held mills queue nothing.)"""
@@ -274,9 +296,9 @@ class Worker:
                                    {"channel": channel}))  # fmt: skip
         return out
 
-    def _archive(self, item: QueuedBlock) -> None:
+    def _archive(self, archive: ArchiveWriter, item: QueuedBlock) -> None:
         try:
-            self.archive.write(item.key, item.payload, item.recv_ns)  # type: ignore[union-attr]
+            archive.write(item.key, item.payload, item.recv_ns)
         except OSError as exc:
             self.archive_errors += 1
             self._log_once(("archive", type(exc).__name__), "archive write failed: %s", exc)
@@ -318,7 +340,7 @@ class Worker:
 
     def _apply_acks(self) -> list[tuple[AckRequest, list[Transition]]]:
         """Apply the queued acknowledgements to the mills' alarm engines (worker thread)."""
-        applied = []
+        applied: list[tuple[AckRequest, list[Transition]]] = []
         while True:
             try:
                 request = self._acks.get_nowait()
@@ -337,7 +359,7 @@ class Worker:
         was not restored, so it does not know the mill's open alarms)."""
         if request.mill_id in self.held:
             raise MillHeldError(request.mill_id, self.held[request.mill_id])
-        engine = self.pipelines[request.mill_id].alarms  # type: ignore[attr-defined]
+        engine = self.pipelines[request.mill_id].alarms
         return engine.acknowledge(request.alarm_id, request.by, self._clock())
 
     def _finish_acks(self, acked: list[tuple[AckRequest, list[Transition]]]) -> None:
@@ -352,7 +374,7 @@ class Worker:
     def commit(self) -> None:
         """Write the pending results in one transaction, then hand the alarm transitions to
         ``on_alarms`` (e.g. to publish them on zenoh) — only once they are stored."""
-        self.finish_analysis()
+        self._finish_analysis()
         if not self._pending:
             return
         pending, self._pending = self._pending, PendingResults()
@@ -402,75 +424,11 @@ class Worker:
         self._schedule.done(mill_id)
 
     # ------------------------------------------------------------------ recovery
-    def recover(
-        self,
-        reader: ArchiveReader,
-        *,
-        jobs: int = 1,
-        factory: Callable[[MillConfig], MillPipeline] | None = None,
-    ) -> int:
-        """Restore every mill's newest checkpoint and replay the archive after them; returns
-        the number of archived blocks replayed. Call before going live.
-
-        The replay starts at the earliest mill's position; each mill skips the blocks before
-        its own position. A configured mill without a checkpoint starts fresh at that earliest
-        position (at the archive's start when no mill has one). A held mill (its checkpoint
-        could not be restored) does not pull the start back to its old position, and no replay
-        is needed when every mill is held. With ``factory`` (how the pipelines were built) a
-        long tail is replayed by up to ``jobs`` processes (0: one per core), the analysed mills
-        split between them (:mod:`service.worker.parallel_replay`); same results."""
-        covered = self.restore_checkpoints(self.store.latest_checkpoints())
-        analysed = [m for m in self.mills if m not in self.held]
-        after = earliest(covered.values())
-        size = replay_batch_blocks(len(self.mills)) // 2  # (read at least half a commit's)
-        batches: Iterable[MessageBatch] = []
-        if analysed:
-            batches = archive_batches(reader.directory, reader.prefix, after=after,
-                                      min_messages=size)  # fmt: skip
-        n_jobs = 1
-        if factory is not None and analysed:
-            tail = tail_bytes(reader.directory, reader.prefix, after)
-            n_jobs = replay_jobs(jobs, len(analysed), tail)
-        if n_jobs > 1:
-            parallel = ParallelReplay(self, split_mills(analysed, n_jobs), factory)  # type: ignore[arg-type]
-            replayed, skipped = parallel.run(batches, covered)
-        else:
-            replayed, skipped = self._replay(batches, covered)
-        self._schedule.restart()
-        log.info(
-            "recovered: %d mill checkpoint(s), %d archived blocks replayed by %d process(es) "
-            "(%d of held mills, not analysed), %d skipped (already in their mill's checkpoint)",
-            len(covered),
-            replayed,
-            n_jobs,
-            sum(self.held_blocks.values()),
-            skipped,
-        )
-        return replayed
-
-    def _replay(
-        self, batches: Iterable[MessageBatch], covered: dict[str, ArchivePosition | None]
-    ) -> tuple[int, int]:
-        """Replay ``batches`` in this process; returns (handled, skipped)."""
-        replayed = skipped = 0
-        lane = BatchLane(self)  # whole batches of blocks as arrays; irregular ones one by one
-        for batch in batches:
-            handled, skip = lane.replay(batch, covered)
-            replayed, skipped = replayed + handled, skipped + skip
-        self.commit()
-        return replayed, skipped
-
     def restore_checkpoints(
         self, parts: dict[str, tuple[dict[str, Any], dict[str, Any]]]
     ) -> dict[str, ArchivePosition | None]:
         """Restore the mills of ``parts`` (:meth:`Store.latest_checkpoints`); returns the
         archive position each mill was restored at (held mills: none, see :attr:`held`)."""
-        return self._restore(parts)
-
-    def _restore(
-        self, parts: dict[str, tuple[dict[str, Any], dict[str, Any]]]
-    ) -> dict[str, ArchivePosition | None]:
-        """Load each part's snapshots; returns the archive position each mill was restored at."""
         covered: dict[str, ArchivePosition | None] = {}
         for position, state in parts.values():
             at = ArchivePosition.from_dict(position) if position else None
@@ -479,6 +437,27 @@ class Worker:
                     covered[mill_id] = at
             self._restore_seqs(state.get("last_seq", {}))
         return covered
+
+    def adopt_replayed(
+        self,
+        snapshots: dict[str, dict[str, Any]],
+        health: dict[str, MillHealth],
+        handled: int,
+        transitions: list[Transition],
+    ) -> None:
+        """Take over mills another process replayed: restore their pipelines from
+        ``snapshots`` and take their channel ``health``, count the ``handled`` blocks, and hand
+        the ``transitions`` that process stored to :attr:`on_alarms`."""
+        for mill_id, snapshot in snapshots.items():
+            self.pipelines[mill_id].restore(snapshot)
+            self.health[mill_id] = health[mill_id]
+        self.blocks_handled += handled
+        if transitions and self.on_alarms is not None:
+            self.on_alarms(transitions)
+
+    def restart_checkpoint_turns(self) -> None:
+        """Spread the mills' next checkpoints over one interval from now (after a recovery)."""
+        self._schedule.restart()
 
     def _restore_or_hold(
         self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None

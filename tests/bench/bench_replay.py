@@ -12,7 +12,7 @@
    ``stopped``; ``month``: the first ``--seconds`` of the month scene — rest, a start, running).
    ``--distinct`` mills are simulated (seeds 0..k−1); the others carry the same samples under
    their own keys (same analysis cost, a fraction of the set-up time).
-2. Replays it with ``Worker.recover`` (the crash-recovery path: archive read, decode, health, each
+2. Replays it with ``recovery.recover`` (the crash-recovery path: archive read, decode, health, each
    mill's analyzer fed long contiguous chunks, alarms, store) into a fresh store, once per
    ``--jobs`` entry: 1 = the worker process alone (the figures per core), N = N replay processes
    with the mills split between them (0 = one per available core;
@@ -55,6 +55,7 @@ from service.store.database import Store
 from service.worker.batch_lane import replay_batch_blocks
 from service.worker.mill_job import MillJob
 from service.worker.parallel_replay import replay_jobs
+from service.worker.recovery import recover
 from service.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -132,7 +133,7 @@ def replay(directory: Path, configs, jobs: int = 1) -> int:
         pipelines = {c.id: MillJob(c) for c in configs}
         worker = Worker({c.id: c for c in configs}, pipelines, store, None)
         reader = ArchiveReader(directory, PREFIX)
-        return worker.recover(reader, jobs=jobs, factory=MillJob)
+        return recover(worker, reader, jobs=jobs, factory=MillJob)
 
 
 def read_only(directory: Path, mills: int, decode: bool) -> int:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ingest.archive.batches import archive_batches
 from ingest.archive.writer import ArchiveReader, ArchiveWriter
 from ingest.keys import build_key
 from ingest.mill_files import load_mill_config
@@ -18,6 +19,7 @@ from service.store.database import Store
 from service.worker.batch_lane import BatchLane
 from service.worker.block_queue import QueuedBlock
 from service.worker.mill_job import MillJob
+from service.worker.recovery import recover
 from service.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -84,7 +86,7 @@ def test_batched_replay_equals_block_by_block(tmp_path: Path) -> None:
             if k % 3000 == 2999:
                 one.commit()
         bulk = _worker(s2)
-        assert bulk.recover(reader) == len(items)
+        assert recover(bulk, reader) == len(items)
         assert _state(bulk, s2) == _state(one, s1)
 
 
@@ -92,8 +94,6 @@ def test_regular_mills_take_the_fast_lane(tmp_path: Path) -> None:
     with ArchiveWriter(tmp_path / "a", "w") as archive:
         for item in _items():
             archive.write(item.key, item.payload, item.recv_ns)
-    from ingest.archive.batches import archive_batches
-
     with Store(tmp_path / "mw.db") as store:
         worker = _worker(store)
         lane = BatchLane(worker)

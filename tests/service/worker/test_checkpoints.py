@@ -12,7 +12,7 @@ import pytest
 
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.spectra.harmonics import HarmonicTracker
-from ingest.archive.writer import ArchivedBlock, ArchivePosition, ArchiveReader, ArchiveWriter
+from ingest.archive.writer import ArchivePosition, ArchiveReader, ArchiveWriter
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks
 from ingest.sim.publisher import starting_now
@@ -22,6 +22,7 @@ from service.store.database import Store
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.checkpoints import CheckpointSchedule, MillHeldError, covers, earliest
 from service.worker.mill_job import MillJob
+from service.worker.recovery import recover
 from service.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -78,12 +79,19 @@ def test_interval_must_be_positive() -> None:
 def test_covers_and_earliest_follow_archive_order() -> None:
     f1, f2 = "w_20261121T000000Z.mcap", "w_20261121T010000Z.mcap"
     at = ArchivePosition(f2, 5)
-    assert covers(at, ArchivedBlock("k", 0, b"", f1, 900))
-    assert covers(at, ArchivedBlock("k", 0, b"", f2, 4))
-    assert not covers(at, ArchivedBlock("k", 0, b"", f2, 5))
-    assert not covers(None, ArchivedBlock("k", 0, b"", f1, 0))
+    assert covers(at, f1, 900)
+    assert covers(at, f2, 4)
+    assert not covers(at, f2, 5)
+    assert not covers(None, f1, 0)
+    assert covers(at, f2, [3, 4, 5, 6]).tolist() == [True, True, False, False]  # a batch at once
     assert earliest([at, ArchivePosition(f1, 7), ArchivePosition(f2, 1)]) == ArchivePosition(f1, 7)
     assert earliest([at, None]) is None and earliest([]) is None
+
+
+def _mill_of(worker: Worker, key: str) -> str:
+    """The mill ``key`` belongs to ("" for none)."""
+    route = worker.route(key)
+    return route[0] if route else ""
 
 
 def _blocks() -> list[QueuedBlock]:
@@ -134,9 +142,9 @@ def test_recovery_from_mills_checkpointed_at_different_positions(tmp_path) -> No
         assert positions["mill-a"]["index"] < positions["mill-b"]["index"]
 
         second = _worker(store, ArchiveWriter(tmp_path / "archive", "w"))
-        replayed = second.recover(ArchiveReader(tmp_path / "archive", "w"))
+        replayed = recover(second, ArchiveReader(tmp_path / "archive", "w"))
         # from mill-a's position on, except mill-b's blocks that its own checkpoint holds
-        held_by_b = sum(1 for b in blocks[cut_a:cut_b] if second.routes[b.key][0] == "mill-b")
+        held_by_b = sum(1 for b in blocks[cut_a:cut_b] if _mill_of(second, b.key) == "mill-b")
         assert replayed == crash - cut_a - held_by_b > 0
         for item in blocks[crash:]:
             second.handle(item)
@@ -235,7 +243,7 @@ def test_recovery_after_a_pinion_speed_change_keeps_damage_and_restarts_spectra(
 
         second = _one_mill(store, None, FASTER)
         with caplog.at_level(logging.WARNING, logger="analytics.mill.analyzer"):
-            assert second.recover(ArchiveReader(tmp_path / "archive", "w")) > 0
+            assert recover(second, ArchiveReader(tmp_path / "archive", "w")) > 0
         assert "mill 'mill-a'" in caplog.text and "spectra restart" in caplog.text
         # the day's damage was not overwritten by a partial total from a fresh analyzer
         assert store.damage("mill-a") == at_crash
@@ -283,7 +291,7 @@ def test_a_checkpoint_that_cannot_be_restored_holds_the_mill_naming_it_and_the_w
         ((position, _),) = store.latest_checkpoints().values()
         second = _one_mill(store, None, edited)
         with caplog.at_level(logging.ERROR, logger="service.worker.worker"):
-            assert second.recover(ArchiveReader(tmp_path / "archive", "w")) == 0  # all held
+            assert recover(second, ArchiveReader(tmp_path / "archive", "w")) == 0  # all held
     text = second.held["mill-a"]
     assert text.startswith(
         f"mill mill-a: its checkpoint (at archive file {position['file']}, message "
@@ -360,7 +368,7 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         second = _two_mills(store, ArchiveWriter(archive, "w"), WITHOUT_BENDING,
                             clock=lambda: an_hour_later)  # fmt: skip
         with caplog.at_level(logging.ERROR, logger="service.worker.worker"):
-            replayed = second.recover(ArchiveReader(archive, "w"))
+            replayed = recover(second, ArchiveReader(archive, "w"))
         assert list(second.held) == ["mill-a"] and len(caplog.records) == 1
         # from mill-b's position: the held mill does not pull the replay back to its own
         assert replayed == crash - cut_b
@@ -371,7 +379,7 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         second.archive.close()  # type: ignore[union-attr]
         analyzer = second.pipelines["mill-a"].analyzer  # type: ignore[attr-defined]
         assert analyzer.loads.n == 0 and analyzer.backlog == 0  # its pipeline got nothing
-        mill_a = [b for b in blocks[cut_b:stop] if second.routes.get(b.key, ("",))[0] == "mill-a"]
+        mill_a = [b for b in blocks[cut_b:stop] if _mill_of(second, b.key) == "mill-a"]
         assert second.held_blocks["mill-a"] == len(mill_a) > 0
         health = second.status(10.0)["mill-a"]
         assert health["state"] == "held" and health["held_reason"] == second.held["mill-a"]
@@ -385,7 +393,7 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         assert archived == [b.payload for b in blocks[:stop]]  # the held mill's blocks too
 
         third = _two_mills(store, ArchiveWriter(archive, "w"))  # the edit reverted
-        third.recover(ArchiveReader(archive, "w"))
+        recover(third, ArchiveReader(archive, "w"))
         assert third.held == {}
         for item in blocks[stop:]:
             third.handle(item)

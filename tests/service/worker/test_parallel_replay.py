@@ -20,6 +20,7 @@ from service.store.database import Store
 from service.worker import parallel_replay
 from service.worker.mill_job import MillJob
 from service.worker.parallel_replay import ReplayJobError, replay_jobs, split_mills
+from service.worker.recovery import recover
 from service.worker.worker import Worker
 from tests.service.worker.test_batch_lane import BASE, CONFIGS, _items, _state
 
@@ -70,9 +71,9 @@ def test_parallel_replay_equals_one_process(
         alarms_one: list = []
         alarms_two: list = []
         one.on_alarms, two.on_alarms = alarms_one.extend, alarms_two.extend
-        n = one.recover(reader)
+        n = recover(one, reader)
         with caplog.at_level(logging.INFO, logger="service"):
-            assert two.recover(reader, jobs=2, factory=MillJob) == n == len(_items())
+            assert recover(two, reader, jobs=2, factory=MillJob) == n == len(_items())
         assert "replayed by 2 process(es)" in caplog.text
         assert _state(two, s2) == _state(one, s1)
         assert sorted(t.to_row()["alarm_id"] for t in alarms_two) == sorted(
@@ -92,8 +93,8 @@ def test_parallel_replay_after_checkpoints_skips_what_they_hold(tmp_path: Path) 
     reader = _checkpointed_archive(tmp_path, {1500: ["mill-0"], 4000: ["mill-2"]})
     with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
         one, two = _worker(s1), _worker(s2)
-        one.recover(reader)
-        two.recover(reader, jobs=2, factory=MillJob)
+        recover(one, reader)
+        recover(two, reader, jobs=2, factory=MillJob)
         assert _state(two, s2) == _state(one, s1)
 
 
@@ -113,7 +114,7 @@ def test_a_failing_or_killed_job_stops_the_replay_naming_its_mills(
     with Store(tmp_path / "mw.db") as store:
         worker = _worker(store, factory)
         with pytest.raises(ReplayJobError, match=error):
-            worker.recover(reader, jobs=3, factory=factory)
+            recover(worker, reader, jobs=3, factory=factory)
 
 
 def _checkpointed_archive(
@@ -156,8 +157,8 @@ def test_after_a_pinion_speed_change_jobs_restart_the_spectra_as_one_process_doe
     with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
         one, two = (Worker(mills, {m: MillJob(c) for m, c in mills.items()}, s, None)
                     for s in (s1, s2))  # fmt: skip
-        one.recover(reader)
-        two.recover(reader, jobs=2, factory=MillJob)
+        recover(one, reader)
+        recover(two, reader, jobs=2, factory=MillJob)
         assert _state(two, s2) == _state(one, s1)
         for m in mills:  # mill-1 and mill-2's stored by the job that replayed them
             events = s2.events(m, "data_quality")
@@ -187,9 +188,9 @@ def test_a_held_mill_fails_no_job_and_the_others_replay_as_in_one_process(
     with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
         one, two = (Worker(mills, {m: MillJob(c) for m, c in mills.items()}, s, None)
                     for s in (s1, s2))  # fmt: skip
-        one.recover(reader)
+        recover(one, reader)
         with caplog.at_level(logging.INFO, logger="service"):
-            two.recover(reader, jobs=3, factory=MillJob)
+            recover(two, reader, jobs=3, factory=MillJob)
         assert "replaying the archive with 2 processes: mill-0; mill-2" in caplog.text
         assert list(two.held) == list(one.held) == ["mill-1"]
         assert two.held["mill-1"].startswith("mill mill-1: its checkpoint (at archive file")
