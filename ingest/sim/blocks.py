@@ -1,6 +1,6 @@
 """A simulated scene as the wire blocks a sensor gateway would send.
 
-The simulator (:mod:`ingest.sim.simulator`) renders chunks of engineering-unit samples per
+The simulator (:mod:`ingest.sim.renderer`) renders chunks of engineering-unit samples per
 configured
 channel; this module cuts them into wire-format blocks (:mod:`ingest.wire`) of ``block_samples``
 samples on each channel's key (:func:`ingest.keys.channel_key`), with a sequence number per key.
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ingest import keys, wire
-from ingest.sim.simulator import Scene
+from ingest.sim.renderer import Scene
 
 __all__ = ["SceneBlock", "channel_samples", "scene_blocks"]
 

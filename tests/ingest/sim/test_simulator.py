@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ingest.mill_files import load_mill_config
-from ingest.sim.simulator import (
+from ingest.sim.renderer import (
     BarringEvent,
     DropoutEvent,
     FailedStartEvent,
