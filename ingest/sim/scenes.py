@@ -41,12 +41,12 @@ from pydantic import ValidationError
 
 from analytics.drivetrain.mill_config import MillConfig, Starter, describe_validation_error
 from ingest.mill_files import load_mill_config
-from ingest.sim.renderer import (
+from ingest.sim.renderer import Scene
+from ingest.sim.spec import (
     BarringEvent,
     DropoutEvent,
     FailedStartEvent,
     ResonanceEvent,
-    Scene,
     SceneError,
     SceneSpec,
     SpikesEvent,

@@ -22,8 +22,8 @@ from analytics.signal.telemetry_faults import (
     hold_last_good,
 )
 from ingest.mill_files import load_mill_config
-from ingest.sim.renderer import SpikesEvent
 from ingest.sim.scenes import get_scene, scene_spec
+from ingest.sim.spec import SpikesEvent
 
 FS = (-100.0, 300.0)
 
