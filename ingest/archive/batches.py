@@ -1,6 +1,6 @@
 """Read the archive as batches of messages held in arrays (for replay at many × real time).
 
-:class:`~ingest.archive.writer.TailTolerantReader` yields one Python object per message (~5 µs
+:class:`~ingest.archive.reader.TailTolerantReader` yields one Python object per message (~5 µs
 each);
 replaying an hour of 50 mills is 7.2 million messages. :class:`BatchReader` reads the same files
 with the same tolerance (it stops where that reader stops, at the first torn or corrupt record,
@@ -11,7 +11,7 @@ log time and the payload's offset and length — record boundaries found by a co
 sequence u32, log_time u64, publish_time u64, data``).
 
 :func:`archive_batches` walks the files of an archive after a checkpoint position, as
-:meth:`ingest.archive.writer.ArchiveReader.blocks` does, merging consecutive chunks of a file into
+:meth:`ingest.archive.reader.ArchiveReader.blocks` does, merging consecutive chunks of a file into
 batches of at least ``min_messages``.
 """
 
@@ -32,15 +32,14 @@ from mcap.records import Chunk
 from numba import njit
 
 from ingest.archive.byte_copy import copy_bytes
-from ingest.archive.writer import (
+from ingest.archive.files import (
     MCAP_MAGIC,
     ArchiveError,
     ArchivePosition,
-    TailTolerantReader,
-    _decompress,
     archive_file_order,
     list_archive_files,
 )
+from ingest.archive.reader import TailTolerantBase, decompress_chunk
 
 __all__ = ["BatchReader", "MessageBatch", "archive_batches"]
 
@@ -55,7 +54,7 @@ _TOP_LEVEL = np.array([Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANN
 class MessageBatch:
     """Consecutive messages of one archive file: ``buf`` holds their payloads at
     ``offset[k] : offset[k] + length[k]``; ``index`` is the file order (as
-    :class:`~ingest.archive.writer.ArchivePosition` counts it), ``channel`` the MCAP channel id
+    :class:`~ingest.archive.files.ArchivePosition` counts it), ``channel`` the MCAP channel id
     (topic
     in ``topics``), ``log_time`` ns since the Unix epoch (UTC)."""
 
@@ -188,8 +187,8 @@ def _scan(data, pos, ops, starts, lengths):
     return n, 0
 
 
-class BatchReader(TailTolerantReader):
-    """:class:`~ingest.archive.writer.TailTolerantReader` whose :meth:`messages` yields one
+class BatchReader(TailTolerantBase):
+    """:class:`~ingest.archive.reader.TailTolerantReader` whose :meth:`messages` yields one
     :class:`MessageBatch` per chunk (and per unchunked message) instead of one object per
     message; the same messages, the same stopping rules and the same attributes afterwards."""
 
@@ -206,7 +205,7 @@ class BatchReader(TailTolerantReader):
             self._known = (len(self.channels), known, topics)
         return self._known[1], self._known[2]
 
-    def messages(self) -> Iterator[MessageBatch]:  # type: ignore[override]
+    def messages(self) -> Iterator[MessageBatch]:
         """Batches of all messages in file order (single pass; the file is read at once)."""
         self._zstd = zstandard.ZstdDecompressor()
         with open(self.path, "rb") as stream:
@@ -243,16 +242,16 @@ class BatchReader(TailTolerantReader):
                 else ("torn record at end of file")
             )
 
-    def _record(self, opcode: int, body: bytes | memoryview) -> Iterator[MessageBatch]:  # type: ignore[override]
+    def _record(self, opcode: int, body: bytes | memoryview) -> Iterator[MessageBatch]:
         if opcode == Opcode.CHUNK:
             chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-            data = np.frombuffer(_decompress(chunk, self._zstd), dtype=np.uint8)
+            data = np.frombuffer(decompress_chunk(chunk, self._zstd), dtype=np.uint8)
             yield from self._chunk(data)
         elif opcode == Opcode.MESSAGE:
             data = np.frombuffer(bytes(body), dtype=np.uint8)
             yield from self._messages(data, np.zeros(1, np.int64), np.array([len(data)]))
         else:
-            yield from super()._record(opcode, body)  # schemas, channels: no messages
+            self._metadata(opcode, body)  # schemas, channels: no messages
 
     def _chunk(self, data: np.ndarray) -> Iterator[MessageBatch]:
         ops, starts, lengths = _scan_records(data)
@@ -262,7 +261,7 @@ class BatchReader(TailTolerantReader):
             yield from self._messages_between(data, ops, starts, lengths, is_msg, first, r)
             first = r + 1
             body = data[starts[r] : starts[r] + lengths[r]].tobytes()
-            yield from super()._record(int(ops[r]), body)
+            yield from self._record(int(ops[r]), body)
         yield from self._messages_between(data, ops, starts, lengths, is_msg, first, ops.size)
 
     def _messages_between(

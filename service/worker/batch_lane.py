@@ -25,7 +25,7 @@ from numba import njit
 
 from ingest.archive.batches import MessageBatch
 from ingest.archive.byte_copy import copy_bytes
-from ingest.archive.writer import ArchivePosition, archive_file_order
+from ingest.archive.files import ArchivePosition, archive_file_order
 from ingest.wire import DType, decode_headers
 from service.worker.block_queue import QueuedBlock
 

@@ -24,7 +24,8 @@ import time
 from collections.abc import Callable, Iterable
 from datetime import UTC, datetime
 
-from ingest.archive.writer import ArchivedBlock, ArchivePosition, archive_file_order
+from ingest.archive.files import ArchivePosition, archive_file_order
+from ingest.archive.reader import ArchivedBlock
 
 __all__ = ["CheckpointRestoreError", "CheckpointSchedule", "MillHeldError", "covers", "earliest"]
 

@@ -51,7 +51,9 @@ from alarms.observations import Observation
 from analytics.drivetrain.mill_config import MillConfig
 from ingest import keys
 from ingest.archive.batches import MessageBatch, archive_batches
-from ingest.archive.writer import ArchivePosition, ArchiveReader, ArchiveWriter
+from ingest.archive.files import ArchivePosition
+from ingest.archive.reader import ArchiveReader
+from ingest.archive.writer import ArchiveWriter
 from ingest.wire import Block, WireError, decode_block
 from service.store.database import AlarmRow, AlarmTransitionRow, DamageRow, EventRow, Store
 from service.worker.batch_lane import BatchLane, replay_batch_blocks

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from ingest.archive.writer import ArchiveReader, TailTolerantReader
+from ingest.archive.reader import ArchiveReader, TailTolerantReader
 from ingest.sim.blocks import channel_samples
 from ingest.wire import decode_block
 from service.cli.main import main
