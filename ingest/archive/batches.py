@@ -31,7 +31,7 @@ from mcap.opcode import Opcode
 from mcap.records import Chunk
 from numba import njit
 
-from ingest.archive.byte_copy import copy_bytes
+from ingest.archive.copy_kernels import copy_bytes
 from ingest.archive.files import (
     MCAP_MAGIC,
     ArchiveError,

@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 from ingest.archive.batches import MessageBatch
-from ingest.archive.byte_copy import copy_bytes
+from ingest.archive.copy_kernels import copy_bytes
 from ingest.archive.files import ArchivePosition, archive_file_order
 from ingest.wire import DType, decode_headers
 from service.worker.block_queue import QueuedBlock
