@@ -29,9 +29,8 @@ from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import Chunk
-from numba import njit
 
-from ingest.archive.copy_kernels import copy_bytes
+from ingest.archive.batch_kernels import message_heads, pack_ranges, record_bounds
 from ingest.archive.files import (
     MCAP_MAGIC,
     ArchiveError,
@@ -87,7 +86,7 @@ class MessageBatch:
         offset = np.zeros(len(self), dtype=np.int64)
         if len(self) > 1:
             np.cumsum(self.length[:-1], out=offset[1:])
-        buf = _pack(self.buf, self.offset, self.length, int(self.length.sum()))
+        buf = pack_ranges(self.buf, self.offset, self.length, int(self.length.sum()))
         return MessageBatch(self.file, buf, self.index, self.channel, self.log_time, offset,
                             self.length.copy(), self.topics)  # fmt: skip
 
@@ -112,38 +111,6 @@ class MessageBatch:
         )
 
 
-@njit(cache=True, nogil=True)
-def _pack(buf, offset, length, total):
-    """The byte ranges ``buf[offset[k] : offset[k] + length[k]]``, back to back."""
-    out = np.empty(total, dtype=np.uint8)
-    at = 0
-    for k in range(offset.shape[0]):
-        copy_bytes(out, at, buf, offset[k], length[k])
-        at += length[k]
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _message_heads(data, starts, lengths, known, channel, log_time):
-    """Channel id (u16) and log time (u64, little-endian) of each message record body at
-    ``starts``; returns how many lead the records before the first invalid one (too short
-    for the message header, or on a channel id not in ``known``), whose channel is set."""
-    size = 22  # channel u16, sequence u32, log_time u64, publish_time u64
-    for k in range(starts.shape[0]):
-        if lengths[k] < size:
-            return k
-        a = starts[k]
-        c = np.int64(data[a]) | (np.int64(data[a + 1]) << 8)
-        channel[k] = c
-        if not known[c]:
-            return k
-        t = np.uint64(0)
-        for i in range(8):
-            t |= np.uint64(data[a + 6 + i]) << np.uint64(8 * i)
-        log_time[k] = np.int64(t)
-    return starts.shape[0]
-
-
 def _scan_from(data: np.ndarray, pos: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(opcode, body start, body length) of the complete records from byte ``pos`` on, and
     the status where the scan stopped: 0 at the end, 1 torn header, 2 torn body."""
@@ -151,7 +118,7 @@ def _scan_from(data: np.ndarray, pos: int) -> tuple[np.ndarray, np.ndarray, np.n
     ops = np.empty(cap, dtype=np.int64)
     starts = np.empty(cap, dtype=np.int64)
     lengths = np.empty(cap, dtype=np.int64)
-    n, status = _scan(data, pos, ops, starts, lengths)
+    n, status = record_bounds(data, pos, ops, starts, lengths)
     return ops[:n], starts[:n], lengths[:n], status
 
 
@@ -164,27 +131,6 @@ def _scan_records(data: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     if status == 2:
         raise ArchiveError("torn record body")
     return ops, starts, lengths
-
-
-@njit(cache=True, nogil=True)
-def _scan(data, pos, ops, starts, lengths):
-    """Record boundaries from ``pos``; status 0 ok, 1 torn header, 2 torn body."""
-    end = data.shape[0]
-    n = 0
-    while pos < end:
-        if pos + 9 > end:
-            return n, 1
-        length = 0
-        for i in range(8):
-            length |= np.int64(data[pos + 1 + i]) << (8 * i)
-        if length < 0 or length > end - pos - 9:
-            return n, 2
-        ops[n] = data[pos]
-        starts[n] = pos + 9
-        lengths[n] = length
-        n += 1
-        pos += 9 + length
-    return n, 0
 
 
 class BatchReader(TailTolerantBase):
@@ -281,7 +227,7 @@ class BatchReader(TailTolerantBase):
         known, topics = self._known_channels()
         channel = np.empty(starts.shape[0], dtype=np.int64)
         log_time = np.empty(starts.shape[0], dtype=np.int64)
-        n = _message_heads(data, starts, lengths, known, channel, log_time)
+        n = message_heads(data, starts, lengths, known, channel, log_time)
         if n:
             index = self.message_count + np.arange(n, dtype=np.int64)
             self.message_count += n
