@@ -1,1 +1,29 @@
-"""The edge: wire format, zenoh publish/subscribe, MCAP archive, replay, scene simulator."""
+"""The edge: how telemetry gets in, is kept, and is played back.
+
+Data path::
+
+    sensor gateway / sim.publisher / replay ──wire block on a keys key──▶ zenoh
+        ──▶ worker (service.worker) ──▶ archive.writer (raw, first) ──▶ analytics
+
+What is here (lower lines never import higher ones):
+
+- ``wire``           the versioned block format: one zenoh message = one block of one channel
+- ``keys``           the one owner of zenoh key expressions (build/parse pairs, patterns, matching)
+- ``zenoh_session``  explicit zenoh configs, always-closed sessions, BLOCK publishers/subscribers
+- ``pacing``         when a timestamped block is due on the wall clock at ``speed`` × real time
+- ``mill_files``     reading mill configuration files (the model is in ``analytics.drivetrain``)
+- ``archive/``       the MCAP log: writer with rotation, tail-tolerant reader, recovery, batches
+- ``replay``         archived blocks back onto zenoh, byte-identical, paced, on replay keys
+- ``sim/``           the scene simulator: synthetic telemetry with ground truth, published live
+
+Where a new thing goes:
+
+- a new wire version → ``wire`` (``FORMAT_VERSION``, the layout in its docstring, the decoder;
+  archived blocks keep the bytes and version they arrived with),
+- a new key kind (tag, pattern) → ``keys`` and nowhere else: no f-string keys outside it,
+- a new scene → ``sim/scenes.py`` (catalogue) or a scene file; a new event kind →
+  ``sim/spec.py`` plus its segment (``sim/segments.py``) or fault (``sim/faults.py``),
+- compiled code → a ``*_kernels.py`` module beside its user.
+
+``ingest`` imports ``analytics`` only.
+"""

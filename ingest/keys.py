@@ -102,6 +102,19 @@ def _parse_signal(value: str) -> tuple[Signal, Side | None]:
     raise KeyFormatError("signal", value, f"expected one of {known}, optionally + _nbs/_bs")
 
 
+def _as_signal(value: Signal | str) -> Signal:
+    if str(value) not in _SIGNALS:
+        known = ", ".join(sorted(_SIGNALS))
+        raise KeyFormatError("signal", str(value), f"expected one of {known}")
+    return Signal(value)
+
+
+def _as_side(value: Side | str | None) -> Side | None:
+    if value is not None and str(value) not in _SIDES:
+        raise KeyFormatError("side", str(value), "expected 'nbs' or 'bs'")
+    return None if value is None else Side(value)
+
+
 @dataclass(frozen=True, slots=True)
 class ChannelKey:
     """A parsed channel key. ``replay_run`` is ``None`` for live data."""
@@ -115,14 +128,8 @@ class ChannelKey:
     def __post_init__(self) -> None:
         _check_segment("site", self.site)
         _check_segment("mill", self.mill)
-        if str(self.signal) not in _SIGNALS:
-            known = ", ".join(sorted(_SIGNALS))
-            raise KeyFormatError("signal", str(self.signal), f"expected one of {known}")
-        object.__setattr__(self, "signal", Signal(self.signal))
-        if self.side is not None and str(self.side) not in _SIDES:
-            raise KeyFormatError("side", str(self.side), "expected 'nbs' or 'bs'")
-        if self.side is not None:
-            object.__setattr__(self, "side", Side(self.side))
+        object.__setattr__(self, "signal", _as_signal(self.signal))
+        object.__setattr__(self, "side", _as_side(self.side))
         if self.replay_run is not None:
             _check_segment("run", self.replay_run)
 
@@ -171,7 +178,9 @@ def build_key(
 
     ``signal`` is a base signal name; the drive side goes in ``side``.
     """
-    return ChannelKey(site, mill, signal, side, replay_run).expr
+    _check_segment("site", site)
+    _check_segment("mill", mill)
+    return ChannelKey(site, mill, _as_signal(signal), _as_side(side), replay_run).expr
 
 
 def channel_key(site: str, mill: str, segment: str, *, replay_run: str | None = None) -> str:

@@ -7,10 +7,10 @@ This module is the library behind ``millwatch replay``; it has no command-line c
 Three parts, each usable alone:
 
 - **Sources** — :func:`collect_archive_files` expands files and directories into archive files;
-  :func:`archive_blocks` reads them as one stream of :class:`~ingest.archive.writer.ArchivedBlock`,
+  :func:`archive_blocks` reads them as one stream of :class:`~ingest.archive.reader.ArchivedBlock`,
   filtered by key pattern and log-time range and merged across writers in log-time order.
   Rotated files of one writer (``<prefix>_<stamp>Z.mcap`` in one directory) are read in file
-  order through :class:`~ingest.archive.writer.ArchiveReader` (which skips finished files outside
+  order through :class:`~ingest.archive.reader.ArchiveReader` (which skips finished files outside
   the
   time range from their summary); other files are read alone, front to back, torn tail
   tolerated.
@@ -41,14 +41,8 @@ from pathlib import Path
 import zenoh
 
 from ingest import keys
-from ingest.archive.writer import (
-    MCAP_MAGIC,
-    ArchivedBlock,
-    ArchivePosition,
-    ArchiveReader,
-    TailTolerantReader,
-    list_archive_files,
-)
+from ingest.archive.files import MCAP_MAGIC, ArchivePosition, list_archive_files
+from ingest.archive.reader import ArchivedBlock, ArchiveReader, TailTolerantReader
 from ingest.pacing import DEFAULT_LATE_THRESHOLD_S, PacingClock
 from ingest.zenoh_session import declare_block_publisher, wait_for_subscribers
 
@@ -376,7 +370,7 @@ ProgressCallback = Callable[[ReplayProgress], None]
 class Replayer:
     """Publish archived blocks on ``session``, paced by their log time.
 
-    ``blocks`` is any iterable of :class:`~ingest.archive.writer.ArchivedBlock` (usually
+    ``blocks`` is any iterable of :class:`~ingest.archive.reader.ArchivedBlock` (usually
     :func:`archive_blocks`); payloads go out exactly as archived, malformed ones included
     (the receiver counts them, as it would live). ``remap`` chooses the output keys;
     ``speed`` is × real time (``None`` = as fast as possible); ``late_threshold_s`` see

@@ -64,7 +64,7 @@ class DType(enum.IntEnum):
         return _NUMPY_DTYPES[self]
 
 
-_NUMPY_DTYPES = {
+_NUMPY_DTYPES: dict[DType, np.dtype] = {
     DType.FLOAT32: np.dtype("<f4"),
     DType.FLOAT64: np.dtype("<f8"),
     DType.INT16: np.dtype("<i2"),

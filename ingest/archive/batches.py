@@ -1,6 +1,6 @@
 """Read the archive as batches of messages held in arrays (for replay at many × real time).
 
-:class:`~ingest.archive.writer.TailTolerantReader` yields one Python object per message (~5 µs
+:class:`~ingest.archive.reader.TailTolerantReader` yields one Python object per message (~5 µs
 each);
 replaying an hour of 50 mills is 7.2 million messages. :class:`BatchReader` reads the same files
 with the same tolerance (it stops where that reader stops, at the first torn or corrupt record,
@@ -11,7 +11,7 @@ log time and the payload's offset and length — record boundaries found by a co
 sequence u32, log_time u64, publish_time u64, data``).
 
 :func:`archive_batches` walks the files of an archive after a checkpoint position, as
-:meth:`ingest.archive.writer.ArchiveReader.blocks` does, merging consecutive chunks of a file into
+:meth:`ingest.archive.reader.ArchiveReader.blocks` does, merging consecutive chunks of a file into
 batches of at least ``min_messages``.
 """
 
@@ -29,18 +29,16 @@ from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import Chunk
-from numba import njit
 
-from ingest.archive.byte_copy import copy_bytes
-from ingest.archive.writer import (
+from ingest.archive.batch_kernels import message_heads, pack_ranges, record_bounds
+from ingest.archive.files import (
     MCAP_MAGIC,
     ArchiveError,
     ArchivePosition,
-    TailTolerantReader,
-    _decompress,
     archive_file_order,
     list_archive_files,
 )
+from ingest.archive.reader import TailTolerantBase, decompress_chunk
 
 __all__ = ["BatchReader", "MessageBatch", "archive_batches"]
 
@@ -55,7 +53,7 @@ _TOP_LEVEL = np.array([Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANN
 class MessageBatch:
     """Consecutive messages of one archive file: ``buf`` holds their payloads at
     ``offset[k] : offset[k] + length[k]``; ``index`` is the file order (as
-    :class:`~ingest.archive.writer.ArchivePosition` counts it), ``channel`` the MCAP channel id
+    :class:`~ingest.archive.files.ArchivePosition` counts it), ``channel`` the MCAP channel id
     (topic
     in ``topics``), ``log_time`` ns since the Unix epoch (UTC)."""
 
@@ -88,7 +86,7 @@ class MessageBatch:
         offset = np.zeros(len(self), dtype=np.int64)
         if len(self) > 1:
             np.cumsum(self.length[:-1], out=offset[1:])
-        buf = _pack(self.buf, self.offset, self.length, int(self.length.sum()))
+        buf = pack_ranges(self.buf, self.offset, self.length, int(self.length.sum()))
         return MessageBatch(self.file, buf, self.index, self.channel, self.log_time, offset,
                             self.length.copy(), self.topics)  # fmt: skip
 
@@ -113,38 +111,6 @@ class MessageBatch:
         )
 
 
-@njit(cache=True, nogil=True)
-def _pack(buf, offset, length, total):
-    """The byte ranges ``buf[offset[k] : offset[k] + length[k]]``, back to back."""
-    out = np.empty(total, dtype=np.uint8)
-    at = 0
-    for k in range(offset.shape[0]):
-        copy_bytes(out, at, buf, offset[k], length[k])
-        at += length[k]
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _message_heads(data, starts, lengths, known, channel, log_time):
-    """Channel id (u16) and log time (u64, little-endian) of each message record body at
-    ``starts``; returns how many lead the records before the first invalid one (too short
-    for the message header, or on a channel id not in ``known``), whose channel is set."""
-    size = 22  # channel u16, sequence u32, log_time u64, publish_time u64
-    for k in range(starts.shape[0]):
-        if lengths[k] < size:
-            return k
-        a = starts[k]
-        c = np.int64(data[a]) | (np.int64(data[a + 1]) << 8)
-        channel[k] = c
-        if not known[c]:
-            return k
-        t = np.uint64(0)
-        for i in range(8):
-            t |= np.uint64(data[a + 6 + i]) << np.uint64(8 * i)
-        log_time[k] = np.int64(t)
-    return starts.shape[0]
-
-
 def _scan_from(data: np.ndarray, pos: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(opcode, body start, body length) of the complete records from byte ``pos`` on, and
     the status where the scan stopped: 0 at the end, 1 torn header, 2 torn body."""
@@ -152,7 +118,7 @@ def _scan_from(data: np.ndarray, pos: int) -> tuple[np.ndarray, np.ndarray, np.n
     ops = np.empty(cap, dtype=np.int64)
     starts = np.empty(cap, dtype=np.int64)
     lengths = np.empty(cap, dtype=np.int64)
-    n, status = _scan(data, pos, ops, starts, lengths)
+    n, status = record_bounds(data, pos, ops, starts, lengths)
     return ops[:n], starts[:n], lengths[:n], status
 
 
@@ -167,29 +133,8 @@ def _scan_records(data: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return ops, starts, lengths
 
 
-@njit(cache=True, nogil=True)
-def _scan(data, pos, ops, starts, lengths):
-    """Record boundaries from ``pos``; status 0 ok, 1 torn header, 2 torn body."""
-    end = data.shape[0]
-    n = 0
-    while pos < end:
-        if pos + 9 > end:
-            return n, 1
-        length = 0
-        for i in range(8):
-            length |= np.int64(data[pos + 1 + i]) << (8 * i)
-        if length < 0 or length > end - pos - 9:
-            return n, 2
-        ops[n] = data[pos]
-        starts[n] = pos + 9
-        lengths[n] = length
-        n += 1
-        pos += 9 + length
-    return n, 0
-
-
-class BatchReader(TailTolerantReader):
-    """:class:`~ingest.archive.writer.TailTolerantReader` whose :meth:`messages` yields one
+class BatchReader(TailTolerantBase):
+    """:class:`~ingest.archive.reader.TailTolerantReader` whose :meth:`messages` yields one
     :class:`MessageBatch` per chunk (and per unchunked message) instead of one object per
     message; the same messages, the same stopping rules and the same attributes afterwards."""
 
@@ -206,7 +151,7 @@ class BatchReader(TailTolerantReader):
             self._known = (len(self.channels), known, topics)
         return self._known[1], self._known[2]
 
-    def messages(self) -> Iterator[MessageBatch]:  # type: ignore[override]
+    def messages(self) -> Iterator[MessageBatch]:
         """Batches of all messages in file order (single pass; the file is read at once)."""
         self._zstd = zstandard.ZstdDecompressor()
         with open(self.path, "rb") as stream:
@@ -243,16 +188,16 @@ class BatchReader(TailTolerantReader):
                 else ("torn record at end of file")
             )
 
-    def _record(self, opcode: int, body: bytes | memoryview) -> Iterator[MessageBatch]:  # type: ignore[override]
+    def _record(self, opcode: int, body: bytes | memoryview) -> Iterator[MessageBatch]:
         if opcode == Opcode.CHUNK:
             chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-            data = np.frombuffer(_decompress(chunk, self._zstd), dtype=np.uint8)
+            data = np.frombuffer(decompress_chunk(chunk, self._zstd), dtype=np.uint8)
             yield from self._chunk(data)
         elif opcode == Opcode.MESSAGE:
             data = np.frombuffer(bytes(body), dtype=np.uint8)
             yield from self._messages(data, np.zeros(1, np.int64), np.array([len(data)]))
         else:
-            yield from super()._record(opcode, body)  # schemas, channels: no messages
+            self._metadata(opcode, body)  # schemas, channels: no messages
 
     def _chunk(self, data: np.ndarray) -> Iterator[MessageBatch]:
         ops, starts, lengths = _scan_records(data)
@@ -262,7 +207,7 @@ class BatchReader(TailTolerantReader):
             yield from self._messages_between(data, ops, starts, lengths, is_msg, first, r)
             first = r + 1
             body = data[starts[r] : starts[r] + lengths[r]].tobytes()
-            yield from super()._record(int(ops[r]), body)
+            yield from self._record(int(ops[r]), body)
         yield from self._messages_between(data, ops, starts, lengths, is_msg, first, ops.size)
 
     def _messages_between(
@@ -282,7 +227,7 @@ class BatchReader(TailTolerantReader):
         known, topics = self._known_channels()
         channel = np.empty(starts.shape[0], dtype=np.int64)
         log_time = np.empty(starts.shape[0], dtype=np.int64)
-        n = _message_heads(data, starts, lengths, known, channel, log_time)
+        n = message_heads(data, starts, lengths, known, channel, log_time)
         if n:
             index = self.message_count + np.arange(n, dtype=np.int64)
             self.message_count += n

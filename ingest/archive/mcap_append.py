@@ -81,9 +81,9 @@ class MessageAppender:
 
     def __init__(self, writer: Writer, chunk_size: int) -> None:
         self._writer = writer
-        self._stats = writer._Writer__statistics  # type: ignore[attr-defined]
-        self._builder = writer._Writer__chunk_builder  # type: ignore[attr-defined]
-        finalize = writer._Writer__finalize_chunk  # type: ignore[attr-defined]
+        self._stats = writer._Writer__statistics  # type: ignore[attr-defined]  # mcap keeps it private
+        self._builder = writer._Writer__chunk_builder  # type: ignore[attr-defined]  # mcap keeps it private
+        finalize = writer._Writer__finalize_chunk  # type: ignore[attr-defined]  # mcap keeps it private
         self._finalize: Callable[[], None] = finalize
         self._chunk_size = chunk_size
 

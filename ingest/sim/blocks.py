@@ -1,6 +1,6 @@
 """A simulated scene as the wire blocks a sensor gateway would send.
 
-The simulator (:mod:`ingest.sim.simulator`) renders chunks of engineering-unit samples per
+The simulator (:mod:`ingest.sim.renderer`) renders chunks of engineering-unit samples per
 configured
 channel; this module cuts them into wire-format blocks (:mod:`ingest.wire`) of ``block_samples``
 samples on each channel's key (:func:`ingest.keys.channel_key`), with a sequence number per key.
@@ -17,12 +17,10 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-import numpy as np
-
 from ingest import keys, wire
-from ingest.sim.simulator import Scene
+from ingest.sim.renderer import Scene
 
-__all__ = ["SceneBlock", "channel_samples", "scene_blocks"]
+__all__ = ["SceneBlock", "scene_blocks"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -68,13 +66,3 @@ def scene_blocks(
                 seq[name] += 1
                 n = samples.shape[0]
                 yield SceneBlock(key, payload, t0, t0 + round(n * 1e9 / fs), n)
-
-
-def channel_samples(scene: Scene) -> dict[str, np.ndarray]:
-    """Every sample of every channel of a (short) scene, keyed by zenoh key: for tests."""
-    config = scene.config
-    data = scene.render(0, scene.n_samples)
-    return {
-        keys.channel_key(config.site, config.id, ch.key): data[name]
-        for name, ch in config.channels.items()
-    }

@@ -19,7 +19,8 @@ import zenoh
 from ingest import wire
 from ingest.pacing import PacingClock
 from ingest.sim.blocks import scene_blocks
-from ingest.sim.simulator import Scene, SceneSpec
+from ingest.sim.renderer import Scene
+from ingest.sim.spec import SceneSpec
 from ingest.zenoh_session import declare_block_publisher, wait_for_subscribers
 
 __all__ = ["PublishReport", "ScenePublisher", "starting_now"]

@@ -16,7 +16,7 @@ events::
     kind = "trip"
     at_s = 400
 
-Catalogue (seed 000 numbers behind each are in :mod:`ingest.sim.simulator`):
+Catalogue (seed 000 numbers behind each are in :mod:`ingest.sim.renderer`):
 
 ``steady``            10 min of steady running,
 ``start-lrs``, ``start-grid``, ``start-elrs``
@@ -41,12 +41,12 @@ from pydantic import ValidationError
 
 from analytics.drivetrain.mill_config import MillConfig, Starter, describe_validation_error
 from ingest.mill_files import load_mill_config
-from ingest.sim.simulator import (
+from ingest.sim.renderer import Scene
+from ingest.sim.spec import (
     BarringEvent,
     DropoutEvent,
     FailedStartEvent,
     ResonanceEvent,
-    Scene,
     SceneError,
     SceneSpec,
     SpikesEvent,

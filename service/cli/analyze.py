@@ -31,7 +31,8 @@ from alarms.report import alarms_for_report
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import MillAnalyzer
 from ingest import keys, wire
-from ingest.archive.writer import ArchiveError, RawMessage, TailTolerantReader
+from ingest.archive.files import ArchiveError
+from ingest.archive.reader import RawMessage, TailTolerantReader
 from ingest.mill_files import load_mill_config
 
 __all__ = ["add_parser", "analyze_recording", "recording_files"]

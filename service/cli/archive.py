@@ -24,7 +24,9 @@ from pathlib import Path
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
-from ingest.archive.writer import MCAP_MAGIC, ArchiveError, TailTolerantReader, recover_file
+from ingest.archive.files import MCAP_MAGIC, ArchiveError
+from ingest.archive.reader import TailTolerantReader
+from ingest.archive.recovery import recover_file
 
 __all__ = ["ArchiveCommandError", "FileInfo", "add_parser", "file_info"]
 

@@ -12,7 +12,7 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from ingest.archive.writer import ArchiveError
+from ingest.archive.files import ArchiveError
 from service.cli import (
     analyze,
     api,

@@ -37,7 +37,7 @@ import zenoh
 from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
 from ingest import keys
-from ingest.archive.writer import ArchiveError
+from ingest.archive.files import ArchiveError
 from ingest.replay import (
     KeyRemap,
     Replayer,

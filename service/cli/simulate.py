@@ -34,8 +34,9 @@ from ingest.archive.writer import ArchiveWriter
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import SceneBlock, scene_blocks
 from ingest.sim.publisher import ScenePublisher, starting_now
+from ingest.sim.renderer import Scene
 from ingest.sim.scenes import get_scene, list_scenes, load_scene_file
-from ingest.sim.simulator import Scene, SceneSpec
+from ingest.sim.spec import SceneSpec
 from ingest.zenoh_session import build_config, open_session
 from service.cli.args import duration_seconds, positive_float, positive_int
 

@@ -38,7 +38,7 @@ from analytics.spectra.harmonics import (
     is_running,
 )
 from ingest import keys, wire
-from ingest.archive.writer import TailTolerantReader
+from ingest.archive.reader import TailTolerantReader
 from ingest.mill_files import load_mill_config
 from service.cli.args import non_negative_float, positive_float
 

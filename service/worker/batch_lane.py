@@ -31,8 +31,8 @@ from numba import njit
 
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.batches import MessageBatch
-from ingest.archive.byte_copy import copy_bytes
-from ingest.archive.writer import ArchivePosition
+from ingest.archive.copy_kernels import copy_bytes
+from ingest.archive.files import ArchivePosition
 from ingest.wire import DType, decode_headers
 from service.worker.block_queue import QueuedBlock
 from service.worker.checkpoints import covers

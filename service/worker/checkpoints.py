@@ -27,7 +27,7 @@ from datetime import UTC, datetime
 import numpy as np
 import numpy.typing as npt
 
-from ingest.archive.writer import ArchivePosition, archive_file_order
+from ingest.archive.files import ArchivePosition, archive_file_order
 
 __all__ = ["CheckpointRestoreError", "CheckpointSchedule", "MillHeldError", "covers", "earliest"]
 

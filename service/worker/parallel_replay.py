@@ -52,7 +52,7 @@ import numpy as np
 from alarms.lifecycle import Transition
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.batches import MessageBatch
-from ingest.archive.writer import ArchivePosition, archive_file_order, list_archive_files
+from ingest.archive.files import ArchivePosition, archive_file_order, list_archive_files
 from service.store.database import Store
 from service.worker.batch_lane import BatchLane, replay_batch_blocks
 from service.worker.health import MillHealth

@@ -23,7 +23,8 @@ from collections.abc import Callable, Iterable
 
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.batches import MessageBatch, archive_batches
-from ingest.archive.writer import ArchivePosition, ArchiveReader
+from ingest.archive.files import ArchivePosition
+from ingest.archive.reader import ArchiveReader
 from service.worker.batch_lane import BatchLane, replay_batch_blocks
 from service.worker.checkpoints import earliest
 from service.worker.parallel_replay import ParallelReplay, replay_jobs, split_mills, tail_bytes

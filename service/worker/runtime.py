@@ -27,7 +27,8 @@ import zenoh
 from alarms.lifecycle import Transition
 from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
 from analytics.drivetrain.mill_config import MillConfig
-from ingest.archive.writer import ArchiveReader, ArchiveWriter
+from ingest.archive.reader import ArchiveReader
+from ingest.archive.writer import ArchiveWriter
 from ingest.keys import alarm_key
 from ingest.zenoh_session import build_config, declare_block_subscriber
 from service.settings import ServiceSettings

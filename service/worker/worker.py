@@ -52,7 +52,8 @@ from alarms.lifecycle import Transition
 from alarms.observations import Observation
 from analytics.drivetrain.mill_config import MillConfig
 from ingest import keys
-from ingest.archive.writer import ArchivePosition, ArchiveWriter
+from ingest.archive.files import ArchivePosition
+from ingest.archive.writer import ArchiveWriter
 from ingest.wire import Block, WireError, decode_block
 from service.store.database import Store
 from service.store.records import DamageRow, EventRow

@@ -36,8 +36,8 @@ import numpy as np
 
 from analytics.signal.telemetry_faults import TelemetryFaultDetector
 from ingest.mill_files import load_mill_config
+from ingest.sim.renderer import Scene
 from ingest.sim.scenes import get_scene
-from ingest.sim.simulator import Scene
 
 log = logging.getLogger("bench_faults")
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "ball-dual-lrs.toml"

@@ -26,8 +26,9 @@ import numpy as np
 
 from analytics.spectra.harmonics import HarmonicSettings, HarmonicTracker, HarmonicWindow
 from ingest.mill_files import load_mill_config
+from ingest.sim.renderer import Scene
 from ingest.sim.scenes import get_scene
-from ingest.sim.simulator import Scene, SceneParams
+from ingest.sim.spec import SceneParams
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 DURATION_S = 180.0

@@ -46,7 +46,8 @@ from pathlib import Path
 
 from ingest import keys
 from ingest.archive.batches import archive_batches
-from ingest.archive.writer import ArchiveReader, ArchiveWriter
+from ingest.archive.reader import ArchiveReader
+from ingest.archive.writer import ArchiveWriter
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import SceneBlock, scene_blocks
 from ingest.sim.scenes import get_scene

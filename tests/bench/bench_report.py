@@ -38,7 +38,7 @@ import numpy as np
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene, month_events
-from ingest.sim.simulator import DEFAULT_T0_NS, FailedStartEvent, StartEvent, StopEvent, TripEvent
+from ingest.sim.spec import DEFAULT_T0_NS, FailedStartEvent, StartEvent, StopEvent, TripEvent
 from service.api.routes.reports import FORMATS
 from service.reports.monthly import build_monthly_report
 from service.reports.starts import month_bounds_ns

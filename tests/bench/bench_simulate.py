@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 
 from ingest.mill_files import load_mill_configs
+from ingest.sim.renderer import Scene
 from ingest.sim.scenes import get_scene
-from ingest.sim.simulator import Scene
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 

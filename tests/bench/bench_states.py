@@ -25,8 +25,9 @@ import numpy as np
 from analytics.mill.loads import LoadAnalysis
 from analytics.signal.frame_aligner import Frame
 from ingest.mill_files import load_mill_config
+from ingest.sim.renderer import Scene
 from ingest.sim.scenes import get_scene
-from ingest.sim.simulator import Scene, SceneSpec
+from ingest.sim.spec import SceneSpec
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 TOL_NS = 1_000_000_000

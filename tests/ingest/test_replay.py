@@ -20,7 +20,9 @@ import pytest
 import zenoh
 
 from ingest import keys, wire
-from ingest.archive.writer import ArchivedBlock, ArchiveWriter, list_archive_files
+from ingest.archive.files import list_archive_files
+from ingest.archive.reader import ArchivedBlock
+from ingest.archive.writer import ArchiveWriter
 from ingest.pacing import PacingClock, PacingError
 from ingest.replay import (
     KeyRemap,

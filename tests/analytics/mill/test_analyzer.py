@@ -98,7 +98,7 @@ def _queued_report(config, scene, names, rng, max_batch: int) -> str:
 def test_long_chunks_give_the_block_by_block_report_bitwise():
     """Starts, stops, barring, faults, steady windows, damage and spectra: the analysis of
     chunks up to MAX_CHUNK_S equals the analysis block by block (random batching)."""
-    from ingest.sim.simulator import BarringEvent, DropoutEvent, SpikesEvent, StartEvent, TripEvent
+    from ingest.sim.spec import BarringEvent, DropoutEvent, SpikesEvent, StartEvent, TripEvent
 
     rng = np.random.default_rng(3)
     for mill, drop_rpm in (("sag-5200-lrs.toml", False), ("ball-dual-lrs.toml", True)):

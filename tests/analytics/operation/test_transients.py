@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from analytics.operation.transients import BarringAccumulator, rise_time_ms
-from ingest.sim.simulator import RC_10_90
+from ingest.sim.waveforms import RC_10_90
 from tests.analytics.scene_helpers import custom, run, scene
 
 FS = 1000.0

@@ -23,7 +23,7 @@ from analytics.signal.telemetry_faults import (
 )
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene, scene_spec
-from ingest.sim.simulator import SpikesEvent
+from ingest.sim.spec import SpikesEvent
 
 FS = (-100.0, 300.0)
 

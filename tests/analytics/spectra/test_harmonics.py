@@ -25,8 +25,9 @@ from analytics.spectra.harmonics import (
     window_response,
 )
 from ingest.mill_files import load_mill_config
+from ingest.sim.renderer import Scene
 from ingest.sim.scenes import get_scene
-from ingest.sim.simulator import Scene, SceneParams
+from ingest.sim.spec import SceneParams
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 DRIFT = SceneParams(speed_drift_pct=1.0).model_dump()  # ±1 % speed drift

@@ -12,8 +12,10 @@ from mcap.writer import CompressionType, Writer
 
 from ingest import keys, wire
 from ingest.archive.batches import BatchReader, MessageBatch, archive_batches
+from ingest.archive.files import ArchivePosition
 from ingest.archive.mcap_append import appender, pack_chunk_indexes
-from ingest.archive.writer import ArchivePosition, ArchiveReader, ArchiveWriter, TailTolerantReader
+from ingest.archive.reader import ArchiveReader, TailTolerantReader
+from ingest.archive.writer import ArchiveWriter
 
 T0 = 1_763_767_800_000_000_000
 SIGNALS = ("motor_torque", "pinion_torque", "pinion_bending", "speed")

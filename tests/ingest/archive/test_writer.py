@@ -22,14 +22,11 @@ import pytest
 from mcap.reader import NonSeekingReader, make_reader
 
 from ingest import keys, wire
-from ingest.archive import writer as archive
-from ingest.archive.writer import (
-    ArchivePosition,
-    ArchiveReader,
-    ArchiveWriter,
-    TailTolerantReader,
-    recover_file,
-)
+from ingest.archive import files as archive
+from ingest.archive.files import ArchivePosition
+from ingest.archive.reader import ArchiveReader, TailTolerantReader
+from ingest.archive.recovery import recover_file
+from ingest.archive.writer import ArchiveWriter
 
 log = logging.getLogger(__name__)
 REPO = Path(__file__).resolve().parents[3]

@@ -10,7 +10,6 @@ import numpy as np
 
 from ingest.keys import mill_pattern
 from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import channel_samples
 from ingest.sim.publisher import ScenePublisher, starting_now
 from ingest.sim.scenes import get_scene
 from ingest.wire import DType, decode_block
@@ -22,6 +21,7 @@ from ingest.zenoh_session import (
     tcp_endpoint,
 )
 from service.cli.simulate import DEFAULT_MILL
+from tests.ingest.sim.scene_samples import channel_samples
 
 
 def test_every_block_arrives_once_in_order_at_the_requested_pace():

@@ -9,7 +9,7 @@ import pytest
 
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene, list_scenes, load_scene_file, scene_spec
-from ingest.sim.simulator import SceneError
+from ingest.sim.spec import SceneError
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 REQUIRED = {

@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from ingest.mill_files import load_mill_config
-from ingest.sim.simulator import (
+from ingest.sim.renderer import Scene
+from ingest.sim.seed_tables import draw_peak_pct
+from ingest.sim.spec import (
     BarringEvent,
     DropoutEvent,
     FailedStartEvent,
     ResonanceEvent,
-    Scene,
     SceneError,
     SceneParams,
     SceneSpec,
@@ -21,7 +22,6 @@ from ingest.sim.simulator import (
     StartEvent,
     StopEvent,
     TripEvent,
-    draw_peak_pct,
 )
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"

@@ -10,7 +10,8 @@ import pytest
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 
-from ingest.archive.writer import MCAP_MAGIC, ArchiveWriter, list_archive_files
+from ingest.archive.files import MCAP_MAGIC, list_archive_files
+from ingest.archive.writer import ArchiveWriter
 from service.cli.main import main
 from tests.ingest.test_replay import KEYS, T0, write_archive
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from ingest.archive.writer import ArchiveReader, TailTolerantReader
-from ingest.sim.blocks import channel_samples
+from ingest.archive.reader import ArchiveReader, TailTolerantReader
 from ingest.wire import decode_block
 from service.cli.main import main
 from service.cli.simulate import DEFAULT_MILL, build_scene
+from tests.ingest.sim.scene_samples import channel_samples
 
 
 def read_back(path: Path) -> dict[str, np.ndarray]:

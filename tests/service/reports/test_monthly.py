@@ -22,7 +22,7 @@ from fastapi.testclient import TestClient
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene
-from ingest.sim.simulator import StartEvent, StopEvent, TripEvent
+from ingest.sim.spec import StartEvent, StopEvent, TripEvent
 from service.api.errors import install_problem_handlers
 from service.api.mill_views import mill_monthly_report
 from service.api.routes.reports import reports_router

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from ingest.archive.batches import archive_batches
-from ingest.archive.writer import ArchiveReader, ArchiveWriter
+from ingest.archive.reader import ArchiveReader
+from ingest.archive.writer import ArchiveWriter
 from ingest.keys import build_key
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks

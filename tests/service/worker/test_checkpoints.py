@@ -12,7 +12,9 @@ import pytest
 
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.spectra.harmonics import HarmonicTracker
-from ingest.archive.writer import ArchivePosition, ArchiveReader, ArchiveWriter
+from ingest.archive.files import ArchivePosition
+from ingest.archive.reader import ArchiveReader
+from ingest.archive.writer import ArchiveWriter
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks
 from ingest.sim.publisher import starting_now

@@ -10,7 +10,8 @@ from pathlib import Path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ingest.archive.writer import ArchiveReader, ArchiveWriter
+from ingest.archive.reader import ArchiveReader
+from ingest.archive.writer import ArchiveWriter
 from ingest.keys import build_key, channel_key
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks

@@ -15,7 +15,8 @@ import pytest
 
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.spectra.harmonics import HarmonicTracker
-from ingest.archive.writer import ArchiveReader, ArchiveWriter
+from ingest.archive.reader import ArchiveReader
+from ingest.archive.writer import ArchiveWriter
 from service.store.database import Store
 from service.worker import parallel_replay
 from service.worker.mill_job import MillJob

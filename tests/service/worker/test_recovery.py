@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from analytics.mill.analyzer import MillAnalyzer
-from ingest.archive.writer import ArchiveReader
+from ingest.archive.reader import ArchiveReader
 from ingest.keys import channel_key
 from ingest.sim.blocks import scene_blocks
 from ingest.sim.publisher import starting_now

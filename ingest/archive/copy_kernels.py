@@ -17,11 +17,11 @@ __all__ = ["copy_bytes"]
 
 
 @intrinsic
-def _memcpy(typingctx, dst, dst_at, src, src_at, n):  # type: ignore[no-untyped-def]
+def _memcpy(typingctx, dst, dst_at, src, src_at, n):
     """``memcpy(&dst[dst_at], &src[src_at], n)`` on contiguous 1-D uint8 arrays (unchecked)."""
     sig = types.void(dst, types.intp, src, types.intp, types.intp)
 
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+    def codegen(context, builder, signature, args):
         dst_v, dst_at_v, src_v, src_at_v, n_v = args
         d = context.make_array(signature.args[0])(context, builder, dst_v)
         s = context.make_array(signature.args[2])(context, builder, src_v)
@@ -34,10 +34,10 @@ def _memcpy(typingctx, dst, dst_at, src, src_at, n):  # type: ignore[no-untyped-
 
 
 @njit(cache=True, nogil=True, inline="always")
-def copy_bytes(dst, dst_at, src, src_at, n):  # type: ignore[no-untyped-def]
+def copy_bytes(dst, dst_at, src, src_at, n):
     """Copy ``src[src_at : src_at + n]`` to ``dst[dst_at : dst_at + n]`` (contiguous 1-D
     ``uint8`` arrays, not overlapping); IndexError when a range leaves its array."""
     if n < 0 or dst_at < 0 or src_at < 0 or dst_at + n > dst.shape[0] or src_at + n > src.shape[0]:
         raise IndexError("byte range outside the array")
     if n:
-        _memcpy(dst, dst_at, src, src_at, n)
+        _memcpy(dst, dst_at, src, src_at, n)  # type: ignore[call-arg]  # numba supplies typingctx
