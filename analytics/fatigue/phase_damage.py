@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from analytics.contracts import check_snapshot
 from analytics.fatigue import damage_kernel as _dk
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.exact_sum import DIGITS, digits_value, fsum, hilo
@@ -303,6 +304,7 @@ class PhaseDamage:
 
     @classmethod
     def restore(cls, d: dict[str, Any]) -> PhaseDamage:
+        check_snapshot(d, "phase_damage", None, "phase damage")
         pd = cls(
             DamageRecorder.restore(d["recorder"]),
             d["t0_ns"],

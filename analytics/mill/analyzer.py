@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from analytics.contracts import check_snapshot
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.mill.loads import LoadAnalysis
 from analytics.operation.operating_states import OperatingState
@@ -326,8 +327,7 @@ class MillAnalyzer:
         :class:`~analytics.spectra.harmonics.SnapshotMismatch`: its sample counts would mean other
         times, or its aligner would go on framing the old channels (an added channel's blocks
         ignored for good, a removed one's waited for)."""
-        if snap.get("kind") != "mill_monitor" or snap.get("version") != _SNAPSHOT_VERSION:
-            raise ValueError(f"not a mill analyzer snapshot of version {_SNAPSHOT_VERSION}")
+        check_snapshot(snap, "mill_monitor", _SNAPSHOT_VERSION, "mill analyzer")
         if snap["mill"] != config.id:
             raise ValueError(f"snapshot of mill {snap['mill']!r}, configuration is {config.id!r}")
         was_fs, fs = float(snap["aligner"]["fs"]), float(config.sample_rate_hz)

@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from analytics.contracts import check_snapshot
 from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["OperatingState", "OperatingStateMachine", "StateThresholds", "Transition"]
@@ -486,9 +487,7 @@ class OperatingStateMachine:
     @classmethod
     def restore(cls, snapshot: dict[str, Any]) -> OperatingStateMachine:
         """A machine that continues exactly where the snapshotted one stood."""
-        kind = ("operating_state_machine", _SNAPSHOT_VERSION)
-        if (snapshot.get("kind"), snapshot.get("version")) != kind:
-            raise ValueError(f"not an operating_state_machine snapshot of version {kind[1]}")
+        check_snapshot(snapshot, "operating_state_machine", _SNAPSHOT_VERSION)
         machine = cls(snapshot["fs"], StateThresholds(**snapshot["thresholds"]))
         machine._I[:] = unpack_array(snapshot["ints"], "<i8", shape=machine._I.shape)
         machine._F[:] = unpack_array(snapshot["floats"], shape=machine._F.shape)

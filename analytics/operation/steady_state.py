@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from analytics.contracts import check_snapshot
 from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["SteadyStateMeter", "SteadyWindow"]
@@ -290,7 +291,7 @@ class SteadyStateMeter:
 
     def restore_state(self, d: dict[str, Any]) -> None:
         """Load the state of :meth:`snapshot` (same configuration) into this meter."""
-
+        check_snapshot(d, "steady_state_meter", None, "steady-state meter")
         self.run_start, self.next = int(d["run_start"]), int(d["next"])
         self.revs, self.rev_index = float(d["revs"]), int(d["rev_index"])
         self.part_max = {k: float(v) for k, v in d["part_max"].items()}

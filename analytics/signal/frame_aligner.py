@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from analytics.contracts import check_snapshot
 from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["Frame", "FrameAligner"]
@@ -277,8 +278,7 @@ class FrameAligner:
         snapshot's channels in the order the caller numbers them now (:meth:`push_blocks` takes
         channel numbers; a configuration may list them in another order than when the snapshot
         was taken); default the snapshot's order."""
-        if snap.get("kind") != "frame_aligner" or snap.get("version") != _SNAPSHOT_VERSION:
-            raise ValueError(f"not a frame aligner snapshot of version {_SNAPSHOT_VERSION}")
+        check_snapshot(snap, "frame_aligner", _SNAPSHOT_VERSION, "frame aligner")
         if channels is not None and sorted(channels) != sorted(snap["channels"]):
             raise ValueError(f"channels {channels} are not the snapshot's {snap['channels']}")
         a = cls(channels or snap["channels"], snap["fs"], max_pending=snap["max_pending"],

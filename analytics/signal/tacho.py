@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from analytics.contracts import check_snapshot
 from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["TachoSpeed"]
@@ -188,8 +189,7 @@ class TachoSpeed:
     @classmethod
     def restore(cls, snapshot: dict[str, Any]) -> TachoSpeed:
         """A converter that continues exactly where the snapshotted one stood."""
-        if snapshot.get("kind") != "tacho" or snapshot.get("version") != _SNAPSHOT_VERSION:
-            raise ValueError(f"not a tacho snapshot of version {_SNAPSHOT_VERSION}")
+        check_snapshot(snapshot, "tacho", _SNAPSHOT_VERSION)
         obj = cls(snapshot["pulses_per_rev"], snapshot["fs"], average_edges=1)
         obj._p = unpack_array(snapshot["params"], shape=obj._p.shape)
         last = snapshot["last"]

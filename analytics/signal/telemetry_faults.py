@@ -80,6 +80,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from analytics.contracts import check_snapshot
 from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = [
@@ -97,7 +98,6 @@ log = logging.getLogger(__name__)
 LOOKAHEAD = 4
 _HIST = 4  # samples of left context kept before the first undecided sample
 _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
-_SNAPSHOT_KIND = ("telemetry_faults", _SNAPSHOT_VERSION)
 RC_10_90 = (math.acos(-0.8) - math.acos(0.8)) / math.pi
 """10–90 % rise of a raised-cosine front as a fraction of its duration (≈ 0.59)."""
 MEDIAN_TO_SIGMA = 0.6745
@@ -509,8 +509,7 @@ class TelemetryFaultDetector:
     @classmethod
     def restore(cls, snapshot: dict[str, Any]) -> TelemetryFaultDetector:
         """A detector that continues exactly where the snapshotted one stood."""
-        if (snapshot.get("kind"), snapshot.get("version")) != _SNAPSHOT_KIND:
-            raise ValueError(f"not a telemetry_faults snapshot of version {_SNAPSHOT_VERSION}")
+        check_snapshot(snapshot, "telemetry_faults", _SNAPSHOT_VERSION)
         low, high, fs, bandwidth, rise = snapshot["config"]
         det = cls((low, high), fs, bandwidth_hz=bandwidth, min_rise_s=rise)
         det._p = unpack_array(snapshot["params"], shape=det._p.shape)

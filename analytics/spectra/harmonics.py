@@ -57,6 +57,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from analytics.contracts import check_snapshot
 from analytics.drivetrain.kinematics import ExpectedLine, KinematicsOptions, expected_lines
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.snapshot_arrays import pack_array, unpack_array
@@ -87,7 +88,6 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
-_SNAPSHOT_KIND = ("harmonic_tracker", _SNAPSHOT_VERSION)
 #: Cosine-sum windows ``w(u) = Σ a_k (−1)^k cos 2πku`` on ``u ∈ [0, 1)`` (periodic).
 COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
     "hann": (0.5, 0.5),
@@ -1008,8 +1008,7 @@ class HarmonicTracker:
         natural_frequencies_hz: Sequence[float] = (),
     ) -> HarmonicTracker:
         """A tracker that continues exactly where the snapshotted one stood."""
-        if (snapshot.get("kind"), snapshot.get("version")) != _SNAPSHOT_KIND:
-            raise ValueError(f"not a harmonic tracker snapshot of version {_SNAPSHOT_VERSION}")
+        check_snapshot(snapshot, "harmonic_tracker", _SNAPSHOT_VERSION, "harmonic tracker")
         if snapshot["mill"] != config.id:
             raise ValueError(f"snapshot of mill {snapshot['mill']!r}, config is {config.id!r}")
         t = cls(
