@@ -259,7 +259,7 @@ def dynamic_factor(torque: np.ndarray, nominal: float | None = None) -> float:
 class DynamicFactorMeter:
     """Streaming eq. 13 over running frames: max |T| and mean T (compensated sum), snapshot-able.
 
-    Feed only steady running samples (as :class:`analytics.spectra.harmonics.HarmonicTracker`); the
+    Feed only steady running samples (as :class:`analytics.spectra.tracker.HarmonicTracker`); the
     value equals :func:`dynamic_factor` on the concatenated samples (to rounding of the mean).
     """
 

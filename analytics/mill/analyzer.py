@@ -42,7 +42,7 @@ from analytics.signal.fault_stage import FaultStage
 from analytics.signal.frame_aligner import Frame, FrameAligner
 from analytics.signal.tacho import TachoSpeed
 from analytics.signal.telemetry_faults import hold_last_good
-from analytics.spectra.harmonics import (
+from analytics.spectra.tracker import (
     HarmonicTracker,
     HarmonicWindow,
     SnapshotMismatch,
@@ -393,12 +393,12 @@ class MillAnalyzer:
 
         After a configuration change that moves the harmonic tracker's geometry (pinion
         speed, tooth counts, liner count, telemetry bandwidth) its snapshot no longer fits
-        (:class:`~analytics.spectra.harmonics.SnapshotMismatch`): the tracker then starts afresh —
+        (:class:`~analytics.spectra.tracker.SnapshotMismatch`): the tracker then starts afresh —
         its
         state is only spectra in progress — while everything else (damage, rainflow residues,
         operating states, events) continues; :attr:`spectra_restarted` says why. A snapshot
         at another sample rate, or of another set of channels, raises
-        :class:`~analytics.spectra.harmonics.SnapshotMismatch`: its sample counts would mean other
+        :class:`~analytics.spectra.tracker.SnapshotMismatch`: its sample counts would mean other
         times, or its aligner would go on framing the old channels (an added channel's blocks
         ignored for good, a removed one's waited for)."""
         check_snapshot(snap, "mill_monitor", _SNAPSHOT_VERSION, "mill analyzer")

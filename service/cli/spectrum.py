@@ -3,7 +3,7 @@
 Reads one MCAP recording (``millwatch simulate --out`` or the ingest archive), keeps only the
 running portions (pinion speed within the running band for ``--settle`` seconds; the operating
 state machine will replace this test), feeds them to
-:class:`analytics.spectra.harmonics.HarmonicTracker`
+:class:`analytics.spectra.tracker.HarmonicTracker`
 (order-tracked Welch PSD, see that module) and renders one PSD panel per torque/bending channel
 with the drivetrain's expected excitation lines marked and labelled — seed 000 §6.2.7, Figures
 35–36, with the seed's colours (mill speed orange, pinion speed blue, liner passing green, motor
@@ -31,7 +31,7 @@ import numpy as np
 
 from analytics.drivetrain.kinematics import ExpectedLine
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.spectra.harmonics import (
+from analytics.spectra.tracker import (
     HarmonicSettings,
     HarmonicTracker,
     harmonics_report,

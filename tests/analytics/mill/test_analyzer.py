@@ -10,7 +10,7 @@ import pytest
 
 from analytics.drivetrain.mill_config import ChannelConfig
 from analytics.mill.analyzer import DERIVED_SPEED, MillAnalyzer, analysis_config
-from analytics.spectra.harmonics import SnapshotMismatch
+from analytics.spectra.tracker import SnapshotMismatch
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.spectra.harmonics import (
+from analytics.spectra.tracker import (
     DailyHarmonicTrend,
     HarmonicSettings,
     HarmonicTracker,

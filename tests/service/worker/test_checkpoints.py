@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
-from analytics.spectra.harmonics import HarmonicTracker
+from analytics.spectra.tracker import HarmonicTracker
 from ingest.archive.writer import ArchivedBlock, ArchivePosition, ArchiveReader, ArchiveWriter
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks

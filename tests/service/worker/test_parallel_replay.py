@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.spectra.harmonics import HarmonicTracker
+from analytics.spectra.tracker import HarmonicTracker
 from ingest.archive.writer import ArchiveReader, ArchiveWriter
 from service.store.database import Store
 from service.worker import parallel_replay
