@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import Any, Protocol, runtime_checkable
 
-__all__ = ["Stateful", "check_snapshot"]
+__all__ = ["SnapshotMismatch", "Stateful", "check_snapshot"]
 
 
 @runtime_checkable
@@ -68,3 +68,12 @@ def check_snapshot(
     raise ValueError(
         f"not a {what or kind} snapshot{of_version}: kind={got_kind!r}, version={got_version!r}"
     )
+
+
+class SnapshotMismatch(ValueError):
+    """A sound snapshot taken under another mill configuration that does not fit the object
+    this configuration builds; the message names the mill and what differs. From
+    :meth:`HarmonicTracker.restore <analytics.spectra.tracker.HarmonicTracker.restore>`
+    (segment length, bins, buffer or tracked lines differ) it concerns only spectra in
+    progress, so a caller may start a fresh tracker instead
+    (:meth:`MillAnalyzer.restore <analytics.mill.analyzer.MillAnalyzer.restore>` does)."""

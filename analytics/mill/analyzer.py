@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
+from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.mill.loads import LoadAnalysis
 from analytics.operation.operating_states import OperatingState
@@ -42,13 +42,10 @@ from analytics.signal.fault_stage import FaultStage
 from analytics.signal.frame_aligner import Frame, FrameAligner
 from analytics.signal.tacho import TachoSpeed
 from analytics.signal.telemetry_faults import hold_last_good
-from analytics.spectra.tracker import (
-    HarmonicTracker,
-    HarmonicWindow,
-    SnapshotMismatch,
-    harmonics_report,
-    stagger_for,
-)
+from analytics.spectra.facts import HarmonicWindow
+from analytics.spectra.report import harmonics_report
+from analytics.spectra.settings import stagger_for
+from analytics.spectra.tracker import HarmonicTracker
 
 __all__ = ["DERIVED_SPEED", "AnalyzerOutput", "MillAnalyzer"]
 
@@ -393,12 +390,12 @@ class MillAnalyzer:
 
         After a configuration change that moves the harmonic tracker's geometry (pinion
         speed, tooth counts, liner count, telemetry bandwidth) its snapshot no longer fits
-        (:class:`~analytics.spectra.tracker.SnapshotMismatch`): the tracker then starts afresh —
+        (:class:`~analytics.contracts.SnapshotMismatch`): the tracker then starts afresh —
         its
         state is only spectra in progress — while everything else (damage, rainflow residues,
         operating states, events) continues; :attr:`spectra_restarted` says why. A snapshot
         at another sample rate, or of another set of channels, raises
-        :class:`~analytics.spectra.tracker.SnapshotMismatch`: its sample counts would mean other
+        :class:`~analytics.contracts.SnapshotMismatch`: its sample counts would mean other
         times, or its aligner would go on framing the old channels (an added channel's blocks
         ignored for good, a removed one's waited for)."""
         check_snapshot(snap, "mill_monitor", _SNAPSHOT_VERSION, "mill analyzer")

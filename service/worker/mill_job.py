@@ -34,7 +34,7 @@ from alarms.from_analysis import event_observations, peak_observations, window_o
 from alarms.observations import Observation, local_month
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
-from analytics.spectra.tracker import stagger_for
+from analytics.spectra.settings import stagger_for
 from ingest.wire import Block
 from service.store.database import DamageRow, EventRow
 from service.worker.worker import MillUpdate
