@@ -33,7 +33,7 @@ def add_bits(digits, row, u):
     """Add the float whose int64 bit pattern is ``u`` exactly into ``digits[row]`` (base 2³²,
     units of 2⁻¹⁰⁷⁴): mantissa × 2^(exponent) split over at most three digits. False (nothing
     added) for a non-finite or huge (≥ 2⁹⁷⁷) value: then math.fsum decides (its overflow rules).
-    Compiled callers (e.g. :mod:`analytics.fatigue.damage_kernel`) use it to sum several subsets in
+    Compiled callers (e.g. :mod:`analytics.fatigue.damage_kernels`) use it to sum several subsets in
     one
     pass."""
     ef = (u >> 52) & 0x7FF

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from analytics.contracts import check_snapshot
-from analytics.fatigue import rainflow_kernel as _k
+from analytics.fatigue import rainflow_kernels as _k
 from analytics.fatigue.cycles import Cycles
 from analytics.snapshot_arrays import pack_array, unpack_array
 

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from analytics.fatigue import damage_kernel as _dk
+from analytics.fatigue import damage_kernels as _dk
 
 __all__ = [
     "GoodmanCorrection",
@@ -289,7 +289,7 @@ class SNCurve:
 
     def damage_of_ranges(self, ranges: np.ndarray, scale: float = 1.0) -> np.ndarray:
         """``damage_per_cycle(ranges * scale)`` (bitwise, a new array) in fewer passes: the
-        compiled passes of :mod:`analytics.fatigue.damage_kernel` around numpy's ``log`` and
+        compiled passes of :mod:`analytics.fatigue.damage_kernels` around numpy's ``log`` and
         ``exp``.
         ``scale`` > 0 multiplies the rainflow ranges (MPa after scaling), e.g. K_t."""
         r = np.ascontiguousarray(ranges, dtype=np.float64)
