@@ -338,7 +338,9 @@ class TelemetryFaultDetector:
 
 def transient_slew(span: float, fs: float, min_rise_s: float) -> float:
     """Largest step per sample of a raised-cosine front over ``span`` with 10–90 % rise
-    ``min_rise_s``: π·span / (2 D fs), D = min_rise_s / 0.59 (Bernstein with B = 1/(2D))."""
+    ``min_rise_s``: π·span / (2 D fs), D = min_rise_s / 0.59 (Bernstein with B = 1/(2D)). The
+    telemetry band's own Bernstein bound, 2π·B·(span/2)/fs (0.785·span at 250 Hz, 1 kHz), is too
+    loose to catch most spikes, hence this one."""
     d = min_rise_s / RC_10_90 * fs
     return math.pi * span / (2.0 * d)
 
@@ -347,12 +349,6 @@ def transient_jerk(span: float, fs: float, min_rise_s: float) -> float:
     """Largest third difference per sample³ of that front: ½·span·(π / D fs)³."""
     d = min_rise_s / RC_10_90 * fs
     return 0.5 * span * (math.pi / d) ** 3
-
-
-def telemetry_slew(span: float, fs: float, bandwidth_hz: float) -> float:
-    """Bernstein's per-sample bound for any signal within the full scale and the telemetry
-    band: 2π·B·(span/2)/fs — 0.785·span at 250 Hz, 1 kHz (too loose to catch most spikes)."""
-    return 2.0 * math.pi * bandwidth_hz * 0.5 * span / fs
 
 
 def hold_last_good(
