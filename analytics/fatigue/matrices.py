@@ -172,7 +172,7 @@ class _Matrix:
             return NotImplemented
         return self._same_bins(other) and bool(np.array_equal(self._counts, other._counts))
 
-    __hash__ = None  # mutable
+    __hash__ = None  # type: ignore[assignment]  # mutable, so unhashable (as list and dict)
 
     def snapshot(self) -> dict[str, Any]:
         """Plain JSON-serialisable state (edges round-trip exactly)."""

@@ -418,9 +418,9 @@ class LoadAnalysis:
         start, data = self.ring.read(acc.until, until)
         acc.until = start
         rows = {name: r for r, name in enumerate(self.rows)}
-        bend = data[rows[self.bending[0]]] if self.bending[0] else None
-        motor = data[rows[self.motor[0]]] if self.motor[0] else data[rows[self.pinion[0]]]
-        acc.add(motor, bend)
+        bending, torque = self.bending[0], self.motor[0] or self.pinion[0]
+        assert torque is not None  # the state inputs need a motor or pinion torque channel
+        acc.add(data[rows[torque]], data[rows[bending]] if bending else None)
 
     def _barring_progress(self) -> None:
         if self.barring is not None:
