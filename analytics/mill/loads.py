@@ -1,5 +1,5 @@
-"""Per-mill analyzer: operating states, start/stop/barring events, steady-state metrics and fatigue
-damage by phase, fed with aligned multi-channel frames.
+"""The load stage of a mill's analysis: operating states, start/stop/barring events,
+steady-state metrics and fatigue damage by phase, fed with aligned multi-channel frames.
 
 Composition (DESIGN.md "Shape of the analytics code"): the state machine
 (:mod:`analytics.operation.operating_states`) turns speed and torque into transitions; each closed
