@@ -136,11 +136,13 @@ def expected_orders(
     options = options or KinematicsOptions()
     base = config.excitation_orders()
     mill_order = base["mill_speed"]
-    rows = [(name, name, "fundamental", order) for name, order in base.items()]
+    rows: list[tuple[str, str, LineKind, float]] = [
+        (name, name, "fundamental", order) for name, order in base.items()
+    ]
     for name, order in base.items():
         if name.startswith(MESH_PREFIXES):
             rows += [(n, name, k, o) for n, k, o in _mesh_orders(name, order, mill_order, options)]
-    return rows  # type: ignore[return-value]
+    return rows
 
 
 def expected_lines(

@@ -41,6 +41,7 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from analytics.contracts import check_snapshot
 from analytics.drivetrain.kinematics import ExpectedLine
 
 __all__ = [
@@ -258,7 +259,7 @@ def dynamic_factor(torque: np.ndarray, nominal: float | None = None) -> float:
 class DynamicFactorMeter:
     """Streaming eq. 13 over running frames: max |T| and mean T (compensated sum), snapshot-able.
 
-    Feed only steady running samples (as :class:`analytics.spectra.harmonics.HarmonicTracker`); the
+    Feed only steady running samples (as :class:`analytics.spectra.tracker.HarmonicTracker`); the
     value equals :func:`dynamic_factor` on the concatenated samples (to rounding of the mean).
     """
 
@@ -295,8 +296,7 @@ class DynamicFactorMeter:
     @classmethod
     def restore(cls, snapshot: dict[str, Any]) -> DynamicFactorMeter:
         """A meter that continues exactly where the snapshotted one stood."""
-        if snapshot.get("kind") != "dynamic_factor":
-            raise ValueError("not a dynamic factor snapshot")
+        check_snapshot(snapshot, "dynamic_factor", None, "dynamic factor")
         meter = cls(snapshot["nominal"])
         meter._max, meter._count = float(snapshot["max"]), int(snapshot["count"])
         meter._parts = [float(snapshot["sum"])] if meter._count else []

@@ -1,0 +1,25 @@
+"""Fatigue: rainflow counting and what is kept of its cycles.
+
+The counter and its fact::
+
+    rainflow         RainflowCounter: continual ASTM E1049-85 rainflow, exact across blocks
+    cycles           Cycles: the fact it emits (ranges, means, counts, sample indices)
+
+Recorders (consume Cycles; combine freely, as pyLife's detectors and recorders do)::
+
+    miner            MinerSum, DamageRecorder: Palmgren-Miner damage on one S-N curve, exact
+    matrices         RangeMeanMatrix, FromToMatrix: cycle histograms with configured bins
+    phase_damage     PhaseTimeline, PhaseDamage: damage by operating phase and local day,
+                     the cost of a start, monthly projections (seed 000 §8.3, App. D)
+
+Curves and sums::
+
+    sn_curves        SNCurve (m1, m2, S_D, N_D, N_L), Goodman correction, equivalent range
+    sn_models        named S-N models → curves
+    exact_sum        correctly rounded sums (compensated, for a year of 1 kHz data)
+    *_kernels        compiled loops of rainflow, damage and the exact sum
+
+Data flow: stress samples → RainflowCounter → Cycles → recorders. A new question about cycles
+is a new recorder here (keep the Stateful contract: split anywhere, snapshot/restore, bounded
+bins from configuration), not a change to the counter or its kernels.
+"""

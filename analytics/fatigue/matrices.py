@@ -35,6 +35,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from analytics.contracts import check_snapshot
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
 from analytics.snapshot_arrays import pack_array, unpack_array
@@ -171,7 +172,7 @@ class _Matrix:
             return NotImplemented
         return self._same_bins(other) and bool(np.array_equal(self._counts, other._counts))
 
-    __hash__ = None  # mutable
+    __hash__ = None  # type: ignore[assignment]  # mutable, so unhashable (as list and dict)
 
     def snapshot(self) -> dict[str, Any]:
         """Plain JSON-serialisable state (edges round-trip exactly)."""
@@ -186,11 +187,7 @@ class _Matrix:
     @classmethod
     def restore(cls, snapshot: dict[str, Any]) -> Any:
         """A new matrix equal to the snapshotted one."""
-        if snapshot.get("kind") != cls._KIND or snapshot.get("version") != _SNAPSHOT_VERSION:
-            raise ValueError(
-                f"not a {cls._KIND} snapshot of version {_SNAPSHOT_VERSION}: "
-                f"kind={snapshot.get('kind')!r}, version={snapshot.get('version')!r}"
-            )
+        check_snapshot(snapshot, cls._KIND, _SNAPSHOT_VERSION)
         out = cls._blank(*(unpack_array(snapshot[f"{axis}_edges"]) for axis in cls._AXES))
         try:
             counts = unpack_array(snapshot["half_cycles"], "<i8")

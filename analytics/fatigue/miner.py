@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from analytics.contracts import check_snapshot
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.exact_sum import fsum, fsum2
 from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
@@ -164,11 +165,7 @@ class MinerSum:
 
 
 def _check_snapshot(snapshot: dict[str, Any], kind: str) -> None:
-    if snapshot.get("kind") != kind or snapshot.get("version") != _SNAPSHOT_VERSION:
-        raise ValueError(
-            f"not a {kind} snapshot of version {_SNAPSHOT_VERSION}: "
-            f"kind={snapshot.get('kind')!r}, version={snapshot.get('version')!r}"
-        )
+    check_snapshot(snapshot, kind, _SNAPSHOT_VERSION)
 
 
 class DamageRecorder:

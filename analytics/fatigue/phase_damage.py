@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from analytics.fatigue import damage_kernel as _dk
+from analytics.contracts import check_snapshot
+from analytics.fatigue import damage_kernels as _dk
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.exact_sum import DIGITS, digits_value, fsum, hilo
 from analytics.fatigue.miner import DamageRecorder, MinerSum
@@ -205,7 +206,7 @@ class PhaseDamage:
         self, dmg: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline, decided_until: int
     ) -> bool:
         """The usual case in one compiled pass
-        (:func:`analytics.fatigue.damage_kernel.attribute_split`):
+        (:func:`analytics.fatigue.damage_kernels.attribute_split`):
         the decided cycles all closed on one local day. Books them as :meth:`_attribute` does
         (the same exact sums per state, in state order) and keeps the rest pending; False, and
         nothing changed, in any other case."""
@@ -303,6 +304,7 @@ class PhaseDamage:
 
     @classmethod
     def restore(cls, d: dict[str, Any]) -> PhaseDamage:
+        check_snapshot(d, "phase_damage", None, "phase damage")
         pd = cls(
             DamageRecorder.restore(d["recorder"]),
             d["t0_ns"],

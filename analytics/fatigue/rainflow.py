@@ -40,7 +40,8 @@ from typing import Any
 
 import numpy as np
 
-from analytics.fatigue import rainflow_kernel as _k
+from analytics.contracts import check_snapshot
+from analytics.fatigue import rainflow_kernels as _k
 from analytics.fatigue.cycles import Cycles
 from analytics.snapshot_arrays import pack_array, unpack_array
 
@@ -215,12 +216,7 @@ class RainflowCounter:
     @classmethod
     def restore(cls, snapshot: dict[str, Any]) -> RainflowCounter:
         """A new counter that continues exactly where the snapshotted one stood."""
-        if snapshot.get("kind") != "rainflow" or snapshot.get("version") != _SNAPSHOT_VERSION:
-            raise ValueError(
-                "not a rainflow counter snapshot of version "
-                f"{_SNAPSHOT_VERSION}: kind={snapshot.get('kind')!r}, "
-                f"version={snapshot.get('version')!r}"
-            )
+        check_snapshot(snapshot, "rainflow", _SNAPSHOT_VERSION, "rainflow counter")
         ints = unpack_array(snapshot["ints"], "<i8", shape=(_k.STARTED + 1,))
         floats = unpack_array(snapshot["floats"], shape=(_k.GATE + 1,))
         values = unpack_array(snapshot["stack_values"])

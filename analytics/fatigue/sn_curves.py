@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from analytics.fatigue import damage_kernel as _dk
+from analytics.fatigue import damage_kernels as _dk
 
 __all__ = [
     "GoodmanCorrection",
@@ -176,7 +176,7 @@ class SNCurve:
         _positive("N_D", self.N_D)
         if self.m2 is None:
             object.__setattr__(self, "m2", float(self.m1))
-        if not (self.m2 >= self.m1):
+        if not (self._m2 >= self.m1):
             raise ValueError(f"m2 must be >= m1 (or inf), got m1={self.m1!r}, m2={self.m2!r}")
         if not (self.N_L >= self.N_D):
             raise ValueError(f"cut-off N_L must be >= N_D (or inf), got {self.N_L!r}")
@@ -239,17 +239,22 @@ class SNCurve:
 
     # ------------------------------------------------------------ evaluation
     @property
+    def _m2(self) -> float:
+        """``m2`` as ``__post_init__`` left it: never None (None was given for ``m2 = m1``)."""
+        return self.m1 if self.m2 is None else self.m2
+
+    @property
     def S_L(self) -> float:
         """Cut-off stress in MPa (0.0 without a cut-off; S_D for a horizontal fatigue limit)."""
         if math.isinf(self.N_L):
-            return self.S_D if math.isinf(self.m2) else 0.0
-        return self.S_D * (self.N_D / self.N_L) ** (1.0 / self.m2)
+            return self.S_D if math.isinf(self._m2) else 0.0
+        return self.S_D * (self.N_D / self.N_L) ** (1.0 / self._m2)
 
     def strength(self, N: ArrayLike) -> np.ndarray:
         """S at ``N`` cycles (MPa, of this curve's kind); ``S_L`` beyond the cut-off."""
         n = np.asarray(N, dtype=np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
-            m = np.where(n <= self.N_D, self.m1, self.m2)
+            m = np.where(n <= self.N_D, self.m1, self._m2)
             s = self.S_D * np.exp(np.log(self.N_D / n) / m)
         return np.where(n >= self.N_L, self.S_L, s)
 
@@ -258,7 +263,7 @@ class SNCurve:
         s = _stresses(S, "stresses")
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             lr = np.log(s / self.S_D)
-            out = np.where(lr >= 0.0, self.m1, self.m2) * lr - math.log(self.N_D)
+            out = np.where(lr >= 0.0, self.m1, self._m2) * lr - math.log(self.N_D)
         return np.where((s < self.S_L) | (s == 0.0), -np.inf, out)
 
     def cycles_to_failure(self, S: ArrayLike) -> np.ndarray:
@@ -289,7 +294,7 @@ class SNCurve:
 
     def damage_of_ranges(self, ranges: np.ndarray, scale: float = 1.0) -> np.ndarray:
         """``damage_per_cycle(ranges * scale)`` (bitwise, a new array) in fewer passes: the
-        compiled passes of :mod:`analytics.fatigue.damage_kernel` around numpy's ``log`` and
+        compiled passes of :mod:`analytics.fatigue.damage_kernels` around numpy's ``log`` and
         ``exp``.
         ``scale`` > 0 multiplies the rainflow ranges (MPa after scaling), e.g. K_t."""
         r = np.ascontiguousarray(ranges, dtype=np.float64)
@@ -300,7 +305,7 @@ class SNCurve:
             return self.damage_per_cycle(r * scale)  # raises as the checked path does
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             np.log(q, out=q)
-            _dk.log_damage(s, q, float(self.m1), float(self.m2), math.log(self.N_D), self.S_L)
+            _dk.log_damage(s, q, float(self.m1), float(self._m2), math.log(self.N_D), self.S_L)
             return np.exp(q, out=q)
 
     def damage(
@@ -331,7 +336,7 @@ class SNCurve:
         unknown = set(data) - fields
         if unknown:
             raise ValueError(f"unknown S-N curve fields: {sorted(unknown)}")
-        values = {k: (math.inf if v == "inf" else v) for k, v in data.items()}
+        values: dict[str, Any] = {k: (math.inf if v == "inf" else v) for k, v in data.items()}
         return cls(**values)
 
 

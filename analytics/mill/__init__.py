@@ -1,0 +1,18 @@
+"""The per-mill composition: one analyzer object per mill, used alike by live ingest, replay
+and offline analysis (DESIGN.md: identical results for the same samples).
+
+Modules (each imports only the ones listed before it)::
+
+    report           the tables of the load report (starts per month, phase seconds, damage,
+                     start cost, projections), from plain pieces
+    loads            LoadAnalysis: the load stage — states, events, steady state, rainflow and
+                     damage per component, phase and day; owns its snapshot/restore
+    analyzer         MillAnalyzer: THE per-mill analyzer — calibration, aligner, faults, tacho,
+                     LoadAnalysis, harmonic tracker; its public reading API is what callers use
+
+Data flow: block → MillAnalyzer (calibrate, align, flag, tacho) → LoadAnalysis.feed(frame)
+→ events, windows, damage; → HarmonicTracker on the running samples. A new per-mill output
+is read through a public method/property on MillAnalyzer (callers never reach into its
+stages); a new piece of LoadAnalysis state goes in its ``snapshot``/``_load`` (a test fails
+otherwise); a new report table is a function in ``report``.
+"""

@@ -1,4 +1,4 @@
-"""The one analyzer per mill: decoded channel blocks in, events, reports and snapshots out.
+"""The analyzer of one mill: decoded channel blocks in, events, reports and snapshots out.
 
 DESIGN.md asks that live ingest, ``millwatch replay`` through zenoh and offline
 ``millwatch analyze`` give identical results for the same samples. They all feed this class,
@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.mill.loads import LoadAnalysis
 from analytics.operation.operating_states import OperatingState
@@ -41,13 +42,10 @@ from analytics.signal.fault_stage import FaultStage
 from analytics.signal.frame_aligner import Frame, FrameAligner
 from analytics.signal.tacho import TachoSpeed
 from analytics.signal.telemetry_faults import hold_last_good
-from analytics.spectra.harmonics import (
-    HarmonicTracker,
-    HarmonicWindow,
-    SnapshotMismatch,
-    harmonics_report,
-    stagger_for,
-)
+from analytics.spectra.facts import HarmonicWindow
+from analytics.spectra.report import harmonics_report
+from analytics.spectra.settings import stagger_for
+from analytics.spectra.tracker import HarmonicTracker
 
 __all__ = ["DERIVED_SPEED", "AnalyzerOutput", "MillAnalyzer"]
 
@@ -86,7 +84,15 @@ def analysis_config(config: MillConfig) -> MillConfig:
 
 
 class MillAnalyzer:
-    """See the module docstring. ``push`` one decoded block at a time, in arrival order."""
+    """The analyzer of one mill: the composition of every stage, from raw blocks to events,
+    harmonic windows, reports and snapshots (module docstring). The one object live ingest,
+    replay and offline analysis each build per mill.
+
+    Feed it with :meth:`push` (or :meth:`add`/:meth:`add_blocks` then :meth:`process`), one
+    decoded block at a time in arrival order. Read it through the properties and methods under
+    "reading" (sample counts, times in ns since the Unix epoch, damage as Miner sums); its
+    stages (``aligner``, ``faults``, ``tacho``, ``loads``, ``harmonics``) are its own business.
+    """
 
     def __init__(self, config: MillConfig) -> None:
         self.config = config
@@ -236,7 +242,7 @@ class MillAnalyzer:
         """Feed the harmonic tracker the running samples: the state after each sample decides
         (not the state at the end of a frame), so spectra do not depend on the framing."""
         n = len(frame)
-        shown = self.loads.sm.shown
+        shown = self.loads.shown_states
         if n == 0 or shown.shape[0] != n:
             return
         running = shown == _RUNNING
@@ -282,7 +288,71 @@ class MillAnalyzer:
     # ------------------------------------------------------------------ reading
     @property
     def state(self) -> str:
-        return self.loads.sm.state.label
+        """Operating state after the last sample analysed (``"running"``, ``"stopped"``, …)."""
+        return self.loads.state.label
+
+    @property
+    def samples(self) -> int:
+        """Stream samples analysed so far (aligned samples still waiting not included)."""
+        return self.loads.n
+
+    @property
+    def first_sample_ns(self) -> int | None:
+        """Time of the first sample analysed (ns since the Unix epoch); None before any."""
+        return self.loads.t0_ns
+
+    @property
+    def next_sample_ns(self) -> int | None:
+        """Time of the next sample to analyse, i.e. just past the last one analysed (ns since
+        the Unix epoch); None before any sample."""
+        a = self.loads
+        return a.t_ns(a.n) if a.t0_ns is not None else None
+
+    @property
+    def seconds_analysed(self) -> float:
+        """Stream time analysed so far: samples / sample rate (s)."""
+        return self.loads.n / self.loads.fs
+
+    @property
+    def steady_windows(self) -> list[dict[str, Any]]:
+        """The most recent steady-state windows (plain dicts with ``t_ns``), oldest first; at
+        most the number :meth:`keep_recent` set."""
+        return self.loads.windows
+
+    @property
+    def tracked_channels(self) -> list[str]:
+        """Channels whose harmonics are tracked."""
+        return [ch.name for ch in self.harmonics.channels]
+
+    def keep_recent(self, windows: int, events: int) -> None:
+        """Keep only the last ``windows`` steady windows and ``events`` events of each kind in
+        memory (and in snapshots), for a caller that stores each as it comes; the default
+        keeps what an offline report shows (a day of windows, 2000 events)."""
+        self.loads.keep_windows = windows
+        self.loads.keep_events = events
+
+    def starts_in_month(self, month: str) -> int:
+        """Starts counted in the local calendar month ``month`` (``"YYYY-MM"``, site time
+        zone); 0 for a month not (or no longer) kept."""
+        return self.loads.starts_per_month.get(month, {}).get("starts", 0)
+
+    def committed_damage(self) -> dict[str, float]:
+        """Miner damage of the closed rainflow cycles so far, per component (dimensionless)."""
+        return {comp: pd.committed for comp, pd in self.loads.damage.items()}
+
+    def damage_summary(self) -> dict[str, dict[str, float]]:
+        """Miner damage per component: ``committed``, ``pending_residue``, ``with_residue``
+        (:meth:`LoadAnalysis.damage_summary <analytics.mill.loads.LoadAnalysis.damage_summary>`)."""
+        return self.loads.damage_summary()
+
+    def damage_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
+        """Attributed Miner damage per component, local day and phase so far (exact sums; the
+        same however often it is called)."""
+        return self.loads.damage_by_day()
+
+    def spike_counts(self) -> dict[str, int]:
+        """Telemetry spikes flagged so far, per checked channel."""
+        return {n: c.spikes for n, c in self.faults.totals().items()}
 
     def report(self) -> dict[str, Any]:
         """The analyzer's report plus harmonics, unexplained peaks and data quality."""
@@ -298,6 +368,8 @@ class MillAnalyzer:
 
     # ------------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
+        """Complete state as plain JSON data (contract: :class:`analytics.contracts.Stateful`);
+        only between :meth:`process` calls, with no aligned frame waiting."""
         if self._queued:
             raise RuntimeError("process() the aligned frames before taking a snapshot")
         return {
@@ -314,20 +386,19 @@ class MillAnalyzer:
 
     @classmethod
     def restore(cls, config: MillConfig, snap: dict[str, Any]) -> MillAnalyzer:
-        """A analyzer that continues exactly where the snapshotted one stood.
+        """An analyzer that continues exactly where the snapshotted one stood.
 
         After a configuration change that moves the harmonic tracker's geometry (pinion
         speed, tooth counts, liner count, telemetry bandwidth) its snapshot no longer fits
-        (:class:`~analytics.spectra.harmonics.SnapshotMismatch`): the tracker then starts afresh —
+        (:class:`~analytics.contracts.SnapshotMismatch`): the tracker then starts afresh —
         its
         state is only spectra in progress — while everything else (damage, rainflow residues,
         operating states, events) continues; :attr:`spectra_restarted` says why. A snapshot
         at another sample rate, or of another set of channels, raises
-        :class:`~analytics.spectra.harmonics.SnapshotMismatch`: its sample counts would mean other
+        :class:`~analytics.contracts.SnapshotMismatch`: its sample counts would mean other
         times, or its aligner would go on framing the old channels (an added channel's blocks
         ignored for good, a removed one's waited for)."""
-        if snap.get("kind") != "mill_monitor" or snap.get("version") != _SNAPSHOT_VERSION:
-            raise ValueError(f"not a mill analyzer snapshot of version {_SNAPSHOT_VERSION}")
+        check_snapshot(snap, "mill_monitor", _SNAPSHOT_VERSION, "mill analyzer")
         if snap["mill"] != config.id:
             raise ValueError(f"snapshot of mill {snap['mill']!r}, configuration is {config.id!r}")
         was_fs, fs = float(snap["aligner"]["fs"]), float(config.sample_rate_hz)

@@ -1,5 +1,5 @@
-"""Per-mill analyzer: operating states, start/stop/barring events, steady-state metrics and fatigue
-damage by phase, fed with aligned multi-channel frames.
+"""The load stage of a mill's analysis: operating states, start/stop/barring events,
+steady-state metrics and fatigue damage by phase, fed with aligned multi-channel frames.
 
 Composition (DESIGN.md "Shape of the analytics code"): the state machine
 (:mod:`analytics.operation.operating_states`) turns speed and torque into transitions; each closed
@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from analytics.contracts import check_snapshot
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.drivetrain.stress import THETA_SEED, combined_stress, shear_stress_from_torque
 from analytics.fatigue.miner import DamageRecorder
@@ -51,6 +52,7 @@ from analytics.fatigue.phase_damage import (
     PhaseTimeline,
 )
 from analytics.fatigue.rainflow import RainflowCounter
+from analytics.mill.report import damage_table, months_table, phase_seconds
 from analytics.operation.operating_states import (
     OperatingState,
     OperatingStateMachine,
@@ -76,11 +78,12 @@ _PREROLL_S = 1.0
 _RING_S = 90.0
 _KEEP_EVENTS = 2000
 _KEEP_WINDOWS = 1440
+_SNAPSHOT_KIND = "mill_analyzer"  # the name LoadAnalysis had when checkpoints were first written
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 #: Local days and calendar months of start counts kept (state stays bounded; 400 days ≈ 14
 #: months). The total since the start of the record is kept apart (``starts_total``).
 KEEP_START_DAYS = 400
 KEEP_START_MONTHS = 14
-_SNAPSHOT_VERSION = 1
 
 
 def _channel(config: MillConfig, kind: str, shaft: str, side: str | None) -> str | None:
@@ -100,12 +103,28 @@ def component_names(config: MillConfig) -> list[str]:
 
 
 class LoadAnalysis:
-    """Streaming analyzer of one mill; see the module docstring.
+    """The load stage of one mill's analysis: operating states, start/stop/barring events,
+    steady-state windows and fatigue damage by component, phase and day (module docstring).
 
-    ``feed(frame)`` takes an aligned frame (channel names of the mill config; missing channels
-    or samples NaN; optional ``flags`` masks) and returns the events completed in it (plain
-    dicts). ``report()`` is plain data; ``snapshot()``/``restore()`` continue exactly.
+    It is one stage of :class:`~analytics.mill.analyzer.MillAnalyzer`, which calibrates, aligns
+    and fault-flags the channels before it and tracks harmonics after it. ``feed(frame)`` takes
+    an aligned frame (channel names of the mill config; missing channels or samples NaN;
+    optional ``flags`` masks) and returns the events completed in it (plain dicts).
+    :meth:`report` is plain data; :meth:`snapshot`/:meth:`restore` keep the contract of
+    :class:`analytics.contracts.Stateful`.
+
+    Public attributes read by callers: ``n`` (stream samples fed), ``t0_ns`` (time of sample 0,
+    None before the first frame), ``fs`` (Hz), ``windows``/``starts``/``stops``/``barrings``
+    (the last ``keep_windows``/``keep_events`` of each, plain dicts), ``starts_per_month``
+    (local calendar month → ``{"starts": n}``), ``starts_total``.
     """
+
+    #: Attributes derived in ``__init__`` from the configuration and the caller's settings; every
+    #: other attribute is state, written by :meth:`snapshot` and set back by :meth:`restore`.
+    CONFIGURED = frozenset({
+        "config", "fs", "settings", "window_s", "keep_windows", "keep_events",
+        "speed_ch", "rated_rpm", "sides", "motor", "pinion", "bending", "rows", "components",
+    })  # fmt: skip
 
     def __init__(
         self,
@@ -159,7 +178,10 @@ class LoadAnalysis:
         self.rated_rpm = cfg.drive.motor_speed_rpm if shaft == "motor" else cfg.pinion_speed_rpm
         self.sides = cfg.sides
         rows = [self.speed_ch]
-        self.motor, self.pinion, self.bending = [], [], []
+        #: Channel names per side (None where the mill has no such channel).
+        self.motor: list[str | None] = []
+        self.pinion: list[str | None] = []
+        self.bending: list[str | None] = []
         for side in self.sides:
             for lst, kind, sh in (
                 (self.motor, "torque", "motor"),
@@ -277,6 +299,18 @@ class LoadAnalysis:
             return t0 + (sample * 1_000_000_000) // int(self.fs)
         return t0 + round(sample * 1e9 / self.fs)
 
+    @property
+    def state(self) -> OperatingState:
+        """The operating state after the last sample fed (tentative until decided)."""
+        return self.sm.state
+
+    @property
+    def shown_states(self) -> np.ndarray:
+        """Operating state (``int8`` values of :class:`OperatingState`) after each sample of
+        the last frame fed: what a consumer that follows the scene sample by sample (the
+        harmonic tracker) goes by, so its results do not depend on the framing."""
+        return self.sm.shown
+
     # ------------------------------------------------------------ phases and events
     def _on_transition(self, tr: Transition) -> list[dict[str, Any]]:
         """Book the phase that ended; measure the events it closed; open new ones."""
@@ -384,9 +418,9 @@ class LoadAnalysis:
         start, data = self.ring.read(acc.until, until)
         acc.until = start
         rows = {name: r for r, name in enumerate(self.rows)}
-        bend = data[rows[self.bending[0]]] if self.bending[0] else None
-        motor = data[rows[self.motor[0]]] if self.motor[0] else data[rows[self.pinion[0]]]
-        acc.add(motor, bend)
+        bending, torque = self.bending[0], self.motor[0] or self.pinion[0]
+        assert torque is not None  # the state inputs need a motor or pinion torque channel
+        acc.add(data[rows[torque]], data[rows[bending]] if bending else None)
 
     def _barring_progress(self) -> None:
         if self.barring is not None:
@@ -497,18 +531,101 @@ class LoadAnalysis:
             out[comp] = pd.days()
         return out
 
-    def report(self) -> dict[str, Any]:
-        """Everything measured so far, as plain JSON-ready data."""
-        from analytics.mill.report import build_report
+    def damage_summary(self) -> dict[str, dict[str, float]]:
+        """Miner damage per component so far: closed cycles (``committed``), what closing the
+        open rainflow residue now as half cycles would add (``pending_residue``), and their sum
+        (``with_residue``). Cheap: the residue is a few turning points, closed on a copy."""
+        out = {}
+        for comp, pd in self.damage.items():
+            committed = pd.committed
+            with_residue = pd.with_residue(self.counters[comp].close())
+            out[comp] = {
+                "committed": committed,
+                "pending_residue": with_residue - committed,
+                "with_residue": with_residue,
+            }
+        return out
 
-        return build_report(self)
+    def report(self) -> dict[str, Any]:
+        """Everything measured so far, as plain JSON-ready data (tables of
+        :mod:`analytics.mill.report`)."""
+        seconds = phase_seconds(self.phase_samples, self.timeline, self.n, self.fs)
+        failed: dict[str, int] = {}
+        for s in self.starts:
+            if s["failed"]:
+                month = self._local(s["sample"]).strftime("%Y-%m")
+                failed[month] = failed.get(month, 0) + 1
+        for pd in self.damage.values():
+            pd.attribute(self.timeline, self.sm.decided_until)
+        residues = {c: k.close() for c, k in self.counters.items()}
+        cfg = self.config
+        return {
+            "mill": cfg.id,
+            "site": cfg.site,
+            "time_zone": cfg.time_zone,
+            "t0_ns": self.t0_ns,
+            "samples": self.n,
+            "t_end_ns": self.t_ns(self.n) if self.t0_ns is not None else None,
+            "state": self.sm.state.label,
+            "starts": list(self.starts),
+            "stops": list(self.stops),
+            "barring": list(self.barrings),
+            "starts_per_day": dict(sorted(self.starts_per_day.items())),
+            "starts_per_month": months_table(self.starts_per_month, failed, cfg.alarms),
+            "steady_state": list(self.windows),
+            "phase_seconds": seconds,
+            "damage": damage_table(
+                self.damage, residues, seconds, self.starts_total, self.n / self.fs
+            ),
+        }
 
     # ------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
-        """Complete state as plain JSON-serialisable data."""
-        from analytics.mill.snapshot import snapshot_analyzer
+        """Complete state as plain JSON data (contract: :class:`analytics.contracts.Stateful`).
 
-        return snapshot_analyzer(self)
+        Every attribute that changes while samples are fed is here and :meth:`_load` sets it
+        back; what ``__init__`` derives from the configuration and the caller's settings is
+        listed in :attr:`CONFIGURED` instead (a test fails on an attribute in neither). The
+        ring keeps only the samples an open phase, the steady-state meter or a phase window's
+        pre-roll may still read."""
+        return {
+            "kind": _SNAPSHOT_KIND,
+            "version": _SNAPSHOT_VERSION,
+            "mill": self.config.id,
+            "n": self.n,
+            "t0_ns": self.t0_ns,
+            "steady_until": self.steady_until,
+            "open_start": self.open_start,
+            "open_stop": self.open_stop,
+            "stop_after_start": self.stop_after_start,
+            "starts": self.starts,
+            "stops": self.stops,
+            "barrings": self.barrings,
+            "windows": self.windows,
+            "starts_per_day": self.starts_per_day,
+            "starts_per_month": self.starts_per_month,
+            "phase_samples": self.phase_samples,
+            "lead": self.lead,
+            "discontinuities": self.discontinuities,
+            "last": {k: repr(v) for k, v in self.last.items()},
+            "sm": self.sm.snapshot(),
+            "timeline": self.timeline.snapshot(),
+            "ring": self.ring.snapshot(self._ring_needed_from()),
+            "counters": {c: k.snapshot() for c, k in self.counters.items()},
+            "damage": {c: p.snapshot() for c, p in self.damage.items()},
+            "meter": self.meter.snapshot(),
+            "barring": None if self.barring is None else self.barring.snapshot(),
+            "starts_total": self.starts_total,
+        }
+
+    def _ring_needed_from(self) -> int:
+        """Oldest ring sample a later phase window, barring session or steady window may read."""
+        pre = round(_PREROLL_S * self.fs)
+        need = [self.n - pre, self.steady_until, self.sm.decided_until - pre]
+        need += [x - pre for x in (self.open_start, self.open_stop) if x >= 0]
+        if self.barring is not None:
+            need.append(self.barring.until)
+        return min(need)
 
     @classmethod
     def restore(
@@ -518,11 +635,46 @@ class LoadAnalysis:
         settings: TransientSettings | None = None,
         window_s: float = 60.0,
     ) -> LoadAnalysis:
-        """An analyzer for ``config`` that continues exactly where the snapshotted one stood
+        """An analysis for ``config`` that continues exactly where the snapshotted one stood
         (pass the same ``settings``/``window_s`` as the original; thresholds are restored)."""
-        from analytics.mill.snapshot import restore_analyzer
+        check_snapshot(snapshot, _SNAPSHOT_KIND, _SNAPSHOT_VERSION)
+        if snapshot["mill"] != config.id:
+            raise ValueError(
+                f"snapshot of mill {snapshot['mill']!r}, configuration is {config.id!r}"
+            )
+        a = cls(config, settings=settings, window_s=window_s)
+        a._load(snapshot)
+        return a
 
-        return restore_analyzer(cls(config, settings=settings, window_s=window_s), snapshot)
+    def _load(self, d: dict[str, Any]) -> None:
+        """Set every attribute :meth:`snapshot` wrote (the same list, in the same order)."""
+        self.n = d["n"]
+        self.t0_ns = d["t0_ns"]
+        self.steady_until = d["steady_until"]
+        self.open_start = d["open_start"]
+        self.open_stop = d["open_stop"]
+        self.stop_after_start = d["stop_after_start"]
+        self.starts = d["starts"]
+        self.stops = d["stops"]
+        self.barrings = d["barrings"]
+        self.windows = d["windows"]
+        self.starts_per_day = d["starts_per_day"]
+        self.starts_per_month = d["starts_per_month"]
+        self.phase_samples = d["phase_samples"]
+        self.lead = d["lead"]
+        self.discontinuities = d["discontinuities"]
+        self.last = {k: float(v) for k, v in d["last"].items()}
+        self.sm = OperatingStateMachine.restore(d["sm"])
+        self.timeline = PhaseTimeline.restore(d["timeline"])
+        self.ring = SampleRing.restore(d["ring"])
+        self.counters = {c: RainflowCounter.restore(s) for c, s in d["counters"].items()}
+        self.damage = {c: PhaseDamage.restore(s) for c, s in d["damage"].items()}
+        self.meter.restore_state(d["meter"])
+        self.barring = None if d["barring"] is None else BarringAccumulator.restore(d["barring"])
+        # (a snapshot from before the total was kept counted every month it had seen)
+        self.starts_total = int(
+            d.get("starts_total", sum(m["starts"] for m in self.starts_per_month.values()))
+        )
 
 
 def _plain(obj: Any) -> Any:

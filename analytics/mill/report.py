@@ -1,26 +1,38 @@
-"""The plain-data report of a :class:`~analytics.mill.loads.LoadAnalysis`.
+"""The tables of a :class:`~analytics.mill.loads.LoadAnalysis` report, from plain pieces.
 
 Sources: seed 000 §6.1.3 and §6.2.8 (starts per month against the supplier norm of 3–5; field
 average 20–22, peak 90), §8.3 and App. D (damage by phase, the cost of a start, damage per month
 for 5 starts/day, 1/day, 1/week, 1/month). Alarm levels come from the mill configuration.
+
+Each function takes the counts, timelines and recorders it tabulates, not the analysis object,
+so this module sits below :mod:`analytics.mill.loads` (which calls it) and imports nothing of it.
+A new report table goes here as one more such function, called from ``LoadAnalysis.report``.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from analytics.drivetrain.mill_config import AlarmThresholds
+from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
+    PHASE_OF_STATE,
+    PhaseDamage,
+    PhaseTimeline,
     project_monthly_damage,
     start_cost,
 )
+from analytics.operation.operating_states import OperatingState
 
-if TYPE_CHECKING:
-    from analytics.drivetrain.mill_config import AlarmThresholds
-    from analytics.mill.loads import LoadAnalysis
-
-__all__ = ["STARTS_NORM_PER_MONTH", "build_report", "starts_status"]
+__all__ = [
+    "STARTS_NORM_PER_MONTH",
+    "damage_table",
+    "months_table",
+    "phase_seconds",
+    "starts_status",
+]
 
 STARTS_NORM_PER_MONTH = (3, 5)
 """Supplier norm for starts per month (seed 000 §6.1.3)."""
@@ -38,72 +50,54 @@ def starts_status(n: int, alarms: AlarmThresholds) -> str:
     return "ok" if n <= STARTS_NORM_PER_MONTH[1] else "above norm"
 
 
-def build_report(a: LoadAnalysis) -> dict[str, Any]:
-    """Everything measured so far (JSON-ready)."""
-    seconds = _phase_seconds(a)
-    return {
-        "mill": a.config.id,
-        "site": a.config.site,
-        "time_zone": a.config.time_zone,
-        "t0_ns": a.t0_ns,
-        "samples": a.n,
-        "t_end_ns": a.t_ns(a.n) if a.t0_ns is not None else None,
-        "state": a.sm.state.label,
-        "starts": list(a.starts),
-        "stops": list(a.stops),
-        "barring": list(a.barrings),
-        "starts_per_day": dict(sorted(a.starts_per_day.items())),
-        "starts_per_month": _months(a),
-        "steady_state": list(a.windows),
-        "phase_seconds": seconds,
-        "damage": _damage(a, seconds),
-    }
-
-
-def _months(a: LoadAnalysis) -> dict[str, dict[str, Any]]:
+def months_table(
+    starts_per_month: dict[str, dict[str, int]],
+    failed_per_month: dict[str, int],
+    alarms: AlarmThresholds,
+) -> dict[str, dict[str, Any]]:
     """Starts per calendar month (site time zone), failed starts, and the status against the
     norm (3–5, §6.1.3) and the configured warning/alarm levels."""
-    failed: dict[str, int] = {}
-    for s in a.starts:
-        if s["failed"]:
-            month = a._local(s["sample"]).strftime("%Y-%m")
-            failed[month] = failed.get(month, 0) + 1
-    alarms = a.config.alarms
     out = {}
-    for month, rec in sorted(a.starts_per_month.items()):
+    for month, rec in sorted(starts_per_month.items()):
         n = rec["starts"]
         out[month] = {
             "starts": n,
-            "failed_starts": failed.get(month, 0),
+            "failed_starts": failed_per_month.get(month, 0),
             "norm": list(STARTS_NORM_PER_MONTH),
             "status": starts_status(n, alarms),
         }
     return out
 
 
-def _phase_seconds(a: LoadAnalysis) -> dict[str, float]:
-    samples = dict(a.phase_samples)
-    if a.timeline.samples:
-        from analytics.fatigue.phase_damage import PHASE_OF_STATE
-        from analytics.operation.operating_states import OperatingState
+def phase_seconds(
+    phase_samples: dict[str, int], timeline: PhaseTimeline, n: int, fs: float
+) -> dict[str, float]:
+    """Seconds per phase: the closed phases' samples plus the current phase up to sample ``n``."""
+    samples = dict(phase_samples)
+    if timeline.samples:
+        current = PHASE_OF_STATE[OperatingState(timeline.states[-1])]
+        samples[current] += max(n - timeline.samples[-1], 0)
+    return {p: k / fs for p, k in samples.items()}
 
-        current = PHASE_OF_STATE[OperatingState(a.timeline.states[-1])]
-        samples[current] += max(a.n - a.timeline.samples[-1], 0)
-    return {p: n / a.fs for p, n in samples.items()}
 
-
-def _damage(a: LoadAnalysis, seconds: dict[str, float]) -> dict[str, Any]:
+def damage_table(
+    damage: dict[str, PhaseDamage],
+    residues: dict[str, Cycles],
+    seconds: dict[str, float],
+    starts_total: int,
+    elapsed_s: float,
+) -> dict[str, Any]:
+    """Per component: committed damage, what closing the rainflow ``residues`` would add, damage
+    by phase and day, the cost of a start and monthly projections (App. D scenarios and the
+    observed start rate). ``damage`` must be attributed up to the decided sample first."""
     out = {}
-    n_starts = a.starts_total
-    elapsed = a.n / a.fs
     scenarios = dict(APP_D_SCENARIOS)
-    if elapsed > 0:
-        scenarios["observed"] = n_starts / elapsed * MONTH_S  # this record's start rate
-    for comp, pd in a.damage.items():
-        pd.attribute(a.timeline, a.sm.decided_until)
-        pending = pd.with_residue(a.counters[comp].close())
+    if elapsed_s > 0:
+        scenarios["observed"] = starts_total / elapsed_s * MONTH_S  # this record's start rate
+    for comp, pd in damage.items():
+        pending = pd.with_residue(residues[comp])
         phases = pd.phases()
-        cost = start_cost(phases, n_starts, seconds["start"] + seconds["stop"], seconds["run"])
+        cost = start_cost(phases, starts_total, seconds["start"] + seconds["stop"], seconds["run"])
         out[comp] = {
             "curve": pd.recorder.curve.name,
             "kt": pd.recorder.scale,

@@ -1,0 +1,15 @@
+"""What the mill is doing: operating states and the measures of each phase.
+
+Modules::
+
+    operating_states OperatingStateMachine: stopped/starting/running/stopping/barring/unknown
+                     from speed and torque, one Transition per change (seed 000 §6.1)
+    transients       start, stop and barring measures on one phase's samples (seed 000 §6.2)
+    steady_state     SteadyStateMeter: steady windows of running (mean, oscillation, imbalance)
+    state_kernels, steady_kernels   their compiled loops
+
+Data flow: speed + torque → state machine (a counter emitting transitions) → the load stage
+cuts phases from them, measures closed phases with ``transients`` and feeds running samples to
+the steady-state meter. A new event measure goes in ``transients``; a new per-window metric in
+``steady_state``; a new state needs the state machine and its kernel.
+"""

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from analytics.contracts import check_snapshot
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.signal.frame_aligner import Frame
 from analytics.signal.telemetry_faults import FaultCounts, FaultFlags, TelemetryFaultDetector
@@ -117,8 +118,7 @@ class FaultStage:
         }
 
     def restore(self, snap: dict[str, Any]) -> None:
-        if snap.get("kind") != "fault_stage" or snap.get("version") != _SNAPSHOT_VERSION:
-            raise ValueError(f"not a fault stage snapshot of version {_SNAPSHOT_VERSION}")
+        check_snapshot(snap, "fault_stage", _SNAPSHOT_VERSION, "fault stage")
         self.detectors = {
             n: TelemetryFaultDetector.restore(s) for n, s in snap["detectors"].items()
         }

@@ -25,8 +25,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
+from analytics.contracts import check_snapshot
+from analytics.signal.aligner_kernels import _emitted_groups, _gather_rows
 from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["Frame", "FrameAligner"]
@@ -49,50 +50,6 @@ class Frame:
 
     def __len__(self) -> int:
         return int(next(iter(self.data.values())).shape[0]) if self.data else 0
-
-
-@njit(cache=True, nogil=True)
-def _emitted_groups(present, chan, group, max_pending):
-    """Replay :meth:`FrameAligner.push` of blocks (``chan[k]``, grid group ``group[k]``) in
-    arrival order over the groups already ``present`` (groups × channels), emitting as its
-    drain does; returns how many leading groups come out complete and in order, or -1 when a
-    block would be late or repeated, or a group emitted incomplete (``max_pending`` exceeded) or
-    after a gap — the cases the caller leaves to block-by-block pushes."""
-    n_groups, n_ch = present.shape
-    counts = np.zeros(n_groups, dtype=np.int64)
-    for g in range(n_groups):
-        for c in range(n_ch):
-            counts[g] += present[g, c]
-    state = np.zeros(2, dtype=np.int64)  # groups emitted, groups open (started, not emitted)
-    state[1] = np.count_nonzero(counts)
-    for k in range(chan.shape[0]):
-        g, c = group[k], chan[k]
-        if g < state[0] or present[g, c]:
-            return -1
-        present[g, c] = True
-        counts[g] += 1
-        state[1] += counts[g] == 1
-        if not _drain_groups(counts, state, n_ch, max_pending):
-            return -1
-    return state[0]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _drain_groups(counts, state, n_ch, max_pending):
-    """The aligner's drain over group counts; False when it would emit a group incomplete or
-    after a gap."""
-    while state[1] > 0:
-        m = state[0]
-        while counts[m] == 0:
-            m += 1
-        complete = counts[m] == n_ch
-        if not (complete or state[1] > max_pending):
-            return True
-        if not complete or m != state[0]:
-            return False
-        state[0] += 1
-        state[1] -= 1
-    return True
 
 
 class FrameAligner:
@@ -277,8 +234,7 @@ class FrameAligner:
         snapshot's channels in the order the caller numbers them now (:meth:`push_blocks` takes
         channel numbers; a configuration may list them in another order than when the snapshot
         was taken); default the snapshot's order."""
-        if snap.get("kind") != "frame_aligner" or snap.get("version") != _SNAPSHOT_VERSION:
-            raise ValueError(f"not a frame aligner snapshot of version {_SNAPSHOT_VERSION}")
+        check_snapshot(snap, "frame_aligner", _SNAPSHOT_VERSION, "frame aligner")
         if channels is not None and sorted(channels) != sorted(snap["channels"]):
             raise ValueError(f"channels {channels} are not the snapshot's {snap['channels']}")
         a = cls(channels or snap["channels"], snap["fs"], max_pending=snap["max_pending"],
@@ -289,18 +245,6 @@ class FrameAligner:
         }
         a.missing_blocks, a.gap_samples, a.dropped_blocks = snap["counters"]
         return a
-
-
-@njit(cache=True, nogil=True)
-def _gather_rows(rows, mine, out, a):
-    """Rows ``mine`` of ``rows`` back to back into ``out`` from index ``a``, each sample cast to
-    ``out``'s dtype (float32 → float64 is exact) on the way: one pass over the samples."""
-    n = rows.shape[1]
-    for k in range(mine.shape[0]):
-        r = mine[k]
-        b = a + k * n
-        for i in range(n):
-            out[b + i] = rows[r, i]
 
 
 def _joined_rows(parts: list[np.ndarray], rows: np.ndarray, mine: np.ndarray, n: int) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Running median over a sliding window with reflected ends: the harmonic tables' noise floor.
 
-:mod:`analytics.spectra.harmonics` takes the noise floor of a power spectrum as the median of the
+:mod:`analytics.spectra.tracker` takes the noise floor of a power spectrum as the median of the
 ``2h + 1`` bins around each bin (ends reflected, as ``np.pad(x, h, mode="reflect")``). The numpy
 form (``np.median`` over a ``sliding_window_view``) partitions a copy of every window: ~10 ms per
 channel for a 11 000-bin spectrum, most of a table's cost. This kernel keeps the window sorted and
@@ -21,7 +21,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from analytics.spectra.median_kernels import (
+    _local_maxima,
+    _may_exceed,
+    _median_at,
+    _medians_at,
+    _slide,
+)
 
 __all__ = ["NoiseFloor", "local_maxima", "running_median", "running_median_numpy"]
 
@@ -100,66 +107,3 @@ def running_median_numpy(x: np.ndarray, h: int) -> np.ndarray:
         return np.empty(0)
     view = np.lib.stride_tricks.sliding_window_view(np.pad(x, h, mode="reflect"), 2 * h + 1)
     return np.median(view, axis=1)
-
-
-@njit(cache=True, nogil=True)
-def _count_below(win: np.ndarray, v: float) -> int:  # pragma: no cover - compiled
-    """Number of values of ``win`` below ``v`` (a branch-free count: vectorised)."""
-    c = 0
-    for t in range(win.shape[0]):
-        c += win[t] < v
-    return c
-
-
-@njit(cache=True, nogil=True)
-def _slide(padded: np.ndarray, w: int, out: np.ndarray) -> None:  # pragma: no cover - compiled
-    win = np.sort(padded[:w])
-    mid = w // 2
-    out[0] = win[mid]
-    for i in range(1, out.shape[0]):
-        old, new = padded[i - 1], padded[i + w - 1]
-        k = _count_below(win, old)  # win[k] == old: replace it, keeping the window sorted
-        j = _count_below(win, new)  # (counts old itself when old < new)
-        if j > k:
-            for t in range(k, j - 1):
-                win[t] = win[t + 1]
-            win[j - 1] = new
-        else:
-            for t in range(k, j, -1):
-                win[t] = win[t - 1]
-            win[j] = new
-        out[i] = win[mid]
-
-
-@njit(cache=True, nogil=True)
-def _median_at(padded: np.ndarray, w: int, i: int) -> float:  # pragma: no cover - compiled
-    return np.sort(padded[i : i + w])[w // 2]
-
-
-@njit(cache=True, nogil=True)
-def _medians_at(padded: np.ndarray, w: int, idx: np.ndarray, out: np.ndarray) -> None:
-    for n in range(idx.shape[0]):  # pragma: no cover - compiled
-        out[n] = np.sort(padded[idx[n] : idx[n] + w])[w // 2]
-
-
-@njit(cache=True, nogil=True)
-def _may_exceed(
-    padded: np.ndarray, w: int, idx: np.ndarray, factor: float, keep: np.ndarray
-) -> None:  # pragma: no cover - compiled
-    for n in range(idx.shape[0]):
-        i = idx[n]
-        x = padded[i + w // 2]
-        c = 0
-        for t in range(w):
-            c += padded[i + t] * factor <= x
-        keep[n] = c > w // 2
-
-
-@njit(cache=True, nogil=True)
-def _local_maxima(x: np.ndarray, start: int, stop: int, out: np.ndarray) -> int:
-    n = 0  # pragma: no cover - compiled
-    for i in range(start, stop + 1):
-        if x[i] > x[i - 1] and x[i] >= x[i + 1]:
-            out[n] = i
-            n += 1
-    return n

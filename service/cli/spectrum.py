@@ -1,9 +1,10 @@
 """``millwatch spectrum``: the steady-state torque spectrum of a recording, expected lines marked.
 
 Reads one MCAP recording (``millwatch simulate --out`` or the ingest archive), keeps only the
-running portions (pinion speed within the running band for ``--settle`` seconds; the operating
-state machine will replace this test), feeds them to
-:class:`analytics.spectra.harmonics.HarmonicTracker`
+running portions (pinion speed within the running band for ``--settle`` seconds: a plain
+speed-band test, :func:`analytics.spectra.settings.is_running`, not the analyzer's operating-state
+machine, whose run edges differ), feeds them to
+:class:`analytics.spectra.tracker.HarmonicTracker`
 (order-tracked Welch PSD, see that module) and renders one PSD panel per torque/bending channel
 with the drivetrain's expected excitation lines marked and labelled — seed 000 §6.2.7, Figures
 35–36, with the seed's colours (mill speed orange, pinion speed blue, liner passing green, motor
@@ -31,12 +32,9 @@ import numpy as np
 
 from analytics.drivetrain.kinematics import ExpectedLine
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.spectra.harmonics import (
-    HarmonicSettings,
-    HarmonicTracker,
-    harmonics_report,
-    is_running,
-)
+from analytics.spectra.report import harmonics_report
+from analytics.spectra.settings import HarmonicSettings, is_running
+from analytics.spectra.tracker import HarmonicTracker
 from ingest import keys, wire
 from ingest.archive.reader import TailTolerantReader
 from ingest.mill_files import load_mill_config

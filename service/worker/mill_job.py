@@ -1,5 +1,6 @@
-"""A mill's analysis inside the worker: :class:`~analytics.mill.analyzer.MillAnalyzer` plus alarms,
-turned into rows for the store.
+"""The worker's unit for one mill: its :class:`~analytics.mill.analyzer.MillAnalyzer` plus its
+alarm engine, with the analysis turned into rows for the store. It reads the analyzer only
+through the analyzer's public reading API.
 
 The worker adds a batch's blocks (:meth:`MillJob.add_block` / ``add_blocks``: aligned
 only) and then calls :meth:`MillJob.finish` once: the analyzer analyses everything as long
@@ -33,7 +34,7 @@ from alarms.from_analysis import event_observations, peak_observations, window_o
 from alarms.observations import Observation, local_month
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
-from analytics.spectra.harmonics import stagger_for
+from analytics.spectra.settings import stagger_for
 from ingest.wire import Block
 from service.store.records import DamageRow, EventRow
 from service.worker.worker import MillUpdate
@@ -57,13 +58,14 @@ SECONDS_PER_YEAR = 365.25 * 86400.0
 
 
 class MillJob:
-    """The worker's :class:`~service.worker.worker.MillPipeline` for one mill."""
+    """The worker's unit for one mill (a :class:`~service.worker.worker.MillPipeline`): feeds
+    the mill's :class:`~analytics.mill.analyzer.MillAnalyzer`, runs its alarms and returns
+    store rows; see the module docstring."""
 
     def __init__(self, config: MillConfig, damage_every_s: float = DAMAGE_EVERY_S) -> None:
         self.config = config
         self.analyzer = MillAnalyzer(config)
-        self.analyzer.loads.keep_windows = WINDOWS_KEPT
-        self.analyzer.loads.keep_events = EVENTS_KEPT
+        self.analyzer.keep_recent(windows=WINDOWS_KEPT, events=EVENTS_KEPT)
         self.alarms = AlarmEngine.for_mills([config])
         self._damage_every = round(damage_every_s * config.sample_rate_hz)
         # the first interval is longer by a fraction fixed by the mill id, so mills started
@@ -105,11 +107,11 @@ class MillJob:
         while True:
             out = self.analyzer.process(until=self._next_damage)
             self._fold(out, update)
-            if self.analyzer.loads.n < self._next_damage:
+            if self.analyzer.samples < self._next_damage:
                 return update
             update.damage += self._damage_rows()
             update.alarm_transitions += self.alarms.observe_all(self._life_observations())
-            self._next_damage = self.analyzer.loads.n + self._damage_every
+            self._next_damage = self.analyzer.samples + self._damage_every
 
     def _fold(self, out: AnalyzerOutput, update: MillUpdate) -> None:
         """Events, steady windows and harmonic tables of ``out`` as rows and alarm input."""
@@ -137,13 +139,13 @@ class MillJob:
         obs = event_observations(self.config.id, event)
         if event.get("event") == "start":
             month = local_month(int(event["t_ns"]), self.config.time_zone)
-            count = self.analyzer.loads.starts_per_month.get(month, {}).get("starts", 0)
+            count = self.analyzer.starts_in_month(month)
             obs.append(Observation(self.config.id, "starts_this_month", float(count),
                                    int(event["t_ns"]), {"month": month}))  # fmt: skip
         return obs
 
     def _new_windows(self) -> list[dict[str, Any]]:
-        new = [w for w in self.analyzer.loads.windows if w["t_ns"] > self._last_window_ns]
+        new = [w for w in self.analyzer.steady_windows if w["t_ns"] > self._last_window_ns]
         if new:
             self._last_window_ns = int(new[-1]["t_ns"])
             self._latest_window = new[-1]
@@ -152,16 +154,16 @@ class MillJob:
     def _life_observations(self) -> list[Observation]:
         """``remaining_life_years`` per component: (1 − D) / (D per year so far), the damage
         rate taken over everything this analyzer has seen (seed 000 §8.2; Miner limit 1)."""
-        a = self.analyzer.loads
-        seconds = a.n / a.fs
+        seconds, t_ns = self.analyzer.seconds_analysed, self.analyzer.next_sample_ns
+        if t_ns is None:  # nothing analysed: no damage, no rate
+            return []
         out = []
-        for comp, pd in a.damage.items():
-            damage = pd.committed
+        for comp, damage in self.analyzer.committed_damage().items():
             if damage <= 0.0 or seconds <= 0.0:
                 continue
             per_year = damage / seconds * SECONDS_PER_YEAR
             out.append(Observation(self.config.id, "remaining_life_years",
-                                   (1.0 - damage) / per_year, a.t_ns(a.n), {
+                                   (1.0 - damage) / per_year, t_ns, {
                                        "component": comp,
                                        "remaining_design_life_years":
                                            self.config.design_life_years,
@@ -171,7 +173,7 @@ class MillJob:
 
     def _damage_rows(self) -> list[DamageRow]:
         rows = []
-        for comp, days in self.analyzer.loads.damage_by_day().items():
+        for comp, days in self.analyzer.damage_by_day().items():
             for day, phases in days.items():
                 for phase, damage in phases.items():
                     rows.append(DamageRow(self.config.id, comp, phase, day, damage, 0.0))
@@ -183,18 +185,18 @@ class MillJob:
 
     def spike_counts(self) -> dict[str, int]:
         """Telemetry spikes flagged so far, per checked channel."""
-        return {n: c.spikes for n, c in self.analyzer.faults.totals().items()}
+        return self.analyzer.spike_counts()
 
     # ------------------------------------------------------------------ reading
     def status(self) -> dict[str, Any]:
-        a = self.analyzer.loads
+        a = self.analyzer
         return {
-            "state": self.analyzer.state,
-            "samples": a.n,
-            "last_sample_ns": a.t_ns(a.n) if a.t0_ns is not None else None,
+            "state": a.state,
+            "samples": a.samples,
+            "last_sample_ns": a.next_sample_ns,
             "latest_steady": self._latest_window,
             "open_alarms": len(self.alarms.open_alarms(self.config.id)),
-            "monitored_since_ns": a.t0_ns,
+            "monitored_since_ns": a.first_sample_ns,
             "damage": self._damage_summary(),
         }
 
@@ -203,17 +205,7 @@ class MillJob:
         open rainflow residue now as half cycles would add (``pending_residue``), and their sum
         (``with_residue``). Cheap (the residue is a few turning points); called by the worker
         thread when it refreshes the status, so the API never touches the analyzer."""
-        a = self.analyzer.loads
-        out = {}
-        for comp, pd in a.damage.items():
-            committed = pd.committed
-            with_residue = pd.with_residue(a.counters[comp].close())
-            out[comp] = {
-                "committed": committed,
-                "pending_residue": with_residue - committed,
-                "with_residue": with_residue,
-            }
-        return out
+        return self.analyzer.damage_summary()
 
     # ------------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
@@ -228,8 +220,7 @@ class MillJob:
 
     def restore(self, snapshot: dict[str, Any]) -> None:
         self.analyzer = MillAnalyzer.restore(self.config, snapshot["monitor"])
-        self.analyzer.loads.keep_windows = WINDOWS_KEPT
-        self.analyzer.loads.keep_events = EVENTS_KEPT
+        self.analyzer.keep_recent(windows=WINDOWS_KEPT, events=EVENTS_KEPT)
         self.alarms.restore(snapshot["alarms"])
         self._next_damage = int(snapshot["next_damage"])
         self._last_window_ns = int(snapshot["last_window_ns"])
@@ -241,15 +232,15 @@ class MillJob:
         """Data-quality events when the restore started the spectra afresh: one per tracked
         channel, at the checkpoint's last sample time (a repeated recovery from the same
         checkpoint stores the same rows again, not new ones)."""
-        why, a = self.analyzer.spectra_restarted, self.analyzer.loads
-        if why is None or a.t0_ns is None:  # no samples analysed: no spectra were lost
+        why, t_ns = self.analyzer.spectra_restarted, self.analyzer.next_sample_ns
+        if why is None or t_ns is None:  # no samples analysed: no spectra were lost
             return []
-        t_ns, problem = a.t_ns(a.n), "spectra_restarted"
+        problem = "spectra_restarted"
         events = []
-        for ch in self.analyzer.harmonics.channels:
-            data = {"channel": ch.name, "problem": problem, "reason": why}
+        for name in self.analyzer.tracked_channels:
+            data = {"channel": name, "problem": problem, "reason": why}
             events.append(EventRow(self.config.id, "data_quality", t_ns, data,
-                                   subject=f"{ch.name}:{problem}"))  # fmt: skip
+                                   subject=f"{name}:{problem}"))  # fmt: skip
         return events
 
 

@@ -24,7 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from analytics.spectra.harmonics import HarmonicSettings, HarmonicTracker, HarmonicWindow
+from analytics.spectra.facts import HarmonicWindow
+from analytics.spectra.settings import HarmonicSettings
+from analytics.spectra.tracker import HarmonicTracker
 from ingest.mill_files import load_mill_config
 from ingest.sim.renderer import Scene
 from ingest.sim.scenes import get_scene

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from analytics.contracts import SnapshotMismatch
 from analytics.drivetrain.mill_config import ChannelConfig
 from analytics.mill.analyzer import DERIVED_SPEED, MillAnalyzer, analysis_config
-from analytics.spectra.harmonics import SnapshotMismatch
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene
 

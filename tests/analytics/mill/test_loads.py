@@ -169,3 +169,30 @@ def test_start_counts_are_bounded_and_the_total_is_kept():
     del old["starts_total"]
     c = LoadAnalysis.restore(a.config, old)
     assert c.starts_total == sum(m["starts"] for m in a.starts_per_month.values())
+
+
+def test_every_attribute_is_configured_or_in_the_snapshot():
+    """A new state attribute must go into snapshot() and restore(), or be declared as derived
+    from the configuration: else a restored analysis would silently miss it."""
+    a = run(scene("start-lrs", seed=1, duration_s=20.0))
+    snap = a.snapshot()
+    state = set(snap) - {"kind", "version", "mill"}
+    assert not state & LoadAnalysis.CONFIGURED
+    assert set(vars(a)) == LoadAnalysis.CONFIGURED | state
+    b = LoadAnalysis.restore(a.config, json.loads(json.dumps(snap)))
+    assert set(vars(b)) == set(vars(a))
+    assert json.dumps(b.snapshot(), sort_keys=True) == json.dumps(snap, sort_keys=True)
+
+
+def test_snapshot_keys_and_order_are_those_of_stored_checkpoints():
+    """The checkpoint format (kind, version, keys in order) that stored checkpoints hold."""
+    snap = LoadAnalysis(mill("sag-5200-lrs")).snapshot()
+    assert list(snap) == [
+        "kind", "version", "mill", "n", "t0_ns", "steady_until", "open_start", "open_stop",
+        "stop_after_start", "starts", "stops", "barrings", "windows", "starts_per_day",
+        "starts_per_month", "phase_samples", "lead", "discontinuities", "last", "sm",
+        "timeline", "ring", "counters", "damage", "meter", "barring", "starts_total",
+    ]  # fmt: skip
+    assert (snap["kind"], snap["version"]) == ("mill_analyzer", 2)
+    with pytest.raises(ValueError, match="not a mill_analyzer snapshot of version 2"):
+        LoadAnalysis.restore(mill("sag-5200-lrs"), snap | {"version": 1})

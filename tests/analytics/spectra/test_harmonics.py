@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import json
 import time
@@ -11,19 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from analytics.contracts import SnapshotMismatch
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.spectra.harmonics import (
-    DailyHarmonicTrend,
-    HarmonicSettings,
-    HarmonicTracker,
-    HarmonicWindow,
-    SnapshotMismatch,
-    _spread,
-    harmonics_report,
-    is_running,
-    stagger_for,
-    window_response,
-)
+from analytics.spectra.facts import HarmonicWindow
+from analytics.spectra.report import harmonics_report
+from analytics.spectra.settings import HarmonicSettings, is_running, stagger_for
+from analytics.spectra.tapers import window_response
+from analytics.spectra.tracker import HarmonicTracker, _spread
 from ingest.mill_files import load_mill_config
 from ingest.sim.renderer import Scene
 from ingest.sim.scenes import get_scene
@@ -359,23 +352,6 @@ def test_window_response() -> None:
     assert float(window_response("hann", 0.5)) == pytest.approx(0.8488, abs=1e-4)
     assert float(window_response("flattop", 0.5)) == pytest.approx(0.9989, abs=1e-4)
     assert float(window_response("hann", 2.0)) == pytest.approx(0.0, abs=1e-12)
-
-
-def test_daily_trend_recorder(short_run) -> None:
-    _, _, windows = short_run
-    trend = DailyHarmonicTrend("Africa/Johannesburg", max_days=2)
-    for w in windows:
-        trend.add(w)
-    rows = trend.rows()
-    mesh = [r for r in rows if r["line"] == "girth_mesh" and r["channel"] == "motor_torque"]
-    assert mesh and mesh[0]["day"] == "2024-01-01" and mesh[0]["windows"] == len(windows)
-    again = DailyHarmonicTrend.restore(json.loads(json.dumps(trend.snapshot())))
-    assert again.rows() == rows
-    day = 86_400 * 10**9
-    for k in range(1, 4):  # older days are dropped: bounded
-        shifted = dataclasses.replace(windows[0], t_start_ns=windows[0].t_start_ns + k * day)
-        again.add(shifted)
-    assert sorted({r["day"] for r in again.rows()}) == ["2024-01-03", "2024-01-04"]
 
 
 def test_speed_spread_is_bitwise_the_block_means() -> None:

@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
-from analytics.spectra.harmonics import HarmonicTracker
+from analytics.spectra.tracker import HarmonicTracker
 from ingest.archive.files import ArchivePosition
 from ingest.archive.reader import ArchiveReader
 from ingest.archive.writer import ArchiveWriter

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.spectra.harmonics import HarmonicTracker
+from analytics.spectra.tracker import HarmonicTracker
 from ingest.archive.reader import ArchiveReader
 from ingest.archive.writer import ArchiveWriter
 from service.store.database import Store

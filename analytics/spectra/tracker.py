@@ -47,19 +47,17 @@ from __future__ import annotations
 
 import logging
 import math
-import zlib
-import zoneinfo
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
-from typing import Annotated, Any, Literal
+from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
-from analytics.drivetrain.kinematics import ExpectedLine, KinematicsOptions, expected_lines
+from analytics.contracts import SnapshotMismatch, check_snapshot
+from analytics.drivetrain.kinematics import ExpectedLine, expected_lines
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.snapshot_arrays import pack_array, unpack_array
+from analytics.spectra.facts import HarmonicWindow, LineMeasurement, UnexplainedPeak
 from analytics.spectra.order_kernels import (
     angle_prefix,
     center_taper,
@@ -69,121 +67,24 @@ from analytics.spectra.order_kernels import (
     resample,
 )
 from analytics.spectra.running_median import NoiseFloor, local_maxima
+from analytics.spectra.settings import HarmonicSettings
+from analytics.spectra.tapers import (
+    COSINE_WINDOWS,
+    interpolation_table,
+    response_at,
+    window_values,
+)
 
-__all__ = [
-    "DailyHarmonicTrend",
-    "HarmonicSettings",
-    "HarmonicTracker",
-    "HarmonicWindow",
-    "LineMeasurement",
-    "SnapshotMismatch",
-    "UnexplainedPeak",
-    "harmonics_report",
-    "is_running",
-    "stagger_for",
-    "window_response",
-]
+__all__ = ["MAX_DEFER_HOPS", "HarmonicTracker"]
 
 log = logging.getLogger(__name__)
 
 _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
-_SNAPSHOT_KIND = ("harmonic_tracker", _SNAPSHOT_VERSION)
-#: Cosine-sum windows ``w(u) = Σ a_k (−1)^k cos 2πku`` on ``u ∈ [0, 1)`` (periodic).
-COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
-    "hann": (0.5, 0.5),
-    "blackmanharris": (0.35875, 0.48829, 0.14128, 0.01168),
-    "flattop": (0.21557895, 0.41663158, 0.277263158, 0.083578947, 0.006947368),
-}
 _SPEED_BLOCKS = 10  # speed block means per segment for the drift estimate
 _TINY = float(np.finfo(float).tiny)
 #: Largest deferral of a complete segment's spectrum, in hops (``stagger`` → 1): under one hop,
 #: so a segment never waits behind the next one.
 MAX_DEFER_HOPS = 0.8
-
-
-class SnapshotMismatch(ValueError):
-    """A sound snapshot taken under another mill configuration that does not fit the object
-    this configuration builds; the message names the mill and what differs. From
-    :meth:`HarmonicTracker.restore` (segment length, bins, buffer or tracked lines differ) it
-    concerns only spectra in progress, so a caller may start a fresh tracker instead
-    (:meth:`MillAnalyzer.restore <analytics.mill.analyzer.MillAnalyzer.restore>` does)."""
-
-
-class HarmonicSettings(BaseModel):
-    """Knobs of the harmonic tracker. Proposed as an optional ``MillConfig.harmonics`` field.
-
-    ``window_s``: minimum segment length (s at rated speed; resolution ≤ 1/window_s Hz);
-    ``overlap``: segment overlap fraction; ``segments_per_window``: segments averaged per window;
-    ``window``: taper; ``tracking``: ``angle``/``time``/``auto`` (module docstring, step 3);
-    ``search_bins``: ± bins searched for an expected line's peak; ``match_bins``: ± bins within
-    which a peak is explained by an expected line; ``peak_snr_db``: peak over the noise floor;
-    ``min_peak_pct`` (% rated torque) / ``min_peak_mpa``: smallest unexplained peak reported;
-    ``floor_bins``: half-width of the running-median noise floor; ``running_band``: pinion speed
-    band (fraction of rated) of :func:`is_running`.
-    """
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
-
-    window_s: Annotated[float, Field(ge=1.0, le=600.0)] = 20.0
-    overlap: Annotated[float, Field(ge=0.0, le=0.9)] = 0.5
-    segments_per_window: Annotated[int, Field(ge=1, le=100)] = 4
-    window: Literal["hann", "blackmanharris", "flattop"] = "hann"
-    tracking: Literal["angle", "time", "auto"] = "auto"
-    auto_threshold_bins: Annotated[float, Field(gt=0)] = 0.25
-    search_bins: Annotated[int, Field(ge=1, le=10)] = 2
-    match_bins: Annotated[float, Field(ge=0.5, le=50)] = 3.0
-    peak_snr_db: Annotated[float, Field(ge=0)] = 15.0
-    min_peak_pct: Annotated[float, Field(ge=0)] = 0.5
-    min_peak_mpa: Annotated[float, Field(ge=0)] = 0.5
-    floor_bins: Annotated[int, Field(ge=5, le=500)] = 25
-    running_band: tuple[float, float] = (0.95, 1.05)
-    kinematics: KinematicsOptions = Field(default_factory=KinematicsOptions)
-
-
-# --------------------------------------------------------------------------- helpers
-
-
-def is_running(
-    speed_rpm: float | np.ndarray,
-    config: MillConfig,
-    *,
-    shaft: Literal["pinion", "motor"] = "pinion",
-    band: tuple[float, float] = (0.95, 1.05),
-) -> bool:
-    """Speed-band running test: every finite sample within ``band`` × rated speed of ``shaft``.
-
-    A stop-gap until the operating-state machine lands; False for empty or all-NaN input.
-    """
-    rated = config.pinion_speed_rpm if shaft == "pinion" else config.drive.motor_speed_rpm
-    x = np.asarray(speed_rpm, dtype=np.float64).ravel()
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return False
-    return bool(x.min() >= band[0] * rated and x.max() <= band[1] * rated)
-
-
-def stagger_for(key: str) -> float:
-    """A fraction in [0, 1) fixed by ``key`` (CRC-32), e.g. a mill id → its ``stagger``."""
-    return zlib.crc32(key.encode()) / 2**32
-
-
-def window_values(name: str, u: np.ndarray) -> np.ndarray:
-    """Cosine-sum window ``name`` at fractions ``u ∈ [0, 1)`` of the segment."""
-    a = COSINE_WINDOWS[name]
-    w = np.full_like(u, a[0], dtype=np.float64)
-    for k in range(1, len(a)):
-        w += (-1) ** k * a[k] * np.cos(2.0 * np.pi * k * u)
-    return w
-
-
-def window_response(name: str, eps: np.ndarray | float) -> np.ndarray:
-    """|W(ε)| / W(0): the window's amplitude response ``ε`` bins off a line (scalloping)."""
-    a = COSINE_WINDOWS[name]
-    e = np.asarray(eps, dtype=np.float64)
-    s = a[0] * np.sinc(e)
-    for k in range(1, len(a)):
-        s = s + 0.5 * a[k] * (np.sinc(e - k) + np.sinc(e + k))
-    return np.abs(s) / a[0]
 
 
 def _spread(dphi: np.ndarray) -> float:
@@ -199,135 +100,9 @@ def _spread(dphi: np.ndarray) -> float:
     return float((means.max() - means.min()) / means.mean())
 
 
-def _sinc(x: float) -> float:
-    """``np.sinc`` of one float (the same formula, without array overhead)."""
-    y = math.pi * (x if x != 0.0 else 1.0e-20)
-    return math.sin(y) / y
-
-
-def _response(name: str, eps: float) -> float:
-    """:func:`window_response` of one offset (per line in every table: scalar math)."""
-    a = COSINE_WINDOWS[name]
-    s = a[0] * _sinc(eps)
-    for k in range(1, len(a)):
-        s = s + 0.5 * a[k] * (_sinc(eps - k) + _sinc(eps + k))
-    return abs(s) / a[0]
-
-
-def _interp_table(name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(ρ, δ): ρ(δ) = (|W(1−δ)| − |W(1+δ)|) / |W(δ)| for the 3-bin peak interpolation."""
-    d = np.linspace(-0.5, 0.5, 2001)
-    rho = (window_response(name, 1.0 - d) - window_response(name, 1.0 + d)) / window_response(
-        name, d
-    )
-    return rho, d
-
-
-# --------------------------------------------------------------------------- facts
-
-
-@dataclass(frozen=True)
-class LineMeasurement:
-    """One expected line on one channel in one window.
-
-    ``amplitude`` is half the peak-to-peak of the line in ``unit`` (kN·m or MPa),
-    ``amplitude_pct`` % of the shaft's rated torque (None for bending); ``frequency_hz`` and
-    ``order`` are measured (expected values when not ``detected``); ``snr_db`` over the floor.
-    Lines that are not ``observable`` carry no measurement (NaN).
-    """
-
-    channel: str
-    name: str
-    family: str
-    kind: str
-    expected_order: float | None
-    expected_hz: float
-    order: float
-    frequency_hz: float
-    amplitude: float
-    unit: str
-    amplitude_pct: float | None
-    snr_db: float
-    detected: bool
-    observable: bool
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain data; NaN becomes None (JSON-ready)."""
-        return {k: _jsonable(v) for k, v in vars(self).items()}  # flat: no asdict deep copy
-
-
-@dataclass(frozen=True)
-class UnexplainedPeak:
-    """A spectral peak matching no expected line: possible torsional resonance (seed 000 §6.2.7).
-
-    ``nearest_line``/``nearest_line_hz``: the closest expected line; ``nearest_natural_hz``: the
-    closest natural frequency of the torsional model, if one was given.
-    """
-
-    channel: str
-    frequency_hz: float
-    order: float
-    amplitude: float
-    unit: str
-    amplitude_pct: float | None
-    snr_db: float
-    nearest_line: str | None
-    nearest_line_hz: float | None
-    nearest_natural_hz: float | None
-    note: str = "possible torsional resonance"
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain data (JSON-ready)."""
-        return {k: _jsonable(v) for k, v in vars(self).items()}  # flat: no asdict deep copy
-
-
-@dataclass(frozen=True)
-class HarmonicWindow:
-    """The harmonic table of one Welch window (all channels).
-
-    ``segments`` are the (start, end) ns of the averaged segments; ``pinion_speed_rpm`` their mean
-    speed (total revolutions / total time); ``resolution_hz`` the bin width at that speed.
-    """
-
-    t_start_ns: int
-    t_end_ns: int
-    segments: tuple[tuple[int, int], ...]
-    pinion_speed_rpm: float
-    resolution_hz: float
-    tracking: str
-    lines: tuple[LineMeasurement, ...]
-    peaks: tuple[UnexplainedPeak, ...]
-
-    def line(self, channel: str, name: str) -> LineMeasurement:
-        """The measurement of line ``name`` on ``channel`` (KeyError if absent)."""
-        for m in self.lines:
-            if m.channel == channel and m.name == name:
-                return m
-        raise KeyError(f"no line {name!r} on channel {channel!r}")
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain data (JSON-ready)."""
-        return {
-            "t_start_ns": self.t_start_ns,
-            "t_end_ns": self.t_end_ns,
-            "segments": [list(s) for s in self.segments],
-            "pinion_speed_rpm": self.pinion_speed_rpm,
-            "resolution_hz": self.resolution_hz,
-            "tracking": self.tracking,
-            "lines": [m.to_dict() for m in self.lines],
-            "peaks": [p.to_dict() for p in self.peaks],
-        }
-
-
 def _db(power: float, floor: float) -> float:
     """10 log10(power / floor), 0 dB for an all-zero spectrum."""
     return 10.0 * math.log10(max(float(power), _TINY) / max(float(floor), _TINY))
-
-
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
 
 
 # --------------------------------------------------------------------------- accumulator
@@ -465,7 +240,7 @@ class HarmonicTracker:
         self._all_lines = expected_lines(config, None, self.settings.kinematics)
         self._unobservable_rows: dict[str, list[LineMeasurement]] = {}
         self._grid: tuple[np.ndarray, np.ndarray] | None = None  # see _grid_taper
-        self._rho, self._delta = _interp_table(self.settings.window)
+        self._rho, self._delta = interpolation_table(self.settings.window)
         nc, nl = len(self.channels), len(self._lines)
         self._buf = np.zeros((nc + 1, self.capacity + self.defer_samples))
         self._len = 0
@@ -865,9 +640,9 @@ class HarmonicTracker:
         if locked and abs(eps) > 0.5:
             eps = 0.0
         if abs(eps) <= 0.5:
-            amp = demod / _response(self.settings.window, eps)
+            amp = demod / response_at(self.settings.window, eps)
         else:
-            amp = self._amplitude(mag_k**2) / _response(self.settings.window, delta)
+            amp = self._amplitude(mag_k**2) / response_at(self.settings.window, delta)
         measured = (b + eps) / self.revs
         return LineMeasurement(
             ch.name, ln.name, ln.family, ln.kind, ln.order, order * rev_hz, measured,
@@ -916,7 +691,7 @@ class HarmonicTracker:
             cand.tolist(), deltas.tolist(), positions.tolist(), explained.tolist(), strict=True
         )
         for k, delta, bin_pos, known in rows:
-            amp = self._amplitude(power[k]) / _response(self.settings.window, delta)
+            amp = self._amplitude(power[k]) / response_at(self.settings.window, delta)
             if amp < min_peak or known:
                 continue
             f = bin_pos / self.revs * rev_hz
@@ -1008,8 +783,7 @@ class HarmonicTracker:
         natural_frequencies_hz: Sequence[float] = (),
     ) -> HarmonicTracker:
         """A tracker that continues exactly where the snapshotted one stood."""
-        if (snapshot.get("kind"), snapshot.get("version")) != _SNAPSHOT_KIND:
-            raise ValueError(f"not a harmonic tracker snapshot of version {_SNAPSHOT_VERSION}")
+        check_snapshot(snapshot, "harmonic_tracker", _SNAPSHOT_VERSION, "harmonic tracker")
         if snapshot["mill"] != config.id:
             raise ValueError(f"snapshot of mill {snapshot['mill']!r}, config is {config.id!r}")
         t = cls(
@@ -1033,7 +807,9 @@ class HarmonicTracker:
         t._window = _Acc.from_json(snapshot["window"], nc, bins, nl)
         t._total = _Acc.from_json(snapshot["total"], nc, bins, nl)
         t.counters.update(snapshot["counters"])
-        t.latest = None if snapshot["latest"] is None else _window_from_dict(snapshot["latest"])
+        t.latest = (
+            None if snapshot["latest"] is None else HarmonicWindow.from_dict(snapshot["latest"])
+        )
         return t
 
     def _layout(self) -> dict[str, Any]:
@@ -1070,104 +846,3 @@ class HarmonicTracker:
             return []
         moved = [a[0] for a, b in zip(lines, now, strict=True) if a != b]
         return [f"tracked lines now at other orders or names: {', '.join(moved)}"]
-
-
-def _window_from_dict(d: dict[str, Any]) -> HarmonicWindow:
-    def num(v: Any) -> Any:
-        return math.nan if v is None else v
-
-    lines = []
-    for m in d["lines"]:
-        m = dict(m)
-        for key in ("order", "frequency_hz", "amplitude", "snr_db"):
-            m[key] = num(m[key])
-        lines.append(LineMeasurement(**m))
-    return HarmonicWindow(
-        d["t_start_ns"], d["t_end_ns"], tuple(tuple(s) for s in d["segments"]),
-        d["pinion_speed_rpm"], d["resolution_hz"], d["tracking"], tuple(lines),
-        tuple(UnexplainedPeak(**p) for p in d["peaks"]),
-    )  # fmt: skip
-
-
-# --------------------------------------------------------------------------- recorders
-
-
-def harmonics_report(tracker: HarmonicTracker) -> dict[str, Any]:
-    """Report of the running portions so far (long-run Welch average over every segment).
-
-    Keys: ``harmonics`` (one row per channel and expected line), ``unexplained_peaks``, and
-    ``summary`` (segments, running seconds, mean pinion speed, resolution). JSON-ready.
-    """
-    table = tracker.total_table()
-    if table is None:
-        return {"harmonics": [], "unexplained_peaks": [], "summary": {"segments": 0}}
-    acc = tracker._total
-    return {
-        "harmonics": [m.to_dict() for m in table.lines],
-        "unexplained_peaks": [p.to_dict() for p in table.peaks],
-        "summary": {
-            "segments": acc.count,
-            "running_s": tracker.counters["running_samples"] / tracker.fs,
-            "pinion_speed_rpm": table.pinion_speed_rpm,
-            "resolution_hz": table.resolution_hz,
-            "tracking": table.tracking,
-        },
-    }
-
-
-class DailyHarmonicTrend:
-    """Per-day aggregates of each line's amplitude (mean, max) and frequency (mean).
-
-    Days are local calendar days in ``time_zone`` (the mill's); only the last ``max_days`` days
-    are kept (bounded). Consumes :class:`HarmonicWindow` facts via :meth:`add`.
-    """
-
-    def __init__(self, time_zone: str = "UTC", max_days: int = 400) -> None:
-        self.time_zone = time_zone
-        self._tz = zoneinfo.ZoneInfo(time_zone)
-        self.max_days = max_days
-        self._days: dict[str, dict[str, list[float]]] = {}
-
-    def _day(self, t_ns: int) -> str:
-        return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).astimezone(self._tz).date().isoformat()
-
-    def add(self, window: HarmonicWindow) -> None:
-        """Fold one window in (detected, observable lines only)."""
-        day = self._days.setdefault(self._day(window.t_start_ns), {})
-        for m in window.lines:
-            if not (m.observable and m.detected):
-                continue
-            agg = day.setdefault(f"{m.channel}/{m.name}", [0.0, 0.0, 0.0, 0.0])
-            agg[0] += 1.0
-            agg[1] += m.amplitude
-            agg[2] = max(agg[2], m.amplitude)
-            agg[3] += m.frequency_hz
-        for old in sorted(self._days)[: -self.max_days]:
-            del self._days[old]
-
-    def rows(self) -> list[dict[str, Any]]:
-        """One row per day, channel and line: windows, mean/max amplitude, mean frequency."""
-        out = []
-        for day in sorted(self._days):
-            for key, (n, s, mx, fs) in sorted(self._days[day].items()):
-                channel, line = key.split("/", 1)
-                out.append({
-                    "day": day, "channel": channel, "line": line, "windows": int(n),
-                    "mean_amplitude": s / n, "max_amplitude": mx, "mean_frequency_hz": fs / n,
-                })  # fmt: skip
-        return out
-
-    def snapshot(self) -> dict[str, Any]:
-        """Plain JSON-serialisable state."""
-        return {"kind": "harmonic_trend", "version": 1, "time_zone": self.time_zone,
-                "max_days": self.max_days, "days": self._days}  # fmt: skip
-
-    @classmethod
-    def restore(cls, snapshot: dict[str, Any]) -> DailyHarmonicTrend:
-        """A recorder that continues where the snapshotted one stood."""
-        if snapshot.get("kind") != "harmonic_trend":
-            raise ValueError("not a harmonic trend snapshot")
-        trend = cls(snapshot["time_zone"], int(snapshot["max_days"]))
-        trend._days = {d: {k: list(v) for k, v in lines.items()}
-                       for d, lines in snapshot["days"].items()}  # fmt: skip
-        return trend

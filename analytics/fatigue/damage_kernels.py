@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from analytics.fatigue.exact_sum import add_bits
+from analytics.fatigue.exact_sum_kernels import add_bits
 
 __all__ = ["attribute_split", "log_damage", "stresses"]
 

@@ -1,0 +1,35 @@
+"""The harmonics part of a mill's report: the long-run table of a :class:`HarmonicTracker`.
+
+Seed 000 §6.2.7 and §10.5: the steady-state spectrum's expected lines and unexplained peaks, as
+one row per channel and line, for operators and the monthly report.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from analytics.spectra.tracker import HarmonicTracker
+
+__all__ = ["harmonics_report"]
+
+
+def harmonics_report(tracker: HarmonicTracker) -> dict[str, Any]:
+    """Report of the running portions so far (long-run Welch average over every segment).
+
+    Keys: ``harmonics`` (one row per channel and expected line), ``unexplained_peaks``, and
+    ``summary`` (segments, running seconds, mean pinion speed, resolution). JSON-ready.
+    """
+    table = tracker.total_table()
+    if table is None:
+        return {"harmonics": [], "unexplained_peaks": [], "summary": {"segments": 0}}
+    return {
+        "harmonics": [m.to_dict() for m in table.lines],
+        "unexplained_peaks": [p.to_dict() for p in table.peaks],
+        "summary": {
+            "segments": tracker.running_segments,
+            "running_s": tracker.counters["running_samples"] / tracker.fs,
+            "pinion_speed_rpm": table.pinion_speed_rpm,
+            "resolution_hz": table.resolution_hz,
+            "tracking": table.tracking,
+        },
+    }
