@@ -1,7 +1,7 @@
 """Compiled passes of the Miner damage of rainflow cycles (numba). Use
 :mod:`analytics.fatigue.sn_curves`
 (:meth:`~analytics.fatigue.sn_curves.SNCurve.damage_of_ranges`) and
-:mod:`analytics.fatigue.phase_damage`.
+:mod:`analytics.mill.phase_damage`.
 
 Sources: the S-N formula of :mod:`analytics.fatigue.sn_curves` (1/N = exp(m·ln(S/S_D) − ln N_D),
 seed 000

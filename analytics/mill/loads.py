@@ -8,7 +8,7 @@ measured from a ring buffer (:mod:`analytics.operation.transients`); running sam
 :mod:`analytics.operation.steady_state`; one :class:`~analytics.fatigue.rainflow.RainflowCounter`
 and
 :class:`~analytics.fatigue.miner.DamageRecorder` per component feed
-:mod:`analytics.fatigue.phase_damage`.
+:mod:`analytics.mill.phase_damage`.
 
 Components (seed 000 §8.2, App. D), per drive side, on the material's S-N curve and scaled by
 K_t (``shafts.kt_torsion``, App. D applies one K_t = 2 to the whole stress trace):
@@ -46,12 +46,12 @@ from analytics.contracts import check_snapshot
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.drivetrain.stress import THETA_SEED, combined_stress, shear_stress_from_torque
 from analytics.fatigue.miner import DamageRecorder
-from analytics.fatigue.phase_damage import (
+from analytics.fatigue.rainflow import RainflowCounter
+from analytics.mill.phase_damage import (
     PHASE_OF_STATE,
     PhaseDamage,
     PhaseTimeline,
 )
-from analytics.fatigue.rainflow import RainflowCounter
 from analytics.mill.report import damage_table, months_table, phase_seconds
 from analytics.operation.operating_states import (
     OperatingState,

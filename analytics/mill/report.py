@@ -15,7 +15,7 @@ from typing import Any
 
 from analytics.drivetrain.mill_config import AlarmThresholds
 from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.phase_damage import (
+from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
     PHASE_OF_STATE,

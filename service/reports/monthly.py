@@ -9,7 +9,7 @@ one the maintenance team reads each month. Its sections and their sources:
 * Miner damage per day, phase and component (§8.2, App. D: start, run and stop portions);
 * the cost of a start in hours of steady running and the App. D what-if table of damage and life
   against starts per month (5/day, 1/day, 1/week, 1/month, and this month's observed rate; a
-  month is 4 weeks as App. D counts it, :data:`analytics.fatigue.phase_damage.MONTH_S`);
+  month is 4 weeks as App. D counts it, :data:`analytics.mill.phase_damage.MONTH_S`);
 * steady-state oscillation range (Tables 14–15) and pinion bending amplitude (§8.1) trends,
 * harmonic line trends and unexplained spectral peaks (§6.1.2, §6.2.7),
 * the month's alarms and data-quality events (§5.2.2).
@@ -42,7 +42,7 @@ import numpy as np
 
 from alarms.lifecycle import Alarm
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.fatigue.phase_damage import (
+from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
     StartCost,

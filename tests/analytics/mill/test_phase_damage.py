@@ -10,7 +10,8 @@ import pytest
 
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.miner import DamageRecorder
-from analytics.fatigue.phase_damage import (
+from analytics.fatigue.sn_curves import SNCurve
+from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
     PhaseDamage,
@@ -19,7 +20,6 @@ from analytics.fatigue.phase_damage import (
     project_monthly_damage,
     start_cost,
 )
-from analytics.fatigue.sn_curves import SNCurve
 from analytics.operation.operating_states import OperatingState as S
 from analytics.operation.operating_states import Transition
 
