@@ -9,8 +9,6 @@ Recorders (consume Cycles; combine freely, as pyLife's detectors and recorders d
 
     miner            MinerSum, DamageRecorder: Palmgren-Miner damage on one S-N curve, exact
     matrices         RangeMeanMatrix, FromToMatrix: cycle histograms with configured bins
-    phase_damage     PhaseTimeline, PhaseDamage: damage by operating phase and local day,
-                     the cost of a start, monthly projections (seed 000 §8.3, App. D)
 
 Curves and sums::
 
@@ -18,6 +16,9 @@ Curves and sums::
     sn_models        named S-N models → curves
     exact_sum        correctly rounded sums (compensated, for a year of 1 kHz data)
     *_kernels        compiled loops of rainflow, damage and the exact sum
+
+Damage by operating phase (a recorder that also needs the operating states) lives one room up,
+in :mod:`analytics.mill.phase_damage`, so that fatigue and operation import nothing of each other.
 
 Data flow: stress samples → RainflowCounter → Cycles → recorders. A new question about cycles
 is a new recorder here (keep the Stateful contract: split anywhere, snapshot/restore, bounded

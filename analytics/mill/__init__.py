@@ -3,6 +3,9 @@ and offline analysis (DESIGN.md: identical results for the same samples).
 
 Modules (each imports only the ones listed before it)::
 
+    phase_damage     PhaseTimeline, PhaseDamage: the damage recorder by operating phase and local
+                     day, the cost of a start, monthly projections (seed 000 §8.3, App. D); here
+                     because it joins fatigue (cycles, Miner) with operation (states)
     report           the tables of the load report (starts per month, phase seconds, damage,
                      start cost, projections), from plain pieces
     loads            LoadAnalysis: the load stage — states, events, steady state, rainflow and
