@@ -1,4 +1,6 @@
-"""Pure computation: numpy arrays in, plain data out. No zenoh, no HTTP, no files.
+"""Pure computation: numpy arrays in, plain data out; no zenoh, HTTP or files.
+
+Pure computation: numpy arrays in, plain data out. No zenoh, no HTTP, no files.
 
 Rooms (lower ones never import higher ones; nothing here imports ``ingest``, ``alarms`` or
 ``service``)::

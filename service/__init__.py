@@ -1,4 +1,6 @@
-"""Composition: the service around the analytics — commands, worker, store, API, reports.
+"""Composition around the analytics: commands, worker, store, API, reports.
+
+Composition: the service around the analytics — commands, worker, store, API, reports.
 
 * ``cli/`` — the ``millwatch`` commands (one module each); the only entry points. ``serve`` runs
   a worker (and the API with it), ``api`` the API alone; the offline commands use ``analytics``

@@ -1,5 +1,7 @@
-"""The per-mill composition: one analyzer object per mill, used alike by live ingest, replay
-and offline analysis (DESIGN.md: identical results for the same samples).
+"""The per-mill composition: MillAnalyzer, and the stages only it combines.
+
+One analyzer object per mill, used alike by live ingest, replay and offline analysis
+(DESIGN.md: identical results for the same samples).
 
 Modules (each imports only the ones listed before it)::
 

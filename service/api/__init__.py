@@ -1,4 +1,6 @@
-"""The REST API (FastAPI): routes → backend → store/runtime (in process) or zenoh (remote).
+"""The REST API (FastAPI): routes → backend → runtime and store, or zenoh.
+
+Routes ask a backend: the store and runtime in process, or the workers over zenoh (remote).
 
 What is here:
 

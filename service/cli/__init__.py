@@ -1,4 +1,6 @@
-"""The ``millwatch`` command line: one module per sub-command, composed by ``main``.
+"""The ``millwatch`` command line: one module per sub-command.
+
+The ``millwatch`` command line: one module per sub-command, composed by ``main``.
 
 * ``main`` — :func:`~service.cli.main.main` (the console script and ``python -m service.cli``):
   builds the parser from ``COMMANDS``, sets up logging, turns user errors into one line, exit 2.

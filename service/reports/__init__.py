@@ -1,4 +1,6 @@
-"""Reports a person reads: the monthly damage report, remaining life, the starts of a month.
+"""Reports a person reads: monthly damage report, remaining life, starts.
+
+Reports a person reads: the monthly damage report, remaining life, the starts of a month.
 
 What is here:
 

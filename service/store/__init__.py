@@ -1,4 +1,6 @@
-"""The embedded store: SQLite in WAL mode (one writer, the worker; any number of readers, the API).
+"""The embedded store: SQLite in WAL mode; one writer, many readers.
+
+The embedded store: SQLite in WAL mode (one writer, the worker; any number of readers, the API).
 
 What is here:
 

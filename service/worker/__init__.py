@@ -1,4 +1,6 @@
-"""The worker: every received block archived first, then analysed per mill and stored.
+"""The worker: each block archived first, then analysed per mill and stored.
+
+The worker: every received block archived first, then analysed per mill and stored.
 
 Block path (``millwatch serve``; DESIGN.md "Data flow")::
 

@@ -1,4 +1,6 @@
-"""The REST routes, one file per resource, each returning an ``APIRouter`` over a backend;
+"""The REST routes: one file per resource, aggregated in service.api.router.
+
+Each file returns an ``APIRouter`` over a backend;
 :func:`service.api.router.api_router` includes them all.
 
 * :mod:`~service.api.routes.health` — ``/health``, ``/ready``.
