@@ -3,7 +3,8 @@
 Data path::
 
     sensor gateway / sim.publisher / replay ──gateway publisher (cache)──▶ zenoh
-        ──▶ recovering subscriber ──▶ worker (service.worker) ──▶ archive.writer (raw, first) ──▶ analytics
+        ──▶ (recovering) subscriber ──▶ worker (service.worker)
+        ──▶ archive.writer (raw, first) ──▶ analytics
 
 What is here (lower lines never import higher ones):
 

@@ -41,7 +41,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from ingest.zenoh_session import block_encoding
+from ingest.zenoh_session import block_encoding, wait_for_subscribers
 
 __all__ = [
     "DEFAULT_RETENTION_S",
@@ -86,6 +86,17 @@ class GatewayPublisher:
     def put(self, payload: bytes) -> None:
         """Publish ``payload`` stamped with the session's clock (so history ``max_age`` works)."""
         self._publisher.put(payload, timestamp=self._session.new_timestamp())
+
+    def wait_for_subscribers(self, timeout_s: float) -> bool:
+        """Wait (at most ``timeout_s`` s) until a subscriber matches the key. An advanced
+        publisher has no matching status in zenoh 1.10, so a plain publisher on the same key
+        is declared for the wait and withdrawn (plain subscribers get no history: a gateway
+        feeding them must wait for them before its first block)."""
+        probe = self._session.declare_publisher(self.key)
+        try:
+            return wait_for_subscribers(probe, timeout_s)
+        finally:
+            probe.undeclare()
 
     def undeclare(self) -> None:
         """Withdraw the publisher; its cache is gone (subscribers see the publisher leave)."""
