@@ -56,7 +56,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Default retention of a gateway's cache (s of sample time): 10 minutes covers a worker
-#: restart or upgrade with a wide margin at ≈ 0.4 MB per 1 kHz channel (README "Wire format").
+#: restart or upgrade with a wide margin at 4.3 MB per 1 kHz channel (README "Wire format").
 DEFAULT_RETENTION_S = 600.0
 #: Heartbeat period (s). A subscriber learns of a lost *last* block only from the heartbeat (the
 #: next block would reveal the gap anyway): 1 s bounds that delay at a cost of one tiny message

@@ -196,7 +196,8 @@ def _add_zenoh_options(p: argparse.ArgumentParser) -> None:
         default=DEFAULT_RETENTION_S,
         metavar="DURATION",
         help="sample time kept per key for recovery by a restarted worker, e.g. 90s, 10m, 1h "
-        "(default 10m; ~0.4 MB per 1 kHz channel per 10m of 100-sample float32 blocks)",
+        "(default 10m; measured 0.43 MB per channel-minute at 1 kHz, 100-sample float32 "
+        "blocks: 4.3 MB per channel for 10m)",
     )
 
 

@@ -212,7 +212,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=duration_seconds,
         default=DEFAULT_RETENTION_S,
         help="sample time kept per channel for recovery by restarted workers, e.g. 90s, 10m, "
-        "1h (default 10m; ~0.4 MB per 1 kHz channel per 10m of 100-sample float32 blocks)",
+        "1h (default 10m; measured 0.43 MB per channel-minute at 1 kHz, 100-sample float32 "
+        "blocks: 4.3 MB per channel for 10m)",
     )
     live.add_argument(
         "--anchor-ns",
