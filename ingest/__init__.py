@@ -2,14 +2,18 @@
 
 Data path::
 
-    sensor gateway / sim.publisher / replay ──wire block on a keys key──▶ zenoh
-        ──▶ worker (service.worker) ──▶ archive.writer (raw, first) ──▶ analytics
+    sensor gateway / sim.publisher / replay ──gateway publisher (cache)──▶ zenoh
+        ──▶ (recovering) subscriber ──▶ worker (service.worker)
+        ──▶ archive.writer (raw, first) ──▶ analytics
 
 What is here (lower lines never import higher ones):
 
 - ``wire``           the versioned block format: one zenoh message = one block of one channel
 - ``keys``           the one owner of zenoh key expressions (build/parse pairs, patterns, matching)
-- ``zenoh_session``  explicit zenoh configs, always-closed sessions, BLOCK publishers/subscribers
+- ``zenoh_session``  explicit zenoh configs (connect retried, never fatal), always-closed
+  sessions, BLOCK publishers/subscribers, connected-peer count
+- ``gateway``        the only user of the unstable ``zenoh.ext``: the gateway publisher that
+  keeps the last ``retention`` of a channel, the worker's recovering subscriber
 - ``pacing``         when a timestamped block is due on the wall clock at ``speed`` × real time
 - ``mill_files``     reading mill configuration files (the model is in ``analytics.drivetrain``)
 - ``archive/``       the MCAP log: writer with rotation, tail-tolerant reader, recovery, batches

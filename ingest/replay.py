@@ -19,7 +19,9 @@ Three parts, each usable alone:
   live subscriber (``millwatch/v1/**``) can receive. Keys are built by :mod:`ingest.keys` only.
 - **Pacing** — :class:`PacingClock` maps archive log time to wall time at ``speed`` × real time
   (or no waiting at all), and :class:`Replayer` publishes each block's payload, exactly as
-  archived, through a BLOCK-congestion publisher when its time comes.
+  archived, through a gateway publisher (:mod:`ingest.gateway`: BLOCK congestion control, and a
+  cache of the last ``retention_s`` of each key, so a worker restarted mid-replay recovers what
+  it missed) when its time comes.
 
 Pacing follows the archived *log time* (the ingest daemon's receive time), so a replay
 reproduces the arrival pattern the live pipeline saw, gaps and bursts included.
@@ -40,15 +42,16 @@ from pathlib import Path
 
 import zenoh
 
-from ingest import keys
+from ingest import keys, wire
 from ingest.archive.files import MCAP_MAGIC, ArchivePosition, list_archive_files
 from ingest.archive.reader import ArchivedBlock, ArchiveReader, TailTolerantReader
+from ingest.gateway import DEFAULT_RETENTION_S, GatewayPublisher, declare_gateway_publisher
 from ingest.pacing import DEFAULT_LATE_THRESHOLD_S, PacingClock
-from ingest.zenoh_session import declare_block_publisher, wait_for_subscribers
 
 __all__ = [
     "KeyRemap",
     "PacingClock",
+    "PublisherFactory",
     "ReplayError",
     "ReplayProgress",
     "ReplayReport",
@@ -63,6 +66,9 @@ log = logging.getLogger(__name__)
 MIN_WAIT_S = 0.0002
 #: Longest single wait (s), so pause/stop/speed changes are seen promptly.
 MAX_WAIT_S = 0.1
+#: Blocks per second assumed for a key whose first archived block does not decode (sizes its
+#: cache only): 100-sample blocks at 1 kHz.
+FALLBACK_BLOCKS_PER_S = 10.0
 _NS_PER_S = 1_000_000_000
 
 
@@ -365,6 +371,9 @@ class _Tally:
 
 
 ProgressCallback = Callable[[ReplayProgress], None]
+#: ``(key, blocks_per_s) -> publisher``: how the replayer declares the publisher of an output
+#: key (default: a gateway publisher on its session; tests of pacing pass a fake).
+PublisherFactory = Callable[[str, float], GatewayPublisher]
 
 
 class Replayer:
@@ -377,7 +386,8 @@ class Replayer:
     :class:`PacingClock`. ``on_progress`` is called at most every ``progress_interval_s`` s
     and once at the end, on the replaying thread. Before the first block,
     ``wait_subscribers_s`` s at most are spent waiting for a subscriber to match (then the
-    replay goes on regardless, with a warning).
+    replay goes on regardless, with a warning). ``retention_s``: sample time each output key
+    keeps for recovery (its cache is sized from the key's first block: fs / samples).
 
     :meth:`pause`, :meth:`resume`, :meth:`set_speed` and :meth:`stop` may be called from any
     thread (or from ``on_progress``). One :meth:`run` per instance.
@@ -394,9 +404,13 @@ class Replayer:
         on_progress: ProgressCallback | None = None,
         progress_interval_s: float = 0.1,
         wait_subscribers_s: float = 0.0,
+        retention_s: float = DEFAULT_RETENTION_S,
+        publisher_factory: PublisherFactory | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self._session = session
+        self._retention_s = retention_s
+        self._declare = publisher_factory or self._declare_gateway_publisher
         self._blocks = blocks
         self._remap = remap
         self._pacer = PacingClock(speed, late_threshold_s, clock)
@@ -410,7 +424,7 @@ class Replayer:
         self._paused_at: int | None = None
         self._paused = False
         self._resync = False
-        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._publishers: dict[str, GatewayPublisher] = {}
         self._out_keys: dict[str, str | None] = {}
         self._tally = _Tally()
         self._next_progress = 0.0
@@ -465,7 +479,7 @@ class Replayer:
         if key is None:
             self._tally.skipped[block.key] += 1
             return
-        publisher = self._publisher(key)
+        publisher = self._publisher(key, block.payload)
         if not self._wait_until_due(block.log_time_ns):
             return
         publisher.put(block.payload)
@@ -481,16 +495,21 @@ class Replayer:
                 self._out_keys[key] = None
         return self._out_keys[key]
 
-    def _publisher(self, key: str) -> zenoh.Publisher:
+    def _publisher(self, key: str, payload: bytes) -> GatewayPublisher:
         publisher = self._publishers.get(key)
         if publisher is None:
-            publisher = self._publishers[key] = declare_block_publisher(self._session, key)
+            publisher = self._publishers[key] = self._declare(key, _blocks_per_s(payload))
             if len(self._publishers) == 1 and self._wait_subscribers_s > 0:
                 self._await_subscriber(publisher, key)
         return publisher
 
-    def _await_subscriber(self, publisher: zenoh.Publisher, key: str) -> None:
-        if not wait_for_subscribers(publisher, self._wait_subscribers_s):
+    def _declare_gateway_publisher(self, key: str, blocks_per_s: float) -> GatewayPublisher:
+        return declare_gateway_publisher(
+            self._session, key, blocks_per_s=blocks_per_s, retention_s=self._retention_s
+        )
+
+    def _await_subscriber(self, publisher: GatewayPublisher, key: str) -> None:
+        if not publisher.wait_for_subscribers(self._wait_subscribers_s):
             log.warning("replay: no subscriber matches %s after %.1f s; replaying anyway",
                         key, self._wait_subscribers_s)  # fmt: skip
 
@@ -540,3 +559,13 @@ class Replayer:
             late_resyncs=self._pacer.late_resyncs, speed=self._pacer.speed,
             stopped=self._stopped.is_set(),
         )  # fmt: skip
+
+
+def _blocks_per_s(payload: bytes) -> float:
+    """Block rate of a key from one of its blocks (fs / samples per block), for cache sizing."""
+    try:
+        block = wire.decode_block(payload)
+    except wire.WireError:
+        return FALLBACK_BLOCKS_PER_S
+    n = block.samples.shape[0]
+    return block.fs / n if n > 0 else FALLBACK_BLOCKS_PER_S

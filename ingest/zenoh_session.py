@@ -7,6 +7,15 @@ Rules this module encodes (zenoh 1.x Python API):
   no listen endpoint given, the session listens nowhere: zenoh's peer default
   (``tcp/[::]:0``, every interface) is replaced by an empty list. Gossip scouting is
   off unless asked for (it only spreads endpoints we already configured).
+- **Start without peers.** A ``connect`` endpoint that is not up yet is retried by zenoh
+  itself (``connect/retry``: first after 250 ms, doubling to at most 4 s), never fatal
+  (``connect/exit_on_failure`` false, ``connect/timeout_ms`` -1). In *peer* mode
+  ``zenoh.open`` returns at once (after the scouting delay, 0.5 s) and zenoh connects in the
+  background. In *client* mode zenoh 1.10 cannot do that: a client connects to its router
+  inside ``zenoh.open`` (``connect_peers_single_link`` has no background connector; with
+  timeout 0 it raises ``Unable to connect``), so :func:`open_session` waits there, retrying,
+  until a router answers — it no longer dies. :func:`open_session` logs once which endpoints
+  are not up yet; :func:`connected_peers` says how many routers and peers are connected now.
 - **Sessions are always closed.** :func:`open_session` is a context manager; an
   unclosed session with a callback subscriber keeps zenoh threads alive and hangs
   interpreter exit.
@@ -41,6 +50,9 @@ LOOPBACK = "127.0.0.1"
 BLOCK_ENCODING = "application/octet-stream"
 BLOCK_SCHEMA = "millwatch.block.v" + str(FORMAT_VERSION)
 _MODES = ("peer", "client", "router")
+#: zenoh's connect retry (``connect/retry``): a peer started a moment after us is found within
+#: 250 ms; one that stays down costs a connection attempt every 4 s at most.
+CONNECT_RETRY = {"period_init_ms": 250, "period_max_ms": 4000, "period_increase_factor": 2}
 
 
 class ZenohConfigError(ValueError):
@@ -108,17 +120,58 @@ def build_config(
     config.insert_json5(
         "connect/endpoints", json.dumps(_check_endpoints("connect", connect, loopback_only))
     )
+    config.insert_json5("connect/timeout_ms", "-1")  # retry until connected ...
+    config.insert_json5("connect/exit_on_failure", "false")  # ... in the background (peer)
+    config.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
     return config
 
 
 @contextlib.contextmanager
 def open_session(config: zenoh.Config) -> Iterator[zenoh.Session]:
-    """Open a session and close it on exit, whatever happens inside."""
-    session = zenoh.open(config)
+    """Open a session and close it on exit, whatever happens inside.
+
+    Connect endpoints that are down do not fail the open (see the module docstring): a peer
+    opens at once and connects when they come up; a client waits, retrying, for its router.
+    Either way one line is logged naming the endpoints not up yet.
+    """
+    session = _open(config)
     try:
         yield session
     finally:
         session.close()
+
+
+def _open(config: zenoh.Config) -> zenoh.Session:
+    endpoints = json.loads(config.get_json("connect/endpoints")) or []
+    if not endpoints:
+        return zenoh.open(config)
+    if json.loads(config.get_json("mode")) != "client":
+        session = zenoh.open(config)
+        if connected_peers(session) == 0:
+            log.warning(
+                "zenoh: none of %s is up yet; connecting in the background (retry every <= %d ms)",
+                endpoints,
+                CONNECT_RETRY["period_max_ms"],
+            )
+        return session
+    config.insert_json5("connect/timeout_ms", "0")  # one attempt first, to log a wait once
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError:
+        log.warning(
+            "zenoh client: no router at %s yet; waiting for one (retry every <= %d ms)",
+            endpoints,
+            CONNECT_RETRY["period_max_ms"],
+        )
+    finally:
+        config.insert_json5("connect/timeout_ms", "-1")
+    return zenoh.open(config)
+
+
+def connected_peers(session: zenoh.Session) -> int:
+    """Routers plus peers this session is connected to right now (0: alone; for ``/ready``)."""
+    info = session.info
+    return len(list(info.routers_zid())) + len(list(info.peers_zid()))
 
 
 def block_encoding() -> zenoh.Encoding:

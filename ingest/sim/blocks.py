@@ -25,13 +25,15 @@ __all__ = ["SceneBlock", "scene_blocks"]
 
 @dataclass(frozen=True, slots=True)
 class SceneBlock:
-    """One encoded block: ``payload`` for ``key``, complete at ``t_end_ns``."""
+    """One encoded block: ``payload`` for ``key``, complete at ``t_end_ns``; ``seq`` is the
+    channel's sequence number (the header's), counted from the scene's first block."""
 
     key: str
     payload: bytes
     t0_ns: int
     t_end_ns: int
     n_samples: int
+    seq: int = 0
 
 
 def scene_blocks(
@@ -63,6 +65,6 @@ def scene_blocks(
                 samples = chunk.data[name][start : start + block_samples]
                 t0 = scene.t_ns(chunk.sample + start)
                 payload = wire.encode_block(samples, t0, fs, seq[name], units[name], dtype)
-                seq[name] += 1
                 n = samples.shape[0]
-                yield SceneBlock(key, payload, t0, t0 + round(n * 1e9 / fs), n)
+                yield SceneBlock(key, payload, t0, t0 + round(n * 1e9 / fs), n, seq[name])
+                seq[name] += 1

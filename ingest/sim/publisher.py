@@ -1,10 +1,20 @@
 """A simulated mill on zenoh: scene blocks published live, on the mill's live keys.
 
 This is a stand-in for a plant's sensor gateway (``millwatch simulate --publish`` and the demo).
-The scene is re-timed to start *now*, so its samples carry current timestamps, and each block is
-published when it is complete — at ``speed`` × real time (``speed`` 60 shows an hour a minute;
-the samples' timestamps then run ahead of the wall clock by the same factor). Publishers use
-congestion control BLOCK: a slow subscriber slows the simulator instead of losing blocks.
+The scene is re-timed to start *now* (or at an anchor), so its samples carry current timestamps,
+and each block is published when it is complete — at ``speed`` × real time (``speed`` 60 shows
+an hour a minute; the samples' timestamps then run ahead of the wall clock by the same factor).
+Blocks go out through gateway publishers (:mod:`ingest.gateway`): congestion control BLOCK, and
+a cache of the last ``retention_s`` of each channel from which a restarted worker recovers.
+
+**Resuming as a restarted gateway would** (``anchored=True``): the scene's first sample is due
+on the wall clock at the scene's ``t0`` (sample time ``t`` is due at
+``t0 + (t - t0) / speed``). Blocks that fell due before :meth:`ScenePublisher.run` started are
+*not* published — they are lost, as for a real DAQ that was off — and the next block keeps its
+scene sequence number and timestamps. Sequence numbers are per channel and count from the
+scene's start (:func:`ingest.sim.blocks.scene_blocks`), so a gateway restarted with the same
+anchor and seed continues the numbering and the lost span is exactly the blocks that fell due
+while it was down.
 """
 
 from __future__ import annotations
@@ -12,20 +22,23 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import zenoh
 
 from ingest import wire
+from ingest.gateway import DEFAULT_RETENTION_S, GatewayPublisher, declare_gateway_publisher
 from ingest.pacing import PacingClock
-from ingest.sim.blocks import scene_blocks
+from ingest.sim.blocks import SceneBlock, scene_blocks
 from ingest.sim.renderer import Scene
 from ingest.sim.spec import SceneSpec
-from ingest.zenoh_session import declare_block_publisher, wait_for_subscribers
 
 __all__ = ["PublishReport", "ScenePublisher", "starting_now"]
 
 log = logging.getLogger(__name__)
+
+_NS_PER_S = 1_000_000_000
 
 
 def starting_now(scene: Scene, now_ns: int | None = None) -> Scene:
@@ -37,10 +50,16 @@ def starting_now(scene: Scene, now_ns: int | None = None) -> Scene:
 
 @dataclass(frozen=True)
 class PublishReport:
+    """``blocks`` published; ``skipped`` blocks that fell due before the run started
+    (``anchored`` only); ``first_seq``: the scene sequence number of the first block published
+    (None if none was)."""
+
     blocks: int
     samples_per_channel: int
     wall_s: float
     stopped_early: bool
+    skipped: int = 0
+    first_seq: int | None = None
 
 
 class ScenePublisher:
@@ -55,44 +74,88 @@ class ScenePublisher:
         block_samples: int = 100,
         dtype: wire.DType = wire.DType.FLOAT32,
         wait_subscribers_s: float = 0.0,
+        retention_s: float = DEFAULT_RETENTION_S,
+        anchored: bool = False,
     ) -> None:
         """``wait_subscribers_s``: before its first block, wait up to this long for someone to
-        subscribe (a gateway publishes regardless; a test wants every block delivered)."""
+        subscribe (a gateway publishes regardless; a test wants every block delivered).
+        ``retention_s``: sample time kept per channel for recovery. ``anchored``: the scene's
+        ``t0`` is its wall-clock start; blocks already due are skipped (see module docstring);
+        needs a finite ``speed``."""
+        if anchored and speed is None:
+            raise ValueError("anchored publishing needs a finite speed")
         self.scene = scene
         self._wait_subscribers_s = wait_subscribers_s
         self._session = session
         self._pacer = PacingClock(speed, late_threshold_s=0.5)
         self._block_samples = block_samples
         self._dtype = dtype
-        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._retention_s = retention_s
+        self._anchored = anchored
+        self._publishers: dict[str, GatewayPublisher] = {}
         self.published = 0
+        self.skipped = 0
 
     def run(self, stop: threading.Event | None = None) -> PublishReport:
         """Publish until the scene ends or ``stop`` is set; undeclares its publishers."""
         stop = stop or threading.Event()
         started = time.monotonic()
-        samples = 0
+        last_end, first_seq = 0, None
         blocks = scene_blocks(self.scene, block_samples=self._block_samples, dtype=self._dtype)
+        if self._anchored:
+            blocks = self._skip_due(blocks)
         try:
             for block in blocks:
                 if stop.wait(self._pacer.wait_s(block.t_end_ns)):
                     break
                 self._publisher(block.key).put(block.payload)
+                first_seq = block.seq if first_seq is None else first_seq
                 self.published += 1
-                samples = max(samples, block.t_end_ns)
+                last_end = max(last_end, block.t_end_ns)
         finally:
-            for publisher in self._publishers.values():
-                publisher.undeclare()
-            self._publishers.clear()
-        n = round((samples - self.scene.t_ns(0)) * self.scene.fs / 1e9) if samples else 0
-        return PublishReport(self.published, n, time.monotonic() - started, stop.is_set())
+            self._undeclare()
+        n = round((last_end - self.scene.t_ns(0)) * self.scene.fs / 1e9) if last_end else 0
+        wall = time.monotonic() - started
+        return PublishReport(
+            self.published, n, wall, stop.is_set(), self.skipped, first_seq
+        )  # fmt: skip
 
-    def _publisher(self, key: str) -> zenoh.Publisher:
+    def _skip_due(self, blocks: Iterator[SceneBlock]) -> Iterator[SceneBlock]:
+        """Anchor pacing on the wall clock at the scene's t0; drop blocks already due."""
+        t0 = self.scene.t_ns(0)
+        speed = self._pacer.speed
+        assert speed is not None
+        now_ns, now = time.time_ns(), time.monotonic()
+        self._pacer.anchor(t0, now - (now_ns - t0) / _NS_PER_S / speed)
+        due_from = t0 + round(max(0, now_ns - t0) * speed)  # sample time due now
+        for block in blocks:
+            if block.t_end_ns < due_from:
+                self.skipped += 1
+                continue
+            self._log_resume(block.seq, due_from - t0)
+            yield block
+            yield from blocks
+            return
+        self._log_resume(None, due_from - t0)
+
+    def _log_resume(self, seq: int | None, behind_ns: int) -> None:
+        level = logging.WARNING if self.skipped else logging.INFO
+        log.log(level, "gateway starts %.1f s (scene time) after the scene's anchor: %d blocks "
+                "fell due before it started and are not published (lost); next sequence %s",
+                max(0, behind_ns) / _NS_PER_S, self.skipped,
+                "none (scene over)" if seq is None else seq)  # fmt: skip
+
+    def _publisher(self, key: str) -> GatewayPublisher:
         publisher = self._publishers.get(key)
         if publisher is None:
-            publisher = declare_block_publisher(self._session, key, archived=True)
-            if self._wait_subscribers_s > 0 and not wait_for_subscribers(
-                publisher, self._wait_subscribers_s
+            publisher = declare_gateway_publisher(
+                self._session,
+                key,
+                blocks_per_s=self.scene.fs / self._block_samples,
+                retention_s=self._retention_s,
+            )
+            if self._wait_subscribers_s > 0 and not publisher.wait_for_subscribers(
+                self._wait_subscribers_s
             ):
                 log.warning(
                     "no subscriber for %s after %.1f s; publishing anyway",
@@ -101,3 +164,11 @@ class ScenePublisher:
                 )
             self._publishers[key] = publisher
         return publisher
+
+    def _undeclare(self) -> None:
+        for publisher in self._publishers.values():
+            try:
+                publisher.undeclare()
+            except zenoh.ZError as exc:  # a closed session already undeclared it
+                log.debug("undeclare failed: %s", exc)
+        self._publishers.clear()

@@ -4,8 +4,18 @@ from __future__ import annotations
 
 import argparse
 import math
+from datetime import UTC, datetime
 
-__all__ = ["duration_seconds", "non_negative_float", "positive_float", "positive_int"]
+__all__ = [
+    "duration_seconds",
+    "non_negative_float",
+    "positive_float",
+    "positive_int",
+    "utc_time_ns",
+]
+
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+_INT64_MAX = 2**63 - 1
 
 
 def positive_int(text: str) -> int:
@@ -62,3 +72,22 @@ def duration_seconds(text: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"must be a duration > 0, got {text!r}")
     return value
+
+
+def utc_time_ns(text: str) -> int:
+    """ISO-8601 with a zone (``2026-11-21T23:30:00Z``, ``...+01:00``) or integer ns since the
+    Unix epoch; returns int ns (UTC)."""
+    if text.strip().isdigit():
+        if int(text) > _INT64_MAX:
+            raise argparse.ArgumentTypeError(f"{text} ns does not fit int64")
+        return int(text)
+    try:
+        moment = datetime.fromisoformat(text.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected ISO-8601 UTC like 2026-11-21T23:30:00Z or ns since the epoch, got {text!r}"
+        ) from None
+    if moment.tzinfo is None:
+        raise argparse.ArgumentTypeError(f"{text!r} has no time zone; add Z for UTC")
+    delta = moment - _EPOCH  # exact: days, seconds, microseconds
+    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1_000

@@ -23,9 +23,11 @@ from ingest import keys, wire
 from ingest.archive.files import list_archive_files
 from ingest.archive.reader import ArchivedBlock
 from ingest.archive.writer import ArchiveWriter
+from ingest.gateway import GatewayPublisher
 from ingest.pacing import PacingClock, PacingError
 from ingest.replay import (
     KeyRemap,
+    PublisherFactory,
     Replayer,
     ReplayError,
     ReplayProgress,
@@ -346,6 +348,11 @@ class FakeSession:
         return self.publishers[-1]
 
 
+def fake_factory(session: FakeSession) -> PublisherFactory:
+    """Publishers of the fake session in place of gateway publishers (pacing tests only)."""
+    return lambda key, _rate: cast(GatewayPublisher, session.declare_publisher(key))
+
+
 def blocks_every(step_ms: int, count: int, key: str = KEYS[0]) -> list[ArchivedBlock]:
     return [ArchivedBlock(key, T0 + i * step_ms * MS, payload(i), "f", i) for i in range(count)]
 
@@ -367,7 +374,8 @@ def replay_with(
     fake = cast(zenoh.Session, session)
     remap = KeyRemap(run="r1")
     box.append(Replayer(fake, blocks, remap, speed=speed, on_progress=on_progress,
-                        progress_interval_s=0.0))  # fmt: skip
+                        progress_interval_s=0.0,
+                        publisher_factory=fake_factory(session)))  # fmt: skip
     return box[0].run()
 
 
@@ -404,7 +412,13 @@ def test_stop_mid_replay() -> None:
 def test_keys_that_are_not_channel_keys_are_skipped_and_counted() -> None:
     session = FakeSession()
     blocks = [*blocks_every(1, 3), ArchivedBlock("some/other/key", T0, b"x", "f", 9)]
-    report = Replayer(cast(zenoh.Session, session), blocks, KeyRemap(run="r1"), speed=None).run()
+    report = Replayer(
+        cast(zenoh.Session, session),
+        blocks,
+        KeyRemap(run="r1"),
+        speed=None,
+        publisher_factory=fake_factory(session),
+    ).run()
     assert report.blocks == 3 and report.skipped_by_key == {"some/other/key": 1}
     assert {k for k, _, _ in session.log} == {keys.to_replay(KEYS[0], "r1")}
 

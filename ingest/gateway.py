@@ -1,0 +1,242 @@
+"""Gateway retention and recovery on zenoh's advanced pub/sub — the one home of ``zenoh.ext``.
+
+Why: a block published while the worker is down used to be lost for good (issue 16). Zenoh
+already keeps and re-sends data: an *advanced publisher* caches the last N samples of its key
+and announces its sequence numbers by heartbeat; an *advanced subscriber* asks new publishers
+for their cache (history), fetches samples it missed (recovery) and reports what can no longer
+be fetched (sample-miss listener). ``zenoh.ext`` is marked unstable in eclipse-zenoh 1.10, so
+every use of it lives in this module; the rest of millwatch sees two functions:
+
+- :func:`declare_gateway_publisher` — what a gateway (``simulate --publish``, ``replay``, a
+  plant gateway written in Python) publishes wire blocks through: a cache of the last
+  ``retention_s`` of the channel in *sample time* (``ceil(retention_s · blocks_per_s)``
+  samples), miss detection with a heartbeat, publisher detection, BLOCK + reliable (also for
+  the replies to recovery queries), and a zenoh timestamp on every put.
+- :func:`declare_recovering_subscriber` — what the worker receives blocks through: history of
+  late-joining publishers (optionally only the last ``max_age_s``), recovery by heartbeat, and
+  unrecoverable misses logged once per source and handed to ``on_miss``.
+
+Measured facts this module relies on (tests/ingest/test_gateway.py):
+
+- a subscriber declared after N puts receives the cache as history, in publish order, then
+  live samples, contiguous;
+- history ``max_age`` filters nothing unless samples carry a timestamp, and
+  ``AdvancedPublisher.put`` adds none by default — hence :meth:`GatewayPublisher.put` stamps
+  each sample with ``session.new_timestamp()`` (the *publish* time, not the block's t0).
+
+Zenoh's own sequence numbers (the ones recovery uses) are per publisher *instance*: a restarted
+gateway starts at 0 again and cannot be recovered across. Millwatch's loss accounting therefore
+uses the wire header's ``seq`` (continuing across gateway restarts), never zenoh's.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Callable
+from types import TracebackType
+from typing import Any
+
+import zenoh
+from zenoh import ext
+
+from ingest.zenoh_session import block_encoding, wait_for_subscribers
+
+__all__ = [
+    "DEFAULT_RETENTION_S",
+    "HEARTBEAT_S",
+    "GatewayPublisher",
+    "RecoveringSubscriber",
+    "cache_samples",
+    "declare_gateway_publisher",
+    "declare_recovering_subscriber",
+]
+
+log = logging.getLogger(__name__)
+
+#: Default retention of a gateway's cache (s of sample time): 10 minutes covers a worker
+#: restart or upgrade with a wide margin at 4.3 MB per 1 kHz channel (README "Wire format").
+DEFAULT_RETENTION_S = 600.0
+#: Heartbeat period (s). A subscriber learns of a lost *last* block only from the heartbeat (the
+#: next block would reveal the gap anyway): 1 s bounds that delay at a cost of one tiny message
+#: per channel per second, ~1 % of a 1 kHz channel's 10 blocks/s, and is well inside the
+#: worker's hold-the-mill bound.
+HEARTBEAT_S = 1.0
+
+
+def cache_samples(retention_s: float, blocks_per_s: float) -> int:
+    """Samples (blocks) kept for ``retention_s`` s of a channel sending ``blocks_per_s``."""
+    if not (math.isfinite(retention_s) and retention_s > 0):
+        raise ValueError(f"retention must be a finite number of seconds > 0, got {retention_s}")
+    if not (math.isfinite(blocks_per_s) and blocks_per_s > 0):
+        raise ValueError(f"blocks_per_s must be a finite number > 0, got {blocks_per_s}")
+    return max(1, math.ceil(retention_s * blocks_per_s - 1e-9))
+
+
+class GatewayPublisher:
+    """A cached advanced publisher of wire blocks on one channel key (see module docstring)."""
+
+    def __init__(self, session: zenoh.Session, publisher: Any, max_samples: int) -> None:
+        self._session = session
+        self._publisher = publisher
+        self.max_samples = max_samples
+        self.key = str(publisher.key_expr)
+
+    def put(self, payload: bytes) -> None:
+        """Publish ``payload`` stamped with the session's clock (so history ``max_age`` works)."""
+        self._publisher.put(payload, timestamp=self._session.new_timestamp())
+
+    def wait_for_subscribers(self, timeout_s: float) -> bool:
+        """Wait (at most ``timeout_s`` s) until a subscriber matches the key. An advanced
+        publisher has no matching status in zenoh 1.10, so a plain publisher on the same key
+        is declared for the wait and withdrawn (plain subscribers get no history: a gateway
+        feeding them must wait for them before its first block)."""
+        probe = self._session.declare_publisher(self.key)
+        try:
+            return wait_for_subscribers(probe, timeout_s)
+        finally:
+            probe.undeclare()
+
+    def undeclare(self) -> None:
+        """Withdraw the publisher; its cache is gone (subscribers see the publisher leave)."""
+        self._publisher.undeclare()
+
+    def __enter__(self) -> GatewayPublisher:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        try:
+            self.undeclare()
+        except zenoh.ZError as err:  # a closed session already undeclared it
+            log.debug("gateway publisher %s: undeclare failed: %s", self.key, err)
+
+
+def declare_gateway_publisher(
+    session: zenoh.Session,
+    key: str,
+    *,
+    blocks_per_s: float,
+    retention_s: float = DEFAULT_RETENTION_S,
+    archived: bool = True,
+) -> GatewayPublisher:
+    """An advanced publisher for wire blocks on ``key`` keeping ``retention_s`` of sample time.
+
+    ``blocks_per_s`` = sample rate / samples per block (10 for 100-sample blocks at 1 kHz).
+    ``archived=True``: congestion control BLOCK, reliable (as
+    :func:`ingest.zenoh_session.declare_block_publisher`); ``False``: DROP for live views.
+    Replies to history and recovery queries always use BLOCK: a recovery must not be lossy.
+    """
+    max_samples = cache_samples(retention_s, blocks_per_s)
+    congestion = zenoh.CongestionControl.BLOCK if archived else zenoh.CongestionControl.DROP
+    publisher = ext.declare_advanced_publisher(
+        session,
+        key,
+        encoding=block_encoding(),
+        congestion_control=congestion,
+        reliability=zenoh.Reliability.RELIABLE,
+        cache=ext.CacheConfig(
+            max_samples,
+            replies_config=ext.RepliesConfig(congestion_control=zenoh.CongestionControl.BLOCK),
+        ),
+        sample_miss_detection=ext.MissDetectionConfig(
+            heartbeat=HEARTBEAT_S, sporadic_heartbeat=None
+        ),
+        publisher_detection=True,
+    )
+    return GatewayPublisher(session, publisher, max_samples)
+
+
+class RecoveringSubscriber:
+    """Holds an advanced subscriber and its miss listener; :meth:`undeclare` drops both."""
+
+    def __init__(self, subscriber: Any, miss_listener: Any) -> None:
+        self._subscriber = subscriber
+        self._miss_listener = miss_listener
+
+    def undeclare(self) -> None:
+        """Stop receiving (and stop miss reports)."""
+        self._miss_listener.undeclare()
+        self._subscriber.undeclare()
+
+    def __enter__(self) -> RecoveringSubscriber:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.undeclare()
+
+
+class _MissReporter:
+    """Logs the first miss of each source at WARNING (later ones at DEBUG), calls ``on_miss``."""
+
+    def __init__(self, pattern: str, on_miss: Callable[[str, int], None] | None) -> None:
+        self._pattern = pattern
+        self._on_miss = on_miss
+        self._seen: set[str] = set()
+        self._lock = threading.Lock()
+
+    def __call__(self, miss: Any) -> None:
+        source = f"{miss.source.zid}/{miss.source.eid}"
+        with self._lock:
+            first = source not in self._seen
+            self._seen.add(source)
+        level = logging.WARNING if first else logging.DEBUG
+        log.log(
+            level,
+            "%s: %d samples of publisher %s could not be recovered (logged once per source)",
+            self._pattern,
+            miss.nb,
+            source,
+        )
+        if self._on_miss is not None:
+            try:
+                self._on_miss(source, int(miss.nb))
+            except Exception:
+                log.exception("miss callback failed for %s", source)
+
+
+def declare_recovering_subscriber(
+    session: zenoh.Session,
+    pattern: str,
+    on_block: Callable[[str, bytes], None],
+    *,
+    max_age_s: float | None = None,
+    on_miss: Callable[[str, int], None] | None = None,
+) -> RecoveringSubscriber:
+    """Subscribe to ``pattern`` with history and recovery; ``on_block(key, payload)`` runs on a
+    zenoh thread and must only enqueue (its exceptions are logged, never propagated).
+
+    History: each publisher's cache is fetched when it is detected (also publishers that start
+    later), limited to samples younger than ``max_age_s`` s of publish time (None: the whole
+    cache). Recovery: heartbeats reveal missed samples, which are fetched from the cache.
+    ``on_miss(source, nb)``: ``nb`` samples of publisher ``source`` (``"<zid>/<eid>"``) are lost
+    for good (no longer in its cache). Blocks may repeat (history overlaps live): the receiver
+    drops what its wire ``seq`` says it has already seen.
+    """
+
+    def _callback(sample: zenoh.Sample) -> None:
+        try:
+            on_block(str(sample.key_expr), sample.payload.to_bytes())
+        except Exception:
+            log.exception("block callback failed for %s", sample.key_expr)
+
+    subscriber = ext.declare_advanced_subscriber(
+        session,
+        pattern,
+        _callback,
+        history=ext.HistoryConfig(detect_late_publishers=True, max_samples=None, max_age=max_age_s),
+        recovery=ext.RecoveryConfig(heartbeat=True, periodic_queries=None),
+        subscriber_detection=True,
+    )
+    listener = subscriber.sample_miss_listener(_MissReporter(pattern, on_miss))
+    return RecoveringSubscriber(subscriber, listener)
