@@ -36,6 +36,7 @@ and logged once per kind; a block whose key belongs to no configured mill is arc
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import queue
 import time
@@ -64,7 +65,7 @@ from service.worker.checkpoints import (
     CheckpointSchedule,
     MillHeldError,
 )
-from service.worker.health import LatencyReservoir, MillHealth, PerMinute
+from service.worker.health import REPEATS, ChannelHealth, LatencyReservoir, MillHealth, PerMinute
 
 __all__ = ["HELD", "AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 
@@ -112,6 +113,8 @@ class MillPipeline(Protocol):
     def add_block(self, channel: str, block: Block) -> None: ...
 
     def add_blocks(self, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray) -> None: ...
+
+    def release_absent(self, channels: set[str]) -> None: ...
 
     def finish(self) -> MillUpdate: ...
 
@@ -192,27 +195,55 @@ class Worker:
             )
             return
         health = self.health[mill_id].channels[channel]
-        missing_before = health.missing_blocks
-        verdict = health.observe(block, item.recv_ns)
-        if verdict == "gap":
-            self._quality(
-                mill_id,
-                channel,
-                block.t0_ns,
-                "sequence_gap",
-                missing_blocks=health.missing_blocks - missing_before,
-                seq=block.seq,
-            )
-        if verdict == "repeat":
+        verdict = health.admit(block.seq)
+        if verdict in REPEATS:  # not new: counted and dropped, in constant time
+            health.repeat(verdict, item.recv_ns)
             self._log_once(
-                (item.key, "repeat"), "%s: repeated block seq %d ignored", item.key, block.seq
-            )
+                (item.key, verdict),
+                "%s: %s block seq %d dropped (not beyond seq %s; counted, further ones not "
+                "logged)", item.key, verdict, block.seq, health.last_seq,
+            )  # fmt: skip
             return
+        block = self._on_time(mill_id, channel, item.key, health, block)
+        loss = health.gap_before(block)
+        health.observe(block, item.recv_ns)
+        if loss is not None:
+            self._quality(mill_id, channel, loss.first_t_ns, "sequence_gap",
+                          **loss.as_dict(), seq=block.seq)  # fmt: skip
+            self._log_once(
+                (item.key, "gap"),
+                "%s: %d block(s) lost before seq %d (stored as a data-quality event; further "
+                "gaps not logged)", item.key, loss.blocks, block.seq,
+            )  # fmt: skip
         if mill_id in self.held:
             self.held_blocks[mill_id] += 1
             return
         self.pipelines[mill_id].add_block(channel, block)
         self._unfinished[mill_id] = None
+
+    def _on_time(
+        self, mill_id: str, channel: str, key: str, health: ChannelHealth, block: Block
+    ) -> Block:
+        """``block`` at the time its sequence number gives it: a t0 that contradicts it is a
+        clock fault — counted, reported once per episode as a data-quality event, and the
+        samples are placed where the sequence number puts them (a gateway clock never becomes
+        the mill's time base)."""
+        expected = health.expected_t0(block.seq)
+        if expected is None or abs(block.t0_ns - expected[0]) <= expected[1]:
+            health.in_clock_fault = False
+            return block
+        health.clock_faults += 1
+        if not health.in_clock_fault:
+            health.in_clock_fault = True
+            self._quality(mill_id, channel, expected[0], "clock_fault", seq=block.seq,
+                          t0_ns=block.t0_ns, expected_t0_ns=expected[0])  # fmt: skip
+            self._log_once(
+                (key, "clock_fault"),
+                "%s: block seq %d says t0=%d ns, its sequence number puts it at %d ns: clock "
+                "fault, analysed at the sequence number's time (further ones not logged)",
+                key, block.seq, block.t0_ns, expected[0],
+            )  # fmt: skip
+        return dataclasses.replace(block, t0_ns=expected[0])
 
     def route(self, key: str) -> tuple[str, str] | None:
         """(mill id, configured channel name) of a zenoh key; None for no configured mill."""
@@ -261,6 +292,12 @@ class Worker:
             for channel in sorted(was - stale):
                 self._quality(mill_id, channel, now, "fresh")
             self._stale[mill_id] = stale
+            silent = self._silent(mill_id, now, stale_after_s)
+            if silent and mill_id not in self.held:
+                # the others are not held back for a silent channel (its late blocks, if any
+                # ever come, are dropped and counted by the aligner)
+                self.pipelines[mill_id].release_absent(silent)
+                self._unfinished[mill_id] = None
             if mill_id in self.held:
                 # Its pipeline's alarm engine was not restored: a fresh one knows nothing of the
                 # mill's open alarms, so it would raise them again under new ids, and what it
@@ -273,6 +310,15 @@ class Worker:
                                             float(archive_failures), now))  # fmt: skip
             self._pending.add(mill_id, self.pipelines[mill_id].observe(observations))
         self._archive_errors_reported = self.archive_errors
+
+    def _silent(self, mill_id: str, now: int, after_s: float) -> set[str]:
+        """Channels that sent nothing for ``after_s`` s of wall time — counted from this
+        worker's start for a channel not heard from since (at start-up its missed blocks are
+        still being recovered: the others wait for them)."""
+        limit = now - after_s * 1e9
+        start = self._started_ns
+        channels = self.health[mill_id].channels.items()
+        return {c for c, h in channels if (h.last_recv_ns or start) < limit}
 
     def _rates(self, mill_id: str, now: int) -> list[Observation]:
         """``spike_rate`` and ``sequence_gaps`` per channel, per minute of wall time."""
@@ -414,9 +460,11 @@ class Worker:
         Nothing for a held mill: its last good checkpoint must stay for the revert."""
         if mill_id in self.held:
             return
-        seqs = {c: h.last_seq for c, h in self.health[mill_id].channels.items()}
+        channels = self.health[mill_id].channels
+        seqs = {c: h.last_seq for c, h in channels.items()}
+        counters = {c: h.counters() for c, h in channels.items()}
         state = {"pipelines": {mill_id: self.pipelines[mill_id].snapshot()},
-                 "last_seq": {mill_id: seqs}}  # fmt: skip
+                 "last_seq": {mill_id: seqs}, "health": {mill_id: counters}}  # fmt: skip
         where = position.as_dict() if position else {}
         with self.store.transaction() as db:
             size = Store.put_checkpoint(db, mill_id, self._clock(), where, state)
@@ -436,7 +484,7 @@ class Worker:
             for mill_id, snap in state.get("pipelines", {}).items():
                 if self._restore_or_hold(mill_id, snap, at):
                     covered[mill_id] = at
-            self._restore_seqs(state.get("last_seq", {}))
+            self._restore_seqs(state.get("last_seq", {}), state.get("health", {}))
         return covered
 
     def adopt_replayed(
@@ -483,16 +531,24 @@ class Worker:
             return False
         return True
 
-    def _restore_seqs(self, last_seq: dict[str, dict[str, int]]) -> None:
-        """The channels' last sequence numbers. Not a held mill's: its checkpoint lies before
-        the blocks the replay and live data bring now, so those in between would be counted
-        (and stored as a data-quality event) as lost; its health starts afresh instead."""
+    def _restore_seqs(
+        self, last_seq: dict[str, dict[str, int]], counters: dict[str, dict[str, Any]]
+    ) -> None:
+        """The channels' sequence positions and lifetime counters (older checkpoints: the last
+        sequence numbers only). Not a held mill's: its checkpoint lies before the blocks the
+        replay and live data bring now, so those in between would be counted (and stored as a
+        data-quality event) as lost; its health starts afresh instead."""
         for mill_id, seqs in last_seq.items():
             if mill_id in self.held or mill_id not in self.health:
                 continue
             channels = self.health[mill_id].channels
+            saved = counters.get(mill_id, {})
             for channel, seq in seqs.items():
-                if channel in channels:
+                if channel not in channels:
+                    continue
+                if channel in saved:
+                    channels[channel].restore_counters(saved[channel])
+                else:
                     channels[channel].last_seq = seq
 
     def _restore_mill(self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None) -> None:
