@@ -40,7 +40,7 @@ import dataclasses
 import logging
 import queue
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Iterable
 from concurrent.futures import Future
 from dataclasses import dataclass, field
@@ -72,6 +72,8 @@ __all__ = ["HELD", "AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 log = logging.getLogger(__name__)
 
 BATCH_BLOCKS = 2000
+#: Unrecoverable losses listed in a mill's status (``GET /mills/{id}``), newest first.
+LOSSES_SHOWN = 20
 #: The ``state`` in the status of a mill that is held (not analysed; see the module docstring).
 HELD = "held"
 
@@ -170,6 +172,8 @@ class Worker:
         self._archive_errors_reported = 0
         self.on_alarms: Callable[[list[Transition]], None] | None = None
         self._acks: queue.SimpleQueue[AckRequest] = queue.SimpleQueue()
+        #: Each mill's newest unrecoverable losses (stored; newest first), for its status.
+        self.losses = {m: deque(store.losses(m, LOSSES_SHOWN), LOSSES_SHOWN) for m in mills}
 
     # ------------------------------------------------------------------ one block
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
@@ -208,8 +212,7 @@ class Worker:
         loss = health.gap_before(block)
         health.observe(block, item.recv_ns)
         if loss is not None:
-            self._quality(mill_id, channel, loss.first_t_ns, "sequence_gap",
-                          **loss.as_dict(), seq=block.seq)  # fmt: skip
+            self._lost(mill_id, channel, loss.as_dict() | {"seq": block.seq})
             self._log_once(
                 (item.key, "gap"),
                 "%s: %d block(s) lost before seq %d (stored as a data-quality event; further "
@@ -220,6 +223,16 @@ class Worker:
             return
         self.pipelines[mill_id].add_block(channel, block)
         self._unfinished[mill_id] = None
+
+    def _lost(self, mill_id: str, channel: str, loss: dict[str, int]) -> None:
+        """An unrecoverable loss: a data-quality event (stored once: the archive replay after
+        a restart finds it again under the same key) and the mill's list of recent losses."""
+        self._quality(mill_id, channel, loss["first_t_ns"], "sequence_gap", **loss)
+        shown = self.losses[mill_id]
+        entry = {"channel": channel, "problem": "sequence_gap", **loss}
+        if not any(e.get("channel") == channel and e.get("first_seq") == loss["first_seq"]
+                   for e in shown):  # fmt: skip
+            shown.appendleft(entry)
 
     def _on_time(
         self, mill_id: str, channel: str, key: str, health: ChannelHealth, block: Block
@@ -569,6 +582,10 @@ class Worker:
         out = {}
         for mill_id in self.mills:
             health = self.health[mill_id].as_dict(now, stale_after_s)
+            health["missing_blocks_total"] = sum(
+                c.missing_blocks for c in self.health[mill_id].channels.values()
+            )
+            health["recent_losses"] = list(self.losses[mill_id])
             reason = self.held.get(mill_id)
             if reason is None:
                 out[mill_id] = {"health": health, **self.pipelines[mill_id].status(),
