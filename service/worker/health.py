@@ -24,6 +24,7 @@ A channel is *stale* when nothing arrived for ``stale_after_s`` seconds of wall 
 
 from __future__ import annotations
 
+import dataclasses
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -34,6 +35,7 @@ from ingest.wire import Block
 
 __all__ = [
     "REPEATS",
+    "Admission",
     "ChannelHealth",
     "LatencyReservoir",
     "Loss",
@@ -69,6 +71,19 @@ class Loss:
         return {"first_seq": self.first_seq, "last_seq": self.last_seq,
                 "first_t_ns": self.first_t_ns, "last_t_ns": self.last_t_ns,
                 "missing_blocks": self.blocks}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Admission:
+    """What :meth:`ChannelHealth.accept` made of a block: its ``verdict``; the ``block`` to
+    analyse (None for a repeat; re-timed to its sequence number's time on a clock fault); the
+    ``loss`` it reveals; and ``clock_fault`` = (t0 sent, t0 given) when it *starts* a clock-fault
+    episode (later blocks of the same episode are counted, not reported again)."""
+
+    verdict: SeqVerdict
+    block: Block | None
+    loss: Loss | None = None
+    clock_fault: tuple[int, int] | None = None
 
 
 @dataclass
@@ -130,6 +145,28 @@ class ChannelHealth:
             return None
         step = self.last_sample_ns - (self.last_t0_ns or self.last_sample_ns)
         return Loss(last + 1, block.seq - 1, self.last_sample_ns, block.t0_ns - step)
+
+    def accept(self, block: Block, recv_ns: int) -> Admission:
+        """The whole admission of a decoded block (see the module docstring): a repeat is
+        counted and dropped; a new block is put at its sequence number's time when its t0
+        contradicts it, then observed."""
+        verdict = self.admit(block.seq)
+        if verdict in REPEATS:
+            self.repeat(verdict, recv_ns)
+            return Admission(verdict, None)
+        fault = None
+        expected = self.expected_t0(block.seq)
+        if expected is None or abs(block.t0_ns - expected[0]) <= expected[1]:
+            self.in_clock_fault = False
+        else:
+            self.clock_faults += 1
+            if not self.in_clock_fault:
+                fault = (block.t0_ns, expected[0])
+            self.in_clock_fault = True
+            block = dataclasses.replace(block, t0_ns=expected[0])
+        loss = self.gap_before(block)
+        self.observe(block, recv_ns)
+        return Admission(verdict, block, loss, fault)
 
     def observe(self, block: Block, recv_ns: int) -> SeqVerdict:
         """Account for a decoded block; returns its verdict (:meth:`admit`). A repeat is only

@@ -36,7 +36,6 @@ and logged once per kind; a block whose key belongs to no configured mill is arc
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import queue
 import time
@@ -65,7 +64,7 @@ from service.worker.checkpoints import (
     CheckpointSchedule,
     MillHeldError,
 )
-from service.worker.health import REPEATS, ChannelHealth, LatencyReservoir, MillHealth, PerMinute
+from service.worker.health import LatencyReservoir, MillHealth, PerMinute
 
 __all__ = ["HELD", "AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 
@@ -199,24 +198,23 @@ class Worker:
             )
             return
         health = self.health[mill_id].channels[channel]
-        verdict = health.admit(block.seq)
-        if verdict in REPEATS:  # not new: counted and dropped, in constant time
-            health.repeat(verdict, item.recv_ns)
+        got = health.accept(block, item.recv_ns)
+        if got.block is None:  # not new: counted and dropped, in constant time
             self._log_once(
-                (item.key, verdict),
+                (item.key, got.verdict),
                 "%s: %s block seq %d dropped (not beyond seq %s; counted, further ones not "
-                "logged)", item.key, verdict, block.seq, health.last_seq,
+                "logged)", item.key, got.verdict, block.seq, health.last_seq,
             )  # fmt: skip
             return
-        block = self._on_time(mill_id, channel, item.key, health, block)
-        loss = health.gap_before(block)
-        health.observe(block, item.recv_ns)
-        if loss is not None:
-            self._lost(mill_id, channel, loss.as_dict() | {"seq": block.seq})
+        if got.clock_fault is not None:
+            self._clock_fault(mill_id, channel, item.key, block.seq, *got.clock_fault)
+        block = got.block
+        if got.loss is not None:
+            self._lost(mill_id, channel, got.loss.as_dict() | {"seq": block.seq})
             self._log_once(
                 (item.key, "gap"),
                 "%s: %d block(s) lost before seq %d (stored as a data-quality event; further "
-                "gaps not logged)", item.key, loss.blocks, block.seq,
+                "gaps not logged)", item.key, got.loss.blocks, block.seq,
             )  # fmt: skip
         if mill_id in self.held:
             self.held_blocks[mill_id] += 1
@@ -234,29 +232,18 @@ class Worker:
                    for e in shown):  # fmt: skip
             shown.appendleft(entry)
 
-    def _on_time(
-        self, mill_id: str, channel: str, key: str, health: ChannelHealth, block: Block
-    ) -> Block:
-        """``block`` at the time its sequence number gives it: a t0 that contradicts it is a
-        clock fault — counted, reported once per episode as a data-quality event, and the
-        samples are placed where the sequence number puts them (a gateway clock never becomes
-        the mill's time base)."""
-        expected = health.expected_t0(block.seq)
-        if expected is None or abs(block.t0_ns - expected[0]) <= expected[1]:
-            health.in_clock_fault = False
-            return block
-        health.clock_faults += 1
-        if not health.in_clock_fault:
-            health.in_clock_fault = True
-            self._quality(mill_id, channel, expected[0], "clock_fault", seq=block.seq,
-                          t0_ns=block.t0_ns, expected_t0_ns=expected[0])  # fmt: skip
-            self._log_once(
-                (key, "clock_fault"),
-                "%s: block seq %d says t0=%d ns, its sequence number puts it at %d ns: clock "
-                "fault, analysed at the sequence number's time (further ones not logged)",
-                key, block.seq, block.t0_ns, expected[0],
-            )  # fmt: skip
-        return dataclasses.replace(block, t0_ns=expected[0])
+    def _clock_fault(
+        self, mill_id: str, channel: str, key: str, seq: int, sent: int, given: int
+    ) -> None:
+        """The start of a clock-fault episode: a data-quality event, logged once a channel."""
+        self._quality(mill_id, channel, given, "clock_fault", seq=seq, t0_ns=sent,
+                      expected_t0_ns=given)  # fmt: skip
+        self._log_once(
+            (key, "clock_fault"),
+            "%s: block seq %d says t0=%d ns, its sequence number puts it at %d ns: clock fault, "
+            "analysed at the sequence number's time (further ones not logged)",
+            key, seq, sent, given,
+        )  # fmt: skip
 
     def route(self, key: str) -> tuple[str, str] | None:
         """(mill id, configured channel name) of a zenoh key; None for no configured mill."""
