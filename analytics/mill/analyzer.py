@@ -162,6 +162,14 @@ class MillAnalyzer:
         if frames:
             self._queue_frames(frames)
 
+    def release_absent(self, channels: set[str]) -> None:
+        """Stop waiting for ``channels`` (e.g. silent for a while): the aligner's oldest groups
+        that lack only them become frames (NaN there) and wait for :meth:`process`
+        (:meth:`~analytics.signal.frame_aligner.FrameAligner.release_absent`)."""
+        frames = self.aligner.release_absent(channels)
+        if frames:
+            self._queue_frames(frames)
+
     def _scaled(self, channel: str) -> bool:
         """Whether ``channel`` has a calibration other than the identity."""
         gain, offset = self._gain.get(channel, (1.0, 0.0))

@@ -4,9 +4,18 @@ The wire format (DESIGN.md) carries one channel per block; the analyzer wants, f
 time, every channel of the mill. Gateways and the simulator emit identical block boundaries on
 every channel (blocks with the same ``t0`` and length), so alignment is a grouping by ``t0``:
 
-* a frame is emitted once every expected channel has a block at its ``t0``, or when more than
-  ``max_pending`` later start times are waiting (the frame is then emitted with the missing
-  channels as NaN and :attr:`FrameAligner.missing_blocks` counts them);
+* a frame is emitted once every expected channel has a block at its ``t0`` or has already
+  delivered a later one (each channel's blocks come in time order — the worker admits a block
+  only when its sequence number is new, at the time that number gives it — so a channel that is
+  past ``t0`` will never fill it), or when more than ``max_pending`` later start times are
+  waiting, or when the caller declares the missing
+  channels absent (:meth:`FrameAligner.release_absent`: the worker does, for channels that sent
+  nothing for a while); the frame is then emitted with the missing channels as NaN and
+  :attr:`FrameAligner.missing_blocks` counts them;
+* the bound is wide (:data:`MAX_PENDING`, ten minutes of 100-sample blocks at 1 kHz) so that the
+  frames do not depend on the order in which channels arrive: after a restart one channel's
+  missed blocks may be recovered long after another's newer ones (DESIGN.md "Persistence and
+  recovery"), and the same blocks must give the same frames as an uninterrupted run;
 * frames come out in time order and contiguous: a jump in ``t0`` beyond the end of the previous
   frame is filled with all-NaN frames of at most ``gap_chunk`` samples (:attr:`gap_samples`
   counts them), so stream sample indices stay equal to (t − t_first)·fs;
@@ -19,6 +28,7 @@ Pure: numpy arrays in, :class:`Frame` values out; no I/O.
 
 from __future__ import annotations
 
+import heapq
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -30,11 +40,15 @@ from analytics.contracts import check_snapshot
 from analytics.signal.aligner_kernels import _emitted_groups, _gather_rows
 from analytics.snapshot_arrays import pack_array, unpack_array
 
-__all__ = ["Frame", "FrameAligner"]
+__all__ = ["MAX_PENDING", "Frame", "FrameAligner"]
 
 log = logging.getLogger(__name__)
 
 _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+#: Default bound on pending start times (groups of blocks) before the oldest is emitted
+#: incomplete: 600 s of 100-sample blocks at 1 kHz, the gateways' default retention. Memory is
+#: taken only while channels are skewed (≈ 0.8 kB a pending 100-sample block).
+MAX_PENDING = 6000
 _GATHERED = (np.dtype(np.float64), np.dtype(np.float32))  # row dtypes _gather_rows takes
 
 
@@ -60,7 +74,7 @@ class FrameAligner:
         channels: list[str],
         fs: float,
         *,
-        max_pending: int = 8,
+        max_pending: int = MAX_PENDING,
         gap_chunk: int = 10_000,
     ) -> None:
         self.channels = list(channels)
@@ -68,6 +82,8 @@ class FrameAligner:
         self.max_pending = max_pending
         self.gap_chunk = gap_chunk
         self._pending: dict[int, dict[str, np.ndarray]] = {}
+        self._starts: list[int] = []  # heap of the pending start times (lazily pruned)
+        self._latest: dict[str, int] = {}  # latest t0 each channel delivered
         self._next_t0: int | None = None
         self.missing_blocks = 0
         self.gap_samples = 0
@@ -85,8 +101,40 @@ class FrameAligner:
         if self._next_t0 is not None and t0_ns < self._next_t0:
             self.dropped_blocks += 1
             return []
-        self._pending.setdefault(int(t0_ns), {})[channel] = np.asarray(samples, dtype=np.float64)
+        if t0_ns > self._latest.get(channel, t0_ns - 1):
+            self._latest[channel] = int(t0_ns)
+        group = self._pending.get(int(t0_ns))
+        if group is None:
+            group = self._pending[int(t0_ns)] = {}
+            heapq.heappush(self._starts, int(t0_ns))
+        group[channel] = np.asarray(samples, dtype=np.float64)
         return list(self._drain(final=False))
+
+    def release_absent(self, absent: set[str] | frozenset[str]) -> list[Frame]:
+        """Emit the oldest pending groups that lack only ``absent`` channels (NaN there) —
+        for channels the caller knows sent nothing for a while, so that the others are not
+        held back; stops at the first group that still waits for a channel not in ``absent``.
+        """
+        out: list[Frame] = []
+        while self._pending:
+            t0 = self._oldest()
+            group = self._pending[t0]
+            if any(c not in group and c not in absent for c in self.channels):
+                break
+            self._pop(t0)
+            out.extend(self._gap_until(t0))
+            out.append(self._frame(t0, group))
+        return out
+
+    def _oldest(self) -> int:
+        starts = self._starts
+        while starts[0] not in self._pending:
+            heapq.heappop(starts)
+        return starts[0]
+
+    def _pop(self, t0: int) -> None:
+        del self._pending[t0]
+        heapq.heappop(self._starts)
 
     def push_blocks(
         self, chan: np.ndarray, t0_ns: np.ndarray, rows: np.ndarray
@@ -117,15 +165,32 @@ class FrameAligner:
         if rel.min() < 0 or np.any(rel % step):
             return None
         n_groups = int(max(group.max(), max(held, default=-1))) + 1
-        if n_groups > chan.shape[0] + len(held) + 1:  # a gap: block by block
+        latest = self._latest_groups(base, step)
+        if n_groups > chan.shape[0] + len(held) + 1 or latest is None:  # a gap, or off the grid
             return None
         present = np.zeros((n_groups, len(self.channels)), dtype=np.bool_)
         for g, chans in held.items():
             present[g, chans] = True
-        emitted = _emitted_groups(present, chan.astype(np.int64), group, self.max_pending)
+        emitted = _emitted_groups(present, chan.astype(np.int64), group, self.max_pending, latest)
         if emitted < 0:
             return None
+        for ci, name in enumerate(self.channels):
+            if latest[ci] >= 0:
+                self._latest[name] = base + int(latest[ci]) * step
         return self._take_groups(base, step, n, chan, group, rows, emitted)
+
+    def _latest_groups(self, base: int, step: int) -> np.ndarray | None:
+        """Each channel's latest delivered t0 as a grid index (-1: none, or before ``base``);
+        None when one is off the grid."""
+        latest = np.full(len(self.channels), -1, dtype=np.int64)
+        for ci, name in enumerate(self.channels):
+            t = self._latest.get(name)
+            if t is not None and t >= base:
+                g, off = divmod(t - base, step)
+                if off:
+                    return None
+                latest[ci] = g
+        return latest
 
     def _held_groups(self, base: int, step: int, n: int) -> dict[int, list[int]] | None:
         """Pending groups as grid index → channel indices; None when one is off the grid."""
@@ -163,6 +228,7 @@ class FrameAligner:
                 t0 = base + int(g_all[k]) * step
                 pending.setdefault(t0, {})[name] = stream[k * n : (k + 1) * n]
         self._pending = {t0: pending[t0] for t0 in sorted(pending)}
+        self._starts = list(self._pending)  # (sorted: already a heap)
         if emitted == 0:
             return []
         self._next_t0 = base + emitted * step
@@ -174,14 +240,20 @@ class FrameAligner:
 
     def _drain(self, final: bool) -> Iterator[Frame]:
         while self._pending:
-            t0 = min(self._pending)
+            t0 = self._oldest()
             group = self._pending[t0]
             complete = len(group) == len(self.channels)
-            if not (complete or final or len(self._pending) > self.max_pending):
+            if not (complete or final or len(self._pending) > self.max_pending
+                    or self._passed(t0, group)):  # fmt: skip
                 return
-            del self._pending[t0]
+            self._pop(t0)
             yield from self._gap_until(t0)
             yield self._frame(t0, group)
+
+    def _passed(self, t0: int, group: dict[str, np.ndarray]) -> bool:
+        """Whether every channel missing from ``group`` has already delivered a later block."""
+        latest = self._latest
+        return all(c in group or latest.get(c, t0) > t0 for c in self.channels)
 
     def _gap_until(self, t0: int) -> Iterator[Frame]:
         if self._next_t0 is None or t0 <= self._next_t0:
@@ -226,6 +298,7 @@ class FrameAligner:
                 for t0, group in sorted(self._pending.items())
             ],
             "counters": [self.missing_blocks, self.gap_samples, self.dropped_blocks],
+            "latest": dict(self._latest),
         }
 
     @classmethod
@@ -237,12 +310,16 @@ class FrameAligner:
         check_snapshot(snap, "frame_aligner", _SNAPSHOT_VERSION, "frame aligner")
         if channels is not None and sorted(channels) != sorted(snap["channels"]):
             raise ValueError(f"channels {channels} are not the snapshot's {snap['channels']}")
-        a = cls(channels or snap["channels"], snap["fs"], max_pending=snap["max_pending"],
+        # (a checkpoint of an older version holds a narrower bound: the current one applies)
+        a = cls(channels or snap["channels"], snap["fs"],
+                max_pending=max(int(snap["max_pending"]), MAX_PENDING),
                 gap_chunk=snap["gap_chunk"])  # fmt: skip
         a._next_t0 = snap["next_t0"]
         a._pending = {
             int(t0): {c: unpack_array(x) for c, x in group.items()} for t0, group in snap["pending"]
         }
+        a._starts = sorted(a._pending)
+        a._latest = {c: int(t) for c, t in snap.get("latest", {}).items()}
         a.missing_blocks, a.gap_samples, a.dropped_blocks = snap["counters"]
         return a
 

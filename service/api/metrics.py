@@ -83,7 +83,24 @@ def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[M
         labels=["mill", "channel", "kind"],
     )
     missing = CounterMetricFamily(
-        "millwatch_missing_blocks", "Blocks lost in sequence gaps.", labels=["mill", "channel"]
+        "millwatch_missing_blocks",
+        "Blocks the gateway numbered but that never reached the worker, nor could be recovered "
+        "from the gateway's cache (lifetime total: survives restarts; each span is a stored "
+        "data-quality event).",
+        labels=["mill", "channel"],
+    )
+    repeated = CounterMetricFamily(
+        "millwatch_repeated_blocks",
+        "Blocks dropped because their sequence number was not new on their channel (lifetime): "
+        "kind duplicate (the last one again, e.g. the overlap a recovery brings) or replay "
+        "(an older one).",
+        labels=["mill", "channel", "kind"],
+    )
+    clock = CounterMetricFamily(
+        "millwatch_clock_fault_blocks",
+        "Blocks whose t0 contradicted their sequence number (analysed at the sequence "
+        "number's time; lifetime).",
+        labels=["mill", "channel"],
     )
     samples = CounterMetricFamily(
         "millwatch_samples_analysed", "Samples analysed per mill.", labels=["mill"]
@@ -103,10 +120,13 @@ def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[M
             for kind, n in ch.get("decode_errors", {}).items():
                 errors.add_metric([mill, channel, kind], n)
             missing.add_metric([mill, channel], ch.get("missing_blocks", 0))
+            for kind in ("duplicate", "replay"):
+                repeated.add_metric([mill, channel, kind], ch.get(kind + "s", 0))
+            clock.add_metric([mill, channel], ch.get("clock_faults", 0))
         samples.add_metric([mill], s.get("samples", 0))
         state.add_metric([mill, str(s.get("state", "unknown"))], 1)
         held.add_metric([mill], 1 if s.get("held_reason") else 0)
-    yield from (errors, missing, samples, state, held)
+    yield from (errors, missing, repeated, clock, samples, state, held)
 
 
 def open_alarms(rows: Iterable[Alarm]) -> Metric:

@@ -34,6 +34,7 @@ from ingest import keys, wire
 from ingest.archive.files import ArchiveError
 from ingest.archive.reader import RawMessage, TailTolerantReader
 from ingest.mill_files import load_mill_config
+from service.worker.health import ChannelHealth
 
 __all__ = ["add_parser", "analyze_recording", "recording_files"]
 
@@ -83,6 +84,9 @@ class _Blocks:
         self.names = _channel_names(config)
         self.malformed: dict[str, int] = {}
         self.foreign = 0
+        #: Per channel, the worker's admission: a block is new only if its sequence number is;
+        #: a t0 contradicting it is a clock fault (so an archive with repeats gives live results).
+        self.sequence = {name: ChannelHealth() for name in config.channels}
 
     def channel(self, key: str) -> str | None:
         try:
@@ -120,6 +124,10 @@ def analyze_recording(
             if got is None:
                 continue
             name, block = got
+            admitted = blocks.sequence[name].accept(block, msg.log_time_ns)
+            if admitted.block is None:  # a repeat: counted, dropped (as the worker does)
+                continue
+            block = admitted.block
             analyzer.add(name, block.t0_ns, block.fs, block.samples)
             if analyzer.backlog >= CHUNK_SAMPLES:  # analysed in long chunks: same results
                 analyzer.process()
@@ -131,6 +139,8 @@ def analyze_recording(
         "missing_blocks": analyzer.aligner.missing_blocks,
         "gap_samples": analyzer.aligner.gap_samples,
         "dropped_blocks": analyzer.aligner.dropped_blocks,
+        "repeated_blocks": sum(h.repeats for h in blocks.sequence.values()),
+        "clock_fault_blocks": sum(h.clock_faults for h in blocks.sequence.values()),
     }
     return analyzer, stats
 

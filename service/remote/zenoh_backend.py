@@ -306,6 +306,8 @@ class ZenohBackend:
         }
         held = {m: a["status"]["held_reason"] for m, a in gathered.items()
                 if a["status"].get("held_reason")}  # fmt: skip
+        stalled = {m: a["status"]["stalled_reason"] for m, a in gathered.items()
+                   if a["status"].get("stalled_reason")}  # fmt: skip
         workers = {
             a["worker"].get("name"): a["worker"].get("checks", {}) for a in gathered.values()
         }
@@ -315,6 +317,7 @@ class ZenohBackend:
             "reachable": {m: m in gathered for m in self.mills},
             "data_fresh": {m: not s for m, s in stale.items()},
             "analysed": {m: m not in held for m in self.mills},
+            "draining": {m: m not in stalled for m in self.mills},
         }
         ready = (
             checks["zenoh"]
@@ -322,8 +325,10 @@ class ZenohBackend:
             and all(checks["reachable"].values())
             and all(checks["data_fresh"].values())
             and all(checks["analysed"].values())
+            and all(checks["draining"].values())
         )
-        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held}
+        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
+                "stalled_mills": stalled}  # fmt: skip
 
     def registry(self) -> CollectorRegistry:
         if self._registry is None:

@@ -262,6 +262,17 @@ class Store:
         rows = self._query_rows(sql, tuple(args))
         return [from_row(EventRow, {**r, "data": json.loads(r["data_json"])}) for r in rows]
 
+    def losses(self, mill_id: str, limit: int = 20) -> list[dict[str, Any]]:
+        """The mill's newest ``limit`` unrecoverable losses (the ``sequence_gap`` data-quality
+        events: channel, first and last missing sequence number and time, count), newest
+        first."""
+        rows = self._query_rows(
+            "SELECT data_json FROM events WHERE mill_id = ? AND kind = 'data_quality' "
+            "AND subject LIKE '%:sequence_gap' ORDER BY t_ns DESC, id DESC LIMIT ?",
+            (mill_id, limit),
+        )
+        return [json.loads(r["data_json"]) for r in rows]
+
     def damage(
         self, mill_id: str, since_day: str | None = None, until_day: str | None = None
     ) -> list[DamageRow]:

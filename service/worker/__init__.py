@@ -1,7 +1,5 @@
 """The worker: each block archived first, then analysed per mill and stored.
 
-The worker: every received block archived first, then analysed per mill and stored.
-
 Block path (``millwatch serve``; DESIGN.md "Data flow")::
 
     zenoh callback ─▶ block_queue ─▶ worker.Worker.step: for each block
@@ -12,7 +10,8 @@ Block path (``millwatch serve``; DESIGN.md "Data flow")::
 Modules, low to high (a module imports only those above it):
 
 * ``block_queue`` — the bounded queue between zenoh callbacks and the worker; drops counted.
-* ``health`` — per-channel counters (sequence gaps, decode errors, staleness), rates, latency.
+* ``health`` — per-channel sequencing (a block is new only if its sequence number is; repeats
+  and clock faults counted), lifetime counters (checkpointed), losses, staleness, rates, latency.
 * ``checkpoints`` — when each mill is checkpointed; which archived blocks a checkpoint covers.
 * ``partition`` — which configured mills this worker analyses when several share a router.
 * ``worker`` — :class:`~service.worker.worker.Worker`: routing, the block path above, commits,
@@ -24,6 +23,7 @@ Modules, low to high (a module imports only those above it):
 * ``parallel_replay`` — a long archive tail replayed by several processes, mills split.
 * ``recovery`` — :func:`~service.worker.recovery.recover`: restore checkpoints, replay the
   archive tail (one process or several), then go live.
+* ``drain_watch`` — whether each mill's blocks are still being analysed (``/ready``).
 * ``runtime`` — :class:`~service.worker.runtime.ServiceRuntime` owns the resources (store,
   archive, zenoh session, worker thread), starts them in order and closes them in reverse.
 

@@ -185,14 +185,25 @@ class BatchLane:
         health = self.worker.health[mill_id].channels
         names = self._channels[mill_id]
         per_channel: dict[int, np.ndarray] = {}
+        step = round(n * 1e9 / fs)
         for ci in np.unique(chan).tolist():
             sel = np.flatnonzero(chan == ci)
             seq = head["seq"][sel]
-            last = health[names[ci]].last_seq
+            h = health[names[ci]]
             first, final = int(seq[0]), int(seq[-1])
-            if (last is not None and first != last + 1) or final - first != sel.size - 1:
+            if (
+                h.last_seq is not None and first != h.last_seq + 1
+            ) or final - first != sel.size - 1:
                 return False
             if np.any(np.diff(seq) != 1):
+                return False
+            # t0 on the sequence numbers' grid (no clock fault): within half a block of it
+            t0 = head["t0_ns"][sel].astype(np.int64)
+            expected = h.expected_t0(first)
+            ref = t0[0] if expected is None else expected[0]
+            if h.in_clock_fault or np.any(
+                np.abs(t0 - (ref + np.arange(sel.size) * step)) > step // 2
+            ):
                 return False
             per_channel[ci] = sel
         start = batch.offset[idx] + head["header_len"].astype(np.int64)
@@ -218,7 +229,8 @@ def _observe(
         samples = sel.size * n
         nonfinite = samples - int(np.count_nonzero(np.isfinite(raw[sel]))) if count else 0
         last = sel[-1]
+        t0_last = int(head["t0_ns"][last])
         health[names[ci]].observe_run(
-            sel.size, samples, nonfinite, int(head["seq"][last]),
-            int(head["t0_ns"][last]) + duration, int(recv[last]),
+            sel.size, samples, nonfinite, int(head["seq"][last]), t0_last,
+            t0_last + duration, int(recv[last]),
         )  # fmt: skip

@@ -2,25 +2,88 @@
 
 Per channel: last sample time (end of the last block, sample clock), last receive time (wall
 clock), lag between the two, blocks and samples received, sequence gaps (missing blocks),
-repeated or out-of-order blocks, non-finite samples, decode errors by kind. Per worker: queue
-depth, high-water mark and drops, keys that belong to no configured mill, archive status.
+repeated blocks by kind, clock faults, non-finite samples, decode errors by kind. Per worker:
+queue depth, high-water mark and drops, keys that belong to no configured mill, archive status.
+
+**What is new** (issue 16, DESIGN.md "Persistence and recovery"): a block is new only if its
+sequence number is beyond every one accepted on its channel (:meth:`ChannelHealth.admit`, constant
+time). Anything else is a *repeat* — a ``duplicate`` (the last sequence number again: a recovery
+overlap or a resend) or a ``replay`` (an older one) — counted by kind and dropped; it never moves
+the channel's position, so a replayed block cannot make the next valid one look like a gap. A new
+block whose t0 contradicts its sequence number (more than half a block away from where the last
+accepted block's t0 and duration put it, :meth:`ChannelHealth.expected_t0`) is a *clock fault*:
+counted, and its samples are placed at the sequence number's time — a gateway clock never becomes
+the mill's time base.
+
+The counters are lifetime totals: the worker checkpoints them with the mill
+(:meth:`ChannelHealth.counters` / :meth:`ChannelHealth.restore_counters`) and the archive tail
+replayed after the checkpoint counts the rest, so a restart neither forgets nor double-counts.
 
 A channel is *stale* when nothing arrived for ``stale_after_s`` seconds of wall time.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from ingest.wire import Block
 
-__all__ = ["ChannelHealth", "LatencyReservoir", "MillHealth", "PerMinute", "SeqVerdict"]
+__all__ = [
+    "REPEATS",
+    "Admission",
+    "ChannelHealth",
+    "LatencyReservoir",
+    "Loss",
+    "MillHealth",
+    "PerMinute",
+    "SeqVerdict",
+]
 
-SeqVerdict = str  # "first", "next", "gap", "repeat"
+SeqVerdict = Literal["first", "next", "gap", "duplicate", "replay"]
+#: The verdicts of blocks that are not new (dropped after counting).
+REPEATS = frozenset({"duplicate", "replay"})
+#: Counters a checkpoint carries (lifetime totals).
+_COUNTERS = ("blocks", "samples", "nonfinite_samples", "missing_blocks", "gaps", "duplicates",
+             "replays", "clock_faults")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Loss:
+    """Blocks of one channel that never arrived: sequence numbers ``first_seq..last_seq``
+    (``blocks`` of them), whose samples would have started at ``first_t_ns`` and the last of
+    them at ``last_t_ns`` (ns since the Unix epoch, UTC; from the blocks around the gap)."""
+
+    first_seq: int
+    last_seq: int
+    first_t_ns: int
+    last_t_ns: int
+
+    @property
+    def blocks(self) -> int:
+        return self.last_seq - self.first_seq + 1
+
+    def as_dict(self) -> dict[str, int]:
+        return {"first_seq": self.first_seq, "last_seq": self.last_seq,
+                "first_t_ns": self.first_t_ns, "last_t_ns": self.last_t_ns,
+                "missing_blocks": self.blocks}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Admission:
+    """What :meth:`ChannelHealth.accept` made of a block: its ``verdict``; the ``block`` to
+    analyse (None for a repeat; re-timed to its sequence number's time on a clock fault); the
+    ``loss`` it reveals; and ``clock_fault`` = (t0 sent, t0 given) when it *starts* a clock-fault
+    episode (later blocks of the same episode are counted, not reported again)."""
+
+    verdict: SeqVerdict
+    block: Block | None
+    loss: Loss | None = None
+    clock_fault: tuple[int, int] | None = None
 
 
 @dataclass
@@ -32,53 +95,136 @@ class ChannelHealth:
     nonfinite_samples: int = 0
     missing_blocks: int = 0
     gaps: int = 0
-    repeats: int = 0
+    duplicates: int = 0
+    replays: int = 0
+    clock_faults: int = 0
     decode_errors: Counter[str] = field(default_factory=Counter)
     last_seq: int | None = None
+    last_t0_ns: int | None = None
     last_sample_ns: int | None = None
     last_recv_ns: int | None = None
+    #: Whether the last accepted block was a clock fault (a fault episode is reported once).
+    in_clock_fault: bool = False
+
+    @property
+    def repeats(self) -> int:
+        return self.duplicates + self.replays
+
+    def admit(self, seq: int) -> SeqVerdict:
+        """What ``seq`` is on this channel; changes nothing (see :meth:`observe`,
+        :meth:`repeat`)."""
+        last = self.last_seq
+        if last is None:
+            return "first"
+        if seq == last + 1:
+            return "next"
+        if seq > last:
+            return "gap"
+        return "duplicate" if seq == last else "replay"
+
+    def repeat(self, verdict: SeqVerdict, recv_ns: int) -> None:
+        """Count a block that is not new (``duplicate`` or ``replay``); its data is dropped."""
+        if verdict == "duplicate":
+            self.duplicates += 1
+        else:
+            self.replays += 1
+        self.last_recv_ns = recv_ns
+
+    def expected_t0(self, seq: int) -> tuple[int, int] | None:
+        """(t0 the sequence number ``seq`` puts the block at, tolerance), both ns — from the
+        last accepted block's t0 and duration; None before the first block."""
+        if self.last_t0_ns is None or self.last_sample_ns is None or self.last_seq is None:
+            return None
+        step = self.last_sample_ns - self.last_t0_ns
+        return self.last_t0_ns + (seq - self.last_seq) * step, max(step // 2, 1)
+
+    def gap_before(self, block: Block) -> Loss | None:
+        """The loss a new ``block`` reveals (None when it follows on), before :meth:`observe`."""
+        last = self.last_seq
+        if last is None or block.seq <= last + 1 or self.last_sample_ns is None:
+            return None
+        step = self.last_sample_ns - (self.last_t0_ns or self.last_sample_ns)
+        return Loss(last + 1, block.seq - 1, self.last_sample_ns, block.t0_ns - step)
+
+    def accept(self, block: Block, recv_ns: int) -> Admission:
+        """The whole admission of a decoded block (see the module docstring): a repeat is
+        counted and dropped; a new block is put at its sequence number's time when its t0
+        contradicts it, then observed."""
+        verdict = self.admit(block.seq)
+        if verdict in REPEATS:
+            self.repeat(verdict, recv_ns)
+            return Admission(verdict, None)
+        fault = None
+        expected = self.expected_t0(block.seq)
+        if expected is None or abs(block.t0_ns - expected[0]) <= expected[1]:
+            self.in_clock_fault = False
+        else:
+            self.clock_faults += 1
+            if not self.in_clock_fault:
+                fault = (block.t0_ns, expected[0])
+            self.in_clock_fault = True
+            block = dataclasses.replace(block, t0_ns=expected[0])
+        loss = self.gap_before(block)
+        self.observe(block, recv_ns)
+        return Admission(verdict, block, loss, fault)
 
     def observe(self, block: Block, recv_ns: int) -> SeqVerdict:
-        """Account for a decoded block; returns what its sequence number says."""
-        verdict = self._sequence(block.seq)
+        """Account for a decoded block; returns its verdict (:meth:`admit`). A repeat is only
+        counted (:meth:`repeat`): it never moves the channel's position."""
+        verdict = self.admit(block.seq)
+        if verdict in REPEATS:
+            self.repeat(verdict, recv_ns)
+            return verdict
+        if verdict == "gap" and self.last_seq is not None:
+            self.gaps += 1
+            self.missing_blocks += block.seq - self.last_seq - 1
+        self.last_seq = block.seq
         self.blocks += 1
         self.samples += block.samples.shape[0]
         self.nonfinite_samples += block.n_nonfinite
+        self.last_t0_ns = block.t0_ns
         self.last_sample_ns = block.t_end_ns
         self.last_recv_ns = recv_ns
         return verdict
 
     def observe_run(
-        self, blocks: int, samples: int, nonfinite: int, last_seq: int, last_sample_ns: int,
-        last_recv_ns: int,
+        self, blocks: int, samples: int, nonfinite: int, last_seq: int, last_t0_ns: int,
+        last_sample_ns: int, last_recv_ns: int,
     ) -> None:  # fmt: skip
         """Account at once for a run of ``blocks`` decoded blocks (``samples`` in all,
         ``nonfinite`` of them not finite) whose sequence numbers follow on from
-        :attr:`last_seq` up to ``last_seq``, without gap or repeat: what :meth:`observe` of
-        each would count (the batch lane's regular blocks)."""
+        :attr:`last_seq` up to ``last_seq`` and whose t0 agree with them, without gap, repeat or
+        clock fault: what :meth:`observe` of each would count (the batch lane's regular
+        blocks)."""
         self.blocks += blocks
         self.samples += samples
         self.nonfinite_samples += nonfinite
         self.last_seq = last_seq
+        self.last_t0_ns = last_t0_ns
         self.last_sample_ns = last_sample_ns
         self.last_recv_ns = last_recv_ns
-
-    def _sequence(self, seq: int) -> SeqVerdict:
-        last, self.last_seq = self.last_seq, seq
-        if last is None:
-            return "first"
-        if seq == last + 1:
-            return "next"
-        if seq > last + 1:
-            self.gaps += 1
-            self.missing_blocks += seq - last - 1
-            return "gap"
-        self.repeats += 1
-        return "repeat"
+        self.in_clock_fault = False
 
     def decode_error(self, kind: str, recv_ns: int) -> None:
         self.decode_errors[kind] += 1
         self.last_recv_ns = recv_ns
+
+    def counters(self) -> dict[str, Any]:
+        """The lifetime counters and the sequence position, for a checkpoint."""
+        out: dict[str, Any] = {name: getattr(self, name) for name in _COUNTERS}
+        out["decode_errors"] = dict(self.decode_errors)
+        out["last_seq"], out["last_t0_ns"] = self.last_seq, self.last_t0_ns
+        out["last_sample_ns"] = self.last_sample_ns
+        return out
+
+    def restore_counters(self, saved: dict[str, Any]) -> None:
+        """Continue from :meth:`counters` (older checkpoints hold fewer: those stay 0)."""
+        for name in _COUNTERS:
+            setattr(self, name, int(saved.get(name, 0)))
+        self.decode_errors = Counter(saved.get("decode_errors", {}))
+        self.last_seq = saved.get("last_seq")
+        self.last_t0_ns = saved.get("last_t0_ns")
+        self.last_sample_ns = saved.get("last_sample_ns")
 
     def stale(self, now_ns: int, stale_after_s: float) -> bool:
         return self.last_recv_ns is None or now_ns - self.last_recv_ns > stale_after_s * 1e9
@@ -94,7 +240,11 @@ class ChannelHealth:
             "missing_blocks": self.missing_blocks,
             "gaps": self.gaps,
             "repeats": self.repeats,
+            "duplicates": self.duplicates,
+            "replays": self.replays,
+            "clock_faults": self.clock_faults,
             "decode_errors": dict(self.decode_errors),
+            "last_seq": self.last_seq,
             "last_sample_ns": self.last_sample_ns,
             "last_recv_ns": self.last_recv_ns,
             "lag_s": lag,

@@ -91,6 +91,11 @@ class MillJob:
         """Many blocks of this mill at once (see :meth:`MillAnalyzer.add_blocks`)."""
         self.analyzer.add_blocks(chan, t0_ns, raw)
 
+    def release_absent(self, channels: set[str]) -> None:
+        """Stop holding the other channels back for ``channels`` (silent: see
+        :meth:`MillAnalyzer.release_absent`); the next :meth:`finish` analyses what that frees."""
+        self.analyzer.release_absent(channels)
+
     @property
     def backlog(self) -> int:
         """Samples aligned but not yet analysed."""

@@ -34,6 +34,7 @@ from ingest.zenoh_session import build_config, declare_block_subscriber
 from service.settings import ServiceSettings
 from service.store.database import Store
 from service.worker.block_queue import BlockQueue
+from service.worker.drain_watch import DrainWatch
 from service.worker.recovery import recover
 from service.worker.worker import AckRequest, MillPipeline, Worker, mill_patterns
 
@@ -44,7 +45,7 @@ log = logging.getLogger(__name__)
 ARCHIVE_PREFIX = "millwatch"
 STATUS_EVERY_S = 0.5
 #: The readiness checks given per mill (``{mill: bool}``); the others are one bool each.
-MILL_CHECKS = ("data_fresh", "analysed")
+MILL_CHECKS = ("data_fresh", "analysed", "draining")
 
 
 class ServiceRuntime:
@@ -74,6 +75,7 @@ class ServiceRuntime:
         self.alarm_listeners: list[Callable[[list[Transition]], None]] = []
         self.recovered_blocks = 0
         self.started_ns: int | None = None
+        self.drain_watch = DrainWatch(2 * settings.worker.stale_after_s)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -180,7 +182,11 @@ class ServiceRuntime:
 
     def _refresh_status(self) -> None:
         assert self.worker is not None
-        self.status = self.worker.status(self.settings.worker.stale_after_s)
+        status = self.worker.status(self.settings.worker.stale_after_s)
+        self.drain_watch.update(status)
+        for mill_id, s in status.items():
+            s["stalled_reason"] = self.drain_watch.stalled.get(mill_id)
+        self.status = status
 
     def stop(self) -> None:
         """Stop in reverse order; safe to call twice."""
@@ -243,13 +249,17 @@ class ServiceRuntime:
             and (self.worker is None or self.worker.archive_errors == 0),
             "store": self._store_ok(),
         }
+        stalled = {m: s["stalled_reason"] for m, s in self.status.items()
+                   if s.get("stalled_reason")}  # fmt: skip
         per_mill = {  # the MILL_CHECKS
             "data_fresh": {m: not s for m, s in stale.items()},
             "analysed": {m: m not in held for m in self.status},
+            "draining": {m: m not in stalled for m in self.status},
         }
         ready = all(flags.values()) and all(all(v.values()) for v in per_mill.values())
         checks: dict[str, Any] = {**flags, **per_mill}
-        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held}
+        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
+                "stalled_mills": stalled}  # fmt: skip
 
     def _store_ok(self) -> bool:
         if self.store is None:

@@ -39,7 +39,7 @@ from __future__ import annotations
 import logging
 import queue
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Iterable
 from concurrent.futures import Future
 from dataclasses import dataclass, field
@@ -71,6 +71,8 @@ __all__ = ["HELD", "AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 log = logging.getLogger(__name__)
 
 BATCH_BLOCKS = 2000
+#: Unrecoverable losses listed in a mill's status (``GET /mills/{id}``), newest first.
+LOSSES_SHOWN = 20
 #: The ``state`` in the status of a mill that is held (not analysed; see the module docstring).
 HELD = "held"
 
@@ -112,6 +114,8 @@ class MillPipeline(Protocol):
     def add_block(self, channel: str, block: Block) -> None: ...
 
     def add_blocks(self, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray) -> None: ...
+
+    def release_absent(self, channels: set[str]) -> None: ...
 
     def finish(self) -> MillUpdate: ...
 
@@ -167,6 +171,8 @@ class Worker:
         self._archive_errors_reported = 0
         self.on_alarms: Callable[[list[Transition]], None] | None = None
         self._acks: queue.SimpleQueue[AckRequest] = queue.SimpleQueue()
+        #: Each mill's newest unrecoverable losses (stored; newest first), for its status.
+        self.losses = {m: deque(store.losses(m, LOSSES_SHOWN), LOSSES_SHOWN) for m in mills}
 
     # ------------------------------------------------------------------ one block
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
@@ -192,27 +198,52 @@ class Worker:
             )
             return
         health = self.health[mill_id].channels[channel]
-        missing_before = health.missing_blocks
-        verdict = health.observe(block, item.recv_ns)
-        if verdict == "gap":
-            self._quality(
-                mill_id,
-                channel,
-                block.t0_ns,
-                "sequence_gap",
-                missing_blocks=health.missing_blocks - missing_before,
-                seq=block.seq,
-            )
-        if verdict == "repeat":
+        got = health.accept(block, item.recv_ns)
+        if got.block is None:  # not new: counted and dropped, in constant time
             self._log_once(
-                (item.key, "repeat"), "%s: repeated block seq %d ignored", item.key, block.seq
-            )
+                (item.key, got.verdict),
+                "%s: %s block seq %d dropped (not beyond seq %s; counted, further ones not "
+                "logged)", item.key, got.verdict, block.seq, health.last_seq,
+            )  # fmt: skip
             return
+        if got.clock_fault is not None:
+            self._clock_fault(mill_id, channel, item.key, block.seq, *got.clock_fault)
+        block = got.block
+        if got.loss is not None:
+            self._lost(mill_id, channel, got.loss.as_dict() | {"seq": block.seq})
+            self._log_once(
+                (item.key, "gap"),
+                "%s: %d block(s) lost before seq %d (stored as a data-quality event; further "
+                "gaps not logged)", item.key, got.loss.blocks, block.seq,
+            )  # fmt: skip
         if mill_id in self.held:
             self.held_blocks[mill_id] += 1
             return
         self.pipelines[mill_id].add_block(channel, block)
         self._unfinished[mill_id] = None
+
+    def _lost(self, mill_id: str, channel: str, loss: dict[str, int]) -> None:
+        """An unrecoverable loss: a data-quality event (stored once: the archive replay after
+        a restart finds it again under the same key) and the mill's list of recent losses."""
+        self._quality(mill_id, channel, loss["first_t_ns"], "sequence_gap", **loss)
+        shown = self.losses[mill_id]
+        entry = {"channel": channel, "problem": "sequence_gap", **loss}
+        if not any(e.get("channel") == channel and e.get("first_seq") == loss["first_seq"]
+                   for e in shown):  # fmt: skip
+            shown.appendleft(entry)
+
+    def _clock_fault(
+        self, mill_id: str, channel: str, key: str, seq: int, sent: int, given: int
+    ) -> None:
+        """The start of a clock-fault episode: a data-quality event, logged once a channel."""
+        self._quality(mill_id, channel, given, "clock_fault", seq=seq, t0_ns=sent,
+                      expected_t0_ns=given)  # fmt: skip
+        self._log_once(
+            (key, "clock_fault"),
+            "%s: block seq %d says t0=%d ns, its sequence number puts it at %d ns: clock fault, "
+            "analysed at the sequence number's time (further ones not logged)",
+            key, seq, sent, given,
+        )  # fmt: skip
 
     def route(self, key: str) -> tuple[str, str] | None:
         """(mill id, configured channel name) of a zenoh key; None for no configured mill."""
@@ -261,6 +292,12 @@ class Worker:
             for channel in sorted(was - stale):
                 self._quality(mill_id, channel, now, "fresh")
             self._stale[mill_id] = stale
+            silent = self._silent(mill_id, now, stale_after_s)
+            if silent and mill_id not in self.held:
+                # the others are not held back for a silent channel (its late blocks, if any
+                # ever come, are dropped and counted by the aligner)
+                self.pipelines[mill_id].release_absent(silent)
+                self._unfinished[mill_id] = None
             if mill_id in self.held:
                 # Its pipeline's alarm engine was not restored: a fresh one knows nothing of the
                 # mill's open alarms, so it would raise them again under new ids, and what it
@@ -273,6 +310,15 @@ class Worker:
                                             float(archive_failures), now))  # fmt: skip
             self._pending.add(mill_id, self.pipelines[mill_id].observe(observations))
         self._archive_errors_reported = self.archive_errors
+
+    def _silent(self, mill_id: str, now: int, after_s: float) -> set[str]:
+        """Channels that sent nothing for ``after_s`` s of wall time — counted from this
+        worker's start for a channel not heard from since (at start-up its missed blocks are
+        still being recovered: the others wait for them)."""
+        limit = now - after_s * 1e9
+        start = self._started_ns
+        channels = self.health[mill_id].channels.items()
+        return {c for c, h in channels if (h.last_recv_ns or start) < limit}
 
     def _rates(self, mill_id: str, now: int) -> list[Observation]:
         """``spike_rate`` and ``sequence_gaps`` per channel, per minute of wall time."""
@@ -414,9 +460,11 @@ class Worker:
         Nothing for a held mill: its last good checkpoint must stay for the revert."""
         if mill_id in self.held:
             return
-        seqs = {c: h.last_seq for c, h in self.health[mill_id].channels.items()}
+        channels = self.health[mill_id].channels
+        seqs = {c: h.last_seq for c, h in channels.items()}
+        counters = {c: h.counters() for c, h in channels.items()}
         state = {"pipelines": {mill_id: self.pipelines[mill_id].snapshot()},
-                 "last_seq": {mill_id: seqs}}  # fmt: skip
+                 "last_seq": {mill_id: seqs}, "health": {mill_id: counters}}  # fmt: skip
         where = position.as_dict() if position else {}
         with self.store.transaction() as db:
             size = Store.put_checkpoint(db, mill_id, self._clock(), where, state)
@@ -436,7 +484,7 @@ class Worker:
             for mill_id, snap in state.get("pipelines", {}).items():
                 if self._restore_or_hold(mill_id, snap, at):
                     covered[mill_id] = at
-            self._restore_seqs(state.get("last_seq", {}))
+            self._restore_seqs(state.get("last_seq", {}), state.get("health", {}))
         return covered
 
     def adopt_replayed(
@@ -483,16 +531,24 @@ class Worker:
             return False
         return True
 
-    def _restore_seqs(self, last_seq: dict[str, dict[str, int]]) -> None:
-        """The channels' last sequence numbers. Not a held mill's: its checkpoint lies before
-        the blocks the replay and live data bring now, so those in between would be counted
-        (and stored as a data-quality event) as lost; its health starts afresh instead."""
+    def _restore_seqs(
+        self, last_seq: dict[str, dict[str, int]], counters: dict[str, dict[str, Any]]
+    ) -> None:
+        """The channels' sequence positions and lifetime counters (older checkpoints: the last
+        sequence numbers only). Not a held mill's: its checkpoint lies before the blocks the
+        replay and live data bring now, so those in between would be counted (and stored as a
+        data-quality event) as lost; its health starts afresh instead."""
         for mill_id, seqs in last_seq.items():
             if mill_id in self.held or mill_id not in self.health:
                 continue
             channels = self.health[mill_id].channels
+            saved = counters.get(mill_id, {})
             for channel, seq in seqs.items():
-                if channel in channels:
+                if channel not in channels:
+                    continue
+                if channel in saved:
+                    channels[channel].restore_counters(saved[channel])
+                else:
                     channels[channel].last_seq = seq
 
     def _restore_mill(self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None) -> None:
@@ -513,6 +569,10 @@ class Worker:
         out = {}
         for mill_id in self.mills:
             health = self.health[mill_id].as_dict(now, stale_after_s)
+            health["missing_blocks_total"] = sum(
+                c.missing_blocks for c in self.health[mill_id].channels.values()
+            )
+            health["recent_losses"] = list(self.losses[mill_id])
             reason = self.held.get(mill_id)
             if reason is None:
                 out[mill_id] = {"health": health, **self.pipelines[mill_id].status(),

@@ -24,7 +24,8 @@ def health_router(backend: Backend) -> APIRouter:
 
     @router.get(
         "/ready",
-        summary="Readiness: zenoh up, data fresh, every mill analysed, archive writable, store ok",
+        summary="Readiness: zenoh up, data fresh, every mill analysed and draining, archive "
+        "writable, store ok",
         responses={503: {"description": "Not ready; the same body says which check failed."}},
     )
     def ready() -> JSONResponse:

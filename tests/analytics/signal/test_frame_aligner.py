@@ -59,14 +59,35 @@ def test_unequal_lengths_are_padded():
     assert len(f) == 100 and np.isnan(f.data["b"][60:]).all()
 
 
-def test_out_of_order_channels_within_pending_are_fine():
+def test_skewed_channels_give_the_frames_of_an_interleaved_arrival():
+    """After a restart one channel's recovered blocks may come long after another's newer ones:
+    the frames are those of an uninterrupted run (far beyond the old bound of 8 groups)."""
+    skewed, interleaved = FrameAligner(["a", "b"], FS), FrameAligner(["a", "b"], FS)
+    out = [f for k in range(500) for f in skewed.push("a", T0 + k * STEP, FS, block(k))]
+    out += [f for k in range(500) for f in skewed.push("b", T0 + k * STEP, FS, block(-k))]
+    ref = [f for k in range(500) for c, v in (("a", k), ("b", -k))
+           for f in interleaved.push(c, T0 + k * STEP, FS, block(v))]  # fmt: skip
+    assert len(out) == len(ref) == 500 and skewed.missing_blocks == 0
+    for f, g in zip(out, ref, strict=True):
+        assert f.t0_ns == g.t0_ns and all(np.array_equal(f.data[c], g.data[c]) for c in "ab")
+
+
+def test_a_channel_past_a_missing_block_releases_its_group_at_once():
+    """Each channel's blocks come in time order, so a channel already past t0 never fills it."""
     al = FrameAligner(["a", "b"], FS)
     out = al.push("a", T0, FS, block(1))
-    out += al.push("a", T0 + STEP, FS, block(2))
-    out += al.push("b", T0 + STEP, FS, block(3))
-    out += al.push("b", T0, FS, block(4))
-    assert [f.t0_ns for f in out] == [T0, T0 + STEP]
-    assert al.missing_blocks == 0
+    out += al.push("b", T0 + STEP, FS, block(2))  # b's block at T0 was lost
+    assert [f.t0_ns for f in out] == [T0] and np.isnan(out[0].data["b"]).all()
+    assert al.missing_blocks == 1
+
+
+def test_released_absent_channels_do_not_hold_the_others():
+    al = FrameAligner(["a", "b"], FS)
+    for k in range(20):
+        assert al.push("a", T0 + k * STEP, FS, block(k)) == []
+    out = al.release_absent({"b"})
+    assert [f.t0_ns for f in out] == [T0 + k * STEP for k in range(20)]
+    assert al.missing_blocks == 20
 
 
 def test_snapshot_restore_keeps_pending_blocks():

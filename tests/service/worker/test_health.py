@@ -16,9 +16,45 @@ def block(seq: int, t0: int = 0, n: int = 100, bad: int = 0):
 
 def test_sequence_numbers_reveal_gaps_and_repeats():
     h = ChannelHealth()
-    verdicts = [h.observe(block(s), recv_ns=0) for s in (0, 1, 2, 5, 5, 6)]
-    assert verdicts == ["first", "next", "next", "gap", "repeat", "next"]
-    assert (h.gaps, h.missing_blocks, h.repeats, h.blocks, h.samples) == (1, 2, 1, 6, 600)
+    verdicts = [h.observe(block(s, t0=s * 100_000_000), recv_ns=0) for s in (0, 1, 2, 5, 5, 6)]
+    assert verdicts == ["first", "next", "next", "gap", "duplicate", "next"]
+    assert (h.gaps, h.missing_blocks, h.repeats, h.blocks, h.samples) == (1, 2, 1, 5, 500)
+
+
+def test_a_replayed_block_never_moves_the_channel_back():
+    """The 102,762 'missing' blocks of issue 16: a replay of an old block must not make the next
+    valid block look like a gap."""
+    h = ChannelHealth()
+    for s in range(10):
+        h.observe(block(s, t0=s * 100_000_000), recv_ns=0)
+    for old in (3, 9, 0, 9):
+        assert h.observe(block(old), recv_ns=0) in {"replay", "duplicate"}
+    assert h.observe(block(10, t0=1_000_000_000), recv_ns=0) == "next"
+    assert (h.missing_blocks, h.gaps, h.duplicates, h.replays, h.last_seq) == (0, 0, 2, 2, 10)
+
+
+def test_a_gap_names_the_lost_span_with_its_times():
+    h = ChannelHealth()
+    h.observe(block(4, t0=400_000_000), recv_ns=0)
+    later = block(9, t0=900_000_000)
+    loss = h.gap_before(later)
+    assert loss is not None
+    assert (loss.first_seq, loss.last_seq, loss.blocks) == (5, 8, 4)
+    assert (loss.first_t_ns, loss.last_t_ns) == (500_000_000, 800_000_000)
+    assert h.expected_t0(9) == (900_000_000, 50_000_000)
+
+
+def test_counters_survive_a_checkpoint():
+    h = ChannelHealth()
+    for s in (0, 1, 4, 4, 2):
+        h.observe(block(s, t0=s * 100_000_000), recv_ns=0)
+    h.decode_error("truncated", recv_ns=0)
+    again = ChannelHealth()
+    again.restore_counters(h.counters())
+    assert again.as_dict(0, 10.0) | {"last_recv_ns": None, "lag_s": None, "stale": True} == (
+        h.as_dict(0, 10.0) | {"last_recv_ns": None, "lag_s": None, "stale": True}
+    )
+    assert again.admit(5) == "next" and again.expected_t0(5) == (500_000_000, 50_000_000)
 
 
 def test_lag_staleness_and_nonfinite_counts():
