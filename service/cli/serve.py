@@ -20,7 +20,7 @@ from pathlib import Path
 import uvicorn
 
 from analytics.drivetrain.mill_config import MillConfig
-from ingest.zenoh_session import build_config, open_session
+from ingest.zenoh_session import build_config, try_open
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
 from service.remote.queryables import WorkerQueryables
@@ -40,8 +40,18 @@ def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
     mills = partition_mills(settings.load_mills(), settings.worker.partition)
     z = settings.zenoh
     if z.connect:
-        with open_session(build_config(mode="client", connect=z.connect)) as session:
+        session = try_open(build_config(mode="client", connect=z.connect))
+        if session is None:
+            log.warning(
+                "no zenoh router at %s yet: the check that no other live worker analyses these "
+                "mills is skipped; starting anyway (zenoh connects when the router comes up)",
+                list(z.connect),
+            )
+            return mills
+        try:
             check_exclusive(session, mills, worker_identity(settings))
+        finally:
+            session.close()
     return mills
 
 

@@ -3,10 +3,17 @@
 :class:`ServiceRuntime` owns every long-lived resource and closes them in reverse order. The
 order of start-up matters:
 
-1. open the store and the archive writer;
-2. subscribe on zenoh (callbacks only enqueue), so nothing published during recovery is lost;
+1. note when the archive was last written, then open the store and the archive writer;
+2. subscribe on zenoh (callbacks only enqueue) with the recovering subscriber
+   (:func:`ingest.gateway.declare_recovering_subscriber`): each gateway's cache is fetched from
+   a little before the archive's last write (:data:`HISTORY_MARGIN_S`), so the blocks published
+   while this worker was down come first, in sequence order, then live ones; what the archive
+   already holds comes again and is dropped as a repeat (its sequence number is not new);
 3. recover: restore the newest checkpoint and replay the archive after it;
 4. start the worker thread, which drains the queue (archive first, then analysis).
+
+A connect endpoint that is down does not stop the start (peer mode: zenoh retries it in the
+background, see :mod:`ingest.zenoh_session`); ``/ready`` says which endpoints are not connected.
 
 Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the worker thread after its current batch,
 write a final checkpoint, finish the archive file (footer and index), undeclare the subscribers,
@@ -20,6 +27,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -27,10 +35,12 @@ import zenoh
 from alarms.lifecycle import Transition
 from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
 from analytics.drivetrain.mill_config import MillConfig
+from ingest.archive.files import list_archive_files
 from ingest.archive.reader import ArchiveReader
 from ingest.archive.writer import ArchiveWriter
+from ingest.gateway import RecoveringSubscriber, declare_recovering_subscriber
 from ingest.keys import alarm_key
-from ingest.zenoh_session import build_config, declare_block_subscriber
+from ingest.zenoh_session import build_config, connected_peers, open_retrying
 from service.settings import ServiceSettings
 from service.store.database import Store
 from service.worker.block_queue import BlockQueue
@@ -44,6 +54,9 @@ log = logging.getLogger(__name__)
 
 ARCHIVE_PREFIX = "millwatch"
 STATUS_EVERY_S = 0.5
+#: History is fetched from this long before the archive's last write: the archive writer keeps
+#: up to ``max_latency_s`` (default well under a second) in memory, which a SIGKILL loses.
+HISTORY_MARGIN_S = 5.0
 #: The readiness checks given per mill (``{mill: bool}``); the others are one bool each.
 MILL_CHECKS = ("data_fresh", "analysed", "draining")
 
@@ -65,7 +78,9 @@ class ServiceRuntime:
         self.archive: ArchiveWriter | None = None
         self.worker: Worker | None = None
         self.session: zenoh.Session | None = None
-        self._subscribers: list[zenoh.Subscriber] = []
+        self._subscribers: list[RecoveringSubscriber] = []
+        #: How far back the gateways' caches are asked for (None: all they hold).
+        self.history_s: float | None = None
         self._alarm_publishers: dict[str, zenoh.Publisher] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -80,6 +95,7 @@ class ServiceRuntime:
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
         s = self.settings
+        self.history_s = history_seconds(s.archive.directory, ARCHIVE_PREFIX)
         self.store = Store(s.store.path)
         for mill_id, config in self.mills.items():
             self.store.put_mill(
@@ -127,10 +143,14 @@ class ServiceRuntime:
 
     def _subscribe(self) -> None:
         z = self.settings.zenoh
-        self.session = zenoh.open(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
+        self.session = open_retrying(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
+        if self.history_s is not None:
+            log.info("asking the gateways for the last %.1f s they hold", self.history_s)
         for pattern in mill_patterns(self.mills.values()):
             self._subscribers.append(
-                declare_block_subscriber(self.session, pattern, self._on_block)
+                declare_recovering_subscriber(
+                    self.session, pattern, self._on_block, max_age_s=self.history_s
+                )
             )
 
     def _on_alarms(self, transitions: list[Transition]) -> None:
@@ -243,7 +263,8 @@ class ServiceRuntime:
         stale = {m: s["health"]["stale_channels"] for m, s in self.status.items()}
         held = {m: s["held_reason"] for m, s in self.status.items() if s.get("held_reason")}
         flags = {
-            "zenoh": self.session is not None,
+            "zenoh": self.session is not None
+            and (not self.settings.zenoh.connect or connected_peers(self.session) > 0),
             "worker": self._thread is not None and self._thread.is_alive(),
             "archive": self.archive is not None
             and (self.worker is None or self.worker.archive_errors == 0),
@@ -258,8 +279,11 @@ class ServiceRuntime:
         }
         ready = all(flags.values()) and all(all(v.values()) for v in per_mill.values())
         checks: dict[str, Any] = {**flags, **per_mill}
-        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
-                "stalled_mills": stalled}  # fmt: skip
+        report = {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
+                  "stalled_mills": stalled}  # fmt: skip
+        if not flags["zenoh"]:
+            report["zenoh_waiting_for"] = list(self.settings.zenoh.connect)
+        return report
 
     def _store_ok(self) -> bool:
         if self.store is None:
@@ -269,3 +293,13 @@ class ServiceRuntime:
         except Exception:  # any failure means "not reachable"
             return False
         return True
+
+
+def history_seconds(directory: str | Path, prefix: str, now_s: float | None = None) -> float | None:
+    """How far back to ask the gateways' caches: since the archive was last written, plus
+    :data:`HISTORY_MARGIN_S` (None when there is no archive yet: all they hold)."""
+    files = list_archive_files(directory, prefix) if Path(directory).is_dir() else []
+    if not files:
+        return None
+    last = max(p.stat().st_mtime for p in files)
+    return max(0.0, (time.time() if now_s is None else now_s) - last) + HISTORY_MARGIN_S
