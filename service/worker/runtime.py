@@ -4,13 +4,15 @@
 order of start-up matters:
 
 1. note when the archive was last written, then open the store and the archive writer;
-2. subscribe on zenoh (callbacks only enqueue) with the recovering subscriber
-   (:func:`ingest.gateway.declare_recovering_subscriber`): each gateway's cache is fetched from
-   a little before the archive's last write (:data:`HISTORY_MARGIN_S`), so the blocks published
-   while this worker was down come first, in sequence order, then live ones; what the archive
-   already holds comes again and is dropped as a repeat (its sequence number is not new);
+2. open the zenoh session (it connects while the next step runs);
 3. recover: restore the newest checkpoint and replay the archive after it;
-4. start the worker thread, which drains the queue (archive first, then analysis).
+4. subscribe (callbacks only enqueue) with the recovering subscriber
+   (:func:`ingest.gateway.declare_recovering_subscriber`), one per mill: its gateways' caches
+   are fetched from a little before the mill's last archived block (:func:`history_seconds`),
+   so the blocks published while this worker was down or recovering come first, in sequence
+   order, then live ones; what the archive already holds comes again and is dropped as a
+   repeat (its sequence number is not new);
+5. start the worker thread, which drains the queue (archive first, then analysis).
 
 A connect endpoint that is down does not stop the start (peer mode: zenoh retries it in the
 background, see :mod:`ingest.zenoh_session`); ``/ready`` says which endpoints are not connected.
@@ -27,7 +29,6 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -35,18 +36,18 @@ import zenoh
 from alarms.lifecycle import Transition
 from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
 from analytics.drivetrain.mill_config import MillConfig
-from ingest.archive.files import list_archive_files
 from ingest.archive.reader import ArchiveReader
 from ingest.archive.writer import ArchiveWriter
 from ingest.gateway import RecoveringSubscriber, declare_recovering_subscriber
-from ingest.keys import alarm_key
+from ingest.keys import alarm_key, mill_pattern
 from ingest.zenoh_session import build_config, connected_peers, open_retrying
 from service.settings import ServiceSettings
 from service.store.database import Store
 from service.worker.block_queue import BlockQueue
 from service.worker.drain_watch import DrainWatch
+from service.worker.health import MillHealth
 from service.worker.recovery import recover
-from service.worker.worker import AckRequest, MillPipeline, Worker, mill_patterns
+from service.worker.worker import AckRequest, MillPipeline, Worker
 
 __all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
 
@@ -79,8 +80,8 @@ class ServiceRuntime:
         self.worker: Worker | None = None
         self.session: zenoh.Session | None = None
         self._subscribers: list[RecoveringSubscriber] = []
-        #: How far back the gateways' caches are asked for (None: all they hold).
-        self.history_s: float | None = None
+        #: How far back each mill's gateways' caches were asked for (None: all they hold).
+        self.history_s: dict[str, float | None] = {}
         self._alarm_publishers: dict[str, zenoh.Publisher] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -95,7 +96,6 @@ class ServiceRuntime:
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
         s = self.settings
-        self.history_s = history_seconds(s.archive.directory, ARCHIVE_PREFIX)
         self.store = Store(s.store.path)
         for mill_id, config in self.mills.items():
             self.store.put_mill(
@@ -117,7 +117,8 @@ class ServiceRuntime:
             self.archive,
             checkpoint_seconds=s.worker.checkpoint_seconds,
         )
-        self._subscribe()
+        z = s.zenoh
+        self.session = open_retrying(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
         self.worker.on_alarms = self._on_alarms
         self.recovered_blocks = recover(
             self.worker,
@@ -125,6 +126,7 @@ class ServiceRuntime:
             jobs=s.worker.recovery_jobs,
             factory=self._pipeline_factory,
         )
+        self._subscribe(self.worker)
         self._refresh_status()
         # What start-up built (modules, compiled kernels, configurations, pipelines) lives as
         # long as the service: frozen, the full collections of later garbage skip it (50 mills:
@@ -141,17 +143,26 @@ class ServiceRuntime:
             s.store.path,
         )
 
-    def _subscribe(self) -> None:
-        z = self.settings.zenoh
-        self.session = open_retrying(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
-        if self.history_s is not None:
-            log.info("asking the gateways for the last %.1f s they hold", self.history_s)
-        for pattern in mill_patterns(self.mills.values()):
+    def _subscribe(self, worker: Worker) -> None:
+        """One recovering subscriber per mill, asking the gateways' caches for what came after
+        the mill's last archived block (:func:`history_seconds`)."""
+        assert self.session is not None
+        for config in self.mills.values():
+            age = history_seconds(worker.health[config.id])
+            self.history_s[config.id] = age
             self._subscribers.append(
                 declare_recovering_subscriber(
-                    self.session, pattern, self._on_block, max_age_s=self.history_s
+                    self.session, mill_pattern(config.site, config.id), self._on_block,
+                    max_age_s=age,
                 )
-            )
+            )  # fmt: skip
+        known = [a for a in self.history_s.values() if a is not None]
+        log.info(
+            "asking the gateways for what they hold since each mill's last archived block "
+            "(up to %.1f s back; %d mill(s) never heard from: all they hold)",
+            max(known, default=0.0),
+            len(self.history_s) - len(known),
+        )
 
     def _on_alarms(self, transitions: list[Transition]) -> None:
         """Stored transitions: tell the listeners, then publish them."""
@@ -295,11 +306,15 @@ class ServiceRuntime:
         return True
 
 
-def history_seconds(directory: str | Path, prefix: str, now_s: float | None = None) -> float | None:
-    """How far back to ask the gateways' caches: since the archive was last written, plus
-    :data:`HISTORY_MARGIN_S` (None when there is no archive yet: all they hold)."""
-    files = list_archive_files(directory, prefix) if Path(directory).is_dir() else []
-    if not files:
+def history_seconds(health: MillHealth, now_ns: int | None = None) -> float | None:
+    """How far back to ask a mill's gateways' caches (zenoh history ``max_age``, by publish
+    time): since the oldest of its channels' last archived blocks was received, plus
+    :data:`HISTORY_MARGIN_S`; None (all they hold) when a channel was never heard from.
+
+    Per channel, not the archive's last write: a worker killed while one channel's recovered
+    blocks were still queued behind another's live ones must ask for that channel's again."""
+    last = [h.last_recv_ns for h in health.channels.values()]
+    if not last or any(t is None for t in last):
         return None
-    last = max(p.stat().st_mtime for p in files)
-    return max(0.0, (time.time() if now_s is None else now_s) - last) + HISTORY_MARGIN_S
+    now = time.time_ns() if now_ns is None else now_ns
+    return max(0.0, (now - min(t for t in last if t is not None)) / 1e9) + HISTORY_MARGIN_S
