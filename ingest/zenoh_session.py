@@ -134,14 +134,16 @@ def open_session(config: zenoh.Config) -> Iterator[zenoh.Session]:
     opens at once and connects when they come up; a client waits, retrying, for its router.
     Either way one line is logged naming the endpoints not up yet.
     """
-    session = _open(config)
+    session = open_retrying(config)
     try:
         yield session
     finally:
         session.close()
 
 
-def _open(config: zenoh.Config) -> zenoh.Session:
+def open_retrying(config: zenoh.Config) -> zenoh.Session:
+    """Open a session whose connect endpoints may be down (see :func:`open_session`, which
+    also closes it); the caller closes it."""
     endpoints = json.loads(config.get_json("connect/endpoints")) or []
     if not endpoints:
         return zenoh.open(config)
@@ -166,6 +168,18 @@ def _open(config: zenoh.Config) -> zenoh.Session:
     finally:
         config.insert_json5("connect/timeout_ms", "-1")
     return zenoh.open(config)
+
+
+def try_open(config: zenoh.Config) -> zenoh.Session | None:
+    """One attempt: a session, or None when none of the connect endpoints answers (a client
+    with no router up); the caller closes the session."""
+    config.insert_json5("connect/timeout_ms", "0")
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError:
+        return None
+    finally:
+        config.insert_json5("connect/timeout_ms", "-1")
 
 
 def connected_peers(session: zenoh.Session) -> int:

@@ -18,7 +18,7 @@ PACKAGES = ("analytics", "ingest", "alarms", "service")
 #: Top-level folders that are not Python packages, with their one line.
 OTHER = {
     "deploy": "zenoh router configs, systemd units, example plant and mill configs (TOML)",
-    "tests": "mirrors the packages; tests/bench/ holds benchmarks (not tests)",
+    "tests": "mirrors the packages; tests/integration/: real processes; tests/bench/: benchmarks",
 }
 HEADING = "## Layout"
 FENCE = "```"

@@ -20,6 +20,7 @@ import uvicorn
 
 from ingest.zenoh_session import build_config, open_session
 from service.api.app import create_app
+from service.cli.serve import run_until_signal
 from service.remote.zenoh_backend import ZenohBackend
 from service.settings import ServiceSettings, load_service_settings
 
@@ -43,7 +44,7 @@ def serve_api(settings: ServiceSettings) -> int:
         try:
             config = uvicorn.Config(create_app(backend), host=settings.api.host,
                                     port=settings.api.port, log_level="warning")  # fmt: skip
-            uvicorn.Server(config).run()  # returns on SIGINT/SIGTERM
+            run_until_signal(uvicorn.Server(config))
         finally:
             backend.close()
     return 0

@@ -24,6 +24,7 @@ from ingest.sim.scenes import get_scene
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.api.app import create_app
 from service.cli.args import positive_float, positive_int
+from service.cli.serve import run_until_signal
 from service.settings import ServiceSettings
 from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
@@ -140,7 +141,7 @@ def _main(args: argparse.Namespace) -> int:
     try:
         gateways.start()
         _announce(settings, runtime, directory, args)
-        server.run()
+        run_until_signal(server)
     finally:
         if timer is not None:
             timer.cancel()

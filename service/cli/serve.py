@@ -20,7 +20,7 @@ from pathlib import Path
 import uvicorn
 
 from analytics.drivetrain.mill_config import MillConfig
-from ingest.zenoh_session import build_config, open_session
+from ingest.zenoh_session import build_config, try_open
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
 from service.remote.queryables import WorkerQueryables
@@ -29,7 +29,7 @@ from service.worker.mill_job import MillJob
 from service.worker.partition import check_exclusive, partition_mills, worker_identity
 from service.worker.runtime import ServiceRuntime
 
-__all__ = ["add_parser", "serve", "wait_for_signal", "worker_mills"]
+__all__ = ["add_parser", "run_until_signal", "serve", "wait_for_signal", "worker_mills"]
 
 log = logging.getLogger(__name__)
 
@@ -40,8 +40,18 @@ def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
     mills = partition_mills(settings.load_mills(), settings.worker.partition)
     z = settings.zenoh
     if z.connect:
-        with open_session(build_config(mode="client", connect=z.connect)) as session:
+        session = try_open(build_config(mode="client", connect=z.connect))
+        if session is None:
+            log.warning(
+                "no zenoh router at %s yet: the check that no other live worker analyses these "
+                "mills is skipped; starting anyway (zenoh connects when the router comes up)",
+                list(z.connect),
+            )
+            return mills
+        try:
             check_exclusive(session, mills, worker_identity(settings))
+        finally:
+            session.close()
     return mills
 
 
@@ -63,13 +73,23 @@ def serve(settings: ServiceSettings, *, api: bool = True) -> int:
                     log_level="warning",
                 )
             )
-            server.run()  # returns on SIGINT/SIGTERM
+            run_until_signal(server)
         else:
             wait_for_signal()
     finally:
         queryables.close()
         runtime.stop()
     return 0
+
+
+def run_until_signal(server: uvicorn.Server) -> None:
+    """Run the API until SIGINT/SIGTERM. uvicorn raises the signal that stopped it again once it
+    has put back the handlers it found; with Python's default ones that killed the process
+    before the runtime's clean stop (final checkpoint, archive footer, zenoh session closed:
+    exit -15). It finds handlers that do nothing instead, so :func:`serve` goes on to stop."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: None)
+    server.run()
 
 
 def wait_for_signal() -> None:

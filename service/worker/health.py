@@ -214,7 +214,7 @@ class ChannelHealth:
         out: dict[str, Any] = {name: getattr(self, name) for name in _COUNTERS}
         out["decode_errors"] = dict(self.decode_errors)
         out["last_seq"], out["last_t0_ns"] = self.last_seq, self.last_t0_ns
-        out["last_sample_ns"] = self.last_sample_ns
+        out["last_sample_ns"], out["last_recv_ns"] = self.last_sample_ns, self.last_recv_ns
         return out
 
     def restore_counters(self, saved: dict[str, Any]) -> None:
@@ -225,6 +225,7 @@ class ChannelHealth:
         self.last_seq = saved.get("last_seq")
         self.last_t0_ns = saved.get("last_t0_ns")
         self.last_sample_ns = saved.get("last_sample_ns")
+        self.last_recv_ns = saved.get("last_recv_ns")
 
     def stale(self, now_ns: int, stale_after_s: float) -> bool:
         return self.last_recv_ns is None or now_ns - self.last_recv_ns > stale_after_s * 1e9

@@ -3,10 +3,19 @@
 :class:`ServiceRuntime` owns every long-lived resource and closes them in reverse order. The
 order of start-up matters:
 
-1. open the store and the archive writer;
-2. subscribe on zenoh (callbacks only enqueue), so nothing published during recovery is lost;
+1. note when the archive was last written, then open the store and the archive writer;
+2. open the zenoh session (it connects while the next step runs);
 3. recover: restore the newest checkpoint and replay the archive after it;
-4. start the worker thread, which drains the queue (archive first, then analysis).
+4. subscribe (callbacks only enqueue) with the recovering subscriber
+   (:func:`ingest.gateway.declare_recovering_subscriber`), one per mill: its gateways' caches
+   are fetched from a little before the mill's last archived block (:func:`history_seconds`),
+   so the blocks published while this worker was down or recovering come first, in sequence
+   order, then live ones; what the archive already holds comes again and is dropped as a
+   repeat (its sequence number is not new);
+5. start the worker thread, which drains the queue (archive first, then analysis).
+
+A connect endpoint that is down does not stop the start (peer mode: zenoh retries it in the
+background, see :mod:`ingest.zenoh_session`); ``/ready`` says which endpoints are not connected.
 
 Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the worker thread after its current batch,
 write a final checkpoint, finish the archive file (footer and index), undeclare the subscribers,
@@ -29,14 +38,16 @@ from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.reader import ArchiveReader
 from ingest.archive.writer import ArchiveWriter
-from ingest.keys import alarm_key
-from ingest.zenoh_session import build_config, declare_block_subscriber
+from ingest.gateway import RecoveringSubscriber, declare_recovering_subscriber
+from ingest.keys import alarm_key, mill_pattern
+from ingest.zenoh_session import build_config, connected_peers, open_retrying
 from service.settings import ServiceSettings
 from service.store.database import Store
 from service.worker.block_queue import BlockQueue
 from service.worker.drain_watch import DrainWatch
+from service.worker.health import MillHealth
 from service.worker.recovery import recover
-from service.worker.worker import AckRequest, MillPipeline, Worker, mill_patterns
+from service.worker.worker import AckRequest, MillPipeline, Worker
 
 __all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
 
@@ -44,6 +55,9 @@ log = logging.getLogger(__name__)
 
 ARCHIVE_PREFIX = "millwatch"
 STATUS_EVERY_S = 0.5
+#: History is fetched from this long before the archive's last write: the archive writer keeps
+#: up to ``max_latency_s`` (default well under a second) in memory, which a SIGKILL loses.
+HISTORY_MARGIN_S = 5.0
 #: The readiness checks given per mill (``{mill: bool}``); the others are one bool each.
 MILL_CHECKS = ("data_fresh", "analysed", "draining")
 
@@ -65,7 +79,9 @@ class ServiceRuntime:
         self.archive: ArchiveWriter | None = None
         self.worker: Worker | None = None
         self.session: zenoh.Session | None = None
-        self._subscribers: list[zenoh.Subscriber] = []
+        self._subscribers: list[RecoveringSubscriber] = []
+        #: How far back each mill's gateways' caches were asked for (None: all they hold).
+        self.history_s: dict[str, float | None] = {}
         self._alarm_publishers: dict[str, zenoh.Publisher] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -101,7 +117,8 @@ class ServiceRuntime:
             self.archive,
             checkpoint_seconds=s.worker.checkpoint_seconds,
         )
-        self._subscribe()
+        z = s.zenoh
+        self.session = open_retrying(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
         self.worker.on_alarms = self._on_alarms
         self.recovered_blocks = recover(
             self.worker,
@@ -109,6 +126,7 @@ class ServiceRuntime:
             jobs=s.worker.recovery_jobs,
             factory=self._pipeline_factory,
         )
+        self._subscribe(self.worker)
         self._refresh_status()
         # What start-up built (modules, compiled kernels, configurations, pipelines) lives as
         # long as the service: frozen, the full collections of later garbage skip it (50 mills:
@@ -125,13 +143,26 @@ class ServiceRuntime:
             s.store.path,
         )
 
-    def _subscribe(self) -> None:
-        z = self.settings.zenoh
-        self.session = zenoh.open(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
-        for pattern in mill_patterns(self.mills.values()):
+    def _subscribe(self, worker: Worker) -> None:
+        """One recovering subscriber per mill, asking the gateways' caches for what came after
+        the mill's last archived block (:func:`history_seconds`)."""
+        assert self.session is not None
+        for config in self.mills.values():
+            age = history_seconds(worker.health[config.id])
+            self.history_s[config.id] = age
             self._subscribers.append(
-                declare_block_subscriber(self.session, pattern, self._on_block)
-            )
+                declare_recovering_subscriber(
+                    self.session, mill_pattern(config.site, config.id), self._on_block,
+                    max_age_s=age,
+                )
+            )  # fmt: skip
+        known = [a for a in self.history_s.values() if a is not None]
+        log.info(
+            "asking the gateways for what they hold since each mill's last archived block "
+            "(up to %.1f s back; %d mill(s) never heard from: all they hold)",
+            max(known, default=0.0),
+            len(self.history_s) - len(known),
+        )
 
     def _on_alarms(self, transitions: list[Transition]) -> None:
         """Stored transitions: tell the listeners, then publish them."""
@@ -243,7 +274,8 @@ class ServiceRuntime:
         stale = {m: s["health"]["stale_channels"] for m, s in self.status.items()}
         held = {m: s["held_reason"] for m, s in self.status.items() if s.get("held_reason")}
         flags = {
-            "zenoh": self.session is not None,
+            "zenoh": self.session is not None
+            and (not self.settings.zenoh.connect or connected_peers(self.session) > 0),
             "worker": self._thread is not None and self._thread.is_alive(),
             "archive": self.archive is not None
             and (self.worker is None or self.worker.archive_errors == 0),
@@ -258,8 +290,11 @@ class ServiceRuntime:
         }
         ready = all(flags.values()) and all(all(v.values()) for v in per_mill.values())
         checks: dict[str, Any] = {**flags, **per_mill}
-        return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
-                "stalled_mills": stalled}  # fmt: skip
+        report = {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
+                  "stalled_mills": stalled}  # fmt: skip
+        if not flags["zenoh"]:
+            report["zenoh_waiting_for"] = list(self.settings.zenoh.connect)
+        return report
 
     def _store_ok(self) -> bool:
         if self.store is None:
@@ -269,3 +304,17 @@ class ServiceRuntime:
         except Exception:  # any failure means "not reachable"
             return False
         return True
+
+
+def history_seconds(health: MillHealth, now_ns: int | None = None) -> float | None:
+    """How far back to ask a mill's gateways' caches (zenoh history ``max_age``, by publish
+    time): since the oldest of its channels' last archived blocks was received, plus
+    :data:`HISTORY_MARGIN_S`; None (all they hold) when a channel was never heard from.
+
+    Per channel, not the archive's last write: a worker killed while one channel's recovered
+    blocks were still queued behind another's live ones must ask for that channel's again."""
+    last = [h.last_recv_ns for h in health.channels.values()]
+    if not last or any(t is None for t in last):
+        return None
+    now = time.time_ns() if now_ns is None else now_ns
+    return max(0.0, (now - min(t for t in last if t is not None)) / 1e9) + HISTORY_MARGIN_S

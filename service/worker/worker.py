@@ -618,8 +618,3 @@ def _routes(mills: dict[str, MillConfig]) -> dict[str, tuple[str, str]]:
         for name, channel in config.channels.items():
             routes[keys.channel_key(config.site, config.id, channel.key)] = (mill_id, name)
     return routes
-
-
-def mill_patterns(mills: Iterable[MillConfig]) -> list[str]:
-    """The zenoh key expressions that cover the configured mills' live channels."""
-    return [keys.mill_pattern(c.site, c.id) for c in mills]
