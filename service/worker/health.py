@@ -149,23 +149,44 @@ class ChannelHealth:
     def accept(self, block: Block, recv_ns: int) -> Admission:
         """The whole admission of a decoded block (see the module docstring): a repeat is
         counted and dropped; a new block is put at its sequence number's time when its t0
-        contradicts it, then observed."""
-        verdict = self.admit(block.seq)
-        if verdict in REPEATS:
+        contradicts it, then observed. (One pass, no helper calls: it runs for every block.)"""
+        seq, last = block.seq, self.last_seq
+        if last is not None and seq <= last:
+            verdict: SeqVerdict = "duplicate" if seq == last else "replay"
             self.repeat(verdict, recv_ns)
             return Admission(verdict, None)
-        fault = None
-        expected = self.expected_t0(block.seq)
-        if expected is None or abs(block.t0_ns - expected[0]) <= expected[1]:
-            self.in_clock_fault = False
+        fault = loss = None
+        last_t0, last_end = self.last_t0_ns, self.last_sample_ns
+        if last is None or last_t0 is None or last_end is None:  # (no times: first, old state)
+            verdict = "first" if last is None else "next" if seq == last + 1 else "gap"
+            if last is not None and verdict == "gap":
+                self.gaps += 1
+                self.missing_blocks += seq - last - 1
         else:
-            self.clock_faults += 1
-            if not self.in_clock_fault:
-                fault = (block.t0_ns, expected[0])
-            self.in_clock_fault = True
-            block = dataclasses.replace(block, t0_ns=expected[0])
-        loss = self.gap_before(block)
-        self.observe(block, recv_ns)
+            step = last_end - last_t0
+            expected = last_t0 + (seq - last) * step
+            if abs(block.t0_ns - expected) <= max(step // 2, 1):
+                self.in_clock_fault = False
+            else:
+                self.clock_faults += 1
+                if not self.in_clock_fault:
+                    fault = (block.t0_ns, expected)
+                self.in_clock_fault = True
+                block = dataclasses.replace(block, t0_ns=expected)
+            if seq == last + 1:
+                verdict = "next"
+            else:
+                verdict = "gap"
+                loss = Loss(last + 1, seq - 1, last_end, block.t0_ns - step)
+                self.gaps += 1
+                self.missing_blocks += seq - last - 1
+        self.last_seq = seq
+        self.blocks += 1
+        self.samples += block.samples.shape[0]
+        self.nonfinite_samples += block.n_nonfinite
+        self.last_t0_ns = block.t0_ns
+        self.last_sample_ns = block.t_end_ns
+        self.last_recv_ns = recv_ns
         return Admission(verdict, block, loss, fault)
 
     def observe(self, block: Block, recv_ns: int) -> SeqVerdict:
