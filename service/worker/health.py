@@ -138,14 +138,6 @@ class ChannelHealth:
         step = self.last_sample_ns - self.last_t0_ns
         return self.last_t0_ns + (seq - self.last_seq) * step, max(step // 2, 1)
 
-    def gap_before(self, block: Block) -> Loss | None:
-        """The loss a new ``block`` reveals (None when it follows on), before :meth:`observe`."""
-        last = self.last_seq
-        if last is None or block.seq <= last + 1 or self.last_sample_ns is None:
-            return None
-        step = self.last_sample_ns - (self.last_t0_ns or self.last_sample_ns)
-        return Loss(last + 1, block.seq - 1, self.last_sample_ns, block.t0_ns - step)
-
     def accept(self, block: Block, recv_ns: int) -> Admission:
         """The whole admission of a decoded block (see the module docstring): a repeat is
         counted and dropped; a new block is put at its sequence number's time when its t0
@@ -190,23 +182,8 @@ class ChannelHealth:
         return Admission(verdict, block, loss, fault)
 
     def observe(self, block: Block, recv_ns: int) -> SeqVerdict:
-        """Account for a decoded block; returns its verdict (:meth:`admit`). A repeat is only
-        counted (:meth:`repeat`): it never moves the channel's position."""
-        verdict = self.admit(block.seq)
-        if verdict in REPEATS:
-            self.repeat(verdict, recv_ns)
-            return verdict
-        if verdict == "gap" and self.last_seq is not None:
-            self.gaps += 1
-            self.missing_blocks += block.seq - self.last_seq - 1
-        self.last_seq = block.seq
-        self.blocks += 1
-        self.samples += block.samples.shape[0]
-        self.nonfinite_samples += block.n_nonfinite
-        self.last_t0_ns = block.t0_ns
-        self.last_sample_ns = block.t_end_ns
-        self.last_recv_ns = recv_ns
-        return verdict
+        """:meth:`accept`, for callers that need only the verdict."""
+        return self.accept(block, recv_ns).verdict
 
     def observe_run(
         self, blocks: int, samples: int, nonfinite: int, last_seq: int, last_t0_ns: int,

@@ -37,11 +37,11 @@ def test_a_gap_names_the_lost_span_with_its_times():
     h = ChannelHealth()
     h.observe(block(4, t0=400_000_000), recv_ns=0)
     later = block(9, t0=900_000_000)
-    loss = h.gap_before(later)
+    loss = h.accept(later, recv_ns=0).loss
     assert loss is not None
     assert (loss.first_seq, loss.last_seq, loss.blocks) == (5, 8, 4)
     assert (loss.first_t_ns, loss.last_t_ns) == (500_000_000, 800_000_000)
-    assert h.expected_t0(9) == (900_000_000, 50_000_000)
+    assert h.expected_t0(10) == (1_000_000_000, 50_000_000)
 
 
 def test_counters_survive_a_checkpoint():
