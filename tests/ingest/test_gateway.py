@@ -233,37 +233,42 @@ def test_restarted_gateway_skips_exactly_what_fell_due_while_down_and_continues_
     same anchor and seed: per channel, its first sequence number is the count it skipped, the
     sequence continues to the end, and the lost span is what fell due while it was down."""
     config = load_mill_config(DEFAULT_MILL)
-    scene = starting_now(get_scene("start-lrs", config, seed=3, duration_s=4.0))
     endpoint = tcp_endpoint(free_loopback_port())
     seqs: dict[str, list[int]] = defaultdict(list)
     lock = threading.Lock()
+    stop = threading.Event()
+    n_channels = len(config.channels)
 
     def on_block(key: str, payload: bytes) -> None:
         with lock:
             seqs[key].append(wire.decode_block(payload).seq)
+            if sum(map(len, seqs.values())) >= 8 * n_channels:  # gateway 1 got going: stop it
+                stop.set()
 
     with open_session(build_config(listen=[endpoint], loopback_only=True)) as worker:
         sub = declare_block_subscriber(worker, keys.mill_pattern(config.site, config.id), on_block)
         with open_session(build_config(connect=[endpoint], loopback_only=True)) as gateway:
-            stop = threading.Event()
-            threading.Timer(0.35, stop.set).start()
-            first = _resumed(gateway, scene).run(stop)  # 4 s of scene at 4× = 1 s wall
+            # anchored once both sessions are up, so a slow start-up only shifts started_at
+            scene = starting_now(get_scene("start-lrs", config, seed=3, duration_s=12.0))
+            threading.Timer(2.5, stop.set).start()  # bound, should gateway 1 deliver nothing
+            first = _resumed(gateway, scene).run(stop)  # 12 s of scene at 4× = 3 s wall
             stopped = time.monotonic()
             time.sleep(0.4)
             restarted = time.monotonic()
             second = _resumed(gateway, scene).run()
         _wait(lambda: sum(map(len, seqs.values())) >= first.blocks + second.blocks)
         sub.undeclare()
-    n_channels = len(config.channels)
+    last = 12 * 10  # 12 s of scene, 10 blocks/s per channel
     started_at = first.skipped // n_channels  # the scene was built a moment before gateway 1
     resumed_at = second.skipped // n_channels
+    assert first.blocks >= 8 * n_channels, first
     assert first.skipped % n_channels == 0 and first.first_seq == started_at
     assert second.skipped % n_channels == 0 and second.first_seq == resumed_at
     stopped_at = started_at + first.blocks // n_channels  # (a stop may fall mid-step: +1)
     for got in seqs.values():  # per channel: two contiguous runs, in order, to the end
-        k = started_at + len(got) - (40 - resumed_at)
+        k = started_at + len(got) - (last - resumed_at)
         assert k in (stopped_at, stopped_at + 1)
-        assert got == [*range(started_at, k), *range(resumed_at, 40)]
+        assert got == [*range(started_at, k), *range(resumed_at, last)]
     due_while_down = (restarted - stopped) * 4.0 * 10  # 4× real time, 10 blocks/s
     assert abs((resumed_at - stopped_at) - due_while_down) <= 2
 
