@@ -95,6 +95,7 @@ def write_report(
     and write each file atomically under ``directory``; extension → path written."""
     from service.reports.monthly import build_monthly_report
 
+    (directory / config.id).mkdir(parents=True, exist_ok=True)  # fails before the work if it must
     report = build_monthly_report(store, config, month)
     written: dict[str, str] = {}
     for ext, data in render_files(report, formats).items():
