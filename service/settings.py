@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import os
 import tomllib
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -54,14 +55,15 @@ from pydantic import (
 from analytics.drivetrain.mill_config import MillConfig, describe_validation_error
 from ingest.keys import LAYOUT_VERSION, ROOT
 from ingest.mill_files import load_mill_config, load_mill_configs
-from service.reports.files import FORMATS, parse_formats
 
 __all__ = [
+    "REPORT_FORMATS",
     "MailSettings",
     "ReportSettings",
     "ServiceSettings",
     "SettingsError",
     "load_service_settings",
+    "parse_formats",
 ]
 
 
@@ -70,6 +72,26 @@ _LIVE_PREFIX = "/".join([ROOT, LAYOUT_VERSION, ""])
 
 class SettingsError(ValueError):
     """Unusable service settings; the message names the file and the fields."""
+
+
+#: Monthly report formats written as files (:mod:`service.reports.files`), in render order.
+REPORT_FORMATS: tuple[str, ...] = ("html", "pdf", "csv")
+
+
+def parse_formats(text: str | Iterable[str]) -> tuple[str, ...]:
+    """Report formats from ``"html,pdf"`` or a list, checked against :data:`REPORT_FORMATS`,
+    duplicates dropped; :class:`ValueError` naming an unknown one."""
+    known = ", ".join(REPORT_FORMATS)
+    items = text.split(",") if isinstance(text, str) else list(text)
+    out: list[str] = []
+    for item in (i.strip().lower() for i in items):
+        if item not in REPORT_FORMATS:
+            raise ValueError(f"report format {item!r} is not one of {known}")
+        if item not in out:
+            out.append(item)
+    if not out:
+        raise ValueError(f"no report format given (choose from {known})")
+    return tuple(out)
 
 
 class _Strict(BaseModel):
@@ -232,7 +254,7 @@ class ReportSettings(_Strict):
 
     enabled: bool = True
     directory: Path = Path("var/reports")
-    formats: tuple[str, ...] = FORMATS
+    formats: tuple[str, ...] = REPORT_FORMATS
     delay_s: Annotated[float, Field(ge=0, le=7 * 86_400)] = 900.0
     catch_up_months: Annotated[int, Field(ge=1, le=24)] = 3
     check_every_s: Annotated[float, Field(gt=0, le=86_400)] = 60.0

@@ -75,9 +75,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     # Imports here: 'millwatch --help' must not pay for the store, pydantic models or renderers.
-    from service.reports.files import FORMATS, parse_formats
+    from service.settings import REPORT_FORMATS, parse_formats
 
-    store_path, out, formats = args.store, args.out, FORMATS
+    store_path, out, formats = args.store, args.out, REPORT_FORMATS
     if args.config is not None:
         from service.settings import load_service_settings
 

@@ -1,9 +1,8 @@
 """The monthly report as files: ``<directory>/<mill>/<YYYY-MM>.<ext>``, written atomically.
 
 The one place that calls the renderers for files (the month-end job, ``millwatch report``):
-:func:`render_files` maps each wanted format to its file extension and bytes. Nothing heavy is
-imported at module import (the renderers pull in matplotlib): the service settings and the
-command line import :data:`FORMATS` from here cheaply.
+:func:`render_files` maps each wanted format to its file extension and bytes. The renderers (they
+pull in matplotlib) are imported only when called.
 
 Atomic writes (:func:`write_atomic`): the bytes go to a temporary file in the same directory,
 are flushed to disk, and the file is renamed over the final name, so a reader (or a crash) sees
@@ -19,30 +18,15 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from service.settings import REPORT_FORMATS as FORMATS
+
 if TYPE_CHECKING:
     from service.reports.monthly import MonthlyReport
 
-__all__ = ["EXTENSIONS", "FORMATS", "parse_formats", "render_files", "report_path", "write_atomic"]
+__all__ = ["EXTENSIONS", "FORMATS", "render_files", "report_path", "write_atomic"]
 
-#: Report formats written as files, in the order they are rendered.
-FORMATS: tuple[str, ...] = ("html", "pdf", "csv")
-#: File extension of each format.
+#: File extension of each format (:data:`service.settings.REPORT_FORMATS`).
 EXTENSIONS: dict[str, str] = {"html": "html", "pdf": "pdf", "csv": "csv"}
-
-
-def parse_formats(text: str | Iterable[str]) -> tuple[str, ...]:
-    """Formats from ``"html,pdf"`` or a list, checked against :data:`FORMATS`, duplicates
-    dropped; :class:`ValueError` naming an unknown one."""
-    items = text.split(",") if isinstance(text, str) else list(text)
-    out: list[str] = []
-    for item in (i.strip().lower() for i in items):
-        if item not in FORMATS:
-            raise ValueError(f"report format {item!r} is not one of {', '.join(FORMATS)}")
-        if item not in out:
-            out.append(item)
-    if not out:
-        raise ValueError(f"no report format given (choose from {', '.join(FORMATS)})")
-    return tuple(out)
 
 
 def render_files(report: MonthlyReport, formats: Iterable[str] = FORMATS) -> dict[str, bytes]:
