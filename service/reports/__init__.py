@@ -10,9 +10,15 @@ What is here:
 * :mod:`service.reports.monthly` — the monthly report as plain data, built from the store.
 * :mod:`service.reports.render_html`, :mod:`service.reports.render_pdf`,
   :mod:`service.reports.render_csv` — the report rendered (HTML with SVG plots, PDF, CSV).
+* :mod:`service.reports.files` — the report as files ``<mill>/<YYYY-MM>.<ext>``: the one call
+  of the renderers for files, atomic writes.
+* :mod:`service.reports.mail` — a report's mail (SMTP, STARTTLS, login; stdlib only).
+* :mod:`service.reports.month_end` — the month-end job of the service: each finished local
+  month's reports written and mailed, catch-up, retries, the ``report_delivery`` alarm.
 
 Data flow: store rows (+ the worker's status for life) → plain dataclasses/dicts → renderers →
-bytes; the API's routes choose the format (:mod:`service.api.routes.reports`).
+bytes; the API's routes choose the format (:mod:`service.api.routes.reports`); the month-end
+job and ``millwatch report`` write files through :mod:`service.reports.files`.
 
 Where things go: a new section of the monthly report is a field of ``MonthlyReport`` built in
 :mod:`service.reports.monthly` and shown by each renderer; a new format is a renderer and an entry
