@@ -15,7 +15,8 @@ from typing import Any
 
 from analytics.drivetrain.mill_config import MillConfig
 from service.errors import NotFound, Unavailable
-from service.reports.life import LifeInputs, life_report
+from service.reports.history import read_life
+from service.reports.life import life_to_dict
 from service.reports.monthly import MonthlyReport, build_monthly_report
 from service.reports.starts import current_month, starts_in_month
 from service.store.database import Store
@@ -104,11 +105,15 @@ def store_of(runtime: ServiceRuntime) -> Store:
 
 
 def mill_life(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
-    """Damage so far, damage rate and remaining life per component (:mod:`service.reports.life`)."""
+    """Damage so far and remaining life per component (:mod:`service.reports.life`), with the
+    worker's live damage (closed cycles not yet stored, the open residue)."""
     config = mill_config(runtime, mill_id)
-    rows = store_of(runtime).damage(mill_id)
+    store = store_of(runtime)
     status = runtime.status.get(mill_id, {})
-    return life_report(LifeInputs(config, rows, status, time.time_ns()))
+    with store.read_snapshot():
+        report = read_life(store, config, time.time_ns(), live=status.get("damage"),
+                           last_sample_ns=status.get("last_sample_ns"))  # fmt: skip
+    return life_to_dict(report)
 
 
 def mill_starts(runtime: ServiceRuntime, mill_id: str, month: str | None) -> dict[str, Any]:

@@ -263,6 +263,7 @@ ALARM_EXAMPLE: JsonDict = {
     "acked_by": None,
     "cleared_ns": None,
     "seq": 1,
+    "simulated": False,
 }
 
 
@@ -289,6 +290,9 @@ class AlarmOut(BaseModel):
     acked_by: str | None
     cleared_ns: int | None
     seq: int = Field(description="Number of transitions so far.")
+    simulated: bool = Field(
+        False, description="Raised on simulated data (the demo's mills); the message says so too."
+    )
 
 
 class TransitionOut(BaseModel):

@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -133,6 +133,17 @@ class Store:
             f"INSERT OR REPLACE INTO damage_daily ({column_list(DamageRow)}) "
             f"VALUES ({', '.join('?' * len(columns(DamageRow)))})",
             [to_params(DamageRow, r) for r in rows],
+        )
+
+    @staticmethod
+    def extend_spans(db: sqlite3.Connection, spans: Mapping[str, tuple[int, int]]) -> None:
+        """Widen each mill's span of analysed samples to include ``(first_ns, last_ns)``
+        (inside :meth:`transaction`); idempotent, so a replayed archive tail changes nothing."""
+        db.executemany(
+            "INSERT INTO mill_span (mill_id, first_ns, last_ns) VALUES (?, ?, ?) "
+            "ON CONFLICT (mill_id) DO UPDATE SET first_ns = min(first_ns, excluded.first_ns), "
+            "last_ns = max(last_ns, excluded.last_ns)",
+            [(m, int(a), int(b)) for m, (a, b) in spans.items()],
         )
 
     @staticmethod
@@ -287,6 +298,26 @@ class Store:
         rows = self._query_rows(sql + " ORDER BY day, component, phase", tuple(args))
         return [from_row(DamageRow, r) for r in rows]
 
+    def mill_span(self, mill_id: str) -> tuple[int | None, int | None]:
+        """Time of the first analysed sample and just past the last one (ns), ``None`` before
+        any (or in a store written by a millwatch before schema 5)."""
+        row = self._query_one("SELECT first_ns, last_ns FROM mill_span WHERE mill_id = ?",
+                              (mill_id,))  # fmt: skip
+        return (None, None) if row is None else (int(row[0]), int(row[1]))
+
+    def count_events(
+        self, mill_id: str, kind: str, since_ns: int | None = None, until_ns: int | None = None
+    ) -> int:
+        """Number of events of one kind in ``[since, until)`` (counted on the index)."""
+        sql = "SELECT count(*) FROM events WHERE mill_id = ? AND kind = ?"
+        args: list[Any] = [mill_id, kind]
+        for clause, value in (("t_ns >= ?", since_ns), ("t_ns < ?", until_ns)):
+            if value is not None:
+                sql += " AND " + clause
+                args.append(value)
+        row = self._query_one(sql, tuple(args))
+        return 0 if row is None else int(row[0])
+
     def damage_days(self, mill_id: str) -> tuple[str | None, str | None]:
         """First and last day with damage rows of a mill (``None`` without any)."""
         row = self._query_one("SELECT min(day), max(day) FROM damage_daily WHERE mill_id = ?",
@@ -308,10 +339,7 @@ class Store:
         first with ``oldest_first``). With ``every_ns`` only the first record of each interval
         of that length (counted from the epoch) is read: the choice is made on the index, so the
         skipped records are never read or decoded."""
-        where, args = sampler.record_window(mill_id, kind, since_ns, until_ns)
-        if every_ns:
-            where += f" AND t_ns IN (SELECT min(t_ns) FROM records WHERE {where} GROUP BY t_ns / ?)"
-            args = (*args, *args, int(every_ns))
+        where, args = sampler.record_window(mill_id, kind, since_ns, until_ns, every_ns)
         sql = f"SELECT t_ns, data_json FROM records WHERE {where} ORDER BY t_ns"
         sql += "" if oldest_first else " DESC"
         if limit is not None:
@@ -364,6 +392,8 @@ class Store:
         objects: Sequence[Sequence[str]],
         since_ns: int | None = None,
         until_ns: int | None = None,
+        *,
+        every_ns: int | None = None,
     ) -> tuple[list[list[str]], list[tuple[Any, ...]]]:
         """Columns of the records of one kind in ``[since, until)``, extracted by SQLite, so a
         month of steady-state windows is read without decoding each record in Python.
@@ -374,8 +404,9 @@ class Store:
         where absent. The object keys are read from the first record of each hour and checked
         on every record in the same pass; a second pass reads them all only if some record
         has others. Records SQLite's JSON refuses (``NaN`` and ``Infinity``, which Python's
-        json writes) are decoded in Python (:mod:`service.store.sampler`)."""
-        where, args = sampler.record_window(mill_id, kind, since_ns, until_ns)
+        json writes) are decoded in Python (:mod:`service.store.sampler`). With ``every_ns``
+        only the first record of each interval of that length is read (as :meth:`records`)."""
+        where, args = sampler.record_window(mill_id, kind, since_ns, until_ns, every_ns)
         return sampler.record_columns(self._query, where, args, fields, objects)
 
     @contextmanager

@@ -71,6 +71,12 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "CREATE INDEX checkpoint_parts_by_part ON checkpoint_parts (part, id)",
         "DROP TABLE checkpoints",
     ),
+    (  # 4 → 5: the span of analysed samples per mill (first and last sample time, ns), which
+        # remaining life measures monitoring by; alarms about simulated data say so
+        """CREATE TABLE mill_span (
+            mill_id TEXT PRIMARY KEY, first_ns INTEGER NOT NULL, last_ns INTEGER NOT NULL)""",
+        "ALTER TABLE alarms ADD COLUMN simulated INTEGER NOT NULL DEFAULT 0",
+    ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 _PART_CHECKPOINTS = 4  # the schema version that brought checkpoint_parts

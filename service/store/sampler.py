@@ -28,14 +28,23 @@ KEY_SAMPLE_NS = 3_600 * 10**9
 
 
 def record_window(
-    mill_id: str, kind: str, since_ns: int | None, until_ns: int | None
+    mill_id: str,
+    kind: str,
+    since_ns: int | None,
+    until_ns: int | None,
+    every_ns: int | None = None,
 ) -> tuple[str, tuple[Any, ...]]:
-    """WHERE clause (on the ``records_unique`` index) and its arguments."""
+    """WHERE clause (on the ``records_unique`` index) and its arguments; with ``every_ns`` only
+    the first record of each interval of that length (counted from the epoch) is selected, the
+    choice made on the index, so the skipped records are never read."""
     where, args = "mill_id = ? AND kind = ?", list[Any]([mill_id, kind])
     for clause, value in (("t_ns >= ?", since_ns), ("t_ns < ?", until_ns)):
         if value is not None:
             where += " AND " + clause
             args.append(value)
+    if every_ns:
+        where += f" AND t_ns IN (SELECT min(t_ns) FROM records WHERE {where} GROUP BY t_ns / ?)"
+        args += [*args, int(every_ns)]
     return where, tuple(args)
 
 

@@ -115,6 +115,7 @@ class MillJob:
             if self.analyzer.samples < self._next_damage:
                 return update
             update.damage += self._damage_rows()
+            update.span = self._span()
             update.alarm_transitions += self.alarms.observe_all(self._life_observations())
             self._next_damage = self.analyzer.samples + self._damage_every
 
@@ -155,6 +156,11 @@ class MillJob:
             self._last_window_ns = int(new[-1]["t_ns"])
             self._latest_window = new[-1]
         return new
+
+    def _span(self) -> tuple[int, int] | None:
+        """The analysed samples' span as the damage rows cover it (stored with them)."""
+        first, last = self.analyzer.first_sample_ns, self.analyzer.next_sample_ns
+        return None if first is None or last is None else (first, last)
 
     def _life_observations(self) -> list[Observation]:
         """``remaining_life_years`` per component: (1 − D) / (D per year so far), the damage

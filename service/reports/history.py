@@ -1,0 +1,223 @@
+"""A mill's history read from the store for remaining life, the monthly trend and the fleet.
+
+Every read is bounded on an index: daily damage rows up to a day, start/stop events of the
+monitored time (a few hundred a month), start counts per month (``count(*)`` on the events
+index), the mill's span of analysed samples (one row), and one steady-state window per
+:data:`TREND_SAMPLE_NS` for the monthly oscillation and bending trend (chosen on the index,
+the fields extracted by SQLite). Call inside :meth:`~service.store.database.Store.read_snapshot`
+to see one state of the store.
+
+* :func:`read_life` — :class:`~service.reports.life.LifeReport` as of a time (now for
+  ``GET /mills/{id}/life``, a month's end for the report): the one life computation.
+* :func:`monthly_trend` — starts, damage per component, oscillation range and bending amplitude
+  per local calendar month (seed 000 §10.6 "long term trending").
+* :func:`phase_seconds` — seconds in the start, stop and run phases from start/stop events.
+"""
+
+from __future__ import annotations
+
+import math
+import zoneinfo
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from datetime import date, datetime, timedelta
+
+import numpy as np
+
+from analytics.drivetrain.mill_config import MillConfig
+from service.reports.life import LifeInputs, LifeReport, compute_life, midnight_ns
+from service.reports.starts import month_bounds_ns
+from service.store.database import Store
+from service.store.records import DamageRow, EventRow
+
+__all__ = [
+    "TREND_SAMPLE_NS",
+    "MonthTrend",
+    "last_months",
+    "monthly_trend",
+    "phase_seconds",
+    "read_life",
+    "read_life_inputs",
+]
+
+TREND_SAMPLE_NS = 3_600 * 10**9
+"""The monthly oscillation and bending trend reads the first steady window of each hour."""
+
+
+def phase_seconds(
+    events: Iterable[EventRow], lo: int, hi: int, running_at_lo: bool
+) -> dict[str, float]:
+    """Seconds in ``start``, ``stop`` and ``run`` within ``[lo, hi)``: a start from switch-on
+    to the end of acceleration, a stop from switch-off to rest, running between a successful
+    start and the next stop (``running_at_lo``: the mill was running at ``lo``)."""
+    out = {"start": 0.0, "stop": 0.0, "run": 0.0}
+    run_since = lo if running_at_lo else None
+    for e in (e for e in events if e.kind in ("start", "stop")):
+        end = e.t_end_ns if e.t_end_ns is not None else e.t_ns
+        out[e.kind] += _clip(e.t_ns, end, lo, hi)
+        if e.kind == "stop" and run_since is not None:
+            out["run"] += _clip(run_since, e.t_ns, lo, hi)
+            run_since = None
+        elif e.kind == "start" and not e.data.get("failed"):
+            run_since = end
+    if run_since is not None:
+        out["run"] += _clip(run_since, hi, lo, hi)
+    return out
+
+
+def _clip(lo: int, hi: int, span_lo: int, span_hi: int) -> float:
+    return max(0, min(hi, span_hi) - max(lo, span_lo)) / 1e9
+
+
+def _span(store: Store, config: MillConfig, until_ns: int) -> tuple[int | None, int | None]:
+    """First and last analysed sample up to ``until_ns``; from the daily rows' days for a
+    store written before the span was kept."""
+    first, last = store.mill_span(config.id)
+    if first is None or last is None:
+        lo_day, hi_day = store.damage_days(config.id)
+        if lo_day is None or hi_day is None:
+            return None, None
+        tz = zoneinfo.ZoneInfo(config.time_zone)
+        first = midnight_ns(date.fromisoformat(lo_day), tz)
+        last = midnight_ns(date.fromisoformat(hi_day) + timedelta(days=1), tz)
+    if first >= until_ns:
+        return None, None
+    return first, min(last, until_ns)
+
+
+def read_life(
+    store: Store,
+    config: MillConfig,
+    until_ns: int,
+    *,
+    live: Mapping[str, Mapping[str, float]] | None = None,
+    last_sample_ns: int | None = None,
+) -> LifeReport:
+    """The life of ``config``'s mill from what the store holds before ``until_ns``; ``live``
+    and ``last_sample_ns``: the worker's damage summary and analysed position (now only)."""
+    return compute_life(read_life_inputs(store, config, until_ns, live=live,
+                                         last_sample_ns=last_sample_ns))  # fmt: skip
+
+
+def read_life_inputs(
+    store: Store,
+    config: MillConfig,
+    until_ns: int,
+    *,
+    live: Mapping[str, Mapping[str, float]] | None = None,
+    last_sample_ns: int | None = None,
+) -> LifeInputs:
+    """What :func:`read_life` computes from (its arguments)."""
+    since, last = _span(store, config, until_ns)
+    if last_sample_ns is not None and since is not None:
+        last = max(last or since, min(last_sample_ns, until_ns))
+    end = last if last is not None else until_ns
+    tz = zoneinfo.ZoneInfo(config.time_zone)
+    rows = store.damage(config.id, until_day=_day(end - 1, tz)) if since is not None else []
+    starts, seconds = 0, {"start": 0.0, "stop": 0.0, "run": 0.0}
+    if since is not None and last is not None:
+        starts = store.count_events(config.id, "start", since, last)
+        events = sorted(
+            [*store.events(config.id, "start", since, last),
+             *store.events(config.id, "stop", since, last)],
+            key=lambda e: e.t_ns,
+        )  # fmt: skip
+        seconds = phase_seconds(events, since, last, running_at_lo=False)
+    return LifeInputs(config, rows, (since, last), starts, seconds, end, live)
+
+
+def _day(t_ns: int, tz: zoneinfo.ZoneInfo) -> str:
+    return datetime.fromtimestamp(t_ns / 1e9, tz).date().isoformat()
+
+
+# ----------------------------------------------------------------------------- monthly trend
+@dataclass(frozen=True, slots=True)
+class MonthTrend:
+    """One local calendar month of a mill: starts, Miner damage per component, steady-state
+    oscillation range (% rated torque) and pinion bending amplitude (MPa) per channel, mean
+    and max over one steady window per hour (``windows_sampled``), and the days monitored."""
+
+    month: str
+    monitored_days: float
+    starts: int
+    damage: dict[str, float]
+    oscillation_range_pct_mean: dict[str, float]
+    oscillation_range_pct_max: dict[str, float]
+    bending_amplitude_mpa_mean: dict[str, float]
+    bending_amplitude_mpa_max: dict[str, float]
+    windows_sampled: int
+
+
+def last_months(month: str, n: int) -> list[str]:
+    """The ``n`` months ending with ``month`` (``YYYY-MM``), oldest first."""
+    year, mon = int(month[:4]), int(month[5:])
+    out = []
+    for _ in range(n):
+        out.append(f"{year:04d}-{mon:02d}")
+        year, mon = (year, mon - 1) if mon > 1 else (year - 1, 12)
+    return out[::-1]
+
+
+def monthly_trend(
+    store: Store, config: MillConfig, months: list[str], rows: list[DamageRow] | None = None
+) -> list[MonthTrend]:
+    """:class:`MonthTrend` of each of ``months`` (consecutive, oldest first); ``rows``: the
+    daily damage rows covering them when already read."""
+    bounds = [month_bounds_ns(m, config.time_zone) for m in months]
+    lo, hi = bounds[0][0], bounds[-1][1]
+    if rows is None:
+        rows = store.damage(config.id, months[0] + "-01", months[-1] + "-31")
+    steady = _sampled_steady(store, config.id, lo, hi)
+    first, last = store.mill_span(config.id)
+    out = []
+    for month, (a, b) in zip(months, bounds, strict=True):
+        covered = 0.0 if first is None or last is None else max(min(b, last) - max(a, first), 0)
+        i, j = np.searchsorted(steady.t_ns, [a, b]).tolist()
+        r_mean, r_max = _stats(steady.ranges, i, j)
+        b_mean, b_max = _stats(steady.bending, i, j)
+        out.append(MonthTrend(
+            month, covered / 86_400e9, store.count_events(config.id, "start", a, b),
+            _month_damage(rows, month), r_mean, r_max, b_mean, b_max, j - i,
+        ))  # fmt: skip
+    return out
+
+
+def _month_damage(rows: list[DamageRow], month: str) -> dict[str, float]:
+    parts: dict[str, list[float]] = {}
+    for r in rows:
+        if r.day.startswith(month):
+            parts.setdefault(r.component, []).append(r.damage)
+    return {c: math.fsum(v) for c, v in sorted(parts.items())}
+
+
+@dataclass(frozen=True, slots=True)
+class _Sampled:
+    t_ns: np.ndarray
+    ranges: dict[str, np.ndarray]
+    bending: dict[str, np.ndarray]
+
+
+def _sampled_steady(store: Store, mill_id: str, lo: int, hi: int) -> _Sampled:
+    (ranges, per_rev), rows = store.record_columns(
+        mill_id, "steady", [], [("range_pct",), ("range_per_rev",)], lo, hi,
+        every_ns=TREND_SAMPLE_NS,
+    )  # fmt: skip
+    cols = np.array([[np.nan if v is None else float(v) for v in r[1:]] for r in rows],
+                    dtype=float).reshape(len(rows), len(ranges) + len(per_rev))  # fmt: skip
+    bend = {ch: cols[:, len(ranges) + i] / 2.0 for i, ch in enumerate(per_rev)
+            if ch.startswith("bending")}  # amplitude = range per revolution / 2  # fmt: skip
+    return _Sampled(np.array([r[0] for r in rows], dtype=np.int64),
+                    {ch: cols[:, i] for i, ch in enumerate(ranges)}, bend)  # fmt: skip
+
+
+def _stats(
+    columns: dict[str, np.ndarray], i: int, j: int
+) -> tuple[dict[str, float], dict[str, float]]:
+    """Mean and max per channel of the finite values in rows ``i:j``."""
+    mean, top = {}, {}
+    for ch, v in sorted(columns.items()):
+        x = v[i:j]
+        x = x[np.isfinite(x)]
+        if x.size:
+            mean[ch], top[ch] = float(x.mean()), float(x.max())
+    return mean, top
