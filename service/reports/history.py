@@ -7,8 +7,8 @@ index), the mill's span of analysed samples (one row), and one steady-state wind
 the fields extracted by SQLite). Call inside :meth:`~service.store.database.Store.read_snapshot`
 to see one state of the store.
 
-* :func:`read_life` — :class:`~service.reports.life.LifeReport` as of a time (now for
-  ``GET /mills/{id}/life``, a month's end for the report): the one life computation.
+* :func:`life_inputs` — what :func:`~service.reports.life.compute_life` needs as of a time
+  (now for ``GET /mills/{id}/life``, a month's end for the report): the one life computation.
 * :func:`monthly_trend` — starts, damage per component, oscillation range and bending amplitude
   per local calendar month (seed 000 §10.6 "long term trending").
 * :func:`phase_seconds` — seconds in the start, stop and run phases from start/stop events.
@@ -25,19 +25,19 @@ from datetime import date, datetime, timedelta
 import numpy as np
 
 from analytics.drivetrain.mill_config import MillConfig
-from service.reports.life import LifeInputs, LifeReport, compute_life, midnight_ns
+from service.reports.life import LifeInputs, midnight_ns
 from service.reports.starts import month_bounds_ns
 from service.store.database import Store
 from service.store.records import DamageRow, EventRow
 
 __all__ = [
     "TREND_SAMPLE_NS",
+    "ChannelStats",
     "MonthTrend",
     "last_months",
+    "life_inputs",
     "monthly_trend",
     "phase_seconds",
-    "read_life",
-    "read_life_inputs",
 ]
 
 TREND_SAMPLE_NS = 3_600 * 10**9
@@ -69,37 +69,26 @@ def _clip(lo: int, hi: int, span_lo: int, span_hi: int) -> float:
     return max(0, min(hi, span_hi) - max(lo, span_lo)) / 1e9
 
 
-def _span(store: Store, config: MillConfig, until_ns: int) -> tuple[int | None, int | None]:
-    """First and last analysed sample up to ``until_ns``; from the daily rows' days for a
-    store written before the span was kept."""
-    first, last = store.mill_span(config.id)
-    if first is None or last is None:
-        lo_day, hi_day = store.damage_days(config.id)
-        if lo_day is None or hi_day is None:
-            return None, None
-        tz = zoneinfo.ZoneInfo(config.time_zone)
-        first = midnight_ns(date.fromisoformat(lo_day), tz)
-        last = midnight_ns(date.fromisoformat(hi_day) + timedelta(days=1), tz)
-    if first >= until_ns:
-        return None, None
-    return first, min(last, until_ns)
+def _coverage(store: Store, config: MillConfig, until_ns: int) -> list[tuple[int, int]]:
+    """The monitored intervals before ``until_ns`` (one per local day); whole days of the
+    daily damage rows for a store written before the monitored time was kept."""
+    days = store.mill_days(config.id, until_ns)
+    if days or store.mill_span(config.id)[0] is not None:
+        return [(a, b) for _, a, b in days if b > a]
+    lo_day, hi_day = store.damage_days(config.id)
+    if lo_day is None or hi_day is None:
+        return []
+    tz = zoneinfo.ZoneInfo(config.time_zone)
+    out, day = [], date.fromisoformat(lo_day)
+    while day.isoformat() <= hi_day:
+        a, b = midnight_ns(day, tz), midnight_ns(day + timedelta(days=1), tz)
+        if a < until_ns:
+            out.append((a, min(b, until_ns)))
+        day += timedelta(days=1)
+    return out
 
 
-def read_life(
-    store: Store,
-    config: MillConfig,
-    until_ns: int,
-    *,
-    live: Mapping[str, Mapping[str, float]] | None = None,
-    last_sample_ns: int | None = None,
-) -> LifeReport:
-    """The life of ``config``'s mill from what the store holds before ``until_ns``; ``live``
-    and ``last_sample_ns``: the worker's damage summary and analysed position (now only)."""
-    return compute_life(read_life_inputs(store, config, until_ns, live=live,
-                                         last_sample_ns=last_sample_ns))  # fmt: skip
-
-
-def read_life_inputs(
+def life_inputs(
     store: Store,
     config: MillConfig,
     until_ns: int,
@@ -107,10 +96,14 @@ def read_life_inputs(
     live: Mapping[str, Mapping[str, float]] | None = None,
     last_sample_ns: int | None = None,
 ) -> LifeInputs:
-    """What :func:`read_life` computes from (its arguments)."""
-    since, last = _span(store, config, until_ns)
-    if last_sample_ns is not None and since is not None:
-        last = max(last or since, min(last_sample_ns, until_ns))
+    """What the life of ``config``'s mill is computed from
+    (:func:`service.reports.life.compute_life`), as the store holds it before ``until_ns``;
+    ``live`` and ``last_sample_ns``: the worker's damage summary and analysed position (only
+    when evaluating now)."""
+    coverage = _coverage(store, config, until_ns)
+    if coverage and last_sample_ns is not None and last_sample_ns > coverage[-1][1]:
+        coverage[-1] = (coverage[-1][0], min(last_sample_ns, until_ns))  # live, not yet stored
+    since, last = (coverage[0][0], coverage[-1][1]) if coverage else (None, None)
     end = last if last is not None else until_ns
     tz = zoneinfo.ZoneInfo(config.time_zone)
     rows = store.damage(config.id, until_day=_day(end - 1, tz)) if since is not None else []
@@ -123,7 +116,7 @@ def read_life_inputs(
             key=lambda e: e.t_ns,
         )  # fmt: skip
         seconds = phase_seconds(events, since, last, running_at_lo=False)
-    return LifeInputs(config, rows, (since, last), starts, seconds, end, live)
+    return LifeInputs(config, rows, coverage, starts, seconds, end, live)
 
 
 def _day(t_ns: int, tz: zoneinfo.ZoneInfo) -> str:
@@ -132,19 +125,29 @@ def _day(t_ns: int, tz: zoneinfo.ZoneInfo) -> str:
 
 # ----------------------------------------------------------------------------- monthly trend
 @dataclass(frozen=True, slots=True)
+class ChannelStats:
+    """Mean and max of a quantity per channel (channels without a value left out)."""
+
+    mean: dict[str, float]
+    max: dict[str, float]
+
+    def worst_mean(self) -> float | None:
+        """The largest channel mean (None without any)."""
+        return max(self.mean.values()) if self.mean else None
+
+
+@dataclass(frozen=True, slots=True)
 class MonthTrend:
-    """One local calendar month of a mill: starts, Miner damage per component, steady-state
-    oscillation range (% rated torque) and pinion bending amplitude (MPa) per channel, mean
-    and max over one steady window per hour (``windows_sampled``), and the days monitored."""
+    """One local calendar month of a mill: the days monitored, starts, Miner damage per
+    component, steady-state oscillation range (% rated torque) and pinion bending amplitude
+    (MPa) per channel over one steady window per hour (``windows_sampled`` of them)."""
 
     month: str
     monitored_days: float
     starts: int
     damage: dict[str, float]
-    oscillation_range_pct_mean: dict[str, float]
-    oscillation_range_pct_max: dict[str, float]
-    bending_amplitude_mpa_mean: dict[str, float]
-    bending_amplitude_mpa_max: dict[str, float]
+    oscillation_range_pct: ChannelStats
+    bending_amplitude_mpa: ChannelStats
     windows_sampled: int
 
 
@@ -168,16 +171,15 @@ def monthly_trend(
     if rows is None:
         rows = store.damage(config.id, months[0] + "-01", months[-1] + "-31")
     steady = _sampled_steady(store, config.id, lo, hi)
-    first, last = store.mill_span(config.id)
+    days = store.mill_days(config.id, hi)
     out = []
     for month, (a, b) in zip(months, bounds, strict=True):
-        covered = 0.0 if first is None or last is None else max(min(b, last) - max(a, first), 0)
+        covered = sum(max(min(b, y) - max(a, x), 0) for _, x, y in days)
         i, j = np.searchsorted(steady.t_ns, [a, b]).tolist()
-        r_mean, r_max = _stats(steady.ranges, i, j)
-        b_mean, b_max = _stats(steady.bending, i, j)
         out.append(MonthTrend(
             month, covered / 86_400e9, store.count_events(config.id, "start", a, b),
-            _month_damage(rows, month), r_mean, r_max, b_mean, b_max, j - i,
+            _month_damage(rows, month), _stats(steady.ranges, i, j),
+            _stats(steady.bending, i, j), j - i,
         ))  # fmt: skip
     return out
 
@@ -210,9 +212,7 @@ def _sampled_steady(store: Store, mill_id: str, lo: int, hi: int) -> _Sampled:
                     {ch: cols[:, i] for i, ch in enumerate(ranges)}, bend)  # fmt: skip
 
 
-def _stats(
-    columns: dict[str, np.ndarray], i: int, j: int
-) -> tuple[dict[str, float], dict[str, float]]:
+def _stats(columns: dict[str, np.ndarray], i: int, j: int) -> ChannelStats:
     """Mean and max per channel of the finite values in rows ``i:j``."""
     mean, top = {}, {}
     for ch, v in sorted(columns.items()):
@@ -220,4 +220,4 @@ def _stats(
         x = x[np.isfinite(x)]
         if x.size:
             mean[ch], top[ch] = float(x.mean()), float(x.max())
-    return mean, top
+    return ChannelStats(mean, top)

@@ -12,14 +12,16 @@ Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
 * **damage so far** ``D`` = prior + monitored (the stored daily rows, or the worker's live
   committed damage when larger) + the open rainflow residue closed now as ASTM E1049 half
   cycles (conservative).
-* **no extrapolation from too little history**: below ``min_monitoring_days`` of monitoring
-  (first to last analysed sample) or ``min_starts`` starts the status is
+* **no extrapolation from too little history**: below ``min_monitoring_days`` of monitored
+  time or ``min_starts`` starts the status is
   ``insufficient_history``, ``missing`` says what is lacking, and every life is null with
   that reason; damage so far is still given.
 * **a range, not a point**: remaining life ``(1 − D) / rate`` at three rates — the last
   ``rate_window_days`` local days, the whole monitored time, and the worst local calendar month
-  with at least :data:`WORST_MONTH_MIN_DAYS` days monitored. A rate is stored damage over the
-  monitored seconds of its period (monitored = between the first and last analysed sample).
+  with at least :data:`WORST_MONTH_MIN_DAYS` days monitored. A rate is the stored damage of its
+  period per year of *monitored* time in it: per local day, from its first to its last analysed
+  sample (the store's coverage, :meth:`~service.store.database.Store.mill_days`), so a
+  telemetry outage of days does not dilute the rate (gaps within a day are not subtracted).
 * **end dates**: present exactly when the life is; a date beyond 9999-12-31 is given as
   ``9999-12-31`` with ``end_date_capped`` true (practically unlimited).
 * **what drives it**: monitored damage by phase (store names: ``start``, ``run``, ``stop``,
@@ -27,7 +29,7 @@ Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
   (5/day, 1/day, 1/week, 1/month per 4-week month) from the measured cost of a start
   (:func:`analytics.mill.phase_damage.start_cost`).
 
-Pure: :class:`LifeInputs` (rows, span, counts) in, :class:`LifeReport` (frozen dataclasses,
+Pure: :class:`LifeInputs` (rows, coverage, counts) in, :class:`LifeReport` (frozen dataclasses,
 JSON-ready through :func:`life_to_dict`) out. The store is read by
 :mod:`service.reports.history`.
 """
@@ -82,15 +84,16 @@ MINER_LIMIT = 1.0
 class LifeInputs:
     """What the life of one mill is computed from, as of ``evaluated_ns``.
 
-    ``rows``: stored daily damage rows up to the evaluation day; ``span``: first analysed
-    sample and just past the last (ns, ``None`` before any) up to the evaluation time;
+    ``rows``: stored daily damage rows up to the evaluation day; ``coverage``: the monitored
+    intervals ``(first analysed sample, just past the last)`` in ns, oldest first, up to the
+    evaluation time (one per local day);
     ``starts``: starts since monitoring began; ``phase_seconds``: seconds in the ``start``,
     ``stop`` and ``run`` phases over the monitored time; ``live``: the worker's damage summary
     per component (``committed``, ``pending_residue``), only when evaluating now."""
 
     config: MillConfig
     rows: list[DamageRow]
-    span: tuple[int | None, int | None]
+    coverage: list[tuple[int, int]]
     starts: int
     phase_seconds: Mapping[str, float]
     evaluated_ns: int
@@ -231,6 +234,11 @@ class _Ctx:
     end_ns: int
     sufficient: bool
     why_not: str
+    coverage: list[tuple[int, int]]
+
+    def monitored_s(self, lo: int, hi: int) -> float:
+        """Monitored seconds within ``[lo, hi)``."""
+        return math.fsum(max(min(b, hi) - max(a, lo), 0) for a, b in self.coverage) / _NS
 
 
 def compute_life(inputs: LifeInputs) -> LifeReport:
@@ -239,10 +247,11 @@ def compute_life(inputs: LifeInputs) -> LifeReport:
     tz = zoneinfo.ZoneInfo(config.time_zone)
     history = _history(inputs, tz)
     missing = _missing(history)
-    since, last = inputs.span
+    since, last = _span(inputs.coverage)
     end_ns = last if last is not None else inputs.evaluated_ns
     ctx = _Ctx(config, tz, since, last, end_ns, not missing,
-               "insufficient history: " + "; ".join(missing) if missing else "")  # fmt: skip
+               "insufficient history: " + "; ".join(missing) if missing else "",
+               inputs.coverage)  # fmt: skip
     monitored = _by_component_phase(inputs.rows)
     prior = _prior(ctx, inputs.rows)
     live = inputs.live or {}
@@ -275,9 +284,13 @@ def compute_life(inputs: LifeInputs) -> LifeReport:
     )
 
 
+def _span(coverage: list[tuple[int, int]]) -> tuple[int | None, int | None]:
+    return (coverage[0][0], coverage[-1][1]) if coverage else (None, None)
+
+
 def _history(inputs: LifeInputs, tz: zoneinfo.ZoneInfo) -> LifeHistory:
-    since, last = inputs.span
-    days = (last - since) / DAY_NS if since is not None and last is not None else 0.0
+    since, last = _span(inputs.coverage)
+    days = math.fsum(b - a for a, b in inputs.coverage) / DAY_NS
     life = inputs.config.life
     return LifeHistory(
         monitored_since_ns=since,
@@ -299,7 +312,7 @@ def _missing(h: LifeHistory) -> list[str]:
         out.append("no data analysed yet")
     elif h.monitored_days < h.min_days:
         out.append(f"{h.min_days - h.monitored_days:.1f} more days of monitoring "
-                   f"(have {h.monitored_days:.1f} of {h.min_days:g})")  # fmt: skip
+                   f"(have {h.monitored_days:.2f} of {h.min_days:g})")  # fmt: skip
     if h.starts < h.min_starts:
         out.append("no start seen yet" if h.starts == 0 and h.min_starts == 1 else
                    f"{h.min_starts - h.starts} more start(s) (have {h.starts})")  # fmt: skip
@@ -322,10 +335,11 @@ def _local_day(t_ns: int, tz: zoneinfo.ZoneInfo) -> date:
     return datetime.fromtimestamp(t_ns / 1e9, tz).date()
 
 
-def _rate(rows: list[DamageRow], comp: str, first_day: date, lo_ns: int, hi_ns: int,
+def _rate(ctx: _Ctx, rows: list[DamageRow], comp: str, first_day: date, lo_ns: int, hi_ns: int,
           last_day: date | None = None) -> float | None:  # fmt: skip
-    """Stored damage of ``comp`` on days ``[first_day, last_day]`` per year of ``[lo, hi]``."""
-    seconds = (hi_ns - lo_ns) / _NS
+    """Stored damage of ``comp`` on days ``[first_day, last_day]`` per year of monitored time
+    in ``[lo, hi)``."""
+    seconds = ctx.monitored_s(lo_ns, hi_ns)
     if seconds <= 0:
         return None
     lo, hi = first_day.isoformat(), (last_day or LAST_DATE).isoformat()
@@ -363,11 +377,11 @@ def _prior(ctx: _Ctx, rows: list[DamageRow]) -> PriorDamage:
     last_day = _local_day(hi - 1, ctx.tz)
     per = {}
     for c in ctx.config.components:
-        rate = _rate(rows, c, first, ctx.since, hi, last_day) or 0.0
+        rate = _rate(ctx, rows, c, first, ctx.since, hi, last_day) or 0.0
         per[c] = min(rate * years, MINER_LIMIT)
-    days = (hi - ctx.since) / DAY_NS
+    days = ctx.monitored_s(ctx.since, hi) * _NS / DAY_NS
     return PriorDamage(method, commissioned, years, days, per,
-                       f"the damage rate of the first {days:.1f} days of monitoring applied "
+                       f"the damage rate of the first {days:.1f} days monitored applied "
                        f"from commissioning on {commissioned} to the start of monitoring "
                        f"({years:.2f} years; assumed)")  # fmt: skip
 
@@ -436,8 +450,8 @@ def _rates(
                 ("worst_month", None, None)]  # fmt: skip
     first_window = _local_day(ctx.last - 1, ctx.tz) - timedelta(days=n - 1)
     lo = max(midnight_ns(first_window, ctx.tz), ctx.since)
-    recent = _rate(rows, comp, first_window, lo, ctx.last)
-    since = _rate(rows, comp, _local_day(ctx.since, ctx.tz), ctx.since, ctx.last)
+    recent = _rate(ctx, rows, comp, first_window, lo, ctx.last)
+    since = _rate(ctx, rows, comp, _local_day(ctx.since, ctx.tz), ctx.since, ctx.last)
     worst, month = _worst_month(ctx, rows, comp)
     return [(f"last_{n}_days", recent, None), ("since_monitoring", since, None),
             ("worst_month", worst, month)]  # fmt: skip
@@ -461,11 +475,11 @@ def _months(ctx: _Ctx) -> list[tuple[str, int, int]]:
 def _worst_month(ctx: _Ctx, rows: list[DamageRow], comp: str) -> tuple[float | None, str | None]:
     best: tuple[float | None, str | None] = (None, None)
     for month, lo, hi in _months(ctx):
-        if (hi - lo) / DAY_NS < WORST_MONTH_MIN_DAYS:
+        if ctx.monitored_s(lo, hi) * _NS / DAY_NS < WORST_MONTH_MIN_DAYS:
             continue
         first = date.fromisoformat(month + "-01")
         last = (first + timedelta(days=32)).replace(day=1) - timedelta(days=1)
-        rate = _rate(rows, comp, first, lo, hi, last)
+        rate = _rate(ctx, rows, comp, first, lo, hi, last)
         if rate is not None and (best[0] is None or rate > best[0]):
             best = (rate, month)
     return best
@@ -559,7 +573,8 @@ def _basis(config: MillConfig) -> LifeBasis:
         damage="prior (see prior) + stored daily damage of attributed rainflow cycles, or the "
         "worker's live committed damage when larger, + the open rainflow residue closed now "
         "as half cycles (ASTM E1049; conservative)",
-        rates=f"stored damage per year of monitored time over the last "
+        rates=f"stored damage per year of monitored time (per local day from its first to its "
+        f"last analysed sample) over the last "
         f"{life.rate_window_days} local days, since monitoring began, and in the worst local "
         f"calendar month with at least {WORST_MONTH_MIN_DAYS:g} days monitored; none below "
         f"{life.min_monitoring_days:g} days of monitoring and {life.min_starts} start(s)",

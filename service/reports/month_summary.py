@@ -121,10 +121,6 @@ def _change(quantity: str, unit: str, this: float | None, last: float | None) ->
     return MonthChange(quantity, unit, this, last, delta)
 
 
-def _max_value(d: dict[str, float]) -> float | None:
-    return max(d.values()) if d else None
-
-
 def _components(life: LifeReport, this: MonthTrend, last: MonthTrend) -> list[ComponentSummary]:
     out = []
     for name, c in life.components.items():
@@ -166,11 +162,9 @@ def build_summary(
         _change("alarms raised", "alarms", float(len(raised_severities)),
                 float(raised_last_month)),
         _change("oscillation range, mean of the worst channel", "% rated torque",
-                _max_value(this.oscillation_range_pct_mean),
-                _max_value(last.oscillation_range_pct_mean)),
+                this.oscillation_range_pct.worst_mean(), last.oscillation_range_pct.worst_mean()),
         _change("bending amplitude, mean of the worst channel", "MPa",
-                _max_value(this.bending_amplitude_mpa_mean),
-                _max_value(last.bending_amplitude_mpa_mean)),
+                this.bending_amplitude_mpa.worst_mean(), last.bending_amplitude_mpa.worst_mean()),
     ]  # fmt: skip
     changes += [
         _change(f"damage {c}", "Miner sum", this.damage.get(c, 0.0), last.damage.get(c, 0.0))

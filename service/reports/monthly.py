@@ -58,9 +58,9 @@ from analytics.mill.phase_damage import (
 from service.reports.history import (
     MonthTrend,
     last_months,
+    life_inputs,
     monthly_trend,
     phase_seconds,
-    read_life_inputs,
 )
 from service.reports.life import LifeReport, compute_life, local_iso
 from service.reports.month_summary import (
@@ -709,7 +709,7 @@ def _long_view(
 ) -> dict[str, Any]:
     """``summary``, ``life`` (as of the month's end), ``cumulative`` and ``trend`` (the
     :class:`MonthlyReport` fields of page 1 and the long view)."""
-    inputs = read_life_inputs(store, config, reader.end_ns)
+    inputs = life_inputs(store, config, reader.end_ns)
     life = compute_life(inputs)
     months = last_months(month, TREND_MONTHS)
     trend = monthly_trend(store, config, months, [r for r in inputs.rows if r.day >= months[0]])

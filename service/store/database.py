@@ -136,14 +136,17 @@ class Store:
         )
 
     @staticmethod
-    def extend_spans(db: sqlite3.Connection, spans: Mapping[str, tuple[int, int]]) -> None:
-        """Widen each mill's span of analysed samples to include ``(first_ns, last_ns)``
-        (inside :meth:`transaction`); idempotent, so a replayed archive tail changes nothing."""
+    def extend_days(
+        db: sqlite3.Connection, spans: Mapping[tuple[str, str], tuple[int, int]]
+    ) -> None:
+        """Widen each ``(mill, local day)``'s monitored span to include ``(first_ns,
+        last_ns)`` (inside :meth:`transaction`); idempotent, so a replayed archive tail changes
+        nothing."""
         db.executemany(
-            "INSERT INTO mill_span (mill_id, first_ns, last_ns) VALUES (?, ?, ?) "
-            "ON CONFLICT (mill_id) DO UPDATE SET first_ns = min(first_ns, excluded.first_ns), "
-            "last_ns = max(last_ns, excluded.last_ns)",
-            [(m, int(a), int(b)) for m, (a, b) in spans.items()],
+            "INSERT INTO mill_days (mill_id, day, first_ns, last_ns) VALUES (?, ?, ?, ?) "
+            "ON CONFLICT (mill_id, day) DO UPDATE SET "
+            "first_ns = min(first_ns, excluded.first_ns), last_ns = max(last_ns, excluded.last_ns)",
+            [(m, d, int(a), int(b)) for (m, d), (a, b) in spans.items()],
         )
 
     @staticmethod
@@ -301,9 +304,22 @@ class Store:
     def mill_span(self, mill_id: str) -> tuple[int | None, int | None]:
         """Time of the first analysed sample and just past the last one (ns), ``None`` before
         any (or in a store written by a millwatch before schema 5)."""
-        row = self._query_one("SELECT first_ns, last_ns FROM mill_span WHERE mill_id = ?",
-                              (mill_id,))  # fmt: skip
-        return (None, None) if row is None else (int(row[0]), int(row[1]))
+        row = self._query_one("SELECT min(first_ns), max(last_ns) FROM mill_days "
+                              "WHERE mill_id = ?", (mill_id,))  # fmt: skip
+        return (None, None) if row is None or row[0] is None else (int(row[0]), int(row[1]))
+
+    def mill_days(self, mill_id: str, until_ns: int | None = None) -> list[tuple[str, int, int]]:
+        """The monitored time per local day, oldest first: ``(day, first analysed sample,
+        just past the last)`` in ns, clipped to before ``until_ns``."""
+        sql = "SELECT day, first_ns, last_ns FROM mill_days WHERE mill_id = ?"
+        args: list[Any] = [mill_id]
+        if until_ns is not None:
+            sql += " AND first_ns < ?"
+            args.append(until_ns)
+        rows = self._query(sql + " ORDER BY day", tuple(args))
+        if until_ns is None:
+            return [(d, int(a), int(b)) for d, a, b in rows]
+        return [(d, int(a), min(int(b), until_ns)) for d, a, b in rows]
 
     def count_events(
         self, mill_id: str, kind: str, since_ns: int | None = None, until_ns: int | None = None

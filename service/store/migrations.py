@@ -71,10 +71,11 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "CREATE INDEX checkpoint_parts_by_part ON checkpoint_parts (part, id)",
         "DROP TABLE checkpoints",
     ),
-    (  # 4 → 5: the span of analysed samples per mill (first and last sample time, ns), which
-        # remaining life measures monitoring by; alarms about simulated data say so
-        """CREATE TABLE mill_span (
-            mill_id TEXT PRIMARY KEY, first_ns INTEGER NOT NULL, last_ns INTEGER NOT NULL)""",
+    (  # 4 → 5: the monitored time per mill and local day (first and last analysed sample, ns),
+        # which remaining life measures monitoring by; alarms about simulated data say so
+        """CREATE TABLE mill_days (
+            mill_id TEXT NOT NULL, day TEXT NOT NULL, first_ns INTEGER NOT NULL,
+            last_ns INTEGER NOT NULL, PRIMARY KEY (mill_id, day))""",
         "ALTER TABLE alarms ADD COLUMN simulated INTEGER NOT NULL DEFAULT 0",
     ),
 )

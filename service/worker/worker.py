@@ -86,12 +86,12 @@ class MillUpdate:
     damage: list[DamageRow] = field(default_factory=list)
     records: list[tuple[str, int, dict[str, Any]]] = field(default_factory=list)
     alarm_transitions: list[Transition] = field(default_factory=list)
-    #: ``(first analysed sample, just past the last)`` in ns, when samples were analysed.
-    span: tuple[int, int] | None = None
+    #: Monitored time analysed: ``(local day, first sample, just past the last)`` in ns.
+    days: list[tuple[str, int, int]] = field(default_factory=list)
 
     def __bool__(self) -> bool:
         return bool(self.events or self.damage or self.records or self.alarm_transitions
-                    or self.span)  # fmt: skip
+                    or self.days)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -593,12 +593,12 @@ class PendingResults:
         self.records: list[tuple[str, str, int, dict[str, Any]]] = []
         self.damage: dict[tuple[str, str, str, str], DamageRow] = {}
         self.transitions: list[Transition] = []
-        self.spans: dict[str, tuple[int, int]] = {}
+        self.days: dict[tuple[str, str], tuple[int, int]] = {}
 
     def add(self, mill_id: str, update: MillUpdate) -> None:
-        if update.span is not None:
-            lo, hi = self.spans.get(mill_id, update.span)
-            self.spans[mill_id] = (min(lo, update.span[0]), max(hi, update.span[1]))
+        for day, first, last in update.days:
+            lo, hi = self.days.get((mill_id, day), (first, last))
+            self.days[(mill_id, day)] = (min(lo, first), max(hi, last))
         self.events += update.events
         self.records += [(mill_id, kind, t, data) for kind, t, data in update.records]
         for row in update.damage:
@@ -606,10 +606,10 @@ class PendingResults:
         self.transitions += update.alarm_transitions
 
     def __bool__(self) -> bool:
-        return bool(self.events or self.records or self.damage or self.transitions or self.spans)
+        return bool(self.events or self.records or self.damage or self.transitions or self.days)
 
     def write(self, db: Any) -> None:
-        Store.extend_spans(db, self.spans)
+        Store.extend_days(db, self.days)
         Store.add_events(db, self.events)
         Store.set_damage(db, list(self.damage.values()))
         for mill_id, kind, t_ns, data in self.records:
