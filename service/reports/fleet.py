@@ -20,6 +20,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from pydantic import ConfigDict, with_config
+
 from alarms.lifecycle import Alarm
 from analytics.drivetrain.mill_config import MillConfig
 from service.reports.history import last_months, life_inputs, monthly_trend
@@ -85,6 +87,26 @@ class VisitOrder:
     reason: str
 
 
+#: An answer of ``GET /sites/{site}/fleet`` (abridged), the OpenAPI example.
+FLEET_EXAMPLE: dict[str, Any] = {
+    "site": "rustenburg", "generated_at_ns": 1709251200000000000,
+    "generated_at": "2024-03-01T02:00:00+02:00", "simulated": False, "rule": VISIT_RULE,
+    "visit_order": [{"rank": 1, "mill": "ball-dual-lrs", "reason": "shortest remaining life "
+                     "12.0–19.4 years (pinion_combined_nbs); life consumed 21.3 % of the Miner "
+                     "limit; bending 38.2 MPa this month; 22 starts this month (norm 3–5)"}],
+    "mills": [{"mill": "ball-dual-lrs", "site": "rustenburg", "simulated": False,
+               "life_status": "ok", "life_missing": [], "life_note": "…",
+               "governing_component": "pinion_combined_nbs", "life_consumed": 0.213,
+               "remaining_life_years_min": 12.0, "remaining_life_years_max": 19.4,
+               "end_date_earliest": "2036-02-29", "months": ["2024-02", "2024-03"],
+               "starts_per_month": [19, 22], "oscillation_range_pct": [21.5, 23.0],
+               "bending_amplitude_mpa": [35.1, 38.2], "open_alarms": 1,
+               "worst_open_severity": "warning"}],
+    "unreachable": [],
+}  # fmt: skip
+
+
+@with_config(ConfigDict(json_schema_extra={"examples": [FLEET_EXAMPLE]}))
 @dataclass(frozen=True, slots=True)
 class FleetView:
     """All mills of a site in visit order; ``unreachable``: mills whose worker did not

@@ -99,7 +99,10 @@ def life_inputs(
     """What the life of ``config``'s mill is computed from
     (:func:`service.reports.life.compute_life`), as the store holds it before ``until_ns``;
     ``live`` and ``last_sample_ns``: the worker's damage summary and analysed position (only
-    when evaluating now)."""
+    when evaluating now: then data time, not the wall clock, bounds it — a replay or a gateway
+    clock ahead of ours is not cut off)."""
+    if last_sample_ns is not None:
+        until_ns = max(until_ns, last_sample_ns)
     coverage = _coverage(store, config, until_ns)
     if coverage and last_sample_ns is not None and last_sample_ns > coverage[-1][1]:
         coverage[-1] = (coverage[-1][0], min(last_sample_ns, until_ns))  # live, not yet stored

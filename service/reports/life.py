@@ -44,6 +44,8 @@ from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta
 from typing import Any
 
+from pydantic import ConfigDict, with_config
+
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
@@ -187,6 +189,36 @@ class LifeBasis:
     design_line: str
 
 
+#: An answer of ``GET /mills/{id}/life`` (abridged), the OpenAPI example.
+LIFE_EXAMPLE: dict[str, Any] = {
+    "mill": "sag-5200-lrs", "site": "rustenburg", "simulated": True,
+    "time_zone": "Africa/Johannesburg", "evaluated_at_ns": 1709251200000000000,
+    "evaluated_at": "2024-03-01T02:00:00+02:00", "status": "ok", "missing": [],
+    "design_life_years": 20.0,
+    "history": {"monitored_since_ns": 1704067200000000000,
+                "monitored_since": "2024-01-01T02:00:00+02:00", "monitored_days": 58.9,
+                "starts": 41, "min_days": 14.0, "min_starts": 1},
+    "prior": {"method": "first_90_days", "commissioned": "2011-06-01",
+              "years_before_monitoring": 12.59, "rate_days": 58.9,
+              "per_component": {"pinion_combined": 0.21}, "note": "…"},
+    "basis": {"miner_limit": 1.0, "sn_curve": {"model": "shigley"}},
+    "components": {"pinion_combined": {
+        "component": "pinion_combined", "damage_prior": 0.21, "damage_monitored": 0.0027,
+        "damage_pending_residue": 0.0, "damage": 0.2127, "design_line": 0.64,
+        "damage_by_phase": {"run": 0.0012, "start": 0.0015},
+        "share_by_phase": {"run": 0.44, "start": 0.56}, "share_of_mill": 0.7,
+        "projections": [{"basis": "last_30_days", "rate_per_year": 0.021,
+                         "remaining_life_years": 37.5, "end_date": "2061-08-30",
+                         "end_date_capped": False, "reason": None}],
+        "remaining_life_years_min": 31.0, "remaining_life_years_max": 37.5,
+        "what_if": [], "live": True}},
+    "governing_component": "pinion_combined",
+    "note": "pinion_combined governs with 31 to 38 years left …", "rate_window_days": 30,
+    "notes": [],
+}  # fmt: skip
+
+
+@with_config(ConfigDict(json_schema_extra={"examples": [LIFE_EXAMPLE]}))
 @dataclass(frozen=True, slots=True)
 class LifeReport:
     """Remaining life of every component of one mill (module docstring); times ns UTC with

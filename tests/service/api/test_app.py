@@ -246,5 +246,5 @@ def test_openapi_documents_problems_examples_and_the_api_key(client):
     assert {"401", "403", "404", "409"} <= set(ack["responses"])
     assert PROBLEM in ack["responses"]["404"]["content"]
     assert "304" in spec["paths"]["/alarms"]["get"]["responses"]
-    for name in ("Life", "MonthStarts", "Spectrum", "AlarmList"):
+    for name in ("LifeReport", "FleetView", "MonthStarts", "Spectrum", "AlarmList"):
         assert spec["components"]["schemas"][name].get("examples"), name
