@@ -2,10 +2,10 @@
 
 Every read is bounded on an index: daily damage rows up to a day, start/stop events of the
 monitored time (a few hundred a month), start counts per month (``count(*)`` on the events
-index), the mill's span of analysed samples (one row), and one steady-state window per
-:data:`TREND_SAMPLE_NS` for the monthly oscillation and bending trend (chosen on the index,
-the fields extracted by SQLite). Call inside :meth:`~service.store.database.Store.read_snapshot`
-to see one state of the store.
+index), the mill's monitored time per day (one row a day), and one steady-state window per
+:data:`TREND_SAMPLE_NS` (3 hours) for the monthly oscillation and bending trend (chosen on the
+index, the fields extracted by SQLite). Call inside
+:meth:`~service.store.database.Store.read_snapshot` to see one state of the store.
 
 * :func:`life_inputs` — what :func:`~service.reports.life.compute_life` needs as of a time
   (now for ``GET /mills/{id}/life``, a month's end for the report): the one life computation.
@@ -40,8 +40,9 @@ __all__ = [
     "phase_seconds",
 ]
 
-TREND_SAMPLE_NS = 3_600 * 10**9
-"""The monthly oscillation and bending trend reads the first steady window of each hour."""
+TREND_SAMPLE_NS = 3 * 3_600 * 10**9
+"""The monthly oscillation and bending trend reads the first steady window of every 3 hours
+(up to 240 a month)."""
 
 
 def phase_seconds(
@@ -113,11 +114,7 @@ def life_inputs(
     starts, seconds = 0, {"start": 0.0, "stop": 0.0, "run": 0.0}
     if since is not None and last is not None:
         starts = store.count_events(config.id, "start", since, last)
-        events = sorted(
-            [*store.events(config.id, "start", since, last),
-             *store.events(config.id, "stop", since, last)],
-            key=lambda e: e.t_ns,
-        )  # fmt: skip
+        events = store.event_times(config.id, ("start", "stop"), since, last)
         seconds = phase_seconds(events, since, last, running_at_lo=False)
     return LifeInputs(config, rows, coverage, starts, seconds, end, live)
 
@@ -143,7 +140,7 @@ class ChannelStats:
 class MonthTrend:
     """One local calendar month of a mill: the days monitored, starts, Miner damage per
     component, steady-state oscillation range (% rated torque) and pinion bending amplitude
-    (MPa) per channel over one steady window per hour (``windows_sampled`` of them)."""
+    (MPa) per channel over one steady window per 3 hours (``windows_sampled`` of them)."""
 
     month: str
     monitored_days: float
@@ -203,16 +200,20 @@ class _Sampled:
 
 
 def _sampled_steady(store: Store, mill_id: str, lo: int, hi: int) -> _Sampled:
-    (ranges, per_rev), rows = store.record_columns(
-        mill_id, "steady", [], [("range_pct",), ("range_per_rev",)], lo, hi,
-        every_ns=TREND_SAMPLE_NS,
-    )  # fmt: skip
-    cols = np.array([[np.nan if v is None else float(v) for v in r[1:]] for r in rows],
-                    dtype=float).reshape(len(rows), len(ranges) + len(per_rev))  # fmt: skip
-    bend = {ch: cols[:, len(ranges) + i] / 2.0 for i, ch in enumerate(per_rev)
-            if ch.startswith("bending")}  # amplitude = range per revolution / 2  # fmt: skip
-    return _Sampled(np.array([r[0] for r in rows], dtype=np.int64),
-                    {ch: cols[:, i] for i, ch in enumerate(ranges)}, bend)  # fmt: skip
+    """The sampled windows' oscillation ranges and bending amplitudes (range per revolution
+    / 2) per channel; the channels are those of the newest window in ``[lo, hi)``."""
+    newest = store.records(mill_id, "steady", lo, limit=1, until_ns=hi)
+    window = newest[0][1] if newest else {}
+    ranges = sorted(window.get("range_pct") or {})
+    bending = sorted(k for k in window.get("range_per_rev") or {} if k.startswith("bending"))
+    paths = [("range_pct", ch) for ch in ranges] + [("range_per_rev", ch) for ch in bending]
+    rows = store.record_values(mill_id, "steady", paths, (lo, hi), TREND_SAMPLE_NS)
+    cols = np.array([[np.nan if v is None else float(v) for v in values] for _, values in rows],
+                    dtype=float).reshape(len(rows), len(paths))  # fmt: skip
+    n = len(ranges)
+    return _Sampled(np.array([t for t, _ in rows], dtype=np.int64),
+                    {ch: cols[:, i] for i, ch in enumerate(ranges)},
+                    {ch: cols[:, n + i] / 2.0 for i, ch in enumerate(bending)})  # fmt: skip
 
 
 def _stats(columns: dict[str, np.ndarray], i: int, j: int) -> ChannelStats:

@@ -334,6 +334,19 @@ class Store:
         row = self._query_one(sql, tuple(args))
         return 0 if row is None else int(row[0])
 
+    def event_times(
+        self, mill_id: str, kinds: Sequence[str], since_ns: int, until_ns: int
+    ) -> list[EventRow]:
+        """Events of some kinds in ``[since, until)`` in time order with only their times and
+        ``failed`` flag in ``data`` (extracted by SQLite: no per-event JSON decode)."""
+        rows = self._query(
+            f"SELECT kind, t_ns, t_end_ns, json_extract(data_json, '$.failed') FROM events "
+            f"WHERE mill_id = ? AND kind IN ({', '.join('?' * len(kinds))}) AND t_ns >= ? "
+            "AND t_ns < ? ORDER BY t_ns, id",
+            (mill_id, *kinds, since_ns, until_ns),
+        )
+        return [EventRow(mill_id, k, t, {"failed": bool(f)}, e) for k, t, e, f in rows]
+
     def damage_days(self, mill_id: str) -> tuple[str | None, str | None]:
         """First and last day with damage rows of a mill (``None`` without any)."""
         row = self._query_one("SELECT min(day), max(day) FROM damage_daily WHERE mill_id = ?",
@@ -408,8 +421,6 @@ class Store:
         objects: Sequence[Sequence[str]],
         since_ns: int | None = None,
         until_ns: int | None = None,
-        *,
-        every_ns: int | None = None,
     ) -> tuple[list[list[str]], list[tuple[Any, ...]]]:
         """Columns of the records of one kind in ``[since, until)``, extracted by SQLite, so a
         month of steady-state windows is read without decoding each record in Python.
@@ -420,10 +431,20 @@ class Store:
         where absent. The object keys are read from the first record of each hour and checked
         on every record in the same pass; a second pass reads them all only if some record
         has others. Records SQLite's JSON refuses (``NaN`` and ``Infinity``, which Python's
-        json writes) are decoded in Python (:mod:`service.store.sampler`). With ``every_ns``
-        only the first record of each interval of that length is read (as :meth:`records`)."""
-        where, args = sampler.record_window(mill_id, kind, since_ns, until_ns, every_ns)
+        json writes) are decoded in Python (:mod:`service.store.sampler`)."""
+        where, args = sampler.record_window(mill_id, kind, since_ns, until_ns)
         return sampler.record_columns(self._query, where, args, fields, objects)
+
+    def record_values(
+        self, mill_id: str, kind: str, paths: Sequence[Sequence[str]],
+        window: tuple[int, int], every_ns: int | None = None,
+    ) -> list[tuple[int, list[Any]]]:  # fmt: skip
+        """``(t_ns, [value at each key path])`` of the records of one kind in ``window``
+        (``[since, until)`` ns; only the first record of each ``every_ns`` interval, found by
+        one index seek per interval), oldest first; SQLite extracts the values in one parse
+        per record (:func:`service.store.sampler.record_values`)."""
+        where, args = sampler.record_window(mill_id, kind, *window, every_ns)
+        return sampler.record_values(self._query, where, args, paths)
 
     @contextmanager
     def read_snapshot(self) -> Iterator[None]:

@@ -173,17 +173,27 @@ class MillJob:
 
     def _life_observations(self) -> list[Observation]:
         """``remaining_life_years`` per component: (1 − D) / (D per year so far), the damage
-        rate taken over everything this analyzer has seen (seed 000 §8.2; Miner limit 1)."""
+        rate taken over everything this analyzer has seen (seed 000 §8.2; Miner limit 1), D
+        with the configured estimated prior damage; none before the minimum history of
+        ``[life]`` (as ``GET /mills/{id}/life``: no extrapolation of a few minutes)."""
         seconds, t_ns = self.analyzer.seconds_analysed, self.analyzer.next_sample_ns
+        life = self.config.life
         if t_ns is None:  # nothing analysed: no damage, no rate
             return []
+        if seconds < life.min_monitoring_days * 86_400 or (
+            self.analyzer.loads.starts_total < life.min_starts
+        ):
+            return []
+        prior = life.prior_damage
         out = []
-        for comp, damage in self.analyzer.committed_damage().items():
-            if damage <= 0.0 or seconds <= 0.0:
+        for comp, monitored in self.analyzer.committed_damage().items():
+            if monitored <= 0.0 or seconds <= 0.0:
                 continue
-            per_year = damage / seconds * SECONDS_PER_YEAR
+            per_year = monitored / seconds * SECONDS_PER_YEAR
+            before = prior.get(comp, 0.0) if isinstance(prior, dict) else (prior or 0.0)
+            damage = monitored + before
             out.append(Observation(self.config.id, "remaining_life_years",
-                                   (1.0 - damage) / per_year, t_ns, {
+                                   max(1.0 - damage, 0.0) / per_year, t_ns, {
                                        "component": comp,
                                        "remaining_design_life_years":
                                            self.config.design_life_years,
