@@ -187,6 +187,30 @@ def screenshot(html_file: Path, png: Path) -> None:
                        check=True, timeout=120, capture_output=True)  # fmt: skip
 
 
+PARTS = {
+    "life": "remaining life as of the month's end",
+    "trend": "the 12-month trend",
+    "long": "page 1, life, cumulative damage and trend together",
+}
+
+
+def long_view_parts(store: Store, config: Any) -> dict[str, Any]:
+    """The report's long-view sections alone (what reading the history costs)."""
+    from service.reports import monthly as m
+    from service.reports.history import life_inputs, monthly_trend
+    from service.reports.life import compute_life
+
+    end = month_bounds_ns(MONTH, config.time_zone)[1]
+    reader = m._MonthReader(store, config, MONTH)
+    starts = m._starts(reader.events(), config, reader.days)
+    alarms = store.alarms(mill_id=config.id)
+    return {
+        "life": lambda: compute_life(life_inputs(store, config, end)),
+        "trend": lambda: monthly_trend(store, config, last_months(MONTH, m.TREND_MONTHS)),
+        "long": lambda: m._long_view(store, config, MONTH, reader, starts, alarms),
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--days", type=float, default=30.0)
@@ -222,6 +246,9 @@ def main() -> None:
                   f"{sum(len(c.per_day) for c in report.damage)} component-days")  # fmt: skip
             print(f"{'':>6}  {'wall s':>7} {'cpu s':>7}")
             print(f"{'build':>6}: {build_s:7.3f} {build_cpu:7.3f}")
+            for name, fn in long_view_parts(store, config).items():
+                secs, cpu, _ = best_of(fn, max(args.repeat, 5))
+                print(f"{name:>6}: {secs:7.3f} {cpu:7.3f} of the build ({PARTS[name]})")
             for name, (_media, render) in FORMATS.items():
                 secs, cpu, body = best_of(
                     lambda r=render: r(build_monthly_report(store, config, MONTH)), args.repeat
