@@ -324,3 +324,18 @@ def test_alarms_of_simulated_data_say_so_and_others_do_not(store):
         (raised,) = engine.observe(obs)
         assert raised.alarm.simulated is simulated
         assert raised.message.startswith(SIMULATED_PREFIX) is simulated
+
+
+def test_a_mill_without_data_and_one_past_the_miner_limit():
+    empty = compute_life(LifeInputs(SIM, [], [], 0, {}, JAN_T0))
+    assert empty.missing == ["no data analysed yet", "no start seen yet"]
+    assert empty.history.monitored_since is None and empty.governing_component is None
+    assert all(c.damage == 0.0 for c in empty.components.values())
+    worn = REAL.model_copy(update={"life": LifeConfig(commissioned=date(2000, 1, 1),
+                                                      prior_damage=1.0, min_starts=0,
+                                                      min_monitoring_days=1)})  # fmt: skip
+    day = 86_400 * 10**9
+    rows = _run_rows(["2024-01-01", "2024-01-02"], 1e-6)
+    life = compute_life(LifeInputs(worn, rows, [(JAN_T0, JAN_T0 + 2 * day)], 0, {}, JAN_T0))
+    for p in life.components["pinion_combined"].projections[:2]:
+        assert p.remaining_life_years == 0.0 and p.end_date == "2024-01-03"
