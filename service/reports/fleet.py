@@ -25,7 +25,7 @@ from pydantic import ConfigDict, with_config
 from alarms.lifecycle import Alarm
 from analytics.drivetrain.mill_config import MillConfig
 from service.reports.history import last_months, life_inputs, monthly_trend
-from service.reports.life import compute_life, local_iso
+from service.reports.life import compute_life, local_iso, years_range_text
 from service.reports.plain import plain
 from service.reports.starts import current_month
 from service.store.database import Store
@@ -183,9 +183,8 @@ def _reason(m: FleetMill) -> str:
     if m.worst_open_severity in ("critical", "alarm"):
         facts.append(f"{m.open_alarms} open alarm(s), the worst {m.worst_open_severity}")
     if m.remaining_life_years_min is not None:
-        hi = m.remaining_life_years_max or m.remaining_life_years_min
-        facts.append(f"shortest remaining life {m.remaining_life_years_min:,.1f}–{hi:,.1f} "
-                     f"years ({m.governing_component})")  # fmt: skip
+        years = years_range_text(m.remaining_life_years_min, m.remaining_life_years_max)
+        facts.append(f"shortest remaining life {years} ({m.governing_component})")
     else:
         facts.append("no life projection yet (" + "; ".join(m.life_missing or ["no damage"])
                      + ")")  # fmt: skip

@@ -70,6 +70,7 @@ __all__ = [
     "life_to_dict",
     "local_iso",
     "midnight_ns",
+    "years_range_text",
 ]
 
 SECONDS_PER_YEAR = 365.25 * 86_400.0
@@ -618,13 +619,20 @@ def _basis(config: MillConfig) -> LifeBasis:
     )
 
 
-def _years_text(p: ComponentLife) -> str:
-    lo, hi = p.remaining_life_years_min, p.remaining_life_years_max
+_RATE_WORDS = {"last": "recent", "since": "since-monitoring", "worst": "worst month's"}
+
+
+def years_range_text(lo: float | None, hi: float | None) -> str:
+    """``31 to 38 years``, ``9,458 years`` (one figure when the ends agree within 5 %)."""
     if lo is None or hi is None:
         return "no projection"
-    fmt = (lambda y: f"{y:,.0f}") if hi >= 10 else (lambda y: f"{y:.1f}")
-    return f"{fmt(lo)} years" if math.isclose(lo, hi, rel_tol=0.05) else \
-        f"{fmt(lo)} to {fmt(hi)} years"  # fmt: skip
+
+    def fmt(y: float) -> str:
+        return f"{y:,.0f}" if y >= 10 else f"{y:.1f}"
+
+    if math.isclose(lo, hi, rel_tol=0.05):
+        return f"{fmt(lo)} years"
+    return f"{fmt(lo)} to {fmt(hi)} years"
 
 
 def _note(config: MillConfig, status: str, missing: list[str], gov: ComponentLife | None,
@@ -641,5 +649,9 @@ def _note(config: MillConfig, status: str, missing: list[str], gov: ComponentLif
         if prior.method == "none"
         else f"prior damage {prior.method} since {prior.commissioned} included"
     )
-    return (f"{sim}{gov.component} governs with {_years_text(gov)} left at the recent, "
-            f"since-monitoring and worst-month rates ({curve}; {prior_text}).")  # fmt: skip
+    rates = [_RATE_WORDS.get(p.basis.split("_")[0], p.basis) for p in gov.projections
+             if p.remaining_life_years is not None]  # fmt: skip
+    said = ", ".join(rates[:-1]) + f" and {rates[-1]}" if len(rates) > 1 else "".join(rates)
+    years = years_range_text(gov.remaining_life_years_min, gov.remaining_life_years_max)
+    return (f"{sim}{gov.component} governs with {years} left at the {said} "
+            f"rate{'s' if len(rates) > 1 else ''} ({curve}; {prior_text}).")  # fmt: skip
