@@ -37,7 +37,7 @@ from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
 from ingest import keys, wire
 from ingest.archive.files import ArchiveError
 from ingest.archive.foxglove_export import ExportCounts, FoxgloveExportWriter, sample_times_ns
-from ingest.archive.reader import RawMessage, TailTolerantReader
+from ingest.archive.reader import RawMessage, TailTolerantReader, finished_statistics
 from service.cli.analyze import CHUNK_SAMPLES, _Blocks
 
 __all__ = ["ExportResult", "SpanExport", "export_archive", "mill_spans", "mills_in"]
@@ -296,12 +296,23 @@ def plan_files(files: list[Path], lo: int | None, hi: int | None) -> list[Path]:
     return keep
 
 
+def _message_total(files: list[Path]) -> int | None:
+    """Messages in ``files`` from their summaries; None when one is unfinished (no summary)."""
+    total = 0
+    for path in files:
+        stats = finished_statistics(path)
+        if stats is None:
+            return None
+        total += stats.message_count
+    return total
+
+
 def _messages(files: list[Path], bar: Any) -> Iterator[RawMessage]:
     for path in files:
         reader = TailTolerantReader(path)
         try:
             for msg in reader.messages():
-                bar.update(len(msg.payload))
+                bar.update(1)
                 yield msg
         except (ArchiveError, OSError) as exc:
             raise ValueError(f"ARCHIVE {path}: {exc}") from exc
@@ -343,9 +354,8 @@ class _NoBar:
 def _read(export: SpanExport, files: list[Path], config: MillConfig, progress: bool) -> None:
     """Feed the mill's admitted blocks of ``files`` to ``export``, in archive order."""
     blocks = _Blocks(config)
-    total = sum(p.stat().st_size for p in files)
-    with tqdm(total=total, unit="B", unit_scale=True, disable=not progress, file=sys.stderr,
-              desc=f"export {config.id}") as bar:  # fmt: skip
+    with tqdm(total=_message_total(files), unit=" blocks", unit_scale=True, disable=not progress,
+              file=sys.stderr, desc=f"export {config.id}") as bar:  # fmt: skip
         for msg in _messages(files, bar):
             got = blocks.decode(msg)
             if got is None:

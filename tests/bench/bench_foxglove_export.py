@@ -4,13 +4,14 @@ Run (defaults shown)::
 
     .venv/bin/python tests/bench/bench_foxglove_export.py --seconds 600
 
-Simulates ``--seconds`` of the ``month`` scene (starts, running, stops, barring, telemetry spikes
-at 1 kHz on the 4 channels of ``deploy/mills/sag-5200-lrs.toml``, 100-sample float32 blocks)
-into an MCAP archive with the real writer (``millwatch simulate``), then exports the whole span
+Simulates ``--seconds`` of the ``steady`` scene (steady running) and the 220 s ``start-lrs``
+scene (stopped, start, running, stop, rocking) at 1 kHz on the 4 channels of
+``deploy/mills/sag-5200-lrs.toml`` (100-sample float32 blocks) into MCAP archives with the real
+writer (``millwatch simulate``), then exports each whole recording
 in-process (:func:`service.cli.archive_export.export_archive`: the analyzer, the alarms and the
 Foxglove writer; no progress bar) once with every sample and once with ``--no-samples``. Prints
 wall and CPU seconds (CPU: every thread of the process, the SDK's compression threads included;
-the steadier figure on a shared machine), both per mill-hour of data (÷ simulated s × 3600),
+the steadier figure on a shared machine), both per mill-hour of data (÷ analysed s × 3600),
 messages and output MB per mill-hour.
 """
 
@@ -30,26 +31,27 @@ MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.
 
 def run(seconds: float) -> None:
     config = load_mill_config(MILL)
+    print(f"{'scene':<10}{'case':<14}{'wall s':>8}{'CPU s':>8}{'wall s/mill-h':>15}"
+          f"{'CPU s/mill-h':>14}{'messages':>10}{'MB':>7}{'MB/mill-h':>11}")  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
-        archive = Path(tmp) / "month.mcap"
-        args = ["simulate", "--scene", "month", "--duration", f"{seconds}s", "--out", str(archive)]
-        assert millwatch([*args, "--dtype", "float32", "--no-progress"]) == 0
-        archive_mb = archive.stat().st_size / 1e6
-        print(f"\narchive: {seconds:.0f} s of mill {config.id}, {archive_mb:.1f} MB")
-        print(f"{'case':<14}{'wall s':>8}{'CPU s':>8}{'wall s/mill-h':>15}{'CPU s/mill-h':>14}"
-              f"{'messages':>10}{'MB':>7}{'MB/mill-h':>11}")  # fmt: skip
-        per_hour = 3600.0 / seconds
-        for name, samples in (("every sample", True), ("--no-samples", False)):
-            out = Path(tmp) / f"export-{samples}.mcap"
-            started, cpu = time.perf_counter(), time.process_time()
-            result = export_archive([archive], config, out, samples=samples)
-            wall, cpu = time.perf_counter() - started, time.process_time() - cpu
-            c = result.counts
-            messages = c.samples + c.overview + c.states + c.events + c.damage + c.alarms
-            mb = out.stat().st_size / 1e6
-            hourly = f"{wall * per_hour:>15.1f}{cpu * per_hour:>14.1f}"
-            print(f"{name:<14}{wall:>8.2f}{cpu:>8.2f}{hourly}{messages:>10}{mb:>7.1f}"
-                  f"{mb * per_hour:>11.0f}")  # fmt: skip
+        for scene, duration in (("steady", seconds), ("start-lrs", None)):
+            archive = Path(tmp) / f"{scene}.mcap"
+            args = ["simulate", "--scene", scene, "--out", str(archive), "--dtype", "float32"]
+            if duration is not None:
+                args += ["--duration", f"{duration}s"]
+            assert millwatch([*args, "--no-progress"]) == 0
+            for name, samples in (("every sample", True), ("--no-samples", False)):
+                out = Path(tmp) / f"{scene}-{samples}.mcap"
+                started, cpu = time.perf_counter(), time.process_time()
+                result = export_archive([archive], config, out, samples=samples)
+                wall, cpu = time.perf_counter() - started, time.process_time() - cpu
+                c = result.counts
+                messages = c.samples + c.overview + c.states + c.events + c.damage + c.alarms
+                mb = out.stat().st_size / 1e6
+                per_hour = 3600.0 / result.analysed_s
+                hourly = f"{wall * per_hour:>15.1f}{cpu * per_hour:>14.1f}"
+                print(f"{scene:<10}{name:<14}{wall:>8.2f}{cpu:>8.2f}{hourly}{messages:>10}"
+                      f"{mb:>7.1f}{mb * per_hour:>11.0f}")  # fmt: skip
 
 
 def main() -> None:

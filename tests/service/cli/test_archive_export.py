@@ -16,8 +16,10 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from ingest import keys, wire
 from ingest.archive.reader import TailTolerantReader
+from ingest.archive.writer import ArchiveWriter
 from ingest.mill_files import load_mill_config
-from service.cli.analyze import analyze_recording
+from service.cli.analyze import analyze_recording, recording_files
+from service.cli.archive_export import export_archive
 from service.cli.main import main
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
@@ -192,3 +194,33 @@ def test_help_teaches_the_time_base_and_a_plot_path(capsys):
         main(["archive", "export", "--help"])
     text = capsys.readouterr().out
     assert "sample time" in text and "received" in text and "samples/motor_torque.value" in text
+
+
+def test_a_directory_of_rotated_files_reads_only_the_files_the_span_needs(recording, tmp_path):
+    """The recording re-archived with the real writer as three files (0-70 s, 70-140 s, 140 s-);
+    a span at the end reads only the last file and still gives its samples exactly."""
+    archive = tmp_path / "archive"
+    messages = list(TailTolerantReader(recording[0]).messages())
+    for k, (lo, hi) in enumerate([(0, 70), (70, 140), (140, 999)]):
+        with ArchiveWriter(tmp_path / f"part{k}", "sag") as writer:
+            for m in messages:
+                if T0 + lo * S <= wire.decode_block(m.payload).t0_ns < T0 + hi * S:
+                    writer.write(m.key, m.payload, m.log_time_ns)
+        for f in (tmp_path / f"part{k}").glob("*.mcap"):
+            archive.mkdir(exist_ok=True)
+            f.rename(archive / f.name)
+    assert len(list(archive.glob("*.mcap"))) == 3
+    config = load_mill_config(MILL)
+    out = tmp_path / "end.mcap"
+    result = export_archive(recording_files(archive), config, out, start_ns=T0 + 210 * S,
+                            end_ns=T0 + 215 * S, context_s=5.0)  # fmt: skip
+    assert (result.files_read, result.files_skipped) == (1, 2)
+    times, values, _ = archived_samples(recording[0])["speed"]
+    k0 = times.index(T0 + 210 * S)
+    msgs = read_export(out, ["/sag-5200-lrs/samples/speed"])["/sag-5200-lrs/samples/speed"]
+    assert [m[1] for m in msgs] == times[k0 : k0 + 5000]
+    exported = np.array([m[3].value for m in msgs])
+    assert exported.view(np.uint64).tolist() == values[k0 : k0 + 5000].view(np.uint64).tolist()
+    # the whole directory: the same samples as the single file, across the file boundaries
+    whole = export_archive(recording_files(archive), config, tmp_path / "all.mcap", samples=False)
+    assert (whole.files_read, whole.counts.overview) == (3, 8800)
