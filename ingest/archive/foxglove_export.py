@@ -59,6 +59,7 @@ __all__ = [
     "SAMPLE_SCHEMA",
     "FoxgloveExportWriter",
     "encode_samples",
+    "sample_time_ns",
     "sample_times_ns",
     "topic",
 ]
@@ -141,6 +142,13 @@ def sample_times_ns(t0_ns: int, fs: float, n: int, first: int = 0) -> np.ndarray
     if float(fs).is_integer():
         return t0_ns + (i * 1_000_000_000) // int(fs)
     return t0_ns + np.round(i * (1e9 / fs)).astype(np.int64)
+
+
+def sample_time_ns(t0_ns: int, fs: float, i: int) -> int:
+    """Time of sample ``i`` of a block starting at ``t0_ns``, as :func:`sample_times_ns`."""
+    if float(fs).is_integer():
+        return t0_ns + (i * 1_000_000_000) // int(fs)
+    return t0_ns + round(i * (1e9 / fs))
 
 
 def _stamp(t_ns: int) -> Timestamp:

@@ -87,12 +87,18 @@ class _Blocks:
         #: Per channel, the worker's admission: a block is new only if its sequence number is;
         #: a t0 contradicting it is a clock fault (so an archive with repeats gives live results).
         self.sequence = {name: ChannelHealth() for name in config.channels}
+        #: key → channel name (None: not the mill's), parsed once per key, not once per message
+        self.known: dict[str, str | None] = {}
 
     def channel(self, key: str) -> str | None:
+        if key in self.known:
+            return self.known[key]
         try:
-            return self.names.get(keys.to_live(key))
+            name = self.names.get(keys.to_live(key))
         except keys.KeyFormatError:
-            return None
+            name = None
+        self.known[key] = name
+        return name
 
     def decode(self, msg: RawMessage) -> tuple[str, wire.Block] | None:
         name = self.channel(msg.key)

@@ -36,7 +36,12 @@ from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
 from ingest import keys, wire
 from ingest.archive.files import ArchiveError
-from ingest.archive.foxglove_export import ExportCounts, FoxgloveExportWriter, sample_times_ns
+from ingest.archive.foxglove_export import (
+    ExportCounts,
+    FoxgloveExportWriter,
+    sample_time_ns,
+    sample_times_ns,
+)
 from ingest.archive.reader import RawMessage, TailTolerantReader, finished_statistics
 from service.cli.analyze import CHUNK_SAMPLES, _Blocks
 
@@ -157,7 +162,7 @@ class SpanExport:
         if self.samples and times is not None:
             self.writer.samples(self.mill, channel, times[a:b], values[a:b])
         self.writer.overview(self.mill, channel, first, values[a:b])
-        last = int(sample_times_ns(t0_ns, fs, b, first=b - 1)[0])
+        last = sample_time_ns(t0_ns, fs, b - 1)
         self.first_written = first if self.first_written is None else min(first, self.first_written)
         self.last_written = last if self.last_written is None else max(last, self.last_written)
 

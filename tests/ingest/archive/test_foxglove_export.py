@@ -21,6 +21,7 @@ from ingest.archive.foxglove_export import (
     FoxgloveExportWriter,
     encode_doubles,
     encode_samples,
+    sample_time_ns,
     sample_times_ns,
 )
 
@@ -65,6 +66,8 @@ def test_sample_times_follow_the_wire_convention() -> None:
     # 1/3 ms steps: t0 + round(i·1e9/fs), as the analyzer's clock (LoadAnalysis.t_ns)
     assert sample_times_ns(0, 3000.0, 4).tolist() == [0, 333_333, 666_666, 1_000_000]
     assert sample_times_ns(0, 2999.5, 2).tolist() == [0, round(1e9 / 2999.5)]
+    for fs in (1000.0, 3000.0, 2999.5):
+        assert [sample_time_ns(T0, fs, i) for i in range(7)] == sample_times_ns(T0, fs, 7).tolist()
 
 
 def test_every_topic_has_its_schema_and_the_time_it_describes(tmp_path: Path) -> None:
