@@ -26,7 +26,7 @@ Topics of one mill ``<mill>`` (schema in brackets; protobuf encoding throughout)
   torque, rise times, rocking, …); ``/<mill>/log`` [``foxglove.Log``]: the same as one line each.
 * ``/<mill>/damage/<component>`` [``millwatch.Damage``]: Miner damage booked since the span start,
   ``committed`` (closed rainflow cycles) and ``with_residue`` (plus the open residue closed as
-  half cycles), at a regular step.
+  half cycles now; its turning points may predate the span), at a regular step.
 * ``/<mill>/alarms`` [``foxglove.Log``]: each alarm transition (raised, escalated, cleared…),
   level Warning/Error/Fatal by severity, Info when cleared.
 

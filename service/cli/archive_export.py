@@ -108,7 +108,7 @@ class SpanExport:
         fs = float(config.sample_rate_hz)
         self.fs = fs
         self.step = max(1, round(damage_step_s * fs))
-        self.base = dict.fromkeys(self.analyzer.loads.components, 0.0)
+        self.base: dict[str, float] = {}  # committed damage at the span start, per component
         self.first_written: int | None = None
         self.last_written: int | None = None
         self.state_before: str = "unknown"
@@ -201,7 +201,8 @@ class SpanExport:
 
     def _step(self, final: bool = False) -> None:
         """At a damage step: the damage booked since the span start (the step at the span start
-        sets what came before aside, and writes zero)."""
+        sets the committed damage before it aside, and writes zero committed). ``with_residue``
+        adds the open residue closed now, whose turning points may predate the span."""
         a = self.analyzer
         n, t = a.samples, a.next_sample_ns
         assert t is not None
@@ -213,7 +214,7 @@ class SpanExport:
             return
         self.damage_at = n
         for comp, d in a.damage_summary().items():
-            base = self.base[comp]
+            base = self.base.get(comp, 0.0)
             self.writer.damage(self.mill, comp, t, d["committed"] - base, d["with_residue"] - base)
 
     def _collect(self, out: AnalyzerOutput) -> None:
