@@ -27,6 +27,12 @@ Topics of one mill ``<mill>`` (schema in brackets; protobuf encoding throughout)
 * ``/<mill>/damage/<component>`` [``millwatch.Damage``]: Miner damage booked since the span start,
   ``committed`` (closed rainflow cycles) and ``with_residue`` (plus the open residue closed as
   half cycles now; its turning points may predate the span), at a regular step.
+* ``/<mill>/starts`` [``millwatch.StartPeaks``]: each start's ``switch_on_peak_pct``,
+  ``short_circuit_peak_pct`` (% of rated motor torque), ``rise_time_10_90_ms``, ``accel_s`` (NaN
+  where not measured), for a Plot of the peaks across starts.
+* ``/<mill>/harmonics/<channel>/<line>`` [``millwatch.HarmonicLine``]: each detected drivetrain
+  line of each spectral window: ``frequency_hz``, ``amplitude`` (channel units), ``amplitude_pct``
+  (% rated, NaN for bending), ``snr_db``, stamped at the window's end.
 * ``/<mill>/alarms`` [``foxglove.Log``]: each alarm transition (raised, escalated, cleared…),
   level Warning/Error/Fatal by severity, Info when cleared.
 
@@ -53,10 +59,14 @@ from foxglove.mcap import MCAPWriteOptions
 from foxglove.messages import Event, KeyValuePair, Log, LogLevel, Timestamp
 from google.protobuf import descriptor_pb2
 
+from analytics.spectra.facts import HarmonicWindow
+
 __all__ = [
     "DAMAGE_SCHEMA",
     "ENVELOPE_SCHEMA",
+    "HARMONIC_SCHEMA",
     "SAMPLE_SCHEMA",
+    "START_SCHEMA",
     "FoxgloveExportWriter",
     "encode_samples",
     "sample_time_ns",
@@ -69,17 +79,21 @@ log = logging.getLogger(__name__)
 SAMPLE_SCHEMA = "millwatch.Sample"
 ENVELOPE_SCHEMA = "millwatch.SampleEnvelope"
 DAMAGE_SCHEMA = "millwatch.Damage"
+START_SCHEMA = "millwatch.StartPeaks"
+HARMONIC_SCHEMA = "millwatch.HarmonicLine"
 #: Fields (all ``double``, numbered from 1) of each custom schema.
 _FIELDS = {
     SAMPLE_SCHEMA: ("value",),
     ENVELOPE_SCHEMA: ("min", "max", "mean"),
     DAMAGE_SCHEMA: ("committed", "with_residue"),
+    START_SCHEMA: ("switch_on_peak_pct", "short_circuit_peak_pct", "rise_time_10_90_ms", "accel_s"),
+    HARMONIC_SCHEMA: ("frequency_hz", "amplitude", "amplitude_pct", "snr_db"),
 }
 #: Event fields that count stream samples of one analysis run: meaningless in a file.
 _STREAM_FIELDS = frozenset({"sample", "end_sample"})
-#: Fixed-width encodings of the envelope and damage messages (tag byte, float64 per field).
-_ENVELOPE = struct.Struct("<BdBdBd")
-_DAMAGE = struct.Struct("<BdBd")
+#: Fixed-width encoding of each custom schema's message: (tag byte, float64) per field.
+_PACK = {name: struct.Struct("<" + "Bd" * len(fields)) for name, fields in _FIELDS.items()}
+_TAGS = {name: [((k + 1) << 3) | 1 for k in range(len(fields))] for name, fields in _FIELDS.items()}
 _LEVEL = {"warning": LogLevel.Warning, "alarm": LogLevel.Error, "critical": LogLevel.Fatal}
 
 
@@ -155,6 +169,11 @@ def _stamp(t_ns: int) -> Timestamp:
     return Timestamp(t_ns // 1_000_000_000, t_ns % 1_000_000_000)
 
 
+def _number(value: Any) -> float:
+    """A measure as float64; NaN for None (not measured)."""
+    return math.nan if value is None else float(value)
+
+
 def _text(value: Any) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
@@ -170,6 +189,7 @@ class ExportCounts:
     states: int = 0
     events: int = 0
     damage: int = 0
+    harmonics: int = 0
     alarms: int = 0
     topics: set[str] = field(default_factory=set)
 
@@ -246,9 +266,14 @@ class FoxgloveExportWriter:
             low = high = mean = math.nan
             if finite.size:
                 low, high, mean = float(finite.min()), float(finite.max()), float(finite.mean())
-        data = _ENVELOPE.pack(0x09, low, 0x11, high, 0x19, mean)
-        self._channel(topic(mill, "overview", channel), ENVELOPE_SCHEMA).base.log(data, t_ns)
+        self.numbers(topic(mill, "overview", channel), ENVELOPE_SCHEMA, t_ns, [low, high, mean])
         self.counts.overview += 1
+
+    def numbers(self, name: str, schema: str, t_ns: int, values: list[float]) -> None:
+        """One message of custom ``schema`` on topic ``name``: its fields in order (NaN where a
+        value is missing), at ``t_ns``."""
+        pairs = [v for tag, x in zip(_TAGS[schema], values, strict=True) for v in (tag, x)]
+        self._channel(name, schema).base.log(_PACK[schema].pack(*pairs), t_ns)
 
     # ------------------------------------------------------------ conclusions
     def state(self, mill: str, t_ns: int, label: str) -> None:
@@ -275,7 +300,20 @@ class FoxgloveExportWriter:
         ch.log(Event(start_time=_stamp(t0), end_time=_stamp(t1), metadata=meta), log_time=t0)
         level = LogLevel.Warning if event.get("alarm") or event.get("failed") else LogLevel.Info
         self.log_line(mill, "log", t0, level, str(event.get("event", "event")), line)
+        if event.get("event") == "start":  # the measures as numbers, for a Plot across starts
+            peaks = [_number(event.get(f)) for f in _FIELDS[START_SCHEMA]]
+            self.numbers(topic(mill, "starts"), START_SCHEMA, t0, peaks)
         self.counts.events += 1
+
+    def harmonics(self, mill: str, window: HarmonicWindow) -> None:
+        """The detected lines of one spectral window (``millwatch.HarmonicLine`` per channel and
+        line), stamped at the window's end, when the analysis concluded them."""
+        for m in window.lines:
+            if m.detected and m.observable:
+                values = [m.frequency_hz, m.amplitude, _number(m.amplitude_pct), m.snr_db]
+                name = topic(mill, "harmonics", m.channel, m.name)
+                self.numbers(name, HARMONIC_SCHEMA, window.t_end_ns, values)
+                self.counts.harmonics += 1
 
     def log_line(
         self, mill: str, sub: str, t_ns: int, level: LogLevel, name: str, text: str
@@ -296,6 +334,5 @@ class FoxgloveExportWriter:
 
     def damage(self, mill: str, component: str, t_ns: int, committed: float, total: float) -> None:
         """Miner damage booked so far (``millwatch.Damage``) at ``t_ns``."""
-        data = _DAMAGE.pack(0x09, committed, 0x11, total)
-        self._channel(topic(mill, "damage", component), DAMAGE_SCHEMA).base.log(data, t_ns)
+        self.numbers(topic(mill, "damage", component), DAMAGE_SCHEMA, t_ns, [committed, total])
         self.counts.damage += 1

@@ -153,6 +153,8 @@ What is written (topics under /<mill>/):
   state               foxglove.KeyValuePair operating_state = stopped|starting|running|...
   events, log         foxglove.Event / foxglove.Log: starts (peaks, rise time), stops, barring
   damage/<component>  millwatch.Damage {committed, with_residue}: Miner damage since --start
+  starts              millwatch.StartPeaks {switch_on_peak_pct, short_circuit_peak_pct, ...}
+  harmonics/<ch>/<line>  millwatch.HarmonicLine {frequency_hz, amplitude, amplitude_pct, snr_db}
   alarms              foxglove.Log: alarm transitions, level by severity
 
 The analysis is the real analyzer (as 'millwatch analyze'), run from --context before --start to
@@ -257,7 +259,7 @@ def _export(args: argparse.Namespace) -> int:
         f"{args.out}: mill {config.id}, samples {iso(result.first_sample_ns)} .. "
         f"{iso(result.last_sample_ns)} (sample time), {len(c.topics)} topics\n"
         f"  {c.samples} samples, {c.overview} overview, {c.states} states, {c.events} events, "
-        f"{c.damage} damage, {c.alarms} alarm messages\n"
+        f"{c.damage} damage, {c.harmonics} harmonic, {c.alarms} alarm messages\n"
         f"  {result.files_read} files read ({result.files_skipped} skipped), "
         f"{result.analysed_s:.0f} s analysed, {took:.1f} s\n"
     )

@@ -228,6 +228,9 @@ class SpanExport:
         for event in out.events:
             if self._in_span(int(event["t_ns"])):
                 self.writer.event(self.mill, event, event_line(event))
+        for window in out.harmonics:
+            if self._in_span(window.t_end_ns):
+                self.writer.harmonics(self.mill, window)
 
     def _show_state(self) -> None:
         """The state in force at the span start, once (before the first change inside it)."""

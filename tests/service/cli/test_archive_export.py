@@ -111,6 +111,10 @@ def test_conclusions_of_the_span(span_export, recording):
     assert abs(t - truth["starts"][0]["t_ns"]) < 20_000_000
     want = truth["starts"][0]["switch_on"][0]["pct"]
     assert float(meta["switch_on_peak_pct"]) == pytest.approx(want, abs=0.5)
+    (schema, t_peaks, _, peaks), = got["/sag-5200-lrs/starts"]  # fmt: skip
+    assert schema == "millwatch.StartPeaks" and t_peaks == t
+    assert f"{peaks.switch_on_peak_pct:.6g}" == meta["switch_on_peak_pct"]
+    assert peaks.short_circuit_peak_pct > 100.0 and peaks.rise_time_10_90_ms > 0.0
     damage = got["/sag-5200-lrs/damage/pinion_combined"]
     assert [t for _, t, _, _ in damage] == [T0 + k * S for k in range(4, 15)]
     assert damage[0][3].committed == 0.0  # booked since the span start
@@ -120,9 +124,11 @@ def test_conclusions_of_the_span(span_export, recording):
 
 def test_whole_recording_conclusions_equal_millwatch_analyze(whole, recording):
     assert not any("/samples/" in t for t in whole)
-    assert {s for t, v in whole.items() for s, *_ in v if not t.startswith("/sag-5200-lrs/damage")
-            and "/overview/" not in t} == {"foxglove.KeyValuePair", "foxglove.Event",
-                                          "foxglove.Log"}  # fmt: skip
+    schemas = {"state": "foxglove.KeyValuePair", "events": "foxglove.Event", "log": "foxglove.Log",
+               "damage": "millwatch.Damage", "overview": "millwatch.SampleEnvelope",
+               "starts": "millwatch.StartPeaks", "harmonics": "millwatch.HarmonicLine"}  # fmt: skip
+    for topic, messages in whole.items():
+        assert {s for s, *_ in messages} == {schemas[topic.split("/")[2]]}, topic
     analyzer, _ = analyze_recording([recording[0]], load_mill_config(MILL))
     report = analyzer.report()
     kinds = [
@@ -138,6 +144,11 @@ def test_whole_recording_conclusions_equal_millwatch_analyze(whole, recording):
         assert last[3].with_residue == pytest.approx(want["with_residue"], rel=1e-12)
     states = [d.value for *_, d in whole["/sag-5200-lrs/state"]]
     assert states == ["stopped", "starting", "running", "stopping", "stopped"]
+    want = {(h["channel"], h["name"]) for h in report["harmonics"] if h["detected"]}
+    got = {tuple(t.split("/")[3:5]) for t in whole if "/harmonics/" in t}
+    assert ("motor_torque", "girth_mesh") in got and got <= want
+    (schema, _, _, mesh), *_ = whole["/sag-5200-lrs/harmonics/motor_torque/girth_mesh"]
+    assert schema == "millwatch.HarmonicLine" and mesh.frequency_hz > 0 and mesh.snr_db > 0
     overview = whole["/sag-5200-lrs/overview/speed"]
     assert len(overview) == 2200 and overview[0][1] == T0  # one per archived block
 
