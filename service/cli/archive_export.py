@@ -133,7 +133,7 @@ class SpanExport:
     def block(self, channel: str, block: wire.Block) -> None:
         """One admitted block of ``channel`` (raw samples, as archived)."""
         n = block.samples.shape[0]
-        t_end = block.t0_ns + round(n * 1e9 / block.fs)
+        t_end = block.t0_ns + block.duration_ns
         if n == 0 or not self.wanted(block.t0_ns, t_end):
             return
         values = self.analyzer.calibrated(channel, block.samples)
@@ -366,6 +366,9 @@ def _read(export: SpanExport, files: list[Path], config: MillConfig, progress: b
     with tqdm(total=_message_total(files), unit=" blocks", unit_scale=True, disable=not progress,
               file=sys.stderr, desc=f"export {config.id}") as bar:  # fmt: skip
         for msg in _messages(files, bar):
+            span = wire.block_span_ns(msg.payload)  # outside span and context: not even decoded
+            if span is not None and not export.wanted(*span):
+                continue
             got = blocks.decode(msg)
             if got is None:
                 continue
