@@ -165,7 +165,7 @@ the span is measured whole; only what happens inside the span is written. Long s
 _EXPORT_EXAMPLES = """examples:
   millwatch simulate --scene start-lrs --out start.mcap
   millwatch archive export start.mcap --mill deploy/mills/sag-5200-lrs.toml --out fox.mcap
-  millwatch archive export /var/lib/millwatch/archive --mill sag1.toml --out sag1.mcap \
+  millwatch archive export /var/lib/millwatch/archive --mill sag1.toml --out sag1.mcap \\
       --start 2026-11-21T23:30:00Z --end 2026-11-22T00:30:00Z
 then open fox.mcap in Foxglove and plot /sag-5200-lrs/samples/motor_torque.value"""
 
