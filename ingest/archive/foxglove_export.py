@@ -67,7 +67,9 @@ __all__ = [
     "HARMONIC_SCHEMA",
     "SAMPLE_SCHEMA",
     "START_SCHEMA",
+    "ExportCounts",
     "FoxgloveExportWriter",
+    "encode_doubles",
     "encode_samples",
     "sample_time_ns",
     "sample_times_ns",
@@ -206,9 +208,12 @@ class FoxgloveExportWriter:
         self.counts = ExportCounts()
         self._context = foxglove.Context()
         options = MCAPWriteOptions(emit_message_indexes=False)  # 16 B/sample; chunk index suffices
-        self._mcap = foxglove.open_mcap(
-            self.path, allow_overwrite=overwrite, context=self._context, writer_options=options
-        )
+        try:
+            self._mcap = foxglove.open_mcap(
+                self.path, allow_overwrite=overwrite, context=self._context, writer_options=options
+            )
+        except OSError as exc:  # the SDK's message names no file
+            raise OSError(f"{self.path}: cannot write: {exc.strerror or exc}") from exc
         self._schemas = {name: Schema(name=name, encoding="protobuf",
                                       data=_descriptor_set(name)) for name in _FIELDS}  # fmt: skip
         self._custom: dict[str, Channel] = {}

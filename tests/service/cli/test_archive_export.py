@@ -177,7 +177,8 @@ def test_alarms_of_a_grid_start(tmp_path: Path, capsys):
       "holds it (sample time) 2024-01-01T00:00:00.000Z .. 2024-01-01T00:03:40.000Z"),
      (["--mill", str(MILLS / "ball-dual-lrs.toml")], "mills found: rustenburg/sag-5200-lrs"),
      (["--start", "2024-01-01T00:01:00Z", "--end", "2024-01-01T00:00:30Z"], "is not after"),
-     (["--start", "yesterday"], "expected ISO-8601")],
+     (["--start", "yesterday"], "expected ISO-8601"),
+     (["--out", "/nonexistent-dir/x.mcap"], "/nonexistent-dir/x.mcap: cannot write")],
 )  # fmt: skip
 def test_errors_say_what_exists(recording, tmp_path, capsys, extra, needle):
     out = tmp_path / "x.mcap"
