@@ -46,7 +46,9 @@ def run(seconds: float) -> None:
                 result = export_archive([archive], config, out, samples=samples)
                 wall, cpu = time.perf_counter() - started, time.process_time() - cpu
                 c = result.counts
-                messages = c.samples + c.overview + c.states + c.events + c.damage + c.alarms
+                messages = (
+                    c.samples + c.overview + c.states + c.events + c.damage + c.harmonics + c.alarms
+                )
                 mb = out.stat().st_size / 1e6
                 per_hour = 3600.0 / result.analysed_s
                 hourly = f"{wall * per_hour:>15.1f}{cpu * per_hour:>14.1f}"
