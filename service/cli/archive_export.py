@@ -4,15 +4,16 @@ Composition only: archive messages are decoded and admitted as ``millwatch analy
 (:class:`service.cli.analyze._Blocks`, :func:`~service.cli.analyze.recording_files`); the samples
 of the span go to :class:`ingest.archive.foxglove_export.FoxgloveExportWriter` stamped with their
 sample time; the same blocks feed the real :class:`~analytics.mill.analyzer.MillAnalyzer` (from a
-context before and after the span, so the operating state is known when the span begins
-and events that cross its end are measured whole), whose state
-changes, events and damage are written on the same timeline; the alarms are those
+context before and after the span, so the operating state is known when the span begins and
+events that cross its end are measured whole), whose state changes, events (with start peaks),
+harmonic lines and damage are written on the same timeline; the alarms are those
 ``millwatch analyze`` reports (:func:`alarms.report.alarms_for_report`).
 
 Times: the span selects by *sample* time (wire block ``t0``), not by the archive's MCAP log
 time, which is the time the worker received the block. Files are skipped unread when their
 first sample and the next file's first sample show they hold nothing within a minute of the
-analysed span (files sort by time, as the rotating writer names them).
+analysed span (files sort by time, as the rotating writer names them); inside a file, blocks
+outside the span and its context are skipped on their header's time, undecoded.
 """
 
 from __future__ import annotations
