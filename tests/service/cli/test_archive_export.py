@@ -236,3 +236,20 @@ def test_a_directory_of_rotated_files_reads_only_the_files_the_span_needs(record
     # the whole directory: the same samples as the single file, across the file boundaries
     whole = export_archive(recording_files(archive), config, tmp_path / "all.mcap", samples=False)
     assert (whole.files_read, whole.counts.overview) == (3, 8800)
+
+
+def test_samples_are_in_the_units_of_the_mill_calibration(recording, tmp_path):
+    """With a calibration other than the identity the exported value is gain·(raw − offset),
+    the very float64 the analyzer computes from the archived sample."""
+    config = load_mill_config(MILL)
+    speed = config.channels["speed"].model_copy(update={"gain": 2.5, "offset": 0.1})
+    config = config.model_copy(update={"channels": {**config.channels, "speed": speed}})
+    out = tmp_path / "cal.mcap"
+    export_archive([recording[0]], config, out, start_ns=T0 + 30 * S, end_ns=T0 + 31 * S,
+                   context_s=1.0)  # fmt: skip
+    times, values, _ = archived_samples(recording[0])["speed"]
+    k0 = times.index(T0 + 30 * S)
+    msgs = read_export(out, ["/sag-5200-lrs/samples/speed"])["/sag-5200-lrs/samples/speed"]
+    want = 2.5 * (values[k0 : k0 + 1000] - 0.1)
+    got = np.array([m[3].value for m in msgs])
+    assert got.view(np.uint64).tolist() == want.view(np.uint64).tolist()
