@@ -8,8 +8,6 @@ The ``millwatch`` command line: one module per sub-command, composed by ``main``
   its handler: ``demo``, ``rainflow``, ``simulate``, ``spectrum``, ``replay``, ``archive``,
   ``serve`` (a worker, and the API with it), ``router``, ``api`` (the API alone, over zenoh),
   ``analyze``, ``report`` (one monthly report from a store file, on demand).
-* ``archive_export`` — the composition behind ``archive export`` (archive span → analyzer and
-  alarms → :mod:`ingest.archive.foxglove_export`), imported by its handler only.
 * ``args`` — argument types that name the rule a value broke; ``signal_files`` — ``.npy`` /
   ``.csv`` signals read in blocks, for the offline commands.
 

@@ -100,6 +100,15 @@ class _Blocks:
         self.known[key] = name
         return name
 
+    def admit(self, msg: RawMessage) -> tuple[str, wire.Block] | None:
+        """:meth:`decode`, then the worker's admission by sequence number: None for a repeat
+        (counted in :attr:`sequence`) as for anything ``decode`` skips."""
+        got = self.decode(msg)
+        if got is None:
+            return None
+        admitted = self.sequence[got[0]].accept(got[1], msg.log_time_ns)
+        return None if admitted.block is None else (got[0], admitted.block)
+
     def decode(self, msg: RawMessage) -> tuple[str, wire.Block] | None:
         name = self.channel(msg.key)
         if name is None:

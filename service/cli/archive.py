@@ -235,8 +235,8 @@ def _add_export(actions: argparse._SubParsersAction) -> None:
 def _export(args: argparse.Namespace) -> int:
     # heavy imports here, not at module level: 'millwatch --help' must not pay for them
     from ingest.mill_files import load_mill_config
-    from service.cli.analyze import recording_files
-    from service.cli.archive_export import export_archive, iso
+    from service.cli.analyze import _Blocks, recording_files
+    from service.export.foxglove import export_archive
 
     if args.out.exists() and not args.force:
         raise ArchiveCommandError(f"--out {args.out}: file exists; remove it or add --force")
@@ -248,7 +248,8 @@ def _export(args: argparse.Namespace) -> int:
     progress = not args.no_progress and sys.stderr.isatty()
     started = time.perf_counter()
     result = export_archive(
-        files, config, args.out, start_ns=args.start, end_ns=args.end, context_s=args.context,
+        files, config, args.out, lambda c: _Blocks(c).admit,  # decoded, admitted as by analyze
+        start_ns=args.start, end_ns=args.end, context_s=args.context,
         damage_step_s=args.damage_step, samples=not args.no_samples, progress=progress,
         overwrite=args.force,
     )  # fmt: skip
@@ -256,8 +257,8 @@ def _export(args: argparse.Namespace) -> int:
     c = result.counts
     assert result.first_sample_ns is not None and result.last_sample_ns is not None
     sys.stdout.write(
-        f"{args.out}: mill {config.id}, samples {iso(result.first_sample_ns)} .. "
-        f"{iso(result.last_sample_ns)} (sample time), {len(c.topics)} topics\n"
+        f"{args.out}: mill {config.id}, samples {_iso(result.first_sample_ns)} .. "
+        f"{_iso(result.last_sample_ns)} (sample time), {len(c.topics)} topics\n"
         f"  {c.samples} samples, {c.overview} overview, {c.states} states, {c.events} events, "
         f"{c.damage} damage, {c.harmonics} harmonic, {c.alarms} alarm messages\n"
         f"  {result.files_read} files read ({result.files_skipped} skipped), "

@@ -8,7 +8,7 @@ Simulates ``--seconds`` of the ``steady`` scene (steady running) and the 220 s `
 scene (stopped, start, running, stop, rocking) at 1 kHz on the 4 channels of
 ``deploy/mills/sag-5200-lrs.toml`` (100-sample float32 blocks) into MCAP archives with the real
 writer (``millwatch simulate``), then exports each whole recording
-in-process (:func:`service.cli.archive_export.export_archive`: the analyzer, the alarms and the
+in-process (:func:`service.export.foxglove.export_archive`: the analyzer, the alarms and the
 Foxglove writer; no progress bar) once with every sample and once with ``--no-samples``. Prints
 wall and CPU seconds (CPU: every thread of the process, the SDK's compression threads included;
 the steadier figure on a shared machine), both per mill-hour of data (÷ analysed s × 3600),
@@ -22,11 +22,18 @@ import tempfile
 import time
 from pathlib import Path
 
+from analytics.drivetrain.mill_config import MillConfig
 from ingest.mill_files import load_mill_config
-from service.cli.archive_export import export_archive
+from service.cli.analyze import _Blocks
 from service.cli.main import main as millwatch
+from service.export.foxglove import Admit, export_archive
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
+
+
+def admit(config: MillConfig) -> Admit:
+    """Decoding and admission as ``millwatch analyze`` (what the command passes)."""
+    return _Blocks(config).admit
 
 
 def run(seconds: float) -> None:
@@ -43,7 +50,7 @@ def run(seconds: float) -> None:
             for name, samples in (("every sample", True), ("--no-samples", False)):
                 out = Path(tmp) / f"{scene}-{samples}.mcap"
                 started, cpu = time.perf_counter(), time.process_time()
-                result = export_archive([archive], config, out, samples=samples)
+                result = export_archive([archive], config, out, admit, samples=samples)
                 wall, cpu = time.perf_counter() - started, time.process_time() - cpu
                 c = result.counts
                 messages = (

@@ -4,62 +4,25 @@ time, Foxglove schema names, and the analyzer's conclusions on the same timeline
 
 from __future__ import annotations
 
-import json
-from collections import defaultdict
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
-from mcap_protobuf.decoder import DecoderFactory
 
-from ingest import keys, wire
-from ingest.archive.reader import TailTolerantReader
-from ingest.archive.writer import ArchiveWriter
 from ingest.mill_files import load_mill_config
-from service.cli.analyze import analyze_recording, recording_files
-from service.cli.archive_export import export_archive
+from service.cli.analyze import analyze_recording
 from service.cli.main import main
+from tests.service.export.recorded import (
+    MILL,
+    MILLS,
+    T0,
+    S,
+    archived_samples,
+    read_export,
+    recording,
+)
 
-MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
-MILL = MILLS / "sag-5200-lrs.toml"
-T0 = 1_704_067_200_000_000_000  # 2024-01-01T00:00:00Z, the scene's first sample
-S = 1_000_000_000
-
-
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
-    d = tmp_path_factory.mktemp("export")
-    out, truth = d / "start.mcap", d / "truth.json"
-    assert main(["simulate", "--scene", "start-lrs", "--out", str(out), "--truth", str(truth),
-                 "--no-progress", "--seed", "3"]) == 0  # fmt: skip
-    return out, json.loads(truth.read_text())
-
-
-def read_export(path: Path, topics: list[str] | None = None) -> dict[str, list[tuple]]:
-    """topic → [(schema name, log time, publish time, decoded message)], in file order."""
-    got: dict[str, list[tuple]] = defaultdict(list)
-    with open(path, "rb") as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        for schema, channel, msg, decoded in reader.iter_decoded_messages(topics=topics):
-            got[channel.topic].append((schema.name, msg.log_time, msg.publish_time, decoded))
-    return got
-
-
-def archived_samples(path: Path) -> dict[str, tuple[list[int], np.ndarray, list[int]]]:
-    """signal → (sample times, samples as float64, archive log times of the blocks)."""
-    parts: dict[str, list[tuple[wire.Block, int]]] = defaultdict(list)
-    for msg in TailTolerantReader(path).messages():
-        parts[keys.parse_key(msg.key).signal_segment].append(
-            (wire.decode_block(msg.payload), msg.log_time_ns)
-        )
-    out = {}
-    for name, blocks in parts.items():
-        times = [b.t0_ns + i * 1_000_000 for b, _ in blocks for i in range(len(b.samples))]
-        values = np.concatenate([b.samples.astype(np.float64) for b, _ in blocks])
-        out[name] = (times, values, [log for _, log in blocks])
-    return out
+__all__ = ["recording"]  # the module fixture, shared
 
 
 @pytest.fixture(scope="module")
@@ -206,50 +169,3 @@ def test_help_teaches_the_time_base_and_a_plot_path(capsys):
         main(["archive", "export", "--help"])
     text = capsys.readouterr().out
     assert "sample time" in text and "received" in text and "samples/motor_torque.value" in text
-
-
-def test_a_directory_of_rotated_files_reads_only_the_files_the_span_needs(recording, tmp_path):
-    """The recording re-archived with the real writer as three files (0-70 s, 70-140 s, 140 s-);
-    a span at the end reads only the last file and still gives its samples exactly."""
-    archive = tmp_path / "archive"
-    messages = list(TailTolerantReader(recording[0]).messages())
-    for k, (lo, hi) in enumerate([(0, 70), (70, 140), (140, 999)]):
-        with ArchiveWriter(tmp_path / f"part{k}", "sag") as writer:
-            for m in messages:
-                if T0 + lo * S <= wire.decode_block(m.payload).t0_ns < T0 + hi * S:
-                    writer.write(m.key, m.payload, m.log_time_ns)
-        for f in (tmp_path / f"part{k}").glob("*.mcap"):
-            archive.mkdir(exist_ok=True)
-            f.rename(archive / f.name)
-    assert len(list(archive.glob("*.mcap"))) == 3
-    config = load_mill_config(MILL)
-    out = tmp_path / "end.mcap"
-    result = export_archive(recording_files(archive), config, out, start_ns=T0 + 210 * S,
-                            end_ns=T0 + 215 * S, context_s=5.0)  # fmt: skip
-    assert (result.files_read, result.files_skipped) == (1, 2)
-    times, values, _ = archived_samples(recording[0])["speed"]
-    k0 = times.index(T0 + 210 * S)
-    msgs = read_export(out, ["/sag-5200-lrs/samples/speed"])["/sag-5200-lrs/samples/speed"]
-    assert [m[1] for m in msgs] == times[k0 : k0 + 5000]
-    exported = np.array([m[3].value for m in msgs])
-    assert exported.view(np.uint64).tolist() == values[k0 : k0 + 5000].view(np.uint64).tolist()
-    # the whole directory: the same samples as the single file, across the file boundaries
-    whole = export_archive(recording_files(archive), config, tmp_path / "all.mcap", samples=False)
-    assert (whole.files_read, whole.counts.overview) == (3, 8800)
-
-
-def test_samples_are_in_the_units_of_the_mill_calibration(recording, tmp_path):
-    """With a calibration other than the identity the exported value is gain·(raw − offset),
-    the very float64 the analyzer computes from the archived sample."""
-    config = load_mill_config(MILL)
-    speed = config.channels["speed"].model_copy(update={"gain": 2.5, "offset": 0.1})
-    config = config.model_copy(update={"channels": {**config.channels, "speed": speed}})
-    out = tmp_path / "cal.mcap"
-    export_archive([recording[0]], config, out, start_ns=T0 + 30 * S, end_ns=T0 + 31 * S,
-                   context_s=1.0)  # fmt: skip
-    times, values, _ = archived_samples(recording[0])["speed"]
-    k0 = times.index(T0 + 30 * S)
-    msgs = read_export(out, ["/sag-5200-lrs/samples/speed"])["/sag-5200-lrs/samples/speed"]
-    want = 2.5 * (values[k0 : k0 + 1000] - 0.1)
-    got = np.array([m[3].value for m in msgs])
-    assert got.view(np.uint64).tolist() == want.view(np.uint64).tolist()

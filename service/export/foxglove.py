@@ -1,8 +1,9 @@
-"""``millwatch archive export``: a span of the archive as an MCAP file that Foxglove plots.
+"""The Foxglove export of a span of the archive: samples at sample time beside what millwatch
+concluded (``millwatch archive export``).
 
-Composition only: archive messages are decoded and admitted as ``millwatch analyze`` does
-(:class:`service.cli.analyze._Blocks`, :func:`~service.cli.analyze.recording_files`); the samples
-of the span go to :class:`ingest.archive.foxglove_export.FoxgloveExportWriter` stamped with their
+Composition: archive messages are read in order and admitted by the caller's ``admit`` (the
+decoding and admission of ``millwatch analyze``, passed in by the command); the samples of the
+span go to :class:`ingest.archive.foxglove_export.FoxgloveExportWriter` stamped with their
 sample time; the same blocks feed the real :class:`~analytics.mill.analyzer.MillAnalyzer` (from a
 context before and after the span, so the operating state is known when the span begins and
 events that cross its end are measured whole), whose state changes, events (with start peaks),
@@ -22,7 +23,7 @@ import logging
 import math
 import sys
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -44,9 +45,12 @@ from ingest.archive.foxglove_export import (
     sample_times_ns,
 )
 from ingest.archive.reader import RawMessage, TailTolerantReader, finished_statistics
-from service.cli.analyze import CHUNK_SAMPLES, _Blocks
 
-__all__ = ["ExportResult", "SpanExport", "export_archive", "mill_spans", "mills_in"]
+__all__ = ["Admit", "ExportResult", "SpanExport", "export_archive", "mill_spans", "mills_in"]
+
+#: Decodes and admits one archive message: ``(channel name, block)`` of a new block of the
+#: mill, None for anything else (another mill, malformed, a repeat). One per export (stateful).
+Admit = Callable[[RawMessage], tuple[str, wire.Block] | None]
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +60,9 @@ _FILE_MARGIN_NS = 60 * 1_000_000_000
 _SPAN_GAP_NS = 1_000_000_000
 #: Events and steady windows the analyzer keeps for the alarms (a month of minutes and more).
 _KEEP = 100_000
+#: Aligned samples gathered before the analyzer runs (as ``millwatch analyze``; long chunks cost
+#: less per sample, the results do not depend on it).
+_CHUNK_SAMPLES = 30_000
 
 
 def iso(t_ns: int) -> str:
@@ -140,7 +147,7 @@ class SpanExport:
         values = self.analyzer.calibrated(channel, block.samples)
         self._write(channel, block.t0_ns, t_end, block.fs, values)
         self.analyzer.add(channel, block.t0_ns, block.fs, block.samples)
-        if self.analyzer.backlog >= CHUNK_SAMPLES:
+        if self.analyzer.backlog >= _CHUNK_SAMPLES:
             self._advance()
 
     def _write(
@@ -338,13 +345,13 @@ def _mill_of(key: str) -> str | None:
     return f"{parsed.site}/{parsed.mill}"
 
 
-def mill_spans(files: list[Path], config: MillConfig) -> list[tuple[int, int]]:
-    """Sample-time spans ``(first, end)`` (ns) of the mill's blocks in ``files``: runs of blocks
-    with pauses of at most a second between them (for error messages; reads every file)."""
-    blocks = _Blocks(config)
+def mill_spans(files: list[Path], admit: Admit) -> list[tuple[int, int]]:
+    """Sample-time spans ``(first, end)`` (ns) of the blocks ``admit`` takes from ``files``: runs
+    of blocks with pauses of at most a second between them (for error messages; reads every
+    file)."""
     spans: list[list[int]] = []
     for msg in _messages(files, _NoBar()):
-        got = blocks.decode(msg)
+        got = admit(msg)
         if got is None:
             continue
         b = got[1]
@@ -361,22 +368,17 @@ class _NoBar:
         pass
 
 
-def _read(export: SpanExport, files: list[Path], config: MillConfig, progress: bool) -> None:
-    """Feed the mill's admitted blocks of ``files`` to ``export``, in archive order."""
-    blocks = _Blocks(config)
+def _read(export: SpanExport, files: list[Path], admit: Admit, progress: bool) -> None:
+    """Feed the admitted blocks of ``files`` to ``export``, in archive order."""
     with tqdm(total=_message_total(files), unit=" blocks", unit_scale=True, disable=not progress,
-              file=sys.stderr, desc=f"export {config.id}") as bar:  # fmt: skip
+              file=sys.stderr, desc=f"export {export.mill}") as bar:  # fmt: skip
         for msg in _messages(files, bar):
             span = wire.block_span_ns(msg.payload)  # outside span and context: not even decoded
             if span is not None and not export.wanted(*span):
                 continue
-            got = blocks.decode(msg)
-            if got is None:
-                continue
-            name, block = got
-            admitted = blocks.sequence[name].accept(block, msg.log_time_ns)
-            if admitted.block is not None:  # a repeat is dropped, as the worker does
-                export.block(name, admitted.block)
+            got = admit(msg)
+            if got is not None:
+                export.block(*got)
 
 
 def mills_in(files: list[Path]) -> Counter[str]:
@@ -394,9 +396,9 @@ def _no_mill(config: MillConfig, files: list[Path]) -> ValueError:
 
 
 def _empty_span(
-    config: MillConfig, files: list[Path], start: int | None, end: int | None
+    config: MillConfig, files: list[Path], admit: Admit, start: int | None, end: int | None
 ) -> ValueError:
-    spans = mill_spans(files, config)
+    spans = mill_spans(files, admit)
     if not spans:
         return _no_mill(config, files)
     held = "; ".join(f"{iso(a)} .. {iso(b)}" for a, b in spans[:20])
@@ -411,6 +413,7 @@ def export_archive(
     files: list[Path],
     config: MillConfig,
     out: Path,
+    admit_for: Callable[[MillConfig], Admit],
     *,
     start_ns: int | None = None,
     end_ns: int | None = None,
@@ -421,7 +424,8 @@ def export_archive(
     overwrite: bool = False,
 ) -> ExportResult:
     """Write the export of mill ``config`` over ``[start_ns, end_ns)`` (sample time, ns; None =
-    open) of the archive ``files`` to ``out``; raises ``ValueError`` naming what is wrong (no
+    open) of the archive ``files`` to ``out``, the blocks admitted by ``admit_for(config)``
+    (called once per pass over the files); raises ``ValueError`` naming what is wrong (no
     such mill in the archive: lists the mills found; nothing in the span: lists the spans the
     archive holds). A failed export leaves no file behind."""
     if start_ns is not None and end_ns is not None and end_ns <= start_ns:
@@ -433,10 +437,10 @@ def export_archive(
         with FoxgloveExportWriter(out, overwrite=overwrite) as writer:
             export = SpanExport(config, writer, start_ns, end_ns, context_s=context_s,
                                 damage_step_s=damage_step_s, samples=samples)  # fmt: skip
-            _read(export, read, config, progress)
+            _read(export, read, admit_for(config), progress)
             export.finish()
         if export.first_written is None:
-            raise _empty_span(config, files, start_ns, end_ns)
+            raise _empty_span(config, files, admit_for(config), start_ns, end_ns)
     except BaseException:
         out.unlink(missing_ok=True)
         raise
