@@ -207,7 +207,9 @@ class FoxgloveExportWriter:
         self.path = Path(path)
         self.counts = ExportCounts()
         self._context = foxglove.Context()
-        options = MCAPWriteOptions(emit_message_indexes=False)  # 16 B/sample; chunk index suffices
+        # message indexes stay (16 B a message, uncompressed): Foxglove's indexed MCAP reader
+        # (@mcap/core ChunkCursor) refuses a chunk that has messages but no message index
+        options = MCAPWriteOptions(emit_message_indexes=True)
         try:
             self._mcap = foxglove.open_mcap(
                 self.path, allow_overwrite=overwrite, context=self._context, writer_options=options

@@ -104,3 +104,18 @@ def test_every_topic_has_its_schema_and_the_time_it_describes(tmp_path: Path) ->
     (_, t, alarm), = got["/m1/alarms"]  # fmt: skip
     assert t == T0 + 6 and alarm.name == "start_peak" and "too high" in alarm.message
     assert alarm.level == 4  # foxglove.Log.Level.ERROR for severity "alarm"
+
+
+def test_every_chunk_is_indexed_as_foxglove_reads_it(tmp_path: Path) -> None:
+    """Foxglove opens MCAP through an indexed reader that refuses a chunk with messages but no
+    message index: every chunk index of an export points at message indexes, in time order."""
+    path = tmp_path / "x.mcap"
+    with FoxgloveExportWriter(path) as w:
+        w.samples("m1", "speed", sample_times_ns(T0, 1000.0, 200_000), np.zeros(200_000))
+        w.state("m1", T0, "running")
+    with open(path, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None and len(summary.chunk_indexes) > 1
+    for index in summary.chunk_indexes:
+        assert index.message_index_length > 0 and index.message_index_offsets
+        assert index.message_start_time <= index.message_end_time
