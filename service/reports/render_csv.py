@@ -1,62 +1,77 @@
-"""The monthly damage report's tables as CSV (seed 000 §10.6 "automatic reports").
+"""A report document's tables as tidy CSV: one table per file (seed 000 §10.6 "automatic reports").
 
-Two tables, each a plain CSV document with a header row (RFC 4180, ``\\r\\n`` line ends):
+Every table of the :class:`~service.reports.document.Document` — the printed ones and the data
+behind the figures (``printed=False``: starts per day, damage per day, component and phase) —
+becomes one CSV document (RFC 4180, ``\\r\\n`` line ends, UTF-8): a header row of column names
+with their units (``switch_on_pct [% rated]``, ``damage [1]``), then one row per table row, so
+a spreadsheet, pandas or Grafana loads it as one rectangular table. Numbers are written at full
+precision (``repr`` of floats), booleans as ``true``/``false``, missing values as empty cells.
 
-* ``starts``: one row per switch-on (local time, UTC ns, failed, peaks in % of rated motor
-  torque, rise time, acceleration time, status against the start-peak levels);
-* ``damage``: one row per local day, component and phase (Miner damage; days without damage
-  are not listed, the daily rows sum to the month's totals of the report).
-
-:func:`render_csv` joins them into one document with a ``# table`` comment line before each,
-for the API's ``format=csv``; :func:`starts_csv` / :func:`damage_csv` give one table each.
+* :func:`render_csv` — every table in one zip (``<mill>-<month>-<table>.csv``), the API's
+  ``format=csv``;
+* :func:`render_csv_table` — one table by name, ``format=csv&table=NAME``; an unknown name is a
+  :class:`~service.errors.BadRequest` (422) that lists the valid ones.
 """
 
 from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Iterable, Sequence
+import zipfile
 
+from service.errors import BadRequest
+from service.reports.document import Cell, Document, Table
 from service.reports.monthly import MonthlyReport
+from service.reports.monthly_document import monthly_document
 
-__all__ = ["CSV_TABLES", "damage_csv", "render_csv", "starts_csv"]
+__all__ = ["document_csv_zip", "render_csv", "render_csv_table", "table_csv"]
 
-STARTS_HEADER = ("local_time", "t_ns", "failed", "switch_on_pct", "short_circuit_pct",
-                 "pinion_switch_on_pct", "rise_10_90_ms", "accel_s", "status")  # fmt: skip
-DAMAGE_HEADER = ("day", "component", "phase", "damage")
+#: A fixed time for the zip members, so the same report gives the same bytes.
+ZIP_TIME = (2000, 1, 1, 0, 0, 0)
 
 
-def _csv(header: Sequence[str], rows: Iterable[Sequence[object]]) -> str:
+def _value(v: Cell) -> str | int | float:
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(v) if v == v and v not in (float("inf"), float("-inf")) else ""
+    return v
+
+
+def table_csv(t: Table) -> str:
+    """One table as CSV text: header row with units, then the rows."""
     buf = io.StringIO()
     writer = csv.writer(buf)
-    writer.writerow(header)
-    writer.writerows(["" if v is None else v for v in row] for row in rows)
+    writer.writerow([c.csv_name for c in t.columns])
+    writer.writerows([_value(v) for v in row] for row in t.rows)
     return buf.getvalue()
 
 
-def starts_csv(r: MonthlyReport) -> str:
-    """One row per start of the month."""
-    return _csv(
-        STARTS_HEADER,
-        ([s.local_time, s.t_ns, int(s.failed), s.switch_on_pct, s.short_circuit_pct,
-          s.pinion_switch_on_pct, s.rise_10_90_ms, s.accel_s, s.status]
-         for s in r.starts.starts),
-    )  # fmt: skip
+def document_csv_zip(doc: Document) -> bytes:
+    """Every table of ``doc`` as ``<file_stem>-<table>.csv`` in one zip."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        for t in doc.tables():
+            info = zipfile.ZipInfo(f"{doc.file_stem}-{t.name}.csv", ZIP_TIME)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            z.writestr(info, table_csv(t).encode("utf-8"))
+    return buf.getvalue()
 
 
-def damage_csv(r: MonthlyReport) -> str:
-    """One row per day, component and phase (``repr`` floats: full precision)."""
-    return _csv(
-        DAMAGE_HEADER,
-        ([day, c.component, phase, repr(d)]
-         for c in r.damage for day, phases in c.per_day.items() for phase, d in phases.items()),
-    )  # fmt: skip
+def render_csv(r: MonthlyReport) -> bytes:
+    """The monthly report's tables, one CSV each, in a zip."""
+    return document_csv_zip(monthly_document(r))
 
 
-CSV_TABLES = {"starts": starts_csv, "damage": damage_csv}
-
-
-def render_csv(r: MonthlyReport) -> str:
-    """Both tables in one document: ``# <table>`` line, then the table, then a blank line."""
-    head = f"# millwatch monthly report: mill {r.mill}, site {r.site}, month {r.month}\r\n"
-    return head + "".join(f"# {name}\r\n{fn(r)}\r\n" for name, fn in CSV_TABLES.items())
+def render_csv_table(r: MonthlyReport, name: str) -> str:
+    """One table of the monthly report as CSV text; :class:`BadRequest` for an unknown name."""
+    doc = monthly_document(r)
+    try:
+        return table_csv(doc.table(name))
+    except KeyError:
+        raise BadRequest(
+            "Unknown report table",
+            f"table {name!r} is not one of {', '.join(doc.table_names())}.",
+        ) from None
