@@ -30,6 +30,8 @@ from matplotlib.figure import Figure as MplFigure
 
 __all__ = [
     "MAX_COLUMNS",
+    "MINUS",
+    "NBSP",
     "STATUS_WORDS",
     "Block",
     "Cell",
@@ -54,6 +56,7 @@ MAX_COLUMNS = 9
 #: Cell texts a renderer highlights (status columns: ``Column.status``).
 STATUS_WORDS = ("ok", "above norm", "warning", "alarm", "critical")
 MINUS = "\u2212"
+NBSP = "\u00a0"
 
 
 def fmt(x: float | None, digits: int = 3) -> str:
@@ -104,8 +107,8 @@ class Column:
 
     @property
     def heading(self) -> str:
-        """The header text of HTML and PDF."""
-        return f"{self.title} [{self.unit}]" if self.unit else self.title
+        """The header text of HTML and PDF; the unit kept on one line (no-break spaces)."""
+        return f"{self.title} [{self.unit.replace(' ', NBSP)}]" if self.unit else self.title
 
     @property
     def csv_name(self) -> str:

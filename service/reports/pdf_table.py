@@ -104,6 +104,11 @@ class _Metrics:
         return width
 
 
+def _words(text: str) -> list[str]:
+    """The unbreakable parts of a cell (split at spaces and line ends, not no-break spaces)."""
+    return text.replace("\n", " ").split(" ")
+
+
 def _needs(t: Table, m: _Metrics) -> tuple[list[float], list[float]]:
     """Per column: the minimum width (widest word) and the natural width (widest cell)."""
     regular, bold = m.measure(""), m.measure("B")
@@ -111,7 +116,7 @@ def _needs(t: Table, m: _Metrics) -> tuple[list[float], list[float]]:
     low, nat = [], []
     for i, head in enumerate(t.headings()):
         cells = [r[i] for r in rows]
-        words = [bold(w) for w in head.split()] + [regular(w) for c in cells for w in c.split()]
+        words = [bold(w) for w in _words(head)] + [regular(w) for c in cells for w in _words(c)]
         whole = [regular(c) for c in cells]
         widest_word = max(words, default=0.0)
         low.append(widest_word + 2 * PAD_X)

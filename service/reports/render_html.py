@@ -21,6 +21,7 @@ import logging
 import matplotlib
 
 from service.reports.document import (
+    MINUS,
     STATUS_WORDS,
     Block,
     Document,
@@ -48,7 +49,7 @@ caption{caption-side:top;text-align:left;font-weight:600;padding:.2rem 0;color:#
 th,td{border:1px solid #ccc;padding:.2rem .45rem;text-align:right;vertical-align:top;
 overflow-wrap:break-word}
 th{background:#f3f3f3;font-weight:600}td.l,th.l{text-align:left}
-.meta{color:#555;font-size:.9rem}
+.meta{color:#555;font-size:.9rem}.nw{white-space:nowrap}
 .note{background:#fff8e1;padding:.5rem;border-left:4px solid #f0b400}
 .ok{color:#1a7f37}.warning,.above{color:#b35900;font-weight:600}
 .alarm,.critical{color:#c00;font-weight:700}
@@ -64,8 +65,16 @@ WIDE_COLUMNS = 7
 
 
 def _esc(text: str) -> str:
-    """Escaped text that may break after ``_`` (long identifiers in narrow columns)."""
-    return html.escape(text).replace("_", "_<wbr>")
+    """Escaped cell text that may break at spaces and after ``_`` (long identifiers in narrow
+    columns) but not at the hyphens of a date or the minus of a number."""
+    words = []
+    for word in html.escape(text).split(" "):
+        if "_" in word:
+            word = word.replace("_", "_<wbr>")
+        elif "-" in word or MINUS in word:
+            word = f"<span class='nw'>{word}</span>"
+        words.append(word)
+    return " ".join(words)
 
 
 def _table(t: Table) -> str:
