@@ -29,6 +29,7 @@ from typing import Literal
 from matplotlib.figure import Figure as MplFigure
 
 __all__ = [
+    "MAX_CHARS",
     "MAX_COLUMNS",
     "MINUS",
     "NBSP",
@@ -51,8 +52,10 @@ Cell = str | int | float | bool | None
 """A table cell as data: text as it is, numbers raw (formatted by :meth:`Table.text_rows`)."""
 
 #: Most columns a printed table has (key columns included) before it is split into column
-#: groups: nine fit an A4 page at 7.5 pt and a 1100 px page.
+#: groups, and most characters of unbreakable words across a row (:meth:`Table.column_chars`):
+#: what fits an A4 page at 7.5 pt (~1.45 mm a character) and a 1100 px page.
 MAX_COLUMNS = 9
+MAX_CHARS = 112
 #: Cell texts a renderer highlights (status columns: ``Column.status``).
 STATUS_WORDS = ("ok", "above norm", "warning", "alarm", "critical")
 MINUS = "\u2212"
@@ -154,24 +157,50 @@ class Table:
         digits = [c.digits for c in self.columns]
         return [[_text(v, d) for v, d in zip(row, digits, strict=True)] for row in self.rows]
 
-    def parts(self, max_columns: int = MAX_COLUMNS) -> list[Table]:
-        """The printed table as column groups of at most ``max_columns``, each repeating the key
-        columns (one part when it fits); groups are balanced in size."""
+    def parts(self, max_columns: int = MAX_COLUMNS, max_chars: int = MAX_CHARS) -> list[Table]:
+        """The printed table as column groups, each repeating the key columns and holding at most
+        ``max_columns`` columns whose widest words (heading or cell: the text that cannot wrap)
+        add up to at most ``max_chars`` characters; as few groups as that allows, balanced."""
         t = self.shown()
-        k, n = t.key_columns, len(t.columns)
-        per = max(max_columns - k, 1)
-        if n <= max(max_columns, k + 1):
+        k = t.key_columns
+        rest = list(range(k, len(t.columns)))
+        if not rest:
             return [t]
-        rest = list(range(k, n))
-        groups = math.ceil(len(rest) / per)
-        size = math.ceil(len(rest) / groups)
+        chars = t.column_chars()
+        groups = 1
+        while not _fits([*range(k)], _balanced(rest, groups), chars, max_columns, max_chars):
+            if groups == len(rest):
+                break
+            groups += 1
+        if groups == 1:
+            return [t]
         out = []
-        for g in range(groups):
-            idx = [*range(k), *rest[g * size : (g + 1) * size]]
+        for g, cols in enumerate(_balanced(rest, groups)):
+            idx = [*range(k), *cols]
             caption = f"{t.caption} ({g + 1} of {groups})" if t.caption else ""
             out.append(replace(t, columns=tuple(t.columns[i] for i in idx), caption=caption,
                                rows=tuple(tuple(r[i] for i in idx) for r in t.rows)))  # fmt: skip
         return out
+
+    def column_chars(self) -> list[int]:
+        """Per column: characters of its widest unbreakable word (heading or cell) plus two
+        for the padding: what it needs at the least."""
+        rows = self.text_rows()
+        return [
+            2 + max(len(w) for text in (h, *(r[i] for r in rows)) for w in text.split(" "))
+            for i, h in enumerate(self.headings())
+        ]
+
+
+def _balanced(items: list[int], groups: int) -> list[list[int]]:
+    size = math.ceil(len(items) / groups)
+    return [items[g * size : (g + 1) * size] for g in range(math.ceil(len(items) / size))]
+
+
+def _fits(keys: list[int], groups: list[list[int]], chars: list[int], most: int,
+          budget: int) -> bool:  # fmt: skip
+    return all(len(keys) + len(g) <= most and sum(chars[i] for i in keys + g) <= budget
+               for g in groups)  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)

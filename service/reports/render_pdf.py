@@ -9,7 +9,7 @@ Generic over :class:`~service.reports.document.Document`, like
   σ print as themselves. Body 9.5 pt, tables 7.5 pt (6.5 pt at the least).
 * Tables: :mod:`service.reports.pdf_table` — wrapped cells, header row repeated on each page,
   rows never split, wide tables as column groups; no text is ever cut.
-* Figures: drawn by matplotlib's Agg at 150 dpi (~190 dpi on the page) and placed at the text
+* Figures: drawn by matplotlib's Agg at 120 dpi (~150 dpi on the page) and placed at the text
   width; a figure starts a new page rather than being split or squeezed. (Vector SVG through
   fpdf2's SVG reader cost ~0.3 s a figure, twice the drawing itself.)
 * Flow: page 1 is the title, the intro lines and the summary section
@@ -44,8 +44,8 @@ BODY_PT, META_PT, H1_PT, H2_PT, HEADER_PT = 9.5, 8.0, 16.0, 12.5, 7.0
 HEADING_MM, KEEP_TABLE_MM = 12.0, 25.0
 GREY = (90, 90, 90)
 NOTE_FILL = (255, 248, 225)
-#: Resolution of the figures: a 9-inch figure printed 180 mm wide is ~190 dpi on paper.
-FIGURE_DPI = 150
+#: Resolution of the figures: a 9-inch figure printed 180 mm wide is ~150 dpi on paper.
+FIGURE_DPI = 120
 
 
 class _Pdf(FPDF):
@@ -186,17 +186,28 @@ class _Writer:
             canvas.draw()
             return Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3])
 
+    def _image_size(self, image: Image.Image) -> tuple[float, float]:
+        """Width and height (mm): the text width, or less for a figure taller than a page
+        holds below a heading."""
+        pdf = self.pdf
+        most = pdf.bottom - pdf.t_margin - HEADING_MM - 3.0
+        width = pdf.epw
+        height = width * image.height / image.width
+        return (width, height) if height <= most else (most * width / height, most)
+
     def _image_height(self, image: Image.Image) -> float:
-        return self.pdf.epw * image.height / image.width + 3.0
+        return self._image_size(image)[1] + 3.0
 
     def figure(self, f: Figure, image: Image.Image | None) -> None:
-        """The figure at the text width, on this page if it fits whole, else on the next."""
+        """The figure at the text width (centred, smaller if it is taller than a page), on this
+        page if it fits whole, else on the next."""
         if image is None:
             self.paragraph(Paragraph(f.empty_text, "meta"))
             return
         self.room(self._image_height(image))
-        height = self.pdf.epw * image.height / image.width
-        self.pdf.image(image, x=self.pdf.l_margin, w=self.pdf.epw, h=height)
+        width, height = self._image_size(image)
+        x = self.pdf.l_margin + (self.pdf.epw - width) / 2
+        self.pdf.image(image, x=x, w=width, h=height)
         self.pdf.set_y(self.pdf.get_y() + 3.0)
 
 
