@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from pypdf import PdfReader
 
 from service.reports.document import (
+    MAX_CHARS,
     MAX_COLUMNS,
     Column,
     Document,
@@ -129,13 +130,14 @@ def test_a_long_wide_table_splits_by_columns_and_pages_repeating_its_header():
     doc = Document("t", "h", "x", (), (Section("s", "S", (_wide_table(120),)),))
     text, pages = pdf_text(document_pdf(doc))
     parts = _wide_table(1).parts()
-    assert len(parts) == 2 and all(len(p.columns) <= MAX_COLUMNS for p in parts)
+    assert len(parts) == 3 and all(len(p.columns) <= MAX_COLUMNS for p in parts)
+    assert all(sum(p.column_chars()) <= MAX_CHARS for p in parts)
     assert all(p.columns[0].key == "scenario" for p in parts)  # the key column repeated
     for h in _wide_table(1).headings():
         assert _flat(h) in text
     assert pages >= 4 and text.count("scenario") >= pages  # header again on every page
     page = html_text(document_html(doc))
-    assert page.count("scenario") == 2 and "s119" in page
+    assert page.count("scenario") == 3 and "s119" in page
 
 
 def test_rows_must_match_the_header():
