@@ -7,14 +7,24 @@ What is here:
 * :mod:`service.reports.starts` — calendar months of a site and the starts of one month against
   the norm and the limits (``GET /mills/{id}/starts`` and the report share it).
 * :mod:`service.reports.life` — damage so far, damage rate and remaining life per component.
-* :mod:`service.reports.monthly` — the monthly report as plain data, built from the store.
+* :mod:`service.reports.monthly` — the monthly report as plain data, built from the store (JSON).
+* :mod:`service.reports.document` — a report as a document: sections of paragraphs, tables
+  (header row with units, raw cells, numbers formatted once) and figures.
+* :mod:`service.reports.monthly_document` — what the monthly report says, once: its sections in
+  order (summary first), as a document; :mod:`service.reports.figures` draws its plots.
 * :mod:`service.reports.render_html`, :mod:`service.reports.render_pdf`,
-  :mod:`service.reports.render_csv` — the report rendered (HTML with SVG plots, PDF, CSV).
+  :mod:`service.reports.render_csv` — a document rendered: one self-contained HTML page (SVG
+  plots), an A4 PDF (fpdf2; tables typeset by :mod:`service.reports.pdf_table`, DejaVu Sans
+  from :mod:`service.reports.pdf_fonts`), tidy CSV tables (one per table, zipped or by name).
 
-Data flow: store rows (+ the worker's status for life) → plain dataclasses/dicts → renderers →
-bytes; the API's routes choose the format (:mod:`service.api.routes.reports`).
+Data flow: store rows (+ the worker's status for life) → ``MonthlyReport`` (plain dataclasses)
+→ :func:`~service.reports.monthly_document.monthly_document` → ``Document`` → renderers →
+bytes; the API's routes choose the format (:mod:`service.api.routes.reports`). HTML and PDF are
+generic over the document, so they cannot diverge: same sections, tables, figures and numbers.
 
-Where things go: a new section of the monthly report is a field of ``MonthlyReport`` built in
-:mod:`service.reports.monthly` and shown by each renderer; a new format is a renderer and an entry
-of ``FORMATS`` in :mod:`service.api.routes.reports`.
+Where things go: new data of the monthly report is a field of ``MonthlyReport`` built in
+:mod:`service.reports.monthly`; showing it is a section function in
+:mod:`service.reports.monthly_document` added to its ``SECTIONS`` (a figure is a builder in
+:mod:`service.reports.figures`) — every format follows without a change. A new format is a
+renderer over ``Document`` and an entry of ``FORMATS`` in :mod:`service.api.routes.reports`.
 """
