@@ -58,7 +58,8 @@ figure{margin:.5rem 0}svg{max-width:100%;height:auto}
 @media print{body{margin:0;max-width:none;padding:0;font-size:10pt}
 .tw{overflow:visible}table{font-size:8pt}table.wide{font-size:7pt}
 thead{display:table-header-group}tr,figure{break-inside:avoid}
-h2,caption{break-after:avoid}section.break{break-after:page}}
+h2,caption,thead{break-after:avoid}section.break{break-after:page}
+figure svg{max-height:235mm;width:auto}}
 """
 #: Tables with at least this many columns use the smaller font.
 WIDE_COLUMNS = 7
