@@ -98,10 +98,10 @@ def reports_router(backend: ReportSource) -> APIRouter:
         table: TableName = None,
     ) -> Response:
         kind = negotiate(format, request.headers.get("accept")) if table is None else "csv"
+        report = backend.monthly_report(mill_id, month)  # an unknown mill is a 404 first
         if table is not None and format not in (None, "csv"):
             raise BadRequest("A table is CSV only",
                              f"table {table!r} comes as format=csv, not {format!r}.")  # fmt: skip
-        report = backend.monthly_report(mill_id, month)
         stem = f"{report.mill}-{report.month}"
         if table is not None:
             return _download(render_csv_table(report, table), "text/csv; charset=utf-8",
