@@ -53,9 +53,18 @@ def _subset(source: Path, target: Path) -> None:
     subset.save_font(font, str(target), opts)
 
 
-@functools.cache
 def font_files() -> dict[str, Path]:
-    """Style (``""`` regular, ``"B"`` bold) → the subset TTF file, made once per process."""
+    """Style (``""`` regular, ``"B"`` bold) → the subset TTF file, made once per process (and
+    again should a temporary-file cleaner of a long-running service have removed it)."""
+    files = _subset_fonts()
+    if not all(p.exists() for p in files.values()):
+        _subset_fonts.cache_clear()
+        files = _subset_fonts()
+    return files
+
+
+@functools.cache
+def _subset_fonts() -> dict[str, Path]:
     source = Path(matplotlib.get_data_path()) / "fonts" / "ttf"
     folder = Path(tempfile.mkdtemp(prefix="millwatch-fonts-"))
     atexit.register(shutil.rmtree, folder, ignore_errors=True)

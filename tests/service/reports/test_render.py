@@ -29,6 +29,7 @@ from service.reports.document import (
     fmt,
 )
 from service.reports.monthly_document import monthly_document
+from service.reports.pdf_fonts import font_files
 from service.reports.pdf_table import wrap
 from service.reports.render_csv import document_csv_zip
 from service.reports.render_html import document_html
@@ -171,3 +172,12 @@ def test_each_csv_is_one_rectangular_table_with_units(report):
     starts = doc.table("starts")
     assert "switch_on_pct [% rated]" in [c.csv_name for c in starts.columns]
     assert len(set(doc.table_names())) == len(doc.table_names())
+
+
+def test_the_font_is_made_again_if_a_cleaner_removed_it():
+    first = font_files()
+    first[""].unlink()
+    again = font_files()
+    assert all(p.exists() for p in again.values()) and again[""] != first[""]
+    doc = Document("t", "h", "x", (Paragraph("−1 ≤ 2"),), ())
+    assert "−1 ≤ 2" in pdf_text(document_pdf(doc))[0]
