@@ -17,17 +17,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from pypdf import PdfReader
 
-from service.reports.document import (
-    MAX_CHARS,
-    MAX_COLUMNS,
-    Column,
-    Document,
-    Figure,
-    Paragraph,
-    Section,
-    Table,
-    fmt,
-)
+from service.reports import document as dm
+from service.reports.document import Column, Document, Paragraph, Section, Table
 from service.reports.monthly_document import monthly_document
 from service.reports.pdf_fonts import font_files
 from service.reports.pdf_table import wrap
@@ -105,7 +96,7 @@ def test_same_tables_and_figures_in_both(report, rendered):
     pdf = document_pdf(doc)
     for t in doc.tables():
         assert (f"id='t-{t.name}'" in page) == (t.printed and bool(t.rows)), t.name
-    built = [b for s in doc.sections for b in s.blocks if isinstance(b, Figure)]
+    built = [b for s in doc.sections for b in s.blocks if isinstance(b, dm.Figure)]
     drawn = [f for f in built if f.build() is not None]
     assert page.count("<figure") == len(drawn) == 3
     images = sum(len(p.images) for p in PdfReader(io.BytesIO(pdf)).pages)
@@ -131,8 +122,8 @@ def test_a_long_wide_table_splits_by_columns_and_pages_repeating_its_header():
     doc = Document("t", "h", "x", (), (Section("s", "S", (_wide_table(120),)),))
     text, pages = pdf_text(document_pdf(doc))
     parts = _wide_table(1).parts()
-    assert len(parts) == 3 and all(len(p.columns) <= MAX_COLUMNS for p in parts)
-    assert all(sum(p.column_chars()) <= MAX_CHARS for p in parts)
+    assert len(parts) == 3 and all(len(p.columns) <= dm.MAX_COLUMNS for p in parts)
+    assert all(sum(p.column_chars()) <= dm.MAX_CHARS for p in parts)
     assert all(p.columns[0].key == "scenario" for p in parts)  # the key column repeated
     for h in _wide_table(1).headings():
         assert _flat(h) in text
@@ -147,7 +138,7 @@ def test_rows_must_match_the_header():
 
 
 def test_numbers_are_formatted_once_for_both():
-    assert [fmt(x) for x in (None, 0, 1234.5, -2.5e-7, float("nan"), 0.25)] == [
+    assert [dm.fmt(x) for x in (None, 0, 1234.5, -2.5e-7, float("nan"), 0.25)] == [
         "–", "0", "1,234.50", "−2.5e−07", "–", "0.25"]  # fmt: skip
 
 
