@@ -63,6 +63,9 @@ figure svg{max-height:235mm;width:auto}}
 """
 #: Tables with at least this many columns use the smaller font.
 WIDE_COLUMNS = 7
+#: Cells this short stay on one line (a time, a number, an identifier); longer text wraps. The
+#: column groups of :meth:`~service.reports.document.Table.parts` keep a row within the page.
+NOWRAP_CHARS = 24
 
 
 def _esc(text: str) -> str:
@@ -82,10 +85,11 @@ def _table(t: Table) -> str:
     if not t.rows:
         caption = f"<p><b>{_esc(t.caption)}</b></p>" if t.caption else ""
         return f"{caption}<p class='meta'>{html.escape(t.empty_text)}</p>"
-    return "".join(_table_part(part) for part in t.parts())
+    parts = t.parts()
+    return "".join(_table_part(p, "" if i == 0 else f"-{i + 1}") for i, p in enumerate(parts))
 
 
-def _table_part(t: Table) -> str:
+def _table_part(t: Table, id_suffix: str) -> str:
     left = ["l" if c.text else "" for c in t.columns]
     head = "".join(f"<th class='{cls}'>{_esc(h)}</th>"
                    for cls, h in zip(left, t.headings(), strict=True))  # fmt: skip
@@ -95,14 +99,14 @@ def _table_part(t: Table) -> str:
         for col, cls, text in zip(t.columns, left, row, strict=True):
             if col.status and text in STATUS_WORDS:
                 cls = f"{cls} {text.split()[0]}".strip()
-            cells.append(
-                f"<td class='{cls}'>{_esc(text)}</td>" if cls else f"<td>{_esc(text)}</td>"
-            )
+            if len(text) <= NOWRAP_CHARS:
+                cls = f"{cls} nw".strip()
+            cells.append(f"<td class='{cls}'>{_esc(text)}</td>")
         body.append("<tr>" + "".join(cells) + "</tr>")
     wide = " class='wide'" if len(t.columns) >= WIDE_COLUMNS else ""
     caption = f"<caption>{_esc(t.caption)}</caption>" if t.caption else ""
-    return (f"<div class='tw'><table id='t-{t.name}'{wide}>{caption}<thead><tr>{head}</tr>"
-            f"</thead><tbody>{''.join(body)}</tbody></table></div>")  # fmt: skip
+    return (f"<div class='tw'><table id='t-{t.name}{id_suffix}'{wide}>{caption}<thead>"
+            f"<tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table></div>")  # fmt: skip
 
 
 def _figure(f: Figure) -> str:
