@@ -99,6 +99,7 @@ class LocalBackend:
             "queue_depth_blocks": rt.queue.depth,
             "queue_dropped_blocks": rt.queue.dropped,
             "checks": checks,
+            "reports": self._reports(latest=False),
         }
 
     def mills_overview(self) -> list[dict[str, Any]]:
@@ -127,6 +128,16 @@ class LocalBackend:
     # ------------------------------------------------------------------ operations
     def readiness(self) -> dict[str, Any]:
         return self.runtime.readiness()
+
+    def reports_status(self) -> dict[str, Any]:
+        """The month-end report job of this worker (``GET /reports/status``)."""
+        return {"workers": {self.worker_name: self._reports(latest=True)}}
+
+    def _reports(self, *, latest: bool) -> dict[str, Any]:
+        job = self.runtime.reports
+        if job is None:
+            return {"enabled": self.runtime.settings.reports.enabled, "running": False}
+        return job.status(latest=latest)
 
     def registry(self) -> CollectorRegistry:
         if self._registry is None:

@@ -42,6 +42,7 @@ def demo_settings(directory: Path, zenoh_port: int, api_port: int, mills: int) -
         "zenoh": {"listen": [tcp_endpoint(zenoh_port)]},
         "archive": {"directory": str(directory / "archive")},
         "store": {"path": str(directory / "millwatch.db")},
+        "reports": {"directory": str(directory / "reports")},
         "worker": {"checkpoint_seconds": 30.0, "stale_after_s": 10.0},
         "api": {"host": "127.0.0.1", "port": api_port},
         "mills": {"files": [str(f) for f in files]},
@@ -170,6 +171,7 @@ def _announce(settings: ServiceSettings, runtime: ServiceRuntime, directory: Pat
         f"  API        {base}/mills   {base}/mills/<id>   {base}/ready   {base}/docs\n"
         f"  archive    {settings.archive.directory}\n"
         f"  store      {settings.store.path}\n"
+        f"  reports    {settings.reports.directory} (each mill's month, after its local end)\n"
         f"  then try   millwatch analyze {settings.archive.directory} "
         f"--mill deploy/mills/sag-5200-lrs.toml\n"
         "Ctrl-C stops (final checkpoint, archive files finished).\n"

@@ -20,12 +20,14 @@ from service.cli import (
     demo,
     rainflow,
     replay,
+    report,
     router,
     serve,
     simulate,
     spectrum,
 )
 from service.cli.signal_files import SignalFileError
+from service.store.migrations import StoreError
 
 __all__ = ["build_parser", "main"]
 
@@ -38,11 +40,14 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
     KeyError,
     OSError,
     ArchiveError,
+    StoreError,
 )
 
 
 #: The sub-command modules, in the order ``--help`` lists them.
-COMMANDS = (demo, rainflow, simulate, spectrum, replay, archive, serve, router, api, analyze)
+COMMANDS = (
+    demo, rainflow, simulate, spectrum, replay, archive, serve, router, api, analyze, report,
+)  # fmt: skip
 
 
 def build_parser() -> argparse.ArgumentParser:

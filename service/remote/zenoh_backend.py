@@ -330,6 +330,15 @@ class ZenohBackend:
         return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
                 "stalled_mills": stalled}  # fmt: skip
 
+    def reports_status(self) -> dict[str, Any]:
+        """Each live worker's month-end report job, as its status answers carry it (without
+        the per-mill ``latest`` months of the in-process answer)."""
+        workers = {
+            a["worker"].get("name"): a["worker"].get("reports", {"enabled": None})
+            for a in self.statuses().values()
+        }
+        return {"workers": workers}
+
     def registry(self) -> CollectorRegistry:
         if self._registry is None:
             self._registry = remote_registry(self)

@@ -16,10 +16,16 @@ What is here:
   :mod:`service.reports.render_csv` — a document rendered: one self-contained HTML page (SVG
   plots), an A4 PDF (fpdf2; tables typeset by :mod:`service.reports.pdf_table`, DejaVu Sans
   from :mod:`service.reports.pdf_fonts`), tidy CSV tables (one per table, zipped or by name).
+* :mod:`service.reports.files` — the report as files ``<mill>/<YYYY-MM>.<ext>`` (``html``,
+  ``pdf``, ``zip`` of the CSV tables): the one call of the renderers for files, atomic writes.
+* :mod:`service.reports.mail` — a report's mail (SMTP, STARTTLS, login; stdlib only).
+* :mod:`service.reports.month_end` — the month-end job of the service: each finished local
+  month's reports written and mailed, catch-up, retries, the ``report_delivery`` alarm.
 
 Data flow: store rows (+ the worker's status for life) → ``MonthlyReport`` (plain dataclasses)
 → :func:`~service.reports.monthly_document.monthly_document` → ``Document`` → renderers →
-bytes; the API's routes choose the format (:mod:`service.api.routes.reports`). HTML and PDF are
+bytes; the API's routes choose the format (:mod:`service.api.routes.reports`); the month-end
+job and ``millwatch report`` write files through :mod:`service.reports.files`. HTML and PDF are
 generic over the document, so they cannot diverge: same sections, tables, figures and numbers.
 
 Where things go: new data of the monthly report is a field of ``MonthlyReport`` built in

@@ -2,6 +2,10 @@
 
 ``GET /mills/{mill_id}/reports/monthly?month=YYYY-MM&format=json|html|csv|pdf[&table=NAME]``
 
+``GET /reports/status``: the month-end report job of each worker (:mod:`service.reports.month_end`):
+where reports go, the last run (due, written, mailed, failed), the failures waiting for their
+next try with their cause, each mill's newest complete month.
+
 * ``month``: the site's local calendar month; default: the current one.
 * ``format``: wins when given; otherwise the ``Accept`` header chooses (``text/html``,
   ``text/csv`` or ``application/zip``, ``application/pdf``, ``application/json``; anything else
@@ -23,7 +27,7 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Callable
-from typing import Annotated, Literal, Protocol
+from typing import Annotated, Any, Literal, Protocol
 
 from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
@@ -61,6 +65,8 @@ class ReportSource(Protocol):
     """What the route needs of a :class:`~service.api.backend.Backend`."""
 
     def monthly_report(self, mill_id: str, month: str | None) -> MonthlyReport: ...
+
+    def reports_status(self) -> dict[str, Any]: ...
 
 
 def negotiate(fmt: str | None, accept: str | None) -> str:
@@ -110,6 +116,14 @@ def reports_router(backend: ReportSource) -> APIRouter:
         if kind in SUFFIX:
             return _download(render(report), media, f"{stem}-damage.{SUFFIX[kind]}")
         return Response(render(report), media_type=media)
+
+    @router.get(
+        "/reports/status",
+        summary="Month-end report job: last run, files, mail, failures (per worker)",
+        responses=problem_responses(503),
+    )
+    def reports_status() -> dict[str, Any]:
+        return backend.reports_status()
 
     return router
 

@@ -238,6 +238,19 @@ def test_metrics_in_prometheus_text_format(client, live_api):
     assert any(name == "millwatch_open_alarms" for name, _ in samples)
 
 
+def test_reports_status_shows_the_month_end_job_of_the_worker(client, live_api):
+    r = client.get("/reports/status")
+    assert r.status_code == 200, r.text
+    (status,) = r.json()["workers"].values()
+    assert status["running"] is True and status["enabled"] is True
+    assert status["directory"] == str(live_api.runtime.settings.reports.directory)
+    assert status["formats"] == ["html", "pdf", "csv"] and status["mail"] is None
+    assert status["failures"] == [] and status["latest"] == {MILL: None}  # no month over yet
+    assert status["runs"] >= 1 and status["last_run"]["failed"] == 0
+    detail = client.get(f"/mills/{MILL}").json()
+    assert detail["worker_status"]["reports"]["running"] is True
+
+
 def test_openapi_documents_problems_examples_and_the_api_key(client):
     spec = client.get("/openapi.json").json()
     assert "Problem" in spec["components"]["schemas"]

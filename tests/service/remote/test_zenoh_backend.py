@@ -80,6 +80,7 @@ def pair(tmp_path_factory) -> Iterator[Pair]:
         "zenoh": {"listen": [tcp_endpoint(port)]},
         "archive": {"directory": str(tmp / "archive")},
         "store": {"path": str(tmp / "mw.db")},
+        "reports": {"directory": str(tmp / "reports")},
         "api": {"api_key": API_KEY},
         "worker": {"name": "w1"},
         "mills": {"files": [str(MILLS / f"{MILL}.toml")]},
@@ -186,6 +187,15 @@ def test_remote_ack_checks_the_key_in_the_api_and_the_worker_applies_it(pair):
     again = pair.remote.get("/alarms", params={"state": "raised"}, headers={"If-None-Match": tag})
     assert again.status_code == 200 and alarm["alarm_id"] not in again.text
     assert pair.local.get(f"/alarms/{alarm['alarm_id']}").json() == r.json()
+
+
+def test_reports_status_over_zenoh_is_the_workers_own(pair):
+    local = pair.local.get("/reports/status").json()["workers"]["w1"]
+    remote = pair.remote.get("/reports/status").json()["workers"]["w1"]
+    keys = ("enabled", "running", "directory", "formats", "mail", "failures")
+    assert {k: remote[k] for k in keys} == {k: local[k] for k in keys}
+    assert remote["running"] is True and remote["directory"].endswith("reports")
+    assert local["latest"] == {MILL: None} and "latest" not in remote  # read from disk locally
 
 
 def test_an_unknown_query_is_a_problem_reply(pair):
