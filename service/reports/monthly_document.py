@@ -10,16 +10,19 @@ format shows what :func:`monthly_document` puts here, in this order (:data:`SECT
    (Tables 14–15, §8.1); 6. harmonics (§6.1.2, §6.2.7); 7. alarms; 8. data quality (§5.2.2).
 
 Adding a section: write ``def _name(r: MonthlyReport) -> Section`` with its paragraphs, tables
-(each a unique ``name``: it becomes a CSV table) and figures (a builder of
-:mod:`service.reports.figures` bound with :func:`functools.partial`), and add it to
+(each a unique ``name``: it becomes a CSV table) and figures (``_figure(name, builder, r)``
+with a builder of :mod:`service.reports.figures`), and add it to
 :data:`SECTIONS`. HTML, PDF and CSV follow without a change.
 """
 
 from __future__ import annotations
 
+import functools
 from collections import Counter
 from collections.abc import Callable
 from functools import partial
+
+from matplotlib.figure import Figure as MplFigure
 
 from service.reports.document import (
     Cell,
@@ -40,6 +43,13 @@ from service.reports.monthly import MonthlyReport
 __all__ = ["SECTIONS", "monthly_document"]
 
 SEVERITIES = ("critical", "alarm", "warning")
+
+
+def _figure(name: str, builder: Callable[[MonthlyReport], MplFigure | None],
+            r: MonthlyReport) -> Figure:  # fmt: skip
+    """A figure of the report, built once per document however many formats draw it (the
+    month-end job renders HTML and PDF from one document)."""
+    return Figure(name, functools.cache(partial(builder, r)))
 
 
 def _intro(r: MonthlyReport) -> tuple[Paragraph, ...]:
@@ -161,7 +171,7 @@ def _starts(r: MonthlyReport) -> Section:
         "(§7.2, Tables 4–6).",
         "meta",
     )
-    figure = Figure("starts", partial(starts_figure, r))
+    figure = _figure("starts", starts_figure, r)
     return Section("starts", "Starts (seed 000 §6.1.3, §6.2.8)", (levels, figure, table, per_day))
 
 
@@ -192,7 +202,7 @@ def _damage(r: MonthlyReport) -> Section:
     note = Paragraph(f"Time in phases: {secs}. The cost of a start is (start + stop damage) / "
                      "starts, expressed as hours of steady running (§8.3).", "meta")  # fmt: skip
     return Section("damage", "Fatigue damage (Miner, seed 000 §8.2, App. D)",
-                   (Figure("damage", partial(damage_figure, r)), table, note, daily))  # fmt: skip
+                   (_figure("damage", damage_figure, r), table, note, daily))  # fmt: skip
 
 
 def _what_if(r: MonthlyReport) -> Section:
@@ -253,7 +263,7 @@ def _steady(r: MonthlyReport) -> Section:
         "meta",
     )
     return Section("steady", "Steady-state oscillation and bending (Tables 14–15, §8.1)",
-                   (levels, Figure("steady", partial(steady_figure, r)), table))  # fmt: skip
+                   (levels, _figure("steady", steady_figure, r), table))  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- harmonics

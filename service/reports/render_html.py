@@ -116,7 +116,7 @@ def _figure(f: Figure) -> str:
         fig = f.build()
         if fig is None:
             return f"<p class='meta'>{html.escape(f.empty_text)}</p>"
-        fig.savefig(buf, format="svg")
+        fig.savefig(buf, format="svg", metadata={"Date": None})  # same report, same bytes
     text = buf.getvalue()
     return f"<figure id='f-{f.name}'>" + text[text.index("<svg") :] + "</figure>"
 

@@ -181,9 +181,10 @@ class _Writer:
             fig = f.build()
             if fig is None:
                 return None
+            dpi, canvas = fig.dpi, FigureCanvasAgg(fig)
             fig.set_dpi(FIGURE_DPI)
-            canvas = FigureCanvasAgg(fig)
             canvas.draw()
+            fig.set_dpi(dpi)  # the figure as it was, for another format of the same document
             return Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3])
 
     def _image_size(self, image: Image.Image) -> tuple[float, float]:

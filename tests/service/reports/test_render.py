@@ -19,12 +19,14 @@ from pypdf import PdfReader
 
 from service.reports import document as dm
 from service.reports.document import Column, Document, Paragraph, Section, Table
+from service.reports.monthly import build_monthly_report
 from service.reports.monthly_document import monthly_document
 from service.reports.pdf_fonts import font_files
 from service.reports.pdf_table import wrap
 from service.reports.render_csv import document_csv_zip
 from service.reports.render_html import document_html
 from service.reports.render_pdf import document_pdf
+from tests.service.reports.month_scene import CONFIG, MONTH
 
 
 def _flat(text: str) -> str:
@@ -172,3 +174,15 @@ def test_the_font_is_made_again_if_a_cleaner_removed_it():
     assert all(p.exists() for p in again.values()) and again[""] != first[""]
     doc = Document("t", "h", "x", (Paragraph("−1 ≤ 2"),), ())
     assert "−1 ≤ 2" in pdf_text(document_pdf(doc))[0]
+
+
+def test_a_document_draws_each_figure_once_and_every_format_the_same(store):
+    """The month-end job renders HTML and PDF from one document: the figures are built once,
+    and drawing them for the PDF leaves the HTML as it would be alone."""
+    r = build_monthly_report(store, CONFIG, MONTH, now_ns=0)
+    alone = document_html(monthly_document(r))
+    doc = monthly_document(r)
+    figures = [b for s in doc.sections for b in s.blocks if isinstance(b, dm.Figure)]
+    document_pdf(doc)
+    assert document_html(doc) == alone
+    assert all(f.build() is f.build() for f in figures)
