@@ -204,11 +204,13 @@ def local_time(t_ns: int, time_zone: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class RuleBook:
-    """The rules of one mill, by quantity, with the site's time zone for messages."""
+    """The rules of one mill, by quantity, with the site's time zone for messages;
+    ``simulated``: the mill's data come from the simulator (its alarms say so)."""
 
     mill_id: str
     time_zone: str
     rules: Mapping[str, Rule]
+    simulated: bool = False
 
     def rule(self, name: str) -> Rule:
         """The rule called ``name`` (KeyError if none)."""
@@ -475,4 +477,6 @@ def build_rules(config: MillConfig, options: RuleOptions | None = None) -> RuleB
     if not opts.life_alarm_fraction < opts.life_warn_fraction:
         raise ValueError("life_alarm_fraction must be below life_warn_fraction")
     rules = [build(config, opts) for build in _BUILDERS]
-    return RuleBook(config.id, config.time_zone, {r.quantity: r for r in rules})
+    return RuleBook(
+        config.id, config.time_zone, {r.quantity: r for r in rules}, simulated=config.simulated
+    )

@@ -95,11 +95,7 @@ def _channel(config: MillConfig, kind: str, shaft: str, side: str | None) -> str
 
 def component_names(config: MillConfig) -> list[str]:
     """Damage components of a mill: combined/torsion per side (see the module docstring)."""
-    out = []
-    for side in config.sides:
-        sfx = f"_{side}" if side else ""
-        out += [f"pinion_combined{sfx}", f"pinion_torsion{sfx}", f"motor_torsion{sfx}"]
-    return out
+    return config.components
 
 
 class LoadAnalysis:

@@ -49,6 +49,12 @@ def demo_settings(directory: Path, zenoh_port: int, api_port: int, mills: int) -
     })  # fmt: skip
 
 
+def simulated_mills(mills: dict[str, MillConfig]) -> dict[str, MillConfig]:
+    """The demo's mills marked ``simulated`` whatever their files say: the demo's data come
+    from the simulator, and every answer, report and alarm must say so."""
+    return {m: c.model_copy(update={"simulated": True}) for m, c in mills.items()}
+
+
 class Gateways:
     """One simulated gateway thread per mill, each with its own zenoh session."""
 
@@ -133,7 +139,7 @@ def _main(args: argparse.Namespace) -> int:
     directory = args.dir or Path(tempfile.mkdtemp(prefix="millwatch-demo-"))
     zenoh_port = free_loopback_port()
     settings = demo_settings(directory, zenoh_port, args.port, mills)
-    runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
+    runtime = ServiceRuntime(settings, simulated_mills(settings.load_mills()), MillJob)
     runtime.start()
     gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene)
     server = uvicorn.Server(uvicorn.Config(create_app(runtime), host="127.0.0.1",

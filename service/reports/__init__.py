@@ -1,13 +1,22 @@
-"""Reports a person reads: monthly damage report, remaining life, starts.
+"""Reports a person reads: monthly damage report, remaining life, starts, the fleet.
 
-Reports a person reads: the monthly damage report, remaining life, the starts of a month.
+Reports a person reads: the monthly damage report, remaining life, the starts of a month, all
+mills of a site side by side.
 
 What is here:
 
 * :mod:`service.reports.starts` — calendar months of a site and the starts of one month against
   the norm and the limits (``GET /mills/{id}/starts`` and the report share it).
-* :mod:`service.reports.life` — damage so far, damage rate and remaining life per component.
-* :mod:`service.reports.monthly` — the monthly report as plain data, built from the store (JSON).
+* :mod:`service.reports.life` — remaining life per component (pure): damage before monitoring,
+  minimum history, a range of rates, what drives it; one computation for ``/life``, the report
+  and the fleet.
+* :mod:`service.reports.history` — a mill's history read from the store (bounded, indexed):
+  the life inputs as of a time, the per-month trend, phase seconds.
+* :mod:`service.reports.monthly` — the monthly report as plain data, built from the store;
+  :mod:`service.reports.month_summary` — its page 1 and cumulative damage against design life.
+* :mod:`service.reports.fleet` — the mills of a site side by side and the visit order
+  (``GET /sites/{site}/fleet``).
+* :mod:`service.reports.plain` — report data to JSON-ready plain data.
 * :mod:`service.reports.document` — a report as a document: sections of paragraphs, tables
   (header row with units, raw cells, numbers formatted once) and figures.
 * :mod:`service.reports.monthly_document` — what the monthly report says, once: its sections in
@@ -27,6 +36,8 @@ Data flow: store rows (+ the worker's status for life) → ``MonthlyReport`` (pl
 bytes; the API's routes choose the format (:mod:`service.api.routes.reports`); the month-end
 job and ``millwatch report`` write files through :mod:`service.reports.files`. HTML and PDF are
 generic over the document, so they cannot diverge: same sections, tables, figures and numbers.
+Every answer about a mill carries ``simulated`` from its configuration (the demo's mills are
+simulated).
 
 Where things go: new data of the monthly report is a field of ``MonthlyReport`` built in
 :mod:`service.reports.monthly`; showing it is a section function in

@@ -86,9 +86,12 @@ class MillUpdate:
     damage: list[DamageRow] = field(default_factory=list)
     records: list[tuple[str, int, dict[str, Any]]] = field(default_factory=list)
     alarm_transitions: list[Transition] = field(default_factory=list)
+    #: Monitored time analysed: ``(local day, first sample, just past the last)`` in ns.
+    days: list[tuple[str, int, int]] = field(default_factory=list)
 
     def __bool__(self) -> bool:
-        return bool(self.events or self.damage or self.records or self.alarm_transitions)
+        return bool(self.events or self.damage or self.records or self.alarm_transitions
+                    or self.days)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -624,8 +627,12 @@ class PendingResults:
         self.records: list[tuple[str, str, int, dict[str, Any]]] = []
         self.damage: dict[tuple[str, str, str, str], DamageRow] = {}
         self.transitions: list[Transition] = []
+        self.days: dict[tuple[str, str], tuple[int, int]] = {}
 
     def add(self, mill_id: str, update: MillUpdate) -> None:
+        for day, first, last in update.days:
+            lo, hi = self.days.get((mill_id, day), (first, last))
+            self.days[(mill_id, day)] = (min(lo, first), max(hi, last))
         self.events += update.events
         self.records += [(mill_id, kind, t, data) for kind, t, data in update.records]
         for row in update.damage:
@@ -633,9 +640,10 @@ class PendingResults:
         self.transitions += update.alarm_transitions
 
     def __bool__(self) -> bool:
-        return bool(self.events or self.records or self.damage or self.transitions)
+        return bool(self.events or self.records or self.damage or self.transitions or self.days)
 
     def write(self, db: Any) -> None:
+        Store.extend_days(db, self.days)
         Store.add_events(db, self.events)
         Store.set_damage(db, list(self.damage.values()))
         for mill_id, kind, t_ns, data in self.records:

@@ -272,3 +272,23 @@ def test_a_held_mill_is_reported_by_the_remote_api_as_by_the_local_one(tmp_path)
     assert "analysed" not in body["checks"]["workers"]["w1"]  # per mill, not a worker's check
     assert mills == local_mills and mills[0]["held_reason"] == reason
     assert f'millwatch_mill_held{{mill="{MILL}"}} 1.0' in metrics
+
+
+def test_the_fleet_and_simulated_flags_over_zenoh_are_the_local_ones(pair):
+    """The demo's mill is simulated: the remote API says so in every answer, as the local one."""
+    bodies = []
+    for client in (pair.local, pair.remote):
+        fleet = client.get("/sites/rustenburg/fleet")
+        assert fleet.status_code == 200, fleet.text
+        body = fleet.json()
+        del body["generated_at_ns"], body["generated_at"]
+        bodies.append(body)
+        assert client.get("/sites/nowhere/fleet").status_code == 404
+    assert bodies[0] == bodies[1] and bodies[1]["simulated"] and bodies[1]["unreachable"] == []
+    line = bodies[1]["mills"][0]
+    assert line["mill"] == MILL and line["life_status"] == "insufficient_history"
+    remote = pair.remote
+    assert remote.get("/mills").json()[0]["simulated"] is True
+    assert remote.get(f"/mills/{MILL}/life").json()["simulated"] is True
+    alarms = remote.get("/alarms").json()["alarms"]
+    assert all(a["simulated"] and a["message"].startswith("SIMULATED DATA") for a in alarms)
