@@ -4,7 +4,8 @@ Each builder takes a :class:`~service.reports.monthly.MonthlyReport` and returns
 ``None`` when the month has nothing to plot; :mod:`service.reports.monthly_document` places them
 in the document, and the renderers save them (SVG in HTML, vector SVG in the PDF).
 matplotlib's rcParams are one per process and read while drawing: renderers build and save
-figures holding :data:`MPL_LOCK`, so concurrent requests cannot leak settings into one another.
+figures holding :data:`service.reports.render.document.MPL_LOCK`, so concurrent requests cannot
+leak settings into one another.
 
 Plots cost most of a report's time, so they are kept cheap: fixed margins instead of a layout
 engine (it draws every figure twice), one collection per bar series (a patch per bar costs
@@ -14,7 +15,6 @@ envelope per plot column (:func:`envelope`), which keeps every peak visible agai
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Sequence
 from typing import Any
 
@@ -25,13 +25,12 @@ from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.ticker import AutoLocator, FixedLocator, FuncFormatter, MaxNLocator, NullLocator
 
-from service.reports.document import fmt
 from service.reports.monthly import MonthlyReport
+from service.reports.render.document import fmt
 from service.reports.starts import day_starts_ns
 
 __all__ = [
     "FIG_WIDTH_IN",
-    "MPL_LOCK",
     "damage_figure",
     "day_positions",
     "envelope",
@@ -47,8 +46,6 @@ PHASE_COLOURS = {
     "stopped": "#7f7f7f",
     "unknown": "#bcbd22",
 }
-MPL_LOCK = threading.RLock()
-"""Held while a figure is built and saved (the rcParams a renderer sets are process-wide)."""
 FIG_WIDTH_IN = 9.0
 #: Plot columns of the steady-state trends (~1 per hour of a month; about one per pixel column
 #: at 96 dpi): each shows the min–max envelope of its windows.

@@ -1,4 +1,5 @@
-"""The monthly damage report as a :class:`~service.reports.document.Document`: what it says, once.
+"""The monthly damage report as a :class:`~service.reports.render.document.Document`: what it
+says, once.
 
 Seed 000 §10.6 asks for "automatic reports"; issue 17 for one content in three renderings. Every
 format shows what :func:`monthly_document` puts here, in this order (:data:`SECTIONS`):
@@ -24,7 +25,9 @@ from functools import partial
 
 from matplotlib.figure import Figure as MplFigure
 
-from service.reports.document import (
+from service.reports.figures import damage_figure, starts_figure, steady_figure
+from service.reports.monthly import MonthlyReport
+from service.reports.render.document import (
     Cell,
     Column,
     Document,
@@ -37,8 +40,6 @@ from service.reports.document import (
     local_time,
     rows,
 )
-from service.reports.figures import damage_figure, starts_figure, steady_figure
-from service.reports.monthly import MonthlyReport
 
 __all__ = ["SECTIONS", "monthly_document"]
 

@@ -36,9 +36,12 @@ from service.api.errors import problem_responses
 from service.api.routes.params import MillId, Month
 from service.errors import BadRequest
 from service.reports.monthly import MonthlyReport, report_to_dict
-from service.reports.render_csv import render_csv, render_csv_table
-from service.reports.render_html import render_html
-from service.reports.render_pdf import render_pdf
+from service.reports.monthly_formats import (
+    render_csv,
+    render_csv_table,
+    render_html,
+    render_pdf,
+)
 
 __all__ = ["FORMATS", "reports_router"]
 

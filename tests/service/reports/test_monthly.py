@@ -24,9 +24,7 @@ from service.api.mill_views import mill_monthly_report
 from service.api.routes.reports import reports_router
 from service.reports.figures import day_positions, envelope
 from service.reports.monthly import MonthError, build_monthly_report, report_to_dict
-from service.reports.render_csv import render_csv, render_csv_table
-from service.reports.render_html import render_html
-from service.reports.render_pdf import render_pdf
+from service.reports.monthly_formats import render_csv, render_csv_table, render_html, render_pdf
 from service.reports.starts import month_bounds_ns, month_days
 from service.store.database import Store
 from service.store.records import EventRow

@@ -1,10 +1,11 @@
 """A report as a document: sections of paragraphs, tables and figures that every format renders.
 
 One content, three renderings (issue 17): a report is turned into a :class:`Document` once
-(:mod:`service.reports.monthly_document`); HTML (:mod:`service.reports.render_html`), PDF
-(:mod:`service.reports.render_pdf`) and CSV (:mod:`service.reports.render_csv`) are generic over
-it, so they carry the same sections, tables, figures and numbers. Numbers are formatted here,
-once (:func:`fmt`, :meth:`Table.text_rows`); CSV takes the raw values at full precision.
+(:mod:`service.reports.monthly_document`); HTML (:mod:`service.reports.render.html_page`),
+PDF (:mod:`service.reports.render.pdf_pages`) and CSV (:mod:`service.reports.render.csv_tables`)
+are generic over it, so they carry the same sections, tables, figures and numbers. Numbers are
+formatted here, once (:func:`fmt`, :meth:`Table.text_rows`); CSV takes the raw values at full
+precision.
 
 Blocks of a :class:`Section`, in order:
 
@@ -20,6 +21,7 @@ Blocks of a :class:`Section`, in order:
 from __future__ import annotations
 
 import math
+import threading
 import zoneinfo
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -32,6 +34,7 @@ __all__ = [
     "MAX_CHARS",
     "MAX_COLUMNS",
     "MINUS",
+    "MPL_LOCK",
     "NBSP",
     "STATUS_WORDS",
     "Block",
@@ -59,6 +62,9 @@ MAX_CHARS = 112
 #: Cell texts a renderer highlights (status columns: ``Column.status``).
 STATUS_WORDS = ("ok", "above norm", "warning", "alarm", "critical")
 MINUS = "\u2212"
+#: Held while a figure is built and saved: matplotlib's rcParams are one per process and read
+#: while drawing, so renderers that set some (SVG text, PDF dpi) cannot leak them into another.
+MPL_LOCK = threading.RLock()
 NBSP = "\u00a0"
 
 

@@ -1,13 +1,13 @@
 """A report document as an A4 PDF, typeset with fpdf2 (pure Python: installs with pip alone).
 
-Generic over :class:`~service.reports.document.Document`, like
-:mod:`service.reports.render_html`: the same sections, tables, figures and formatted numbers.
+Generic over :class:`~service.reports.render.document.Document`, like
+:mod:`service.reports.render.html_page`: the same sections, tables, figures and formatted numbers.
 
 * Page template: a running header with the mill, site and month on every page, ``page n of N``
   and the report's name in the footer; 15 mm margins.
-* Text: DejaVu Sans embedded (subset, :mod:`service.reports.pdf_fonts`), so minus signs, ≤, μ,
-  σ print as themselves. Body 9.5 pt, tables 7.5 pt (6.5 pt at the least).
-* Tables: :mod:`service.reports.pdf_table` — wrapped cells, header row repeated on each page,
+* Text: DejaVu Sans embedded (subset, :mod:`service.reports.render.pdf_fonts`), so minus signs,
+  ≤, μ, σ print as themselves. Body 9.5 pt, tables 7.5 pt (6.5 pt at the least).
+* Tables: :mod:`service.reports.render.pdf_table` — wrapped cells, header row repeated on each page,
   rows never split, wide tables as column groups; no text is ever cut.
 * Figures: drawn by matplotlib's Agg at 120 dpi (~150 dpi on the page) and placed at the text
   width; a figure starts a new page rather than being split or squeezed. (Vector SVG through
@@ -26,14 +26,11 @@ from fpdf import FPDF
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from PIL import Image
 
-from service.reports.document import Document, Figure, Paragraph, Section, Table
-from service.reports.figures import MPL_LOCK
-from service.reports.monthly import MonthlyReport
-from service.reports.monthly_document import monthly_document
-from service.reports.pdf_fonts import FONT_FAMILY, font_files
-from service.reports.pdf_table import PT_MM, TableWriter
+from service.reports.render.document import MPL_LOCK, Document, Figure, Paragraph, Section, Table
+from service.reports.render.pdf_fonts import FONT_FAMILY, font_files
+from service.reports.render.pdf_table import PT_MM, TableWriter
 
-__all__ = ["document_pdf", "render_pdf"]
+__all__ = ["document_pdf"]
 
 log = logging.getLogger(__name__)
 
@@ -221,8 +218,3 @@ def document_pdf(doc: Document) -> bytes:
     for s in doc.sections:
         writer.section(s)
     return bytes(pdf.output())
-
-
-def render_pdf(r: MonthlyReport) -> bytes:
-    """The monthly report as PDF bytes."""
-    return document_pdf(monthly_document(r))

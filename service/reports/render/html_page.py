@@ -1,15 +1,15 @@
 """A report document as one self-contained HTML page (seed 000 §10.6 "automatic reports").
 
-Generic over :class:`~service.reports.document.Document`: sections, tables and figures are the
-document's, numbers as :meth:`~service.reports.document.Table.text_rows` formatted them, so the
-page says what the PDF says. Inline CSS, plots as inline SVG (text kept as text), no external
-URL, no script.
+Generic over :class:`~service.reports.render.document.Document`: sections, tables and figures
+are the document's, numbers as :meth:`~service.reports.render.document.Table.text_rows`
+formatted them, so the page says what the PDF says. Inline CSS, plots as inline SVG (text kept
+as text), no external URL, no script.
 
 Tables fit the page: a table wider than the document's column limit is shown as column groups
-(:meth:`~service.reports.document.Table.parts`), identifiers may break after ``_`` (``<wbr>``),
-wide tables use a smaller font, and a table that still does not fit scrolls on screen rather than
-being cut. For print: A4 pages, header rows repeated on each page, rows and figures not split,
-the summary alone on page 1.
+(:meth:`~service.reports.render.document.Table.parts`), identifiers may break after ``_``
+(``<wbr>``), wide tables use a smaller font, and a table that still does not fit scrolls on
+screen rather than being cut. For print: A4 pages, header rows repeated on each page, rows and
+figures not split, the summary alone on page 1.
 """
 
 from __future__ import annotations
@@ -20,8 +20,9 @@ import logging
 
 import matplotlib
 
-from service.reports.document import (
+from service.reports.render.document import (
     MINUS,
+    MPL_LOCK,
     STATUS_WORDS,
     Block,
     Document,
@@ -30,11 +31,8 @@ from service.reports.document import (
     Section,
     Table,
 )
-from service.reports.figures import MPL_LOCK
-from service.reports.monthly import MonthlyReport
-from service.reports.monthly_document import monthly_document
 
-__all__ = ["CSS", "document_html", "render_html"]
+__all__ = ["CSS", "document_html"]
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +62,7 @@ figure svg{max-height:235mm;width:auto}}
 #: Tables with at least this many columns use the smaller font.
 WIDE_COLUMNS = 7
 #: Cells this short stay on one line (a time, a number, an identifier); longer text wraps. The
-#: column groups of :meth:`~service.reports.document.Table.parts` keep a row within the page.
+#: column groups of :meth:`~service.reports.render.document.Table.parts` keep a row within the page.
 NOWRAP_CHARS = 24
 
 
@@ -152,8 +150,3 @@ def document_html(doc: Document) -> str:
         f"<style>{CSS}</style></head><body><header><h1>{html.escape(doc.title)}</h1>{intro}"
         f"</header>{body}{footer}</body></html>"
     )
-
-
-def render_html(r: MonthlyReport) -> str:
-    """The monthly report as one HTML page."""
-    return document_html(monthly_document(r))

@@ -1,16 +1,16 @@
 """A report document's tables as tidy CSV: one table per file (seed 000 §10.6 "automatic reports").
 
-Every table of the :class:`~service.reports.document.Document` — the printed ones and the data
-behind the figures (``printed=False``: starts per day, damage per day, component and phase) —
+Every table of the :class:`~service.reports.render.document.Document` — the printed ones and the
+data behind the figures (``printed=False``: starts per day, damage per day, component and phase) —
 becomes one CSV document (RFC 4180, ``\\r\\n`` line ends, UTF-8): a header row of column names
 with their units (``switch_on_pct [% rated]``, ``damage [1]``), then one row per table row, so
 a spreadsheet, pandas or Grafana loads it as one rectangular table. Numbers are written at full
 precision (``repr`` of floats), booleans as ``true``/``false``, missing values as empty cells.
 
-* :func:`render_csv` — every table in one zip (``<mill>-<month>-<table>.csv``), the API's
+* :func:`document_csv_zip` — every table in one zip (``<mill>-<month>-<table>.csv``), the API's
   ``format=csv``;
-* :func:`render_csv_table` — one table by name, ``format=csv&table=NAME``; an unknown name is a
-  :class:`~service.errors.BadRequest` (422) that lists the valid ones.
+* :func:`document_csv_table` — one table by name, ``format=csv&table=NAME``; an unknown name is
+  a :class:`~service.errors.BadRequest` (422) that lists the valid ones.
 """
 
 from __future__ import annotations
@@ -20,11 +20,9 @@ import io
 import zipfile
 
 from service.errors import BadRequest
-from service.reports.document import Cell, Document, Table
-from service.reports.monthly import MonthlyReport
-from service.reports.monthly_document import monthly_document
+from service.reports.render.document import Cell, Document, Table
 
-__all__ = ["document_csv_zip", "render_csv", "render_csv_table", "table_csv"]
+__all__ = ["document_csv_table", "document_csv_zip", "table_csv"]
 
 #: A fixed time for the zip members, so the same report gives the same bytes.
 ZIP_TIME = (2000, 1, 1, 0, 0, 0)
@@ -60,14 +58,9 @@ def document_csv_zip(doc: Document) -> bytes:
     return buf.getvalue()
 
 
-def render_csv(r: MonthlyReport) -> bytes:
-    """The monthly report's tables, one CSV each, in a zip."""
-    return document_csv_zip(monthly_document(r))
-
-
-def render_csv_table(r: MonthlyReport, name: str) -> str:
-    """One table of the monthly report as CSV text; :class:`BadRequest` for an unknown name."""
-    doc = monthly_document(r)
+def document_csv_table(doc: Document, name: str) -> str:
+    """One table of ``doc`` as CSV text; :class:`BadRequest` (422) naming the valid tables for
+    an unknown name."""
     try:
         return table_csv(doc.table(name))
     except KeyError:
