@@ -20,7 +20,7 @@ Example (``deploy/plant.toml``)::
     files = ["mills/sag-5200-lrs.toml"]  # or: directory = "mills"
 
     [reports]                            # monthly reports, written after each local month end
-    directory = "../var/reports"         # <directory>/<mill>/<YYYY-MM>.html|pdf|csv
+    directory = "../var/reports"         # <directory>/<mill>/<YYYY-MM>.html|pdf|zip
 
     [reports.mail]                       # optional: mail each report (SMTP, STARTTLS)
     host = "smtp.example.com"
