@@ -23,7 +23,14 @@ import numpy.typing as npt
 from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
-from matplotlib.ticker import AutoLocator, FixedLocator, FuncFormatter, MaxNLocator, NullLocator
+from matplotlib.ticker import (
+    AutoLocator,
+    FixedLocator,
+    FuncFormatter,
+    MaxNLocator,
+    NullLocator,
+    ScalarFormatter,
+)
 
 from service.reports.monthly import MonthlyReport
 from service.reports.render.document import fmt
@@ -31,11 +38,13 @@ from service.reports.starts import day_starts_ns
 
 __all__ = [
     "FIG_WIDTH_IN",
+    "cumulative_figure",
     "damage_figure",
     "day_positions",
     "envelope",
     "starts_figure",
     "steady_figure",
+    "trend_figure",
 ]
 
 PHASE_COLOURS = {
@@ -214,4 +223,66 @@ def steady_figure(r: MonthlyReport) -> Figure | None:
     ax2.set_ylabel("bending amplitude, MPa")
     ax2.set_title("Pinion bending amplitude (range per revolution / 2)", fontsize=10, y=1)
     ax2.legend(fontsize=8, ncols=4, loc="upper left")
+    return fig
+
+
+def cumulative_figure(r: MonthlyReport) -> Figure | None:
+    """Cumulative Miner damage per component (prior included) against the design line
+    D(t) = years since commissioning / design life, by local day (seed 000 §8.2)."""
+    c = r.cumulative
+    if not c.days or not c.damage:
+        return None
+    days = np.array(c.days, dtype="datetime64[D]")
+    fig, (ax,) = _frame(3.4)
+    ax.plot(days, c.design_line, color="#7f7f7f", linestyle="--", linewidth=1.2,
+            label=f"design line ({fmt(c.design_life_years)} years)")  # fmt: skip
+    for name, values in c.damage.items():
+        ax.plot(days, values, linewidth=1.4, label=name)
+    ax.set_ylim(0, max(1e-12, *(max(v) for v in c.damage.values()), max(c.design_line)) * 1.1)
+    ax.set_ylabel("Miner damage D (1 = failure)")
+    ax.set_xlabel("date")
+    since = f"since commissioning {c.commissioned}" if c.commissioned else "since monitoring"
+    ax.set_title(f"Cumulative damage against design life, {since}", fontsize=10, y=1)
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=6))
+    ax.yaxis.set_major_locator(MaxNLocator(nbins=5))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, ncols=3, loc="upper left")
+    return fig
+
+
+def trend_figure(r: MonthlyReport) -> Figure | None:
+    """12-month trend: starts, Miner damage per component, worst channel's mean oscillation
+    range (% rated) and bending amplitude (MPa) per local calendar month (§10.6)."""
+    months = r.trend
+    if not any(m.monitored_days for m in months):
+        return None
+    x = np.arange(len(months))
+    fig, axes = _frame(6.4, 4)
+    axes[0].bar(x, [m.starts for m in months], color="#1f77b4", width=0.7)
+    axes[0].axhspan(3, 5, color="#2ca02c", alpha=0.15, label="norm 3–5")
+    axes[0].set_ylabel("starts")
+    axes[0].legend(fontsize=8, loc="upper left")
+    for name in sorted({c for m in months for c in m.damage}):
+        axes[1].plot(x, [m.damage.get(name, np.nan) for m in months], marker="o", ms=3,
+                     linewidth=1.2, label=name)  # fmt: skip
+    axes[1].set_ylabel("damage per month")
+    axes[1].legend(fontsize=7, ncols=3, loc="upper left")
+    for ax, stats, label in ((axes[2], "oscillation_range_pct", "oscillation, % rated"),
+                             (axes[3], "bending_amplitude_mpa", "bending, MPa")):  # fmt: skip
+        mean = [getattr(m, stats).worst_mean() for m in months]
+        ax.plot(x, [np.nan if v is None else v for v in mean], marker="o", ms=3, linewidth=1.2)
+        ax.set_ylim(bottom=0)  # from zero: a flat trend looks flat
+        ax.set_ylabel(label)
+    for ax in axes:
+        ax.set_xlim(-0.6, len(months) - 0.4)
+        ax.grid(axis="y", alpha=0.3)
+        ax.yaxis.set_major_locator(MaxNLocator(nbins=3))
+        ax.yaxis.set_major_formatter(ScalarFormatter(useOffset=False))
+    axes[-1].xaxis.set_major_locator(FixedLocator(list(x)))
+    axes[-1].xaxis.set_major_formatter(
+        FuncFormatter(lambda v, _p: months[int(v)].month[2:] if 0 <= int(v) < len(months) else "")
+    )
+    axes[-1].set_xlabel("month")
+    axes[0].set_title("12-month trend (worst channel's monthly mean for the steady figures)",
+                      fontsize=10, y=1)  # fmt: skip
     return fig

@@ -4,11 +4,15 @@ says, once.
 Seed 000 §10.6 asks for "automatic reports"; issue 17 for one content in three renderings. Every
 format shows what :func:`monthly_document` puts here, in this order (:data:`SECTIONS`):
 
-1. **Summary** (page 1 of the PDF, top of the HTML): starts against the 3–5 norm (§6.1.3), the
-   worst start against the start-peak levels (§7.2), damage per component and the share of it
-   from starts and stops (§8.3, App. D), alarms raised, data-quality events;
-2. starts; 3. fatigue damage; 4. what-if (App. D); 5. steady-state oscillation and bending
-   (Tables 14–15, §8.1); 6. harmonics (§6.1.2, §6.2.7); 7. alarms; 8. data quality (§5.2.2).
+1. **Summary** (page 1 of the PDF, top of the HTML): life consumed to date and the remaining
+   range per component (or why there is none), starts against the 3–5 norm (§6.1.3), the
+   worst start against the start-peak levels (§7.2), alarms raised, what changed since last
+   month, damage per component and the share of it from starts and stops (§8.3, App. D);
+2. remaining life (§8.2): cumulative damage against the design line (figure), the range by
+   rate basis, what drives it, life at the App. D start rates; 3. the 12-month trend (§10.6
+   "long term trending"); 4. starts; 5. fatigue damage; 6. what-if (App. D); 7. steady-state
+   oscillation and bending (Tables 14–15, §8.1); 8. harmonics (§6.1.2, §6.2.7); 9. alarms;
+   10. data quality (§5.2.2).
 
 Adding a section: write ``def _name(r: MonthlyReport) -> Section`` with its paragraphs, tables
 (each a unique ``name``: it becomes a CSV table) and figures (``_figure(name, builder, r)``
@@ -25,7 +29,13 @@ from functools import partial
 
 from matplotlib.figure import Figure as MplFigure
 
-from service.reports.figures import damage_figure, starts_figure, steady_figure
+from service.reports.figures import (
+    cumulative_figure,
+    damage_figure,
+    starts_figure,
+    steady_figure,
+    trend_figure,
+)
 from service.reports.monthly import MonthlyReport
 from service.reports.render.document import (
     Cell,
@@ -132,13 +142,155 @@ def _summary_damage(r: MonthlyReport) -> Table:
     )  # fmt: skip
 
 
+def _summary_life(r: MonthlyReport) -> Table:
+    return Table(
+        "summary_life",
+        (Column("component", "component", text=True),
+         Column("life_consumed_pct", "life consumed to date", "% of D = 1"),
+         Column("prior_pct", "of which before monitoring", "% of D = 1"),
+         Column("design_line_pct", "design line", "% of D = 1"),
+         Column("remaining_min_years", "remaining life, least", "years"),
+         Column("remaining_max_years", "remaining life, most", "years"),
+         Column("end_earliest", "end, earliest", text=True),
+         Column("end_latest", "end, latest", text=True),
+         Column("reason", "why no life", text=True)),
+        rows([[c.component, c.life_consumed_pct, 100.0 * c.damage_prior, c.design_line_pct,
+               c.remaining_life_years_min, c.remaining_life_years_max,
+               c.end_date_earliest or "–", c.end_date_latest or "–", c.life_reason or "–"]
+              for c in r.summary.components]),
+        caption="Life consumed and remaining life per component (Miner, seed 000 §8.2)",
+        empty_text="No component analysed yet.",
+    )  # fmt: skip
+
+
+def _summary_changes(r: MonthlyReport) -> Table:
+    return Table(
+        "summary_changes",
+        (Column("quantity", "quantity", text=True), Column("unit", "unit", text=True),
+         Column("this_month", r.month), Column("last_month", r.summary.previous_month),
+         Column("change", "change")),
+        rows([[c.quantity, c.unit, c.this_month, c.last_month, c.change]
+              for c in r.summary.changes]),
+        caption=f"What changed since last month ({r.summary.previous_month})",
+        empty_text="Nothing to compare with last month.",
+    )  # fmt: skip
+
+
+def _life_status(r: MonthlyReport) -> Paragraph:
+    s = r.summary
+    if s.life_status == "insufficient_history":
+        missing = "; ".join(s.life_missing)
+        return Paragraph(f"Insufficient history for a remaining life: {missing}. Damage so far "
+                         f"only. {s.life_note}", "note")  # fmt: skip
+    return Paragraph(s.life_note, "meta")
+
+
 def _summary(r: MonthlyReport) -> Section:
     return Section(
         "summary",
         "Summary",
-        (_summary_table(r), _summary_damage(r)),
+        (
+            _life_status(r),
+            _summary_life(r),
+            _summary_table(r),
+            _summary_changes(r),
+            _summary_damage(r),
+        ),
         page_break_after=True,
     )
+
+
+# ----------------------------------------------------------------------------- life
+def _sn_curve(curve: dict[str, object]) -> str:
+    """``model shigley, material 820M17, m1 5.52, …`` (nested and empty values left out)."""
+    return ", ".join(f"{k} {fmt(v) if isinstance(v, float) else v}" for k, v in curve.items()
+                     if v is not None and not isinstance(v, dict))  # fmt: skip
+
+
+def _life(r: MonthlyReport) -> Section:
+    life = r.life
+    comps = list(life.components.values())
+    projections = Table(
+        "life_projections",
+        (Column("component", "component", text=True), Column("basis", "rate basis", text=True),
+         Column("month", "month", text=True), Column("rate_per_year", "damage rate", "1/year"),
+         Column("remaining_life_years", "remaining life", "years"),
+         Column("end_date", "end date", text=True), Column("reason", "why none", text=True)),
+        rows([[c.component, p.basis, p.month or "–", p.rate_per_year, p.remaining_life_years,
+               (f"{p.end_date} (capped)" if p.end_date_capped else p.end_date) or "–",
+               p.reason or "–"] for c in comps for p in c.projections]),
+        caption="Remaining life (1 − D) / rate at each rate basis",
+        key_columns=2,
+    )  # fmt: skip
+    phases = sorted({p for c in comps for p in c.share_by_phase})
+    drivers = Table(
+        "life_drivers",
+        (Column("component", "component", text=True),
+         Column("share_of_mill_pct", "share of the mill's damage", "%"),
+         *(Column(f"share_{p}_pct", f"from {p}", "%") for p in phases)),
+        rows([[c.component, None if c.share_of_mill is None else 100.0 * c.share_of_mill,
+               *(100.0 * c.share_by_phase.get(p, 0.0) for p in phases)] for c in comps]),
+        caption="What drives it: share of damage by component and phase",
+    )  # fmt: skip
+    scenarios = list(dict.fromkeys(w.scenario for c in comps for w in c.what_if))
+    what_if = Table(
+        "life_what_if",
+        (Column("component", "component", text=True),
+         *(Column(f"life_at_{s.replace('/', '_per_')}", f"at {s} starts", "years")
+           for s in scenarios)),
+        rows([[c.component, *({w.scenario: w.remaining_life_years for w in c.what_if}.get(s)
+                              for s in scenarios)] for c in comps]),
+        caption="Remaining life at the App. D start rates (damage to date included)",
+    )  # fmt: skip
+    b = life.basis
+    basis = Paragraph(
+        f"Miner limit D = {fmt(b.miner_limit)}; S-N curve: {_sn_curve(b.sn_curve)}. "
+        f"{b.damage} {b.rates} {b.remaining_life}",
+        "meta",
+    )
+    prior = Paragraph(f"Damage before monitoring ({life.prior.method}): {life.prior.note}", "meta")
+    cumulative = Table(
+        "cumulative_damage",
+        (Column("day", "day", text=True), Column("design_line", "design line", "1"),
+         *(Column(f"damage_{c}", c, "1") for c in r.cumulative.damage)),
+        rows([[day, r.cumulative.design_line[i],
+               *(v[i] for v in r.cumulative.damage.values())]
+              for i, day in enumerate(r.cumulative.days)]),
+        printed=False,
+    )  # fmt: skip
+    return Section(
+        "life", "Remaining life and cumulative damage (seed 000 §8.2, App. D)",
+        (Paragraph(life.note, "meta"), basis, prior,
+         _figure("cumulative", cumulative_figure, r), projections, drivers, what_if, cumulative),
+    )  # fmt: skip
+
+
+def _trend(r: MonthlyReport) -> Section:
+    comps = sorted({c for m in r.trend for c in m.damage})
+    table = Table(
+        "trend_monthly",
+        (Column("month", "month", text=True), Column("monitored_days", "monitored", "days"),
+         Column("starts", "starts"),
+         Column("oscillation_mean_pct", "oscillation range, mean", "% rated"),
+         Column("oscillation_max_pct", "oscillation range, max", "% rated"),
+         Column("bending_mean_mpa", "bending amplitude, mean", "MPa"),
+         Column("bending_max_mpa", "bending amplitude, max", "MPa"),
+         *(Column(f"damage_{c}", f"damage {c}", "1") for c in comps)),
+        rows([[m.month, m.monitored_days, m.starts,
+               m.oscillation_range_pct.worst_mean(), _worst_max(m.oscillation_range_pct.max),
+               m.bending_amplitude_mpa.worst_mean(), _worst_max(m.bending_amplitude_mpa.max),
+               *(m.damage.get(c) for c in comps)] for m in r.trend]),
+        caption="Month by month (steady figures: worst channel, a window per 3 hours)",
+        key_columns=1,
+    )  # fmt: skip
+    about = Paragraph("Long-term trending (seed 000 §10.6): starts, Miner damage per component, "
+                      "steady-state oscillation range and pinion bending amplitude per local "
+                      "calendar month, the 12 months ending with this one.", "meta")  # fmt: skip
+    return Section("trend", "12-month trend", (about, _figure("trend", trend_figure, r), table))
+
+
+def _worst_max(values: dict[str, float]) -> float | None:
+    return max(values.values()) if values else None
 
 
 # ----------------------------------------------------------------------------- starts
@@ -345,6 +497,8 @@ def _quality(r: MonthlyReport) -> Section:
 
 SECTIONS: tuple[Callable[[MonthlyReport], Section], ...] = (
     _summary,
+    _life,
+    _trend,
     _starts,
     _damage,
     _what_if,

@@ -271,6 +271,7 @@ def render_table(report: Any, build_s: float, build_cpu: float, args: Any) -> No
         print(f"| {'render ' + name:<12} | {secs:7.3f} | {cpu:7.3f} | {pages(body):>5} | "
               f"{len(body) / 1e3:7.1f} | {flag:<6} |")  # fmt: skip
         if args.out:
+            args.out.mkdir(parents=True, exist_ok=True)
             suffix = {"csv": "zip"}.get(name, name)
             data = body if isinstance(body, bytes) else body.encode("utf-8")
             (args.out / f"{report.mill}-{report.month}.{suffix}").write_bytes(data)

@@ -106,7 +106,8 @@ def test_a_stored_nan_is_kept_in_its_window_and_left_out_of_daily_statistics(tmp
     assert r.steady.days[0].range_pct_mean == {"motor_torque0": 12.0}
     assert r.steady.days[0].bending_amplitude_max == {"bending0": 10.0}
     assert report_to_dict(r)["steady"]["points"][1]["range_pct"] == {"motor_torque0": None}
-    assert render_html(r).count("<svg") == 2 and render_pdf(r).startswith(b"%PDF")  # no damage
+    # starts, steady and the 12-month trend; no damage, so no damage or cumulative figure
+    assert render_html(r).count("<svg") == 3 and render_pdf(r).startswith(b"%PDF")
 
 
 def test_trend_envelopes_keep_single_window_peaks():
@@ -156,7 +157,7 @@ def test_months_are_local_calendar_months():
 
 def test_html_is_self_contained_with_inline_plots(report):
     page = render_html(report)
-    assert page.count("<svg") == 3  # starts per day, damage per day, steady trends
+    assert page.count("<svg") == 5  # cumulative, trend, starts per day, damage per day, steady
     for external in ("<script", "<link", "src=", 'href="http', "href='http", "@import"):
         assert external not in page
     assert not re.search(r"url\((?!#)", page)  # only references inside the SVGs
