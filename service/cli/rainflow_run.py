@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.rainflow import NonFiniteSampleError
@@ -125,16 +124,21 @@ class _CycleWriter:
             self._csv.writerows(cycles.as_tuples())
 
 
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+
 @contextmanager
-def _progress(source: Source, enabled: bool) -> Iterator[tqdm]:
-    show = enabled and (source.length is None or source.length >= PROGRESS_THRESHOLD)
+def _progress(source: Source, enabled: bool) -> Iterator[Any]:
+    """A tqdm bar on stderr for a long input on a terminal (tqdm imported only then)."""
+    if not (enabled and (source.length is None or source.length >= PROGRESS_THRESHOLD)):
+        yield _NoBar()
+        return
+    from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
+
     with tqdm(
-        total=source.length,
-        unit="sample",
-        unit_scale=True,
-        disable=not show,
-        desc=source.path.name,
-        file=sys.stderr,
+        total=source.length, unit="sample", unit_scale=True, desc=source.path.name, file=sys.stderr
     ) as bar:
         yield bar
 
