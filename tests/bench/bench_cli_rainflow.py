@@ -17,6 +17,7 @@ at 1 kHz (12 M samples = 3 h 20 min), saved as ``.npy``. Timed:
 Both give the same cycle count and the same damage (checked: the run fails otherwise).
 
     .venv/bin/python tests/bench/bench_cli_rainflow.py [--samples 12000000] [--runs 5] [--json]
+        [--millwatch /path/to/plain-venv/bin/millwatch]
 """
 
 from __future__ import annotations
@@ -39,7 +40,6 @@ from bench_rainflow import FS, running
 
 from analytics.fatigue.sn_models import build_sn_curve
 
-SCRIPT = Path(sys.executable).parent / "millwatch"
 KT = 2.0
 
 
@@ -50,9 +50,11 @@ def torque_file(folder: Path, samples: int) -> Path:
     return path
 
 
-def run_cli(path: Path, env: dict[str, str] | None = None) -> tuple[float, float, dict[str, Any]]:
+def run_cli(
+    script: Path, path: Path, env: dict[str, str] | None = None
+) -> tuple[float, float, dict[str, Any]]:
     """Wall s, child CPU s and the JSON summary of one ``millwatch rainflow`` process."""
-    argv = [str(SCRIPT), "rainflow", str(path), "--kt", str(KT), "--json", "--no-progress"]
+    argv = [str(script), "rainflow", str(path), "--kt", str(KT), "--json", "--no-progress"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     done = subprocess.run(argv, capture_output=True, text=True, check=True, timeout=600, env=env)
@@ -78,13 +80,21 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=12_000_000)
     parser.add_argument("--runs", type=int, default=5, help="millwatch processes (median)")
     parser.add_argument("--ref-runs", type=int, default=1, help="rainflow runs (median)")
+    parser.add_argument(
+        "--millwatch",
+        type=Path,
+        default=Path(sys.executable).parent / "millwatch",
+        help="the console script to time (default: beside this interpreter; e.g. one of a "
+        "plain install without the test extra, whose scipy numba imports on its first call)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         path = torque_file(Path(tmp), args.samples)
-        cold = run_cli(path, env={**os.environ, "NUMBA_CACHE_DIR": str(Path(tmp) / "cache")})
-        run_cli(path)  # the installed cache is filled and the file is in the page cache
-        ours = [run_cli(path) for _ in range(args.runs)]
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(tmp) / "cache")}
+        cold = run_cli(args.millwatch, path, env=env)
+        run_cli(args.millwatch, path)  # the installed cache is filled, the file in the page cache
+        ours = [run_cli(args.millwatch, path) for _ in range(args.runs)]
         x = np.load(path)
         refs = [run_reference(x) for _ in range(args.ref_runs)]
     summary = ours[0][2]
@@ -102,6 +112,7 @@ def main() -> None:
         "first_run_wall_s": cold[0],
         "first_run_cpu_s": cold[1],
         "load_average": os.getloadavg()[0],
+        "millwatch": str(args.millwatch),
     }
     result["ratio_wall"] = result["rainflow_wall_s"] / result["millwatch_wall_s"]
     result["ratio_cpu"] = result["rainflow_cpu_s"] / result["millwatch_cpu_s"]
@@ -111,7 +122,7 @@ def main() -> None:
     r = result
     print(
         f"{r['samples']:,} samples, {r['cycles']:,} cycles, damage {r['damage']:.6e} (equal); "
-        f"load average {r['load_average']:.1f}\n"
+        f"load average {r['load_average']:.1f}; {r['millwatch']}\n"
     )
     print("| | wall s | CPU s |\n|---|---:|---:|")
     print(f"| `millwatch rainflow` whole process (median of {args.runs}) | "
