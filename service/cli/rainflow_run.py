@@ -26,7 +26,6 @@ from analytics.fatigue.record_count import RecordCount
 from analytics.fatigue.residue_modes import ResidueMode
 from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
 from analytics.fatigue.sn_models import SNModelParameters, build_sn_curve
-from service.cli.rainflow import DEFAULT_BLOCK_SIZE
 from service.cli.signal_files import ArraySource, SignalFileError, SignalSource, open_signal
 
 __all__ = ["RainflowSummary", "run_command", "run_rainflow"]
@@ -61,7 +60,7 @@ def run_rainflow(
     source: Source,
     curve: SNCurve,
     *,
-    block_size: int = DEFAULT_BLOCK_SIZE,
+    block_size: int,
     gate: float = 0.0,
     residue: ResidueMode = ResidueMode.HALF,
     scale: float = 1.0,
