@@ -23,17 +23,23 @@ returned by :meth:`~RepeatClosure.observe`), so the state stays as small as a re
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from analytics.fatigue import rainflow_kernels as _k
 from analytics.fatigue.cycles import Cycles
 
-if TYPE_CHECKING:
-    from analytics.fatigue.rainflow import RainflowCounter
-
 __all__ = ["RepeatClosure"]
+
+
+class _Counter(Protocol):
+    """What is read of :class:`~analytics.fatigue.rainflow.RainflowCounter` (which imports
+    this module)."""
+
+    def anchors(self, closed: Cycles) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def residue(self) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 class RepeatClosure:
@@ -45,7 +51,7 @@ class RepeatClosure:
 
     __slots__ = ("_counter", "_i", "_v")
 
-    def __init__(self, counter: RainflowCounter) -> None:
+    def __init__(self, counter: _Counter) -> None:
         self._counter = counter
         self._v = np.empty(0)
         self._i = np.empty(0, dtype=np.int64)
