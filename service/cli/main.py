@@ -14,29 +14,21 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import logging
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
-from ingest.archive.files import ArchiveError
+# Start-up: logging, dataclasses and the commands' modules are imported only when a command runs.
 
 __all__ = ["COMMANDS", "Command", "build_parser", "main"]
 
-log = logging.getLogger("millwatch")
-
 #: Errors a user can fix from the message alone: printed without a traceback (the commands'
-#: own, e.g. :class:`~service.cli.signal_files.SignalFileError`, are ``ValueError``\ s).
-USER_ERRORS: tuple[type[BaseException], ...] = (
-    ValueError,
-    KeyError,
-    OSError,
-    ArchiveError,
-)
+#: own, e.g. :class:`~service.cli.signal_files.SignalFileError`, are ``ValueError``\ s), and
+#: :class:`ingest.archive.files.ArchiveError` (see :func:`_is_user_error`).
+USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, KeyError, OSError)
 
 
-@dataclass(frozen=True)
-class Command:
+class Command(NamedTuple):
     """A sub-command: its name, the module that registers it (imported only when the command
     runs or shows its own ``--help``) and the line ``millwatch --help`` lists for it (the same
     ``help=`` the module's ``add_parser`` gives; a test keeps them equal)."""
@@ -143,18 +135,31 @@ def _command_named(argv: Sequence[str] | None) -> str | None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the sub-command ``argv`` names (default: the process's arguments); the exit status."""
     args = build_parser(argv).parse_args(argv)
+    import logging
+
     logging.basicConfig(
         level=logging.WARNING - 10 * min(args.verbose, 2),
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
     try:
         return int(args.handler(args) or 0)
-    except USER_ERRORS as exc:
+    except Exception as exc:
+        if not _is_user_error(exc):
+            raise
         sys.stderr.write(f"millwatch: error: {exc}\n")
         return 2
     except KeyboardInterrupt:
         sys.stderr.write("millwatch: interrupted\n")
         return 130
+
+
+def _is_user_error(exc: Exception) -> bool:
+    """One of :data:`USER_ERRORS`, or an archive error (its module is looked up, not imported:
+    a command that raised one has imported it)."""
+    archive = sys.modules.get("ingest.archive.files")
+    return isinstance(exc, USER_ERRORS) or (
+        archive is not None and isinstance(exc, archive.ArchiveError)
+    )
 
 
 if __name__ == "__main__":
