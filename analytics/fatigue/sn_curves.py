@@ -373,7 +373,10 @@ def _log_sum_of_powers(ranges: np.ndarray, counts: np.ndarray, m: float, S_ref: 
     s, n = ranges[keep], counts[keep]
     s_max = float(np.max(s))
     terms = n * np.exp(m * np.log(s / s_max))
-    return math.log(fsum(terms)) + m * math.log(s_max / S_ref)
+    ratio = s_max / S_ref
+    if not (ratio > 0.0 and math.isfinite(ratio)):  # a subnormal or huge range: no quotient
+        return math.log(fsum(terms)) + m * (math.log(s_max) - math.log(S_ref))
+    return math.log(fsum(terms)) + m * math.log(ratio)
 
 
 def _spectrum(ranges: ArrayLike, counts: ArrayLike, m: float) -> tuple[np.ndarray, np.ndarray]:
