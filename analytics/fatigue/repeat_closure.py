@@ -71,7 +71,10 @@ class RepeatClosure:
     def close(self) -> Cycles:
         """The full cycles that the record followed by itself closes: the four-point rule over
         the dropped start points and the counter's residue, then over what is left joined to
-        itself at a clean reversal. The counter and this object are not changed."""
+        itself at a clean reversal. The counter and this object are not changed.
+
+        Sample indices are the record's: a cycle that the junction closes starts near the end of
+        the record and ends near its start (``i_start > i_end``)."""
         values, indices = self._counter.residue()
         seq_v = np.concatenate([self._v, values])
         seq_i = np.concatenate([self._i, indices])
