@@ -38,11 +38,13 @@ from alarms.observations import Kind, Observation
 from alarms.rules import Rule, RuleBook, RuleOptions, Severity, build_rules
 from analytics.drivetrain.mill_config import MillConfig
 
-__all__ = ["AlarmEngine", "UnknownAlarmError"]
+__all__ = ["SIMULATED_PREFIX", "AlarmEngine", "UnknownAlarmError"]
 
 log = logging.getLogger(__name__)
 
 SNAPSHOT_VERSION = 1
+SIMULATED_PREFIX = "SIMULATED DATA: "
+"""Starts the message of every alarm of a mill whose data come from the simulator."""
 _NS = 1_000_000_000
 
 
@@ -265,10 +267,13 @@ class AlarmEngine:
         self, rule: Rule, key: Key, cond: _Condition, obs: Observation, severity: Severity
     ) -> list[Transition]:
         threshold = rule.threshold(severity, obs)
-        message = rule.message(obs, severity, self.books[key[0]].time_zone)
+        book = self.books[key[0]]
+        message = rule.message(obs, severity, book.time_zone)
+        if book.simulated:
+            message = SIMULATED_PREFIX + message
         alarm = cond.alarm
         if alarm is None:
-            cond.alarm = _new_alarm(rule, key, obs, severity, threshold, message)
+            cond.alarm = _new_alarm(rule, key, obs, severity, threshold, message, book.simulated)
             return [lifecycle.raise_alarm(cond.alarm)]
         if severity.rank > alarm.severity.rank:
             return [lifecycle.escalate(alarm, severity, obs.t_ns, obs.value, threshold, message)]
@@ -294,12 +299,18 @@ class AlarmEngine:
 
 
 def _new_alarm(
-    rule: Rule, key: Key, obs: Observation, severity: Severity, threshold: float, message: str
+    rule: Rule,
+    key: Key,
+    obs: Observation,
+    severity: Severity,
+    threshold: float,
+    message: str,
+    simulated: bool,
 ) -> Alarm:
     mill_id, name, subject = key
     return Alarm(
         alarm_id=lifecycle.alarm_id_for(mill_id, name, subject, obs.t_ns),
         mill_id=mill_id, rule=name, subject=subject, quantity=rule.quantity, unit=rule.unit,
         severity=severity, state=AlarmState.RAISED, raised_ns=obs.t_ns, updated_ns=obs.t_ns,
-        value=obs.value, threshold=threshold, message=message,
+        value=obs.value, threshold=threshold, message=message, simulated=simulated,
     )  # fmt: skip

@@ -84,8 +84,9 @@ class Alarm:
     ``value``/``threshold`` belong to the latest transition (``None`` once stored when not
     finite: SQLite keeps NaN as NULL); ``condition`` is False while a latched alarm waits for
     acknowledgement after its condition returned to normal; ``seq`` counts the alarm's
-    transitions. Readers that hold one (the API's alarm board) never mutate it; only the
-    lifecycle functions below do, on the engine's own copy."""
+    transitions; ``simulated``: raised on data from the simulator (its message says so too).
+    Readers that hold one (the API's alarm board) never mutate it; only the lifecycle
+    functions below do, on the engine's own copy."""
 
     alarm_id: str
     mill_id: str
@@ -105,6 +106,7 @@ class Alarm:
     acked_by: str | None = None
     cleared_ns: int | None = None
     seq: int = 0
+    simulated: bool = False
 
     @property
     def open(self) -> bool:

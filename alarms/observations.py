@@ -113,6 +113,12 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
         "writes", Kind.EVENT, None,
         "archive writes that failed since the previous report (0 reports a clean interval)",
     ),
+    "report_failures": QuantitySpec(
+        "attempts", Kind.EVENT, "stage",
+        "failed attempts to make (stage 'files') or mail (stage 'mail') a monthly report, "
+        "after the last retry (0 reports a delivery that succeeded); context: stage, month, "
+        "error",
+    ),
     "load_sharing_imbalance_pct": QuantitySpec(
         "%", Kind.LEVEL, None,
         "|T_bs − T_nbs| / mean(T_bs, T_nbs) of the steady-state pinion torques of a dual drive",

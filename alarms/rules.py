@@ -42,6 +42,7 @@ archive_write_failures      alarm > 0 (*option*)                  3 clean report
 (event)                                                           latched
 load_sharing (level)        warning > 10 %, alarm > 20 %          ≤ 8 % for 5 min        §6.2.2
                             (*option*)
+report_delivery (event)     alarm > 0 failed attempts             1 delivery; latched    §10.6
 =========================== ===================================== ====================== =======
 
 Severity never steps down while an alarm is open: an alarm that reached ``alarm`` stays an
@@ -203,11 +204,13 @@ def local_time(t_ns: int, time_zone: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class RuleBook:
-    """The rules of one mill, by quantity, with the site's time zone for messages."""
+    """The rules of one mill, by quantity, with the site's time zone for messages;
+    ``simulated``: the mill's data come from the simulator (its alarms say so)."""
 
     mill_id: str
     time_zone: str
     rules: Mapping[str, Rule]
+    simulated: bool = False
 
     def rule(self, name: str) -> Rule:
         """The rule called ``name`` (KeyError if none)."""
@@ -429,6 +432,21 @@ def _archive(config: MillConfig, o: RuleOptions) -> Rule:
     )  # fmt: skip
 
 
+def _report_delivery(config: MillConfig, o: RuleOptions) -> Rule:
+    """A monthly report that could not be made or mailed after its retries (seed 000 §10.6:
+    reports "automatically generated and distributed to site management"). Event per stage
+    (files, mail), latched: the site must see it even once a later attempt succeeded."""
+    return Rule(
+        "report_delivery", "report_failures", _levels((Severity.ALARM, 0.0)),
+        headline="Monthly report {month}: {stage} failed after {value} ({time}): {error}",
+        advice="fix the cause (reports directory: space, permissions; mail: SMTP host, "
+        "credentials, recipients); the service tries again, or run 'millwatch report'",
+        source="seed 000 §10.6", value_format="{:.0f} attempts",
+        criterion="alarm: the report did not reach its destination",
+        clean_events_to_clear=1, latched=True,
+    )  # fmt: skip
+
+
 def _load_sharing(config: MillConfig, o: RuleOptions) -> Rule:
     """Dual-drive load-sharing imbalance between barring and non-barring sides (seed 000 §6.2.2,
     Table 15 compares the sides; the limits are engineering defaults, not seed values)."""
@@ -446,6 +464,7 @@ def _load_sharing(config: MillConfig, o: RuleOptions) -> Rule:
 _BUILDERS = (
     _start_peak, _starts_per_month, _oscillation, _bending, _barring, _unexplained_peak,
     _resonance, _remaining_life, _stale, _spike_rate, _sequence_gaps, _archive, _load_sharing,
+    _report_delivery,
 )  # fmt: skip
 
 
@@ -458,4 +477,6 @@ def build_rules(config: MillConfig, options: RuleOptions | None = None) -> RuleB
     if not opts.life_alarm_fraction < opts.life_warn_fraction:
         raise ValueError("life_alarm_fraction must be below life_warn_fraction")
     rules = [build(config, opts) for build in _BUILDERS]
-    return RuleBook(config.id, config.time_zone, {r.quantity: r for r in rules})
+    return RuleBook(
+        config.id, config.time_zone, {r.quantity: r for r in rules}, simulated=config.simulated
+    )

@@ -26,7 +26,8 @@ subscribe to :func:`ingest.keys.alarm_pattern`). Encoding ``application/json``, 
         "unit": "% rated motor torque", "severity": "alarm", "state": "raised",
         "condition": true, "raised_ns": …, "updated_ns": …, "acked_ns": null,
         "acked_by": null, "cleared_ns": null, "value": 312.0, "threshold": 300.0,
-        "message": "…", "seq": 1
+        "message": "…", "seq": 1,
+        "simulated": false                  # true: raised on simulated data (the demo)
       }
     }
 

@@ -19,6 +19,16 @@ Example (``deploy/plant.toml``)::
     [mills]
     files = ["mills/sag-5200-lrs.toml"]  # or: directory = "mills"
 
+    [reports]                            # monthly reports, written after each local month end
+    directory = "../var/reports"         # <directory>/<mill>/<YYYY-MM>.html|pdf|zip
+
+    [reports.mail]                       # optional: mail each report (SMTP, STARTTLS)
+    host = "smtp.example.com"
+    username = "millwatch"
+    password_file = "/run/secrets/smtp"  # or the environment variable MILLWATCH_SMTP_PASSWORD
+    sender = "millwatch@example.com"
+    recipients = ["site.manager@example.com"]
+
 Scale-out (``deploy/worker-*.toml``, ``deploy/api.toml``): ``[zenoh] mode = "client"`` with
 ``connect`` = the router, ``[worker] partition`` = the key expressions of this worker's mills,
 ``[api] query_timeout_s`` for ``millwatch api``.
@@ -26,18 +36,35 @@ Scale-out (``deploy/worker-*.toml``, ``deploy/api.toml``): ``[zenoh] mode = "cli
 
 from __future__ import annotations
 
+import os
 import tomllib
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import zenoh
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from analytics.drivetrain.mill_config import MillConfig, describe_validation_error
 from ingest.keys import LAYOUT_VERSION, ROOT
 from ingest.mill_files import load_mill_config, load_mill_configs
 
-__all__ = ["ServiceSettings", "SettingsError", "load_service_settings"]
+__all__ = [
+    "REPORT_FORMATS",
+    "MailSettings",
+    "ReportSettings",
+    "ServiceSettings",
+    "SettingsError",
+    "load_service_settings",
+    "parse_formats",
+]
 
 
 _LIVE_PREFIX = "/".join([ROOT, LAYOUT_VERSION, ""])
@@ -45,6 +72,26 @@ _LIVE_PREFIX = "/".join([ROOT, LAYOUT_VERSION, ""])
 
 class SettingsError(ValueError):
     """Unusable service settings; the message names the file and the fields."""
+
+
+#: Monthly report formats written as files (:mod:`service.reports.files`), in render order.
+REPORT_FORMATS: tuple[str, ...] = ("html", "pdf", "csv")
+
+
+def parse_formats(text: str | Iterable[str]) -> tuple[str, ...]:
+    """Report formats from ``"html,pdf"`` or a list, checked against :data:`REPORT_FORMATS`,
+    duplicates dropped; :class:`ValueError` naming an unknown one."""
+    known = ", ".join(REPORT_FORMATS)
+    items = text.split(",") if isinstance(text, str) else list(text)
+    out: list[str] = []
+    for item in (i.strip().lower() for i in items):
+        if item not in REPORT_FORMATS:
+            raise ValueError(f"report format {item!r} is not one of {known}")
+        if item not in out:
+            out.append(item)
+    if not out:
+        raise ValueError(f"no report format given (choose from {known})")
+    return tuple(out)
 
 
 class _Strict(BaseModel):
@@ -125,6 +172,105 @@ class MillSettings(_Strict):
     directory: Path | None = None
 
 
+class MailSettings(_Strict):
+    """Mail of each monthly report (SMTP; :mod:`service.reports.mail`): one mail per mill and
+    month to every recipient, the PDF and HTML attached (``attach``).
+
+    The password is never in this file: it is read when a mail is sent from ``password_file``
+    (a secret file; trailing newline dropped) or else from the environment variable named by
+    ``password_env``, and never logged. ``starttls`` (default on) upgrades the connection
+    before logging in; ``ca_file`` trusts another CA than the system's (a site's own)."""
+
+    host: Annotated[str, Field(min_length=1)]
+    port: Annotated[int, Field(ge=1, le=65535)] = 587
+    starttls: bool = True
+    username: str | None = None
+    password_file: Path | None = None
+    password_env: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")] = (
+        "MILLWATCH_SMTP_PASSWORD"
+    )
+    sender: Annotated[str, Field(pattern=r"^[^@\s]+@[^@\s]+$")]
+    recipients: Annotated[
+        tuple[Annotated[str, Field(pattern=r"^[^@\s]+@[^@\s]+$")], ...], Field(min_length=1)
+    ]
+    ca_file: Path | None = None
+    timeout_s: Annotated[float, Field(gt=0, le=600)] = 30.0
+    attach: tuple[str, ...] = ("pdf", "html")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_password_here(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "password" in data:
+            raise ValueError(
+                "password: not in the settings file; put it in a secret file named by "
+                "password_file, or in the environment variable named by password_env "
+                "(default MILLWATCH_SMTP_PASSWORD)"
+            )
+        return data
+
+    @model_validator(mode="after")
+    def _no_clear_text_login(self) -> MailSettings:
+        if self.username is not None and not self.starttls:
+            raise ValueError(
+                "username: logging in without starttls would send the password in clear text; "
+                "set starttls = true (the default) or drop username"
+            )
+        return self
+
+    @field_validator("attach")
+    @classmethod
+    def _formats(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        return parse_formats(value) if value else ()
+
+    def password(self) -> str | None:
+        """The SMTP password from ``password_file`` or ``password_env`` (None when neither
+        holds one); :class:`SettingsError` for a secret file that cannot be read."""
+        if self.password_file is not None:
+            try:
+                return self.password_file.read_text(encoding="utf-8").rstrip("\r\n")
+            except OSError as exc:
+                raise SettingsError(
+                    f"reports.mail.password_file: cannot read {self.password_file} "
+                    f"({exc.strerror or exc})"
+                ) from exc
+        return os.environ.get(self.password_env) or None
+
+
+class ReportSettings(_Strict):
+    """Monthly reports written after each local month end (:mod:`service.reports.month_end`).
+
+    * ``directory``: reports go to ``<directory>/<mill>/<YYYY-MM>.<ext>``; ``formats`` which.
+    * ``delay_s``: how long after the local month end (each mill's ``time_zone``) its report is
+      made, so late data (gateway caches, queue) is in (default 15 min).
+    * ``catch_up_months``: at start and every ``check_every_s``, the finished months this far
+      back that have data and no report yet are made (a service down at month end catches up).
+    * ``attempts``, ``backoff_s``, ``backoff_max_s``: a failed render/write or mail is tried
+      ``attempts`` times, waiting ``backoff_s`` doubled each time (at most ``backoff_max_s``);
+      then the ``report_delivery`` alarm is raised, and the month is tried again after
+      ``retry_failed_after_s``.
+    * ``jobs``: processes that build and render reports, at low priority (0: one per core;
+      reports of several mills are made in parallel, off the worker's real-time path).
+    """
+
+    enabled: bool = True
+    directory: Path = Path("var/reports")
+    formats: tuple[str, ...] = REPORT_FORMATS
+    delay_s: Annotated[float, Field(ge=0, le=7 * 86_400)] = 900.0
+    catch_up_months: Annotated[int, Field(ge=1, le=24)] = 3
+    check_every_s: Annotated[float, Field(gt=0, le=86_400)] = 60.0
+    attempts: Annotated[int, Field(ge=1, le=20)] = 4
+    backoff_s: Annotated[float, Field(ge=0, le=3600)] = 30.0
+    backoff_max_s: Annotated[float, Field(ge=0, le=86_400)] = 600.0
+    retry_failed_after_s: Annotated[float, Field(gt=0, le=30 * 86_400)] = 3600.0
+    jobs: Annotated[int, Field(ge=0, le=64)] = 0
+    mail: MailSettings | None = None
+
+    @field_validator("formats")
+    @classmethod
+    def _formats(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        return parse_formats(value)
+
+
 class ServiceSettings(_Strict):
     zenoh: ZenohSettings = ZenohSettings()
     archive: ArchiveSettings = ArchiveSettings()
@@ -132,6 +278,7 @@ class ServiceSettings(_Strict):
     worker: WorkerSettings = WorkerSettings()
     api: ApiSettings = ApiSettings()
     mills: MillSettings = MillSettings()
+    reports: ReportSettings = ReportSettings()
 
     def resolved(self, base: Path) -> ServiceSettings:
         """The same settings with relative paths made relative to ``base``."""
@@ -143,6 +290,14 @@ class ServiceSettings(_Strict):
             files=tuple(at(p) for p in self.mills.files),
             directory=None if self.mills.directory is None else at(self.mills.directory),
         )
+        mail = self.reports.mail
+        if mail is not None:
+            mail = mail.model_copy(
+                update={
+                    "password_file": None if mail.password_file is None else at(mail.password_file),
+                    "ca_file": None if mail.ca_file is None else at(mail.ca_file),
+                }
+            )
         return self.model_copy(
             update={
                 "archive": self.archive.model_copy(
@@ -150,6 +305,9 @@ class ServiceSettings(_Strict):
                 ),
                 "store": StoreSettings(path=at(self.store.path)),
                 "mills": mills,
+                "reports": self.reports.model_copy(
+                    update={"directory": at(self.reports.directory), "mail": mail}
+                ),
             }
         )
 

@@ -26,8 +26,10 @@ Errors: a :class:`pydantic.ValidationError` converts to one line per problem wit
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 import zoneinfo
+from datetime import date
 from enum import StrEnum
 from typing import Annotated, Any, Literal
 
@@ -44,10 +46,12 @@ from analytics.fatigue.sn_curves import SNCurve
 from analytics.fatigue.sn_models import SN_MODEL_PARAMETERS, SNModelParameters, build_sn_curve
 
 __all__ = [
+    "COMPONENT_KINDS",
     "AlarmThresholds",
     "ChannelConfig",
     "DriveConfig",
     "DriveLayout",
+    "LifeConfig",
     "MaterialConfig",
     "MillConfig",
     "MillConfigError",
@@ -263,6 +267,59 @@ class AlarmThresholds(_Frozen):
         return self
 
 
+#: The analysed components of each drive side: combined (bending + torsion, §8.2) and torsion
+#: stress on the pinion shaft, torsion on the motor shaft (``_bs``/``_nbs`` on dual drives).
+COMPONENT_KINDS = ("pinion_combined", "pinion_torsion", "motor_torsion")
+_PRIOR_RATE = re.compile(r"^first_([1-9]\d{0,3})_days$")
+
+
+class LifeConfig(_Frozen):
+    """How remaining life is projected (``[life]`` of a mill file; :mod:`service.reports.life`).
+
+    Damage before monitoring began (seed 000 §8.3: a 15-year-old shaft is not new): the date
+    the drivetrain was ``commissioned`` and *either* an estimated ``prior_damage`` (Miner sum,
+    one value for every component or a table per component) *or* an assumed ``prior_rate``:
+    ``"first_<N>_days"`` applies the damage rate of the first N days of monitoring from
+    commissioning to the start of monitoring. Without either, damage counts from the start of
+    monitoring only, and the answer says so.
+
+    No projection before ``min_monitoring_days`` of monitoring including ``min_starts`` starts;
+    ``rate_window_days`` is the "recent" rate's window."""
+
+    commissioned: date | None = Field(
+        default=None, description="Local date the drivetrain went into service."
+    )
+    prior_damage: Annotated[float, Field(ge=0, le=1)] | dict[str, Annotated[
+        float, Field(ge=0, le=1)]] | None = None  # fmt: skip
+    prior_rate: str | None = Field(default=None, description='e.g. "first_90_days"')
+    min_monitoring_days: Annotated[float, Field(ge=0, le=3650)] = 14.0
+    min_starts: Annotated[int, Field(ge=0, le=1000)] = 1
+    rate_window_days: Annotated[int, Field(ge=1, le=366)] = 30
+
+    @field_validator("prior_rate")
+    @classmethod
+    def _rate_form(cls, value: str | None) -> str | None:
+        if value is not None and not _PRIOR_RATE.match(value):
+            raise ValueError(f"{value!r} is not first_<N>_days (e.g. first_90_days)")
+        return value
+
+    @model_validator(mode="after")
+    def _prior_needs_a_date(self) -> LifeConfig:
+        if self.prior_damage is not None and self.prior_rate is not None:
+            raise ValueError("give prior_damage or prior_rate, not both")
+        if self.prior_rate is not None and self.commissioned is None:
+            raise ValueError("prior_rate needs commissioned (the date to apply it from)")
+        if self.prior_damage is not None and self.commissioned is None:
+            raise ValueError("prior_damage needs commissioned (the date it is estimated from)")
+        return self
+
+    @property
+    def prior_rate_days(self) -> int | None:
+        """N of ``first_<N>_days``; None without a prior rate."""
+        m = _PRIOR_RATE.match(self.prior_rate or "")
+        return int(m.group(1)) if m else None
+
+
 #: Barring peak limits in % of motor rated torque (seed 000 Tables 12–13, §6.2.3).
 BARRING_LIMIT_PCT = {DriveLayout.SINGLE: 185.0, DriveLayout.DUAL: 314.0}
 
@@ -283,6 +340,12 @@ class MillConfig(_Frozen):
         min_length=1
     )
     alarms: AlarmThresholds = Field(default_factory=AlarmThresholds)
+    life: LifeConfig = Field(default_factory=LifeConfig)
+    simulated: bool = Field(
+        default=False,
+        description="The mill's data come from the simulator (the demo, example mills): every "
+        "answer, report and alarm about the mill says so. Never set for a real mill.",
+    )
 
     @field_validator("time_zone")
     @classmethod
@@ -305,12 +368,23 @@ class MillConfig(_Frozen):
             if ch.kind in ("torque", "bending") and dual != (ch.side is not None):
                 need = "needs side 'bs' or 'nbs'" if dual else "must not set side"
                 raise ValueError(f"channel {name!r} on a {self.drive.layout} drive {need}")
+        prior = self.life.prior_damage
+        if isinstance(prior, dict):
+            unknown = sorted(set(prior) - set(self.components))
+            if unknown:
+                raise ValueError(f"life.prior_damage: unknown component(s) {unknown}; this "
+                                 f"mill's components: {', '.join(self.components)}")  # fmt: skip
         return self
 
     @classmethod
     def from_toml_text(cls, text: str) -> MillConfig:
         """Parse and validate TOML text; raises ``TOMLDecodeError`` or ``ValidationError``."""
         return cls.model_validate(tomllib.loads(text))
+
+    @property
+    def components(self) -> list[str]:
+        """The analysed components: each of :data:`COMPONENT_KINDS` on each drive side."""
+        return [f"{k}_{s}" if s else k for s in self.sides for k in COMPONENT_KINDS]
 
     @property
     def sides(self) -> tuple[str | None, ...]:

@@ -95,11 +95,7 @@ def _channel(config: MillConfig, kind: str, shaft: str, side: str | None) -> str
 
 def component_names(config: MillConfig) -> list[str]:
     """Damage components of a mill: combined/torsion per side (see the module docstring)."""
-    out = []
-    for side in config.sides:
-        sfx = f"_{side}" if side else ""
-        out += [f"pinion_combined{sfx}", f"pinion_torsion{sfx}", f"motor_torsion{sfx}"]
-    return out
+    return config.components
 
 
 class LoadAnalysis:
@@ -214,8 +210,12 @@ class LoadAnalysis:
             self.damage[c] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone)
 
     # ------------------------------------------------------------ feeding
-    def feed(self, frame: Frame) -> list[dict[str, Any]]:
-        """Analyse one aligned frame; returns the events (start/stop/barring dicts) it closed."""
+    def feed(
+        self, frame: Frame, transitions: list[Transition] | None = None
+    ) -> list[dict[str, Any]]:
+        """Analyse one aligned frame; returns the events (start/stop/barring dicts) it closed.
+        The operating-state transitions decided in it are appended to ``transitions`` if given
+        (stream samples; :meth:`t_ns` converts)."""
         n = len(frame)
         if n == 0:
             return []
@@ -228,6 +228,8 @@ class LoadAnalysis:
         events: list[dict[str, Any]] = []
         for tr in self.sm.feed(*self._state_inputs(block, flagged_all)):
             events += self._on_transition(tr)
+            if transitions is not None:
+                transitions.append(tr)
         self._barring_progress()
         self._count(block)
         self.n += n

@@ -11,6 +11,7 @@ registers on ``runtime.alarm_listeners``) and loaded once from the store when th
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from prometheus_client import CollectorRegistry
@@ -27,8 +28,10 @@ from service.api.mill_views import (
     mill_spectrum,
     mill_starts,
     mill_summary,
+    site_mills,
     store_of,
 )
+from service.reports.fleet import FleetMill, build_fleet, fleet_entry, fleet_to_dict
 from service.reports.monthly import MonthlyReport
 from service.worker.partition import worker_identity
 from service.worker.runtime import MILL_CHECKS, ServiceRuntime
@@ -99,6 +102,7 @@ class LocalBackend:
             "queue_depth_blocks": rt.queue.depth,
             "queue_dropped_blocks": rt.queue.dropped,
             "checks": checks,
+            "reports": self._reports(latest=False),
         }
 
     def mills_overview(self) -> list[dict[str, Any]]:
@@ -124,9 +128,34 @@ class LocalBackend:
         """The monthly report (default: this month in the site's time zone)."""
         return mill_monthly_report(self.runtime, mill_id, month)
 
+    def fleet_mill(self, mill_id: str) -> FleetMill:
+        """One mill's fleet line (:func:`service.reports.fleet.fleet_entry`)."""
+        config = config_of(self.mills, mill_id)
+        board = self.alarm_board()
+        return fleet_entry(store_of(self.runtime), config, time.time_ns(),
+                           status=self.runtime.status.get(mill_id, {}),
+                           open_alarms=[a for a in board.rows(mill_id) if a.open])  # fmt: skip
+
+    def fleet(self, site: str) -> dict[str, Any]:
+        """The site's mills side by side, in visit order (:mod:`service.reports.fleet`)."""
+        mills = site_mills(self.mills, site)
+        lines = [self.fleet_mill(m) for m in mills]
+        zone = next(iter(mills.values())).time_zone
+        return fleet_to_dict(build_fleet(site, lines, [], time.time_ns(), zone))
+
     # ------------------------------------------------------------------ operations
     def readiness(self) -> dict[str, Any]:
         return self.runtime.readiness()
+
+    def reports_status(self) -> dict[str, Any]:
+        """The month-end report job of this worker (``GET /reports/status``)."""
+        return {"workers": {self.worker_name: self._reports(latest=True)}}
+
+    def _reports(self, *, latest: bool) -> dict[str, Any]:
+        job = self.runtime.reports
+        if job is None:
+            return {"enabled": self.runtime.settings.reports.enabled, "running": False}
+        return job.status(latest=latest)
 
     def registry(self) -> CollectorRegistry:
         if self._registry is None:

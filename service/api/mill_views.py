@@ -15,7 +15,8 @@ from typing import Any
 
 from analytics.drivetrain.mill_config import MillConfig
 from service.errors import NotFound, Unavailable
-from service.reports.life import LifeInputs, life_report
+from service.reports.history import life_inputs
+from service.reports.life import compute_life, life_to_dict
 from service.reports.monthly import MonthlyReport, build_monthly_report
 from service.reports.starts import current_month, starts_in_month
 from service.store.database import Store
@@ -30,6 +31,7 @@ __all__ = [
     "mill_spectrum",
     "mill_starts",
     "mill_summary",
+    "site_mills",
     "store_of",
 ]
 
@@ -46,21 +48,34 @@ def config_of(mills: Mapping[str, MillConfig], mill_id: str) -> MillConfig:
     return config
 
 
+def site_mills(mills: Mapping[str, MillConfig], site: str) -> dict[str, MillConfig]:
+    """The configured mills of ``site``; :class:`NotFound` naming the sites there are."""
+    found = {m: c for m, c in mills.items() if c.site == site}
+    if not found:
+        sites = ", ".join(sorted({c.site for c in mills.values()})) or "(none)"
+        raise NotFound("Unknown site", f"No mill of site {site!r} is configured here; sites: "
+                       f"{sites}.")  # fmt: skip
+    return found
+
+
 def mill_summary(
     config: MillConfig, status: Mapping[str, Any] | None, worker: str | None
 ) -> dict[str, Any]:
     """One line of ``GET /mills``: state, stale channels and why the mill is held (if it is)
     from the worker's status; a mill without status (``None``: its worker is gone) is
     ``unreachable`` with every channel stale."""
+    simulated = config.simulated
     if status is None:
         state, stale, held = UNREACHABLE, list(config.channels), None
     else:
         state = status.get("state", "unknown")
         stale = status.get("health", {}).get("stale_channels", [])
         held = status.get("held_reason")
+        simulated = bool(status.get("simulated", simulated))  # the worker's config decides
     return {
         "id": config.id,
         "site": config.site,
+        "simulated": simulated,
         "drive": config.drive.layout,
         "starter": config.drive.starter,
         "state": state,
@@ -104,11 +119,16 @@ def store_of(runtime: ServiceRuntime) -> Store:
 
 
 def mill_life(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
-    """Damage so far, damage rate and remaining life per component (:mod:`service.reports.life`)."""
+    """Damage so far and remaining life per component (:mod:`service.reports.life`), with the
+    worker's live damage (closed cycles not yet stored, the open residue)."""
     config = mill_config(runtime, mill_id)
-    rows = store_of(runtime).damage(mill_id)
+    store = store_of(runtime)
     status = runtime.status.get(mill_id, {})
-    return life_report(LifeInputs(config, rows, status, time.time_ns()))
+    with store.read_snapshot():
+        report = compute_life(life_inputs(store, config, time.time_ns(),
+                                          live=status.get("damage"),
+                                          last_sample_ns=status.get("last_sample_ns")))  # fmt: skip
+    return life_to_dict(report)
 
 
 def mill_starts(runtime: ServiceRuntime, mill_id: str, month: str | None) -> dict[str, Any]:
@@ -137,4 +157,5 @@ def mill_spectrum(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
             "are computed only in steady running, once per Welch window.",
         )
     t_ns, data = latest[0]
-    return {"mill": mill_id, "t_ns": t_ns, "harmonics": data}
+    config = mill_config(runtime, mill_id)
+    return {"mill": mill_id, "simulated": config.simulated, "t_ns": t_ns, "harmonics": data}

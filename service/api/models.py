@@ -1,6 +1,7 @@
-"""Response and request bodies of the mill, life, starts, spectrum and alarm endpoints, for the
+"""Response and request bodies of the mill, starts, spectrum and alarm endpoints, for the
 OpenAPI schema (with examples) and for validating what the API sends. Units are in the field
-names."""
+names. ``/life`` and ``/sites/{site}/fleet`` answer their report dataclasses
+(:class:`service.reports.life.LifeReport`, :class:`service.reports.fleet.FleetView`)."""
 
 from __future__ import annotations
 
@@ -14,8 +15,6 @@ __all__ = [
     "AlarmDetail",
     "AlarmList",
     "AlarmOut",
-    "ComponentLife",
-    "Life",
     "MillDetail",
     "MillSummary",
     "MonthStarts",
@@ -43,6 +42,7 @@ class MillSummary(BaseModel):
                 {
                     "id": "sag-5200-lrs",
                     "site": "rustenburg",
+                    "simulated": False,
                     "drive": "single",
                     "starter": "LRS",
                     "state": "held",
@@ -56,6 +56,9 @@ class MillSummary(BaseModel):
 
     id: str
     site: str
+    simulated: bool = Field(
+        description="The mill's data come from the simulator (the demo, example mills)."
+    )
     drive: str = Field(description="single or dual.")
     starter: str
     state: str = Field(
@@ -87,76 +90,6 @@ class MillDetail(MillSummary):
     )
 
 
-class ComponentLife(BaseModel):
-    """Damage and remaining life of one component (Miner, failure at D = 1)."""
-
-    damage_stored: float = Field(description="Sum of the stored daily damage rows.")
-    damage_committed: float = Field(description="Damage of all closed rainflow cycles.")
-    damage_pending_residue: float = Field(
-        description="Damage the open residue adds when closed now as half cycles."
-    )
-    damage: float = Field(description="committed + pending residue: the D of the projection.")
-    damage_in_window: float
-    damage_rate_per_year: float
-    remaining_life_years: float | None = Field(description="(1 − D) / rate; null: no rate yet.")
-    projected_end_date: str | None = Field(description="YYYY-MM-DD in the site's time zone.")
-    design_life_years: float
-    live: bool = Field(description="Whether the worker's live damage summary was available.")
-    note: str | None = None
-
-
-class Life(BaseModel):
-    model_config = ConfigDict(
-        json_schema_extra={
-            "examples": [
-                {
-                    "mill": "sag-5200-lrs",
-                    "time_zone": "America/Santiago",
-                    "design_life_years": 20.0,
-                    "rate_window": {
-                        "start_ns": 1714521600000000000,
-                        "end_ns": 1717200000000000000,
-                        "seconds": 2678400.0,
-                        "first_day": "2024-05-01",
-                        "max_days": 30,
-                    },
-                    "basis": {
-                        "miner_limit": 1.0,
-                        "damage": "…",
-                        "rate": "…",
-                        "remaining_life": "…",
-                    },
-                    "components": {
-                        "pinion_combined": {
-                            "damage_stored": 0.0123,
-                            "damage_committed": 0.0124,
-                            "damage_pending_residue": 0.0001,
-                            "damage": 0.0125,
-                            "damage_in_window": 0.0011,
-                            "damage_rate_per_year": 0.0134,
-                            "remaining_life_years": 73.6,
-                            "projected_end_date": "2097-12-30",
-                            "design_life_years": 20.0,
-                            "live": True,
-                            "note": None,
-                        }
-                    },
-                }
-            ]
-        }
-    )
-
-    mill: str
-    time_zone: str
-    design_life_years: float
-    rate_window: dict[str, Any] = Field(
-        description="start_ns/end_ns/seconds of monitored time the rate is computed over, "
-        "first_day of the stored days used, max_days of the window."
-    )
-    basis: dict[str, Any] = Field(description="How damage, rate and remaining life are taken.")
-    components: dict[str, ComponentLife]
-
-
 class StartOut(BaseModel):
     t_ns: int
     local_time: str
@@ -175,6 +108,7 @@ class MonthStarts(BaseModel):
             "examples": [
                 {
                     "mill": "sag-5200-lrs",
+                    "simulated": False,
                     "month": "2024-05",
                     "time_zone": "America/Santiago",
                     "count": 21,
@@ -203,6 +137,7 @@ class MonthStarts(BaseModel):
     )
 
     mill: str
+    simulated: bool
     month: str
     time_zone: str
     count: int
@@ -221,6 +156,7 @@ class Spectrum(BaseModel):
             "examples": [
                 {
                     "mill": "sag-5200-lrs",
+                    "simulated": False,
                     "t_ns": 1714560600000000000,
                     "harmonics": {
                         "t_start_ns": 1714560000000000000,
@@ -237,6 +173,7 @@ class Spectrum(BaseModel):
     )
 
     mill: str
+    simulated: bool
     t_ns: int = Field(description="End of the Welch window, ns UTC.")
     harmonics: dict[str, Any] = Field(
         description="The harmonic table: expected lines measured per channel and unexplained "
@@ -263,6 +200,7 @@ ALARM_EXAMPLE: JsonDict = {
     "acked_by": None,
     "cleared_ns": None,
     "seq": 1,
+    "simulated": False,
 }
 
 
@@ -289,6 +227,9 @@ class AlarmOut(BaseModel):
     acked_by: str | None
     cleared_ns: int | None
     seq: int = Field(description="Number of transitions so far.")
+    simulated: bool = Field(
+        False, description="Raised on simulated data (the demo's mills); the message says so too."
+    )
 
 
 class TransitionOut(BaseModel):

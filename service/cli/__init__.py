@@ -7,7 +7,7 @@ The ``millwatch`` command line: one module per sub-command, composed by ``main``
 * one module per sub-command, each with ``add_parser(subparsers)`` that registers it and sets
   its handler: ``demo``, ``rainflow``, ``simulate``, ``spectrum``, ``replay``, ``archive``,
   ``serve`` (a worker, and the API with it), ``router``, ``api`` (the API alone, over zenoh),
-  ``analyze``.
+  ``analyze``, ``report`` (one monthly report from a store file, on demand).
 * ``args`` — argument types that name the rule a value broke; ``signal_files`` — ``.npy`` /
   ``.csv`` signals read in blocks, for the offline commands.
 

@@ -42,10 +42,17 @@ def demo_settings(directory: Path, zenoh_port: int, api_port: int, mills: int) -
         "zenoh": {"listen": [tcp_endpoint(zenoh_port)]},
         "archive": {"directory": str(directory / "archive")},
         "store": {"path": str(directory / "millwatch.db")},
+        "reports": {"directory": str(directory / "reports")},
         "worker": {"checkpoint_seconds": 30.0, "stale_after_s": 10.0},
         "api": {"host": "127.0.0.1", "port": api_port},
         "mills": {"files": [str(f) for f in files]},
     })  # fmt: skip
+
+
+def simulated_mills(mills: dict[str, MillConfig]) -> dict[str, MillConfig]:
+    """The demo's mills marked ``simulated`` whatever their files say: the demo's data come
+    from the simulator, and every answer, report and alarm must say so."""
+    return {m: c.model_copy(update={"simulated": True}) for m, c in mills.items()}
 
 
 class Gateways:
@@ -132,7 +139,7 @@ def _main(args: argparse.Namespace) -> int:
     directory = args.dir or Path(tempfile.mkdtemp(prefix="millwatch-demo-"))
     zenoh_port = free_loopback_port()
     settings = demo_settings(directory, zenoh_port, args.port, mills)
-    runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
+    runtime = ServiceRuntime(settings, simulated_mills(settings.load_mills()), MillJob)
     runtime.start()
     gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene)
     server = uvicorn.Server(uvicorn.Config(create_app(runtime), host="127.0.0.1",
@@ -170,6 +177,7 @@ def _announce(settings: ServiceSettings, runtime: ServiceRuntime, directory: Pat
         f"  API        {base}/mills   {base}/mills/<id>   {base}/ready   {base}/docs\n"
         f"  archive    {settings.archive.directory}\n"
         f"  store      {settings.store.path}\n"
+        f"  reports    {settings.reports.directory} (each mill's month, after its local end)\n"
         f"  then try   millwatch analyze {settings.archive.directory} "
         f"--mill deploy/mills/sag-5200-lrs.toml\n"
         "Ctrl-C stops (final checkpoint, archive files finished).\n"

@@ -24,8 +24,15 @@ __all__ = ["COMMANDS", "Command", "build_parser", "main"]
 
 #: Errors a user can fix from the message alone: printed without a traceback (the commands'
 #: own, e.g. :class:`~service.cli.signal_files.SignalFileError`, are ``ValueError``\ s), and
-#: :class:`ingest.archive.files.ArchiveError` (see :func:`_is_user_error`).
+#: those of :data:`MODULE_ERRORS`.
 USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, KeyError, OSError)
+
+#: User errors defined in modules a command imports, as ``(module, class)``: looked up, not
+#: imported, when a command fails (a command that raised one has imported its module).
+MODULE_ERRORS = (
+    ("ingest.archive.files", "ArchiveError"),
+    ("service.store.migrations", "StoreError"),
+)
 
 
 class Command(NamedTuple):
@@ -89,6 +96,11 @@ COMMANDS = (
         "analyze",
         "service.cli.analyze",
         "analyse an MCAP recording: starts, stops, barring, steady state, damage by phase",
+    ),
+    Command(
+        "report",
+        "service.cli.report",
+        "write one mill's monthly report (HTML, PDF, CSV) from a store file",
     ),
 )
 
@@ -154,12 +166,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _is_user_error(exc: Exception) -> bool:
-    """One of :data:`USER_ERRORS`, or an archive error (its module is looked up, not imported:
-    a command that raised one has imported it)."""
-    archive = sys.modules.get("ingest.archive.files")
-    return isinstance(exc, USER_ERRORS) or (
-        archive is not None and isinstance(exc, archive.ArchiveError)
-    )
+    """One of :data:`USER_ERRORS` or of :data:`MODULE_ERRORS`."""
+    if isinstance(exc, USER_ERRORS):
+        return True
+    for module, name in MODULE_ERRORS:
+        found = sys.modules.get(module)
+        if found is not None and isinstance(exc, getattr(found, name)):
+            return True
+    return False
 
 
 if __name__ == "__main__":

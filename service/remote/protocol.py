@@ -64,6 +64,7 @@ class Question(StrEnum):
     ALARMS = "alarms"
     ALARM = "alarm"
     ACK = "ack"
+    FLEET = "fleet"
 
 
 # ---------------------------------------------------------------------- arguments

@@ -48,6 +48,7 @@ from service.remote.protocol import (
     month_of,
     problem_of,
 )
+from service.reports.fleet import fleet_mill_to_dict
 from service.reports.monthly import report_to_dict
 
 __all__ = ["ANSWERS", "WorkerQueryables"]
@@ -85,6 +86,7 @@ ANSWERS: dict[Question, Answer] = {
     Question.ALARMS: lambda b, m, _: [row_to_dict(r) for r in b.alarm_board().rows(m)],
     Question.ALARM: _alarm,
     Question.ACK: _ack,
+    Question.FLEET: lambda b, m, _: fleet_mill_to_dict(b.fleet_mill(m)),
 }
 """How a worker answers each :class:`~service.remote.protocol.Question`."""
 

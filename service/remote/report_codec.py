@@ -21,7 +21,6 @@ import types
 import typing
 from typing import Any
 
-from service.reports import monthly as monthly_report
 from service.reports.monthly import MonthlyReport
 
 __all__ = ["ReportDecodeError", "report_from_dict"]
@@ -33,7 +32,7 @@ class ReportDecodeError(ValueError):
 
 @functools.cache
 def _hints(cls: type) -> dict[str, Any]:
-    return typing.get_type_hints(cls, vars(monthly_report))
+    return typing.get_type_hints(cls)  # in the namespace of the class's own module
 
 
 def _decode(tp: Any, value: Any, where: str) -> Any:

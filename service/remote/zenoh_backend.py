@@ -47,7 +47,7 @@ from ingest.keys import (
     worker_token_pattern,
 )
 from service.api.alarm_board import AlarmBoard, row_from_dict
-from service.api.mill_views import config_of, mill_detail, mill_summary
+from service.api.mill_views import config_of, mill_detail, mill_summary, site_mills
 from service.errors import GatewayTimeout, NotFound, Unavailable
 from service.remote.metrics import remote_registry
 from service.remote.protocol import (
@@ -59,6 +59,7 @@ from service.remote.protocol import (
     problem_from,
 )
 from service.remote.report_codec import ReportDecodeError, report_from_dict
+from service.reports.fleet import build_fleet, fleet_mill_from_dict, fleet_to_dict
 from service.reports.monthly import MonthlyReport
 
 __all__ = ["DEFAULT_TIMEOUT_S", "ZenohBackend"]
@@ -157,13 +158,15 @@ class ZenohBackend:
         gathered = self._gather(Question.ALARMS)
         return self._board.merge(row_from_dict(r) for rows in gathered.values() for r in rows)
 
-    def _gather(self, what: Question) -> dict[str, Any]:
-        """One ``get`` on every mill's ``@query/<what>``: the answers by mill id (mills whose
-        worker is gone, or that did not answer within the timeout, are missing)."""
+    def _gather(self, what: Question, site: str | None = None) -> dict[str, Any]:
+        """One ``get`` on every mill's (of ``site``'s) ``@query/<what>``: the answers by mill
+        id (mills whose worker is gone, or that did not answer within the timeout, are
+        missing)."""
         out: dict[str, Any] = {}
         if not self.live_workers():
             return out
-        for reply in self.session.get(query_pattern(what), timeout=self.timeout_s):
+        pattern = query_pattern(what) if site is None else query_pattern(what, site=site)
+        for reply in self.session.get(pattern, timeout=self.timeout_s):
             if reply.ok is None:
                 log.warning("a worker failed %s: %s", what, _error_payload(reply)[:200])
                 continue
@@ -276,6 +279,23 @@ class ZenohBackend:
             raise Unavailable("Report unreadable", f"The worker's report of {mill_id!r} does "
                               f"not fit this API's version: {exc}.") from exc  # fmt: skip
 
+    def fleet(self, site: str) -> dict[str, Any]:
+        """The site's mills side by side: one ``get`` on the site's ``@query/fleet`` keys,
+        each worker answering for its mills; mills that did not answer are listed as
+        ``unreachable``."""
+        mills = site_mills(self.mills, site)
+        gathered = self._gather(Question.FLEET, site=next(iter(mills.values())).site)
+        lines = []
+        for mill_id in mills:
+            if mill_id in gathered:
+                try:
+                    lines.append(fleet_mill_from_dict(gathered[mill_id]))
+                except (KeyError, TypeError) as exc:
+                    log.warning("fleet line of %s unreadable: %s", mill_id, exc)
+        unreachable = [m for m in mills if m not in {x.mill for x in lines}]
+        zone = next(iter(mills.values())).time_zone
+        return fleet_to_dict(build_fleet(site, lines, unreachable, time.time_ns(), zone))
+
     def _alarm_row_mill(self, alarm_id: str) -> str:
         row = self._board.get(alarm_id)
         if row is None:
@@ -329,6 +349,15 @@ class ZenohBackend:
         )
         return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
                 "stalled_mills": stalled}  # fmt: skip
+
+    def reports_status(self) -> dict[str, Any]:
+        """Each live worker's month-end report job, as its status answers carry it (without
+        the per-mill ``latest`` months of the in-process answer)."""
+        workers = {
+            a["worker"].get("name"): a["worker"].get("reports", {"enabled": None})
+            for a in self.statuses().values()
+        }
+        return {"workers": workers}
 
     def registry(self) -> CollectorRegistry:
         if self._registry is None:

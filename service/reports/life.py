@@ -1,166 +1,657 @@
-"""Remaining fatigue life per component, from stored daily damage and the live analyzer.
+"""Remaining fatigue life per component, with its honesty built in: one computation for
+``GET /mills/{id}/life``, the monthly report and the fleet view.
 
-Basis (seed 000 §8.2, Palmgren–Miner with failure at D = 1):
+Basis (seed 000 §8.2: rainflow + Palmgren–Miner on the configured S-N curve, failure at the
+Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
 
-* **damage so far** ``D`` — the sum of the stored daily damage rows (cycles attributed to a
-  phase and day), or, when the worker's live summary is larger, its damage of all closed
-  cycles (``committed``). The open rainflow residue (``pending_residue``: closing the open
-  turning points now as ASTM E1049 half cycles) is reported beside it and *included* in ``D``
-  for the projection, which is the conservative choice.
-* **damage rate** — damage of the last :data:`RATE_WINDOW_DAYS` local calendar days (today
-  included, partial) divided by the time monitored in those days (from the later of the
-  window's first local midnight and the start of monitoring, to the latest analysed sample),
-  expressed per year of 365.25 days.
-* **remaining life** ``(1 − D) / rate``, and the date it projects to in the site's time zone;
-  none when nothing was counted yet (rate 0: no basis for a projection).
+* **damage before monitoring** (``[life]`` of the mill file, :class:`~analytics.drivetrain.
+  mill_config.LifeConfig`): an estimated prior damage per component (``estimated``), or the
+  damage rate of the first N days of monitoring applied from commissioning to the start of
+  monitoring (``first_N_days``; only once the minimum history is there), or none (``none``:
+  the shaft is taken as new when monitoring began, and the answer says so).
+* **damage so far** ``D`` = prior + monitored (the stored daily rows, or the worker's live
+  committed damage when larger) + the open rainflow residue closed now as ASTM E1049 half
+  cycles (conservative).
+* **no extrapolation from too little history**: below ``min_monitoring_days`` of monitored
+  time or ``min_starts`` starts the status is
+  ``insufficient_history``, ``missing`` says what is lacking, and every life is null with
+  that reason; damage so far is still given.
+* **a range, not a point**: remaining life ``(1 − D) / rate`` at three rates — the last
+  ``rate_window_days`` local days, the whole monitored time, and the worst local calendar month
+  with at least :data:`WORST_MONTH_MIN_DAYS` days monitored. A rate is the stored damage of its
+  period per year of *monitored* time in it: per local day, from its first to its last analysed
+  sample (the store's coverage, :meth:`~service.store.database.Store.mill_days`), so a
+  telemetry outage of days does not dilute the rate (gaps within a day are not subtracted).
+* **end dates**: present exactly when the life is; a date beyond 9999-12-31 is given as
+  ``9999-12-31`` with ``end_date_capped`` true (practically unlimited).
+* **what drives it**: monitored damage by phase (store names: ``start``, ``run``, ``stop``,
+  ``barring``, ``stopped``, ``unknown``) and by component; life at the App. D start rates
+  (5/day, 1/day, 1/week, 1/month per 4-week month) from the measured cost of a start
+  (:func:`analytics.mill.phase_damage.start_cost`).
 
-Pure: plain rows and dicts in, a JSON-ready dict out.
+Pure: :class:`LifeInputs` (rows, coverage, counts) in, :class:`LifeReport` (frozen dataclasses,
+JSON-ready through :func:`life_to_dict`) out. The store is read by
+:mod:`service.reports.history`.
 """
 
 from __future__ import annotations
 
 import math
 import zoneinfo
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from collections import defaultdict
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta
 from typing import Any
 
+from pydantic import ConfigDict, with_config
+
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.phase_damage import (
+    APP_D_SCENARIOS,
+    MONTH_S,
+    project_monthly_damage,
+    start_cost,
+)
+from service.reports.plain import plain
 from service.store.records import DamageRow
 
-__all__ = ["RATE_WINDOW_DAYS", "LifeInputs", "life_report"]
+__all__ = [
+    "WORST_MONTH_MIN_DAYS",
+    "ComponentLife",
+    "LifeBasis",
+    "LifeHistory",
+    "LifeInputs",
+    "LifeReport",
+    "PriorDamage",
+    "Projection",
+    "WhatIfLife",
+    "compute_life",
+    "life_to_dict",
+    "local_iso",
+    "midnight_ns",
+    "years_range_text",
+]
 
-RATE_WINDOW_DAYS = 30
 SECONDS_PER_YEAR = 365.25 * 86_400.0
+DAY_NS = 86_400 * 10**9
 _NS = 1_000_000_000
-COMPONENT_KINDS = ("pinion_combined", "pinion_torsion", "motor_torsion")
+WORST_MONTH_MIN_DAYS = 7.0
+"""A calendar month counts for the worst-month rate once this many days of it were monitored."""
+LAST_DATE = date(9999, 12, 31)
+MINER_LIMIT = 1.0
 
 
-@dataclass(frozen=True)
+# ----------------------------------------------------------------------------- the data
+@dataclass(frozen=True, slots=True)
 class LifeInputs:
-    """What a life report is computed from: stored rows, the worker's status, the clock."""
+    """What the life of one mill is computed from, as of ``evaluated_ns``.
+
+    ``rows``: stored daily damage rows up to the evaluation day; ``coverage``: the monitored
+    intervals ``(first analysed sample, just past the last)`` in ns, oldest first, up to the
+    evaluation time (one per local day);
+    ``starts``: starts since monitoring began; ``phase_seconds``: seconds in the ``start``,
+    ``stop`` and ``run`` phases over the monitored time; ``live``: the worker's damage summary
+    per component (``committed``, ``pending_residue``), only when evaluating now."""
 
     config: MillConfig
     rows: list[DamageRow]
-    status: Mapping[str, Any]
-    now_ns: int
+    coverage: list[tuple[int, int]]
+    starts: int
+    phase_seconds: Mapping[str, float]
+    evaluated_ns: int
+    live: Mapping[str, Mapping[str, float]] | None = None
 
 
-def components(config: MillConfig) -> list[str]:
-    """The analysed components: each kind on each drive side (``_bs``/``_nbs`` suffix)."""
-    return [f"{k}_{s}" if s else k for s in config.sides for k in COMPONENT_KINDS]
+@dataclass(frozen=True, slots=True)
+class LifeHistory:
+    """How much monitoring the answer rests on, against the configured minimum."""
+
+    monitored_since_ns: int | None
+    monitored_since: str | None
+    last_sample_ns: int | None
+    last_sample: str | None
+    monitored_days: float
+    days_with_data: int
+    starts: int
+    min_days: float
+    min_starts: int
 
 
-def _window(inputs: LifeInputs, tz: zoneinfo.ZoneInfo) -> tuple[int, int, str]:
-    """``(start_ns, end_ns, first_day)`` of the rate window (module docstring)."""
-    status = inputs.status
-    end_ns = int(status.get("last_sample_ns") or inputs.now_ns)
-    end_day = datetime.fromtimestamp(end_ns / 1e9, tz).date()
-    first_day = end_day - timedelta(days=RATE_WINDOW_DAYS - 1)
-    stored_days = [date.fromisoformat(r.day) for r in inputs.rows]
-    if stored_days:
-        first_day = max(first_day, min(stored_days))
-    start_ns = int(datetime.combine(first_day, datetime.min.time(), tz).timestamp() * _NS)
-    since = status.get("monitored_since_ns")
-    if since is not None:
-        start_ns = max(start_ns, int(since))
-    return start_ns, max(end_ns, start_ns), first_day.isoformat()
+@dataclass(frozen=True, slots=True)
+class PriorDamage:
+    """Damage before monitoring began and how it was taken (``method``: ``none``,
+    ``estimated`` or ``first_<N>_days``)."""
+
+    method: str
+    commissioned: str | None
+    years_before_monitoring: float | None
+    rate_days: float | None
+    per_component: dict[str, float]
+    note: str
 
 
-def _sums(rows: Iterable[DamageRow], since_day: str) -> tuple[dict[str, float], dict[str, float]]:
-    """Stored damage per component: all days, and the days of the rate window."""
-    total: dict[str, list[float]] = {}
-    recent: dict[str, list[float]] = {}
-    for r in rows:
-        total.setdefault(r.component, []).append(r.damage)
-        if r.day >= since_day:
-            recent.setdefault(r.component, []).append(r.damage)
-    return (
-        {c: math.fsum(v) for c, v in total.items()},
-        {c: math.fsum(v) for c, v in recent.items()},
+@dataclass(frozen=True, slots=True)
+class Projection:
+    """Remaining life at one rate (``basis``: ``last_<N>_days``, ``since_monitoring`` or
+    ``worst_month`` with its ``month``); ``reason`` says why the life is null."""
+
+    basis: str
+    rate_per_year: float | None
+    remaining_life_years: float | None
+    end_date: str | None
+    end_date_capped: bool
+    reason: str | None
+    month: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class WhatIfLife:
+    """App. D scenario: starts per 4-week month → damage per month and remaining life."""
+
+    scenario: str
+    starts_per_month: float
+    damage_per_month: float | None
+    remaining_life_years: float | None
+    end_date: str | None
+    end_date_capped: bool
+
+
+@dataclass(frozen=True, slots=True)
+class ComponentLife:
+    """Damage and remaining life of one component (Miner sums, dimensionless)."""
+
+    component: str
+    damage_prior: float
+    damage_monitored: float
+    damage_pending_residue: float
+    damage: float
+    design_line: float | None
+    damage_by_phase: dict[str, float]
+    share_by_phase: dict[str, float]
+    share_of_mill: float | None
+    projections: list[Projection]
+    remaining_life_years_min: float | None
+    remaining_life_years_max: float | None
+    what_if: list[WhatIfLife]
+    live: bool
+
+
+@dataclass(frozen=True, slots=True)
+class LifeBasis:
+    """What the numbers rest on: the Miner limit, the S-N curve, the rules (plain words)."""
+
+    miner_limit: float
+    sn_curve: dict[str, Any]
+    damage: str
+    rates: str
+    remaining_life: str
+    end_date: str
+    design_line: str
+
+
+#: An answer of ``GET /mills/{id}/life`` (abridged), the OpenAPI example.
+LIFE_EXAMPLE: dict[str, Any] = {
+    "mill": "sag-5200-lrs", "site": "rustenburg", "simulated": True,
+    "time_zone": "Africa/Johannesburg", "evaluated_at_ns": 1709251200000000000,
+    "evaluated_at": "2024-03-01T02:00:00+02:00", "status": "ok", "missing": [],
+    "design_life_years": 20.0,
+    "history": {"monitored_since_ns": 1704067200000000000,
+                "monitored_since": "2024-01-01T02:00:00+02:00", "monitored_days": 58.9,
+                "starts": 41, "min_days": 14.0, "min_starts": 1},
+    "prior": {"method": "first_90_days", "commissioned": "2011-06-01",
+              "years_before_monitoring": 12.59, "rate_days": 58.9,
+              "per_component": {"pinion_combined": 0.21}, "note": "…"},
+    "basis": {"miner_limit": 1.0, "sn_curve": {"model": "shigley"}},
+    "components": {"pinion_combined": {
+        "component": "pinion_combined", "damage_prior": 0.21, "damage_monitored": 0.0027,
+        "damage_pending_residue": 0.0, "damage": 0.2127, "design_line": 0.64,
+        "damage_by_phase": {"run": 0.0012, "start": 0.0015},
+        "share_by_phase": {"run": 0.44, "start": 0.56}, "share_of_mill": 0.7,
+        "projections": [{"basis": "last_30_days", "rate_per_year": 0.021,
+                         "remaining_life_years": 37.5, "end_date": "2061-08-30",
+                         "end_date_capped": False, "reason": None}],
+        "remaining_life_years_min": 31.0, "remaining_life_years_max": 37.5,
+        "what_if": [], "live": True}},
+    "governing_component": "pinion_combined",
+    "note": "pinion_combined governs with 31 to 38 years left …", "rate_window_days": 30,
+    "notes": [],
+}  # fmt: skip
+
+
+@with_config(ConfigDict(json_schema_extra={"examples": [LIFE_EXAMPLE]}))
+@dataclass(frozen=True, slots=True)
+class LifeReport:
+    """Remaining life of every component of one mill (module docstring); times ns UTC with
+    ISO-8601 local times beside them."""
+
+    mill: str
+    site: str
+    simulated: bool
+    time_zone: str
+    evaluated_at_ns: int
+    evaluated_at: str
+    status: str
+    missing: list[str]
+    design_life_years: float
+    history: LifeHistory
+    prior: PriorDamage
+    basis: LifeBasis
+    components: dict[str, ComponentLife]
+    governing_component: str | None
+    note: str
+    rate_window_days: int = 30
+    notes: list[str] = field(default_factory=list)
+
+
+def life_to_dict(report: LifeReport) -> dict[str, Any]:
+    """JSON-ready plain data (non-finite floats as None)."""
+    out: dict[str, Any] = plain(report)
+    return out
+
+
+def local_iso(t_ns: int | None, tz: zoneinfo.ZoneInfo) -> str | None:
+    """ISO-8601 local time of ``t_ns`` (seconds), None for None."""
+    if t_ns is None:
+        return None
+    return datetime.fromtimestamp(t_ns / 1e9, tz).isoformat(timespec="seconds")
+
+
+# ----------------------------------------------------------------------------- computing
+@dataclass(frozen=True, slots=True)
+class _Ctx:
+    config: MillConfig
+    tz: zoneinfo.ZoneInfo
+    since: int | None
+    last: int | None
+    end_ns: int
+    sufficient: bool
+    why_not: str
+    coverage: list[tuple[int, int]]
+
+    def monitored_s(self, lo: int, hi: int) -> float:
+        """Monitored seconds within ``[lo, hi)``."""
+        return math.fsum(max(min(b, hi) - max(a, lo), 0) for a, b in self.coverage) / _NS
+
+
+def compute_life(inputs: LifeInputs) -> LifeReport:
+    """The life report of one mill (module docstring for the basis)."""
+    config = inputs.config
+    tz = zoneinfo.ZoneInfo(config.time_zone)
+    history = _history(inputs, tz)
+    missing = _missing(history)
+    since, last = _span(inputs.coverage)
+    end_ns = last if last is not None else inputs.evaluated_ns
+    ctx = _Ctx(config, tz, since, last, end_ns, not missing,
+               "insufficient history: " + "; ".join(missing) if missing else "",
+               inputs.coverage)  # fmt: skip
+    monitored = _by_component_phase(inputs.rows)
+    prior = _prior(ctx, inputs.rows)
+    live = inputs.live or {}
+    names = list(dict.fromkeys([*config.components, *sorted(monitored), *sorted(live)]))
+    total_monitored = math.fsum(math.fsum(p.values()) for p in monitored.values())
+    comps = {
+        c: _component(ctx, inputs, c, monitored.get(c, {}), prior.per_component.get(c, 0.0),
+                      live.get(c), total_monitored)
+        for c in names
+    }  # fmt: skip
+    governing = _governing(comps)
+    status = "ok" if ctx.sufficient else "insufficient_history"
+    return LifeReport(
+        mill=config.id,
+        site=config.site,
+        simulated=config.simulated,
+        time_zone=config.time_zone,
+        evaluated_at_ns=inputs.evaluated_ns,
+        evaluated_at=local_iso(inputs.evaluated_ns, tz) or "",
+        status=status,
+        missing=missing,
+        design_life_years=config.design_life_years,
+        history=history,
+        prior=prior,
+        basis=_basis(config),
+        components=comps,
+        governing_component=governing,
+        note=_note(config, status, missing, comps.get(governing) if governing else None, prior),
+        rate_window_days=config.life.rate_window_days,
     )
 
 
-def _projection(
-    damage: float, per_year: float, end_ns: int, tz: zoneinfo.ZoneInfo
-) -> dict[str, Any]:
-    if damage >= 1.0:
-        return {
-            "remaining_life_years": 0.0,
-            "projected_end_date": None,
-            "note": "Miner limit D = 1 reached",
-        }
-    if per_year <= 0.0:
-        return {
-            "remaining_life_years": None,
-            "projected_end_date": None,
-            "note": "no damage counted in the rate window: no basis for a projection",
-        }
-    years = (1.0 - damage) / per_year
-    try:
-        end = datetime.fromtimestamp(end_ns / 1e9, tz) + timedelta(days=years * 365.25)
-        end_date: str | None = end.date().isoformat()
-    except (OverflowError, ValueError):
-        end_date = None  # beyond the calendar (year 9999): practically unlimited
-    return {"remaining_life_years": years, "projected_end_date": end_date, "note": None}
+def _span(coverage: list[tuple[int, int]]) -> tuple[int | None, int | None]:
+    return (coverage[0][0], coverage[-1][1]) if coverage else (None, None)
 
 
+def _history(inputs: LifeInputs, tz: zoneinfo.ZoneInfo) -> LifeHistory:
+    since, last = _span(inputs.coverage)
+    days = math.fsum(b - a for a, b in inputs.coverage) / DAY_NS
+    life = inputs.config.life
+    return LifeHistory(
+        monitored_since_ns=since,
+        monitored_since=local_iso(since, tz),
+        last_sample_ns=last,
+        last_sample=local_iso(last, tz),
+        monitored_days=max(days, 0.0),
+        days_with_data=len({r.day for r in inputs.rows}),
+        starts=inputs.starts,
+        min_days=life.min_monitoring_days,
+        min_starts=life.min_starts,
+    )
+
+
+def _missing(h: LifeHistory) -> list[str]:
+    """What is lacking before a projection is made (empty: enough)."""
+    out = []
+    if h.monitored_since_ns is None:
+        out.append("no data analysed yet")
+    elif h.monitored_days < h.min_days:
+        out.append(f"{h.min_days - h.monitored_days:.1f} more days of monitoring "
+                   f"(have {h.monitored_days:.2f} of {h.min_days:g})")  # fmt: skip
+    if h.starts < h.min_starts:
+        out.append("no start seen yet" if h.starts == 0 and h.min_starts == 1 else
+                   f"{h.min_starts - h.starts} more start(s) (have {h.starts})")  # fmt: skip
+    return out
+
+
+def _by_component_phase(rows: list[DamageRow]) -> dict[str, dict[str, float]]:
+    parts: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for r in rows:
+        parts[r.component][r.phase].append(r.damage)
+    return {c: {p: math.fsum(v) for p, v in sorted(ph.items())} for c, ph in parts.items()}
+
+
+def midnight_ns(day: date, tz: zoneinfo.ZoneInfo) -> int:
+    """UTC ns of the local midnight starting ``day``."""
+    return int(datetime(day.year, day.month, day.day, tzinfo=tz).timestamp()) * _NS
+
+
+def _local_day(t_ns: int, tz: zoneinfo.ZoneInfo) -> date:
+    return datetime.fromtimestamp(t_ns / 1e9, tz).date()
+
+
+def _rate(ctx: _Ctx, rows: list[DamageRow], comp: str, first_day: date, lo_ns: int, hi_ns: int,
+          last_day: date | None = None) -> float | None:  # fmt: skip
+    """Stored damage of ``comp`` on days ``[first_day, last_day]`` per year of monitored time
+    in ``[lo, hi)``."""
+    seconds = ctx.monitored_s(lo_ns, hi_ns)
+    if seconds <= 0:
+        return None
+    lo, hi = first_day.isoformat(), (last_day or LAST_DATE).isoformat()
+    d = math.fsum(r.damage for r in rows if r.component == comp and lo <= r.day <= hi)
+    return d / seconds * SECONDS_PER_YEAR
+
+
+# ----------------------------------------------------------------------------- prior
+def _prior(ctx: _Ctx, rows: list[DamageRow]) -> PriorDamage:
+    life = ctx.config.life
+    commissioned = life.commissioned.isoformat() if life.commissioned else None
+    years = _years_before(ctx)
+    if life.prior_damage is not None:
+        value = life.prior_damage
+        comps = ctx.config.components
+        if isinstance(value, dict):
+            per = {c: float(value.get(c, 0.0)) for c in comps}
+        else:
+            per = dict.fromkeys(comps, float(value))
+        return PriorDamage("estimated", commissioned, years, None, per,
+                           f"estimated damage before monitoring, since commissioning on "
+                           f"{commissioned} (configured)")  # fmt: skip
+    n = life.prior_rate_days
+    if n is None:
+        why = ("no commissioning date and prior damage configured: damage counts from the "
+               "start of monitoring, as if the shafts were new then")  # fmt: skip
+        return PriorDamage("none", None, None, None, {}, why)
+    method = f"first_{n}_days"
+    if not ctx.sufficient or ctx.since is None or ctx.last is None or years is None:
+        return PriorDamage(method, commissioned, years, None, {},
+                           f"the first {n} days' rate is applied from commissioning on "
+                           f"{commissioned} once the minimum history is there")  # fmt: skip
+    hi = min(ctx.last, ctx.since + n * DAY_NS)
+    first = _local_day(ctx.since, ctx.tz)
+    last_day = _local_day(hi - 1, ctx.tz)
+    per = {}
+    for c in ctx.config.components:
+        rate = _rate(ctx, rows, c, first, ctx.since, hi, last_day) or 0.0
+        per[c] = min(rate * years, MINER_LIMIT)
+    days = ctx.monitored_s(ctx.since, hi) * _NS / DAY_NS
+    return PriorDamage(method, commissioned, years, days, per,
+                       f"the damage rate of the first {days:.1f} days monitored applied "
+                       f"from commissioning on {commissioned} to the start of monitoring "
+                       f"({years:.2f} years; assumed)")  # fmt: skip
+
+
+def _years_before(ctx: _Ctx) -> float | None:
+    """Years from commissioning (local midnight) to the start of monitoring (≥ 0)."""
+    commissioned = ctx.config.life.commissioned
+    if commissioned is None:
+        return None
+    start = ctx.since if ctx.since is not None else ctx.end_ns
+    return max(start - midnight_ns(commissioned, ctx.tz), 0) / _NS / SECONDS_PER_YEAR
+
+
+# ----------------------------------------------------------------------------- per component
 def _component(
-    stored: float, recent: float, live: Mapping[str, float] | None, window_s: float
-) -> dict[str, Any]:
-    committed = max(stored, float(live["committed"])) if live else stored
+    ctx: _Ctx,
+    inputs: LifeInputs,
+    comp: str,
+    phases: dict[str, float],
+    prior: float,
+    live: Mapping[str, float] | None,
+    total_monitored: float,
+) -> ComponentLife:
+    stored = math.fsum(phases.values())
+    monitored = max(stored, float(live["committed"])) if live else stored
     residue = float(live["pending_residue"]) if live else 0.0
-    per_year = recent / window_s * SECONDS_PER_YEAR if window_s > 0 else 0.0
-    return {
-        "damage_stored": stored,
-        "damage_committed": committed,
-        "damage_pending_residue": residue,
-        "damage": committed + residue,
-        "damage_in_window": recent,
-        "damage_rate_per_year": per_year,
-        "live": live is not None,
-    }
+    damage = prior + monitored + residue
+    projections = [_project(ctx, damage, basis, rate, month)
+                   for basis, rate, month in _rates(ctx, inputs.rows, comp)]  # fmt: skip
+    years = [p.remaining_life_years for p in projections if p.remaining_life_years is not None]
+    return ComponentLife(
+        component=comp,
+        damage_prior=prior,
+        damage_monitored=monitored,
+        damage_pending_residue=residue,
+        damage=damage,
+        design_line=_design_line(ctx),
+        damage_by_phase=phases,
+        share_by_phase={p: d / stored for p, d in phases.items()} if stored > 0 else {},
+        share_of_mill=stored / total_monitored if total_monitored > 0 else None,
+        projections=projections,
+        remaining_life_years_min=min(years) if years else None,
+        remaining_life_years_max=max(years) if years else None,
+        what_if=_what_if(ctx, inputs, phases, damage),
+        live=live is not None,
+    )
 
 
-def life_report(inputs: LifeInputs) -> dict[str, Any]:
-    """Remaining life of every component of one mill (module docstring for the basis)."""
-    config = inputs.config
-    tz = zoneinfo.ZoneInfo(config.time_zone)
-    start_ns, end_ns, first_day = _window(inputs, tz)
-    window_s = (end_ns - start_ns) / _NS
-    total, recent = _sums(inputs.rows, first_day)
-    live = inputs.status.get("damage") or {}
-    names = list(dict.fromkeys([*components(config), *sorted(total), *sorted(live)]))
-    out = {}
-    for comp in names:
-        c = _component(total.get(comp, 0.0), recent.get(comp, 0.0), live.get(comp), window_s)
-        c |= _projection(c["damage"], c["damage_rate_per_year"], end_ns, tz)
-        c["design_life_years"] = config.design_life_years
-        out[comp] = c
-    return {
-        "mill": config.id,
-        "time_zone": config.time_zone,
-        "design_life_years": config.design_life_years,
-        "rate_window": {
-            "start_ns": start_ns,
-            "end_ns": end_ns,
-            "seconds": window_s,
-            "first_day": first_day,
-            "max_days": RATE_WINDOW_DAYS,
+def _design_line(ctx: _Ctx) -> float | None:
+    """D(t) of the design line at the evaluation: years since commissioning (else since
+    monitoring began) / design life."""
+    commissioned = ctx.config.life.commissioned
+    start = midnight_ns(commissioned, ctx.tz) if commissioned is not None else ctx.since
+    if start is None:
+        return None
+    return max(ctx.end_ns - start, 0) / _NS / SECONDS_PER_YEAR / ctx.config.design_life_years
+
+
+def _rates(
+    ctx: _Ctx, rows: list[DamageRow], comp: str
+) -> list[tuple[str, float | None, str | None]]:
+    """``(basis, rate per year, month)`` for the three projections."""
+    n = ctx.config.life.rate_window_days
+    if ctx.since is None or ctx.last is None:
+        return [(f"last_{n}_days", None, None), ("since_monitoring", None, None),
+                ("worst_month", None, None)]  # fmt: skip
+    first_window = _local_day(ctx.last - 1, ctx.tz) - timedelta(days=n - 1)
+    lo = max(midnight_ns(first_window, ctx.tz), ctx.since)
+    recent = _rate(ctx, rows, comp, first_window, lo, ctx.last)
+    since = _rate(ctx, rows, comp, _local_day(ctx.since, ctx.tz), ctx.since, ctx.last)
+    worst, month = _worst_month(ctx, rows, comp)
+    return [(f"last_{n}_days", recent, None), ("since_monitoring", since, None),
+            ("worst_month", worst, month)]  # fmt: skip
+
+
+def _months(ctx: _Ctx) -> list[tuple[str, int, int]]:
+    """``(YYYY-MM, lo, hi)`` of the local months the monitored time touches, clipped to it."""
+    assert ctx.since is not None and ctx.last is not None
+    out: list[tuple[str, int, int]] = []
+    day = _local_day(ctx.since, ctx.tz).replace(day=1)
+    while True:
+        nxt = (day + timedelta(days=32)).replace(day=1)
+        lo = max(midnight_ns(day, ctx.tz), ctx.since)
+        hi = min(midnight_ns(nxt, ctx.tz), ctx.last)
+        if lo >= ctx.last:
+            return out
+        out.append((day.strftime("%Y-%m"), lo, hi))
+        day = nxt
+
+
+def _worst_month(ctx: _Ctx, rows: list[DamageRow], comp: str) -> tuple[float | None, str | None]:
+    best: tuple[float | None, str | None] = (None, None)
+    for month, lo, hi in _months(ctx):
+        if ctx.monitored_s(lo, hi) * _NS / DAY_NS < WORST_MONTH_MIN_DAYS:
+            continue
+        first = date.fromisoformat(month + "-01")
+        last = (first + timedelta(days=32)).replace(day=1) - timedelta(days=1)
+        rate = _rate(ctx, rows, comp, first, lo, hi, last)
+        if rate is not None and (best[0] is None or rate > best[0]):
+            best = (rate, month)
+    return best
+
+
+def _end_date(ctx: _Ctx, years: float) -> tuple[str, bool]:
+    """The date ``years`` after the last analysed sample; capped at 9999-12-31 (flag)."""
+    start = _local_day(ctx.end_ns, ctx.tz)
+    days = years * 365.25
+    if days >= (LAST_DATE - start).days:
+        return LAST_DATE.isoformat(), True
+    return (start + timedelta(days=days)).isoformat(), False
+
+
+def _project(ctx: _Ctx, damage: float, basis: str, rate: float | None,
+             month: str | None) -> Projection:  # fmt: skip
+    if not ctx.sufficient:
+        return Projection(basis, rate if ctx.since else None, None, None, False, ctx.why_not,
+                          month)  # fmt: skip
+    if damage >= MINER_LIMIT:
+        end, capped = _end_date(ctx, 0.0)
+        return Projection(basis, rate, 0.0, end, capped, None, month)
+    if rate is None:
+        why = ("no calendar month with "
+               f"{WORST_MONTH_MIN_DAYS:g} days of monitoring yet" if basis == "worst_month"
+               else "no monitored time in the period")  # fmt: skip
+        return Projection(basis, None, None, None, False, why, month)
+    if rate <= 0.0:
+        why = "no damage counted in the period: no basis for a projection"
+        return Projection(basis, rate, None, None, False, why, month)
+    years = (MINER_LIMIT - damage) / rate
+    end, capped = _end_date(ctx, years)
+    return Projection(basis, rate, years, end, capped, None, month)
+
+
+def _what_if(
+    ctx: _Ctx, inputs: LifeInputs, phases: dict[str, float], damage: float
+) -> list[WhatIfLife]:
+    """Life at the App. D start rates from the monitored cost of a start (none when
+    the history is insufficient)."""
+    s = inputs.phase_seconds
+    full = {"start": 0.0, "stop": 0.0, "run": 0.0, **phases}
+    cost = start_cost(full, inputs.starts, s.get("start", 0.0) + s.get("stop", 0.0),
+                      s.get("run", 0.0))  # fmt: skip
+    out: list[WhatIfLife] = []
+    for name, n in APP_D_SCENARIOS.items():
+        per_month = project_monthly_damage(cost, n) if ctx.sufficient else None
+        years, end, capped = _what_if_life(ctx, damage, per_month)
+        out.append(WhatIfLife(name, n, per_month, years, end, capped))
+    return out
+
+
+def _what_if_life(
+    ctx: _Ctx, damage: float, per_month: float | None
+) -> tuple[float | None, str | None, bool]:
+    if per_month is None or per_month <= 0.0:
+        return None, None, False
+    years = max(MINER_LIMIT - damage, 0.0) / (per_month * SECONDS_PER_YEAR / MONTH_S)
+    end, capped = _end_date(ctx, years)
+    return years, end, capped
+
+
+def _governing(comps: dict[str, ComponentLife]) -> str | None:
+    """The component with the shortest remaining life (else the most damage)."""
+    with_life = [c for c in comps.values() if c.remaining_life_years_min is not None]
+    if with_life:
+        return min(with_life, key=lambda c: c.remaining_life_years_min or 0.0).component
+    damaged = [c for c in comps.values() if c.damage > 0]
+    return max(damaged, key=lambda c: c.damage).component if damaged else None
+
+
+# ----------------------------------------------------------------------------- words
+def _basis(config: MillConfig) -> LifeBasis:
+    curve = config.material.sn_curve()
+    life = config.life
+    return LifeBasis(
+        miner_limit=MINER_LIMIT,
+        sn_curve={
+            "model": config.material.sn.name,
+            "parameters": config.material.sn.resolved_params(),
+            "material": config.material.name,
+            "S_ut_mpa": config.material.s_ut_mpa,
+            "m1": curve.m1,
+            "S_D_mpa": curve.S_D,
+            "N_D": curve.N_D,
+            "m2": curve.m2,
+            "stress": str(curve.kind),
+            "kt": config.shafts.kt_torsion,
+            "source": "seed 000 §8.1–8.2, App. D",
         },
-        "basis": _basis(),
-        "components": out,
-    }
+        damage="prior (see prior) + stored daily damage of attributed rainflow cycles, or the "
+        "worker's live committed damage when larger, + the open rainflow residue closed now "
+        "as half cycles (ASTM E1049; conservative)",
+        rates=f"stored damage per year of monitored time (per local day from its first to its "
+        f"last analysed sample) over the last "
+        f"{life.rate_window_days} local days, since monitoring began, and in the worst local "
+        f"calendar month with at least {WORST_MONTH_MIN_DAYS:g} days monitored; none below "
+        f"{life.min_monitoring_days:g} days of monitoring and {life.min_starts} start(s)",
+        remaining_life="(1 − D) / rate, from the last analysed sample; Miner limit D = 1",
+        end_date="local date of the last analysed sample + the remaining life; beyond "
+        "9999-12-31 it is 9999-12-31 with end_date_capped true",
+        design_line="D(t) = years since commissioning (else since monitoring began) / design "
+        "life: the damage a shaft on course for its design life would have now",
+    )
 
 
-def _basis() -> dict[str, str | float]:
-    return {
-        "miner_limit": 1.0,
-        "damage": "stored daily damage (attributed cycles), or the live analyzer's committed "
-        "damage when larger, plus the open rainflow residue closed now as half cycles "
-        "(ASTM E1049; conservative)",
-        "rate": f"stored damage of the last {RATE_WINDOW_DAYS} local days (or since monitoring "
-        "began, if shorter) per year of monitored time",
-        "remaining_life": "(1 − damage) / rate, from the latest analysed sample",
-    }
+_RATE_WORDS = {"last": "recent", "since": "since-monitoring", "worst": "worst month's"}
+
+
+def years_range_text(lo: float | None, hi: float | None) -> str:
+    """``31 to 38 years``, ``9,458 years`` (one figure when the ends agree within 5 %)."""
+    if lo is None or hi is None:
+        return "no projection"
+
+    def fmt(y: float) -> str:
+        return f"{y:,.0f}" if y >= 10 else f"{y:.1f}"
+
+    if math.isclose(lo, hi, rel_tol=0.05):
+        return f"{fmt(lo)} years"
+    return f"{fmt(lo)} to {fmt(hi)} years"
+
+
+def _note(config: MillConfig, status: str, missing: list[str], gov: ComponentLife | None,
+          prior: PriorDamage) -> str:  # fmt: skip
+    sim = "Simulated data. " if config.simulated else ""
+    curve = f"Miner limit D = 1 on the {config.material.sn.name} S-N curve"
+    if status != "ok":
+        return (f"{sim}Insufficient history for a projection ({'; '.join(missing)}): damage so "
+                f"far is given, remaining life is not ({curve}).")  # fmt: skip
+    if gov is None:
+        return f"{sim}No damage counted yet: no basis for a remaining-life projection ({curve})."
+    prior_text = (
+        "damage counted from the start of monitoring only"
+        if prior.method == "none"
+        else f"prior damage {prior.method} since {prior.commissioned} included"
+    )
+    rates = [_RATE_WORDS.get(p.basis.split("_")[0], p.basis) for p in gov.projections
+             if p.remaining_life_years is not None]  # fmt: skip
+    said = ", ".join(rates[:-1]) + f" and {rates[-1]}" if len(rates) > 1 else "".join(rates)
+    years = years_range_text(gov.remaining_life_years_min, gov.remaining_life_years_max)
+    return (f"{sim}{gov.component} governs with {years} left at the {said} "
+            f"rate{'s' if len(rates) > 1 else ''} ({curve}; {prior_text}).")  # fmt: skip

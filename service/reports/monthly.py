@@ -12,7 +12,13 @@ one the maintenance team reads each month. Its sections and their sources:
   month is 4 weeks as App. D counts it, :data:`analytics.mill.phase_damage.MONTH_S`);
 * steady-state oscillation range (Tables 14–15) and pinion bending amplitude (§8.1) trends,
 * harmonic line trends and unexplained spectral peaks (§6.1.2, §6.2.7),
-* the month's alarms and data-quality events (§5.2.2).
+* the month's alarms and data-quality events (§5.2.2);
+* page 1, the summary (:class:`~service.reports.month_summary.ReportSummary`), the remaining
+  life evaluated at the month's end (``life``: :mod:`service.reports.life`, the same
+  computation as ``GET /mills/{id}/life``), the cumulative damage against the design life
+  (``cumulative``) and the 12-month trend (``trend``:
+  :class:`~service.reports.history.MonthTrend`);
+* ``simulated``: the mill's data come from the simulator (the report must say so).
 
 The month is the site's calendar month (``MillConfig.time_zone``). Nothing is invented: an empty
 month gives zero counts, empty tables and ``None`` where a quantity cannot be computed.
@@ -49,6 +55,22 @@ from analytics.mill.phase_damage import (
     project_monthly_damage,
     start_cost,
 )
+from service.reports.history import (
+    MonthTrend,
+    last_months,
+    life_inputs,
+    monthly_trend,
+    phase_seconds,
+)
+from service.reports.life import LifeReport, compute_life, local_iso
+from service.reports.month_summary import (
+    CumulativeDamage,
+    ReportSummary,
+    SummaryStart,
+    build_cumulative,
+    build_summary,
+)
+from service.reports.plain import finite_or_none, plain
 from service.reports.starts import (
     STARTS_NORM_PER_MONTH,
     MonthError,
@@ -73,6 +95,8 @@ log = logging.getLogger(__name__)
 
 SECONDS_PER_YEAR = 365.25 * 86_400.0
 HOUR_NS = 3_600 * 10**9
+#: Months of the long-term trend (seed 000 §10.6), the report's month the last.
+TREND_MONTHS = 12
 #: Harmonic tables are large (every expected line of every channel): trends read at most one
 #: table per hour; unexplained peaks are read from the same tables.
 HARMONIC_SAMPLE_NS = HOUR_NS
@@ -158,6 +182,10 @@ class SteadyPoint:
     t_ns: int
     range_pct: dict[str, float]
     bending_amplitude_mpa: dict[str, float]
+
+    def __plain__(self) -> dict[str, Any]:
+        return {"t_ns": self.t_ns, "range_pct": finite_or_none(self.range_pct),
+                "bending_amplitude_mpa": finite_or_none(self.bending_amplitude_mpa)}  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
@@ -270,6 +298,11 @@ class MonthlyReport:
     harmonics: Harmonics
     alarms: list[AlarmEntry]
     data_quality: DataQuality
+    simulated: bool
+    summary: ReportSummary
+    life: LifeReport
+    cumulative: CumulativeDamage
+    trend: list[MonthTrend]
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -282,25 +315,8 @@ def report_to_dict(report: MonthlyReport) -> dict[str, Any]:
     """JSON-ready plain data in field order, as :func:`dataclasses.asdict` would give but
     without its deep copies (a month holds tens of thousands of steady windows); non-finite
     floats become None, tuples lists."""
-    return _plain(report) | {"empty": report.empty}
-
-
-def _plain(x: Any) -> Any:
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    if isinstance(x, dict):
-        return {k: _plain(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_plain(v) for v in x]
-    if isinstance(x, SteadyPoint):
-        return {"t_ns": x.t_ns, "range_pct": _floats(x.range_pct),
-                "bending_amplitude_mpa": _floats(x.bending_amplitude_mpa)}  # fmt: skip
-    names = getattr(x, "__dataclass_fields__", None)
-    return x if names is None else {name: _plain(getattr(x, name)) for name in names}
-
-
-def _floats(d: dict[str, float]) -> dict[str, float | None]:
-    return {k: v if math.isfinite(v) else None for k, v in d.items()}
+    out: dict[str, Any] = plain(report)
+    return out | {"empty": report.empty}
 
 
 # ----------------------------------------------------------------------------- building
@@ -319,7 +335,9 @@ def build_monthly_report(
         seconds = _phase_seconds(reader, events, span)
         damage = _damage(reader.damage(), starts.count, seconds)
         covered = _covered_seconds(reader, span)
-        alarms = _alarms(store.alarms(mill_id=config.id), reader.start_ns, reader.end_ns)
+        stored_alarms = store.alarms(mill_id=config.id)
+        alarms = _alarms(stored_alarms, reader.start_ns, reader.end_ns)
+        long_view = _long_view(store, config, month, reader, starts, stored_alarms)
     report = MonthlyReport(
         mill=config.id,
         site=config.site,
@@ -342,7 +360,9 @@ def build_monthly_report(
         harmonics=harmonics,
         alarms=alarms,
         data_quality=_data_quality([e for e in events if e.kind == "data_quality"]),
-        notes=_notes(span, starts, covered),
+        simulated=config.simulated,
+        **long_view,
+        notes=_notes(span, starts, covered, config.simulated),
     )
     log.info("monthly report %s %s: %d starts", config.id, month, starts.count)
     return report
@@ -492,34 +512,17 @@ def _starts(events: list[EventRow], config: MillConfig, days: list[str]) -> Star
 
 
 # ----------------------------------------------------------------------------- damage
-def _clip(lo: int, hi: int, span_lo: int, span_hi: int) -> float:
-    return max(0, min(hi, span_hi) - max(lo, span_lo)) / 1e9
-
-
 def _phase_seconds(
     reader: _MonthReader, events: list[EventRow], span: tuple[int | None, int | None]
 ) -> dict[str, float]:
-    """Seconds in start, stop and run phases within the month's stored span: a start from
-    switch-on to the end of acceleration, a stop from switch-off to rest, running between."""
-    out = {"start": 0.0, "stop": 0.0, "run": 0.0}
+    """Seconds in start, stop and run phases within the month's stored span
+    (:func:`service.reports.history.phase_seconds`)."""
     if span[0] is None or span[1] is None:
-        return out
+        return {"start": 0.0, "stop": 0.0, "run": 0.0}
     lo, hi = max(reader.start_ns, span[0]), min(reader.end_ns, span[1])
     before = reader.last_before()
-    run_since = None
-    if before is not None and before.kind == "start" and not before.data.get("failed"):
-        run_since = lo
-    for e in (e for e in events if e.kind in ("start", "stop")):
-        end = e.t_end_ns if e.t_end_ns is not None else e.t_ns
-        out[e.kind] += _clip(e.t_ns, end, lo, hi)
-        if e.kind == "stop" and run_since is not None:
-            out["run"] += _clip(run_since, e.t_ns, lo, hi)
-            run_since = None
-        elif e.kind == "start" and not e.data.get("failed"):
-            run_since = end
-    if run_since is not None:
-        out["run"] += _clip(run_since, hi, lo, hi)
-    return out
+    running = before is not None and before.kind == "start" and not before.data.get("failed")
+    return phase_seconds(events, lo, hi, running)
 
 
 def _damage(rows: list[DamageRow], starts: int, seconds: dict[str, float]) -> list[ComponentDamage]:
@@ -695,6 +698,43 @@ def _peak_summaries(tables: list[tuple[int, list[dict[str, Any]]]]) -> list[Peak
     return out
 
 
+# ----------------------------------------------------------------------------- long view
+def _long_view(
+    store: Store,
+    config: MillConfig,
+    month: str,
+    reader: _MonthReader,
+    starts: Starts,
+    stored_alarms: list[Alarm],
+) -> dict[str, Any]:
+    """``summary``, ``life`` (as of the month's end), ``cumulative`` and ``trend`` (the
+    :class:`MonthlyReport` fields of page 1 and the long view)."""
+    inputs = life_inputs(store, config, reader.end_ns)
+    life = compute_life(inputs)
+    months = last_months(month, TREND_MONTHS)
+    trend = monthly_trend(store, config, months, [r for r in inputs.rows if r.day >= months[0]])
+    prev_lo = month_bounds_ns(months[-2], config.time_zone)[0]
+    summary = build_summary(
+        life=life,
+        trend=trend,
+        starts=(starts.count, starts.norm, starts.status),
+        worst_start=_worst_start(starts, zoneinfo.ZoneInfo(config.time_zone)),
+        raised_severities=[str(a.severity) for a in stored_alarms
+                           if reader.start_ns <= a.raised_ns < reader.end_ns],
+        raised_last_month=sum(prev_lo <= a.raised_ns < reader.start_ns for a in stored_alarms),
+    )  # fmt: skip
+    return {"summary": summary, "life": life, "cumulative": build_cumulative(life, inputs.rows),
+            "trend": trend}  # fmt: skip
+
+
+def _worst_start(starts: Starts, zone: zoneinfo.ZoneInfo) -> SummaryStart | None:
+    peaks = [s for s in starts.starts if s.switch_on_pct is not None]
+    if not peaks:
+        return None
+    w = max(peaks, key=lambda s: s.switch_on_pct or 0.0)
+    return SummaryStart(w.t_ns, local_iso(w.t_ns, zone) or "", w.switch_on_pct, w.status)
+
+
 # ----------------------------------------------------------------------------- alarms, quality
 def _alarms(rows: list[Alarm], start_ns: int, end_ns: int) -> list[AlarmEntry]:
     """Alarms active at some time in ``[start, end)``, oldest first."""
@@ -721,12 +761,17 @@ def _data_quality(events: list[EventRow], listed: int = 50) -> DataQuality:
     )
 
 
-def _notes(span: tuple[int | None, int | None], starts: Starts, covered_s: float) -> list[str]:
+def _notes(
+    span: tuple[int | None, int | None], starts: Starts, covered_s: float, simulated: bool
+) -> list[str]:
+    sim = (
+        ["SIMULATED DATA: this mill is fed by the simulator, not by a plant."] if simulated else []
+    )
     if span[0] is None:
-        return ["No results are stored for this month: nothing to report."]
+        return [*sim, "No results are stored for this month: nothing to report."]
     hours = covered_s / 3600.0
     covered = f"{hours / 24.0:.2f} days" if hours >= 48.0 else f"{hours:.2f} hours"
-    notes = [f"Monitoring covered {covered} of the month."]
+    notes = [*sim, f"Monitoring covered {covered} of the month."]
     if starts.count == 0:
         notes.append("No starts this month: the cost of a start cannot be measured.")
     return notes

@@ -152,6 +152,7 @@ def starts_in_month(store: Store, config: MillConfig, month: str) -> dict[str, A
     c = count_starts([s["failed"] for s in starts], a)
     return {
         "mill": config.id,
+        "simulated": config.simulated,
         "month": month,
         "time_zone": config.time_zone,
         "count": c.count,

@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -133,6 +133,20 @@ class Store:
             f"INSERT OR REPLACE INTO damage_daily ({column_list(DamageRow)}) "
             f"VALUES ({', '.join('?' * len(columns(DamageRow)))})",
             [to_params(DamageRow, r) for r in rows],
+        )
+
+    @staticmethod
+    def extend_days(
+        db: sqlite3.Connection, spans: Mapping[tuple[str, str], tuple[int, int]]
+    ) -> None:
+        """Widen each ``(mill, local day)``'s monitored span to include ``(first_ns,
+        last_ns)`` (inside :meth:`transaction`); idempotent, so a replayed archive tail changes
+        nothing."""
+        db.executemany(
+            "INSERT INTO mill_days (mill_id, day, first_ns, last_ns) VALUES (?, ?, ?, ?) "
+            "ON CONFLICT (mill_id, day) DO UPDATE SET "
+            "first_ns = min(first_ns, excluded.first_ns), last_ns = max(last_ns, excluded.last_ns)",
+            [(m, d, int(a), int(b)) for (m, d), (a, b) in spans.items()],
         )
 
     @staticmethod
@@ -287,6 +301,52 @@ class Store:
         rows = self._query_rows(sql + " ORDER BY day, component, phase", tuple(args))
         return [from_row(DamageRow, r) for r in rows]
 
+    def mill_span(self, mill_id: str) -> tuple[int | None, int | None]:
+        """Time of the first analysed sample and just past the last one (ns), ``None`` before
+        any (or in a store written by a millwatch before schema 5)."""
+        row = self._query_one("SELECT min(first_ns), max(last_ns) FROM mill_days "
+                              "WHERE mill_id = ?", (mill_id,))  # fmt: skip
+        return (None, None) if row is None or row[0] is None else (int(row[0]), int(row[1]))
+
+    def mill_days(self, mill_id: str, until_ns: int | None = None) -> list[tuple[str, int, int]]:
+        """The monitored time per local day, oldest first: ``(day, first analysed sample,
+        just past the last)`` in ns, clipped to before ``until_ns``."""
+        sql = "SELECT day, first_ns, last_ns FROM mill_days WHERE mill_id = ?"
+        args: list[Any] = [mill_id]
+        if until_ns is not None:
+            sql += " AND first_ns < ?"
+            args.append(until_ns)
+        rows = self._query(sql + " ORDER BY day", tuple(args))
+        if until_ns is None:
+            return [(d, int(a), int(b)) for d, a, b in rows]
+        return [(d, int(a), min(int(b), until_ns)) for d, a, b in rows]
+
+    def count_events(
+        self, mill_id: str, kind: str, since_ns: int | None = None, until_ns: int | None = None
+    ) -> int:
+        """Number of events of one kind in ``[since, until)`` (counted on the index)."""
+        sql = "SELECT count(*) FROM events WHERE mill_id = ? AND kind = ?"
+        args: list[Any] = [mill_id, kind]
+        for clause, value in (("t_ns >= ?", since_ns), ("t_ns < ?", until_ns)):
+            if value is not None:
+                sql += " AND " + clause
+                args.append(value)
+        row = self._query_one(sql, tuple(args))
+        return 0 if row is None else int(row[0])
+
+    def event_times(
+        self, mill_id: str, kinds: Sequence[str], since_ns: int, until_ns: int
+    ) -> list[EventRow]:
+        """Events of some kinds in ``[since, until)`` in time order with only their times and
+        ``failed`` flag in ``data`` (extracted by SQLite: no per-event JSON decode)."""
+        rows = self._query(
+            f"SELECT kind, t_ns, t_end_ns, json_extract(data_json, '$.failed') FROM events "
+            f"WHERE mill_id = ? AND kind IN ({', '.join('?' * len(kinds))}) AND t_ns >= ? "
+            "AND t_ns < ? ORDER BY t_ns, id",
+            (mill_id, *kinds, since_ns, until_ns),
+        )
+        return [EventRow(mill_id, k, t, {"failed": bool(f)}, e) for k, t, e, f in rows]
+
     def damage_days(self, mill_id: str) -> tuple[str | None, str | None]:
         """First and last day with damage rows of a mill (``None`` without any)."""
         row = self._query_one("SELECT min(day), max(day) FROM damage_daily WHERE mill_id = ?",
@@ -308,10 +368,7 @@ class Store:
         first with ``oldest_first``). With ``every_ns`` only the first record of each interval
         of that length (counted from the epoch) is read: the choice is made on the index, so the
         skipped records are never read or decoded."""
-        where, args = sampler.record_window(mill_id, kind, since_ns, until_ns)
-        if every_ns:
-            where += f" AND t_ns IN (SELECT min(t_ns) FROM records WHERE {where} GROUP BY t_ns / ?)"
-            args = (*args, *args, int(every_ns))
+        where, args = sampler.record_window(mill_id, kind, since_ns, until_ns, every_ns)
         sql = f"SELECT t_ns, data_json FROM records WHERE {where} ORDER BY t_ns"
         sql += "" if oldest_first else " DESC"
         if limit is not None:
@@ -377,6 +434,17 @@ class Store:
         json writes) are decoded in Python (:mod:`service.store.sampler`)."""
         where, args = sampler.record_window(mill_id, kind, since_ns, until_ns)
         return sampler.record_columns(self._query, where, args, fields, objects)
+
+    def record_values(
+        self, mill_id: str, kind: str, paths: Sequence[Sequence[str]],
+        window: tuple[int, int], every_ns: int | None = None,
+    ) -> list[tuple[int, list[Any]]]:  # fmt: skip
+        """``(t_ns, [value at each key path])`` of the records of one kind in ``window``
+        (``[since, until)`` ns; only the first record of each ``every_ns`` interval, found by
+        one index seek per interval), oldest first; SQLite extracts the values in one parse
+        per record (:func:`service.store.sampler.record_values`)."""
+        where, args = sampler.record_window(mill_id, kind, *window, every_ns)
+        return sampler.record_values(self._query, where, args, paths)
 
     @contextmanager
     def read_snapshot(self) -> Iterator[None]:

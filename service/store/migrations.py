@@ -71,6 +71,13 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "CREATE INDEX checkpoint_parts_by_part ON checkpoint_parts (part, id)",
         "DROP TABLE checkpoints",
     ),
+    (  # 4 → 5: the monitored time per mill and local day (first and last analysed sample, ns),
+        # which remaining life measures monitoring by; alarms about simulated data say so
+        """CREATE TABLE mill_days (
+            mill_id TEXT NOT NULL, day TEXT NOT NULL, first_ns INTEGER NOT NULL,
+            last_ns INTEGER NOT NULL, PRIMARY KEY (mill_id, day))""",
+        "ALTER TABLE alarms ADD COLUMN simulated INTEGER NOT NULL DEFAULT 0",
+    ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 _PART_CHECKPOINTS = 4  # the schema version that brought checkpoint_parts

@@ -18,7 +18,14 @@ import json
 from collections.abc import Callable, Sequence
 from typing import Any
 
-__all__ = ["KEY_SAMPLE_NS", "Query", "record_columns", "record_keys", "record_window"]
+__all__ = [
+    "KEY_SAMPLE_NS",
+    "Query",
+    "record_columns",
+    "record_keys",
+    "record_values",
+    "record_window",
+]
 
 Query = Callable[[str, tuple[Any, ...]], list[tuple[Any, ...]]]
 """A read: SQL and its arguments → rows."""
@@ -28,14 +35,35 @@ KEY_SAMPLE_NS = 3_600 * 10**9
 
 
 def record_window(
-    mill_id: str, kind: str, since_ns: int | None, until_ns: int | None
+    mill_id: str,
+    kind: str,
+    since_ns: int | None,
+    until_ns: int | None,
+    every_ns: int | None = None,
 ) -> tuple[str, tuple[Any, ...]]:
-    """WHERE clause (on the ``records_unique`` index) and its arguments."""
+    """WHERE clause (on the ``records_unique`` index) and its arguments; with ``every_ns`` only
+    the first record of each interval of that length (counted from the epoch) is selected, the
+    choice made on the index, so the skipped records are never read."""
     where, args = "mill_id = ? AND kind = ?", list[Any]([mill_id, kind])
     for clause, value in (("t_ns >= ?", since_ns), ("t_ns < ?", until_ns)):
         if value is not None:
             where += " AND " + clause
             args.append(value)
+    if every_ns and since_ns is not None and until_ns is not None:
+        # one index seek per interval (a recursive CTE of interval starts): a year of windows
+        # sampled every few hours is read in milliseconds, the skipped ones never touched
+        step, first = int(every_ns), int(since_ns) // int(every_ns) * int(every_ns)
+        where = (
+            "mill_id = ? AND kind = ? AND t_ns IN (SELECT t FROM (WITH RECURSIVE b(x) AS "
+            "(SELECT ? UNION ALL SELECT x + ? FROM b WHERE x + ? < ?) SELECT (SELECT min(t_ns) "
+            "FROM records WHERE mill_id = ? AND kind = ? AND t_ns >= max(x, ?) "
+            "AND t_ns < min(x + ?, ?)) AS t FROM b) WHERE t IS NOT NULL)"
+        )
+        bounds = [first, step, step, int(until_ns), mill_id, kind, since_ns, step, until_ns]
+        args = [mill_id, kind, *bounds]
+    elif every_ns:
+        where += f" AND t_ns IN (SELECT min(t_ns) FROM records WHERE {where} GROUP BY t_ns / ?)"
+        args += [*args, int(every_ns)]
     return where, tuple(args)
 
 
@@ -153,6 +181,27 @@ def _columns(
     if any(rest not in (None, "{}") for row in rows for rest in row[-n:]):
         return None
     return [row[:-n] for row in rows]
+
+
+def record_values(
+    query: Query, where: str, args: tuple[Any, ...], paths: Sequence[Sequence[str]]
+) -> list[tuple[int, list[Any]]]:
+    """``(t_ns, [value at each path])`` of the records in ``where``, oldest first: SQLite
+    extracts every path in one parse of each record (``None`` where absent). The ``NaN`` and
+    ``Infinity`` Python's json writes, which SQLite's JSON refuses, are read as ``null``
+    and ``±1e999`` (±inf): the keys of the records never contain them. Meant for a few
+    thousand records (a year of a mill's steady windows sampled every few hours)."""
+    if not paths:
+        return [(t, []) for (t,) in query(f"SELECT t_ns FROM records WHERE {where} ORDER BY t_ns",
+                                           args)]  # fmt: skip
+    # one more path than asked, so SQLite always answers a JSON array (one path: a scalar)
+    extract = ", ".join("?" for _ in paths)
+    text = "replace(replace(data_json, 'NaN', 'null'), 'Infinity', '1e999')"
+    sql = (f"SELECT t_ns, json_extract({text}, {extract}, '$.__none__') FROM records "
+           f"WHERE {where} ORDER BY t_ns")  # fmt: skip
+    n = len(paths)
+    rows = query(sql, (*[_json_path(p) for p in paths], *args))
+    return [(t, json.loads(values)[:n]) for t, values in rows]
 
 
 def _unparsable(query: Query, where: str, args: tuple[Any, ...]) -> list[tuple[int, Any]]:

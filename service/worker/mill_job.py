@@ -25,6 +25,8 @@ reproduces the same rows, which the store writes idempotently.
 from __future__ import annotations
 
 import logging
+import zoneinfo
+from datetime import datetime, timedelta
 from typing import Any
 
 import numpy as np
@@ -39,7 +41,7 @@ from ingest.wire import Block
 from service.store.records import DamageRow, EventRow
 from service.worker.worker import MillUpdate
 
-__all__ = ["MillJob"]
+__all__ = ["MillJob", "split_local_days"]
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +77,8 @@ class MillJob:
         self._latest_window: dict[str, Any] | None = None
         self._next_harmonics_ns = 0
         self._held_events: list[EventRow] = []  # stored with the next finish()
+        self._covered_until: int | None = None  # monitored time stored up to here (ns)
+        self._tz = zoneinfo.ZoneInfo(config.time_zone)
 
     # ------------------------------------------------------------------ feeding
     def feed_block(self, channel: str, block: Block) -> MillUpdate:
@@ -115,6 +119,7 @@ class MillJob:
             if self.analyzer.samples < self._next_damage:
                 return update
             update.damage += self._damage_rows()
+            update.days += self._days()
             update.alarm_transitions += self.alarms.observe_all(self._life_observations())
             self._next_damage = self.analyzer.samples + self._damage_every
 
@@ -156,19 +161,39 @@ class MillJob:
             self._latest_window = new[-1]
         return new
 
+    def _days(self) -> list[tuple[str, int, int]]:
+        """The time analysed since the last damage rows, split at local midnights: the
+        monitored time they cover (stored with them; remaining life's rates use it)."""
+        first = self._covered_until or self.analyzer.first_sample_ns
+        now = self.analyzer.next_sample_ns
+        if first is None or now is None or now <= first:
+            return []
+        self._covered_until = now
+        return split_local_days(first, now, self._tz)
+
     def _life_observations(self) -> list[Observation]:
         """``remaining_life_years`` per component: (1 − D) / (D per year so far), the damage
-        rate taken over everything this analyzer has seen (seed 000 §8.2; Miner limit 1)."""
+        rate taken over everything this analyzer has seen (seed 000 §8.2; Miner limit 1), D
+        with the configured estimated prior damage; none before the minimum history of
+        ``[life]`` (as ``GET /mills/{id}/life``: no extrapolation of a few minutes)."""
         seconds, t_ns = self.analyzer.seconds_analysed, self.analyzer.next_sample_ns
+        life = self.config.life
         if t_ns is None:  # nothing analysed: no damage, no rate
             return []
+        if seconds < life.min_monitoring_days * 86_400 or (
+            self.analyzer.loads.starts_total < life.min_starts
+        ):
+            return []
+        prior = life.prior_damage
         out = []
-        for comp, damage in self.analyzer.committed_damage().items():
-            if damage <= 0.0 or seconds <= 0.0:
+        for comp, monitored in self.analyzer.committed_damage().items():
+            if monitored <= 0.0 or seconds <= 0.0:
                 continue
-            per_year = damage / seconds * SECONDS_PER_YEAR
+            per_year = monitored / seconds * SECONDS_PER_YEAR
+            before = prior.get(comp, 0.0) if isinstance(prior, dict) else (prior or 0.0)
+            damage = monitored + before
             out.append(Observation(self.config.id, "remaining_life_years",
-                                   (1.0 - damage) / per_year, t_ns, {
+                                   max(1.0 - damage, 0.0) / per_year, t_ns, {
                                        "component": comp,
                                        "remaining_design_life_years":
                                            self.config.design_life_years,
@@ -202,6 +227,7 @@ class MillJob:
             "latest_steady": self._latest_window,
             "open_alarms": len(self.alarms.open_alarms(self.config.id)),
             "monitored_since_ns": a.first_sample_ns,
+            "simulated": self.config.simulated,
             "damage": self._damage_summary(),
         }
 
@@ -231,6 +257,7 @@ class MillJob:
         self._last_window_ns = int(snapshot["last_window_ns"])
         self._latest_window = snapshot["latest_window"]
         self._next_harmonics_ns = int(snapshot["next_harmonics_ns"])
+        self._covered_until = self.analyzer.next_sample_ns
         self._held_events += self._restart_events()
 
     def _restart_events(self) -> list[EventRow]:
@@ -255,3 +282,15 @@ def _compact(table: dict[str, Any]) -> dict[str, Any]:
         "lines": [m for m in table["lines"] if m.get("detected")],
         "segments": len(table["segments"]),
     }
+
+
+def split_local_days(lo: int, hi: int, tz: zoneinfo.ZoneInfo) -> list[tuple[str, int, int]]:
+    """``[lo, hi)`` (ns) cut at the local midnights of ``tz``: ``(YYYY-MM-DD, lo, hi)`` each."""
+    out = []
+    while lo < hi:
+        day = datetime.fromtimestamp(lo / 1e9, tz).date()
+        nxt = day + timedelta(days=1)
+        end = int(datetime(nxt.year, nxt.month, nxt.day, tzinfo=tz).timestamp()) * 10**9
+        out.append((day.isoformat(), lo, min(end, hi)))
+        lo = min(end, hi)
+    return out

@@ -12,12 +12,16 @@ order of start-up matters:
    so the blocks published while this worker was down or recovering come first, in sequence
    order, then live ones; what the archive already holds comes again and is dropped as a
    repeat (its sequence number is not new);
-5. start the worker thread, which drains the queue (archive first, then analysis).
+5. start the worker thread, which drains the queue (archive first, then analysis);
+6. start the month-end report job in its own thread (``[reports]``,
+   :mod:`service.reports.month_end`): it catches up on finished months without reports, and
+   raises its failures as alarms through the worker thread.
 
 A connect endpoint that is down does not stop the start (peer mode: zenoh retries it in the
 background, see :mod:`ingest.zenoh_session`); ``/ready`` says which endpoints are not connected.
 
-Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the worker thread after its current batch,
+Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the report job (between reports), stop the
+worker thread after its current batch,
 write a final checkpoint, finish the archive file (footer and index), undeclare the subscribers,
 close the zenoh session and the store.
 """
@@ -41,6 +45,7 @@ from ingest.archive.writer import ArchiveWriter
 from ingest.gateway import RecoveringSubscriber, declare_recovering_subscriber
 from ingest.keys import alarm_key, mill_pattern
 from ingest.zenoh_session import build_config, connected_peers, open_retrying
+from service.reports.month_end import MonthEndJob
 from service.settings import ServiceSettings
 from service.store.database import Store
 from service.worker.block_queue import BlockQueue
@@ -92,6 +97,8 @@ class ServiceRuntime:
         self.recovered_blocks = 0
         self.started_ns: int | None = None
         self.drain_watch = DrainWatch(2 * settings.worker.stale_after_s)
+        #: The month-end report job (None until started, or when ``[reports] enabled`` is off).
+        self.reports: MonthEndJob | None = None
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -136,6 +143,11 @@ class ServiceRuntime:
         self._thread = threading.Thread(target=self._run, name="millwatch-worker", daemon=True)
         self._thread.start()
         self.started_ns = time.time_ns()
+        if s.reports.enabled:
+            self.reports = MonthEndJob(
+                s.reports, self.mills, self.store, alarm=self.worker.request_observations
+            )
+            self.reports.start()
         log.info(
             "millwatch serving %d mill(s); archive %s; store %s",
             len(self.mills),
@@ -222,6 +234,8 @@ class ServiceRuntime:
     def stop(self) -> None:
         """Stop in reverse order; safe to call twice."""
         self._stop.set()
+        if self.reports is not None:
+            self.reports.stop()
         for sub in self._subscribers:
             sub.undeclare()
         self._subscribers.clear()

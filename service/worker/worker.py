@@ -86,9 +86,12 @@ class MillUpdate:
     damage: list[DamageRow] = field(default_factory=list)
     records: list[tuple[str, int, dict[str, Any]]] = field(default_factory=list)
     alarm_transitions: list[Transition] = field(default_factory=list)
+    #: Monitored time analysed: ``(local day, first sample, just past the last)`` in ns.
+    days: list[tuple[str, int, int]] = field(default_factory=list)
 
     def __bool__(self) -> bool:
-        return bool(self.events or self.damage or self.records or self.alarm_transitions)
+        return bool(self.events or self.damage or self.records or self.alarm_transitions
+                    or self.days)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -171,6 +174,7 @@ class Worker:
         self._archive_errors_reported = 0
         self.on_alarms: Callable[[list[Transition]], None] | None = None
         self._acks: queue.SimpleQueue[AckRequest] = queue.SimpleQueue()
+        self._outside: queue.SimpleQueue[Observation] = queue.SimpleQueue()
         #: Each mill's newest unrecoverable losses (stored; newest first), for its status.
         self.losses = {m: deque(store.losses(m, LOSSES_SHOWN), LOSSES_SHOWN) for m in mills}
 
@@ -362,6 +366,7 @@ class Worker:
         for item in items:
             self.handle(item)
         acked = self._apply_acks()
+        observed = self._apply_outside()
         try:
             self.commit()
             self.latency.add_batch(self._clock(), items)
@@ -371,6 +376,8 @@ class Worker:
             raise
         if acked:
             self._finish_acks(acked)
+        if observed:
+            self.checkpoint(sorted(observed))  # wall-clock facts the archive cannot replay
         if self.archive is not None:
             self.archive.flush_if_due()
         self._checkpoint_due()
@@ -384,6 +391,36 @@ class Worker:
         request = AckRequest(mill_id, alarm_id, by)
         self._acks.put(request)
         return request
+
+    def request_observations(self, observations: Iterable[Observation]) -> None:
+        """Hand alarm observations from outside the analysis to the worker thread (any thread
+        may call this; e.g. the month-end report job's ``report_failures``). The worker applies
+        them at its next :meth:`step`, stores and publishes their transitions like any other
+        and checkpoints the mills they changed. A held mill's are logged and dropped (its alarm
+        engine was not restored)."""
+        for obs in observations:
+            self._outside.put(obs)
+
+    def _apply_outside(self) -> set[str]:
+        """Apply the queued outside observations (worker thread); the mills whose alarms
+        changed."""
+        changed: set[str] = set()
+        while True:
+            try:
+                obs = self._outside.get_nowait()
+            except queue.Empty:
+                return changed
+            if obs.mill_id not in self.pipelines or obs.mill_id in self.held:
+                why = "held" if obs.mill_id in self.held else "not analysed here"
+                log.error(
+                    "alarm observation %s of mill %r dropped: the mill is %s",
+                    obs.quantity, obs.mill_id, why,
+                )  # fmt: skip
+                continue
+            update = self.pipelines[obs.mill_id].observe([obs])
+            if update.alarm_transitions:
+                changed.add(obs.mill_id)
+            self._pending.add(obs.mill_id, update)
 
     def _apply_acks(self) -> list[tuple[AckRequest, list[Transition]]]:
         """Apply the queued acknowledgements to the mills' alarm engines (worker thread)."""
@@ -590,8 +627,12 @@ class PendingResults:
         self.records: list[tuple[str, str, int, dict[str, Any]]] = []
         self.damage: dict[tuple[str, str, str, str], DamageRow] = {}
         self.transitions: list[Transition] = []
+        self.days: dict[tuple[str, str], tuple[int, int]] = {}
 
     def add(self, mill_id: str, update: MillUpdate) -> None:
+        for day, first, last in update.days:
+            lo, hi = self.days.get((mill_id, day), (first, last))
+            self.days[(mill_id, day)] = (min(lo, first), max(hi, last))
         self.events += update.events
         self.records += [(mill_id, kind, t, data) for kind, t, data in update.records]
         for row in update.damage:
@@ -599,9 +640,10 @@ class PendingResults:
         self.transitions += update.alarm_transitions
 
     def __bool__(self) -> bool:
-        return bool(self.events or self.records or self.damage or self.transitions)
+        return bool(self.events or self.records or self.damage or self.transitions or self.days)
 
     def write(self, db: Any) -> None:
+        Store.extend_days(db, self.days)
         Store.add_events(db, self.events)
         Store.set_damage(db, list(self.damage.values()))
         for mill_id, kind, t_ns, data in self.records:

@@ -19,8 +19,11 @@ NS = 1_000_000_000
 T0 = int(datetime(2026, 11, 2, tzinfo=ZoneInfo("Africa/Johannesburg")).timestamp()) * NS
 
 
-def mill(name: str = "sag-5200-lrs") -> MillConfig:
-    return MillConfig.from_toml_text((MILLS / f"{name}.toml").read_text(encoding="utf-8"))
+def mill(name: str = "sag-5200-lrs", simulated: bool = False) -> MillConfig:
+    """A deploy mill as a real plant's (the files mark the example mills simulated, whose
+    alarms' messages then start with ``SIMULATED DATA:``; ``simulated=True`` keeps that)."""
+    config = MillConfig.from_toml_text((MILLS / f"{name}.toml").read_text(encoding="utf-8"))
+    return config.model_copy(update={"simulated": simulated})
 
 
 def engine(name: str = "sag-5200-lrs", options: RuleOptions | None = None) -> AlarmEngine:

@@ -50,6 +50,7 @@ def _settings(tmp: Path, zenoh_port: int, **worker: Any) -> ServiceSettings:
             "zenoh": {"listen": [tcp_endpoint(zenoh_port)]},
             "archive": {"directory": str(tmp / "archive")},
             "store": {"path": str(tmp / "mw.db")},
+            "reports": {"directory": str(tmp / "reports")},
             "api": {"api_key": API_KEY},
             "worker": worker,
             "mills": {"files": [str(MILLS / f"{MILL}.toml")]},

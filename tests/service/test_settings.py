@@ -52,3 +52,39 @@ def test_the_same_mill_twice_is_an_error():
     )
     with pytest.raises(SettingsError, match="configured twice"):
         twice.load_mills()
+
+
+MAIL = '[reports.mail]\nhost = "smtp.plant"\nsender = "mw@plant"\nrecipients = ["m@plant"]\n'
+
+
+def test_report_paths_and_the_secret_file_are_relative_to_the_settings_file(tmp_path, monkeypatch):
+    path = tmp_path / "millwatch.toml"
+    path.write_text('[reports]\ndirectory = "out"\n' + MAIL +
+                    'username = "mw"\npassword_file = "secret"\n')  # fmt: skip
+    (tmp_path / "secret").write_text("pw-from-file\n")
+    monkeypatch.setenv("MILLWATCH_SMTP_PASSWORD", "pw-from-env")
+    s = load_service_settings(path)
+    assert s.reports.directory == (tmp_path / "out").resolve()
+    assert s.reports.mail.password_file == (tmp_path / "secret").resolve()
+    assert s.reports.mail.password() == "pw-from-file"  # the file wins, newline dropped
+    assert "pw-from" not in repr(s)  # the settings never hold the password
+    env_only = s.reports.mail.model_copy(update={"password_file": None})
+    assert env_only.password() == "pw-from-env"
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        ('password = "hunter2"\n', "password: not in the settings file"),
+        ('username = "mw"\nstarttls = false\n', "password in clear text"),
+        ('attach = ["doc"]\n', "'doc' is not one of html, pdf, csv"),
+    ],
+)
+def test_mail_settings_refuse_a_password_in_the_file_and_clear_text_logins(
+    tmp_path, extra, message
+):
+    path = tmp_path / "millwatch.toml"
+    path.write_text(MAIL + extra)
+    with pytest.raises(SettingsError, match=r"reports\.mail") as err:
+        load_service_settings(path)
+    assert message in str(err.value) and "hunter2" not in str(err.value)

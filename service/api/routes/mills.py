@@ -1,5 +1,6 @@
 """Routes of the mills: ``GET /mills``, ``/mills/{id}`` and one mill's analysis: ``/life``,
-``/starts``, ``/spectrum``. The work is done by the :class:`~service.api.backend.Backend` (in
+``/starts``, ``/spectrum``; the mills of a site side by side: ``/sites/{site}/fleet``. The
+work is done by the :class:`~service.api.backend.Backend` (in
 process: :mod:`service.api.mill_views`; remote: a worker over zenoh); the monthly report has its
 own module (:mod:`service.api.routes.reports`)."""
 
@@ -11,8 +12,10 @@ from fastapi import APIRouter
 
 from service.api.backend import Backend
 from service.api.errors import problem_responses
-from service.api.models import Life, MillDetail, MillSummary, MonthStarts, Spectrum
-from service.api.routes.params import MillId, Month
+from service.api.models import MillDetail, MillSummary, MonthStarts, Spectrum
+from service.api.routes.params import MillId, Month, Site
+from service.reports.fleet import FleetView
+from service.reports.life import LifeReport
 
 __all__ = ["mills_router"]
 
@@ -40,8 +43,8 @@ def mills_router(backend: Backend) -> APIRouter:
 
     @router.get(
         "/mills/{mill_id}/life",
-        summary="Damage so far, damage rate and remaining life per component",
-        response_model=Life,
+        summary="Damage so far and remaining life (a range, with its basis) per component",
+        response_model=LifeReport,
         responses=problem_responses(404, 422, 503),
     )
     def life(mill_id: MillId) -> dict[str, Any]:
@@ -64,5 +67,14 @@ def mills_router(backend: Backend) -> APIRouter:
     )
     def spectrum(mill_id: MillId) -> dict[str, Any]:
         return backend.spectrum(mill_id)
+
+    @router.get(
+        "/sites/{site}/fleet",
+        summary="All mills of a site side by side, and which to visit first",
+        response_model=FleetView,
+        responses=problem_responses(404, 422, 503, 504),
+    )
+    def fleet(site: Site) -> dict[str, Any]:
+        return backend.fleet(site)
 
     return router

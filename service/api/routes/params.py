@@ -12,7 +12,7 @@ from fastapi import Path, Query
 
 from service.reports.starts import MONTH_PATTERN
 
-__all__ = ["MILL_ID_PATTERN", "AlarmId", "MillId", "Month"]
+__all__ = ["MILL_ID_PATTERN", "AlarmId", "MillId", "Month", "Site"]
 
 MILL_ID_PATTERN = r"^[a-z0-9][a-z0-9_\-]*$"
 """What a mill's configured ``id`` may be (``MillConfig.id``; a test keeps the two equal)."""
@@ -23,6 +23,14 @@ MillId = Annotated[
         pattern=MILL_ID_PATTERN,
         max_length=64,
         description="The mill's id, e.g. sag-5200-lrs.",
+    ),
+]
+Site = Annotated[
+    str,
+    Path(
+        pattern=MILL_ID_PATTERN,
+        max_length=64,
+        description="The site's id (``site`` of the mill files), e.g. rustenburg.",
     ),
 ]
 AlarmId = Annotated[str, Path(max_length=200, description="The alarm's id.")]

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import time
-from datetime import date
 
 import httpx
 import pytest
@@ -39,28 +38,29 @@ def assert_problem(r: httpx.Response, status: int, *words: str) -> None:
 
 
 # ---------------------------------------------------------------------- life
-def test_life_gives_damage_rate_and_remaining_life_per_component(client, live_api):
+def test_life_of_two_minutes_is_damage_so_far_and_insufficient_history(client, live_api):
     body = client.get(f"/mills/{MILL}/life").json()
     comps = body["components"]
     assert {"pinion_combined", "pinion_torsion", "motor_torsion"} <= set(comps)
     assert body["basis"]["miner_limit"] == 1.0 and "residue" in body["basis"]["damage"]
+    assert body["basis"]["sn_curve"]["model"] == "shigley" and "Miner limit D = 1" in body["note"]
     assert body["design_life_years"] == live_api.runtime.mills[MILL].design_life_years
-    window = body["rate_window"]
-    assert 100.0 < window["seconds"] < 200.0  # since monitoring began: the 120 s scene
+    assert body["status"] == "insufficient_history" and body["simulated"] is True
+    assert "more days of monitoring" in body["missing"][0]  # 120 s of the 14 days needed
+    assert 100.0 < body["history"]["monitored_days"] * 86_400 < 200.0  # the 120 s scene
+    assert body["prior"]["method"] == "first_90_days" and body["prior"]["per_component"] == {}
     c = comps["pinion_combined"]
-    assert c["live"] and c["damage_stored"] > 0 and c["damage_pending_residue"] >= 0
-    assert c["damage_committed"] >= c["damage_stored"]
-    assert c["damage"] == pytest.approx(c["damage_committed"] + c["damage_pending_residue"])
-    rate = c["damage_in_window"] / window["seconds"] * 365.25 * 86400
-    assert c["damage_rate_per_year"] == pytest.approx(rate)
-    assert c["remaining_life_years"] == pytest.approx((1 - c["damage"]) / rate)
-    assert date.fromisoformat(c["projected_end_date"]).year > date.today().year
+    assert c["live"] and c["damage_monitored"] > 0 and c["damage_pending_residue"] >= 0
+    assert c["damage"] == pytest.approx(c["damage_monitored"] + c["damage_pending_residue"])
+    for p in c["projections"]:  # no extrapolation of two minutes
+        assert p["remaining_life_years"] is None and p["end_date"] is None
+        assert p["reason"].startswith("insufficient history")
 
 
 def test_life_damage_agrees_with_the_workers_live_summary(client, live_api):
     live = live_api.runtime.status[MILL]["damage"]["pinion_combined"]
     body = client.get(f"/mills/{MILL}/life").json()["components"]["pinion_combined"]
-    assert body["damage_committed"] == pytest.approx(live["committed"])
+    assert body["damage_monitored"] == pytest.approx(live["committed"])
     assert body["damage_pending_residue"] == pytest.approx(live["pending_residue"])
 
 
@@ -238,6 +238,19 @@ def test_metrics_in_prometheus_text_format(client, live_api):
     assert any(name == "millwatch_open_alarms" for name, _ in samples)
 
 
+def test_reports_status_shows_the_month_end_job_of_the_worker(client, live_api):
+    r = client.get("/reports/status")
+    assert r.status_code == 200, r.text
+    (status,) = r.json()["workers"].values()
+    assert status["running"] is True and status["enabled"] is True
+    assert status["directory"] == str(live_api.runtime.settings.reports.directory)
+    assert status["formats"] == ["html", "pdf", "csv"] and status["mail"] is None
+    assert status["failures"] == [] and status["latest"] == {MILL: None}  # no month over yet
+    assert status["runs"] >= 1 and status["last_run"]["failed"] == 0
+    detail = client.get(f"/mills/{MILL}").json()
+    assert detail["worker_status"]["reports"]["running"] is True
+
+
 def test_openapi_documents_problems_examples_and_the_api_key(client):
     spec = client.get("/openapi.json").json()
     assert "Problem" in spec["components"]["schemas"]
@@ -246,5 +259,5 @@ def test_openapi_documents_problems_examples_and_the_api_key(client):
     assert {"401", "403", "404", "409"} <= set(ack["responses"])
     assert PROBLEM in ack["responses"]["404"]["content"]
     assert "304" in spec["paths"]["/alarms"]["get"]["responses"]
-    for name in ("Life", "MonthStarts", "Spectrum", "AlarmList"):
+    for name in ("LifeReport", "FleetView", "MonthStarts", "Spectrum", "AlarmList"):
         assert spec["components"]["schemas"][name].get("examples"), name

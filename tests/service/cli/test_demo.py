@@ -37,6 +37,9 @@ def test_demo_serves_simulated_mills_and_stops_by_itself(tmp_path):
                 mill = detail.json()
         assert mill is not None, "the demo never analysed a sample"
         assert mill["status"]["health"]["channels"]
+        assert mill["simulated"] is True and mill["status"]["simulated"] is True
+        life = httpx.get(f"http://127.0.0.1:{port}/mills/{mill['id']}/life", timeout=5).json()
+        assert life["simulated"] is True and life["status"] == "insufficient_history"
         missing = httpx.get(f"http://127.0.0.1:{port}/mills/nope", timeout=2)
         assert missing.status_code == 404
         assert missing.headers["content-type"].startswith("application/problem+json")

@@ -45,3 +45,12 @@ def test_the_listed_summary_is_the_one_each_module_registers() -> None:
 )
 def test_the_command_is_the_first_word_not_an_option(argv: list[str], command: str | None) -> None:
     assert _command_named(argv) == command
+
+
+def test_the_errors_looked_up_by_module_exist() -> None:
+    import importlib
+
+    from service.cli.main import MODULE_ERRORS
+
+    for module, name in MODULE_ERRORS:
+        assert issubclass(getattr(importlib.import_module(module), name), Exception)

@@ -80,6 +80,7 @@ def pair(tmp_path_factory) -> Iterator[Pair]:
         "zenoh": {"listen": [tcp_endpoint(port)]},
         "archive": {"directory": str(tmp / "archive")},
         "store": {"path": str(tmp / "mw.db")},
+        "reports": {"directory": str(tmp / "reports")},
         "api": {"api_key": API_KEY},
         "worker": {"name": "w1"},
         "mills": {"files": [str(MILLS / f"{MILL}.toml")]},
@@ -160,9 +161,13 @@ def test_remote_alarm_detail_mill_detail_and_report(pair):
     )
     local.pop("generated_ns"), remote.pop("generated_ns")
     assert remote == local and local["starts"]["count"] == 1
-    for fmt in ("html", "csv"):
+    for fmt, media in (
+        ("html", "text/html"),
+        ("csv", "application/zip"),
+        ("pdf", "application/pdf"),
+    ):
         r = pair.remote.get(path, params={"format": fmt})
-        assert r.status_code == 200 and r.headers["content-type"].startswith(f"text/{fmt}")
+        assert r.status_code == 200 and r.headers["content-type"].startswith(media)
 
 
 def test_report_json_round_trips_through_the_codec(pair):
@@ -182,6 +187,15 @@ def test_remote_ack_checks_the_key_in_the_api_and_the_worker_applies_it(pair):
     again = pair.remote.get("/alarms", params={"state": "raised"}, headers={"If-None-Match": tag})
     assert again.status_code == 200 and alarm["alarm_id"] not in again.text
     assert pair.local.get(f"/alarms/{alarm['alarm_id']}").json() == r.json()
+
+
+def test_reports_status_over_zenoh_is_the_workers_own(pair):
+    local = pair.local.get("/reports/status").json()["workers"]["w1"]
+    remote = pair.remote.get("/reports/status").json()["workers"]["w1"]
+    keys = ("enabled", "running", "directory", "formats", "mail", "failures")
+    assert {k: remote[k] for k in keys} == {k: local[k] for k in keys}
+    assert remote["running"] is True and remote["directory"].endswith("reports")
+    assert local["latest"] == {MILL: None} and "latest" not in remote  # read from disk locally
 
 
 def test_an_unknown_query_is_a_problem_reply(pair):
@@ -258,3 +272,23 @@ def test_a_held_mill_is_reported_by_the_remote_api_as_by_the_local_one(tmp_path)
     assert "analysed" not in body["checks"]["workers"]["w1"]  # per mill, not a worker's check
     assert mills == local_mills and mills[0]["held_reason"] == reason
     assert f'millwatch_mill_held{{mill="{MILL}"}} 1.0' in metrics
+
+
+def test_the_fleet_and_simulated_flags_over_zenoh_are_the_local_ones(pair):
+    """The demo's mill is simulated: the remote API says so in every answer, as the local one."""
+    bodies = []
+    for client in (pair.local, pair.remote):
+        fleet = client.get("/sites/rustenburg/fleet")
+        assert fleet.status_code == 200, fleet.text
+        body = fleet.json()
+        del body["generated_at_ns"], body["generated_at"]
+        bodies.append(body)
+        assert client.get("/sites/nowhere/fleet").status_code == 404
+    assert bodies[0] == bodies[1] and bodies[1]["simulated"] and bodies[1]["unreachable"] == []
+    line = bodies[1]["mills"][0]
+    assert line["mill"] == MILL and line["life_status"] == "insufficient_history"
+    remote = pair.remote
+    assert remote.get("/mills").json()[0]["simulated"] is True
+    assert remote.get(f"/mills/{MILL}/life").json()["simulated"] is True
+    alarms = remote.get("/alarms").json()["alarms"]
+    assert all(a["simulated"] and a["message"].startswith("SIMULATED DATA") for a in alarms)

@@ -134,3 +134,50 @@ def test_a_read_snapshot_does_not_see_later_commits(store):
             assert store.record_stats("m1", "steady") == before
     assert store.record_stats("m1", "steady")[0] == before[0] + 1
     assert json.loads(json.dumps(store.records("m1", "steady", limit=1)[0][1])) == _window(99)
+
+
+@pytest.mark.parametrize("every", [HOUR, 25 * MIN, 7 * MIN])
+@pytest.mark.parametrize(("since", "until"), [(0, 5 * HOUR), (35 * MIN, 4 * HOUR + 1), (1, 2)])
+def test_sampling_within_bounds_seeks_the_same_records_as_grouping(store, every, since, until):
+    """Bounded sampling seeks each interval on the index; it picks what grouping by
+    ``t_ns / every`` over the window picks (the unbounded form)."""
+    seeked = [t for t, _ in store.records("m1", "steady", since, until_ns=until,
+                                          every_ns=every, oldest_first=True)]  # fmt: skip
+    grouped = {}
+    for t, _ in store.records("m1", "steady", oldest_first=True):
+        if since <= t < until:
+            grouped.setdefault(t // every, t)
+    assert seeked == sorted(grouped.values())
+
+
+def test_record_values_extract_paths_and_read_nan_as_none(store):
+    paths = [("range_pct", "motor"), ("range_per_rev", "bending"), ("range_pct", "spare")]
+    rows = store.record_values("m1", "steady", paths, (0, 5 * HOUR), HOUR)
+    assert [t for t, _ in rows] == [h * HOUR for h in range(5)]
+    assert rows[1][1] == [16.0, 3.0, None]
+    nan = store.record_values("m1", "steady", [("range_pct", "motor")], (70 * MIN, 71 * MIN))
+    assert nan == [(70 * MIN, [None])]  # the window with NaN
+    assert store.record_values("m1", "steady", [], (0, 20 * MIN)) == [(0, []), (10 * MIN, [])]
+
+
+def test_monitored_days_widen_and_clip(tmp_path):
+    with Store(tmp_path / "s.db") as s:
+        with s.transaction() as db:
+            Store.extend_days(db, {("m1", "2024-01-01"): (10, 20), ("m1", "2024-01-02"): (30, 40)})
+            Store.extend_days(db, {("m1", "2024-01-01"): (5, 15)})  # replayed: only widens
+        assert s.mill_days("m1") == [("2024-01-01", 5, 20), ("2024-01-02", 30, 40)]
+        assert s.mill_days("m1", until_ns=35) == [("2024-01-01", 5, 20), ("2024-01-02", 30, 35)]
+        assert s.mill_span("m1") == (5, 40) and s.mill_span("m2") == (None, None)
+
+
+def test_event_counts_and_times_on_the_index(tmp_path):
+    with Store(tmp_path / "s.db") as s:
+        with s.transaction() as db:
+            Store.add_events(db, [EventRow("m1", "start", 10, {"failed": True}, 12),
+                                  EventRow("m1", "stop", 20, {"kind": "trip"}, 25),
+                                  EventRow("m1", "start", 30, {}, 33)])  # fmt: skip
+        assert s.count_events("m1", "start") == 2 and s.count_events("m1", "start", 11) == 1
+        times = s.event_times("m1", ("start", "stop"), 0, 100)
+        assert [(e.kind, e.t_ns, e.t_end_ns, e.data) for e in times] == [
+            ("start", 10, 12, {"failed": True}), ("stop", 20, 25, {"failed": False}),
+            ("start", 30, 33, {"failed": False})]  # fmt: skip

@@ -1,0 +1,234 @@
+"""The fleet: every mill of a site side by side, and which one to visit first.
+
+Seed 000 §10.6 asks for long-term trending across the plant; §8.3 says bending and starts per
+month drive fatigue. Per mill (:class:`FleetMill`, built where the mill's store is —
+:func:`fleet_entry`, by the worker that analyses it): life consumed and the remaining-life range
+of the governing component (the one life computation, :mod:`service.reports.life`), starts per
+month, steady-state oscillation range and bending amplitude per month (the worst channel's mean,
+from :func:`service.reports.history.monthly_trend`), open alarms. :func:`build_fleet` (pure)
+puts the mills of a site in visit order (:data:`VISIT_RULE`) with the reason for each place.
+
+Plain, typed, JSON-ready data (:func:`fleet_to_dict`), for ``GET /sites/{site}/fleet`` and a
+fleet report.
+"""
+
+from __future__ import annotations
+
+import math
+import zoneinfo
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import ConfigDict, with_config
+
+from alarms.lifecycle import Alarm
+from analytics.drivetrain.mill_config import MillConfig
+from service.reports.history import last_months, life_inputs, monthly_trend
+from service.reports.life import compute_life, local_iso, years_range_text
+from service.reports.plain import plain
+from service.reports.starts import current_month
+from service.store.database import Store
+
+__all__ = [
+    "FLEET_MONTHS",
+    "VISIT_RULE",
+    "FleetMill",
+    "FleetView",
+    "build_fleet",
+    "fleet_entry",
+    "fleet_mill_from_dict",
+    "fleet_mill_to_dict",
+    "fleet_to_dict",
+]
+
+FLEET_MONTHS = 6
+"""Months of starts, oscillation and bending shown per mill (the current one the last)."""
+
+VISIT_RULE = (
+    "1. the worst open alarm (critical, alarm, warning); 2. the shortest remaining life at any "
+    "of the three rates; 3. the most life consumed; 4. the highest bending amplitude this month; "
+    "5. the most starts this month"
+)
+_SEVERITY_RANK = {"critical": 3, "alarm": 2, "warning": 1}
+
+
+@dataclass(frozen=True, slots=True)
+class FleetMill:
+    """One mill of the fleet (module docstring). ``life_consumed``: the largest Miner damage
+    to date of its components (prior included; 1 = the Miner limit); month series are aligned
+    with ``months``; ``None`` where nothing was measured."""
+
+    mill: str
+    site: str
+    simulated: bool
+    life_status: str
+    life_missing: list[str]
+    life_note: str
+    governing_component: str | None
+    life_consumed: float
+    remaining_life_years_min: float | None
+    remaining_life_years_max: float | None
+    end_date_earliest: str | None
+    months: list[str]
+    starts_per_month: list[int]
+    oscillation_range_pct: list[float | None]
+    bending_amplitude_mpa: list[float | None]
+    open_alarms: int
+    worst_open_severity: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class VisitOrder:
+    """A mill's place in the visit order and the reason."""
+
+    rank: int
+    mill: str
+    reason: str
+
+
+#: An answer of ``GET /sites/{site}/fleet`` (abridged), the OpenAPI example.
+FLEET_EXAMPLE: dict[str, Any] = {
+    "site": "rustenburg", "generated_at_ns": 1709251200000000000,
+    "generated_at": "2024-03-01T02:00:00+02:00", "simulated": False, "rule": VISIT_RULE,
+    "visit_order": [{"rank": 1, "mill": "ball-dual-lrs", "reason": "shortest remaining life "
+                     "12.0–19.4 years (pinion_combined_nbs); life consumed 21.3 % of the Miner "
+                     "limit; bending 38.2 MPa this month; 22 starts this month (norm 3–5)"}],
+    "mills": [{"mill": "ball-dual-lrs", "site": "rustenburg", "simulated": False,
+               "life_status": "ok", "life_missing": [], "life_note": "…",
+               "governing_component": "pinion_combined_nbs", "life_consumed": 0.213,
+               "remaining_life_years_min": 12.0, "remaining_life_years_max": 19.4,
+               "end_date_earliest": "2036-02-29", "months": ["2024-02", "2024-03"],
+               "starts_per_month": [19, 22], "oscillation_range_pct": [21.5, 23.0],
+               "bending_amplitude_mpa": [35.1, 38.2], "open_alarms": 1,
+               "worst_open_severity": "warning"}],
+    "unreachable": [],
+}  # fmt: skip
+
+
+@with_config(ConfigDict(json_schema_extra={"examples": [FLEET_EXAMPLE]}))
+@dataclass(frozen=True, slots=True)
+class FleetView:
+    """All mills of a site in visit order; ``unreachable``: mills whose worker did not
+    answer."""
+
+    site: str
+    generated_at_ns: int
+    generated_at: str
+    simulated: bool
+    rule: str
+    visit_order: list[VisitOrder]
+    mills: list[FleetMill]
+    unreachable: list[str]
+
+
+def fleet_entry(
+    store: Store,
+    config: MillConfig,
+    now_ns: int,
+    *,
+    status: Mapping[str, Any] | None = None,
+    open_alarms: Sequence[Alarm] = (),
+) -> FleetMill:
+    """One mill's fleet line from its store (read in one snapshot), the worker's status (live
+    damage, analysed position) and its open alarms."""
+    status = status or {}
+    months = last_months(current_month(config, now_ns), FLEET_MONTHS)
+    with store.read_snapshot():
+        inputs = life_inputs(store, config, now_ns, live=status.get("damage"),
+                             last_sample_ns=status.get("last_sample_ns"))  # fmt: skip
+        life = compute_life(inputs)
+        trend = monthly_trend(store, config, months)
+    gov = life.components.get(life.governing_component or "")
+    ends = [p.end_date for p in gov.projections if p.end_date] if gov else []
+    severities = [str(a.severity) for a in open_alarms]
+    return FleetMill(
+        mill=config.id,
+        site=config.site,
+        simulated=config.simulated,
+        life_status=life.status,
+        life_missing=list(life.missing),
+        life_note=life.note,
+        governing_component=life.governing_component,
+        life_consumed=max((c.damage for c in life.components.values()), default=0.0),
+        remaining_life_years_min=gov.remaining_life_years_min if gov else None,
+        remaining_life_years_max=gov.remaining_life_years_max if gov else None,
+        end_date_earliest=min(ends) if ends else None,
+        months=months,
+        starts_per_month=[t.starts for t in trend],
+        oscillation_range_pct=[t.oscillation_range_pct.worst_mean() for t in trend],
+        bending_amplitude_mpa=[t.bending_amplitude_mpa.worst_mean() for t in trend],
+        open_alarms=len(open_alarms),
+        worst_open_severity=max(severities, key=lambda s: _SEVERITY_RANK.get(s, 0), default=None),
+    )
+
+
+def _last(values: Sequence[float | None]) -> float:
+    return values[-1] if values and values[-1] is not None else -math.inf
+
+
+def _visit_key(m: FleetMill) -> tuple[float, ...]:
+    life = m.remaining_life_years_min
+    return (
+        -_SEVERITY_RANK.get(m.worst_open_severity or "", 0),
+        math.inf if life is None else life,
+        -m.life_consumed,
+        -_last(m.bending_amplitude_mpa),
+        -(m.starts_per_month[-1] if m.starts_per_month else 0),
+    )
+
+
+def _reason(m: FleetMill) -> str:
+    facts = []
+    if m.worst_open_severity in ("critical", "alarm"):
+        facts.append(f"{m.open_alarms} open alarm(s), the worst {m.worst_open_severity}")
+    if m.remaining_life_years_min is not None:
+        years = years_range_text(m.remaining_life_years_min, m.remaining_life_years_max)
+        facts.append(f"shortest remaining life {years} ({m.governing_component})")
+    else:
+        facts.append("no life projection yet (" + "; ".join(m.life_missing or ["no damage"])
+                     + ")")  # fmt: skip
+    facts.append(f"life consumed {100 * m.life_consumed:.3g} % of the Miner limit")
+    bending = _last(m.bending_amplitude_mpa)
+    if math.isfinite(bending):
+        facts.append(f"bending {bending:.1f} MPa this month")
+    if m.starts_per_month:
+        facts.append(f"{m.starts_per_month[-1]} starts this month (norm 3–5)")
+    if m.worst_open_severity == "warning":
+        facts.append(f"{m.open_alarms} open alarm(s), the worst a warning")
+    return "; ".join(facts)
+
+
+def build_fleet(
+    site: str, mills: Sequence[FleetMill], unreachable: Sequence[str], now_ns: int,
+    time_zone: str = "UTC",
+) -> FleetView:  # fmt: skip
+    """The site's mills in visit order (:data:`VISIT_RULE`), each with its reason."""
+    ordered = sorted(mills, key=lambda m: (_visit_key(m), m.mill))
+    return FleetView(
+        site=site,
+        generated_at_ns=now_ns,
+        generated_at=local_iso(now_ns, zoneinfo.ZoneInfo(time_zone)) or "",
+        simulated=any(m.simulated for m in mills),
+        rule=VISIT_RULE,
+        visit_order=[VisitOrder(i, m.mill, _reason(m)) for i, m in enumerate(ordered, 1)],
+        mills=ordered,
+        unreachable=sorted(unreachable),
+    )
+
+
+def fleet_to_dict(view: FleetView) -> dict[str, Any]:
+    """JSON-ready plain data."""
+    out: dict[str, Any] = plain(view)
+    return out
+
+
+def fleet_mill_to_dict(mill: FleetMill) -> dict[str, Any]:
+    """One mill's line as plain data (what a worker answers over zenoh)."""
+    out: dict[str, Any] = plain(mill)
+    return out
+
+
+def fleet_mill_from_dict(data: Mapping[str, Any]) -> FleetMill:
+    """A mill's line back from :func:`fleet_mill_to_dict`."""
+    return FleetMill(**{f: data[f] for f in FleetMill.__dataclass_fields__})
