@@ -16,6 +16,8 @@ What is here:
   :mod:`service.reports.month_summary` — its page 1 and cumulative damage against design life.
 * :mod:`service.reports.fleet` — the mills of a site side by side and the visit order
   (``GET /sites/{site}/fleet``).
+* :mod:`service.reports.fleet_document` — the fleet report (HTML, PDF, CSV) from the fleet
+  answer (``GET /sites/{site}/reports/fleet``).
 * :mod:`service.reports.plain` — report data to JSON-ready plain data.
 * :mod:`service.reports.monthly_document` — what the monthly report says, once: its sections in
   order (summary first) as a document of :mod:`service.reports.render`, which renders it as

@@ -2,6 +2,10 @@
 
 ``GET /mills/{mill_id}/reports/monthly?month=YYYY-MM&format=json|html|csv|pdf[&table=NAME]``
 
+``GET /sites/{site}/reports/fleet?format=json|html|csv|pdf``: the fleet report, every mill of a
+site side by side (:mod:`service.reports.fleet_document`, from the same answer as
+``GET /sites/{site}/fleet``).
+
 ``GET /reports/status``: the month-end report job of each worker (:mod:`service.reports.month_end`):
 where reports go, the last run (due, written, mailed, failed), the failures waiting for their
 next try with their cause, each mill's newest complete month.
@@ -33,8 +37,9 @@ from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 
 from service.api.errors import problem_responses
-from service.api.routes.params import MillId, Month
+from service.api.routes.params import MillId, Month, Site
 from service.errors import BadRequest
+from service.reports.fleet_document import render_fleet
 from service.reports.monthly import MonthlyReport, report_to_dict
 from service.reports.monthly_formats import (
     render_csv,
@@ -70,6 +75,8 @@ class ReportSource(Protocol):
     def monthly_report(self, mill_id: str, month: str | None) -> MonthlyReport: ...
 
     def reports_status(self) -> dict[str, Any]: ...
+
+    def fleet(self, site: str) -> dict[str, Any]: ...
 
 
 def negotiate(fmt: str | None, accept: str | None) -> str:
@@ -119,6 +126,28 @@ def reports_router(backend: ReportSource) -> APIRouter:
         if kind in SUFFIX:
             return _download(render(report), media, f"{stem}-damage.{SUFFIX[kind]}")
         return Response(render(report), media_type=media)
+
+    @router.get(
+        "/sites/{site}/reports/fleet",
+        summary="Fleet report: the mills of a site side by side (json, html, csv or pdf)",
+        responses={
+            200: {"content": {m.split(";")[0]: {} for m, _ in FORMATS.values()}},
+            **problem_responses(404, 422, 503, 504),
+        },
+    )
+    def fleet_report(
+        request: Request,
+        site: Site,
+        format: Literal["json", "html", "csv", "pdf"] | None = None,
+    ) -> Response:
+        kind = negotiate(format, request.headers.get("accept"))
+        view = backend.fleet(site)
+        if kind == "json":
+            return Response(json.dumps(view), media_type="application/json")
+        media, body = FORMATS[kind][0], render_fleet(view, kind)
+        if kind in SUFFIX:
+            return _download(body, media, f"{site}-fleet.{SUFFIX[kind]}")
+        return Response(body, media_type=media)
 
     @router.get(
         "/reports/status",
