@@ -12,9 +12,12 @@ every use of it lives in this module; the rest of millwatch sees two functions:
   ``retention_s`` of the channel in *sample time* (``ceil(retention_s · blocks_per_s)``
   samples), miss detection with a heartbeat, publisher detection, BLOCK + reliable (also for
   the replies to recovery queries), and a zenoh timestamp on every put.
-- :func:`declare_recovering_subscriber` — what the worker receives blocks through: history of
-  late-joining publishers (optionally only the last ``max_age_s``), recovery by heartbeat, and
-  unrecoverable misses logged once per source and handed to ``on_miss``.
+- :func:`declare_recovering_subscriber` — what the worker receives blocks through: the caches
+  of the publishers up when it is declared (optionally only the last ``max_age_s``), recovery by
+  heartbeat, and unrecoverable misses logged once per source and handed to ``on_miss``.
+- :class:`PublisherWatch` — which channel keys have a gateway publisher up right now (zenoh's
+  publisher detection), so that the worker declares a mill's subscriber once its gateways are
+  there (see "History only through the initial query" below).
 
 Measured facts this module relies on (tests/ingest/test_gateway.py):
 
@@ -23,6 +26,18 @@ Measured facts this module relies on (tests/ingest/test_gateway.py):
 - history ``max_age`` filters nothing unless samples carry a timestamp, and
   ``AdvancedPublisher.put`` adds none by default — hence :meth:`GatewayPublisher.put` stamps
   each sample with ``session.new_timestamp()`` (the *publish* time, not the block's t0).
+
+History only through the initial query (issue 16, diagnosed with zenoh-ext trace logs and
+``tests/bench/bench_recovery.py``): zenoh-ext 1.10's advanced subscriber holds a source's live
+samples back only while its *initial* history query (the one sent when it is declared) is
+pending. A cache it fetches later — a publisher found by late-publisher detection, which also
+re-queries every publisher already up — races that source's live samples: if a live sample
+comes first it is delivered, and the whole history reply is then dropped as old, silently (no
+miss reported; the worker saw a gap of the entire outage). Measured: 37 % of a 60 s outage of
+10 mills lost, whole channels at a time. So :func:`declare_recovering_subscriber` turns
+late-publisher detection off by default, and the worker declares a mill's subscriber only when
+:class:`PublisherWatch` sees the mill's publishers (bounded wait; see
+:mod:`service.worker.runtime`).
 
 Zenoh's own sequence numbers (the ones recovery uses) are per publisher *instance*: a restarted
 gateway starts at 0 again and cannot be recovered across. Millwatch's loss accounting therefore
@@ -47,6 +62,7 @@ __all__ = [
     "DEFAULT_RETENTION_S",
     "HEARTBEAT_S",
     "GatewayPublisher",
+    "PublisherWatch",
     "RecoveringSubscriber",
     "cache_samples",
     "declare_gateway_publisher",
@@ -212,13 +228,17 @@ def declare_recovering_subscriber(
     *,
     max_age_s: float | None = None,
     on_miss: Callable[[str, int], None] | None = None,
+    detect_late_publishers: bool = False,
 ) -> RecoveringSubscriber:
     """Subscribe to ``pattern`` with history and recovery; ``on_block(key, payload)`` runs on a
     zenoh thread and must only enqueue (its exceptions are logged, never propagated).
 
-    History: each publisher's cache is fetched when it is detected (also publishers that start
-    later), limited to samples younger than ``max_age_s`` s of publish time (None: the whole
-    cache). Recovery: heartbeats reveal missed samples, which are fetched from the cache.
+    History: the caches of the publishers up now are fetched by the initial query, limited to
+    samples younger than ``max_age_s`` s of publish time (None: the whole cache), and delivered
+    in order before their live samples. ``detect_late_publishers=True`` also fetches the caches
+    of publishers found later, but those replies race live samples and may be dropped whole
+    (module docstring): declare once the publishers are up (:class:`PublisherWatch`) instead.
+    Recovery: heartbeats reveal missed samples, which are fetched from the cache.
     ``on_miss(source, nb)``: ``nb`` samples of publisher ``source`` (``"<zid>/<eid>"``) are lost
     for good (no longer in its cache). Blocks may repeat (history overlaps live): the receiver
     drops what its wire ``seq`` says it has already seen.
@@ -234,9 +254,53 @@ def declare_recovering_subscriber(
         session,
         pattern,
         _callback,
-        history=ext.HistoryConfig(detect_late_publishers=True, max_samples=None, max_age=max_age_s),
+        history=ext.HistoryConfig(
+            detect_late_publishers=detect_late_publishers, max_samples=None, max_age=max_age_s
+        ),
         recovery=ext.RecoveryConfig(heartbeat=True, periodic_queries=None),
         subscriber_detection=True,
     )
     listener = subscriber.sample_miss_listener(_MissReporter(pattern, on_miss))
     return RecoveringSubscriber(subscriber, listener)
+
+
+#: Where zenoh-ext puts the liveliness token of a publisher with publisher detection:
+#: ``<key>/@adv/pub/<zid>/<eid>/<meta or _>``.
+_PUBLISHER_TOKEN = "/@adv/pub/"
+
+
+class PublisherWatch:
+    """The keys under ``pattern`` whose gateway publisher (an advanced publisher with publisher
+    detection, :func:`declare_gateway_publisher`) is up now, from zenoh liveliness tokens.
+
+    A key is up while at least one such publisher on it is (a gateway restarted before its old
+    session's token expired counts once). Plain publishers have no token and are never seen.
+    """
+
+    def __init__(self, session: zenoh.Session, pattern: str) -> None:
+        self._lock = threading.Lock()
+        self._tokens: dict[str, set[str]] = {}
+        self._subscriber = session.liveliness().declare_subscriber(
+            pattern + _PUBLISHER_TOKEN + "**", self._on_token, history=True
+        )
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        token = str(sample.key_expr)
+        key, _, _ = token.partition(_PUBLISHER_TOKEN)
+        with self._lock:
+            tokens = self._tokens.setdefault(key, set())
+            if sample.kind == zenoh.SampleKind.DELETE:
+                tokens.discard(token)
+            else:
+                tokens.add(token)
+            if not tokens:
+                del self._tokens[key]
+
+    def up(self) -> set[str]:
+        """Keys with a gateway publisher up now."""
+        with self._lock:
+            return set(self._tokens)
+
+    def undeclare(self) -> None:
+        """Stop watching."""
+        self._subscriber.undeclare()

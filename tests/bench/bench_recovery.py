@@ -97,9 +97,10 @@ def gateways(mill_files: list[Path], port: int, seconds: float) -> None:
 
 
 def start_serve(settings: Path, log: Path) -> subprocess.Popen[bytes]:
+    """``millwatch -v serve`` (INFO log, so ``serve.log`` shows when it subscribed)."""
     with log.open("ab") as out:
         return subprocess.Popen(
-            [sys.executable, "-m", "service.cli.main", "serve", "--config", str(settings)],
+            [sys.executable, "-m", "service.cli.main", "-v", "serve", "--config", str(settings)],
             cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
         )  # fmt: skip
 
@@ -146,9 +147,23 @@ def archive_counts(directory: Path, kill_ns: int, restart_ns: int, channels: int
     return {"blocks_recovered": len(seen), "blocks_lost": max(0, expected - len(seen))}
 
 
-def run(n_mills: int, outage_s: float, warmup_s: float, tail_s: float) -> dict:
+def api_up(client: httpx.Client, limit_s: float) -> float:
+    """Seconds until ``/health`` answers (inf: not within ``limit_s``)."""
+    started = time.monotonic()
+    for _ in range(int(limit_s / 0.1) + 1):
+        try:
+            if client.get("/health").status_code < 500:
+                return time.monotonic() - started
+        except httpx.HTTPError:
+            pass
+        time.sleep(0.1)
+    return float("inf")
+
+
+def run(n_mills: int, outage_s: float, warmup_s: float, tail_s: float, keep: Path | None) -> dict:
     with tempfile.TemporaryDirectory() as d:
-        directory = Path(d)
+        directory = Path(d) if keep is None else keep
+        directory.mkdir(parents=True, exist_ok=True)
         port, api_port = free_loopback_port(), free_loopback_port()
         settings = write_plant(directory, n_mills, port, api_port)
         mill_files = sorted((directory / "mills").glob("*.toml"))
@@ -173,7 +188,9 @@ def run(n_mills: int, outage_s: float, warmup_s: float, tail_s: float) -> dict:
                 time.sleep(outage_s)
                 restart_ns = time.time_ns()
                 serve = start_serve(settings, log)
+                up_s = api_up(client, CATCH_UP_LIMIT_S)
                 recovery_s = wait_all(client, mills, restart_ns, CATCH_UP_LIMIT_S)
+                recovery_s += up_s
             serve.send_signal(signal.SIGTERM)
             serve.wait(timeout=120)
         finally:
@@ -184,7 +201,8 @@ def run(n_mills: int, outage_s: float, warmup_s: float, tail_s: float) -> dict:
                 p.join(timeout=30)
         counts = archive_counts(directory, kill_ns, restart_ns, 4 * n_mills)
     return {"mills": n_mills, "outage_s": (restart_ns - kill_ns) / 1e9, **counts,
-            "recovery_wall_s": recovery_s, "target_s": TARGET_S}  # fmt: skip
+            "api_up_s": up_s, "recovery_wall_s": recovery_s, "target_s": TARGET_S,
+            "kill_ns": kill_ns, "restart_ns": restart_ns}  # fmt: skip
 
 
 def main() -> None:
@@ -194,8 +212,10 @@ def main() -> None:
     parser.add_argument("--warmup", type=float, default=15.0, help="running before the kill, s")
     parser.add_argument("--tail", type=float, default=30.0, help="publishing after, s")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="keep the plant (archive, serve.log) here, for diagnosis")  # fmt: skip
     args = parser.parse_args()
-    result = run(args.mills, args.outage, args.warmup, args.tail)
+    result = run(args.mills, args.outage, args.warmup, args.tail, args.keep)
     if args.json:
         print(json.dumps(result, indent=2))
         return

@@ -18,6 +18,7 @@ import zenoh
 from ingest import keys, wire
 from ingest.gateway import (
     GatewayPublisher,
+    PublisherWatch,
     cache_samples,
     declare_gateway_publisher,
     declare_recovering_subscriber,
@@ -181,6 +182,64 @@ def test_blocks_missed_beyond_the_cache_are_reported_and_the_rest_recovered() ->
         sub.undeclare()
     assert received == [0, 1, 2, *range(18, 23)]
     assert [nb for _, nb in inbox.misses] == [15]
+
+
+def test_publisher_watch_sees_gateway_publishers_come_and_go_and_never_plain_ones() -> None:
+    other = keys.build_key("s1", "m1", "speed")
+    with _gateway_and_worker() as (publisher, worker):
+        watch = PublisherWatch(worker, keys.mill_pattern("s1", "m1"))
+        try:
+            assert _wait(lambda: watch.up() == {KEY})
+            gateway = publisher._session
+            plain = gateway.declare_publisher(other)
+            second = declare_gateway_publisher(gateway, other, blocks_per_s=RATE)
+            assert _wait(lambda: watch.up() == {KEY, other})
+            second.undeclare()
+            assert _wait(lambda: watch.up() == {KEY})
+            time.sleep(0.3)
+            assert watch.up() == {KEY}  # the plain publisher on `other` is not a gateway
+            plain.undeclare()
+        finally:
+            watch.undeclare()
+
+
+def test_history_comes_before_live_blocks_while_the_gateway_keeps_publishing() -> None:
+    """The worker's start (issue 16): the gateway publishes on, the subscriber is declared once
+    the watch sees it. Every round: the whole cache, then live, contiguous — zenoh's
+    late-publisher detection (``detect_late_publishers=True``) lost the cache whole in some
+    rounds, when a live block overtook its history reply."""
+    stop = threading.Event()
+    published = [0]
+
+    def publish(publisher: GatewayPublisher) -> None:
+        for seq in range(20_000):  # bounded: 2 ms apart, ~40 s at most
+            if stop.is_set():
+                return
+            publisher.put(_block(seq))
+            published[0] = seq + 1
+            time.sleep(0.002)
+
+    rounds: list[tuple[int, int, bool]] = []
+    with _gateway_and_worker() as (publisher, worker):
+        thread = threading.Thread(target=publish, args=(publisher,), daemon=True)
+        thread.start()
+        try:
+            watch = PublisherWatch(worker, keys.mill_pattern("s1", "m1"))
+            assert _wait(lambda: KEY in watch.up())
+            watch.undeclare()
+            for _ in range(5):
+                _wait(lambda: False, timeout_s=0.2)  # more blocks in the cache
+                inbox = _Inbox()
+                sub = declare_recovering_subscriber(worker, keys.mill_pattern("s1", "m1"),
+                                                    inbox.on_block)  # fmt: skip
+                until = published[0] + 50
+                got = inbox.wait_for(lambda s, until=until: bool(s) and s[-1] >= until)
+                sub.undeclare()
+                rounds.append((got[0] if got else -1, len(got), got == list(range(len(got)))))
+        finally:
+            stop.set()
+            thread.join(timeout=10)
+    assert all(first == 0 and contiguous for first, _, contiguous in rounds), rounds
 
 
 def _wait(condition: Callable[[], bool], timeout_s: float = WAIT_S) -> bool:
