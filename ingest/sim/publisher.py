@@ -105,8 +105,9 @@ class ScenePublisher:
         if self._anchored:
             blocks = self._skip_due(blocks)
         try:
-            self._declare_all()
             for block in blocks:
+                if not self._publishers:  # once the first block is known (anchored: skips)
+                    self._declare_all()
                 if stop.wait(self._pacer.wait_s(block.t_end_ns)):
                     break
                 self._publisher(block.key).put(block.payload)
