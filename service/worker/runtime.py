@@ -196,12 +196,15 @@ class ServiceRuntime:
                 config = self.mills[mill_id]
                 age = history_seconds(worker.health[mill_id])
                 self.history_s[mill_id] = age
-                self._subscribers.append(
-                    declare_recovering_subscriber(
+                try:
+                    subscriber = declare_recovering_subscriber(
                         self.session, mill_pattern(config.site, config.id), self._on_block,
                         max_age_s=age,
-                    )
-                )  # fmt: skip
+                    )  # fmt: skip
+                except zenoh.ZError as err:  # retried at the next look (while within the wait)
+                    log.error("%s: could not subscribe to its gateways: %s", mill_id, err)
+                    continue
+                self._subscribers.append(subscriber)
                 del self._unsubscribed[mill_id]
                 back = "all they hold" if age is None else f"the last {age:.1f} s"
                 if missing:
