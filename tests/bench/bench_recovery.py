@@ -17,7 +17,9 @@ restarted worker never catches up on the outage (it reports the blocks as lost).
 4. Stops everything and counts, in the archive, the blocks whose t0 fell in the outage
    (recovered from the caches) and those of the outage never archived (lost).
 
-Prints a table: mills, outage s, blocks recovered, lost, recovery wall s, target 10 s.
+Prints a table: mills, outage s, blocks recovered, lost, start s (until the API answers),
+outage queued s (until the last outage block was received), recovery wall s, target 10 s;
+all times from the restart.
 """
 
 from __future__ import annotations
@@ -135,6 +137,7 @@ def wait_all(client: httpx.Client, mills: list[str], until_ns: int, limit_s: flo
 def archive_counts(directory: Path, kill_ns: int, restart_ns: int, channels: int) -> dict:
     """Blocks of the outage in the archive (recovered) and of the outage expected but absent."""
     seen: set[tuple[str, int]] = set()
+    queued_ns = restart_ns
     for b in ArchiveReader(directory / "archive", ARCHIVE_PREFIX).blocks():
         try:
             block = decode_block(b.payload)
@@ -142,9 +145,11 @@ def archive_counts(directory: Path, kill_ns: int, restart_ns: int, channels: int
             continue
         if kill_ns <= block.t0_ns < restart_ns:
             seen.add((b.key, block.seq))
+            queued_ns = max(queued_ns, b.log_time_ns)  # received (queued) by the worker
     keys = {k for k, _ in seen}
     expected = (restart_ns - kill_ns) // BLOCK_NS * max(len(keys), channels)
-    return {"blocks_recovered": len(seen), "blocks_lost": max(0, expected - len(seen))}
+    return {"blocks_recovered": len(seen), "blocks_lost": max(0, expected - len(seen)),
+            "outage_queued_s": (queued_ns - restart_ns) / 1e9}  # fmt: skip
 
 
 def api_up(client: httpx.Client, limit_s: float) -> float:
@@ -219,9 +224,11 @@ def main() -> None:
     if args.json:
         print(json.dumps(result, indent=2))
         return
-    heads = ("mills", "outage s", "blocks recovered", "lost", "recovery wall s", "target s")
+    heads = ("mills", "outage s", "blocks recovered", "lost", "start s", "outage queued s",
+             "recovery wall s", "target s")  # fmt: skip
     cells = (f"{result['mills']}", f"{result['outage_s']:.1f}", f"{result['blocks_recovered']}",
-             f"{result['blocks_lost']}", f"{result['recovery_wall_s']:.1f}",
+             f"{result['blocks_lost']}", f"{result['api_up_s']:.1f}",
+             f"{result['outage_queued_s']:.1f}", f"{result['recovery_wall_s']:.1f}",
              f"{result['target_s']:.0f}")  # fmt: skip
     widths = [max(len(h), len(c)) for h, c in zip(heads, cells, strict=True)]
     print(" | ".join(h.rjust(w) for h, w in zip(heads, widths, strict=True)))
