@@ -81,10 +81,10 @@ log = logging.getLogger(__name__)
 #: Default retention of a gateway's cache (s of sample time): 10 minutes covers a worker
 #: restart or upgrade with a wide margin at 4.3 MB per 1 kHz channel (README "Wire format").
 DEFAULT_RETENTION_S = 600.0
-#: Heartbeat period (s). A subscriber learns of a lost *last* block only from the heartbeat (the
-#: next block would reveal the gap anyway): 1 s bounds that delay at a cost of one tiny message
-#: per channel per second, ~1 % of a 1 kHz channel's 10 blocks/s, and is well inside the
-#: worker's hold-the-mill bound.
+#: Heartbeat period (s), for subscribers that recover by heartbeat (a lost *last* block is
+#: otherwise seen only when the next one comes): one tiny message per channel per second, ~1 %
+#: of a 1 kHz channel's 10 blocks/s. millwatch's worker does not use it (it polls, see
+#: :data:`RECOVERY_QUERY_S`); kept for other subscribers and announced in the wire format.
 HEARTBEAT_S = 1.0
 #: How long the worker's subscriber to a mill only fetches history, before a recovering
 #: subscriber replaces it (s): longer than zenoh-ext's query timeout (10 s, not settable from
