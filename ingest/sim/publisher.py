@@ -128,7 +128,9 @@ class ScenePublisher:
         speed = self._pacer.speed
         assert speed is not None
         now_ns, now = time.time_ns(), time.monotonic()
-        self._pacer.anchor(t0, now - (now_ns - t0) / _NS_PER_S / speed)
+        # the scene's t0 falls at wall-clock time t0 (in the past or the future); from there
+        # scene time runs ``speed`` × wall time, so the anchor is t0 on the monotonic clock
+        self._pacer.anchor(t0, now - (now_ns - t0) / _NS_PER_S)
         due_from = t0 + round(max(0, now_ns - t0) * speed)  # sample time due now
         for block in blocks:
             if block.t_end_ns < due_from:
