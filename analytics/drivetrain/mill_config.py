@@ -233,8 +233,15 @@ class ChannelConfig(_Frozen):
         return self
 
 
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
 class AlarmThresholds(_Frozen):
-    """Alarm thresholds; % are of motor rated torque. Sources in the module docstring."""
+    """The ``[alarms]`` section: thresholds (seed values; % are of motor rated torque, sources in
+    the module docstring) and the rules' options the seed does not fix — deadbands, delays (s),
+    data-quality limits, resonance margin, life fractions, load-sharing limits. Those options'
+    defaults are engineering judgement; every field names its unit. :mod:`alarms.rules` says
+    which rule uses which field."""
 
     start_peak_warn_pct: Positive = 250.0
     start_peak_alarm_pct: Positive = 300.0
@@ -248,22 +255,79 @@ class AlarmThresholds(_Frozen):
     barring_peak_pct: Positive | None = Field(
         default=None, description="None: 185 % single drive, 314 % dual drive (Tables 12-13)"
     )
+    # Rule options (engineering judgement, not seed values; alarms.rules says which rule uses
+    # which field).
+    raise_delay_s: NonNegative = Field(
+        default=60.0, description="s a level stays beyond before raising"
+    )
+    clear_delay_s: NonNegative = Field(
+        default=300.0, description="s a level stays normal before clearing"
+    )
+    start_peak_deadband_pct: NonNegative = Field(
+        default=10.0, description="clean start: ≤ warn − this"
+    )
+    clean_starts_to_clear: int = Field(
+        default=3, ge=1, description="clean starts that clear start_peak"
+    )
+    oscillation_deadband_pct: NonNegative = Field(
+        default=2.0, description="% of motor rated torque"
+    )
+    bending_deadband_mpa: NonNegative = Field(default=2.0, description="MPa of bending amplitude")
+    barring_deadband_pct: NonNegative = Field(default=10.0, description="% of motor rated torque")
+    unexplained_peak_quiet_s: Positive = Field(
+        default=3600.0, description="s without recurrence: clear"
+    )
+    resonance_margin_warn: float = Field(
+        default=0.10, gt=0, lt=1,
+        description="warn when an excitation is within this fraction of a natural frequency",
+    )  # fmt: skip
+    resonance_margin_deadband: NonNegative = Field(
+        default=0.02, description="fraction of the frequency"
+    )
+    life_warn_fraction: Positive = Field(
+        default=1.0, description="warn when remaining life < this × the remaining design life"
+    )
+    life_alarm_fraction: Positive = Field(
+        default=0.5, description="alarm below this × (< warn fraction)"
+    )
+    life_deadband_fraction: NonNegative = Field(
+        default=0.05, description="× the remaining design life"
+    )
+    stale_after_s: Positive = Field(
+        default=10.0, description="s without data from a channel: warning"
+    )
+    spike_rate_warn_per_min: Positive = Field(
+        default=6.0, description="telemetry spikes per minute"
+    )
+    spike_rate_deadband_per_min: NonNegative = Field(default=3.0, description="spikes per minute")
+    sequence_gaps_warn_per_min: NonNegative = Field(
+        default=0.0, description="missing blocks per minute"
+    )
+    archive_clean_reports_to_clear: int = Field(
+        default=3, ge=1, description="clean archive reports"
+    )
+    imbalance_warn_pct: Positive = Field(
+        default=10.0, description="dual-drive load-sharing imbalance, %"
+    )
+    imbalance_alarm_pct: Positive = Field(default=20.0, description="% (above imbalance_warn_pct)")
+    imbalance_deadband_pct: NonNegative = Field(default=2.0, description="% of imbalance")
 
     @model_validator(mode="after")
     def _ordered(self) -> AlarmThresholds:
         pairs = [
-            ("start_peak", self.start_peak_warn_pct, self.start_peak_alarm_pct),
-            ("starts_per_month", self.starts_per_month_warn, self.starts_per_month_alarm),
-            ("oscillation_range", self.oscillation_range_warn_pct,
-             self.oscillation_range_alarm_pct),
-            ("bending_amplitude", self.bending_amplitude_warn_mpa,
-             self.bending_amplitude_alarm_mpa),
-            ("bending_amplitude", self.bending_amplitude_alarm_mpa,
-             self.bending_amplitude_critical_mpa),
-        ]  # fmt: skip
-        for name, low, high in pairs:
-            if not low < high:
-                raise ValueError(f"{name}: warning level {low} must be below alarm level {high}")
+            ("start_peak_warn_pct", "start_peak_alarm_pct"),
+            ("starts_per_month_warn", "starts_per_month_alarm"),
+            ("oscillation_range_warn_pct", "oscillation_range_alarm_pct"),
+            ("bending_amplitude_warn_mpa", "bending_amplitude_alarm_mpa"),
+            ("bending_amplitude_alarm_mpa", "bending_amplitude_critical_mpa"),
+            ("imbalance_warn_pct", "imbalance_alarm_pct"),
+            ("life_alarm_fraction", "life_warn_fraction"),  # lower life is worse
+        ]
+        for low, high in pairs:
+            if not getattr(self, low) < getattr(self, high):
+                raise ValueError(
+                    f"{low} ({getattr(self, low)}) must be below {high} ({getattr(self, high)})"
+                )
         return self
 
 
