@@ -13,6 +13,7 @@ from prometheus_client.parser import text_string_to_metric_families
 from ingest.keys import alarm_pattern
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.api.app import create_app
+from service.api.times import iso_utc
 from service.settings import ServiceSettings
 from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
@@ -121,9 +122,29 @@ def test_alarms_since_cursor_returns_only_later_changes(client):
     assert after == {"alarms": [], "count": 0, "cursor": cursor + 1}
 
 
+def test_alarm_times_are_also_iso_and_since_takes_iso(client):
+    body = client.get("/alarms").json()
+    alarm = body["alarms"][0]
+    assert alarm["raised"] == iso_utc(alarm["raised_ns"]) and alarm["raised"].endswith("Z")
+    assert alarm["updated"] == iso_utc(alarm["updated_ns"])
+    assert "acked" in alarm and "cleared" in alarm
+    whole_s = body["cursor"] // 10**9 * 10**9
+    since = iso_utc(whole_s).replace("Z", "+00:00")
+    at = client.get("/alarms", params={"since": since}).json()
+    assert at["count"] >= 1 and all(a["updated_ns"] >= whole_s for a in at["alarms"])
+    later = client.get("/alarms", params={"since": iso_utc(whole_s + 10**9)}).json()
+    assert later["count"] == 0
+    detail = client.get(f"/alarms/{alarm['alarm_id']}").json()
+    assert all(t["t"] == iso_utc(t["t_ns"]) for t in detail["transitions"])
+    starts = client.get(f"/mills/{MILL}/starts").json()["starts"]
+    assert starts and starts[0]["t"] == iso_utc(starts[0]["t_ns"])
+    assert client.get("/health").json()["time"].endswith("Z")
+
+
 def test_alarm_filters_are_validated(client):
     assert_problem(client.get("/alarms", params={"state": "burning"}), 422, "'burning'")
-    assert_problem(client.get("/alarms", params={"since": -1}), 422, "since")
+    assert_problem(client.get("/alarms", params={"since": -1}), 422, "since", "-1")
+    assert_problem(client.get("/alarms", params={"since": "soon"}), 422, "'since", "'soon'")
     assert_problem(client.get("/alarms", params={"mill": "ball-9"}), 404, "'ball-9'")
 
 
