@@ -4,6 +4,7 @@ start, served by uvicorn on 127.0.0.1 (fixture ``live_api`` in conftest.py)."""
 from __future__ import annotations
 
 import json
+import re
 import time
 
 import httpx
@@ -282,3 +283,25 @@ def test_openapi_documents_problems_examples_and_the_api_key(client):
     assert "304" in spec["paths"]["/alarms"]["get"]["responses"]
     for name in ("LifeReport", "FleetView", "MonthStarts", "Spectrum", "AlarmList"):
         assert spec["components"]["schemas"][name].get("examples"), name
+
+
+# ---------------------------------------------------------------------- docs offline
+@pytest.mark.parametrize("page", ["/docs", "/redoc"])
+def test_docs_load_only_from_the_app_itself(client, page):
+    """Plants are air-gapped: every script, style, icon and the spec of /docs and /redoc come
+    from the app (same origin), none from a CDN."""
+    html = client.get(page)
+    assert html.status_code == 200 and html.headers["content-type"].startswith("text/html")
+    found = re.findall(r"""(?:src|href|spec-url)=["']([^"']+)["']|url: ?["']([^"']+)["']""",
+                       html.text)  # fmt: skip
+    urls = [a or b for a, b in found]
+    assert any(u.endswith(".js") for u in urls)
+    assert not re.search(r"https?://|//cdn|fonts\.googleapis", html.text)
+    kinds = {".js": "javascript", ".css": "text/css", ".png": "image/png", ".json": "json"}
+    for url in urls:
+        assert url.startswith("/") and not url.startswith("//"), url
+        r = client.get(url)
+        assert r.status_code == 200, url
+        want = next(v for k, v in kinds.items() if url.endswith(k))
+        assert want in r.headers["content-type"], (url, r.headers["content-type"])
+        assert len(r.content) > 100
