@@ -76,7 +76,12 @@ class RemoteCollector(Collector):
         yield reachable
         status = {m: gathered[m]["status"] if m in gathered else {"state": UNREACHABLE}
                   for m in self.backend.mills}  # fmt: skip
-        yield from mill_families(self.backend.mills, status, self.life.get)
+
+        # life only of mills whose worker answers (an unreachable one would cost a timeout)
+        def life(mill: str) -> dict[str, Any] | None:
+            return self.life.get(mill) if mill in gathered else None
+
+        yield from mill_families(self.backend.mills, status, life)
         yield open_alarms(self.backend.alarm_board().rows())
 
 
