@@ -5,16 +5,20 @@ already keeps and re-sends data: an *advanced publisher* caches the last N sampl
 and announces its sequence numbers by heartbeat; an *advanced subscriber* asks new publishers
 for their cache (history), fetches samples it missed (recovery) and reports what can no longer
 be fetched (sample-miss listener). ``zenoh.ext`` is marked unstable in eclipse-zenoh 1.10, so
-every use of it lives in this module; the rest of millwatch sees two functions:
+every use of it lives in this module; the rest of millwatch sees:
 
 - :func:`declare_gateway_publisher` — what a gateway (``simulate --publish``, ``replay``, a
   plant gateway written in Python) publishes wire blocks through: a cache of the last
   ``retention_s`` of the channel in *sample time* (``ceil(retention_s · blocks_per_s)``
   samples), miss detection with a heartbeat, publisher detection, BLOCK + reliable (also for
   the replies to recovery queries), and a zenoh timestamp on every put.
-- :func:`declare_recovering_subscriber` — what the worker receives blocks through: history of
-  late-joining publishers (optionally only the last ``max_age_s``), recovery by heartbeat, and
-  unrecoverable misses logged once per source and handed to ``on_miss``.
+- :func:`declare_recovering_subscriber` — what the worker receives blocks through: the caches
+  of the publishers up when it is declared (optionally only the last ``max_age_s``), recovery by
+  periodic queries, and unrecoverable misses logged once per source and handed to ``on_miss``.
+- :class:`PublisherWatch` — which channel keys have a gateway publisher up right now (zenoh's
+  publisher detection), so that the worker declares a mill's subscriber once its gateways are
+  there (see "History only through the initial query" below).
+- :class:`RecoveringSubscriber` — the history phase, then the recovery phase (same place).
 
 Measured facts this module relies on (tests/ingest/test_gateway.py):
 
@@ -23,6 +27,21 @@ Measured facts this module relies on (tests/ingest/test_gateway.py):
 - history ``max_age`` filters nothing unless samples carry a timestamp, and
   ``AdvancedPublisher.put`` adds none by default — hence :meth:`GatewayPublisher.put` stamps
   each sample with ``session.new_timestamp()`` (the *publish* time, not the block's t0).
+
+History only through the initial query (issue 16, diagnosed with zenoh-ext's trace log and
+``tests/bench/bench_recovery.py``): zenoh-ext 1.10's advanced subscriber holds a publisher's
+live samples back only while its *initial* history query (sent when it is declared) is pending,
+and only if no other query for that publisher is pending when that query ends. Every other query
+races the live samples: if a live sample is delivered first, the reply is dropped whole as old,
+silently (no miss reported; the worker saw a gap of the entire outage). Such queries came from
+late-publisher detection (which also re-queries every publisher already up: 37 % of a 60 s
+outage of 10 mills lost, whole channels at a time), and, with recovery on, from a heartbeat or
+simply a live sample arriving during the initial query (a query of the whole cache; at 50 mills,
+whole mills lost). Hence :class:`RecoveringSubscriber` declares two advanced subscribers in turn:
+history only (no late-publisher detection, no recovery) until the initial query has certainly
+ended (:data:`HISTORY_PHASE_S`), then recovery only (no history); and the worker declares a
+mill's subscriber only when :class:`PublisherWatch` sees the mill's publishers up (bounded wait;
+see :mod:`service.worker.runtime`), so that the initial query reaches their caches.
 
 Zenoh's own sequence numbers (the ones recovery uses) are per publisher *instance*: a restarted
 gateway starts at 0 again and cannot be recovered across. Millwatch's loss accounting therefore
@@ -35,6 +54,7 @@ import logging
 import math
 import threading
 from collections.abc import Callable
+from datetime import timedelta
 from types import TracebackType
 from typing import Any
 
@@ -46,7 +66,10 @@ from ingest.zenoh_session import block_encoding, wait_for_subscribers
 __all__ = [
     "DEFAULT_RETENTION_S",
     "HEARTBEAT_S",
+    "HISTORY_PHASE_S",
+    "RECOVERY_QUERY_S",
     "GatewayPublisher",
+    "PublisherWatch",
     "RecoveringSubscriber",
     "cache_samples",
     "declare_gateway_publisher",
@@ -58,11 +81,20 @@ log = logging.getLogger(__name__)
 #: Default retention of a gateway's cache (s of sample time): 10 minutes covers a worker
 #: restart or upgrade with a wide margin at 4.3 MB per 1 kHz channel (README "Wire format").
 DEFAULT_RETENTION_S = 600.0
-#: Heartbeat period (s). A subscriber learns of a lost *last* block only from the heartbeat (the
-#: next block would reveal the gap anyway): 1 s bounds that delay at a cost of one tiny message
-#: per channel per second, ~1 % of a 1 kHz channel's 10 blocks/s, and is well inside the
-#: worker's hold-the-mill bound.
+#: Heartbeat period (s), for subscribers that recover by heartbeat (a lost *last* block is
+#: otherwise seen only when the next one comes): one tiny message per channel per second, ~1 %
+#: of a 1 kHz channel's 10 blocks/s. millwatch's worker does not use it (it polls, see
+#: :data:`RECOVERY_QUERY_S`); kept for other subscribers and announced in the wire format.
 HEARTBEAT_S = 1.0
+#: How long the worker's subscriber to a mill only fetches history, before a recovering
+#: subscriber replaces it (s): longer than zenoh-ext's query timeout (10 s, not settable from
+#: Python), so the initial history query has completed or timed out by then (module docstring).
+HISTORY_PHASE_S = 12.0
+#: How often the recovering subscriber asks each publisher for samples after the last it got
+#: (zenoh ``RecoveryConfig.periodic_queries``, s): it finds a lost *last* block; a later block
+#: reveals any other gap at once and triggers a query then. Not the heartbeat: for a publisher
+#: it has not heard yet, a heartbeat makes zenoh-ext fetch the whole cache.
+RECOVERY_QUERY_S = 5.0
 
 
 def cache_samples(retention_s: float, blocks_per_s: float) -> int:
@@ -153,16 +185,45 @@ def declare_gateway_publisher(
 
 
 class RecoveringSubscriber:
-    """Holds an advanced subscriber and its miss listener; :meth:`undeclare` drops both."""
+    """The worker's subscriber to one pattern, in two phases (module docstring, "History only
+    through the initial query"): a *history* advanced subscriber (caches, no recovery) and, from
+    ``history_phase_s`` after the declaration on, a *recovering* one (no history) that replaces
+    it — declared before the first is withdrawn, so no block falls between them (the overlap
+    repeats a few, which the receiver drops by seq). :meth:`undeclare` drops what is declared."""
 
-    def __init__(self, subscriber: Any, miss_listener: Any) -> None:
-        self._subscriber = subscriber
-        self._miss_listener = miss_listener
+    def __init__(
+        self,
+        declare: Callable[[bool], tuple[Any, Any]],
+        history_phase_s: float,
+    ) -> None:
+        self._declare = declare
+        self._lock = threading.Lock()
+        self._active: tuple[Any, Any] | None = declare(True)
+        self.recovering = False
+        self._timer = threading.Timer(history_phase_s, self._hand_over)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _hand_over(self) -> None:
+        with self._lock:
+            if self._active is None:
+                return
+            try:
+                live = self._declare(False)
+            except zenoh.ZError as err:  # a closed session: nothing to hand over to
+                log.debug("recovering subscriber not declared: %s", err)
+                return
+            _undeclare_pair(self._active)
+            self._active = live
+            self.recovering = True
 
     def undeclare(self) -> None:
         """Stop receiving (and stop miss reports)."""
-        self._miss_listener.undeclare()
-        self._subscriber.undeclare()
+        self._timer.cancel()
+        with self._lock:
+            if self._active is not None:
+                _undeclare_pair(self._active)
+                self._active = None
 
     def __enter__(self) -> RecoveringSubscriber:
         return self
@@ -174,6 +235,12 @@ class RecoveringSubscriber:
         tb: TracebackType | None,
     ) -> None:
         self.undeclare()
+
+
+def _undeclare_pair(pair: tuple[Any, Any]) -> None:
+    subscriber, listener = pair
+    listener.undeclare()
+    subscriber.undeclare()
 
 
 class _MissReporter:
@@ -212,16 +279,20 @@ def declare_recovering_subscriber(
     *,
     max_age_s: float | None = None,
     on_miss: Callable[[str, int], None] | None = None,
+    history_phase_s: float = HISTORY_PHASE_S,
 ) -> RecoveringSubscriber:
-    """Subscribe to ``pattern`` with history and recovery; ``on_block(key, payload)`` runs on a
-    zenoh thread and must only enqueue (its exceptions are logged, never propagated).
+    """Subscribe to ``pattern`` with history, then recovery; ``on_block(key, payload)`` runs on
+    a zenoh thread and must only enqueue (its exceptions are logged, never propagated).
 
-    History: each publisher's cache is fetched when it is detected (also publishers that start
-    later), limited to samples younger than ``max_age_s`` s of publish time (None: the whole
-    cache). Recovery: heartbeats reveal missed samples, which are fetched from the cache.
-    ``on_miss(source, nb)``: ``nb`` samples of publisher ``source`` (``"<zid>/<eid>"``) are lost
-    for good (no longer in its cache). Blocks may repeat (history overlaps live): the receiver
-    drops what its wire ``seq`` says it has already seen.
+    History: the caches of the publishers up now are fetched by the initial query, limited to
+    samples younger than ``max_age_s`` s of publish time (None: the whole cache), and delivered
+    in order before their live samples. Publishers that come up later are not asked (declare
+    once they are up: :class:`PublisherWatch`). Recovery, from ``history_phase_s`` on: a gap
+    revealed by a later sample is fetched from the cache at once, a lost last sample within
+    :data:`RECOVERY_QUERY_S`. ``on_miss(source, nb)``: ``nb`` samples of publisher ``source``
+    (``"<zid>/<eid>"``) are lost for good (no longer in its cache; during the history phase,
+    any gap). Blocks may repeat (history overlaps live, the hand-over): the receiver drops what
+    its wire ``seq`` says it has already seen.
     """
 
     def _callback(sample: zenoh.Sample) -> None:
@@ -230,13 +301,72 @@ def declare_recovering_subscriber(
         except Exception:
             log.exception("block callback failed for %s", sample.key_expr)
 
-    subscriber = ext.declare_advanced_subscriber(
-        session,
-        pattern,
-        _callback,
-        history=ext.HistoryConfig(detect_late_publishers=True, max_samples=None, max_age=max_age_s),
-        recovery=ext.RecoveryConfig(heartbeat=True, periodic_queries=None),
-        subscriber_detection=True,
-    )
-    listener = subscriber.sample_miss_listener(_MissReporter(pattern, on_miss))
-    return RecoveringSubscriber(subscriber, listener)
+    reporter = _MissReporter(pattern, on_miss)
+
+    def declare(history: bool) -> tuple[Any, Any]:
+        if history:
+            subscriber = ext.declare_advanced_subscriber(
+                session,
+                pattern,
+                _callback,
+                history=ext.HistoryConfig(
+                    detect_late_publishers=False, max_samples=None, max_age=max_age_s
+                ),
+                subscriber_detection=True,
+            )
+        else:
+            subscriber = ext.declare_advanced_subscriber(
+                session,
+                pattern,
+                _callback,
+                recovery=ext.RecoveryConfig(  # the 1.10.2 stub says float; it takes a timedelta
+                    heartbeat=None,
+                    periodic_queries=timedelta(seconds=RECOVERY_QUERY_S),  # type: ignore[arg-type]
+                ),
+                subscriber_detection=True,
+            )
+        return subscriber, subscriber.sample_miss_listener(reporter)
+
+    return RecoveringSubscriber(declare, history_phase_s)
+
+
+#: Where zenoh-ext puts the liveliness token of a publisher with publisher detection:
+#: ``<key>/@adv/pub/<zid>/<eid>/<meta or _>``.
+_PUBLISHER_TOKEN = "/@adv/pub/"
+
+
+class PublisherWatch:
+    """The keys under ``pattern`` whose gateway publisher (an advanced publisher with publisher
+    detection, :func:`declare_gateway_publisher`) is up now, from zenoh liveliness tokens.
+
+    A key is up while at least one such publisher on it is (a gateway restarted before its old
+    session's token expired counts once). Plain publishers have no token and are never seen.
+    """
+
+    def __init__(self, session: zenoh.Session, pattern: str) -> None:
+        self._lock = threading.Lock()
+        self._tokens: dict[str, set[str]] = {}
+        self._subscriber = session.liveliness().declare_subscriber(
+            pattern + _PUBLISHER_TOKEN + "**", self._on_token, history=True
+        )
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        token = str(sample.key_expr)
+        key, _, _ = token.partition(_PUBLISHER_TOKEN)
+        with self._lock:
+            tokens = self._tokens.setdefault(key, set())
+            if sample.kind == zenoh.SampleKind.DELETE:
+                tokens.discard(token)
+            else:
+                tokens.add(token)
+            if not tokens:
+                del self._tokens[key]
+
+    def up(self) -> set[str]:
+        """Keys with a gateway publisher up now."""
+        with self._lock:
+            return set(self._tokens)
+
+    def undeclare(self) -> None:
+        """Stop watching."""
+        self._subscriber.undeclare()

@@ -297,6 +297,18 @@ def decode_block(payload: bytes | bytearray | memoryview) -> Block:
     return _decode_checked(payload)
 
 
+def block_span_ns(payload: bytes | bytearray | memoryview) -> tuple[int, int] | None:
+    """``(t0, t0 + n·1e9/fs)`` ns of a payload that begins with a v1 header, read from the
+    header alone (a few hundred ns, no samples touched); None when it does not begin with one.
+    For skipping blocks by sample time before :func:`decode_block` checks the rest."""
+    if len(payload) < HEADER_SIZE:
+        return None
+    magic, version, _, t0_ns, fs, _, _, _, _, n = HEADER.unpack_from(payload)
+    if magic != MAGIC or version != FORMAT_VERSION or not 0.0 < fs < _INF:
+        return None
+    return t0_ns, t0_ns + round(n * 1e9 / fs)
+
+
 #: The v1 header as a numpy record (same layout as :data:`HEADER`), for many blocks at once.
 HEADER_DTYPE = np.dtype([
     ("magic", "S4"), ("version", "<u2"), ("header_len", "<u2"), ("t0_ns", "<i8"),

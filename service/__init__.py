@@ -14,9 +14,12 @@ Composition: the service around the analytics — commands, worker, store, API, 
 * ``remote/`` — both ends of the zenoh query protocol: the workers' queryables and the API's
   backend that asks them.
 * ``reports/`` — the monthly damage report, life and starts summaries, and their renderers.
+* ``export/`` — the archive for other tools: a span of a mill as an MCAP file Foxglove plots,
+  with the analyzer's and alarm rules' conclusions (``millwatch archive export``).
 
-Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote``; ``worker`` → ``store``; ``api`` →
-``store``, ``reports``, and the ``worker`` runtime it serves; ``remote`` sits between ``api``
-and the workers. A new command goes in ``cli/``, a new route in ``api/routes/``, a new report in
-``reports/``, a new stored table in ``store/``.
+Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote`` / ``export``; ``worker`` →
+``store``; ``api`` → ``store``, ``reports``, and the ``worker`` runtime it serves; ``remote``
+sits between ``api`` and the workers. A new command goes in ``cli/``, a new route in
+``api/routes/``, a new report in ``reports/``, a new stored table in ``store/``, a new export
+format in ``export/``.
 """

@@ -20,7 +20,7 @@ Example (``deploy/plant.toml``)::
     files = ["mills/sag-5200-lrs.toml"]  # or: directory = "mills"
 
     [reports]                            # monthly reports, written after each local month end
-    directory = "../var/reports"         # <directory>/<mill>/<YYYY-MM>.html|pdf|csv
+    directory = "../var/reports"         # <directory>/<mill>/<YYYY-MM>.html|pdf|zip
 
     [reports.mail]                       # optional: mail each report (SMTP, STARTTLS)
     host = "smtp.example.com"
@@ -132,6 +132,11 @@ class WorkerSettings(_Strict):
     * ``recovery_jobs``: processes that replay a long archive tail at start, the mills split
       between them (0, the default: one per available core; 1: the worker alone). A tail under
       32 MB is always replayed by the worker alone.
+    * ``gateway_wait_s``: at start, each mill is subscribed once a gateway publisher of every
+      one of its channels is up (so their caches come, in order, before live blocks: issue 16),
+      or after this many seconds with whatever is up (default 10 s: 2.5 times zenoh's longest
+      connect retry period, 4 s). Gateways with plain publishers are never seen as up: their
+      mills are subscribed after the wait (0: subscribe at once, no recovery wait).
     """
 
     queue_blocks: Annotated[int, Field(gt=0)] = 200_000
@@ -140,6 +145,7 @@ class WorkerSettings(_Strict):
     name: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$")] | None = None
     partition: tuple[str, ...] = ()
     recovery_jobs: Annotated[int, Field(ge=0, le=256)] = 0
+    gateway_wait_s: Annotated[float, Field(ge=0, le=600)] = 10.0
 
     @field_validator("partition")
     @classmethod

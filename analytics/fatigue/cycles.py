@@ -30,7 +30,8 @@ __all__ = ["Cycles"]
 class Cycles:
     """Closed (or closable) rainflow cycles; see the module docstring.
 
-    Stored as two row-major blocks, ``f`` = float64 ``(3, m)`` rows range/mean/count and
+    Stored as two row-major blocks, ``f`` = float64 ``(3, m)`` rows range/mean/count (the
+    counter's views have a fourth row, see :mod:`analytics.fatigue.rainflow_kernels`) and
     ``i`` = int64 ``(2, m)`` rows i_start/i_end, of which the first ``n`` columns are valid; the
     field properties are views.
     """
@@ -72,7 +73,7 @@ class Cycles:
         """Join several cycle sets in order (new arrays)."""
         if not parts:
             return cls.empty()
-        f = np.concatenate([p._f[:, : p._n] for p in parts], axis=1)
+        f = np.concatenate([p._f[:3, : p._n] for p in parts], axis=1)
         i = np.concatenate([p._i[:, : p._n] for p in parts], axis=1)
         return cls(f, i, f.shape[1])
 
@@ -116,14 +117,21 @@ class Cycles:
 
     def copy(self) -> Cycles:
         """An independent copy (the counter's views are overwritten by its next ``feed``)."""
-        return Cycles(self._f[:, : self._n].copy(), self._i[:, : self._n].copy(), self._n)
+        return Cycles(self._f[:3, : self._n].copy(), self._i[:, : self._n].copy(), self._n)
+
+    def full(self) -> Cycles:
+        """The full cycles (count 1.0) only, in order; a new object."""
+        keep = self.count == 1.0
+        return Cycles(
+            self._f[:3, : self._n][:, keep], self._i[:, : self._n][:, keep], int(keep.sum())
+        )
 
     def scaled(self, factor: float) -> Cycles:
         """The same cycles with range and mean multiplied by ``factor`` > 0 (e.g. a stress
         concentration factor K_t, or a unit conversion); a new object, the input untouched."""
         if not factor > 0:
             raise ValueError(f"scale factor must be > 0, got {factor!r}")
-        f = self._f[:, : self._n].copy()
+        f = self._f[:3, : self._n].copy()
         f[:2] *= factor
         return Cycles(f, self._i[:, : self._n].copy(), self._n)
 

@@ -24,7 +24,7 @@ from numba import njit
 
 from analytics.fatigue.exact_sum_kernels import add_bits
 
-__all__ = ["attribute_split", "log_damage", "stresses"]
+__all__ = ["attribute_split", "book", "log_damage", "stresses"]
 
 
 @njit(cache=True, nogil=True)
@@ -55,6 +55,27 @@ def log_damage(s, lq, m1, m2, ln_nd, s_l):
             lr = lq[k]
             lq[k] = (m1 if lr >= 0.0 else m2) * lr - ln_nd
     return lq
+
+
+@njit(cache=True, nogil=True)
+def book(dmg, eq, counts, digits):
+    """Whole-record booking (:mod:`analytics.fatigue.record_count`), in place: ``dmg`` and ``eq``
+    are multiplied by ``counts`` (as ``np.multiply`` does) and added exactly into ``digits`` rows
+    0 and 1. Returns ``(full cycles, ok)``; ``ok`` False when a value is negative, NaN, infinite
+    or huge (the digits are then garbage; the caller takes a checked path)."""
+    bits_d = dmg.view(np.int64)
+    bits_e = eq.view(np.int64)
+    full = 0
+    for k in range(dmg.shape[0]):
+        n = counts[k]
+        full += n == 1.0
+        dmg[k] = dmg[k] * n
+        eq[k] = eq[k] * n
+        if bits_d[k] < 0 or bits_e[k] < 0:
+            return full, False
+        if not (add_bits(digits, 0, bits_d[k]) and add_bits(digits, 1, bits_e[k])):
+            return full, False
+    return full, True
 
 
 @njit(cache=True, nogil=True)

@@ -22,7 +22,7 @@ import numpy as np
 
 from analytics.fatigue.exact_sum_kernels import _accumulate
 
-__all__ = ["DIGITS", "digits_value", "fsum", "fsum2", "hilo"]
+__all__ = ["DIGITS", "ExactSum", "digits_value", "fsum", "fsum2", "hilo"]
 
 _DIGITS = 68  # base-2³² digits from 2⁻¹⁰⁷⁴ up: every finite double and sums of ~10⁹ of them
 DIGITS = _DIGITS
@@ -83,3 +83,40 @@ def fsum2(x: np.ndarray) -> tuple[float, float]:
         values.append(-hi)
         return hi, math.fsum(values)
     return hilo(total)
+
+
+class ExactSum:
+    """Running exact sums of finite doubles, however many arrays are added (long accumulators
+    that stay compiled between calls), one per row: :meth:`value` is the correctly rounded sum
+    of everything added to a row, the float :func:`math.fsum` of all of it would give.
+
+    For sums of non-negative finite terms such as damage increments: :meth:`add` raises
+    ``ValueError`` for a NaN, infinite or huge (≥ 2⁹⁷⁷) term, after which the sum is unusable.
+    Compiled callers add into :attr:`digits` (:func:`~analytics.fatigue.exact_sum_kernels.add_bits`)
+    and call :meth:`carry` after each call, which may add < 2³¹ terms per row.
+    """
+
+    __slots__ = ("digits",)
+
+    def __init__(self, rows: int = 1) -> None:
+        self.digits = np.zeros((rows, _DIGITS), dtype=np.int64)
+
+    def add(self, x: np.ndarray) -> None:
+        """Add every element of the 1-D float64 array ``x`` exactly into row 0."""
+        a = np.ascontiguousarray(x, dtype=np.float64)
+        if not _accumulate(a.view(np.int64), self.digits):
+            raise ValueError("exact sum refused a NaN, infinite or huge (>= 2**977) term")
+        self.carry()
+
+    def carry(self) -> None:
+        """Carry each digit's excess up (the sums are unchanged), so that the int64 digits never
+        overflow however many calls add to them."""
+        d = self.digits
+        carry = d >> 32
+        d &= 0xFFFFFFFF
+        d[:, 1:] += carry[:, :-1]
+        d[:, -1] += carry[:, -1] << 32
+
+    def value(self, row: int = 0) -> float:
+        """The sum of ``row`` so far, correctly rounded."""
+        return digits_value(self.digits[row]) / _SCALE

@@ -24,18 +24,18 @@ accepted once the signal has come back from the extreme by *more* than ``gate``;
 dropped before counting. ``gate=0`` (default) is exact. Its damage error against exact counting is
 measured in ``tests/bench/bench_rainflow.py``.
 
-Residue closure. ``"half"`` (ASTM, the default) counts each remaining range as a half cycle.
-``"repeat"`` closes the residue as if the record were followed by itself (residue ⊕ residue,
-four-point rule), which pairs the largest excursions into full cycles: more conservative, and the
-right choice when the record is one period of a repeating duty. The half cycles that ASTM already
-counted while running (those anchored at the record's first sample) stay half cycles in both modes.
+Residue closure (:mod:`analytics.fatigue.residue_modes`). :meth:`RainflowCounter.close` gives
+the ASTM closure (``"half"``): every range left open is a half cycle. The standard ``"repeat"``
+closure (the record followed by itself) also needs the start points of the half cycles ASTM
+already emitted while running: :class:`analytics.fatigue.repeat_closure.RepeatClosure` follows a
+counter for that, and :func:`count_cycles` takes ``residue="repeat"``. Every half cycle the counter
+emits carries its start value for it (:meth:`RainflowCounter.anchors`).
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Iterable
-from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -43,6 +43,8 @@ import numpy as np
 from analytics.contracts import check_snapshot
 from analytics.fatigue import rainflow_kernels as _k
 from analytics.fatigue.cycles import Cycles
+from analytics.fatigue.repeat_closure import RepeatClosure
+from analytics.fatigue.residue_modes import ResidueMode
 from analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = [
@@ -56,13 +58,6 @@ log = logging.getLogger(__name__)
 
 _F64 = np.dtype(np.float64)
 _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
-
-
-class ResidueMode(StrEnum):
-    """How the open residue is closed on demand."""
-
-    HALF = "half"
-    REPEAT = "repeat"
 
 
 class NonFiniteSampleError(ValueError):
@@ -178,15 +173,27 @@ class RainflowCounter:
         return values, indices
 
     def close(self, mode: ResidueMode | str = ResidueMode.HALF) -> Cycles:
-        """The cycles that closing the residue now would add; the counter is not changed.
+        """The ASTM closure of the residue now: push the held-back extreme (it may close full
+        cycles), then every remaining range is a half cycle. The counter is not changed.
 
-        ``"half"``: ASTM — push the held-back extreme (it may close full cycles), then every
-        remaining range is a half cycle. ``"repeat"``: full cycles of residue ⊕ residue.
-        """
-        mode = ResidueMode(mode)
-        if mode is ResidueMode.HALF:
-            return self._close_half()
-        return _close_by_repetition(*self.residue())
+        ``mode`` must be ``"half"``: the standard ``"repeat"`` closure needs what the counter
+        emitted too (:class:`analytics.fatigue.repeat_closure.RepeatClosure`)."""
+        if ResidueMode(mode) is not ResidueMode.HALF:
+            raise ValueError(
+                "the 'repeat' closure needs the start points of the half cycles already emitted: "
+                "follow the counter with analytics.fatigue.repeat_closure.RepeatClosure, or use "
+                "count_cycles(samples, residue='repeat')"
+            )
+        return self._close_half()
+
+    def anchors(self, closed: Cycles) -> tuple[np.ndarray, np.ndarray]:
+        """The start points ``(values, sample_indices)`` of the half cycles in ``closed``, which
+        must be what the last :meth:`feed` returned (copies). ASTM counts a range that holds the
+        record's start point as a half cycle and drops that point from the stack; a repeat
+        closure needs those points back (they lead the four-point residue)."""
+        k = len(closed)
+        half = self._out_f[2, :k] == 0.5
+        return self._out_f[3, :k][half], self._out_i[0, :k][half]
 
     def _close_half(self) -> Cycles:
         n = int(self._st_i[_k.STACK_LEN])
@@ -194,7 +201,7 @@ class RainflowCounter:
         si = np.empty(n + 1, dtype=np.int64)
         sv[:n] = self._F[_k.STACK, :n]
         si[:n] = self._I[_k.STACK, :n]
-        out_f = np.empty((3, n + 1))
+        out_f = np.empty((4, n + 1))
         out_i = np.empty((2, n + 1), dtype=np.int64)
         cand, cand_i = self._st_f[_k.CAND_VALUE], self._st_i[_k.CAND_INDEX]
         k = _k.close_half(sv, si, n, cand, cand_i, self._has_candidate(), out_f, out_i)
@@ -231,39 +238,6 @@ class RainflowCounter:
         return counter
 
 
-def _close_by_repetition(values: np.ndarray, indices: np.ndarray) -> Cycles:
-    """Four-point rule over the residue (it may still close cycles through the held-back
-    extreme), then over what is left joined to itself at a clean reversal."""
-    first, left_v, left_i = _four_point(values, indices)
-    if left_v.shape[0] < 2:
-        return first
-    doubled_v = np.concatenate([left_v, left_v])
-    keep = _reversal_mask(doubled_v)
-    second, _, _ = _four_point(doubled_v[keep], np.concatenate([left_i, left_i])[keep])
-    return Cycles.concatenate([first, second])
-
-
-def _four_point(values: np.ndarray, indices: np.ndarray) -> tuple[Cycles, np.ndarray, np.ndarray]:
-    m = values.shape[0]
-    out_f, out_i = np.empty((3, m)), np.empty((2, m), dtype=np.int64)
-    left_v, left_i = np.empty(m), np.empty(m, dtype=np.int64)
-    k, n = _k.four_point(values, indices, out_f, out_i, left_v, left_i)
-    return Cycles(out_f, out_i, k), left_v[:n], left_i[:n]
-
-
-def _reversal_mask(values: np.ndarray) -> np.ndarray:
-    """Mask keeping the end points and the direction changes of ``values``, repeats dropped
-    (used at the junction of a residue joined to itself)."""
-    keep = np.ones(values.shape[0], dtype=bool)
-    keep[1:] = values[1:] != values[:-1]
-    kept = np.flatnonzero(keep)
-    if kept.shape[0] >= 3:
-        d = np.diff(values[kept])
-        through = np.sign(d[1:]) == np.sign(d[:-1])
-        keep[kept[1:-1][through]] = False
-    return keep
-
-
 def count_cycles(
     samples: np.ndarray | Iterable[float],
     *,
@@ -273,11 +247,19 @@ def count_cycles(
 ) -> Cycles:
     """Batch rainflow of a whole record: the same kernel as streaming, residue closed.
 
-    Equals ``rainflow.extract_cycles`` (see the module docstring for the two degenerate
-    exceptions) with ``residue="half"``.
+    ``residue="half"`` equals ``rainflow.extract_cycles`` (see the module docstring for the
+    degenerate exceptions). ``residue="repeat"``: the standard count of the record followed by
+    itself, full cycles only (:class:`~analytics.fatigue.repeat_closure.RepeatClosure`).
     """
     x = np.ascontiguousarray(samples, dtype=np.float64)
     counter = RainflowCounter(gate=gate, capacity=min(max(x.shape[0], 8), block_size) + 16)
-    parts = [counter.feed(x[s : s + block_size]).copy() for s in range(0, x.shape[0], block_size)]
-    parts.append(counter.close(residue))
+    repeat = RepeatClosure(counter) if ResidueMode(residue) is ResidueMode.REPEAT else None
+    parts = []
+    for s in range(0, x.shape[0], block_size):
+        closed = counter.feed(x[s : s + block_size])
+        if repeat is None:
+            parts.append(closed.copy())
+        else:
+            parts += [closed.full(), repeat.observe(closed)]
+    parts.append(counter.close() if repeat is None else repeat.close())
     return Cycles.concatenate(parts)

@@ -8,7 +8,7 @@ package's ``extract_cycles`` applies it.
 
 State layout (owned by :class:`analytics.fatigue.rainflow.RainflowCounter`): two arrays, so that one
 call passes three arguments (numba's dispatch costs ~0.1 µs per array argument, which matters at
-100-sample blocks). ``F`` is float64 ``(6, capacity)``, ``I`` is int64 ``(5, capacity)``:
+100-sample blocks). ``F`` is float64 ``(7, capacity)``, ``I`` is int64 ``(5, capacity)``:
 
 =========  ==============================  ====================================================
 row        ``F``                           ``I``
@@ -20,6 +20,10 @@ row        ``F``                           ``I``
 2 STATE    ``[cand_value, start_value,     ``[stack_len, cand_index, direction, n_seen,
            gate]``                         started]``
 3..        output rows range, mean, count  output rows i_start, i_end
+6          output row: the value at
+           ``i_start`` of each *half* cycle
+           (the start point ASTM drops;
+           other columns are not written)
 =========  ==============================  ====================================================
 
 ``direction`` is +1 while the signal rises, -1 while it falls, 0 until it first leaves the start
@@ -37,7 +41,7 @@ from numba import njit
 __all__ = ["NEED_CAPACITY", "NON_FINITE", "close_half", "feed", "four_point"]
 
 
-F_ROWS, I_ROWS = 6, 5
+F_ROWS, I_ROWS = 7, 5
 STACK, SCRATCH, STATE, OUT = 0, 1, 2, 3
 STACK_LEN, CAND_INDEX, DIRECTION, N_SEEN, STARTED = 0, 1, 2, 3, 4
 CAND_VALUE, START_VALUE, GATE = 0, 1, 2
@@ -76,6 +80,7 @@ def _stack_rule(rv, ri, m, sv, si, n, out_f, out_i, k):
                 out_f[0, k] = abs(x1 - x2)
                 out_f[1, k] = 0.5 * (x1 + x2)
                 out_f[2, k] = 0.5
+                out_f[3, k] = x1  # the dropped start point, for a repeat closure
                 out_i[0, k] = si[0]
                 out_i[1, k] = si[1]
                 sv[0] = x2

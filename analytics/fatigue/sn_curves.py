@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from analytics.fatigue import damage_kernels as _dk
+from analytics.fatigue.exact_sum import fsum
 
 __all__ = [
     "GoodmanCorrection",
@@ -308,6 +309,29 @@ class SNCurve:
             _dk.log_damage(s, q, float(self.m1), float(self._m2), math.log(self.N_D), self.S_L)
             return np.exp(q, out=q)
 
+    def damage_and_equivalent(
+        self, ranges: np.ndarray, scale: float = 1.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`damage_of_ranges` (bitwise) and, from the same logarithm, each cycle's
+        ``(S/S_D)^m1`` — the cycles of the knee range it equals on a single-slope curve of slope
+        m1 (seed 002 eq. 4; range and amplitude give the same ratio, halving is exact). Both new
+        arrays; a ratio may overflow to ``inf`` (the caller then sums it another way)."""
+        r = np.ascontiguousarray(ranges, dtype=np.float64)
+        s, q = np.empty(r.shape[0]), np.empty(r.shape[0])
+        if r.ndim != 1 or not _dk.stresses(
+            r, float(scale), self.kind is StressKind.AMPLITUDE, self.S_D, s, q
+        ):
+            d = self.damage_per_cycle(r * scale)  # raises as the checked path does
+            ratio = self.stress_of_ranges(r * scale) / self.S_D
+            with np.errstate(over="ignore", divide="ignore"):
+                return d, np.power(ratio, self.m1)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            np.log(q, out=q)
+            eq = np.multiply(q, float(self.m1))
+            np.exp(eq, out=eq)
+            _dk.log_damage(s, q, float(self.m1), float(self._m2), math.log(self.N_D), self.S_L)
+            return np.exp(q, out=q), eq
+
     def damage(
         self,
         ranges: ArrayLike,
@@ -321,7 +345,7 @@ class SNCurve:
         if n.size and not (np.min(n) >= 0.0 and np.all(np.isfinite(n))):
             raise ValueError("cycle counts must be finite and >= 0")
         d = self.damage_per_cycle(ranges, means, mean_correction)
-        return math.fsum((n * d).tolist())
+        return fsum(np.ascontiguousarray(n * d, dtype=np.float64).ravel())
 
     # ------------------------------------------------------------ plain data
     def to_dict(self) -> dict[str, Any]:
@@ -349,7 +373,10 @@ def _log_sum_of_powers(ranges: np.ndarray, counts: np.ndarray, m: float, S_ref: 
     s, n = ranges[keep], counts[keep]
     s_max = float(np.max(s))
     terms = n * np.exp(m * np.log(s / s_max))
-    return math.log(math.fsum(terms.tolist())) + m * math.log(s_max / S_ref)
+    ratio = s_max / S_ref
+    if not (ratio > 0.0 and math.isfinite(ratio)):  # a subnormal or huge range: no quotient
+        return math.log(fsum(terms)) + m * (math.log(s_max) - math.log(S_ref))
+    return math.log(fsum(terms)) + m * math.log(ratio)
 
 
 def _spectrum(ranges: ArrayLike, counts: ArrayLike, m: float) -> tuple[np.ndarray, np.ndarray]:

@@ -18,8 +18,10 @@ name               curve
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from analytics.fatigue.sn_curves import SNCurve, marin_endurance_limit
+if TYPE_CHECKING:  # imported when a curve is built: the names and defaults stay light (CLI)
+    from analytics.fatigue.sn_curves import SNCurve
 
 __all__ = ["SN_MODEL_NAMES", "SN_MODEL_PARAMETERS", "SNModelParameters", "build_sn_curve"]
 
@@ -51,6 +53,8 @@ class SNModelParameters:
 def build_sn_curve(name: str, params: SNModelParameters | None = None) -> SNCurve:
     """The S-N curve called ``name`` (see the module table); raises ``ValueError`` naming the
     known models for an unknown name."""
+    from analytics.fatigue.sn_curves import SNCurve, marin_endurance_limit
+
     p = params or SNModelParameters()
     if name in ("shigley", "shigley-limit"):
         s_e = p.S_e if p.S_e is not None else marin_endurance_limit(p.S_ut, **APP_D_MARIN)

@@ -37,7 +37,7 @@ import numpy as np
 from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.mill.loads import LoadAnalysis
-from analytics.operation.operating_states import OperatingState
+from analytics.operation.operating_states import OperatingState, Transition
 from analytics.signal.fault_stage import FaultStage
 from analytics.signal.frame_aligner import Frame, FrameAligner
 from analytics.signal.tacho import TachoSpeed
@@ -61,13 +61,16 @@ _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
 class AnalyzerOutput:
-    """What one block completed: analyzer events and harmonic windows (usually none)."""
+    """What one block completed: analyzer events and harmonic windows (usually none), and the
+    operating-state changes decided in it (``(t_ns, state label)``, oldest first; not counted by
+    ``bool``, which tells whether there is anything to store)."""
 
-    __slots__ = ("events", "harmonics")
+    __slots__ = ("events", "harmonics", "states")
 
     def __init__(self) -> None:
         self.events: list[dict[str, Any]] = []
         self.harmonics: list[HarmonicWindow] = []
+        self.states: list[tuple[int, str]] = []
 
     def __bool__(self) -> bool:
         return bool(self.events or self.harmonics)
@@ -131,13 +134,19 @@ class MillAnalyzer:
         Callers with many blocks at hand (a worker's batch, a replay) add them all and process
         once: the analysis then runs over long contiguous chunks, which costs far less per
         sample than block by block and gives bitwise the same results."""
+        frames = self.aligner.push(channel, t0_ns, fs, self.calibrated(channel, raw))
+        if frames:
+            self._queue_frames(frames)
+
+    def calibrated(self, channel: str, raw: np.ndarray) -> np.ndarray:
+        """Raw samples of ``channel`` in engineering units as the analysis sees them: float64
+        ``gain·(raw − offset)`` of the mill config (the same array when that is the identity
+        and ``raw`` is float64 already)."""
         gain, offset = self._gain.get(channel, (1.0, 0.0))
         x = np.asarray(raw, dtype=np.float64)
         if gain != 1.0 or offset != 0.0:
             x = gain * (x - offset)
-        frames = self.aligner.push(channel, t0_ns, fs, x)
-        if frames:
-            self._queue_frames(frames)
+        return x
 
     def add_blocks(self, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray) -> None:
         """Many blocks at once, as :meth:`add` of each in order: block ``k`` is of channel
@@ -243,7 +252,9 @@ class MillAnalyzer:
         if self.tacho is not None:
             name, conv = self.tacho
             frame.data[DERIVED_SPEED] = conv.feed(frame.data[name])
-        out.events += self.loads.feed(frame)
+        decided: list[Transition] = []
+        out.events += self.loads.feed(frame, decided)
+        out.states += [(self.loads.t_ns(tr.sample), tr.state.label) for tr in decided]
         self._harmonics(frame, out)
 
     def _harmonics(self, frame: Frame, out: AnalyzerOutput) -> None:

@@ -210,8 +210,12 @@ class LoadAnalysis:
             self.damage[c] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone)
 
     # ------------------------------------------------------------ feeding
-    def feed(self, frame: Frame) -> list[dict[str, Any]]:
-        """Analyse one aligned frame; returns the events (start/stop/barring dicts) it closed."""
+    def feed(
+        self, frame: Frame, transitions: list[Transition] | None = None
+    ) -> list[dict[str, Any]]:
+        """Analyse one aligned frame; returns the events (start/stop/barring dicts) it closed.
+        The operating-state transitions decided in it are appended to ``transitions`` if given
+        (stream samples; :meth:`t_ns` converts)."""
         n = len(frame)
         if n == 0:
             return []
@@ -224,6 +228,8 @@ class LoadAnalysis:
         events: list[dict[str, Any]] = []
         for tr in self.sm.feed(*self._state_inputs(block, flagged_all)):
             events += self._on_transition(tr)
+            if transitions is not None:
+                transitions.append(tr)
         self._barring_progress()
         self._count(block)
         self.n += n

@@ -12,9 +12,13 @@ What is here:
 - ``batches``        ``BatchReader``, ``archive_batches``: the same messages as arrays (fast replay)
 - ``batch_kernels``  compiled record scans and payload packing for ``batches``
 - ``copy_kernels``   ``copy_bytes``: a bounds-checked ``memcpy`` usable inside compiled code
+- ``foxglove_export`` ``FoxgloveExportWriter``: a derived MCAP file Foxglove plots — samples
+                     and analysis results as protobuf topics stamped with *sample* time (the
+                     archive's log time is receive time: ``files``)
 
 Data flow: worker ──write──▶ writer ──files──▶ reader / batches ──▶ recovery of the worker,
-replay, ``millwatch analyze``; recovery rewrites what a crash left. A file written before a
+replay, ``millwatch analyze``, ``millwatch archive export`` (→ ``foxglove_export``); recovery
+rewrites what a crash left. A file written before a
 crash is readable by both readers up to its last complete record.
 
 Where a new thing goes: a format or naming change → ``files`` (both sides read it); a new way

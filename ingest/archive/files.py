@@ -21,7 +21,14 @@ if possible"), which no typed schema can hold; (2) replay and crash recovery mus
 feed the analyzer exactly the bytes live ingest saw, so results are identical;
 (3) a checksum of a payload means the same thing on the wire and in the archive.
 Standard MCAP tools (``mcap info``, ``mcap cat``, ``mcap.reader.make_reader``) list
-and read these files; plotting in Foxglove needs a derived export (not done here).
+and read these files; plotting in Foxglove needs the derived export of
+:mod:`ingest.archive.foxglove_export` (``millwatch archive export``).
+
+Time base: a message's MCAP ``log_time`` (and ``publish_time``) is the time the worker
+*received* the block (wall clock), which is what orders the log and positions checkpoints.
+The time of the samples is in the block itself: wire header ``t0``, sample ``i`` at
+``t0 + i·1e9/fs``. The two differ by the transport delay live, and by anything at all for a
+replayed or simulated archive; the Foxglove export stamps every message with sample time.
 
 Files
 -----

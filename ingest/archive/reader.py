@@ -23,7 +23,7 @@ from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Schema
+from mcap.records import Channel, Chunk, Schema, Statistics
 from mcap.stream_reader import get_chunk_data_stream
 
 from ingest import wire
@@ -43,6 +43,7 @@ __all__ = [
     "TailTolerantBase",
     "TailTolerantReader",
     "decompress_chunk",
+    "finished_statistics",
 ]
 
 _RECORD_HEAD = struct.Struct("<BQ")
@@ -202,8 +203,9 @@ class TailTolerantReader(TailTolerantBase):
         return RawMessage(channel.topic, log_time, publish_time, sequence, payload, index, channel)
 
 
-def _finished_time_range(path: Path) -> tuple[int, int] | None:
-    """(first, last) log time of a finished file from its summary, else None."""
+def finished_statistics(path: Path) -> Statistics | None:
+    """The summary statistics of a finished file (message count, per-channel counts, first and
+    last log time), read from its summary section; None for an unfinished file."""
     try:
         with open(path, "rb") as stream:
             stream.seek(-len(MCAP_MAGIC), os.SEEK_END)
@@ -213,9 +215,13 @@ def _finished_time_range(path: Path) -> tuple[int, int] | None:
             summary = make_reader(stream).get_summary()
     except (OSError, McapError, struct.error, ValueError, StopIteration):
         return None
-    if summary is None or summary.statistics is None:
-        return None
-    return summary.statistics.message_start_time, summary.statistics.message_end_time
+    return None if summary is None else summary.statistics
+
+
+def _finished_time_range(path: Path) -> tuple[int, int] | None:
+    """(first, last) log time of a finished file from its summary, else None."""
+    stats = finished_statistics(path)
+    return None if stats is None else (stats.message_start_time, stats.message_end_time)
 
 
 class ArchiveReader:

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from ingest import wire
+from ingest import keys, wire
 from ingest.gateway import DEFAULT_RETENTION_S, GatewayPublisher, declare_gateway_publisher
 from ingest.pacing import PacingClock
 from ingest.sim.blocks import SceneBlock, scene_blocks
@@ -106,6 +106,8 @@ class ScenePublisher:
             blocks = self._skip_due(blocks)
         try:
             for block in blocks:
+                if not self._publishers:  # once the first block is known (anchored: skips)
+                    self._declare_all()
                 if stop.wait(self._pacer.wait_s(block.t_end_ns)):
                     break
                 self._publisher(block.key).put(block.payload)
@@ -145,6 +147,20 @@ class ScenePublisher:
                 max(0, behind_ns) / _NS_PER_S, self.skipped,
                 "none (scene over)" if seq is None else seq)  # fmt: skip
 
+    def _declare_all(self) -> None:
+        """Declare every channel's publisher before the first block, then wait (at most
+        ``wait_subscribers_s``) for a subscriber: a worker subscribes a mill once a gateway
+        publisher of each of its channels is up (issue 16), so declaring them one by one,
+        waiting after the first, would stall both."""
+        config = self.scene.config
+        for ch in config.channels.values():
+            self._publisher(keys.channel_key(config.site, config.id, ch.key))
+        first = next(iter(self._publishers.values()), None)
+        waits = first is not None and self._wait_subscribers_s > 0
+        if waits and first is not None and not first.wait_for_subscribers(self._wait_subscribers_s):
+            log.warning("no subscriber for %s after %.1f s; publishing anyway",
+                        first.key, self._wait_subscribers_s)  # fmt: skip
+
     def _publisher(self, key: str) -> GatewayPublisher:
         publisher = self._publishers.get(key)
         if publisher is None:
@@ -154,14 +170,6 @@ class ScenePublisher:
                 blocks_per_s=self.scene.fs / self._block_samples,
                 retention_s=self._retention_s,
             )
-            if self._wait_subscribers_s > 0 and not publisher.wait_for_subscribers(
-                self._wait_subscribers_s
-            ):
-                log.warning(
-                    "no subscriber for %s after %.1f s; publishing anyway",
-                    key,
-                    self._wait_subscribers_s,
-                )
             self._publishers[key] = publisher
         return publisher
 

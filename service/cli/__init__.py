@@ -11,8 +11,16 @@ The ``millwatch`` command line: one module per sub-command, composed by ``main``
 * ``args`` — argument types that name the rule a value broke; ``signal_files`` — ``.npy`` /
   ``.csv`` signals read in blocks, for the offline commands.
 
+Start-up. ``main.COMMANDS`` names each command's module as a dotted path with the one line
+``millwatch --help`` lists; only the module of the command being run (or asked for ``--help``) is
+imported, so ``millwatch --help`` imports no command module and one command never pays for
+another's imports (FastAPI, matplotlib, zenoh). A command that should answer ``--help`` at once
+(``rainflow``) keeps its module to argparse and light helpers and imports the rest in its
+handler; ``tests/service/cli/test_startup.py`` checks what ``--help`` imports.
+
 Commands only compose: they read settings and files, build objects from ``service.worker``,
 ``service.api``, ``service.remote`` (and ``analytics`` / ``ingest`` for the offline ones) and run
-them; no analysis lives here. A new command: a new module with ``add_parser``, added to
-``main.COMMANDS``.
+them; no analysis lives here. A new command: a new module with ``add_parser`` (its ``help=``
+line), and one line in ``main.COMMANDS``: ``Command("name", "service.cli.name", "the same help
+line")`` (a test checks that the two lines agree).
 """

@@ -87,12 +87,27 @@ class _Blocks:
         #: Per channel, the worker's admission: a block is new only if its sequence number is;
         #: a t0 contradicting it is a clock fault (so an archive with repeats gives live results).
         self.sequence = {name: ChannelHealth() for name in config.channels}
+        #: key → channel name (None: not the mill's), parsed once per key, not once per message
+        self.known: dict[str, str | None] = {}
 
     def channel(self, key: str) -> str | None:
+        if key in self.known:
+            return self.known[key]
         try:
-            return self.names.get(keys.to_live(key))
+            name = self.names.get(keys.to_live(key))
         except keys.KeyFormatError:
+            name = None
+        self.known[key] = name
+        return name
+
+    def admit(self, msg: RawMessage) -> tuple[str, wire.Block] | None:
+        """:meth:`decode`, then the worker's admission by sequence number: None for a repeat
+        (counted in :attr:`sequence`) as for anything ``decode`` skips."""
+        got = self.decode(msg)
+        if got is None:
             return None
+        admitted = self.sequence[got[0]].accept(got[1], msg.log_time_ns)
+        return None if admitted.block is None else (got[0], admitted.block)
 
     def decode(self, msg: RawMessage) -> tuple[str, wire.Block] | None:
         name = self.channel(msg.key)

@@ -9,6 +9,13 @@ unfinished ones are read front to back. Exit status 1 if any file is unfinished.
 indexed file: every complete message is kept byte-identical, the torn tail is dropped. Without
 ``--out`` the file is replaced atomically (an already finished file is left untouched). Never
 run it on the file a live archive writer is still appending to.
+
+``archive export ARCHIVE... --mill MILL.toml --out FILE.mcap [--start T] [--end T]`` writes a
+span of one mill as an MCAP file that Foxglove opens and plots: every sample as a protobuf
+message stamped with its *sample* time, a per-block min/max/mean overview, and beside them what
+millwatch concluded over the span — operating state, starts (with their peaks), stops and
+barring, Miner damage per component since the span start, alarms — on the same timeline.
+README "Open the archive in Foxglove" lists the topics and suggests Plot panel paths.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
@@ -27,6 +35,7 @@ from mcap.reader import make_reader
 from ingest.archive.files import MCAP_MAGIC, ArchiveError
 from ingest.archive.reader import TailTolerantReader
 from ingest.archive.recovery import recover_file
+from service.cli.args import duration_seconds, utc_time_ns
 
 __all__ = ["ArchiveCommandError", "FileInfo", "add_parser", "file_info"]
 
@@ -128,6 +137,134 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--out", type=Path, metavar="FILE", help="write here instead of replacing FILE"
     )
     recover.set_defaults(handler=_recover)
+    _add_export(actions)
+
+
+_EXPORT_HELP = """Write a span of one mill of the archive as an MCAP file that Foxglove plots.
+
+Time base: the archive's MCAP log time is when the worker *received* a block; the export stamps
+every message with the time it describes (log_time = publish_time = sample time, from the wire
+block header t0 + i/fs), so the plots line up with the plant's clock whatever the network or a
+replay did. --start/--end select by sample time.
+
+What is written (topics under /<mill>/):
+  samples/<channel>   millwatch.Sample {value}, one message per sample (calibrated units)
+  overview/<channel>  millwatch.SampleEnvelope {min, max, mean}, one per archived block
+  state               foxglove.KeyValuePair operating_state = stopped|starting|running|...
+  events, log         foxglove.Event / foxglove.Log: starts (peaks, rise time), stops, barring
+  damage/<component>  millwatch.Damage {committed, with_residue}: Miner damage since --start
+  starts              millwatch.StartPeaks {switch_on_peak_pct, short_circuit_peak_pct, ...}
+  harmonics/<ch>/<line>  millwatch.HarmonicLine {frequency_hz, amplitude, amplitude_pct, snr_db}
+  alarms              foxglove.Log: alarm transitions, level by severity
+
+The analysis is the real analyzer (as 'millwatch analyze'), run from --context before --start to
+--context after --end, so the state is known when the span begins and a start that begins in
+the span is measured whole; only what happens inside the span is written. Long spans:
+--no-samples writes the overview only (one message per block instead of per sample)."""
+
+_EXPORT_EXAMPLES = """examples:
+  millwatch simulate --scene start-lrs --out start.mcap
+  millwatch archive export start.mcap --mill deploy/mills/sag-5200-lrs.toml --out fox.mcap
+  millwatch archive export /var/lib/millwatch/archive --mill sag1.toml --out sag1.mcap \\
+      --start 2026-11-21T23:30:00Z --end 2026-11-22T00:30:00Z
+then open fox.mcap in Foxglove and plot /sag-5200-lrs/samples/motor_torque.value"""
+
+
+def _add_export(actions: argparse._SubParsersAction) -> None:
+    ex = actions.add_parser(
+        "export",
+        help="a span of one mill as an MCAP file Foxglove plots (sample time)",
+        description=_EXPORT_HELP,
+        epilog=_EXPORT_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    ex.add_argument(
+        "archive",
+        nargs="+",
+        type=Path,
+        metavar="ARCHIVE",
+        help="archive .mcap file(s) or directory (its *.mcap in name order)",
+    )
+    ex.add_argument(
+        "--mill",
+        type=Path,
+        required=True,
+        metavar="MILL.toml",
+        help="configuration of the mill to export (channels, calibration)",
+    )
+    ex.add_argument("--out", type=Path, required=True, metavar="FILE.mcap", help="file to write")
+    ex.add_argument(
+        "--start",
+        type=utc_time_ns,
+        metavar="T",
+        help="first sample time: ISO-8601 (2026-11-21T23:30:00Z) or ns since "
+        "the epoch; default: the archive's first",
+    )
+    ex.add_argument(
+        "--end",
+        type=utc_time_ns,
+        metavar="T",
+        help="end of the span (excluded), same forms; default: the archive's last",
+    )
+    ex.add_argument(
+        "--context",
+        type=duration_seconds,
+        default=120.0,
+        metavar="DURATION",
+        help="analyse this much before --start and after --end, so the state at "
+        "the start and events crossing the span's edges are known "
+        "(default 120s)",
+    )
+    ex.add_argument(
+        "--damage-step",
+        type=duration_seconds,
+        default=1.0,
+        metavar="DURATION",
+        help="sample time between damage messages (default 1s)",
+    )
+    ex.add_argument(
+        "--no-samples",
+        action="store_true",
+        help="leave out the per-sample topics (overview and conclusions only)",
+    )
+    ex.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    ex.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    ex.set_defaults(handler=_export)
+
+
+def _export(args: argparse.Namespace) -> int:
+    # heavy imports here, not at module level: 'millwatch --help' must not pay for them
+    from ingest.mill_files import load_mill_config
+    from service.cli.analyze import _Blocks, recording_files
+    from service.export.foxglove import export_archive
+
+    if args.out.exists() and not args.force:
+        raise ArchiveCommandError(f"--out {args.out}: file exists; remove it or add --force")
+    try:
+        config = load_mill_config(args.mill)
+    except ValueError as exc:
+        raise ValueError(f"--mill {exc}") from exc
+    files = [f for path in args.archive for f in recording_files(path)]
+    progress = not args.no_progress and sys.stderr.isatty()
+    started = time.perf_counter()
+    result = export_archive(
+        files, config, args.out, lambda c: _Blocks(c).admit,  # decoded, admitted as by analyze
+        start_ns=args.start, end_ns=args.end, context_s=args.context,
+        damage_step_s=args.damage_step, samples=not args.no_samples, progress=progress,
+        overwrite=args.force,
+    )  # fmt: skip
+    took = time.perf_counter() - started
+    c = result.counts
+    assert result.first_sample_ns is not None and result.last_sample_ns is not None
+    sys.stdout.write(
+        f"{args.out}: mill {config.id}, samples {_iso(result.first_sample_ns)} .. "
+        f"{_iso(result.last_sample_ns)} (sample time), {len(c.topics)} topics\n"
+        f"  {c.samples} samples, {c.overview} overview, {c.states} states, {c.events} events, "
+        f"{c.damage} damage, {c.harmonics} harmonic, {c.alarms} alarm messages\n"
+        f"  {result.files_read} files read ({result.files_skipped} skipped), "
+        f"{result.analysed_s:.0f} s analysed, {took:.1f} s\n"
+    )
+    return 0
 
 
 def _info(args: argparse.Namespace) -> int:

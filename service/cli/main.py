@@ -3,55 +3,116 @@
 Each sub-command lives in its own module with an ``add_parser(subparsers)`` function; this module
 only composes them, sets up logging and turns expected errors into one readable line and exit
 status 2 (1 is left for "ran, but found a problem").
+
+Start-up: only the module of the command being run is imported (:data:`COMMANDS` names each
+module by its dotted path and holds the one line ``millwatch --help`` lists). ``millwatch --help``
+imports no command module at all, ``millwatch rainflow ...`` only :mod:`service.cli.rainflow`; a
+command that needs FastAPI or zenoh no longer makes every other command pay for importing them.
 """
 
 from __future__ import annotations
 
 import argparse
-import logging
+import importlib
 import sys
 from collections.abc import Sequence
+from typing import NamedTuple
 
-from ingest.archive.files import ArchiveError
-from service.cli import (
-    analyze,
-    api,
-    archive,
-    demo,
-    rainflow,
-    replay,
-    report,
-    router,
-    serve,
-    simulate,
-    spectrum,
-)
-from service.cli.signal_files import SignalFileError
-from service.store.migrations import StoreError
+# Start-up: logging, dataclasses and the commands' modules are imported only when a command runs.
 
-__all__ = ["build_parser", "main"]
+__all__ = ["COMMANDS", "Command", "build_parser", "main"]
 
-log = logging.getLogger("millwatch")
+#: Errors a user can fix from the message alone: printed without a traceback (the commands'
+#: own, e.g. :class:`~service.cli.signal_files.SignalFileError`, are ``ValueError``\ s), and
+#: those of :data:`MODULE_ERRORS`.
+USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, KeyError, OSError)
 
-#: Errors a user can fix from the message alone: printed without a traceback.
-USER_ERRORS: tuple[type[BaseException], ...] = (
-    SignalFileError,
-    ValueError,
-    KeyError,
-    OSError,
-    ArchiveError,
-    StoreError,
+#: User errors defined in modules a command imports, as ``(module, class)``: looked up, not
+#: imported, when a command fails (a command that raised one has imported its module).
+MODULE_ERRORS = (
+    ("ingest.archive.files", "ArchiveError"),
+    ("service.store.migrations", "StoreError"),
 )
 
 
-#: The sub-command modules, in the order ``--help`` lists them.
+class Command(NamedTuple):
+    """A sub-command: its name, the module that registers it (imported only when the command
+    runs or shows its own ``--help``) and the line ``millwatch --help`` lists for it (the same
+    ``help=`` the module's ``add_parser`` gives; a test keeps them equal)."""
+
+    name: str
+    module: str
+    summary: str
+
+
+#: The sub-commands, in the order ``--help`` lists them. A new command: one line here.
 COMMANDS = (
-    demo, rainflow, simulate, spectrum, replay, archive, serve, router, api, analyze, report,
-)  # fmt: skip
+    Command(
+        "demo",
+        "service.cli.demo",
+        "run everything on loopback with simulated mills: worker, gateways, REST API",
+    ),
+    Command(
+        "rainflow",
+        "service.cli.rainflow",
+        "rainflow count and Miner damage of a recorded signal (.npy or .csv)",
+    ),
+    Command(
+        "simulate",
+        "service.cli.simulate",
+        "simulate a mill (scene) to an MCAP file with ground truth",
+    ),
+    Command(
+        "spectrum",
+        "service.cli.spectrum",
+        "PSD of the running portions of a recording with the expected lines marked",
+    ),
+    Command(
+        "replay",
+        "service.cli.replay",
+        "re-publish archived MCAP blocks to zenoh with their original pacing",
+    ),
+    Command(
+        "archive",
+        "service.cli.archive",
+        "inspect MCAP archive files, recover files a crash left unfinished",
+    ),
+    Command(
+        "serve",
+        "service.cli.serve",
+        "run a worker (zenoh ingest, archive, analysis, store, queryables) and the REST API",
+    ),
+    Command(
+        "router",
+        "service.cli.router",
+        "run a zenoh router (for workers, gateways and the API) where zenohd is absent",
+    ),
+    Command(
+        "api",
+        "service.cli.api",
+        "run the REST API alone; it asks the workers over zenoh (scale-out)",
+    ),
+    Command(
+        "analyze",
+        "service.cli.analyze",
+        "analyse an MCAP recording: starts, stops, barring, steady state, damage by phase",
+    ),
+    Command(
+        "report",
+        "service.cli.report",
+        "write one mill's monthly report (HTML, PDF, CSV) from a store file",
+    ),
+)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``millwatch`` parser: global options and every sub-command of :data:`COMMANDS`."""
+def build_parser(
+    argv: Sequence[str] | None = None, *, load_all: bool = False
+) -> argparse.ArgumentParser:
+    """The ``millwatch`` parser: global options and every sub-command of :data:`COMMANDS`.
+
+    Only the command ``argv`` names gets its full parser (its module is imported); the others
+    are listed by name and summary. ``load_all``: import every command module and build every
+    full parser (tests)."""
     parser = argparse.ArgumentParser(
         prog="millwatch",
         description=(
@@ -62,26 +123,57 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
+    chosen = _command_named(argv)
     for command in COMMANDS:
-        command.add_parser(sub)
+        if load_all or command.name == chosen:
+            importlib.import_module(command.module).add_parser(sub)
+        else:
+            sub.add_parser(command.name, help=command.summary)
     return parser
+
+
+def _command_named(argv: Sequence[str] | None) -> str | None:
+    """The sub-command ``argv`` names: its first word that is not an option (the global options
+    take no value)."""
+    words = list(sys.argv[1:] if argv is None else argv)
+    for k, word in enumerate(words):
+        if word == "--":
+            return words[k + 1] if k + 1 < len(words) else None
+        if not word.startswith("-"):
+            return word
+    return None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the sub-command ``argv`` names (default: the process's arguments); the exit status."""
-    args = build_parser().parse_args(argv)
+    args = build_parser(argv).parse_args(argv)
+    import logging
+
     logging.basicConfig(
         level=logging.WARNING - 10 * min(args.verbose, 2),
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
     try:
         return int(args.handler(args) or 0)
-    except USER_ERRORS as exc:
+    except Exception as exc:
+        if not _is_user_error(exc):
+            raise
         sys.stderr.write(f"millwatch: error: {exc}\n")
         return 2
     except KeyboardInterrupt:
         sys.stderr.write("millwatch: interrupted\n")
         return 130
+
+
+def _is_user_error(exc: Exception) -> bool:
+    """One of :data:`USER_ERRORS` or of :data:`MODULE_ERRORS`."""
+    if isinstance(exc, USER_ERRORS):
+        return True
+    for module, name in MODULE_ERRORS:
+        found = sys.modules.get(module)
+        if found is not None and isinstance(exc, getattr(found, name)):
+            return True
+    return False
 
 
 if __name__ == "__main__":

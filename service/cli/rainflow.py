@@ -1,187 +1,54 @@
 """``millwatch rainflow INPUT``: offline rainflow count and Miner damage of one recorded signal.
 
-The signal goes through the same streaming counter and damage recorder as live data, block by
-block, so the result of any ``--block-size`` is the batch result (ASTM E1049-85; seed 000 §8.2 and
-App. D). The residue is closed at the end (``--residue half``, ASTM, or ``repeat``).
+The signal is read in large chunks (a ``.npy`` file memory-mapped, never loaded whole) and goes
+through the same exact counter and damage per cycle as live data, compiled or vectorised per
+chunk (:mod:`analytics.fatigue.record_count`), so the result of any ``--block-size`` is the batch
+result (ASTM E1049-85; seed 000 §8.2 and App. D). The residue is closed at the end: ``half``
+(ASTM, the default) or ``repeat`` (the record followed by itself, full cycles only; see
+``--residue``).
+
+Start-up: the module imports argparse and light helpers only, so ``millwatch rainflow --help``
+imports no numpy or numba; the functions that count import what they use when they run.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
-import json
-import logging
 import math
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
-import numpy as np
-from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
-
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.miner import DamageRecorder, MinerSum
-from analytics.fatigue.rainflow import NonFiniteSampleError, RainflowCounter, ResidueMode
-from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve, equivalent_cycles
-from analytics.fatigue.sn_models import (
-    APP_D_S_UT,
-    SN_MODEL_NAMES,
-    SNModelParameters,
-    build_sn_curve,
-)
+from analytics.fatigue.residue_modes import RESIDUE_MODE_HELP, ResidueMode
+from analytics.fatigue.sn_models import APP_D_S_UT, SN_MODEL_NAMES
 from service.cli.args import non_negative_float, positive_float, positive_int
-from service.cli.signal_files import ArraySource, SignalFileError, SignalSource, open_signal
 
-__all__ = ["RainflowSummary", "add_parser", "run_rainflow"]
+if TYPE_CHECKING:  # numpy and the counter are imported by the functions that count
+    import numpy as np
 
-log = logging.getLogger(__name__)
+    from analytics.fatigue.cycles import Cycles
+    from analytics.fatigue.record_count import RecordCount
+    from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
+    from service.cli.signal_files import ArraySource, SignalSource
 
-#: Inputs longer than this show a progress bar (on a terminal).
-PROGRESS_THRESHOLD = 1_000_000
+    Source = SignalSource | ArraySource
 
+__all__ = ["DEFAULT_BLOCK_SIZE", "RainflowSummary", "add_parser", "run_rainflow"]
 
-@dataclass(frozen=True)
-class RainflowSummary:
-    """What ``--json`` prints."""
-
-    input: str
-    samples: int
-    full_cycles: int
-    half_cycles: int
-    damage: float
-    damage_committed: float
-    damage_residue: float
-    equivalent_range: float
-    equivalent_range_cycles: float
-    residue_length: int
-    residue_mode: str
-    gate: float
-    scale: float
-    sn_curve: dict[str, Any]
+#: Samples read and counted at once: big enough that Python's cost per chunk vanishes, small
+#: enough that the counter's buffers stay in cache (measured: tests/bench/bench_cli_rainflow.py).
+DEFAULT_BLOCK_SIZE = 1 << 16
 
 
-class _Tally:
-    """Recorders for the offline run: damage, cycle counts and the equivalent-range sum."""
-
-    def __init__(self, curve: SNCurve, scale: float, goodman: GoodmanCorrection | None) -> None:
-        self.damage = DamageRecorder(curve, scale=scale, mean_correction=goodman)
-        self.scale = scale
-        self.m = curve.m1
-        self.s_ref = curve.as_kind("range").S_D
-        self.eq_sum = MinerSum()
-        self.full = 0
-        self.half = 0
-
-    def record(self, cycles: Cycles) -> None:
-        if not len(cycles):
-            return
-        self.damage.record(cycles)
-        self.full += cycles.full_cycles
-        self.half += cycles.half_cycles
-        ranges = cycles.range * self.scale
-        self.eq_sum.add(equivalent_cycles(ranges, cycles.count, self.m, self.s_ref))
-
-    def equivalent_range(self, n_ref: float) -> float:
-        """Seed 002 eq. 4: the range that, ``n_ref`` times, does the same damage (slope m1)."""
-        total = self.eq_sum.value
-        return 0.0 if total == 0.0 else self.s_ref * (total / n_ref) ** (1.0 / self.m)
-
-
-def run_rainflow(
-    source: Source,
-    curve: SNCurve,
-    *,
-    block_size: int = 1000,
-    gate: float = 0.0,
-    residue: ResidueMode = ResidueMode.HALF,
-    scale: float = 1.0,
-    goodman: GoodmanCorrection | None = None,
-    n_ref: float = 2e6,
-    cycles_out: IO[str] | None = None,
-    progress: bool = False,
-) -> RainflowSummary:
-    """Count ``source`` block by block; write every cycle to ``cycles_out`` if given."""
-    counter = RainflowCounter(gate=gate, capacity=block_size + 64)
-    tally = _Tally(curve, scale, goodman)
-    writer = _CycleWriter(cycles_out)
-    with _progress(source, progress) as bar:
-        for block in source.blocks(block_size):
-            cycles = _feed(counter, block, source)
-            tally.record(cycles)
-            writer.write(cycles)
-            bar.update(block.shape[0])
-    committed = tally.damage.damage
-    closing = counter.close(residue)
-    tally.record(closing)
-    writer.write(closing)
-    return RainflowSummary(
-        input=str(source.path),
-        samples=counter.samples_seen,
-        full_cycles=tally.full,
-        half_cycles=tally.half,
-        damage=tally.damage.damage,
-        damage_committed=committed,
-        damage_residue=tally.damage.damage - committed,
-        equivalent_range=tally.equivalent_range(n_ref),
-        equivalent_range_cycles=n_ref,
-        residue_length=counter.residue_length,
-        residue_mode=str(residue),
-        gate=gate,
-        scale=scale,
-        sn_curve=curve.to_dict(),
-    )
-
-
-Source = SignalSource | ArraySource
-
-
-def _feed(counter: RainflowCounter, block: np.ndarray, source: Source) -> Cycles:
-    try:
-        return counter.feed(block)
-    except NonFiniteSampleError as exc:
-        where = f"row {exc.index + 1}" if source.column else f"sample {exc.index}"
-        raise SignalFileError(
-            f"{source.path}: {where} is {exc.value!r}. Rainflow needs finite samples; clean or "
-            "cut the record first (millwatch never interpolates bad telemetry silently)."
-        ) from exc
-
-
-class _CycleWriter:
-    """``range,mean,count,i_start,i_end`` rows at full precision (repr of float64)."""
-
-    def __init__(self, out: IO[str] | None) -> None:
-        self._csv = csv.writer(out, lineterminator="\n") if out is not None else None
-        if self._csv is not None:
-            self._csv.writerow(["range", "mean", "count", "i_start", "i_end"])
-
-    def write(self, cycles: Cycles) -> None:
-        if self._csv is not None and len(cycles):
-            self._csv.writerows(cycles.as_tuples())
-
-
-@contextmanager
-def _progress(source: Source, enabled: bool) -> Iterator[tqdm]:
-    show = enabled and (source.length is None or source.length >= PROGRESS_THRESHOLD)
-    with tqdm(
-        total=source.length,
-        unit="sample",
-        unit_scale=True,
-        disable=not show,
-        desc=source.path.name,
-        file=sys.stderr,
-    ) as bar:
-        yield bar
-
-
-# ---------------------------------------------------------------- command line
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "rainflow",
         help="rainflow count and Miner damage of a recorded signal (.npy or .csv)",
-        description=__doc__,
+        description=__doc__.split("\n\nThis module")[0] if __doc__ else None,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=(
             "examples:\n"
@@ -192,7 +59,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("input", type=Path, help="signal file: .npy (1-D) or .csv with a header row")
     p.add_argument("--column", help="CSV column holding the signal (MPa for damage)")
-    p.add_argument("--block-size", type=positive_int, default=1000, help="samples per block")
+    p.add_argument(
+        "--block-size",
+        type=positive_int,
+        default=DEFAULT_BLOCK_SIZE,
+        help="samples read and counted at once (memory, not results; default %(default)s)",
+    )
     p.add_argument(
         "--gate",
         type=non_negative_float,
@@ -202,8 +74,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--residue",
         choices=[m.value for m in ResidueMode],
-        default="half",
-        help="close the residue as half cycles (ASTM) or by repeating the record",
+        default=ResidueMode.HALF.value,
+        help="how the open residue is closed: "
+        + "; ".join(f"{m.value}: {text}" for m, text in RESIDUE_MODE_HELP.items()),
     )
     _add_sn_options(p)
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -251,7 +124,126 @@ def _add_sn_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+#: Inputs longer than this show a progress bar (on a terminal).
+PROGRESS_THRESHOLD = 1_000_000
+
+
+@dataclass(frozen=True)
+class RainflowSummary:
+    """What ``--json`` prints."""
+
+    input: str
+    samples: int
+    full_cycles: int
+    half_cycles: int
+    damage: float
+    damage_committed: float
+    damage_residue: float
+    equivalent_range: float
+    equivalent_range_cycles: float
+    residue_length: int
+    residue_mode: str
+    gate: float
+    scale: float
+    sn_curve: dict[str, Any]
+
+
+def run_rainflow(
+    source: Source,
+    curve: SNCurve,
+    *,
+    block_size: int,
+    gate: float = 0.0,
+    residue: ResidueMode | str = ResidueMode.HALF,
+    scale: float = 1.0,
+    goodman: GoodmanCorrection | None = None,
+    n_ref: float = 2e6,
+    cycles_out: IO[str] | None = None,
+    progress: bool = False,
+) -> RainflowSummary:
+    """Count ``source`` in chunks of ``block_size``; write every cycle to ``cycles_out`` if
+    given."""
+    from analytics.fatigue.record_count import RecordCount
+
+    count = RecordCount(
+        curve, scale=scale, goodman=goodman, gate=gate, residue=residue, capacity=block_size
+    )
+    writer = _CycleWriter(cycles_out)
+    with _progress(source, progress) as bar:
+        for chunk in source.blocks(block_size):
+            writer.write(_feed(count, chunk, source))
+            bar.update(chunk.shape[0])
+    closing, totals = count.close()
+    writer.write(closing)
+    return RainflowSummary(
+        input=str(source.path),
+        samples=totals.samples,
+        full_cycles=totals.full_cycles,
+        half_cycles=totals.half_cycles,
+        damage=totals.damage,
+        damage_committed=totals.damage_committed,
+        damage_residue=totals.damage_residue,
+        equivalent_range=totals.equivalent_range(n_ref),
+        equivalent_range_cycles=n_ref,
+        residue_length=totals.residue_length,
+        residue_mode=ResidueMode(residue).value,
+        gate=gate,
+        scale=scale,
+        sn_curve=curve.to_dict(),
+    )
+
+
+def _feed(count: RecordCount, chunk: np.ndarray, source: Source) -> Cycles:
+    from analytics.fatigue.rainflow import NonFiniteSampleError
+    from service.cli.signal_files import SignalFileError
+
+    try:
+        return count.feed(chunk)
+    except NonFiniteSampleError as exc:
+        where = f"row {exc.index + 1}" if source.column else f"sample {exc.index}"
+        raise SignalFileError(
+            f"{source.path}: {where} is {exc.value!r}. Rainflow needs finite samples; clean or "
+            "cut the record first (millwatch never interpolates bad telemetry silently)."
+        ) from exc
+
+
+class _CycleWriter:
+    """``range,mean,count,i_start,i_end`` rows at full precision (repr of float64)."""
+
+    def __init__(self, out: IO[str] | None) -> None:
+        self._csv = csv.writer(out, lineterminator="\n") if out is not None else None
+        if self._csv is not None:
+            self._csv.writerow(["range", "mean", "count", "i_start", "i_end"])
+
+    def write(self, cycles: Cycles) -> None:
+        if self._csv is not None and len(cycles):
+            self._csv.writerows(cycles.as_tuples())
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+
+@contextmanager
+def _progress(source: Source, enabled: bool) -> Iterator[Any]:
+    """A tqdm bar on stderr for a long input on a terminal (tqdm imported only then)."""
+    if not (enabled and (source.length is None or source.length >= PROGRESS_THRESHOLD)):
+        yield _NoBar()
+        return
+    from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
+
+    with tqdm(
+        total=source.length, unit="sample", unit_scale=True, desc=source.path.name, file=sys.stderr
+    ) as bar:
+        yield bar
+
+
 def _main(args: argparse.Namespace) -> int:
+    from analytics.fatigue.sn_curves import GoodmanCorrection
+    from analytics.fatigue.sn_models import SNModelParameters, build_sn_curve
+    from service.cli.signal_files import open_signal
+
     params = SNModelParameters(S_ut=args.s_ut, S_e=args.s_e, fat=args.fat)
     curve = build_sn_curve(args.sn_model, params)
     goodman = GoodmanCorrection(args.s_ut) if args.goodman else None
@@ -275,6 +267,8 @@ def _main(args: argparse.Namespace) -> int:
 
 @contextmanager
 def _maybe_open(path: Path | None) -> Iterator[IO[str] | None]:
+    from service.cli.signal_files import SignalFileError
+
     if path is None:
         yield None
         return
@@ -287,6 +281,8 @@ def _maybe_open(path: Path | None) -> Iterator[IO[str] | None]:
 
 
 def _print_summary(s: RainflowSummary, *, as_json: bool) -> None:
+    import json
+
     out = sys.stdout
     if as_json:
         json.dump(asdict(s), out, indent=2)

@@ -1,8 +1,10 @@
 """Reading a recorded signal from ``.npy`` or ``.csv`` in blocks, for the offline commands.
 
-``.npy`` files are memory-mapped, so an hour or a month of 1 kHz samples is never loaded whole.
-``.csv`` files need a header row; the column is chosen by name. Errors name the file, the column
-and the row, because the person reading them has to go and fix that file.
+``.npy`` files are memory-mapped, so an hour or a month of 1 kHz samples is never loaded whole; a
+float64 file's blocks are views of the mapping (no copy). ``.csv`` files need a header row; the
+column is chosen by name; each block of lines is parsed by numpy's C reader (``np.loadtxt``), and
+only a block it refuses is read again row by row to say where and why. Errors name the file, the
+column and the row, because the person reading them has to go and fix that file.
 """
 
 from __future__ import annotations
@@ -110,15 +112,30 @@ def _csv_blocks(path: Path, column: str | None, block_size: int) -> Iterator[np.
     assert column is not None
     j = _csv_column_index(path, column)
     with path.open(newline="") as f:
-        rows = csv.reader(f)
-        next(rows)
+        next(f)  # the header
         line = 1
         while True:
-            chunk = list(itertools.islice(rows, block_size))
-            if not chunk:
+            lines = list(itertools.islice(f, block_size))
+            if not lines:
                 return
-            yield _parse_csv_chunk(path, column, j, chunk, line)
-            line += len(chunk)
+            yield _parse_csv_lines(path, column, j, lines, line)
+            line += len(lines)
+
+
+def _parse_csv_lines(
+    path: Path, column: str, j: int, lines: list[str], first_line: int
+) -> np.ndarray:
+    """Column ``j`` of ``lines`` as float64, vectorised; a block numpy refuses, or where it would
+    skip a line (blank, comment), is parsed row by row for the error message."""
+    try:
+        out = np.loadtxt(
+            lines, delimiter=",", usecols=j, dtype=np.float64, comments=None, quotechar='"', ndmin=1
+        )
+    except ValueError:
+        out = None
+    if out is None or out.shape[0] != len(lines):
+        return _parse_csv_chunk(path, column, j, list(csv.reader(lines)), first_line)
+    return out
 
 
 def _parse_csv_chunk(

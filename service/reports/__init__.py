@@ -16,22 +16,32 @@ What is here:
   :mod:`service.reports.month_summary` — its page 1 and cumulative damage against design life.
 * :mod:`service.reports.fleet` — the mills of a site side by side and the visit order
   (``GET /sites/{site}/fleet``).
+* :mod:`service.reports.fleet_document` — the fleet report (HTML, PDF, CSV) from the fleet
+  answer (``GET /sites/{site}/reports/fleet``).
 * :mod:`service.reports.plain` — report data to JSON-ready plain data.
-* :mod:`service.reports.render_html`, :mod:`service.reports.render_pdf`,
-  :mod:`service.reports.render_csv` — the report rendered (HTML with SVG plots, PDF, CSV).
-* :mod:`service.reports.files` — the report as files ``<mill>/<YYYY-MM>.<ext>``: the one call
-  of the renderers for files, atomic writes.
+* :mod:`service.reports.monthly_document` — what the monthly report says, once: its sections in
+  order (summary first) as a document of :mod:`service.reports.render`, which renders it as
+  HTML, PDF and tidy CSV tables; :mod:`service.reports.figures` draws its plots;
+  :mod:`service.reports.monthly_formats` — the report in each format (the API's ``FORMATS``).
+* :mod:`service.reports.files` — the report as files ``<mill>/<YYYY-MM>.<ext>`` (``html``,
+  ``pdf``, ``zip`` of the CSV tables): the one call of the renderers for files, atomic writes.
 * :mod:`service.reports.mail` — a report's mail (SMTP, STARTTLS, login; stdlib only).
 * :mod:`service.reports.month_end` — the month-end job of the service: each finished local
   month's reports written and mailed, catch-up, retries, the ``report_delivery`` alarm.
 
-Data flow: store rows (+ the worker's status for life) → plain dataclasses/dicts → renderers →
-bytes; the API's routes choose the format (:mod:`service.api.routes.reports`); the month-end
-job and ``millwatch report`` write files through :mod:`service.reports.files`.
+Data flow: store rows (+ the worker's status for life) → ``MonthlyReport`` (plain dataclasses)
+→ :func:`~service.reports.monthly_document.monthly_document` → ``Document`` → renderers of
+:mod:`service.reports.render` → bytes; the API's routes choose the format
+(:mod:`service.api.routes.reports`); the month-end job and ``millwatch report`` write files
+through :mod:`service.reports.files`. HTML and PDF are generic over the document, so they cannot
+diverge: same sections, tables, figures and numbers.
 Every answer about a mill carries ``simulated`` from its configuration (the demo's mills are
 simulated).
 
-Where things go: a new section of the monthly report is a field of ``MonthlyReport`` built in
-:mod:`service.reports.monthly` and shown by each renderer; a new format is a renderer and an entry
-of ``FORMATS`` in :mod:`service.api.routes.reports`.
+Where things go: new data of the monthly report is a field of ``MonthlyReport`` built in
+:mod:`service.reports.monthly`; showing it is a section function in
+:mod:`service.reports.monthly_document` added to its ``SECTIONS`` (a figure is a builder in
+:mod:`service.reports.figures`) — every format follows without a change. A new format is a
+renderer over ``Document`` in :mod:`service.reports.render` and an entry of ``FORMATS`` in
+:mod:`service.api.routes.reports`.
 """

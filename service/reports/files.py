@@ -25,24 +25,27 @@ if TYPE_CHECKING:
 
 __all__ = ["EXTENSIONS", "FORMATS", "render_files", "report_path", "write_atomic"]
 
-#: File extension of each format (:data:`service.settings.REPORT_FORMATS`).
-EXTENSIONS: dict[str, str] = {"html": "html", "pdf": "pdf", "csv": "csv"}
+#: File extension of each format (:data:`service.settings.REPORT_FORMATS`); ``csv`` is a zip of
+#: tidy tables, one CSV per table (:mod:`service.reports.render.csv_tables`).
+EXTENSIONS: dict[str, str] = {"html": "html", "pdf": "pdf", "csv": "zip"}
 
 
 def render_files(report: MonthlyReport, formats: Iterable[str] = FORMATS) -> dict[str, bytes]:
     """The report rendered in each of ``formats``: file extension → bytes."""
-    from service.reports.render_csv import render_csv
-    from service.reports.render_html import render_html
-    from service.reports.render_pdf import render_pdf
+    from service.reports.monthly_document import monthly_document
+    from service.reports.render.csv_tables import document_csv_zip
+    from service.reports.render.html_page import document_html
+    from service.reports.render.pdf_pages import document_pdf
 
+    doc = monthly_document(report)  # one document for every format
     out: dict[str, bytes] = {}
     for fmt in formats:
         if fmt == "html":
-            out[EXTENSIONS[fmt]] = render_html(report).encode("utf-8")
+            out[EXTENSIONS[fmt]] = document_html(doc).encode("utf-8")
         elif fmt == "pdf":
-            out[EXTENSIONS[fmt]] = render_pdf(report)
+            out[EXTENSIONS[fmt]] = document_pdf(doc)
         elif fmt == "csv":
-            out[EXTENSIONS[fmt]] = render_csv(report).encode("utf-8")
+            out[EXTENSIONS[fmt]] = document_csv_zip(doc)
         else:
             raise ValueError(f"report format {fmt!r} is not one of {', '.join(FORMATS)}")
     return out

@@ -7,11 +7,15 @@ order of start-up matters:
 2. open the zenoh session (it connects while the next step runs);
 3. recover: restore the newest checkpoint and replay the archive after it;
 4. subscribe (callbacks only enqueue) with the recovering subscriber
-   (:func:`ingest.gateway.declare_recovering_subscriber`), one per mill: its gateways' caches
-   are fetched from a little before the mill's last archived block (:func:`history_seconds`),
-   so the blocks published while this worker was down or recovering come first, in sequence
-   order, then live ones; what the archive already holds comes again and is dropped as a
-   repeat (its sequence number is not new);
+   (:func:`ingest.gateway.declare_recovering_subscriber`), one per mill, declared as soon as a
+   gateway publisher of each of the mill's channels is up (:class:`ingest.gateway.PublisherWatch`;
+   at most ``[worker] gateway_wait_s`` later with whatever is up, in a background thread): its
+   gateways' caches are fetched from a little before the mill's last archived block
+   (:func:`history_seconds`), so the blocks published while this worker was down or recovering
+   come first, in sequence order, then live ones; what the archive already holds comes again
+   and is dropped as a repeat (its sequence number is not new). Declaring before the gateways
+   are up would leave their caches to zenoh's late-publisher detection, whose replies race the
+   live blocks and were lost whole (issue 16, :mod:`ingest.gateway`);
 5. start the worker thread, which drains the queue (archive first, then analysis);
 6. start the month-end report job in its own thread (``[reports]``,
    :mod:`service.reports.month_end`): it catches up on finished months without reports, and
@@ -42,8 +46,8 @@ from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.reader import ArchiveReader
 from ingest.archive.writer import ArchiveWriter
-from ingest.gateway import RecoveringSubscriber, declare_recovering_subscriber
-from ingest.keys import alarm_key, mill_pattern
+from ingest.gateway import PublisherWatch, RecoveringSubscriber, declare_recovering_subscriber
+from ingest.keys import alarm_key, channel_key, live_pattern, mill_pattern
 from ingest.zenoh_session import build_config, connected_peers, open_retrying
 from service.reports.month_end import MonthEndJob
 from service.settings import ServiceSettings
@@ -63,6 +67,8 @@ STATUS_EVERY_S = 0.5
 #: History is fetched from this long before the archive's last write: the archive writer keeps
 #: up to ``max_latency_s`` (default well under a second) in memory, which a SIGKILL loses.
 HISTORY_MARGIN_S = 5.0
+#: How often the subscribing thread looks whether a waiting mill's gateways are up (s).
+GATEWAY_POLL_S = 0.05
 #: The readiness checks given per mill (``{mill: bool}``); the others are one bool each.
 MILL_CHECKS = ("data_fresh", "analysed", "draining")
 
@@ -85,6 +91,11 @@ class ServiceRuntime:
         self.worker: Worker | None = None
         self.session: zenoh.Session | None = None
         self._subscribers: list[RecoveringSubscriber] = []
+        self._watch: PublisherWatch | None = None
+        #: Mills not subscribed yet -> the keys of their configured channels.
+        self._unsubscribed: dict[str, set[str]] = {}
+        self._subscribe_lock = threading.Lock()
+        self._subscribe_thread: threading.Thread | None = None
         #: How far back each mill's gateways' caches were asked for (None: all they hold).
         self.history_s: dict[str, float | None] = {}
         self._alarm_publishers: dict[str, zenoh.Publisher] = {}
@@ -156,25 +167,68 @@ class ServiceRuntime:
         )
 
     def _subscribe(self, worker: Worker) -> None:
-        """One recovering subscriber per mill, asking the gateways' caches for what came after
-        the mill's last archived block (:func:`history_seconds`)."""
+        """Subscribe each mill once its gateways are up (see the module docstring, step 4):
+        those up already now, the others from a thread within ``[worker] gateway_wait_s``."""
         assert self.session is not None
-        for config in self.mills.values():
-            age = history_seconds(worker.health[config.id])
-            self.history_s[config.id] = age
-            self._subscribers.append(
-                declare_recovering_subscriber(
-                    self.session, mill_pattern(config.site, config.id), self._on_block,
-                    max_age_s=age,
-                )
+        self._watch = PublisherWatch(self.session, live_pattern())
+        self._unsubscribed = {
+            m: {channel_key(c.site, c.id, ch.key) for ch in c.channels.values()}
+            for m, c in self.mills.items()
+        }
+        wait_s = self.settings.worker.gateway_wait_s
+        self._subscribe_ready(worker, final=wait_s == 0)
+        if self._unsubscribed:
+            self._subscribe_thread = threading.Thread(
+                target=self._subscribe_when_up, args=(worker, wait_s),
+                name="millwatch-subscribe", daemon=True,
             )  # fmt: skip
-        known = [a for a in self.history_s.values() if a is not None]
-        log.info(
-            "asking the gateways for what they hold since each mill's last archived block "
-            "(up to %.1f s back; %d mill(s) never heard from: all they hold)",
-            max(known, default=0.0),
-            len(self.history_s) - len(known),
-        )
+            self._subscribe_thread.start()
+
+    def _subscribe_when_up(self, worker: Worker, wait_s: float) -> None:
+        deadline = time.monotonic() + wait_s
+        for _ in range(int(wait_s / GATEWAY_POLL_S) + 2):
+            if self._stop.is_set() or not self._unsubscribed:
+                return
+            self._subscribe_ready(worker, final=time.monotonic() >= deadline)
+            time.sleep(GATEWAY_POLL_S)
+        self._subscribe_ready(worker, final=True)
+
+    def _subscribe_ready(self, worker: Worker, *, final: bool) -> None:
+        """Declare the subscriber of every waiting mill whose channels all have a gateway
+        publisher up (``final``: of every waiting mill, logging what is not up)."""
+        assert self._watch is not None
+        up = self._watch.up()
+        with self._subscribe_lock:
+            if self.session is None or self._stop.is_set():
+                return
+            for mill_id, expected in list(self._unsubscribed.items()):
+                missing = sorted(k.rsplit("/", 1)[-1] for k in expected - up)
+                if missing and not final:
+                    continue
+                config = self.mills[mill_id]
+                age = history_seconds(worker.health[mill_id])
+                self.history_s[mill_id] = age
+                try:
+                    subscriber = declare_recovering_subscriber(
+                        self.session, mill_pattern(config.site, config.id), self._on_block,
+                        max_age_s=age,
+                    )  # fmt: skip
+                except zenoh.ZError as err:  # retried at the next look (while within the wait)
+                    log.error("%s: could not subscribe to its gateways: %s", mill_id, err)
+                    continue
+                self._subscribers.append(subscriber)
+                del self._unsubscribed[mill_id]
+                back = "all they hold" if age is None else f"the last {age:.1f} s"
+                if missing:
+                    log.warning(
+                        "%s: subscribed without a cached gateway publisher for %s (none up "
+                        "within %.0f s): what they published meanwhile is not recovered, and "
+                        "is counted as lost if their seq shows it; asked the others for %s",
+                        mill_id, ", ".join(missing), self.settings.worker.gateway_wait_s, back,
+                    )  # fmt: skip
+                else:
+                    log.info("%s: gateways up; subscribed, asking their caches for %s",
+                             mill_id, back)  # fmt: skip
 
     def _on_alarms(self, transitions: list[Transition]) -> None:
         """Stored transitions: tell the listeners, then publish them."""
@@ -236,9 +290,7 @@ class ServiceRuntime:
         self._stop.set()
         if self.reports is not None:
             self.reports.stop()
-        for sub in self._subscribers:
-            sub.undeclare()
-        self._subscribers.clear()
+        self._unsubscribe()
         if self._thread is not None:
             self._thread.join(timeout=30)
             self._thread = None
@@ -257,6 +309,19 @@ class ServiceRuntime:
             self.store.close()
             self.store = None
         gc.unfreeze()  # (what start() froze is ordinary garbage again once the service is gone)
+
+    def _unsubscribe(self) -> None:
+        """Stop taking blocks: the subscribing thread, the subscribers, the publisher watch."""
+        if self._subscribe_thread is not None:
+            self._subscribe_thread.join(timeout=5)
+            self._subscribe_thread = None
+        with self._subscribe_lock:
+            for sub in self._subscribers:
+                sub.undeclare()
+            self._subscribers.clear()
+            if self._watch is not None:
+                self._watch.undeclare()
+                self._watch = None
 
     def _drain_and_checkpoint(self) -> None:
         assert self.worker is not None

@@ -41,6 +41,7 @@ from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.matrices import RangeMeanMatrix, uniform_edges
 from analytics.fatigue.miner import DamageRecorder
 from analytics.fatigue.rainflow import RainflowCounter, count_cycles
+from analytics.fatigue.repeat_closure import RepeatClosure
 from analytics.fatigue.sn_models import build_sn_curve
 
 FS = 1000.0
@@ -235,13 +236,22 @@ def _slice(cycles: Cycles, a: int, b: int) -> Cycles:
 
 
 def state_and_residue(name: str, x: np.ndarray) -> dict[str, Any]:
+    """Longest residue; damage of the two closures. ``repeat`` replaces the half cycles ASTM
+    counted from the start by the full cycles the repetition closes (RepeatClosure)."""
     counter = RainflowCounter(capacity=1064)
-    longest = 0
-    for s in range(0, x.shape[0], 1000):
-        counter.feed(x[s : s + 1000])
-        longest = max(longest, counter.residue_length)
+    closure = RepeatClosure(counter)
     curve = build_sn_curve("shigley")
-    half, repeat = counter.close("half"), counter.close("repeat")
+    longest = 0
+    d_halves_emitted = 0.0
+    added: list[Cycles] = []
+    for s in range(0, x.shape[0], 1000):
+        closed = counter.feed(x[s : s + 1000])
+        halves = closed.count == 0.5
+        d_halves_emitted += curve.damage(closed.range[halves] * KT, closed.count[halves])
+        added.append(closure.observe(closed))
+        longest = max(longest, counter.residue_length)
+    half = counter.close("half")
+    repeat = Cycles.concatenate([*added, closure.close()])
     d_half = curve.damage(half.range * KT, half.count)
     d_repeat = curve.damage(repeat.range * KT, repeat.count)
     d_all, _, _ = exact_damage(x)
@@ -249,9 +259,9 @@ def state_and_residue(name: str, x: np.ndarray) -> dict[str, Any]:
         "signal": name,
         "max_residue_length": longest,
         "residue_damage_half": d_half,
-        "residue_damage_repeat": d_repeat,
+        "residue_damage_repeat": d_repeat - d_halves_emitted,
         "total_damage_half": d_all,
-        "repeat_vs_half": (d_all - d_half + d_repeat) / d_all - 1.0,
+        "repeat_vs_half": (d_all - d_half - d_halves_emitted + d_repeat) / d_all - 1.0,
     }
 
 

@@ -17,7 +17,9 @@ restarted worker never catches up on the outage (it reports the blocks as lost).
 4. Stops everything and counts, in the archive, the blocks whose t0 fell in the outage
    (recovered from the caches) and those of the outage never archived (lost).
 
-Prints a table: mills, outage s, blocks recovered, lost, recovery wall s, target 10 s.
+Prints a table: mills, outage s, blocks recovered, lost, start s (until the API answers),
+outage queued s (until the last outage block was received), recovery wall s, target 10 s;
+all times from the restart.
 """
 
 from __future__ import annotations
@@ -97,9 +99,10 @@ def gateways(mill_files: list[Path], port: int, seconds: float) -> None:
 
 
 def start_serve(settings: Path, log: Path) -> subprocess.Popen[bytes]:
+    """``millwatch -v serve`` (INFO log, so ``serve.log`` shows when it subscribed)."""
     with log.open("ab") as out:
         return subprocess.Popen(
-            [sys.executable, "-m", "service.cli.main", "serve", "--config", str(settings)],
+            [sys.executable, "-m", "service.cli.main", "-v", "serve", "--config", str(settings)],
             cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
         )  # fmt: skip
 
@@ -134,6 +137,7 @@ def wait_all(client: httpx.Client, mills: list[str], until_ns: int, limit_s: flo
 def archive_counts(directory: Path, kill_ns: int, restart_ns: int, channels: int) -> dict:
     """Blocks of the outage in the archive (recovered) and of the outage expected but absent."""
     seen: set[tuple[str, int]] = set()
+    queued_ns = restart_ns
     for b in ArchiveReader(directory / "archive", ARCHIVE_PREFIX).blocks():
         try:
             block = decode_block(b.payload)
@@ -141,14 +145,30 @@ def archive_counts(directory: Path, kill_ns: int, restart_ns: int, channels: int
             continue
         if kill_ns <= block.t0_ns < restart_ns:
             seen.add((b.key, block.seq))
+            queued_ns = max(queued_ns, b.log_time_ns)  # received (queued) by the worker
     keys = {k for k, _ in seen}
     expected = (restart_ns - kill_ns) // BLOCK_NS * max(len(keys), channels)
-    return {"blocks_recovered": len(seen), "blocks_lost": max(0, expected - len(seen))}
+    return {"blocks_recovered": len(seen), "blocks_lost": max(0, expected - len(seen)),
+            "outage_queued_s": (queued_ns - restart_ns) / 1e9}  # fmt: skip
 
 
-def run(n_mills: int, outage_s: float, warmup_s: float, tail_s: float) -> dict:
+def api_up(client: httpx.Client, limit_s: float) -> float:
+    """Seconds until ``/health`` answers (inf: not within ``limit_s``)."""
+    started = time.monotonic()
+    for _ in range(int(limit_s / 0.1) + 1):
+        try:
+            if client.get("/health").status_code < 500:
+                return time.monotonic() - started
+        except httpx.HTTPError:
+            pass
+        time.sleep(0.1)
+    return float("inf")
+
+
+def run(n_mills: int, outage_s: float, warmup_s: float, tail_s: float, keep: Path | None) -> dict:
     with tempfile.TemporaryDirectory() as d:
-        directory = Path(d)
+        directory = Path(d) if keep is None else keep
+        directory.mkdir(parents=True, exist_ok=True)
         port, api_port = free_loopback_port(), free_loopback_port()
         settings = write_plant(directory, n_mills, port, api_port)
         mill_files = sorted((directory / "mills").glob("*.toml"))
@@ -173,7 +193,9 @@ def run(n_mills: int, outage_s: float, warmup_s: float, tail_s: float) -> dict:
                 time.sleep(outage_s)
                 restart_ns = time.time_ns()
                 serve = start_serve(settings, log)
+                up_s = api_up(client, CATCH_UP_LIMIT_S)
                 recovery_s = wait_all(client, mills, restart_ns, CATCH_UP_LIMIT_S)
+                recovery_s += up_s
             serve.send_signal(signal.SIGTERM)
             serve.wait(timeout=120)
         finally:
@@ -184,7 +206,8 @@ def run(n_mills: int, outage_s: float, warmup_s: float, tail_s: float) -> dict:
                 p.join(timeout=30)
         counts = archive_counts(directory, kill_ns, restart_ns, 4 * n_mills)
     return {"mills": n_mills, "outage_s": (restart_ns - kill_ns) / 1e9, **counts,
-            "recovery_wall_s": recovery_s, "target_s": TARGET_S}  # fmt: skip
+            "api_up_s": up_s, "recovery_wall_s": recovery_s, "target_s": TARGET_S,
+            "kill_ns": kill_ns, "restart_ns": restart_ns}  # fmt: skip
 
 
 def main() -> None:
@@ -194,14 +217,18 @@ def main() -> None:
     parser.add_argument("--warmup", type=float, default=15.0, help="running before the kill, s")
     parser.add_argument("--tail", type=float, default=30.0, help="publishing after, s")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="keep the plant (archive, serve.log) here, for diagnosis")  # fmt: skip
     args = parser.parse_args()
-    result = run(args.mills, args.outage, args.warmup, args.tail)
+    result = run(args.mills, args.outage, args.warmup, args.tail, args.keep)
     if args.json:
         print(json.dumps(result, indent=2))
         return
-    heads = ("mills", "outage s", "blocks recovered", "lost", "recovery wall s", "target s")
+    heads = ("mills", "outage s", "blocks recovered", "lost", "start s", "outage queued s",
+             "recovery wall s", "target s")  # fmt: skip
     cells = (f"{result['mills']}", f"{result['outage_s']:.1f}", f"{result['blocks_recovered']}",
-             f"{result['blocks_lost']}", f"{result['recovery_wall_s']:.1f}",
+             f"{result['blocks_lost']}", f"{result['api_up_s']:.1f}",
+             f"{result['outage_queued_s']:.1f}", f"{result['recovery_wall_s']:.1f}",
              f"{result['target_s']:.0f}")  # fmt: skip
     widths = [max(len(h), len(c)) for h, c in zip(heads, cells, strict=True)]
     print(" | ".join(h.rjust(w) for h, w in zip(heads, widths, strict=True)))

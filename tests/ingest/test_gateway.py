@@ -17,7 +17,9 @@ import zenoh
 
 from ingest import keys, wire
 from ingest.gateway import (
+    RECOVERY_QUERY_S,
     GatewayPublisher,
+    PublisherWatch,
     cache_samples,
     declare_gateway_publisher,
     declare_recovering_subscriber,
@@ -169,7 +171,10 @@ def test_blocks_missed_beyond_the_cache_are_reported_and_the_rest_recovered() ->
         publisher = stack.enter_context(
             declare_gateway_publisher(gateway, KEY, blocks_per_s=RATE, retention_s=0.5)
         )
-        sub = declare_recovering_subscriber(worker, KEY, inbox.on_block, on_miss=inbox.on_miss)
+        sub = declare_recovering_subscriber(
+            worker, KEY, inbox.on_block, on_miss=inbox.on_miss, history_phase_s=0.2
+        )
+        time.sleep(0.5)  # the recovering subscriber has taken over
         _publish(publisher, range(3))
         assert inbox.wait_for(lambda s: len(s) >= 3) == [0, 1, 2]
         router.close()
@@ -177,10 +182,99 @@ def test_blocks_missed_beyond_the_cache_are_reported_and_the_rest_recovered() ->
         _publish(publisher, range(3, 23))
         router = zenoh.open(router_config)
         stack.callback(router.close)
-        received = inbox.wait_for(lambda s: s[-1:] == [22], timeout_s=10.0)
+        received = inbox.wait_for(lambda s: s[-1:] == [22], timeout_s=RECOVERY_QUERY_S + 10.0)
         sub.undeclare()
     assert received == [0, 1, 2, *range(18, 23)]
     assert [nb for _, nb in inbox.misses] == [15]
+
+
+def test_publisher_watch_sees_gateway_publishers_come_and_go_and_never_plain_ones() -> None:
+    other = keys.build_key("s1", "m1", "speed")
+    with _gateway_and_worker() as (publisher, worker):
+        watch = PublisherWatch(worker, keys.mill_pattern("s1", "m1"))
+        try:
+            assert _wait(lambda: watch.up() == {KEY})
+            gateway = publisher._session
+            plain = gateway.declare_publisher(other)
+            second = declare_gateway_publisher(gateway, other, blocks_per_s=RATE)
+            assert _wait(lambda: watch.up() == {KEY, other})
+            second.undeclare()
+            assert _wait(lambda: watch.up() == {KEY})
+            time.sleep(0.3)
+            assert watch.up() == {KEY}  # the plain publisher on `other` is not a gateway
+            plain.undeclare()
+        finally:
+            watch.undeclare()
+
+
+def test_history_comes_before_live_blocks_while_the_gateway_keeps_publishing() -> None:
+    """The worker's start (issue 16): the gateway publishes on, the subscriber is declared once
+    the watch sees it. Every round: the whole cache, then live, contiguous. (The race that lost
+    whole caches needs the load of many publishers: tests/bench/bench_recovery.py shows it.)"""
+    stop = threading.Event()
+    published = [0]
+
+    def publish(publisher: GatewayPublisher) -> None:
+        for seq in range(20_000):  # bounded: 2 ms apart, ~40 s at most
+            if stop.is_set():
+                return
+            publisher.put(_block(seq))
+            published[0] = seq + 1
+            time.sleep(0.002)
+
+    rounds: list[tuple[int, int, bool]] = []
+    with _gateway_and_worker() as (publisher, worker):
+        thread = threading.Thread(target=publish, args=(publisher,), daemon=True)
+        thread.start()
+        try:
+            watch = PublisherWatch(worker, keys.mill_pattern("s1", "m1"))
+            assert _wait(lambda: KEY in watch.up())
+            watch.undeclare()
+            for _ in range(5):
+                _wait(lambda: False, timeout_s=0.2)  # more blocks in the cache
+                inbox = _Inbox()
+                sub = declare_recovering_subscriber(worker, keys.mill_pattern("s1", "m1"),
+                                                    inbox.on_block)  # fmt: skip
+                until = published[0] + 50
+                got = inbox.wait_for(lambda s, until=until: bool(s) and s[-1] >= until)
+                sub.undeclare()
+                rounds.append((got[0] if got else -1, len(got), got == list(range(len(got)))))
+        finally:
+            stop.set()
+            thread.join(timeout=10)
+    assert all(first == 0 and contiguous for first, _, contiguous in rounds), rounds
+
+
+def test_history_phase_hands_over_to_recovery_without_a_gap() -> None:
+    stop = threading.Event()
+
+    def publish(publisher: GatewayPublisher) -> None:
+        for seq in range(20_000):  # bounded: 2 ms apart, ~40 s at most
+            if stop.is_set():
+                return
+            publisher.put(_block(seq))
+            time.sleep(0.002)
+
+    inbox = _Inbox()
+    with _gateway_and_worker() as (publisher, worker):
+        thread = threading.Thread(target=publish, args=(publisher,), daemon=True)
+        thread.start()
+        try:
+            _wait(lambda: False, timeout_s=0.3)  # some blocks in the cache
+            sub = declare_recovering_subscriber(worker, KEY, inbox.on_block, history_phase_s=0.5)
+            assert not sub.recovering
+            assert _wait(lambda: sub.recovering, timeout_s=5.0)
+            count = len(inbox.seqs)
+            inbox.wait_for(lambda s: len(s) >= count + 200)
+            sub.undeclare()
+            assert not sub.recovering or sub._active is None
+        finally:
+            stop.set()
+            thread.join(timeout=10)
+    seqs = inbox.settle()
+    assert seqs[0] == 0 and len(seqs) > 300
+    assert sorted(set(seqs)) == list(range(max(seqs) + 1))  # no gap; the hand-over may repeat
+    assert len(seqs) - len(set(seqs)) < 50
 
 
 def _wait(condition: Callable[[], bool], timeout_s: float = WAIT_S) -> bool:

@@ -200,3 +200,10 @@ def test_units_are_found_by_their_config_symbol():
     assert Unit.from_symbol("MPa") is Unit.MEGAPASCAL
     with pytest.raises(BadHeaderValue, match="unknown unit symbol 'psi'"):
         Unit.from_symbol("psi")
+
+
+def test_block_span_is_read_from_the_header_alone():
+    payload = wire.encode_block(np.zeros(100, np.float32), 5_000, 1000.0, 7, wire.Unit.RPM)
+    assert wire.block_span_ns(payload) == (5_000, 5_000 + 100_000_000)
+    assert wire.block_span_ns(payload[:39]) is None
+    assert wire.block_span_ns(b"XXXX" + payload[4:]) is None

@@ -126,13 +126,16 @@ def write_settings(
     connect: tuple[str, ...] = (),
     stale_after_s: float = 60.0,
     checkpoint_seconds: float = 1.0,
+    gateway_wait_s: float = 10.0,
 ) -> Path:
-    """A ``serve`` settings file: archive and store in ``directory``, the one test mill."""
+    """A ``serve`` settings file: archive and store in ``directory``, the one test mill
+    (``gateway_wait_s`` 0 for plain publishers, which are never seen as gateways up)."""
     path = directory / "plant.toml"
     path.write_text(
         f"[zenoh]\nlisten = {json.dumps(list(listen))}\nconnect = {json.dumps(list(connect))}\n"
         f'[archive]\ndirectory = "archive"\n[store]\npath = "mw.db"\n'
         f"[worker]\nstale_after_s = {stale_after_s}\ncheckpoint_seconds = {checkpoint_seconds}\n"
+        f"gateway_wait_s = {gateway_wait_s}\n"
         f'[api]\nport = {api_port}\n[mills]\nfiles = ["{MILL_FILE}"]\n',
         encoding="utf-8",
     )

@@ -92,7 +92,9 @@ def flood(tmp_path: Path, kinds: tuple[str, ...], seed: int, clean: dict[str, An
     """Run the flood; every property is checked and the broken ones reported together."""
     procs = Processes(tmp_path)
     port, api_port = free_loopback_port(), free_loopback_port()
-    settings = write_settings(tmp_path, api_port=api_port, listen=(tcp_endpoint(port),))
+    settings = write_settings(
+        tmp_path, api_port=api_port, listen=(tcp_endpoint(port),), gateway_wait_s=0.0
+    )
     api = Api(api_port)
     broken: dict[str, Any] = {}
     try:

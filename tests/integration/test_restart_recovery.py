@@ -45,8 +45,9 @@ pytestmark = pytest.mark.slow
 CONFIG = load_mill_config(MILL_FILE)
 CHANNELS = sorted(CONFIG.channels)
 KILLS = 5
-#: Lead time from the test's start to the scene's first sample: the gateway and serve start.
-LEAD_S = 6.0
+#: Lead time from the test's start to the scene's first sample: the gateway and serve start
+#: (a Python start took up to 12 s on a busy 2-core machine; a late gateway skips blocks).
+LEAD_S = 15.0
 
 
 class Plant:
@@ -103,15 +104,9 @@ def archived_seqs(directory: Path) -> dict[str, set[int]]:
     return seqs
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="issue 16 is open: under repeated SIGKILLs recovery from the gateway's cache loses "
-    "blocks intermittently (95-120 per channel in 1 of 4 runs on 2026-11-24; 22,685 of 120,000 "
-    "at 50 mills in bench_recovery). Kept running so the failure stays visible.",
-)
 def test_sigkilled_worker_recovers_every_block_and_equals_offline_analysis(tmp_path, clean):
     rng = random.Random(20261124)
-    plant = Plant(tmp_path, speed=1.5)  # 47 s of wall time
+    plant = Plant(tmp_path, speed=0.6)  # 117 s of wall time: starts took 7-12 s on a busy machine
     outages: list[float] = []
     try:
         plant.start_gateway()

@@ -1,6 +1,10 @@
 """REST route of the monthly damage report (seed 000 §10.6 "automatic reports").
 
-``GET /mills/{mill_id}/reports/monthly?month=YYYY-MM&format=json|html|csv|pdf``
+``GET /mills/{mill_id}/reports/monthly?month=YYYY-MM&format=json|html|csv|pdf[&table=NAME]``
+
+``GET /sites/{site}/reports/fleet?format=json|html|csv|pdf``: the fleet report, every mill of a
+site side by side (:mod:`service.reports.fleet_document`, from the same answer as
+``GET /sites/{site}/fleet``).
 
 ``GET /reports/status``: the month-end report job of each worker (:mod:`service.reports.month_end`):
 where reports go, the last run (due, written, mailed, failed), the failures waiting for their
@@ -8,10 +12,14 @@ next try with their cause, each mill's newest complete month.
 
 * ``month``: the site's local calendar month; default: the current one.
 * ``format``: wins when given; otherwise the ``Accept`` header chooses (``text/html``,
-  ``text/csv``, ``application/pdf``, ``application/json``; anything else gives JSON).
+  ``text/csv`` or ``application/zip``, ``application/pdf``, ``application/json``; anything else
+  gives JSON).
+* ``csv`` is every table of the report as tidy CSV, one file per table, in a zip; with
+  ``table=NAME`` (implies ``format=csv``) the one table as ``text/csv``.
 * Errors are ``application/problem+json`` through :mod:`service.api.errors`: 422 for a
-  malformed month or an unknown format (the detail names the value), 404 for an unknown mill,
-  503 while the store is not open.
+  malformed month, an unknown format or table, or a table with another format (the detail
+  names the value and, for a table, the valid names), 404 for an unknown mill, 503 while the
+  store is not open.
 
 Layering (STYLE.md): the route only parses and dispatches; :mod:`service.reports.monthly` reads
 the store and the renderers turn the plain report into bytes. :func:`reports_router` is included
@@ -23,18 +31,22 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Callable
-from typing import Any, Literal, Protocol
+from typing import Annotated, Any, Literal, Protocol
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 
 from service.api.errors import problem_responses
-from service.api.routes.params import MillId, Month
+from service.api.routes.params import MillId, Month, Site
 from service.errors import BadRequest
+from service.reports.fleet_document import render_fleet
 from service.reports.monthly import MonthlyReport, report_to_dict
-from service.reports.render_csv import render_csv
-from service.reports.render_html import render_html
-from service.reports.render_pdf import render_pdf
+from service.reports.monthly_formats import (
+    render_csv,
+    render_csv_table,
+    render_html,
+    render_pdf,
+)
 
 __all__ = ["FORMATS", "reports_router"]
 
@@ -43,11 +55,18 @@ log = logging.getLogger(__name__)
 FORMATS: dict[str, tuple[str, Callable[[MonthlyReport], str | bytes]]] = {
     "json": ("application/json", lambda r: json.dumps(report_to_dict(r))),
     "html": ("text/html; charset=utf-8", render_html),
-    "csv": ("text/csv; charset=utf-8", render_csv),
+    "csv": ("application/zip", render_csv),
     "pdf": ("application/pdf", render_pdf),
 }
-_ACCEPT = {"text/html": "html", "text/csv": "csv", "application/pdf": "pdf",
-           "application/json": "json"}  # fmt: skip
+_ACCEPT = {"text/html": "html", "text/csv": "csv", "application/zip": "csv",
+           "application/pdf": "pdf", "application/json": "json"}  # fmt: skip
+#: File name extension of a download.
+SUFFIX = {"csv": "zip", "pdf": "pdf"}
+TableName = Annotated[
+    str | None,
+    Query(pattern=r"^[a-z0-9_]+$", max_length=64,
+          description="One table of the report as CSV (implies format=csv), e.g. starts."),
+]  # fmt: skip
 
 
 class ReportSource(Protocol):
@@ -56,6 +75,8 @@ class ReportSource(Protocol):
     def monthly_report(self, mill_id: str, month: str | None) -> MonthlyReport: ...
 
     def reports_status(self) -> dict[str, Any]: ...
+
+    def fleet(self, site: str) -> dict[str, Any]: ...
 
 
 def negotiate(fmt: str | None, accept: str | None) -> str:
@@ -81,7 +102,7 @@ def reports_router(backend: ReportSource) -> APIRouter:
         "/mills/{mill_id}/reports/monthly",
         summary="Monthly damage report (json, html, csv or pdf)",
         responses={
-            200: {"content": {m.split(";")[0]: {} for m, _ in FORMATS.values()}},
+            200: {"content": {m.split(";")[0]: {} for m, _ in FORMATS.values()} | {"text/csv": {}}},
             **problem_responses(404, 422, 503),
         },
     )
@@ -90,15 +111,43 @@ def reports_router(backend: ReportSource) -> APIRouter:
         mill_id: MillId,
         month: Month = None,
         format: Literal["json", "html", "csv", "pdf"] | None = None,
+        table: TableName = None,
+    ) -> Response:
+        kind = negotiate(format, request.headers.get("accept")) if table is None else "csv"
+        report = backend.monthly_report(mill_id, month)  # an unknown mill is a 404 first
+        if table is not None and format not in (None, "csv"):
+            raise BadRequest("A table is CSV only",
+                             f"table {table!r} comes as format=csv, not {format!r}.")  # fmt: skip
+        stem = f"{report.mill}-{report.month}"
+        if table is not None:
+            return _download(render_csv_table(report, table), "text/csv; charset=utf-8",
+                             f"{stem}-{table}.csv")  # fmt: skip
+        media, render = FORMATS[kind]
+        if kind in SUFFIX:
+            return _download(render(report), media, f"{stem}-damage.{SUFFIX[kind]}")
+        return Response(render(report), media_type=media)
+
+    @router.get(
+        "/sites/{site}/reports/fleet",
+        summary="Fleet report: the mills of a site side by side (json, html, csv or pdf)",
+        responses={
+            200: {"content": {m.split(";")[0]: {} for m, _ in FORMATS.values()}},
+            **problem_responses(404, 422, 503, 504),
+        },
+    )
+    def fleet_report(
+        request: Request,
+        site: Site,
+        format: Literal["json", "html", "csv", "pdf"] | None = None,
     ) -> Response:
         kind = negotiate(format, request.headers.get("accept"))
-        report = backend.monthly_report(mill_id, month)
-        media, render = FORMATS[kind]
-        headers = {}
-        if kind in ("csv", "pdf"):
-            name = f"{report.mill}-{report.month}-damage.{kind}"
-            headers["Content-Disposition"] = f'attachment; filename="{name}"'
-        return Response(render(report), media_type=media, headers=headers)
+        view = backend.fleet(site)
+        if kind == "json":
+            return Response(json.dumps(view), media_type="application/json")
+        media, body = FORMATS[kind][0], render_fleet(view, kind)
+        if kind in SUFFIX:
+            return _download(body, media, f"{site}-fleet.{SUFFIX[kind]}")
+        return Response(body, media_type=media)
 
     @router.get(
         "/reports/status",
@@ -109,3 +158,8 @@ def reports_router(backend: ReportSource) -> APIRouter:
         return backend.reports_status()
 
     return router
+
+
+def _download(body: str | bytes, media: str, name: str) -> Response:
+    return Response(body, media_type=media,
+                    headers={"Content-Disposition": f'attachment; filename="{name}"'})  # fmt: skip

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.fatigue.exact_sum import fsum, fsum2
+from analytics.fatigue.exact_sum import ExactSum, fsum, fsum2
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 
@@ -48,3 +48,26 @@ def test_special_values_go_to_math_fsum() -> None:
     with pytest.raises(OverflowError):
         fsum(np.array([1e308, 1e308]))
     assert fsum2(np.array([np.nan]))[1] == 0.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.lists(st.floats(0.0, 2.0**900), max_size=40), max_size=8))
+def test_running_exact_sum_is_fsum_of_everything_added(parts: list[list[float]]) -> None:
+    total = ExactSum()
+    for part in parts:
+        total.add(np.array(part, dtype=np.float64))
+    assert total.value() == math.fsum(v for part in parts for v in part)
+
+
+def test_running_exact_sum_carries_past_int64_digits() -> None:
+    total = ExactSum()
+    block = np.full(1 << 16, np.nextafter(2.0**32, 0.0))  # every digit of 2³² - ulp set
+    for _ in range(1 << 10):  # 2²⁶ terms: without carries a digit would pass 2⁶³
+        total.add(block)
+    assert total.value() == math.fsum([float(block[0])] * (1 << 26))
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 2.0**1000])
+def test_running_exact_sum_refuses_what_it_cannot_add(bad: float) -> None:
+    with pytest.raises(ValueError, match="refused"):
+        ExactSum().add(np.array([1.0, bad]))

@@ -232,3 +232,26 @@ def test_restore_with_the_channels_listed_in_another_order_continues_bitwise():
     second.add_blocks(chan, np.array([b[1] for b in rest]), np.stack([b[3] for b in rest]))
     second.process()
     assert report(second) == report(ref)
+
+
+def test_state_changes_are_the_decided_transitions_whatever_the_framing():
+    """AnalyzerOutput.states: (time, state) of each decided transition, the same block by block
+    as in long chunks, in time order, ending in the state the analyzer reports."""
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    scene = get_scene("start-lrs", config, seed=2)
+    runs = []
+    for size, chunked in ((100, False), (1000, True)):
+        m, states = MillAnalyzer(config), []
+        for b in blocks(scene, size):
+            if chunked:
+                m.add(*b)
+            else:
+                states += m.push(*b).states
+        states += m.process().states + m.flush().states
+        runs.append(states)
+        assert [label for _, label in states][-1] == m.state
+    assert runs[0] == runs[1]
+    labels = [label for _, label in runs[0]]
+    assert labels == ["stopped", "starting", "running", "stopping", "stopped"]
+    times = [t for t, _ in runs[0]]
+    assert times == sorted(times) and times[0] == scene.t_ns(0)

@@ -42,7 +42,7 @@ def test_an_empty_month_is_written_with_a_warning(store_file, tmp_path):
                      "--format", "csv", "--out", tmp_path)  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert "nothing stored for mill sag-5200-lrs in 2023-06" in done.stderr
-    assert (tmp_path / A.id / "2023-06.csv").is_file()
+    assert (tmp_path / A.id / "2023-06.zip").is_file()  # the CSV tables
 
 
 @pytest.mark.parametrize(

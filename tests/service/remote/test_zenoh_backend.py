@@ -161,9 +161,13 @@ def test_remote_alarm_detail_mill_detail_and_report(pair):
     )
     local.pop("generated_ns"), remote.pop("generated_ns")
     assert remote == local and local["starts"]["count"] == 1
-    for fmt in ("html", "csv"):
+    for fmt, media in (
+        ("html", "text/html"),
+        ("csv", "application/zip"),
+        ("pdf", "application/pdf"),
+    ):
         r = pair.remote.get(path, params={"format": fmt})
-        assert r.status_code == 200 and r.headers["content-type"].startswith(f"text/{fmt}")
+        assert r.status_code == 200 and r.headers["content-type"].startswith(media)
 
 
 def test_report_json_round_trips_through_the_codec(pair):

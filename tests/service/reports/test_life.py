@@ -6,8 +6,11 @@ a fresh analyzer on the same store), so the store spans 40 days of monitoring.""
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import math
+import zipfile
 import zoneinfo
 from datetime import date, datetime
 from pathlib import Path
@@ -17,6 +20,7 @@ import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from pydantic import ValidationError
+from pypdf import PdfReader
 
 from alarms.engine import SIMULATED_PREFIX
 from analytics.drivetrain.mill_config import LifeConfig, MillConfig, describe_validation_error
@@ -310,6 +314,28 @@ def test_fleet_life_and_report_over_http_say_simulated_only_for_simulated_mills(
             assert client.get("/mills").json()[0]["simulated"] is simulated
             missing = client.get("/sites/nowhere/fleet")
             assert missing.status_code == 404 and "rustenburg" in missing.json()["detail"]
+            _check_fleet_report(client, body, simulated)
+
+
+def _check_fleet_report(client: TestClient, fleet: dict, simulated: bool) -> None:
+    """The fleet report says in HTML, PDF and CSV what the fleet answer says."""
+    html = client.get("/sites/rustenburg/reports/fleet?format=html")
+    assert html.status_code == 200 and html.headers["content-type"].startswith("text/html")
+    pdf = client.get("/sites/rustenburg/reports/fleet", headers={"accept": "application/pdf"})
+    assert pdf.status_code == 200 and pdf.content.startswith(b"%PDF")
+    text = " ".join(p.extract_text() for p in PdfReader(io.BytesIO(pdf.content)).pages)
+    text = " ".join(text.split())
+    for heading in ("Visit order", "Remaining life (seed 000 §8.2)", "Trend per mill"):
+        assert heading in html.text and heading in text
+    first = fleet["visit_order"][0]
+    assert first["mill"] in text and first["mill"] in html.text
+    assert ("SIMULATED DATA" in text) is simulated and ("SIMULATED DATA" in html.text) is simulated
+    with zipfile.ZipFile(io.BytesIO(client.get("/sites/rustenburg/reports/fleet?format=csv")
+                                    .content)) as z:  # fmt: skip
+        trend = list(csv.reader(io.StringIO(z.read("rustenburg-fleet-fleet_trend.csv").decode())))
+    assert trend[0][:3] == ["mill", "month", "starts"]
+    assert len(trend) - 1 == sum(len(m["months"]) for m in fleet["mills"])
+    assert client.get("/sites/nowhere/reports/fleet?format=pdf").status_code == 404
 
 
 def test_alarms_of_simulated_data_say_so_and_others_do_not(store):

@@ -12,6 +12,7 @@ import email
 import email.policy
 import logging
 import ssl
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -78,16 +79,16 @@ def test_the_job_writes_every_mills_finished_month_in_render_processes(store, tm
     early = job(store, tmp_path, "2024-02-01T03:00", in_process=False, jobs=2)
     summary = early.run_once()  # Johannesburg's January is over, Lima's is not yet
     assert (summary.due, summary.written, summary.failed) == (1, 1, 0)
-    assert set(files(tmp_path)) == {f"{A.id}/2024-01.{e}" for e in ("html", "pdf", "csv")}
+    assert set(files(tmp_path)) == {f"{A.id}/2024-01.{e}" for e in ("html", "pdf", "zip")}
     later = job(store, tmp_path, "2024-02-01T06:00", in_process=False, jobs=2)
     assert later.run_once().written == 1  # now Lima's too; A's January is not made again
     written = files(tmp_path)
-    assert set(written) == {f"{m}/2024-01.{e}" for m in MILLS for e in ("html", "pdf", "csv")}
+    assert set(written) == {f"{m}/2024-01.{e}" for m in MILLS for e in ("html", "pdf", "zip")}
     for m in MILLS:
         assert (tmp_path / m / "2024-01.pdf").read_bytes().startswith(b"%PDF")
         html = (tmp_path / m / "2024-01.html").read_text(encoding="utf-8")
         assert m in html and "2024-01" in html
-        assert (tmp_path / m / "2024-01.csv").read_text(encoding="utf-8").strip()
+        assert zipfile.ZipFile(tmp_path / m / "2024-01.zip").namelist()  # the CSV tables
     assert not list(tmp_path.rglob("*.tmp"))  # atomic writes leave no temporary file
     # a restart: a new job over the same directory finds nothing to do and rewrites nothing
     again = job(store, tmp_path, "2024-02-01T06:05", in_process=False)

@@ -57,7 +57,7 @@ def test_the_service_catches_up_writes_the_files_and_alarms_a_mail_it_cannot_sen
         assert alarm.subject == "mail" and alarm.state == "raised"
         assert month in alarm.message and "connect failed" in alarm.message
         assert alarm.alarm_id in {r.alarm_id for r in backend.alarm_board().rows(A.id)}
-        for ext in ("html", "pdf", "csv"):
+        for ext in ("html", "pdf", "zip"):
             assert (tmp_path / "reports" / A.id / f"{month}.{ext}").is_file()
         (status,) = backend.reports_status()["workers"].values()
         assert [(f["mill"], f["month"], f["stage"]) for f in status["failures"]] == [

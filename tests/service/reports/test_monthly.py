@@ -8,9 +8,9 @@ import io
 import json
 import math
 import re
+import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
-from pathlib import Path
 from types import SimpleNamespace
 
 import matplotlib
@@ -19,52 +19,16 @@ import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.sim.spec import StartEvent, StopEvent, TripEvent
 from service.api.errors import install_problem_handlers
 from service.api.mill_views import mill_monthly_report
 from service.api.routes.reports import reports_router
+from service.reports.figures import day_positions, envelope
 from service.reports.monthly import MonthError, build_monthly_report, report_to_dict
-from service.reports.render_csv import damage_csv, render_csv, starts_csv
-from service.reports.render_html import day_positions, envelope, render_html
-from service.reports.render_pdf import render_pdf
+from service.reports.monthly_formats import render_csv, render_csv_table, render_html, render_pdf
 from service.reports.starts import month_bounds_ns, month_days
 from service.store.database import Store
 from service.store.records import EventRow
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
-
-MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
-CONFIG = load_mill_config(MILL)
-MONTH = "2024-01"  # the scene starts at 2024-01-01T00:00Z = 02:00 in Johannesburg
-EVENTS = (StartEvent(at_s=5.0), StopEvent(at_s=100.0), StartEvent(at_s=160.0),
-          TripEvent(at_s=260.0), StartEvent(at_s=320.0), StopEvent(at_s=420.0))  # fmt: skip
-DROPPED = 2001  # one block left out: a sequence gap, i.e. a data-quality event
-
-
-@pytest.fixture(scope="module")
-def store(tmp_path_factory: pytest.TempPathFactory) -> Store:
-    scene = get_scene("start-lrs", CONFIG, seed=1, duration_s=470.0, events=EVENTS)
-    blocks = [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
-    path = tmp_path_factory.mktemp("report") / "mw.db"
-    with Store(path) as s:
-        pipeline = MillJob(CONFIG, damage_every_s=10.0)
-        worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: pipeline}, s, None)
-        for i, block in enumerate(blocks):
-            if i != DROPPED:
-                worker.handle(block)
-        worker.commit()
-    s = Store(path)
-    yield s
-    s.close()
-
-
-@pytest.fixture(scope="module")
-def report(store: Store):
-    return build_monthly_report(store, CONFIG, MONTH)
+from tests.service.reports.month_scene import CONFIG, MONTH
 
 
 def test_starts_and_their_peaks_are_those_stored(store, report):
@@ -142,7 +106,8 @@ def test_a_stored_nan_is_kept_in_its_window_and_left_out_of_daily_statistics(tmp
     assert r.steady.days[0].range_pct_mean == {"motor_torque0": 12.0}
     assert r.steady.days[0].bending_amplitude_max == {"bending0": 10.0}
     assert report_to_dict(r)["steady"]["points"][1]["range_pct"] == {"motor_torque0": None}
-    assert render_html(r).count("<svg") == 2 and render_pdf(r).startswith(b"%PDF")  # no damage
+    # starts, steady and the 12-month trend; no damage, so no damage or cumulative figure
+    assert render_html(r).count("<svg") == 3 and render_pdf(r).startswith(b"%PDF")
 
 
 def test_trend_envelopes_keep_single_window_peaks():
@@ -170,8 +135,9 @@ def test_an_empty_month_is_an_honest_empty_report(store):
     assert all(a.raised_ns < empty.start_ns and a.cleared_ns is None for a in empty.alarms)
     assert [w.scenario for w in empty.what_if] == ["5/day", "1/day", "1/week", "1/month"]
     assert "No results" in empty.notes[-1] and empty.notes[0].startswith("SIMULATED DATA")
-    for text in (render_html(empty), render_csv(empty)):
-        assert "sag-5200-lrs" in text
+    assert "sag-5200-lrs" in render_html(empty)
+    names = zipfile.ZipFile(io.BytesIO(render_csv(empty))).namelist()
+    assert "sag-5200-lrs-2024-02-starts.csv" in names
     assert render_pdf(empty).startswith(b"%PDF")
 
 
@@ -191,19 +157,12 @@ def test_months_are_local_calendar_months():
 
 def test_html_is_self_contained_with_inline_plots(report):
     page = render_html(report)
-    assert page.count("<svg") == 3  # starts per day, damage per day, steady trends
+    assert page.count("<svg") == 5  # cumulative, trend, starts per day, damage per day, steady
     for external in ("<script", "<link", "src=", 'href="http', "href='http", "@import"):
         assert external not in page
     assert not re.search(r"url\((?!#)", page)  # only references inside the SVGs
     for text in ("sag-5200-lrs", "rustenburg", MONTH, report.source.store_path, "What if"):
         assert text in page
-
-
-def test_pdf_has_pages(report):
-    pdf = render_pdf(report)
-    assert pdf.startswith(b"%PDF")
-    assert len(re.findall(rb"/Type /Page\b", pdf)) >= 5  # summary, 3 figures, details
-    assert b"/FontFile" not in pdf  # core fonts, nothing embedded (rendering time)
 
 
 def test_concurrent_renders_leave_matplotlib_settings_as_they_were(report):
@@ -215,12 +174,13 @@ def test_concurrent_renders_leave_matplotlib_settings_as_they_were(report):
 
 
 def test_csv_parses_and_matches_the_report(report):
-    starts = list(csv.DictReader(io.StringIO(starts_csv(report))))
+    starts = list(csv.DictReader(io.StringIO(render_csv_table(report, "starts"))))
     assert len(starts) == 3
-    assert float(starts[0]["switch_on_pct"]) == report.starts.starts[0].switch_on_pct
-    damage = list(csv.DictReader(io.StringIO(damage_csv(report))))
+    assert float(starts[0]["switch_on_pct [% rated]"]) == report.starts.starts[0].switch_on_pct
+    damage = list(csv.DictReader(io.StringIO(render_csv_table(report, "damage_daily"))))
     for comp in report.damage:
-        total = math.fsum(float(r["damage"]) for r in damage if r["component"] == comp.component)
+        total = math.fsum(float(r["damage [1]"]) for r in damage
+                          if r["component"] == comp.component)  # fmt: skip
         assert total == comp.total
 
 
@@ -250,7 +210,10 @@ def test_route_serves_every_format(client):
     r = client.get(URL, params={"month": MONTH, "format": "pdf"})
     assert r.content.startswith(b"%PDF") and "attachment" in r.headers["content-disposition"]
     r = client.get(URL, params={"month": MONTH, "format": "csv"})
-    assert r.headers["content-type"].startswith("text/csv") and "# starts" in r.text
+    assert r.headers["content-type"] == "application/zip"
+    assert f"{CONFIG.id}-{MONTH}-starts.csv" in zipfile.ZipFile(io.BytesIO(r.content)).namelist()
+    r = client.get(URL, params={"month": MONTH, "table": "starts"})
+    assert r.headers["content-type"].startswith("text/csv") and len(r.text.splitlines()) == 4
 
 
 @pytest.mark.parametrize(
@@ -259,6 +222,8 @@ def test_route_serves_every_format(client):
         (URL, {"month": "2024-13"}, 422, "2024-13"),
         (URL, {"month": MONTH, "format": "docx"}, 422, "docx"),
         ("/mills/nope/reports/monthly", {"month": MONTH}, 404, "nope"),
+        (URL, {"month": MONTH, "table": "nope"}, 422, "what_if_life"),  # names the valid ones
+        (URL, {"month": MONTH, "table": "starts", "format": "pdf"}, 422, "starts"),
     ],
 )
 def test_route_errors_are_problem_json(client, path, params, status, named):

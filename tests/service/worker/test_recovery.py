@@ -46,7 +46,7 @@ def write_settings(tmp_path: Path, port: int) -> Path:
     path.write_text(
         f'[zenoh]\nlisten = ["{tcp_endpoint(port)}"]\n'
         '[archive]\ndirectory = "archive"\n[store]\npath = "mw.db"\n'
-        "[worker]\ncheckpoint_seconds = 0.5\n"
+        "[worker]\ncheckpoint_seconds = 0.5\ngateway_wait_s = 0\n"  # plain publisher
         f'[mills]\nfiles = ["{MILL}"]\n'
     )
     return path

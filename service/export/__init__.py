@@ -1,0 +1,14 @@
+"""The archive for other tools: a span of a mill as an MCAP file that Foxglove plots.
+
+* ``foxglove`` — :func:`~service.export.foxglove.export_archive`: the archive's blocks of one mill
+  in a span, written by :class:`ingest.archive.foxglove_export.FoxgloveExportWriter` at sample
+  time, beside what the real analyzer and alarm rules conclude over the span (states, events,
+  start peaks, harmonic lines, damage, alarms); :class:`~service.export.foxglove.SpanExport`
+  is the per-block composition, :data:`~service.export.foxglove.Admit` what the caller passes to
+  decode and admit messages.
+
+Data flow: archive files → ``Admit`` (the command's decoding and admission, as
+``millwatch analyze``) → ``SpanExport`` → analyzer, alarms → writer. Called by ``cli/archive``
+(``millwatch archive export``); imports ``analytics``, ``ingest`` and ``alarms`` only. A new
+export format goes here as a module of its own.
+"""

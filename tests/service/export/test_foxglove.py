@@ -1,0 +1,73 @@
+"""``service.export.foxglove``: the export over a directory of rotated archive files (only the
+files a span needs are read) and in the units of the mill's calibration."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ingest import wire
+from ingest.archive.reader import TailTolerantReader
+from ingest.archive.writer import ArchiveWriter
+from ingest.mill_files import load_mill_config
+from service.cli.analyze import recording_files
+from service.export.foxglove import export_archive
+from tests.service.export.recorded import (
+    MILL,
+    T0,
+    S,
+    admit_for,
+    archived_samples,
+    read_export,
+    recording,
+)
+
+__all__ = ["recording"]  # the module fixture, shared
+
+
+def test_a_directory_of_rotated_files_reads_only_the_files_the_span_needs(recording, tmp_path):
+    """The recording re-archived with the real writer as three files (0-70 s, 70-140 s, 140 s-);
+    a span at the end reads only the last file and still gives its samples exactly."""
+    archive = tmp_path / "archive"
+    messages = list(TailTolerantReader(recording[0]).messages())
+    for k, (lo, hi) in enumerate([(0, 70), (70, 140), (140, 999)]):
+        with ArchiveWriter(tmp_path / f"part{k}", "sag") as writer:
+            for m in messages:
+                if T0 + lo * S <= wire.decode_block(m.payload).t0_ns < T0 + hi * S:
+                    writer.write(m.key, m.payload, m.log_time_ns)
+        for f in (tmp_path / f"part{k}").glob("*.mcap"):
+            archive.mkdir(exist_ok=True)
+            f.rename(archive / f.name)
+    assert len(list(archive.glob("*.mcap"))) == 3
+    config = load_mill_config(MILL)
+    out = tmp_path / "end.mcap"
+    result = export_archive(recording_files(archive), config, out, admit_for, start_ns=T0 + 210 * S,
+                            end_ns=T0 + 215 * S, context_s=5.0)  # fmt: skip
+    assert (result.files_read, result.files_skipped) == (1, 2)
+    times, values, _ = archived_samples(recording[0])["speed"]
+    k0 = times.index(T0 + 210 * S)
+    msgs = read_export(out, ["/sag-5200-lrs/samples/speed"])["/sag-5200-lrs/samples/speed"]
+    assert [m[1] for m in msgs] == times[k0 : k0 + 5000]
+    exported = np.array([m[3].value for m in msgs])
+    assert exported.view(np.uint64).tolist() == values[k0 : k0 + 5000].view(np.uint64).tolist()
+    # the whole directory: the same samples as the single file, across the file boundaries
+    whole = export_archive(
+        recording_files(archive), config, tmp_path / "all.mcap", admit_for, samples=False
+    )
+    assert (whole.files_read, whole.counts.overview) == (3, 8800)
+
+
+def test_samples_are_in_the_units_of_the_mill_calibration(recording, tmp_path):
+    """With a calibration other than the identity the exported value is gain·(raw − offset),
+    the very float64 the analyzer computes from the archived sample."""
+    config = load_mill_config(MILL)
+    speed = config.channels["speed"].model_copy(update={"gain": 2.5, "offset": 0.1})
+    config = config.model_copy(update={"channels": {**config.channels, "speed": speed}})
+    out = tmp_path / "cal.mcap"
+    export_archive([recording[0]], config, out, admit_for, start_ns=T0 + 30 * S, end_ns=T0 + 31 * S,
+                   context_s=1.0)  # fmt: skip
+    times, values, _ = archived_samples(recording[0])["speed"]
+    k0 = times.index(T0 + 30 * S)
+    msgs = read_export(out, ["/sag-5200-lrs/samples/speed"])["/sag-5200-lrs/samples/speed"]
+    want = 2.5 * (values[k0 : k0 + 1000] - 0.1)
+    got = np.array([m[3].value for m in msgs])
+    assert got.view(np.uint64).tolist() == want.view(np.uint64).tolist()
