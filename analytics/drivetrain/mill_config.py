@@ -255,62 +255,33 @@ class AlarmThresholds(_Frozen):
     barring_peak_pct: Positive | None = Field(
         default=None, description="None: 185 % single drive, 314 % dual drive (Tables 12-13)"
     )
-    # Rule options (engineering judgement, not seed values; alarms.rules says which rule uses
-    # which field).
-    raise_delay_s: NonNegative = Field(
-        default=60.0, description="s a level stays beyond before raising"
-    )
-    clear_delay_s: NonNegative = Field(
-        default=300.0, description="s a level stays normal before clearing"
-    )
-    start_peak_deadband_pct: NonNegative = Field(
-        default=10.0, description="clean start: ≤ warn − this"
-    )
-    clean_starts_to_clear: int = Field(
-        default=3, ge=1, description="clean starts that clear start_peak"
-    )
-    oscillation_deadband_pct: NonNegative = Field(
-        default=2.0, description="% of motor rated torque"
-    )
-    bending_deadband_mpa: NonNegative = Field(default=2.0, description="MPa of bending amplitude")
-    barring_deadband_pct: NonNegative = Field(default=10.0, description="% of motor rated torque")
-    unexplained_peak_quiet_s: Positive = Field(
-        default=3600.0, description="s without recurrence: clear"
-    )
-    resonance_margin_warn: float = Field(
-        default=0.10, gt=0, lt=1,
-        description="warn when an excitation is within this fraction of a natural frequency",
-    )  # fmt: skip
-    resonance_margin_deadband: NonNegative = Field(
-        default=0.02, description="fraction of the frequency"
-    )
-    life_warn_fraction: Positive = Field(
-        default=1.0, description="warn when remaining life < this × the remaining design life"
-    )
-    life_alarm_fraction: Positive = Field(
-        default=0.5, description="alarm below this × (< warn fraction)"
-    )
-    life_deadband_fraction: NonNegative = Field(
-        default=0.05, description="× the remaining design life"
-    )
-    stale_after_s: Positive = Field(
-        default=10.0, description="s without data from a channel: warning"
-    )
-    spike_rate_warn_per_min: Positive = Field(
-        default=6.0, description="telemetry spikes per minute"
-    )
-    spike_rate_deadband_per_min: NonNegative = Field(default=3.0, description="spikes per minute")
-    sequence_gaps_warn_per_min: NonNegative = Field(
-        default=0.0, description="missing blocks per minute"
-    )
-    archive_clean_reports_to_clear: int = Field(
-        default=3, ge=1, description="clean archive reports"
-    )
-    imbalance_warn_pct: Positive = Field(
-        default=10.0, description="dual-drive load-sharing imbalance, %"
-    )
-    imbalance_alarm_pct: Positive = Field(default=20.0, description="% (above imbalance_warn_pct)")
-    imbalance_deadband_pct: NonNegative = Field(default=2.0, description="% of imbalance")
+    # Rule options: engineering judgement, not seed values (alarms.rules says which rule uses
+    # which). Times in s, deadbands in the rule's unit, rates per minute, fractions as named.
+    # fmt: off
+    raise_delay_s: NonNegative = 60.0             # a level stays beyond this long to raise …
+    clear_delay_s: NonNegative = 300.0            # … and within the clear level to clear
+    start_peak_deadband_pct: NonNegative = 10.0
+    clean_starts_to_clear: Annotated[int, Field(ge=1)] = 3
+    oscillation_deadband_pct: NonNegative = 2.0
+    bending_deadband_mpa: NonNegative = 2.0
+    barring_deadband_pct: NonNegative = 10.0
+    unexplained_peak_quiet_s: Positive = 3600.0   # no recurrence this long: clear
+    # resonance: warn when an excitation is within this fraction of a natural frequency
+    resonance_margin_warn: Annotated[float, Field(gt=0, lt=1)] = 0.10
+    resonance_margin_deadband: NonNegative = 0.02
+    # remaining life below these fractions of the remaining design life: warning, alarm
+    life_warn_fraction: Positive = 1.0
+    life_alarm_fraction: Positive = 0.5
+    life_deadband_fraction: NonNegative = 0.05
+    stale_after_s: Positive = 10.0                # no data from a channel this long: warning
+    spike_rate_warn_per_min: Positive = 6.0
+    spike_rate_deadband_per_min: NonNegative = 3.0
+    sequence_gaps_warn_per_min: NonNegative = 0.0
+    archive_clean_reports_to_clear: Annotated[int, Field(ge=1)] = 3
+    imbalance_warn_pct: Positive = 10.0           # dual drives: load-sharing imbalance, %
+    imbalance_alarm_pct: Positive = 20.0
+    imbalance_deadband_pct: NonNegative = 2.0
+    # fmt: on
 
     @model_validator(mode="after")
     def _ordered(self) -> AlarmThresholds:
