@@ -30,7 +30,7 @@ from alarms.engine import AlarmEngine, UnknownAlarmError
 from alarms.lifecycle import Alarm, AlarmState, Transition, TransitionKind
 from alarms.observations import QUANTITIES, Kind, Observation
 from alarms.report import alarms_for_report
-from alarms.rules import RuleOptions, Severity, build_rules
+from alarms.rules import Severity, build_rules
 
 __all__ = [
     "QUANTITIES",
@@ -39,7 +39,6 @@ __all__ = [
     "AlarmState",
     "Kind",
     "Observation",
-    "RuleOptions",
     "Severity",
     "Transition",
     "TransitionKind",

@@ -35,7 +35,7 @@ from typing import Any
 from alarms import lifecycle
 from alarms.lifecycle import Alarm, AlarmState, Transition
 from alarms.observations import Kind, Observation
-from alarms.rules import Rule, RuleBook, RuleOptions, Severity, build_rules
+from alarms.rules import Rule, RuleBook, Severity, build_rules
 from analytics.drivetrain.mill_config import MillConfig
 
 __all__ = ["SIMULATED_PREFIX", "AlarmEngine", "UnknownAlarmError"]
@@ -101,11 +101,9 @@ class AlarmEngine:
         self._lock = threading.RLock()
 
     @classmethod
-    def for_mills(
-        cls, configs: Iterable[MillConfig], options: RuleOptions | None = None
-    ) -> AlarmEngine:
+    def for_mills(cls, configs: Iterable[MillConfig]) -> AlarmEngine:
         """An engine with :func:`alarms.rules.build_rules` for each mill."""
-        return cls(build_rules(c, options) for c in configs)
+        return cls(build_rules(c) for c in configs)
 
     # ------------------------------------------------------------------ input
     def observe(self, obs: Observation) -> list[Transition]:
@@ -268,10 +266,11 @@ class AlarmEngine:
     ) -> list[Transition]:
         threshold = rule.threshold(severity, obs)
         book = self.books[key[0]]
-        message = rule.message(obs, severity, book.time_zone)
+        alarm = cond.alarm
+        raised_ns = None if alarm is None else alarm.raised_ns
+        message = rule.message(obs, severity, book.time_zone, raised_ns)
         if book.simulated:
             message = SIMULATED_PREFIX + message
-        alarm = cond.alarm
         if alarm is None:
             cond.alarm = _new_alarm(rule, key, obs, severity, threshold, message, book.simulated)
             return [lifecycle.raise_alarm(cond.alarm)]

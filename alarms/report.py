@@ -16,7 +16,6 @@ from typing import Any
 from alarms.engine import AlarmEngine
 from alarms.lifecycle import Transition
 from alarms.observations import Observation, derive_start_counts
-from alarms.rules import RuleOptions
 from analytics.drivetrain.mill_config import MillConfig
 
 __all__ = ["alarms_for_report", "history"]
@@ -42,9 +41,8 @@ def history(transitions: Iterable[Transition]) -> list[dict[str, Any]]:
 def alarms_for_report(
     observations: Iterable[Observation],
     config: MillConfig,
-    options: RuleOptions | None = None,
 ) -> list[dict[str, Any]]:
     """The alarm history the observations of ``config``'s mill would have produced."""
     ordered = sorted(_with_start_counts(list(observations), config.time_zone), key=lambda o: o.t_ns)
-    engine = AlarmEngine.for_mills([config], options)
+    engine = AlarmEngine.for_mills([config])
     return history(engine.observe_all(ordered))

@@ -3,8 +3,9 @@
 A :class:`Rule` says when a quantity (:data:`alarms.observations.QUANTITIES`) is abnormal — one
 threshold per severity, compared *strictly* (``>`` for ``above`` rules, ``<`` for ``below``) — how
 it returns to normal, and what to tell the control room. :func:`build_rules` makes the rule book
-of one mill from ``MillConfig.alarms`` (seed thresholds) and :class:`RuleOptions` (the knobs the
-seed says nothing about: deadbands, delays, data-quality limits).
+of one mill from ``MillConfig.alarms`` — the ``[alarms]`` section of the mill file: the seed
+thresholds and the knobs the seed says nothing about (deadbands, delays, data-quality limits,
+resonance margin, life fractions, load-sharing limits), each a named, validated field.
 
 Lifecycle knobs (:mod:`alarms.engine` applies them):
 
@@ -18,12 +19,15 @@ Lifecycle knobs (:mod:`alarms.engine` applies them):
 * ``latched``: a condition that returns to normal before anyone acknowledged it keeps the alarm
   raised until acknowledged (the control room must see that it happened).
 
-Rules and their defaults (``MillConfig.alarms`` unless marked *option*):
+Rules and their defaults (fields of ``MillConfig.alarms``; *option*: not a seed value). A
+message states the time of the value that raised (or escalated) the alarm, in the site's time
+zone to the second (``2026-11-02 17:00:38 SAST``), and the start-peak advice is the mill's
+starter's (:data:`START_ADVICE`: Grid, LRS, E-LRS).
 
 =========================== ===================================== ====================== =======
 rule                        levels                                clears                 source
 =========================== ===================================== ====================== =======
-start_peak (event)          warning > 250 %, alarm > 300 %        3 clean starts         §7.2,
+start_peak (event)          warning > 250 %, alarm > 300 %        3 clean starts         §6.2.1,
                                                                                          §10.4
 starts_per_month (level)    warning > 5, alarm > 20               new month; latched     §6.1.3,
                                                                                          §6.2.8
@@ -57,17 +61,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from enum import StrEnum
-from typing import Annotated, Any, Literal
-
-from pydantic import BaseModel, ConfigDict, Field
+from typing import Any, Literal
 
 from alarms.observations import QUANTITIES, Kind, Observation, local_month
-from analytics.drivetrain.mill_config import MillConfig
+from analytics.drivetrain.mill_config import MillConfig, Starter
 
-__all__ = ["Level", "Rule", "RuleBook", "RuleOptions", "Severity", "build_rules"]
-
-NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+__all__ = ["Level", "Rule", "RuleBook", "Severity", "build_rules", "local_time"]
 
 
 class Severity(StrEnum):
@@ -172,8 +171,12 @@ class Rule:
     def fmt(self, value: float) -> str:
         return self.value_format.format(value)
 
-    def message(self, obs: Observation, severity: Severity, time_zone: str) -> str:
-        """A sentence for the control room: what, when, how bad, per which source, what to do."""
+    def message(
+        self, obs: Observation, severity: Severity, time_zone: str, raised_ns: int | None = None
+    ) -> str:
+        """A sentence for the control room: what, when, how bad, per which source, what to do.
+        ``time`` is ``obs``'s (the value that raised or escalated the alarm); ``raised_ns``: the
+        alarm was raised earlier (an escalation or recurrence), said after the headline."""
         level = next(lv for lv in self.levels if lv.severity == severity)
         fields = _Defaults({k: _short(v) for k, v in obs.context.items()})
         subject = obs.subject
@@ -185,6 +188,8 @@ class Rule:
             where=f" on {subject}" if subject else "",
         )
         headline = self.headline.format_map(fields)
+        if raised_ns is not None and raised_ns != obs.t_ns:
+            headline += f" (alarm raised {local_time(raised_ns, time_zone)})"
         criterion = self.criterion or (
             f"{severity} {self.direction} {self.fmt(self.threshold(severity, obs))}"
         )
@@ -197,9 +202,11 @@ def _short(value: Any) -> Any:
 
 
 def local_time(t_ns: int, time_zone: str) -> str:
-    """``YYYY-MM-DD HH:MM`` in the site's time zone (what the control room's clock shows)."""
+    """``YYYY-MM-DD HH:MM:SS ZONE`` in the site's time zone (what the control room's clock shows,
+    with the zone's abbreviation, e.g. ``SAST``)."""
     zone = zoneinfo.ZoneInfo(time_zone)
-    return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).astimezone(zone).strftime("%Y-%m-%d %H:%M")
+    local = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=UTC).astimezone(zone)
+    return local.strftime("%Y-%m-%d %H:%M:%S %Z")
 
 
 @dataclass(frozen=True, slots=True)
@@ -220,56 +227,53 @@ class RuleBook:
         raise KeyError(name)
 
 
-class RuleOptions(BaseModel):
-    """Knobs the seed does not fix (deadbands, delays, data quality, resonance, life, load
-    sharing). Defaults are engineering judgement; each names its unit. Candidates for
-    ``MillConfig.alarms`` once they have proved themselves."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
-
-    raise_delay_s: NonNegative = 60.0
-    clear_delay_s: NonNegative = 300.0
-    start_peak_deadband_pct: NonNegative = 10.0
-    clean_starts_to_clear: Annotated[int, Field(ge=1)] = 3
-    oscillation_deadband_pct: NonNegative = 2.0
-    bending_deadband_mpa: NonNegative = 2.0
-    barring_deadband_pct: NonNegative = 10.0
-    unexplained_peak_quiet_s: Positive = 3600.0
-    resonance_margin_warn: Annotated[float, Field(gt=0, lt=1)] = 0.10
-    resonance_margin_deadband: NonNegative = 0.02
-    life_warn_fraction: Positive = 1.0
-    life_alarm_fraction: Positive = 0.5
-    life_deadband_fraction: NonNegative = 0.05
-    stale_after_s: Positive = 10.0
-    spike_rate_warn_per_min: Positive = 6.0
-    spike_rate_deadband_per_min: NonNegative = 3.0
-    sequence_gaps_warn_per_min: NonNegative = 0.0
-    archive_clean_reports_to_clear: Annotated[int, Field(ge=1)] = 3
-    imbalance_warn_pct: Positive = 10.0
-    imbalance_alarm_pct: Positive = 20.0
-    imbalance_deadband_pct: NonNegative = 2.0
-
-
 def _levels(*pairs: tuple[Severity, float]) -> tuple[Level, ...]:
     return tuple(Level(sev, thr) for sev, thr in pairs)
 
 
-def _start_peak(config: MillConfig, o: RuleOptions) -> Rule:
-    """Start peak torque, % of motor rated torque (seed 000 §7.2, §10.4; Tables 4–6: LRS
-    averages 233 %, Grid 542 %). Event; clears after ``clean_starts_to_clear`` clean starts."""
+#: Start-peak advice per starter (seed 000 §6.2.1–6.2.2, Tables 6 and 11: average peak
+#: switch-on / short-circuit torque, % of motor rated torque; §10.2 starter maintenance; §10.4
+#: design service factors and "Grid type starters [should] not [be] used for mill applications").
+START_ADVICE = {
+    Starter.GRID: (
+        "fixed grid resistor (Grid) starter",
+        "Grid starters average 542 % switch-on and 324 % short-circuit peaks (seed 000 Table 6); "
+        "the seed strongly recommends not using Grid starters on mills (§10.4): plan the change "
+        "to an LRS or E-LRS starter and keep the number of starts to a minimum until then",
+    ),
+    Starter.LRS: (
+        "liquid resistance starter (LRS)",
+        "LRS starts average 233 % switch-on and 197 % short-circuit peaks (Table 6): check the "
+        "liquid resistance starter (electrolyte density, verify with the strain gauges) and the "
+        "start sequence (§10.2)",
+    ),
+    Starter.E_LRS: (
+        "enhanced liquid resistance starter (E-LRS)",
+        "E-LRS starts average only 92 % switch-on and 119 % short-circuit peaks (Table 6): a peak "
+        "this high means the starter is not working as designed; check its control and "
+        "electrolyte and the start sequence (§10.2)",
+    ),
+}
+
+
+def _start_peak(config: MillConfig) -> Rule:
+    """Start peak torque, % of motor rated torque (seed 000 §7.2, §10.4; Table 6: E-LRS averages
+    92 %, LRS 233 %, Grid 542 %), with advice for the mill's starter (:data:`START_ADVICE`).
+    Event; clears after ``clean_starts_to_clear`` clean starts."""
     a = config.alarms
+    starter, advice = START_ADVICE[config.drive.starter]
     return Rule(
         "start_peak", "start_peak_pct",
         _levels((Severity.WARNING, a.start_peak_warn_pct),
                 (Severity.ALARM, a.start_peak_alarm_pct)),
-        headline="Start at {time}{where} reached {value} of rated motor torque",
-        advice="check the liquid resistance starter (electrolyte density) and the start sequence",
-        source="seed 000 §7.2, §10.4", value_format="{:.0f} %",
-        deadband=o.start_peak_deadband_pct, clean_events_to_clear=o.clean_starts_to_clear,
+        headline=f"Start at {{time}}{{where}} with the {starter} reached {{value}} of rated "
+        "motor torque",
+        advice=advice, source="seed 000 §6.2.1, §10.2, §10.4", value_format="{:.0f} %",
+        deadband=a.start_peak_deadband_pct, clean_events_to_clear=a.clean_starts_to_clear,
     )  # fmt: skip
 
 
-def _starts_per_month(config: MillConfig, o: RuleOptions) -> Rule:
+def _starts_per_month(config: MillConfig) -> Rule:
     """Starts in the local calendar month (seed 000 §6.1.3 supplier norm 3–5, §6.2.8 field
     average 20–22, §10.3 "recorded and scrutinized"). Level without delays (a count does not
     chatter); latched: a busy month must be acknowledged even after the count resets."""
@@ -285,7 +289,7 @@ def _starts_per_month(config: MillConfig, o: RuleOptions) -> Rule:
     )  # fmt: skip
 
 
-def _oscillation(config: MillConfig, o: RuleOptions) -> Rule:
+def _oscillation(config: MillConfig) -> Rule:
     """Steady-state torque oscillation range, % of motor rated torque (seed 000 Tables 14–15:
     23.6 % average, 45.4 % max on single-drive motor shafts; §7.4, §10.5)."""
     a = config.alarms
@@ -297,12 +301,12 @@ def _oscillation(config: MillConfig, o: RuleOptions) -> Rule:
         "torque at {time}",
         advice="check the spectrum (gear mesh, liner passing, pinion speed) and gear wear",
         source="seed 000 Tables 14–15, §10.5", value_format="{:.0f} %",
-        deadband=o.oscillation_deadband_pct, raise_delay_s=o.raise_delay_s,
-        clear_delay_s=o.clear_delay_s,
+        deadband=a.oscillation_deadband_pct, raise_delay_s=a.raise_delay_s,
+        clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
-def _bending(config: MillConfig, o: RuleOptions) -> Rule:
+def _bending(config: MillConfig) -> Rule:
     """Pinion-shaft bending stress amplitude, MPa (seed 000 §8.1: < 25 MPa by experience, 43 MPa
     for a fatigue reserve factor of 2, > 90 MPa fails within weeks; §10.1 alignment)."""
     a = config.alarms
@@ -317,28 +321,30 @@ def _bending(config: MillConfig, o: RuleOptions) -> Rule:
         headline="Pinion-shaft bending amplitude{where} reached {value} at {time}",
         advice="check the alignment of the whole drivetrain (bearing and gear wear, foundation)",
         source="seed 000 §8.1, §10.1", value_format="{:.1f} MPa",
-        deadband=o.bending_deadband_mpa, raise_delay_s=o.raise_delay_s,
-        clear_delay_s=o.clear_delay_s,
+        deadband=a.bending_deadband_mpa, raise_delay_s=a.raise_delay_s,
+        clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
-def _barring(config: MillConfig, o: RuleOptions) -> Rule:
+def _barring(config: MillConfig) -> Rule:
     """Barring peak torque above the drive's limit (seed 000 §6.2.3, Tables 12–13: 185 % single,
     314 % dual). Event; clears after one clean barring session or on acknowledgement."""
+    a = config.alarms
     return Rule(
         "barring_peak", "barring_peak_pct",
         _levels((Severity.ALARM, config.barring_peak_limit_pct)),
         headline="Barring at {time}{where} reached {value} of rated motor torque",
         advice="the charge may have set during a long stop: loosen it before a full start",
         source="seed 000 §6.2.3, Tables 12–13", value_format="{:.0f} %",
-        deadband=o.barring_deadband_pct, clean_events_to_clear=1, clear_on_ack=True,
+        deadband=a.barring_deadband_pct, clean_events_to_clear=1, clear_on_ack=True,
     )  # fmt: skip
 
 
-def _unexplained_peak(config: MillConfig, o: RuleOptions) -> Rule:
+def _unexplained_peak(config: MillConfig) -> Rule:
     """A spectral peak matching no expected excitation (seed 000 §6.2.7, Figure 36: 10–15 Hz
     peaks pointing to torsional resonance). Event: every reported peak offends (the harmonic
     tracker already applied its SNR and amplitude gates); clears after a quiet hour."""
+    a = config.alarms
     return Rule(
         "unexplained_peak", "unexplained_peak_hz", _levels((Severity.WARNING, 0.0)),
         headline="Spectral peak at {value}{where} ({time}) matches no drivetrain excitation; "
@@ -346,93 +352,99 @@ def _unexplained_peak(config: MillConfig, o: RuleOptions) -> Rule:
         advice="possible torsional resonance: compare with the drivetrain model and inspect",
         source="seed 000 §6.2.7, seed 001", value_format="{:.2f} Hz",
         criterion="warning: unexplained by the drivetrain kinematics",
-        quiet_s_to_clear=o.unexplained_peak_quiet_s,
+        quiet_s_to_clear=a.unexplained_peak_quiet_s,
     )  # fmt: skip
 
 
-def _resonance(config: MillConfig, o: RuleOptions) -> Rule:
+def _resonance(config: MillConfig) -> Rule:
     """Excitation close to a torsional natural frequency (seed 001 torsional model; seed 000
     §6.1.1 resonance near 90 % speed during acceleration). Level, lower is worse."""
+    a = config.alarms
     return Rule(
         "resonance_margin", "resonance_margin",
-        _levels((Severity.WARNING, o.resonance_margin_warn)),
+        _levels((Severity.WARNING, a.resonance_margin_warn)),
         headline="Excitation {line} at {frequency_hz} Hz{where} is only {value} from the natural "
         "frequency {natural_hz} Hz ({time})",
         advice="running close to resonance amplifies torque oscillations: review speed and model",
         source="seed 001, seed 000 §6.1.1", value_format="{:.1%}", direction="below",
-        deadband=o.resonance_margin_deadband, raise_delay_s=o.raise_delay_s,
-        clear_delay_s=o.clear_delay_s,
+        deadband=a.resonance_margin_deadband, raise_delay_s=a.raise_delay_s,
+        clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
-def _remaining_life(config: MillConfig, o: RuleOptions) -> Rule:
+def _remaining_life(config: MillConfig) -> Rule:
     """Projected remaining life shorter than the remaining design life (seed 000 §8.2–8.3:
     bending range, start transients and start count drive damage). Level, lower is worse;
     thresholds are fractions of ``context['remaining_design_life_years']`` (default: the
     mill's ``design_life_years``)."""
+    a = config.alarms
     return Rule(
         "remaining_life", "remaining_life_years",
-        _levels((Severity.WARNING, o.life_warn_fraction), (Severity.ALARM, o.life_alarm_fraction)),
+        _levels((Severity.WARNING, a.life_warn_fraction), (Severity.ALARM, a.life_alarm_fraction)),
         headline="Projected remaining life of {subject} is {value} at the current damage rate "
         "({time})",
         advice="the damage rate is too high: review bending (alignment), start peaks and "
         "start count in the damage report",
         source="seed 000 §8.2–8.3", value_format="{:.1f} years", direction="below",
-        deadband=o.life_deadband_fraction, raise_delay_s=o.raise_delay_s,
-        clear_delay_s=o.clear_delay_s, scale_key="remaining_design_life_years",
+        deadband=a.life_deadband_fraction, raise_delay_s=a.raise_delay_s,
+        clear_delay_s=a.clear_delay_s, scale_key="remaining_design_life_years",
         default_scale=config.design_life_years,
     )  # fmt: skip
 
 
-def _stale(config: MillConfig, o: RuleOptions) -> Rule:
+def _stale(config: MillConfig) -> Rule:
     """No data from a channel (seed 000 §5.1: telemetry links drop out). The value is already a
     duration, so no delays; clears as soon as data flows again."""
+    a = config.alarms
     return Rule(
-        "stale_channel", "stale_channel", _levels((Severity.WARNING, o.stale_after_s)),
+        "stale_channel", "stale_channel", _levels((Severity.WARNING, a.stale_after_s)),
         headline="No data{where} for {value} (at {time})",
         advice="check the telemetry transmitter, the gateway and the network link",
-        source="seed 000 §5.1", value_format="{:.0f} s", deadband=o.stale_after_s * 0.5,
+        source="seed 000 §5.1", value_format="{:.0f} s", deadband=a.stale_after_s * 0.5,
     )  # fmt: skip
 
 
-def _spike_rate(config: MillConfig, o: RuleOptions) -> Rule:
+def _spike_rate(config: MillConfig) -> Rule:
     """Telemetry interference spikes per minute (seed 000 §5.2.2: two-way radios and phones)."""
+    a = config.alarms
     return Rule(
-        "spike_rate", "spike_rate", _levels((Severity.WARNING, o.spike_rate_warn_per_min)),
+        "spike_rate", "spike_rate", _levels((Severity.WARNING, a.spike_rate_warn_per_min)),
         headline="Telemetry spikes{where}: {value} ({time})",
         advice="check the telemetry antenna and radio sources near the mill; flagged samples "
         "are excluded from the analysis",
         source="seed 000 §5.2.2", value_format="{:.1f} per minute",
-        deadband=o.spike_rate_deadband_per_min, raise_delay_s=o.raise_delay_s,
-        clear_delay_s=o.clear_delay_s,
+        deadband=a.spike_rate_deadband_per_min, raise_delay_s=a.raise_delay_s,
+        clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
-def _sequence_gaps(config: MillConfig, o: RuleOptions) -> Rule:
+def _sequence_gaps(config: MillConfig) -> Rule:
     """Blocks missing from a channel's sequence (seed 000 §5.1 telemetry path; the wire
     format's sequence numbers)."""
+    a = config.alarms
     return Rule(
-        "sequence_gaps", "sequence_gaps", _levels((Severity.WARNING, o.sequence_gaps_warn_per_min)),
+        "sequence_gaps", "sequence_gaps", _levels((Severity.WARNING, a.sequence_gaps_warn_per_min)),
         headline="Data blocks missing{where}: {value} ({time})",
         advice="check the sensor gateway and the network between gateway and service",
         source="seed 000 §5.1", value_format="{:.0f} per minute",
-        raise_delay_s=o.raise_delay_s, clear_delay_s=o.clear_delay_s,
+        raise_delay_s=a.raise_delay_s, clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
-def _archive(config: MillConfig, o: RuleOptions) -> Rule:
+def _archive(config: MillConfig) -> Rule:
     """Archive writes failing: raw data is being lost (the archive is the log; seed 000 §10.6
     long-term trending needs it). Event, latched; clears after clean reports."""
+    a = config.alarms
     return Rule(
         "archive_write_failures", "archive_write_failures", _levels((Severity.ALARM, 0.0)),
         headline="{value} failed at {time}: raw telemetry is not being archived",
         advice="check the archive disk (space, permissions, health)",
         source="seed 000 §10.6", value_format="{:.0f} archive writes",
-        clean_events_to_clear=o.archive_clean_reports_to_clear, latched=True,
+        clean_events_to_clear=a.archive_clean_reports_to_clear, latched=True,
     )  # fmt: skip
 
 
-def _report_delivery(config: MillConfig, o: RuleOptions) -> Rule:
+def _report_delivery(config: MillConfig) -> Rule:
     """A monthly report that could not be made or mailed after its retries (seed 000 §10.6:
     reports "automatically generated and distributed to site management"). Event per stage
     (files, mail), latched: the site must see it even once a later attempt succeeded."""
@@ -447,17 +459,18 @@ def _report_delivery(config: MillConfig, o: RuleOptions) -> Rule:
     )  # fmt: skip
 
 
-def _load_sharing(config: MillConfig, o: RuleOptions) -> Rule:
+def _load_sharing(config: MillConfig) -> Rule:
     """Dual-drive load-sharing imbalance between barring and non-barring sides (seed 000 §6.2.2,
     Table 15 compares the sides; the limits are engineering defaults, not seed values)."""
+    a = config.alarms
     return Rule(
         "load_sharing", "load_sharing_imbalance_pct",
-        _levels((Severity.WARNING, o.imbalance_warn_pct), (Severity.ALARM, o.imbalance_alarm_pct)),
+        _levels((Severity.WARNING, a.imbalance_warn_pct), (Severity.ALARM, a.imbalance_alarm_pct)),
         headline="Load sharing between the drive sides is {value} out of balance at {time}",
         advice="check the drives' load-sharing control and the pinion alignment of both sides",
         source="seed 000 §6.2.2, Table 15", value_format="{:.0f} %",
-        deadband=o.imbalance_deadband_pct, raise_delay_s=o.raise_delay_s,
-        clear_delay_s=o.clear_delay_s,
+        deadband=a.imbalance_deadband_pct, raise_delay_s=a.raise_delay_s,
+        clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
@@ -468,15 +481,10 @@ _BUILDERS = (
 )  # fmt: skip
 
 
-def build_rules(config: MillConfig, options: RuleOptions | None = None) -> RuleBook:
-    """The rule book of one mill: seed thresholds from ``config.alarms``, other knobs from
-    ``options`` (defaults: :class:`RuleOptions`)."""
-    opts = options or RuleOptions()
-    if not opts.imbalance_warn_pct < opts.imbalance_alarm_pct:
-        raise ValueError("imbalance_warn_pct must be below imbalance_alarm_pct")
-    if not opts.life_alarm_fraction < opts.life_warn_fraction:
-        raise ValueError("life_alarm_fraction must be below life_warn_fraction")
-    rules = [build(config, opts) for build in _BUILDERS]
+def build_rules(config: MillConfig) -> RuleBook:
+    """The rule book of one mill: thresholds and options from ``config.alarms`` (the mill
+    file's ``[alarms]`` section, validated there)."""
+    rules = [build(config) for build in _BUILDERS]
     return RuleBook(
         config.id, config.time_zone, {r.quantity: r for r in rules}, simulated=config.simulated
     )

@@ -17,7 +17,7 @@ README = ROOT / "README.md"
 PACKAGES = ("analytics", "ingest", "alarms", "service")
 #: Top-level folders that are not Python packages, with their one line.
 OTHER = {
-    "deploy": "zenoh router configs, systemd units, example plant and mill configs (TOML)",
+    "deploy": "zenoh router configs, systemd units, plant and mill configs (TOML), Grafana",
     "tests": "mirrors the packages; tests/integration/: real processes; tests/bench/: benchmarks",
 }
 HEADING = "## Layout"

@@ -233,8 +233,15 @@ class ChannelConfig(_Frozen):
         return self
 
 
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
 class AlarmThresholds(_Frozen):
-    """Alarm thresholds; % are of motor rated torque. Sources in the module docstring."""
+    """The ``[alarms]`` section: thresholds (seed values; % are of motor rated torque, sources in
+    the module docstring) and the rules' options the seed does not fix — deadbands, delays (s),
+    data-quality limits, resonance margin, life fractions, load-sharing limits. Those options'
+    defaults are engineering judgement; every field names its unit. :mod:`alarms.rules` says
+    which rule uses which field."""
 
     start_peak_warn_pct: Positive = 250.0
     start_peak_alarm_pct: Positive = 300.0
@@ -248,22 +255,50 @@ class AlarmThresholds(_Frozen):
     barring_peak_pct: Positive | None = Field(
         default=None, description="None: 185 % single drive, 314 % dual drive (Tables 12-13)"
     )
+    # Rule options: engineering judgement, not seed values (alarms.rules says which rule uses
+    # which). Times in s, deadbands in the rule's unit, rates per minute, fractions as named.
+    # fmt: off
+    raise_delay_s: NonNegative = 60.0             # a level stays beyond this long to raise …
+    clear_delay_s: NonNegative = 300.0            # … and within the clear level to clear
+    start_peak_deadband_pct: NonNegative = 10.0
+    clean_starts_to_clear: Annotated[int, Field(ge=1)] = 3
+    oscillation_deadband_pct: NonNegative = 2.0
+    bending_deadband_mpa: NonNegative = 2.0
+    barring_deadband_pct: NonNegative = 10.0
+    unexplained_peak_quiet_s: Positive = 3600.0   # no recurrence this long: clear
+    # resonance: warn when an excitation is within this fraction of a natural frequency
+    resonance_margin_warn: Annotated[float, Field(gt=0, lt=1)] = 0.10
+    resonance_margin_deadband: NonNegative = 0.02
+    # remaining life below these fractions of the remaining design life: warning, alarm
+    life_warn_fraction: Positive = 1.0
+    life_alarm_fraction: Positive = 0.5
+    life_deadband_fraction: NonNegative = 0.05
+    stale_after_s: Positive = 10.0                # no data from a channel this long: warning
+    spike_rate_warn_per_min: Positive = 6.0
+    spike_rate_deadband_per_min: NonNegative = 3.0
+    sequence_gaps_warn_per_min: NonNegative = 0.0
+    archive_clean_reports_to_clear: Annotated[int, Field(ge=1)] = 3
+    imbalance_warn_pct: Positive = 10.0           # dual drives: load-sharing imbalance, %
+    imbalance_alarm_pct: Positive = 20.0
+    imbalance_deadband_pct: NonNegative = 2.0
+    # fmt: on
 
     @model_validator(mode="after")
     def _ordered(self) -> AlarmThresholds:
         pairs = [
-            ("start_peak", self.start_peak_warn_pct, self.start_peak_alarm_pct),
-            ("starts_per_month", self.starts_per_month_warn, self.starts_per_month_alarm),
-            ("oscillation_range", self.oscillation_range_warn_pct,
-             self.oscillation_range_alarm_pct),
-            ("bending_amplitude", self.bending_amplitude_warn_mpa,
-             self.bending_amplitude_alarm_mpa),
-            ("bending_amplitude", self.bending_amplitude_alarm_mpa,
-             self.bending_amplitude_critical_mpa),
-        ]  # fmt: skip
-        for name, low, high in pairs:
-            if not low < high:
-                raise ValueError(f"{name}: warning level {low} must be below alarm level {high}")
+            ("start_peak_warn_pct", "start_peak_alarm_pct"),
+            ("starts_per_month_warn", "starts_per_month_alarm"),
+            ("oscillation_range_warn_pct", "oscillation_range_alarm_pct"),
+            ("bending_amplitude_warn_mpa", "bending_amplitude_alarm_mpa"),
+            ("bending_amplitude_alarm_mpa", "bending_amplitude_critical_mpa"),
+            ("imbalance_warn_pct", "imbalance_alarm_pct"),
+            ("life_alarm_fraction", "life_warn_fraction"),  # lower life is worse
+        ]
+        for low, high in pairs:
+            if not getattr(self, low) < getattr(self, high):
+                raise ValueError(
+                    f"{low} ({getattr(self, low)}) must be below {high} ({getattr(self, high)})"
+                )
         return self
 
 

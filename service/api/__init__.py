@@ -16,10 +16,14 @@ What is here:
 * :mod:`service.api.alarm_board` — every alarm's current state in memory (cheap ``/alarms``).
 * :mod:`service.api.models` — the request and response bodies (OpenAPI schema).
 * :mod:`service.api.errors` — domain errors and their ``application/problem+json`` answers.
-* :mod:`service.api.metrics` — the Prometheus collector of a runtime.
+* :mod:`service.api.metrics` — the Prometheus collector of a runtime;
+  :mod:`service.api.domain_metrics` — its domain gauges (damage, remaining life, oscillation,
+  bending, starts, lag, state) and the cache of the life computation they need.
+* :mod:`service.api.times` — every ``*_ns`` time also as ISO-8601 UTC; ISO query times.
 
 Data flow: request → route (validates, calls one backend method) → ``LocalBackend`` → views →
-store/runtime status; or → ``service.remote.zenoh_backend.ZenohBackend`` → a worker's
+store/runtime status (times given ISO-8601 beside, :func:`service.api.times.with_iso`, in the
+route); or → ``service.remote.zenoh_backend.ZenohBackend`` → a worker's
 queryable → its ``LocalBackend``. Either way errors are :mod:`service.api.errors` exceptions,
 answered as problem JSON in one handler.
 

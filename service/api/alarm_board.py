@@ -33,6 +33,7 @@ from typing import Any
 from alarms.lifecycle import Alarm, Transition
 from alarms.wire import decode_transition
 from service.api.alarm_views import etag
+from service.api.times import with_iso
 
 __all__ = ["AlarmBoard", "Listing", "row_from_dict"]
 
@@ -144,7 +145,8 @@ class AlarmBoard:
             and (mill_id is None or r.mill_id == mill_id)
         ]
         cursor = max((r.updated_ns for r in rows), default=since_ns)
-        body = {"alarms": [row_to_dict(r) for r in rows], "count": len(rows), "cursor": cursor}
+        alarms = [with_iso(row_to_dict(r)) for r in rows]
+        body = {"alarms": alarms, "count": len(rows), "cursor": cursor}
         listing = Listing(_encode(body), etag(rows), version)
         with self._lock:
             if len(self._listings) >= MAX_CACHED_LISTINGS:

@@ -28,6 +28,7 @@ from typing import Any
 
 from alarms.engine import UnknownAlarmError
 from alarms.lifecycle import Alarm, AlarmState
+from service.api.times import with_iso
 from service.errors import BadRequest, Conflict, Forbidden, NotFound, Unauthorized, Unavailable
 from service.store.database import Store
 from service.worker.checkpoints import MillHeldError
@@ -79,7 +80,7 @@ def alarm_list(
     """The listing (alarms, count, next cursor) and its ETag."""
     rows = store.alarms(states or None, since_ns, mill_id)
     cursor = max((r.updated_ns for r in rows), default=since_ns)
-    body = {"alarms": [r.to_dict() for r in rows], "count": len(rows), "cursor": cursor}
+    body = {"alarms": [with_iso(r.to_dict()) for r in rows], "count": len(rows), "cursor": cursor}
     return body, etag(rows)
 
 

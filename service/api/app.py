@@ -13,6 +13,7 @@ Nothing is read at import time.
 from __future__ import annotations
 
 from fastapi import FastAPI
+from fastapi_offline import FastAPIOffline
 
 from service.api.backend import Backend
 from service.api.errors import install_problem_handlers
@@ -26,10 +27,11 @@ __all__ = ["create_app"]
 def create_app(source: ServiceRuntime | Backend) -> FastAPI:
     """The API over a backend, or over a runtime in this process."""
     backend: Backend = LocalBackend(source) if isinstance(source, ServiceRuntime) else source
-    app = FastAPI(
+    app = FastAPIOffline(  # /docs and /redoc load their assets from this app, not a CDN
         title="millwatch",
         summary="Condition monitoring of grinding-mill drivetrains",
         version="0.1.0",
+        swagger_ui_parameters={"validatorUrl": None},  # no badge fetched from swagger.io
     )
     app.state.backend = backend
     install_problem_handlers(app)

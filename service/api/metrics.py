@@ -7,6 +7,8 @@ counters the worker thread only ever increments (plain ints, read atomically) an
 analyzer or iterates a dict the worker mutates. Open alarms are counted from the store.
 
 Names follow Prometheus conventions: ``millwatch_`` prefix, unit suffixes, ``_total`` counters.
+The domain gauges (damage, remaining life, oscillation range, bending amplitude, starts this
+month, channel lag, one 0/1 series per mill state) are :mod:`service.api.domain_metrics`.
 
 ``millwatch api`` (no worker in the process) exports the same per-mill families
 (:func:`mill_families`, :func:`open_alarms`) from what the workers answer over zenoh:
@@ -16,7 +18,7 @@ Names follow Prometheus conventions: ``millwatch_`` prefix, unit suffixes, ``_to
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Any
 
 from prometheus_client import CollectorRegistry
@@ -24,11 +26,15 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 from prometheus_client.registry import Collector
 
 from alarms.lifecycle import Alarm
+from service.api.domain_metrics import LifeCache, domain_families
+from service.api.mill_views import mill_life
 from service.worker.runtime import ServiceRuntime
 
 __all__ = ["RuntimeCollector", "metrics_registry", "mill_families", "open_alarms"]
 
 _OPEN = ("raised", "acknowledged")
+LifeSource = Callable[[str], dict[str, Any] | None]
+"""A mill's life answer (``GET /mills/{id}/life`` as a dict), ``None`` when not available."""
 
 
 class RuntimeCollector(Collector):
@@ -36,11 +42,12 @@ class RuntimeCollector(Collector):
 
     def __init__(self, runtime: ServiceRuntime) -> None:
         self.runtime = runtime
+        self.life = LifeCache(lambda mill: mill_life(runtime, mill))
 
     def collect(self) -> Iterator[Metric]:
         yield from self._worker()
         yield from self._queue()
-        yield from mill_families(self.runtime.mills, self.runtime.status)
+        yield from mill_families(self.runtime.mills, self.runtime.status, self.life.get)
         store = self.runtime.store
         yield open_alarms(store.alarms(_OPEN) if store else [])
 
@@ -74,9 +81,13 @@ class RuntimeCollector(Collector):
         )
 
 
-def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[Metric]:
-    """Decode errors, missing blocks, samples, state and whether held per mill, from the
-    workers' statuses."""
+def mill_families(
+    mills: Iterable[str], status: Mapping[str, Any], life: LifeSource = lambda mill: None
+) -> Iterator[Metric]:
+    """Decode errors, missing blocks, samples and whether held per mill, from the workers'
+    statuses, and the domain gauges (:mod:`service.api.domain_metrics`: damage and remaining
+    life from ``life``, the rest from the statuses)."""
+    yield from domain_families(mills, status, life)
     errors = CounterMetricFamily(
         "millwatch_decode_errors",
         "Undecodable blocks per channel and kind.",
@@ -105,9 +116,6 @@ def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[M
     samples = CounterMetricFamily(
         "millwatch_samples_analysed", "Samples analysed per mill.", labels=["mill"]
     )
-    state = GaugeMetricFamily(
-        "millwatch_mill_state", "1 for the mill's operating state.", labels=["mill", "state"]
-    )
     held = GaugeMetricFamily(
         "millwatch_mill_held",
         "1 while the mill is held: its checkpoint could not be restored, its blocks are "
@@ -124,9 +132,8 @@ def mill_families(mills: Iterable[str], status: Mapping[str, Any]) -> Iterator[M
                 repeated.add_metric([mill, channel, kind], ch.get(kind + "s", 0))
             clock.add_metric([mill, channel], ch.get("clock_faults", 0))
         samples.add_metric([mill], s.get("samples", 0))
-        state.add_metric([mill, str(s.get("state", "unknown"))], 1)
         held.add_metric([mill], 1 if s.get("held_reason") else 0)
-    yield from (errors, missing, repeated, clock, samples, state, held)
+    yield from (errors, missing, repeated, clock, samples, held)
 
 
 def open_alarms(rows: Iterable[Alarm]) -> Metric:

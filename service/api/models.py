@@ -92,8 +92,10 @@ class MillDetail(MillSummary):
 
 class StartOut(BaseModel):
     t_ns: int
+    t: str = Field(description="Start time, ISO-8601 UTC (= t_ns).")
     local_time: str
     end_t_ns: int | None
+    end_t: str | None = Field(description="End of the start, ISO-8601 UTC (= end_t_ns).")
     failed: bool
     switch_on_peak_pct: float | None = Field(description="% of motor rated torque.")
     short_circuit_peak_pct: float | None
@@ -121,8 +123,10 @@ class MonthStarts(BaseModel):
                     "starts": [
                         {
                             "t_ns": 1714560000000000000,
+                            "t": "2024-05-01T10:40:00Z",
                             "local_time": "2024-05-01T06:40:00-04:00",
                             "end_t_ns": 1714560030000000000,
+                            "end_t": "2024-05-01T10:40:30Z",
                             "failed": False,
                             "switch_on_peak_pct": 262.0,
                             "short_circuit_peak_pct": None,
@@ -158,6 +162,7 @@ class Spectrum(BaseModel):
                     "mill": "sag-5200-lrs",
                     "simulated": False,
                     "t_ns": 1714560600000000000,
+                    "t": "2024-05-01T10:50:00Z",
                     "harmonics": {
                         "t_start_ns": 1714560000000000000,
                         "t_end_ns": 1714560600000000000,
@@ -175,6 +180,7 @@ class Spectrum(BaseModel):
     mill: str
     simulated: bool
     t_ns: int = Field(description="End of the Welch window, ns UTC.")
+    t: str = Field(description="End of the Welch window, ISO-8601 UTC (= t_ns).")
     harmonics: dict[str, Any] = Field(
         description="The harmonic table: expected lines measured per channel and unexplained "
         "peaks (possible torsional resonances)."
@@ -191,21 +197,25 @@ ALARM_EXAMPLE: JsonDict = {
     "severity": "warning",
     "state": "raised",
     "raised_ns": 1714560000000000000,
+    "raised": "2024-05-01T10:40:00Z",
     "updated_ns": 1714560000000000000,
+    "updated": "2024-05-01T10:40:00Z",
     "value": 262.0,
     "threshold": 250.0,
     "message": "Start peak 262 % of rated torque",
     "condition": True,
     "acked_ns": None,
+    "acked": None,
     "acked_by": None,
     "cleared_ns": None,
+    "cleared": None,
     "seq": 1,
     "simulated": False,
 }
 
 
 class AlarmOut(BaseModel):
-    """The current state of one alarm; times ns UTC."""
+    """The current state of one alarm; times ns UTC and (without ``_ns``) ISO-8601 UTC."""
 
     model_config = ConfigDict(json_schema_extra={"examples": [ALARM_EXAMPLE]})
 
@@ -218,14 +228,18 @@ class AlarmOut(BaseModel):
     severity: str
     state: str = Field(description="raised, acknowledged or cleared.")
     raised_ns: int
+    raised: str = Field(description="Raised, ISO-8601 UTC (= raised_ns).")
     updated_ns: int = Field(description="Time of the latest transition (the poll cursor).")
+    updated: str = Field(description="Latest transition, ISO-8601 UTC (= updated_ns).")
     value: float | None
     threshold: float | None
     message: str
     condition: bool
     acked_ns: int | None
+    acked: str | None = Field(description="Acknowledged, ISO-8601 UTC (= acked_ns).")
     acked_by: str | None
     cleared_ns: int | None
+    cleared: str | None = Field(description="Cleared, ISO-8601 UTC (= cleared_ns).")
     seq: int = Field(description="Number of transitions so far.")
     simulated: bool = Field(
         False, description="Raised on simulated data (the demo's mills); the message says so too."
@@ -237,6 +251,7 @@ class TransitionOut(BaseModel):
     seq: int
     kind: str
     t_ns: int
+    t: str = Field(description="Transition time, ISO-8601 UTC (= t_ns).")
     severity: str
     state: str
     value: float | None

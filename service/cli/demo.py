@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import secrets
 import sys
 import tempfile
 import threading
@@ -138,7 +139,7 @@ def _main(args: argparse.Namespace) -> int:
         )  # fmt: skip
     directory = args.dir or Path(tempfile.mkdtemp(prefix="millwatch-demo-"))
     zenoh_port = free_loopback_port()
-    settings = demo_settings(directory, zenoh_port, args.port, mills)
+    settings = with_demo_api_key(demo_settings(directory, zenoh_port, args.port, mills))
     runtime = ServiceRuntime(settings, simulated_mills(settings.load_mills()), MillJob)
     runtime.start()
     gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene)
@@ -182,4 +183,23 @@ def _announce(settings: ServiceSettings, runtime: ServiceRuntime, directory: Pat
         f"--mill deploy/mills/sag-5200-lrs.toml\n"
         "Ctrl-C stops (final checkpoint, archive files finished).\n"
     )
+    sys.stdout.write(ack_help(base, settings.api.api_key))
     sys.stdout.flush()
+
+
+def with_demo_api_key(settings: ServiceSettings) -> ServiceSettings:
+    """``settings`` with an API key made for this run (the demo prints it), so acknowledging
+    an alarm — what an operator does — can be tried."""
+    api = settings.api.model_copy(update={"api_key": secrets.token_urlsafe(16)})
+    return settings.model_copy(update={"api": api})
+
+
+def ack_help(base: str, api_key: str | None) -> str:
+    """The lines that show an operator how to list open alarms and acknowledge one."""
+    return (
+        f"  API key    {api_key}   (header X-API-Key; made for this run)\n"
+        f"  alarms     curl --noproxy '*' '{base}/alarms?state=open'\n"
+        f"  ack        curl --noproxy '*' -X POST -H 'X-API-Key: {api_key}' "
+        f"-H 'Content-Type: application/json' -d '{{\"by\": \"operator\"}}' "
+        f"'{base}/alarms/<alarm_id>/ack'\n"
+    )

@@ -17,6 +17,7 @@ from prometheus_client.registry import Collector
 
 from analytics.drivetrain.mill_config import MillConfig
 from service.api.alarm_board import AlarmBoard
+from service.api.domain_metrics import LifeCache
 from service.api.metrics import mill_families, open_alarms
 from service.api.mill_views import UNREACHABLE
 
@@ -33,6 +34,8 @@ class StatusSource(Protocol):
 
     def alarm_board(self) -> AlarmBoard: ...
 
+    def life(self, mill_id: str) -> dict[str, Any]: ...
+
 
 _WORKER_COUNTERS = (
     ("millwatch_blocks_handled", "blocks_handled", "Blocks taken off the queue and handled."),
@@ -47,6 +50,7 @@ class RemoteCollector(Collector):
 
     def __init__(self, backend: StatusSource) -> None:
         self.backend = backend
+        self.life = LifeCache(backend.life)
 
     def collect(self) -> Iterator[Metric]:
         gathered = self.backend.statuses()
@@ -72,7 +76,12 @@ class RemoteCollector(Collector):
         yield reachable
         status = {m: gathered[m]["status"] if m in gathered else {"state": UNREACHABLE}
                   for m in self.backend.mills}  # fmt: skip
-        yield from mill_families(self.backend.mills, status)
+
+        # life only of mills whose worker answers (an unreachable one would cost a timeout)
+        def life(mill: str) -> dict[str, Any] | None:
+            return self.life.get(mill) if mill in gathered else None
+
+        yield from mill_families(self.backend.mills, status, life)
         yield open_alarms(self.backend.alarm_board().rows())
 
 

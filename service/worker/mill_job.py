@@ -229,7 +229,15 @@ class MillJob:
             "monitored_since_ns": a.first_sample_ns,
             "simulated": self.config.simulated,
             "damage": self._damage_summary(),
+            "starts_this_month": self._starts_this_month(),
         }
+
+    def _starts_this_month(self) -> int:
+        """Starts in the local calendar month of the last analysed sample (0 before any)."""
+        t_ns = self.analyzer.next_sample_ns
+        if t_ns is None:
+            return 0
+        return self.analyzer.starts_in_month(local_month(int(t_ns), self.config.time_zone))
 
     def _damage_summary(self) -> dict[str, dict[str, float]]:
         """Miner damage per component so far: closed cycles (``committed``), what closing the

@@ -10,8 +10,7 @@ from zoneinfo import ZoneInfo
 from alarms.engine import AlarmEngine
 from alarms.lifecycle import Transition
 from alarms.observations import Observation
-from alarms.rules import RuleOptions
-from analytics.drivetrain.mill_config import MillConfig
+from analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 NS = 1_000_000_000
@@ -26,8 +25,15 @@ def mill(name: str = "sag-5200-lrs", simulated: bool = False) -> MillConfig:
     return config.model_copy(update={"simulated": simulated})
 
 
-def engine(name: str = "sag-5200-lrs", options: RuleOptions | None = None) -> AlarmEngine:
-    return AlarmEngine.for_mills([mill(name)], options)
+def with_alarms(config: MillConfig, **alarms: Any) -> MillConfig:
+    """``config`` with ``[alarms]`` fields changed (validated as a mill file's would be)."""
+    merged = AlarmThresholds.model_validate({**config.alarms.model_dump(), **alarms})
+    return config.model_copy(update={"alarms": merged})
+
+
+def engine(name: str = "sag-5200-lrs", **alarms: Any) -> AlarmEngine:
+    """An engine for one deploy mill; ``alarms``: ``[alarms]`` fields to change."""
+    return AlarmEngine.for_mills([with_alarms(mill(name), **alarms)])
 
 
 def obs(quantity: str, value: float, t_s: float, mill_id: str = "sag-5200-lrs", **context: Any):

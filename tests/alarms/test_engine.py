@@ -10,7 +10,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from alarms.engine import AlarmEngine, UnknownAlarmError
-from alarms.rules import RuleOptions
 from tests.alarms.helpers import NS, T0, engine, feed, kinds, mill, obs
 
 
@@ -23,7 +22,7 @@ def test_one_alarm_per_condition_and_one_per_subject():
 
 
 def test_escalation_updates_the_same_alarm_and_never_steps_down():
-    eng = engine(options=RuleOptions(raise_delay_s=0))
+    eng = engine(raise_delay_s=0)
     fired = feed(eng, "bending_amplitude_mpa", [30, 50, 95, 30, 50], channel="b")
     assert kinds(fired) == ["raised", "escalated", "escalated"]
     assert len({t.alarm_id for t in fired}) == 1
@@ -36,7 +35,7 @@ def test_escalation_updates_the_same_alarm_and_never_steps_down():
 
 
 def test_escalation_after_acknowledgement_needs_a_new_acknowledgement():
-    eng = engine(options=RuleOptions(raise_delay_s=0))
+    eng = engine(raise_delay_s=0)
     (raised,) = feed(eng, "bending_amplitude_mpa", [30], channel="b")
     assert kinds(eng.acknowledge(raised.alarm_id, "ops", T0 + NS)) == ["acknowledged"]
     (esc,) = feed(eng, "bending_amplitude_mpa", [50], start_s=60, channel="b")
@@ -55,7 +54,7 @@ def test_level_clears_only_below_the_deadband_for_the_clear_delay():
 
 
 def test_a_non_latched_alarm_clears_without_acknowledgement():
-    eng = engine(options=RuleOptions(raise_delay_s=0, clear_delay_s=0))
+    eng = engine(raise_delay_s=0, clear_delay_s=0)
     fired = feed(eng, "spike_rate", [10, 1], channel="c")
     assert kinds(fired) == ["raised", "cleared"]
     with pytest.raises(UnknownAlarmError):
@@ -140,7 +139,7 @@ def test_bad_input_is_ignored_not_raised():
 
 
 def test_state_is_bounded_to_open_and_pending_conditions():
-    eng = engine(options=RuleOptions(raise_delay_s=0, clear_delay_s=0))
+    eng = engine(raise_delay_s=0, clear_delay_s=0)
     for i in range(50):
         feed(eng, "spike_rate", [10, 1], start_s=i * 200, channel=f"c{i % 5}")
     assert eng.snapshot()["conditions"] == []
@@ -155,7 +154,7 @@ def test_state_is_bounded_to_open_and_pending_conditions():
 def test_a_value_wandering_inside_the_deadband_raises_one_alarm(steps, raise_delay):
     """Random walk kept strictly inside (threshold − deadband, threshold + deadband) after a
     confirmed crossing: exactly one alarm, never cleared, never re-raised."""
-    eng = engine(options=RuleOptions(raise_delay_s=raise_delay))
+    eng = engine(raise_delay_s=raise_delay)
     ch = {"channel": "motor_torque"}  # threshold 25 %, deadband 2 %
     fired = feed(eng, "oscillation_range_pct", [26.0, 26.0], **ch)
     value, values = 26.0, []

@@ -5,8 +5,9 @@ from __future__ import annotations
 import pytest
 
 from alarms.observations import QUANTITIES
-from alarms.rules import RuleOptions, Severity, build_rules
-from tests.alarms.helpers import engine, feed, kinds, mill
+from alarms.rules import Severity, build_rules, local_time
+from analytics.drivetrain.mill_config import MillConfig, Starter
+from tests.alarms.helpers import NS, T0, engine, feed, kinds, mill, with_alarms
 
 # quantity, mill, context, values crossing (two per level: level rules confirm after 60 s),
 # expected rule and severity of the last transition, clean values
@@ -93,7 +94,7 @@ def test_level_rules_wait_for_the_raise_delay():
     assert kinds(feed(eng, "oscillation_range_pct", [30], start_s=60, channel="motor_torque")) == [
         "raised"
     ]
-    quick = engine(options=RuleOptions(raise_delay_s=0))
+    quick = engine(raise_delay_s=0)
     assert kinds(feed(quick, "oscillation_range_pct", [30], channel="motor_torque")) == ["raised"]
 
 
@@ -105,14 +106,87 @@ def test_a_dip_restarts_the_raise_delay():
 
 def test_message_reads_like_an_engineer_wrote_it():
     eng = engine()
-    t_s = 2 * 3600 + 14 * 60  # 02:14 local
+    t_s = 2 * 3600 + 14 * 60 + 7  # 02:14:07 local
     (t,) = feed(eng, "start_peak_pct", [312], start_s=t_s)
     assert t.message == (
-        "Start at 2026-11-02 02:14 reached 312 % of rated motor torque (alarm above 300 %, "
-        "seed 000 §7.2, §10.4): check the liquid resistance starter (electrolyte density) "
-        "and the start sequence"
+        "Start at 2026-11-02 02:14:07 SAST with the liquid resistance starter (LRS) reached "
+        "312 % of rated motor torque (alarm above 300 %, seed 000 §6.2.1, §10.2, §10.4): LRS "
+        "starts average 233 % switch-on and 197 % short-circuit peaks (Table 6): check the "
+        "liquid resistance starter (electrolyte density, verify with the strain gauges) and the "
+        "start sequence (§10.2)"
     )
     assert (t.value, t.threshold) == (312.0, 300.0)
+
+
+def _starter_mill(starter: Starter) -> MillConfig:
+    config = mill("rod-1100-grid")
+    return config.model_copy(update={"drive": config.drive.model_copy(update={"starter": starter})})
+
+
+@pytest.mark.parametrize("starter", list(Starter))
+def test_start_peak_advice_is_the_mills_starters(starter):
+    """Seed 000 §6.2.1 Table 6, §10.2, §10.4: Grid, LRS and E-LRS starts need different advice;
+    the liquid-starter advice only for a liquid resistance starter."""
+    from alarms.engine import AlarmEngine
+
+    eng = AlarmEngine.for_mills([_starter_mill(starter)])
+    (t,) = feed(eng, "start_peak_pct", [755], mill_id="rod-1100-grid")
+    names = {Starter.GRID: "(Grid) starter", Starter.LRS: "starter (LRS)",
+             Starter.E_LRS: "starter (E-LRS)"}  # fmt: skip
+    assert names[starter] in t.message
+    assert ("542 %" in t.message) == (starter is Starter.GRID)
+    assert ("check the liquid resistance starter" in t.message) == (starter is Starter.LRS)
+    assert ("92 %" in t.message) == (starter is Starter.E_LRS)
+
+
+def test_grid_mill_start_names_the_grid_starter():
+    (t,) = feed(engine("rod-1100-grid"), "start_peak_pct", [755], mill_id="rod-1100-grid")
+    assert "with the fixed grid resistor (Grid) starter reached 755 %" in t.message
+    assert "not using Grid starters on mills (§10.4)" in t.message
+    assert "liquid resistance starter" not in t.message
+
+
+def test_message_time_is_the_time_of_the_raising_value():
+    """A level alarm is raised by the value that completes the raise delay; its message states
+    that value's time (to the second, site zone), which is the alarm's ``raised_ns``; a later
+    escalation states its own value's time and when the alarm was raised."""
+    eng = engine("ball-dual-lrs")
+    first = feed(eng, "load_sharing_imbalance_pct", [12, 12], step_s=38, mill_id="ball-dual-lrs")
+    assert first == []  # 38 s < 60 s raise delay
+    (raised,) = feed(eng, "load_sharing_imbalance_pct", [12], start_s=76, mill_id="ball-dual-lrs")
+    assert raised.alarm.raised_ns == raised.t_ns == T0 + 76 * NS
+    assert f"at {local_time(raised.t_ns, 'Africa/Johannesburg')}" in raised.message
+    assert "at 2026-11-02 00:01:16 SAST" in raised.message
+    later = feed(eng, "load_sharing_imbalance_pct", [25, 25, 25], step_s=200, start_s=200,
+                 mill_id="ball-dual-lrs")  # fmt: skip
+    assert kinds(later) == ["escalated"]
+    (esc,) = later
+    assert "at 2026-11-02 00:06:40 SAST (alarm raised 2026-11-02 00:01:16 SAST)" in esc.message
+
+
+def test_alarm_options_come_from_the_mill_file():
+    """An ``[alarms]`` option in the mill TOML changes the rule's behaviour."""
+    from alarms.engine import AlarmEngine
+    from tests.alarms.helpers import MILLS
+
+    toml = (MILLS / "ball-dual-lrs.toml").read_text(encoding="utf-8")
+    options = "[alarms]\nimbalance_warn_pct = 30.0\nimbalance_alarm_pct = 40.0\nraise_delay_s = 0\n"
+    custom = MillConfig.from_toml_text(toml.replace("[alarms]\n", options))
+    default = engine("ball-dual-lrs", raise_delay_s=0)
+    raised = feed(default, "load_sharing_imbalance_pct", [25], mill_id="ball-dual-lrs")
+    assert kinds(raised) == ["raised"]
+    eng = AlarmEngine.for_mills([custom])
+    assert feed(eng, "load_sharing_imbalance_pct", [25], mill_id="ball-dual-lrs") == []
+    (t,) = feed(eng, "load_sharing_imbalance_pct", [31], start_s=60, mill_id="ball-dual-lrs")
+    assert "warning above 30 %" in t.message
+
+
+def test_resonance_margin_and_life_factors_come_from_the_mill_file():
+    config = with_alarms(mill(), resonance_margin_warn=0.2, life_warn_fraction=0.8,
+                         life_alarm_fraction=0.4)  # fmt: skip
+    book = build_rules(config)
+    assert book.rules["resonance_margin"].levels[0].threshold == 0.2
+    assert [lv.threshold for lv in book.rules["remaining_life_years"].levels] == [0.8, 0.4]
 
 
 @pytest.mark.parametrize("quantity", sorted(QUANTITIES))
@@ -121,14 +195,14 @@ def test_every_message_cites_a_source(quantity):
     rule = book.rules[quantity]
     assert "seed 000" in rule.source or "seed 001" in rule.source
     bad = 1e9 if rule.direction == "above" else -1.0
-    eng = engine("ball-dual-lrs", RuleOptions(raise_delay_s=0))
+    eng = engine("ball-dual-lrs", raise_delay_s=0)
     (t,) = feed(eng, quantity, [bad], mill_id="ball-dual-lrs", channel="c")
     assert rule.source in t.message
     assert "{" not in t.message
 
 
 def test_context_numbers_are_rounded_and_missing_ones_marked():
-    eng = engine(options=RuleOptions(raise_delay_s=0))
+    eng = engine(raise_delay_s=0)
     ctx = {"channel": "pinion_torque", "line": "girth_mesh", "frequency_hz": 64.123456}
     (t,) = feed(eng, "resonance_margin", [0.05], **ctx)
     assert t.message.startswith(
@@ -138,15 +212,23 @@ def test_context_numbers_are_rounded_and_missing_ones_marked():
 
 
 def test_critical_bending_advice_overrides_the_rule_advice():
-    eng = engine(options=RuleOptions(raise_delay_s=0))
+    eng = engine(raise_delay_s=0)
     (t,) = feed(eng, "bending_amplitude_mpa", [95], channel="pinion_bending")
     assert "within weeks" in t.message
     assert "on pinion_bending" in t.message
 
 
-def test_options_are_validated():
-    with pytest.raises(ValueError, match="imbalance"):
-        build_rules(mill(), RuleOptions(imbalance_warn_pct=30, imbalance_alarm_pct=20))
+def test_options_are_validated_naming_the_field():
+    from pydantic import ValidationError
+
+    from analytics.drivetrain.mill_config import describe_validation_error
+
+    with pytest.raises(ValidationError) as info:
+        with_alarms(mill(), imbalance_warn_pct=30, imbalance_alarm_pct=20)
+    (line,) = describe_validation_error(info.value)
+    assert "imbalance_warn_pct (30.0) must be below imbalance_alarm_pct (20.0)" in line
+    with pytest.raises(ValidationError, match="raise_delay_s"):
+        with_alarms(mill(), raise_delay_s=-1)
     assert Severity.CRITICAL.rank > Severity.ALARM.rank > Severity.WARNING.rank
 
 

@@ -8,10 +8,12 @@ in process, the mill's worker over zenoh); the API key is checked here, in the A
 
 from __future__ import annotations
 
+from datetime import datetime
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Header, Query, Response, Security
 from fastapi.security import APIKeyHeader
+from pydantic import Field
 
 from service.api.alarm_views import STATE_PATTERN, check_api_key, matches, parse_states
 from service.api.backend import Backend
@@ -19,6 +21,7 @@ from service.api.errors import problem_responses
 from service.api.mill_views import config_of
 from service.api.models import AckBody, AlarmDetail, AlarmList
 from service.api.routes.params import AlarmId
+from service.api.times import IsoTime, ns_of, with_iso
 
 __all__ = ["alarms_router"]
 
@@ -52,14 +55,19 @@ def alarms_router(backend: Backend) -> APIRouter:
     async def alarms(
         state: Annotated[str | None, Query(pattern=STATE_PATTERN, description=_STATE_HELP)] = None,
         since: Annotated[
-            int | None, Query(ge=0, le=INT64_MAX, description="Changed at or after (ns UTC).")
+            Annotated[int, Field(ge=0, le=INT64_MAX)] | IsoTime | None,
+            Query(
+                description="Changed at or after: integer ns UTC (the previous answer's cursor) "
+                "or ISO-8601 (e.g. 2024-05-01T10:40:00Z; without an offset: UTC).",
+            ),
         ] = None,
         mill: Annotated[str | None, Query(max_length=64, description="One mill only.")] = None,
         if_none_match: Annotated[str | None, Header(max_length=1000)] = None,
     ) -> Response:
         if mill is not None:
             config_of(backend.mills, mill)
-        listing = backend.alarm_board().listing(parse_states(state), since, mill)
+        since_ns = ns_of(since) if isinstance(since, datetime) else since
+        listing = backend.alarm_board().listing(parse_states(state), since_ns, mill)
         headers = {"ETag": listing.etag, "Cache-Control": "no-cache"}
         if matches(if_none_match, listing.etag):
             return Response(status_code=304, headers=headers)
@@ -72,7 +80,7 @@ def alarms_router(backend: Backend) -> APIRouter:
         responses=problem_responses(404, 422, 503),
     )
     def alarm(alarm_id: AlarmId) -> dict[str, Any]:
-        return backend.alarm(alarm_id)
+        return with_iso(backend.alarm(alarm_id))
 
     @router.post(
         "/alarms/{alarm_id}/ack",
@@ -87,6 +95,6 @@ def alarms_router(backend: Backend) -> APIRouter:
     ) -> dict[str, Any]:
         check_api_key(backend.api_key, api_key)
         by = body.by if body is not None else "api"
-        return backend.ack(alarm_id, by)
+        return with_iso(backend.ack(alarm_id, by))
 
     return router

@@ -10,6 +10,7 @@ from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 
 from service.api.backend import Backend
+from service.api.times import with_iso
 
 __all__ = ["health_router"]
 
@@ -20,7 +21,7 @@ def health_router(backend: Backend) -> APIRouter:
 
     @router.get("/health", summary="Liveness: the process answers")
     def health() -> dict[str, Any]:
-        return {"status": "ok", "time_ns": time.time_ns()}
+        return with_iso({"status": "ok", "time_ns": time.time_ns()})
 
     @router.get(
         "/ready",

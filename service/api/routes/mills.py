@@ -14,6 +14,7 @@ from service.api.backend import Backend
 from service.api.errors import problem_responses
 from service.api.models import MillDetail, MillSummary, MonthStarts, Spectrum
 from service.api.routes.params import MillId, Month, Site
+from service.api.times import with_iso
 from service.reports.fleet import FleetView
 from service.reports.life import LifeReport
 
@@ -39,7 +40,7 @@ def mills_router(backend: Backend) -> APIRouter:
         responses=problem_responses(404, 422),
     )
     def mill(mill_id: MillId) -> dict[str, Any]:
-        return backend.mill_detail(mill_id)
+        return with_iso(backend.mill_detail(mill_id))
 
     @router.get(
         "/mills/{mill_id}/life",
@@ -57,7 +58,7 @@ def mills_router(backend: Backend) -> APIRouter:
         responses=problem_responses(404, 422, 503),
     )
     def starts(mill_id: MillId, month: Month = None) -> dict[str, Any]:
-        return backend.starts(mill_id, month)
+        return with_iso(backend.starts(mill_id, month))
 
     @router.get(
         "/mills/{mill_id}/spectrum",
@@ -66,7 +67,7 @@ def mills_router(backend: Backend) -> APIRouter:
         responses=problem_responses(404, 422, 503),
     )
     def spectrum(mill_id: MillId) -> dict[str, Any]:
-        return backend.spectrum(mill_id)
+        return with_iso(backend.spectrum(mill_id))
 
     @router.get(
         "/sites/{site}/fleet",

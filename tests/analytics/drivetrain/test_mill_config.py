@@ -91,7 +91,12 @@ def test_frozen() -> None:
         ("drive", "starter", "Diesel", "drive.starter: "),
         ("drive", "reducer_ratio", 6.5, "drive: reducer_stages give ratio"),
         ("shafts", "pinion_diameter_m", 0.0, "shafts.pinion_diameter_m: must be > 0"),
-        ("alarms", "start_peak_warn_pct", 400.0, "alarms: start_peak: warning level"),
+        (
+            "alarms",
+            "start_peak_warn_pct",
+            400.0,
+            "alarms: start_peak_warn_pct (400.0) must be below",
+        ),
         ("material", "s_ut_mpa", 50.0, "material.s_ut_mpa: must be > 100"),
     ],
 )

@@ -4,6 +4,7 @@ start, served by uvicorn on 127.0.0.1 (fixture ``live_api`` in conftest.py)."""
 from __future__ import annotations
 
 import json
+import re
 import time
 
 import httpx
@@ -13,6 +14,8 @@ from prometheus_client.parser import text_string_to_metric_families
 from ingest.keys import alarm_pattern
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.api.app import create_app
+from service.api.domain_metrics import MILL_STATES
+from service.api.times import iso_utc
 from service.settings import ServiceSettings
 from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
@@ -121,9 +124,29 @@ def test_alarms_since_cursor_returns_only_later_changes(client):
     assert after == {"alarms": [], "count": 0, "cursor": cursor + 1}
 
 
+def test_alarm_times_are_also_iso_and_since_takes_iso(client):
+    body = client.get("/alarms").json()
+    alarm = body["alarms"][0]
+    assert alarm["raised"] == iso_utc(alarm["raised_ns"]) and alarm["raised"].endswith("Z")
+    assert alarm["updated"] == iso_utc(alarm["updated_ns"])
+    assert "acked" in alarm and "cleared" in alarm
+    whole_s = body["cursor"] // 10**9 * 10**9
+    since = iso_utc(whole_s).replace("Z", "+00:00")
+    at = client.get("/alarms", params={"since": since}).json()
+    assert at["count"] >= 1 and all(a["updated_ns"] >= whole_s for a in at["alarms"])
+    later = client.get("/alarms", params={"since": iso_utc(whole_s + 10**9)}).json()
+    assert later["count"] == 0
+    detail = client.get(f"/alarms/{alarm['alarm_id']}").json()
+    assert all(t["t"] == iso_utc(t["t_ns"]) for t in detail["transitions"])
+    starts = client.get(f"/mills/{MILL}/starts").json()["starts"]
+    assert starts and starts[0]["t"] == iso_utc(starts[0]["t_ns"])
+    assert client.get("/health").json()["time"].endswith("Z")
+
+
 def test_alarm_filters_are_validated(client):
     assert_problem(client.get("/alarms", params={"state": "burning"}), 422, "'burning'")
-    assert_problem(client.get("/alarms", params={"since": -1}), 422, "since")
+    assert_problem(client.get("/alarms", params={"since": -1}), 422, "since", "-1")
+    assert_problem(client.get("/alarms", params={"since": "soon"}), 422, "'since", "'soon'")
     assert_problem(client.get("/alarms", params={"mill": "ball-9"}), 404, "'ball-9'")
 
 
@@ -233,6 +256,8 @@ def test_metrics_in_prometheus_text_format(client, live_api):
     assert samples[("millwatch_archive_errors_total", ())] == 0
     state = live_api.runtime.status[MILL]["state"]
     assert samples[("millwatch_mill_state", (("mill", MILL), ("state", state)))] == 1
+    states = {dict(k)["state"]: v for (n, k), v in samples.items() if n == "millwatch_mill_state"}
+    assert set(states) == set(MILL_STATES) and sum(states.values()) == 1  # one 0/1 per state
     assert samples[("millwatch_samples_analysed_total", (("mill", MILL),))] > 0
     assert samples[("millwatch_mill_held", (("mill", MILL),))] == 0
     assert any(name == "millwatch_open_alarms" for name, _ in samples)
@@ -261,3 +286,95 @@ def test_openapi_documents_problems_examples_and_the_api_key(client):
     assert "304" in spec["paths"]["/alarms"]["get"]["responses"]
     for name in ("LifeReport", "FleetView", "MonthStarts", "Spectrum", "AlarmList"):
         assert spec["components"]["schemas"][name].get("examples"), name
+
+
+# ---------------------------------------------------------------------- docs offline
+@pytest.mark.parametrize("page", ["/docs", "/redoc"])
+def test_docs_load_only_from_the_app_itself(client, page):
+    """Plants are air-gapped: every script, style, icon and the spec of /docs and /redoc come
+    from the app (same origin), none from a CDN."""
+    html = client.get(page)
+    assert html.status_code == 200 and html.headers["content-type"].startswith("text/html")
+    found = re.findall(r"""(?:src|href|spec-url)=["']([^"']+)["']|url: ?["']([^"']+)["']""",
+                       html.text)  # fmt: skip
+    urls = [a or b for a, b in found]
+    assert any(u.endswith(".js") for u in urls)
+    assert not re.search(r"https?://|//cdn|fonts\.googleapis", html.text)
+    kinds = {".js": "javascript", ".css": "text/css", ".png": "image/png", ".json": "json"}
+    for url in urls:
+        assert url.startswith("/") and not url.startswith("//"), url
+        r = client.get(url)
+        assert r.status_code == 200, url
+        want = next(v for k, v in kinds.items() if url.endswith(k))
+        assert want in r.headers["content-type"], (url, r.headers["content-type"])
+        assert len(r.content) > 100
+
+
+# ---------------------------------------------------------------------- domain metrics, grafana
+def _scrape(client) -> dict[str, list]:
+    """Metric family name → its samples, of a real scrape (counters by their ``_total``)."""
+    r = client.get("/metrics")
+    assert r.status_code == 200
+    out: dict[str, list] = {}
+    for family in text_string_to_metric_families(r.text):
+        for s in family.samples:
+            out.setdefault(s.name, []).append(s)
+        out.setdefault(family.name + ("_total" if family.type == "counter" else ""), [])
+    return out
+
+
+def test_domain_gauges_per_mill_and_component(client, live_api):
+    scraped = _scrape(client)
+    life = client.get(f"/mills/{MILL}/life").json()
+    damage = {s.labels["component"]: s.value for s in scraped["millwatch_damage_ratio"]}
+    assert damage == pytest.approx({c: v["damage"] for c, v in life["components"].items()})
+    remaining = scraped["millwatch_remaining_life_years"]
+    if life["status"] == "ok":
+        assert {s.labels["component"] for s in remaining} <= set(life["components"])
+    else:  # two minutes of data: insufficient history, no remaining life exported
+        assert remaining == []
+    status = live_api.runtime.status[MILL]
+    (starts,) = scraped["millwatch_starts_this_month"]
+    assert starts.value == status["starts_this_month"] >= 1  # the fed LRS start
+    lags = {s.labels["channel"] for s in scraped["millwatch_channel_lag_seconds"]}
+    assert lags == set(status["health"]["channels"])
+    window = status["latest_steady"] or {}
+    osc = {s.labels["channel"]: s.value for s in scraped["millwatch_oscillation_range_percent"]}
+    assert osc == pytest.approx({c: v for c, v in window.get("range_pct", {}).items()})
+    bending = {s.labels["channel"]: s.value
+               for s in scraped["millwatch_bending_amplitude_megapascals"]}  # fmt: skip
+    per_rev = window.get("range_per_rev", {})
+    assert bending == pytest.approx({c: r / 2 for c, r in per_rev.items() if c.startswith("bend")})
+    assert osc and bending  # the 120 s feed reaches steady running
+
+
+def test_metrics_scrape_is_cheap_with_the_life_cached(client):
+    client.get("/metrics")  # fills the life cache
+    t0 = time.perf_counter()
+    for _ in range(10):
+        assert client.get("/metrics").status_code == 200
+    assert (time.perf_counter() - t0) / 10 < 0.2
+
+
+def test_grafana_dashboard_queries_name_only_exported_metrics(client):
+    """deploy/grafana/millwatch.json: every metric a panel or variable query names is in a real
+    scrape of the running app (fed by the simulator)."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[3] / "deploy" / "grafana" / "millwatch.json"
+    dashboard = json.loads(path.read_text(encoding="utf-8"))
+    exprs = [t["expr"] for p in dashboard["panels"] for t in p["targets"]]
+    exprs += [v["definition"] for v in dashboard["templating"]["list"]]
+    named = {m for e in exprs for m in re.findall(r"\bmillwatch_[a-z0-9_]+", e)}
+    assert len(exprs) >= 10 and len(named) >= 10
+    scraped = _scrape(client)
+    assert sorted(named - set(scraped)) == []
+    for needed in (
+        "millwatch_damage_ratio",
+        "millwatch_oscillation_range_percent",
+        "millwatch_starts_this_month",
+        "millwatch_channel_lag_seconds",
+        "millwatch_bending_amplitude_megapascals",
+        "millwatch_remaining_life_years",
+    ):
+        assert needed in named

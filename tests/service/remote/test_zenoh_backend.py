@@ -211,6 +211,10 @@ def test_metrics_and_readiness_over_zenoh(pair):
     text = pair.remote.get("/metrics").text
     assert 'millwatch_blocks_handled_total{worker="w1"}' in text
     assert f'millwatch_mill_reachable{{mill="{MILL}"}} 1.0' in text
+    life = pair.remote.get(f"/mills/{MILL}/life").json()
+    for component in life["components"]:  # domain gauges gathered from the worker
+        assert f'millwatch_damage_ratio{{component="{component}",mill="{MILL}"}}' in text
+    assert f'millwatch_mill_state{{mill="{MILL}",state="unreachable"}} 0.0' in text
     ready = pair.remote.get("/ready").json()
     assert ready["checks"]["reachable"] == {MILL: True}
     assert ready["checks"]["workers"]["w1"]["store"] is True
