@@ -1,0 +1,272 @@
+"""The OPC UA server: asyncua in its own thread, mirroring a backend's answers.
+
+:class:`OpcUaServer` runs an asyncio loop in a thread (``millwatch-opcua``) that serves
+``[opcua] endpoint`` and keeps the address space (:mod:`service.opcua.address_space`) equal to
+what the :class:`~service.api.backend.Backend` answers — the REST API's backend, so it is the
+runtime in this process under ``millwatch serve`` and the workers over zenoh under
+``millwatch api``:
+
+* every ``update_s`` (≤ 1 s) it asks, per mill, ``mill_detail``, ``life`` and ``starts`` (a
+  backend call may block on SQLite or zenoh, so calls run on one helper thread, never on the
+  loop) and writes only the values that changed;
+* every :data:`ALARM_EVERY_S` it looks at the alarm board's version and sends the condition
+  events of the alarms that changed (:mod:`service.opcua.conditions`);
+* Acknowledge calls the backend's ``ack`` as the OPC UA user (:mod:`service.opcua.access`).
+
+A backend error on one mill (its worker gone, a timeout) leaves that mill's values as they were
+and is logged once per kind; the server never stops for it. :meth:`OpcUaServer.start` returns
+once the endpoint listens (or raises :class:`OpcUaError` saying why it cannot);
+:meth:`OpcUaServer.stop` closes it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+from urllib.parse import urlparse
+
+from asyncua import Server, ua
+from asyncua.crypto.permission_rules import User
+
+from service.api.backend import Backend
+from service.errors import ApiError
+from service.opcua.access import CALLER, OPERATOR, AccessRules, Login, Logins, certificate_names
+from service.opcua.address_space import NAMESPACE_URI, MillNodes, root_folder
+from service.opcua.certificate import APPLICATION_URI, ensure_certificate
+from service.opcua.conditions import Conditions
+from service.opcua.ua_types import nid, status
+from service.opcua.values import Point, mill_points
+from service.settings import OpcUaSettings
+
+__all__ = ["ALARM_EVERY_S", "OpcUaError", "OpcUaServer", "OpcUaStats"]
+
+log = logging.getLogger(__name__)
+
+ALARM_EVERY_S = 0.2
+START_TIMEOUT_S = 60.0
+_POLICIES = {
+    "None": ua.SecurityPolicyType.NoSecurity,
+    "Basic256Sha256_Sign": ua.SecurityPolicyType.Basic256Sha256_Sign,
+    "Basic256Sha256_SignAndEncrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
+}
+T = TypeVar("T")
+
+
+class OpcUaError(RuntimeError):
+    """The OPC UA server cannot start (the message says why: the endpoint, the port)."""
+
+
+@dataclass
+class OpcUaStats:
+    """Counters of the running server (for tests and the benchmark)."""
+
+    polls: int = 0
+    writes: int = 0
+    last_poll_s: float = 0.0
+    last_poll_end_ns: int = 0
+
+
+class OpcUaServer:
+    """Serves ``backend`` over OPC UA as ``settings`` say (module docstring)."""
+
+    def __init__(self, backend: Backend, settings: OpcUaSettings, state_dir: Path) -> None:
+        self.backend = backend
+        self.settings = settings
+        self.certificate_dir = settings.certificate_dir or state_dir / "opcua"
+        self.stats = OpcUaStats()
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._started = threading.Event()
+        self._error: BaseException | None = None
+        self._calls = ThreadPoolExecutor(1, thread_name_prefix="millwatch-opcua-backend")
+        self._logged: set[tuple[str, str]] = set()
+        self._logins: Logins | None = None
+        self._mills: dict[str, MillNodes] = {}
+        self._conditions: Conditions | None = None
+
+    @property
+    def endpoint(self) -> str:
+        return self.settings.endpoint
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        """Start the thread; returns once the endpoint listens, :class:`OpcUaError` if not."""
+        self._thread = threading.Thread(target=self._run, name="millwatch-opcua", daemon=True)
+        self._thread.start()
+        if not self._started.wait(START_TIMEOUT_S):
+            raise OpcUaError(f"OPC UA server on {self.endpoint} did not start within "
+                             f"{START_TIMEOUT_S:g} s")  # fmt: skip
+        if self._error is not None:
+            self._thread.join(timeout=10)
+            raise OpcUaError(f"OPC UA server on {self.endpoint} cannot start: "
+                             f"{self._error}") from self._error  # fmt: skip
+        log.info("OPC UA server on %s", self.endpoint)
+
+    def stop(self) -> None:
+        """Close the endpoint and end the thread (idempotent)."""
+        loop, stop = self._loop, self._stop
+        if loop is not None and stop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(stop.set)
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+        self._calls.shutdown(wait=True, cancel_futures=True)
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as exc:  # reported to start(); after a start, logged
+            if not self._started.is_set():
+                self._error = exc
+                self._started.set()
+            else:
+                log.exception("OPC UA server stopped on an error")
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        server = await self._build()
+        async with server:
+            await self._build_mills(server)
+            self._started.set()
+            tasks = [asyncio.create_task(self._poll_values()),
+                     asyncio.create_task(self._poll_alarms())]  # fmt: skip
+            try:
+                await self._stop.wait()
+            finally:
+                for t in tasks:
+                    t.cancel()
+                await asyncio.gather(*tasks, return_exceptions=True)
+
+    # ------------------------------------------------------------------ building
+    async def _build(self) -> Server:
+        s = self.settings
+        logins = [Login(u.name, u.password(), u.role) for u in s.users]
+        certs = await certificate_names(s.user_certificates)
+        self._logins = Logins(logins, certs, anonymous=s.anonymous)
+        server = Server(user_manager=self._logins)
+        server.iserver.bind_condition_methods = True  # ConditionRefresh
+        await server.init()
+        server.set_endpoint(s.endpoint)
+        server.set_server_name("millwatch")
+        await server.set_application_uri(APPLICATION_URI)
+        tokens: list[type] = [ua.UserNameIdentityToken, ua.X509IdentityToken]
+        if s.anonymous:
+            tokens.append(ua.AnonymousIdentityToken)
+        server.set_identity_tokens(tokens)
+        server.set_security_policy([_POLICIES[p] for p in s.security], AccessRules())
+        cert, key = await ensure_certificate(self.certificate_dir)
+        await server.load_certificate(str(cert))
+        await server.load_private_key(str(key))
+        return server
+
+    async def _build_mills(self, server: Server) -> None:
+        ns = await server.register_namespace(NAMESPACE_URI)
+        root = await root_folder(server, ns)
+        sites: dict[str, Any] = {}
+        for config in self.backend.mills.values():
+            if config.site not in sites:
+                sites[config.site] = await root.add_folder(nid(config.site, ns), config.site)
+            mill = await MillNodes.create(server, ns, sites[config.site], config)
+            await mill.node.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
+            self._mills[config.id] = mill
+        self._conditions = await Conditions.create(server, self._mills)
+        ack_method = server.get_node(nid(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge))
+        server.link_method(ack_method, self._acknowledge)
+
+    # ------------------------------------------------------------------ polling
+    async def _call(self, fn: Callable[..., T], *args: Any) -> T:
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._calls, fn, *args)
+
+    async def _poll_values(self) -> None:
+        period = self.settings.update_s
+        while True:
+            t0 = time.monotonic()
+            try:
+                await self._update_values()
+            except Exception:  # a bug must not freeze every value: logged, tried again
+                log.exception("OPC UA value update failed")
+            self.stats.last_poll_s = time.monotonic() - t0
+            self.stats.last_poll_end_ns = time.time_ns()
+            await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
+
+    async def _update_values(self) -> None:
+        points = await self._call(self._gather_points)
+        writes = 0
+        for mill_id, mill_points_ in points.items():
+            writes += await self._mills[mill_id].apply(mill_points_)
+        self.stats.polls += 1
+        self.stats.writes += writes
+
+    def _gather_points(self) -> dict[str, dict[str, Point]]:
+        """Every mill's points (on the helper thread); mills whose detail failed are left out."""
+        out = {}
+        for mill_id, config in self.backend.mills.items():
+            detail = self._ask(mill_id, "detail", self.backend.mill_detail, mill_id)
+            if detail is None:
+                continue
+            life = self._ask(mill_id, "life", self.backend.life, mill_id)
+            starts = self._ask(mill_id, "starts", self.backend.starts, mill_id, None)
+            out[mill_id] = mill_points(config, detail, life, starts)
+        return out
+
+    def _ask(self, mill_id: str, what: str, fn: Callable[..., T], *args: Any) -> T | None:
+        try:
+            return fn(*args)
+        except ApiError as exc:
+            if (mill_id, what) not in self._logged:
+                self._logged.add((mill_id, what))
+                log.warning("OPC UA: no %s of mill %s yet: %s", what, mill_id, exc)
+            return None
+
+    async def _poll_alarms(self) -> None:
+        assert self._conditions is not None
+        version = -1
+        while True:
+            board = await self._call(self._board)
+            if board is not None and board.version != version:
+                version = board.version
+                try:
+                    await self._conditions.sync(reversed(board.rows()))
+                except Exception:
+                    log.exception("OPC UA alarm events failed")
+            await asyncio.sleep(ALARM_EVERY_S)
+
+    def _board(self) -> Any:
+        try:
+            return self.backend.alarm_board()
+        except ApiError:
+            return None
+
+    # ------------------------------------------------------------------ Acknowledge
+    async def _acknowledge(self, parent: ua.NodeId, *args: ua.Variant) -> ua.StatusCode:
+        """``Acknowledge(EventId, Comment)`` on a condition, by the calling user."""
+        assert self._conditions is not None and self._logins is not None
+        user: User | None = CALLER.get()
+        if self._logins.role_of(user) != OPERATOR or user is None or user.name is None:
+            return status(ua.StatusCodes.BadUserAccessDenied)
+        if len(args) != 2:
+            return status(ua.StatusCodes.BadArgumentsMissing)
+        event_id = args[0].Value if isinstance(args[0], ua.Variant) else args[0]
+        comment = args[1].Value if isinstance(args[1], ua.Variant) else args[1]
+        text = comment.Text if isinstance(comment, ua.LocalizedText) else str(comment or "")
+
+        async def ack(alarm_id: str, by: str) -> dict[str, Any]:
+            return await self._call(self.backend.ack, alarm_id, by)
+
+        result = await self._conditions.acknowledge(parent, event_id, text or "", user.name, ack)
+        log.info("OPC UA Acknowledge of %s by %s: %s", parent.to_string(), user.name, result.name)
+        return result
+
+
+def endpoint_port(endpoint: str) -> int:
+    """The TCP port of an ``opc.tcp://host:port/path`` endpoint."""
+    return urlparse(endpoint).port or 4840
