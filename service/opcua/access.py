@@ -75,13 +75,15 @@ class Logins(UserManager):
     ) -> User | None:
         if username:
             return self._by_password(username, password or "")
-        if certificate is not None:
-            name = self._certificates.get(bytes(certificate))
-            if name is None:
-                log.warning("OPC UA login refused: unknown user certificate")
-                return None
+        # asyncua passes the X.509 user token's certificate, or for an anonymous token the
+        # secure channel's client certificate (possession of its key proven by the channel)
+        name = self._certificates.get(bytes(certificate)) if certificate else None
+        if name is not None:
             return User(role=UserRole.User, name=name)
-        return User(role=UserRole.Anonymous, name=None) if self.anonymous else None
+        if not self.anonymous:
+            log.warning("OPC UA login refused: no credentials (or an unknown user certificate)")
+            return None
+        return User(role=UserRole.Anonymous, name=None)
 
     def _by_password(self, username: str, password: str) -> User | None:
         login = self._logins.get(username)

@@ -66,7 +66,9 @@ def _eu(unit: str) -> ua.EUInformation | None:
 
 async def root_folder(server: Server, ns: int) -> Node:
     """``Objects/Millwatch``."""
-    return await server.nodes.objects.add_folder(nid("Millwatch", ns), "Millwatch")
+    return await server.nodes.objects.add_folder(
+        nid("Millwatch", ns), ua.QualifiedName("Millwatch", ns)
+    )
 
 
 def datavalue(point: Point) -> ua.DataValue:
@@ -94,10 +96,12 @@ class MillNodes:
     @classmethod
     async def create(cls, server: Server, ns: int, site: Node, config: MillConfig) -> MillNodes:
         """The mill's object under its site folder, its properties and its Alarms folder."""
-        node = await site.add_object(nid(f"{config.site}/{config.id}", ns), config.id)
+        node = await site.add_object(
+            nid(f"{config.site}/{config.id}", ns), ua.QualifiedName(config.id, ns)
+        )
         mill = cls(server, ns, config, node)
         for name, value in (("Drive", config.drive.layout), ("Starter", config.drive.starter)):
-            await node.add_property(mill.node_id(name), name, str(value))
+            await node.add_property(mill.node_id(name), ua.QualifiedName(name, ns), str(value))
         mill.alarms_folder = await mill._folder("Alarms")
         return mill
 
@@ -128,7 +132,7 @@ class MillNodes:
         if folder is None:
             parent_path, _, name = path.rpartition("/")
             parent = await self._folder(parent_path)
-            folder = await parent.add_folder(self.node_id(path), name)
+            folder = await parent.add_folder(self.node_id(path), ua.QualifiedName(name, self.ns))
             self._folders[path] = folder
         return folder
 
@@ -138,7 +142,10 @@ class MillNodes:
         initial = (ua.Variant([], ua.VariantType.String) if point.kind is Kind.STRINGS
                    else ua.Variant(None, ua.VariantType.Null))  # fmt: skip
         var = await parent.add_variable(
-            self.node_id(path), name, initial, datatype=nid(_DATATYPE[point.kind])
+            self.node_id(path),
+            ua.QualifiedName(name, self.ns),
+            initial,
+            datatype=nid(_DATATYPE[point.kind]),
         )
         if point.kind is Kind.STRINGS:
             await var.write_value_rank(ua.ValueRank.OneDimension)

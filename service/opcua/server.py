@@ -173,7 +173,9 @@ class OpcUaServer:
         sites: dict[str, Any] = {}
         for config in self.backend.mills.values():
             if config.site not in sites:
-                sites[config.site] = await root.add_folder(nid(config.site, ns), config.site)
+                sites[config.site] = await root.add_folder(
+                    nid(config.site, ns), ua.QualifiedName(config.site, ns)
+                )
             mill = await MillNodes.create(server, ns, sites[config.site], config)
             await mill.node.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
             self._mills[config.id] = mill
