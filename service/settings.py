@@ -181,6 +181,29 @@ class MillSettings(_Strict):
     directory: Path | None = None
 
 
+def read_secret(path: Path | None, env: str | None, field: str) -> str | None:
+    """A secret from a file (trailing newline dropped) or else an environment variable; None
+    when neither holds one; :class:`SettingsError` naming ``field`` for an unreadable file.
+    The secret itself is never put in a message."""
+    if path is not None:
+        try:
+            return path.read_text(encoding="utf-8").rstrip("\r\n")
+        except OSError as exc:
+            raise SettingsError(f"{field}: cannot read {path} ({exc.strerror or exc})") from exc
+    return (os.environ.get(env) or None) if env else None
+
+
+def no_password_field(data: Any, hint: str = "") -> Any:
+    """``data`` unchanged; :class:`ValueError` when it holds a ``password`` (secrets live in a
+    file or the environment, never in the settings file)."""
+    if isinstance(data, dict) and "password" in data:
+        raise ValueError(
+            "password: not in the settings file; put it in a secret file named by "
+            "password_file, or in the environment variable named by password_env " + hint
+        )
+    return data
+
+
 class MailSettings(_Strict):
     """Mail of each monthly report (SMTP; :mod:`service.reports.mail`): one mail per mill and
     month to every recipient, the PDF and HTML attached (``attach``).
@@ -209,13 +232,7 @@ class MailSettings(_Strict):
     @model_validator(mode="before")
     @classmethod
     def _no_password_here(cls, data: Any) -> Any:
-        if isinstance(data, dict) and "password" in data:
-            raise ValueError(
-                "password: not in the settings file; put it in a secret file named by "
-                "password_file, or in the environment variable named by password_env "
-                "(default MILLWATCH_SMTP_PASSWORD)"
-            )
-        return data
+        return no_password_field(data, "(default MILLWATCH_SMTP_PASSWORD)")
 
     @model_validator(mode="after")
     def _no_clear_text_login(self) -> MailSettings:
@@ -276,18 +293,6 @@ SecurityPolicy = Literal["None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndE
 """Security policies the OPC UA server can offer (``[opcua] security``)."""
 
 
-def read_secret(path: Path | None, env: str | None, field: str) -> str | None:
-    """A secret from a file (trailing newline dropped) or else an environment variable; None
-    when neither holds one; :class:`SettingsError` naming ``field`` for an unreadable file.
-    The secret itself is never put in a message."""
-    if path is not None:
-        try:
-            return path.read_text(encoding="utf-8").rstrip("\r\n")
-        except OSError as exc:
-            raise SettingsError(f"{field}: cannot read {path} ({exc.strerror or exc})") from exc
-    return (os.environ.get(env) or None) if env else None
-
-
 class OpcUaUser(_Strict):
     """One OPC UA user: ``name`` and a password from ``password_file`` or the environment
     variable ``password_env`` (never in this file, never logged). ``role``: ``operator`` may
@@ -301,12 +306,7 @@ class OpcUaUser(_Strict):
     @model_validator(mode="before")
     @classmethod
     def _no_password_here(cls, data: Any) -> Any:
-        if isinstance(data, dict) and "password" in data:
-            raise ValueError(
-                "password: not in the settings file; put it in a secret file named by "
-                "password_file, or in the environment variable named by password_env"
-            )
-        return data
+        return no_password_field(data)
 
     @model_validator(mode="after")
     def _one_source(self) -> OpcUaUser:

@@ -27,6 +27,7 @@ from service.opcua.server import OpcUaServer
 from service.settings import OpcUaSettings
 from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
+from tests.integration.live import wait as wait_until
 from tests.service.conftest import MILL, _settings, serve
 
 MILL_B = "sag-5200-lrs-b"
@@ -117,17 +118,6 @@ class RestPoller:
     def stop(self) -> None:
         self._stop.set()
         self._thread.join(timeout=15)
-
-
-def wait_until(predicate: Any, timeout_s: float, every_s: float = 0.05) -> Any:
-    """Poll ``predicate`` until true or ``timeout_s`` (bounded count and time)."""
-    deadline = time.monotonic() + timeout_s
-    for _ in range(int(timeout_s / every_s) + 1):
-        value = predicate()
-        if value or time.monotonic() >= deadline:
-            return value
-        time.sleep(every_s)
-    return predicate()
 
 
 def _feed(runtime: ServiceRuntime, port: int, configs: list[MillConfig]) -> None:
