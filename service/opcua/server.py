@@ -6,9 +6,9 @@ what the :class:`~service.api.backend.Backend` answers — the REST API's backen
 runtime in this process under ``millwatch serve`` and the workers over zenoh under
 ``millwatch api``:
 
-* every ``update_s`` (≤ 1 s) it asks, per mill, ``mill_detail``, ``life`` and ``starts`` (a
-  backend call may block on SQLite or zenoh, so calls run on one helper thread, never on the
-  loop) and writes only the values that changed;
+* every ``update_s`` (≤ 1 s) it asks every mill's status at once (``mill_statuses``), then per
+  mill ``life`` and ``starts`` (a backend call may block on SQLite or zenoh, so calls run on
+  one helper thread, never on the loop) and writes only the values that changed;
 * every :data:`ALARM_EVERY_S` it looks at the alarm board's version and sends the condition
   events of the alarms that changed (:mod:`service.opcua.conditions`);
 * Acknowledge calls the backend's ``ack`` as the OPC UA user (:mod:`service.opcua.access`).
@@ -25,9 +25,10 @@ import asyncio
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 from urllib.parse import urlparse
@@ -36,6 +37,7 @@ from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User
 
 from service.api.backend import Backend
+from service.api.mill_views import mill_summary
 from service.errors import ApiError
 from service.opcua.access import CALLER, OPERATOR, AccessRules, Login, Logins, certificate_names
 from service.opcua.address_space import NAMESPACE_URI, MillNodes, root_folder
@@ -65,12 +67,12 @@ class OpcUaError(RuntimeError):
 
 @dataclass
 class OpcUaStats:
-    """Counters of the running server (for tests and the benchmark)."""
+    """Counters of the running server (for tests and the benchmark); ``poll_s``: how long the
+    latest value updates took (s, wall clock)."""
 
     polls: int = 0
     writes: int = 0
-    last_poll_s: float = 0.0
-    last_poll_end_ns: int = 0
+    poll_s: deque[float] = field(default_factory=lambda: deque(maxlen=1000))
 
 
 class OpcUaServer:
@@ -196,8 +198,7 @@ class OpcUaServer:
                 await self._update_values()
             except Exception:  # a bug must not freeze every value: logged, tried again
                 log.exception("OPC UA value update failed")
-            self.stats.last_poll_s = time.monotonic() - t0
-            self.stats.last_poll_end_ns = time.time_ns()
+            self.stats.poll_s.append(time.monotonic() - t0)
             await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
 
     async def _update_values(self) -> None:
@@ -209,12 +210,16 @@ class OpcUaServer:
         self.stats.writes += writes
 
     def _gather_points(self) -> dict[str, dict[str, Point]]:
-        """Every mill's points (on the helper thread); mills whose detail failed are left out."""
+        """Every mill's points (on the helper thread): the state, stale channels and hold of
+        each mill as ``GET /mills/{id}`` says them (:func:`~service.api.mill_views.mill_summary`
+        of its status; a mill whose worker is gone is ``unreachable``)."""
+        statuses = self._ask("*", "status", self.backend.mill_statuses)
+        if statuses is None:
+            return {}
         out = {}
         for mill_id, config in self.backend.mills.items():
-            detail = self._ask(mill_id, "detail", self.backend.mill_detail, mill_id)
-            if detail is None:
-                continue
+            status = statuses.get(mill_id)
+            detail = {**mill_summary(config, status, None), "status": status or {}}
             life = self._ask(mill_id, "life", self.backend.life, mill_id)
             starts = self._ask(mill_id, "starts", self.backend.starts, mill_id, None)
             out[mill_id] = mill_points(config, detail, life, starts)
