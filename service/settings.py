@@ -330,7 +330,7 @@ class OpcUaSettings(_Strict):
     * ``security``: the policies offered (``None``, ``Basic256Sha256_Sign``,
       ``Basic256Sha256_SignAndEncrypt``); the server's self-signed certificate is made at first
       start in ``certificate_dir`` (default: ``opcua/`` beside the store).
-    * ``update_s``: how often values are read from the backend (≤ 1 s).
+    * ``update_s``: how often values are read from the backend (≤ 1 s; default 0.25 s).
     """
 
     enabled: bool = False
@@ -346,7 +346,7 @@ class OpcUaSettings(_Strict):
         "Basic256Sha256_SignAndEncrypt",
     )
     certificate_dir: Path | None = None
-    update_s: Annotated[float, Field(gt=0, le=1.0)] = 0.5
+    update_s: Annotated[float, Field(gt=0, le=1.0)] = 0.25
 
     @field_validator("users")
     @classmethod

@@ -31,7 +31,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
-from urllib.parse import urlparse
 
 from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User
@@ -45,7 +44,7 @@ from service.opcua.certificate import APPLICATION_URI, ensure_certificate
 from service.opcua.conditions import Conditions
 from service.opcua.ua_types import nid, status
 from service.opcua.values import Point, mill_points
-from service.settings import OpcUaSettings
+from service.settings import OpcUaSettings, OpcUaUser, SettingsError
 
 __all__ = ["ALARM_EVERY_S", "OpcUaError", "OpcUaServer", "OpcUaStats"]
 
@@ -61,8 +60,9 @@ _POLICIES = {
 T = TypeVar("T")
 
 
-class OpcUaError(RuntimeError):
-    """The OPC UA server cannot start (the message says why: the endpoint, the port)."""
+class OpcUaError(OSError):
+    """The OPC UA server cannot start (the message says why: the endpoint, the port); an
+    ``OSError``, so the command prints it without a traceback."""
 
 
 @dataclass
@@ -150,7 +150,7 @@ class OpcUaServer:
     # ------------------------------------------------------------------ building
     async def _build(self) -> Server:
         s = self.settings
-        logins = [Login(u.name, u.password(), u.role) for u in s.users]
+        logins = [Login(u.name, _password(u), u.role) for u in s.users]
         certs = await certificate_names(s.user_certificates)
         self._logins = Logins(logins, certs, anonymous=s.anonymous)
         server = Server(user_manager=self._logins)
@@ -180,6 +180,7 @@ class OpcUaServer:
                 )
             mill = await MillNodes.create(server, ns, sites[config.site], config)
             await mill.node.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
+            await mill.apply(mill_points(config, {}, None, None))  # every node, values unknown
             self._mills[config.id] = mill
         self._conditions = await Conditions.create(server, self._mills)
         ack_method = server.get_node(nid(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge))
@@ -274,6 +275,10 @@ class OpcUaServer:
         return result
 
 
-def endpoint_port(endpoint: str) -> int:
-    """The TCP port of an ``opc.tcp://host:port/path`` endpoint."""
-    return urlparse(endpoint).port or 4840
+def _password(user: OpcUaUser) -> str:
+    """The user's password; :class:`SettingsError` naming the user when there is none."""
+    password = user.password()
+    if not password:
+        raise SettingsError(f"opcua.users.{user.name}: no password (environment variable "
+                            f"{user.password_env} is not set, or the file is empty)")  # fmt: skip
+    return password

@@ -210,7 +210,7 @@ def main() -> None:
     p.add_argument("--mills", type=int, default=50)
     p.add_argument("--seconds", type=float, default=30.0, help="measured seconds")
     p.add_argument("--feed-seconds", type=float, default=20.0, help="data fed per mill first")
-    p.add_argument("--update-s", type=float, default=0.5, help="[opcua] update_s")
+    p.add_argument("--update-s", type=float, default=0.25, help="[opcua] update_s")
     p.add_argument("--client", help=argparse.SUPPRESS)
     p.add_argument("--t0", type=float, help=argparse.SUPPRESS)
     p.add_argument("--mill-ids", help=argparse.SUPPRESS)

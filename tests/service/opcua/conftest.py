@@ -138,6 +138,11 @@ def _feed(runtime: ServiceRuntime, port: int, configs: list[MillConfig]) -> None
     assert len(reports) == len(configs), "a simulated gateway did not finish"
     assert runtime.worker is not None
     assert wait_until(lambda: runtime.worker.blocks_handled >= sum(reports), 90.0)
+    # blocks are counted when taken; the analysis of a batch follows: wait for a status
+    # snapshot that has analysed (nearly) every sample of every mill
+    analysed = (SCENE_S - 1.0) * 1000
+    assert wait_until(lambda: all(runtime.status.get(c.id, {}).get("samples", 0) >= analysed
+                                  for c in configs), 90.0)  # fmt: skip
 
 
 def opcua_settings(tmp: Path, port: int) -> OpcUaSettings:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -16,9 +17,12 @@ from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
+from service.api.local_backend import LocalBackend
 from service.opcua.address_space import NAMESPACE_URI
 from service.opcua.conditions import SEVERITY
+from service.opcua.server import OpcUaError, OpcUaServer
 from service.opcua.units import UNITS, unit_id
+from service.settings import OpcUaSettings
 from tests.service.conftest import API_KEY, MILL
 from tests.service.opcua.conftest import (
     MILL_B,
@@ -302,3 +306,27 @@ def test_endpoints_offer_none_and_basic256sha256(plant: Plant) -> None:
     assert all(e for e in found)
     assert plant.opcua.stats.polls > 0 and all(map(math.isfinite, plant.opcua.stats.poll_s))
     assert (plant.directory / "opcua" / "server-key.pem").stat().st_mode & 0o077 == 0
+
+
+# ---------------------------------------------------------------------- start-up errors
+def test_an_endpoint_in_use_is_an_error_naming_it(plant: Plant, tmp_path: Path) -> None:
+    settings = OpcUaSettings(enabled=True, endpoint=plant.endpoint)
+    second = OpcUaServer(LocalBackend(plant.runtime), settings, tmp_path)
+    with pytest.raises(OpcUaError, match=re.escape(plant.endpoint)) as err:
+        second.start()
+    second.stop()
+    assert isinstance(err.value, OSError)  # the command prints it without a traceback
+
+
+def test_a_user_without_a_password_stops_the_start_naming_the_user(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.delenv("MW_TEST_NO_SUCH_PW", raising=False)
+    settings = OpcUaSettings.model_validate({
+        "enabled": True, "endpoint": "opc.tcp://127.0.0.1:1/millwatch",
+        "users": [{"name": "hmi", "password_env": "MW_TEST_NO_SUCH_PW"}],
+    })  # fmt: skip
+    server = OpcUaServer(object(), settings, tmp_path)  # type: ignore[arg-type]
+    with pytest.raises(OpcUaError, match=r"opcua\.users\.hmi: no password"):
+        server.start()
+    server.stop()
