@@ -92,6 +92,7 @@ class OpcUaServer:
         self._logged: set[tuple[str, str]] = set()
         self._logins: Logins | None = None
         self._mills: dict[str, MillNodes] = {}
+        self._answers: dict[str, tuple[Any, Any, Any]] = {}  # last answers per mill (helper)
         self._conditions: Conditions | None = None
 
     @property
@@ -213,16 +214,21 @@ class OpcUaServer:
     def _gather_points(self) -> dict[str, dict[str, Point]]:
         """Every mill's points (on the helper thread): the state, stale channels and hold of
         each mill as ``GET /mills/{id}`` says them (:func:`~service.api.mill_views.mill_summary`
-        of its status; a mill whose worker is gone is ``unreachable``)."""
+        of its status; a mill whose worker is gone is ``unreachable``). A mill whose answers
+        equal the last ones is left out."""
         statuses = self._ask("*", "status", self.backend.mill_statuses)
         if statuses is None:
             return {}
         out = {}
         for mill_id, config in self.backend.mills.items():
             status = statuses.get(mill_id)
-            detail = {**mill_summary(config, status, None), "status": status or {}}
             life = self._ask(mill_id, "life", self.backend.life, mill_id)
             starts = self._ask(mill_id, "starts", self.backend.starts, mill_id, None)
+            answers = (status, life, starts)
+            if self._answers.get(mill_id) == answers:
+                continue  # nothing changed: no points to make, no values to compare
+            self._answers[mill_id] = answers
+            detail = {**mill_summary(config, status, None), "status": status or {}}
             out[mill_id] = mill_points(config, detail, life, starts)
         return out
 
