@@ -17,6 +17,8 @@ What is here, and how data flows (backend → values → address space; board �
 * :mod:`service.opcua.certificate` — the self-signed server certificate made at first start.
 * :mod:`service.opcua.units` — UNECE engineering units (``EUInformation``).
 * :mod:`service.opcua.ua_types` — typed constructors of asyncua's NodeId and StatusCode.
+* :mod:`service.opcua.launch` — :func:`~service.opcua.launch.start_opcua`, what ``serve``,
+  ``api`` and the demo call (asyncua is imported only when ``[opcua] enabled``).
 
 Where things go: a new value is a point in :mod:`~service.opcua.values` (its node appears by
 itself); a new alarm field a line of ``_fill`` in :mod:`~service.opcua.conditions`. The commands
