@@ -29,6 +29,13 @@ Example (``deploy/plant.toml``)::
     sender = "millwatch@example.com"
     recipients = ["site.manager@example.com"]
 
+    [opcua]                              # optional OPC UA server (off by default)
+    enabled = true
+    endpoint = "opc.tcp://127.0.0.1:4840/millwatch"
+    [[opcua.users]]
+    name = "operator"                    # may acknowledge alarms
+    password_file = "/run/secrets/opcua-operator"   # or password_env = "MILLWATCH_OPCUA_PASSWORD"
+
 Scale-out (``deploy/worker-*.toml``, ``deploy/api.toml``): ``[zenoh] mode = "client"`` with
 ``connect`` = the router, ``[worker] partition`` = the key expressions of this worker's mills,
 ``[api] query_timeout_s`` for ``millwatch api``.
@@ -59,6 +66,8 @@ from ingest.mill_files import load_mill_config, load_mill_configs
 __all__ = [
     "REPORT_FORMATS",
     "MailSettings",
+    "OpcUaSettings",
+    "OpcUaUser",
     "ReportSettings",
     "ServiceSettings",
     "SettingsError",
@@ -178,6 +187,29 @@ class MillSettings(_Strict):
     directory: Path | None = None
 
 
+def read_secret(path: Path | None, env: str | None, field: str) -> str | None:
+    """A secret from a file (trailing newline dropped) or else an environment variable; None
+    when neither holds one; :class:`SettingsError` naming ``field`` for an unreadable file.
+    The secret itself is never put in a message."""
+    if path is not None:
+        try:
+            return path.read_text(encoding="utf-8").rstrip("\r\n")
+        except OSError as exc:
+            raise SettingsError(f"{field}: cannot read {path} ({exc.strerror or exc})") from exc
+    return (os.environ.get(env) or None) if env else None
+
+
+def no_password_field(data: Any, hint: str = "") -> Any:
+    """``data`` unchanged; :class:`ValueError` when it holds a ``password`` (secrets live in a
+    file or the environment, never in the settings file)."""
+    if isinstance(data, dict) and "password" in data:
+        raise ValueError(
+            "password: not in the settings file; put it in a secret file named by "
+            "password_file, or in the environment variable named by password_env " + hint
+        )
+    return data
+
+
 class MailSettings(_Strict):
     """Mail of each monthly report (SMTP; :mod:`service.reports.mail`): one mail per mill and
     month to every recipient, the PDF and HTML attached (``attach``).
@@ -206,13 +238,7 @@ class MailSettings(_Strict):
     @model_validator(mode="before")
     @classmethod
     def _no_password_here(cls, data: Any) -> Any:
-        if isinstance(data, dict) and "password" in data:
-            raise ValueError(
-                "password: not in the settings file; put it in a secret file named by "
-                "password_file, or in the environment variable named by password_env "
-                "(default MILLWATCH_SMTP_PASSWORD)"
-            )
-        return data
+        return no_password_field(data, "(default MILLWATCH_SMTP_PASSWORD)")
 
     @model_validator(mode="after")
     def _no_clear_text_login(self) -> MailSettings:
@@ -231,15 +257,7 @@ class MailSettings(_Strict):
     def password(self) -> str | None:
         """The SMTP password from ``password_file`` or ``password_env`` (None when neither
         holds one); :class:`SettingsError` for a secret file that cannot be read."""
-        if self.password_file is not None:
-            try:
-                return self.password_file.read_text(encoding="utf-8").rstrip("\r\n")
-            except OSError as exc:
-                raise SettingsError(
-                    f"reports.mail.password_file: cannot read {self.password_file} "
-                    f"({exc.strerror or exc})"
-                ) from exc
-        return os.environ.get(self.password_env) or None
+        return read_secret(self.password_file, self.password_env, "reports.mail.password_file")
 
 
 class ReportSettings(_Strict):
@@ -277,6 +295,83 @@ class ReportSettings(_Strict):
         return parse_formats(value)
 
 
+SecurityPolicy = Literal["None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndEncrypt"]
+"""Security policies the OPC UA server can offer (``[opcua] security``)."""
+
+
+class OpcUaUser(_Strict):
+    """One OPC UA user: ``name`` and a password from ``password_file`` or the environment
+    variable ``password_env`` (never in this file, never logged). ``role``: ``operator`` may
+    acknowledge alarms, ``viewer`` only reads."""
+
+    name: Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.@-]{0,63}$")]
+    password_file: Path | None = None
+    password_env: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")] | None = None
+    role: Literal["operator", "viewer"] = "operator"
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_password_here(cls, data: Any) -> Any:
+        return no_password_field(data)
+
+    @model_validator(mode="after")
+    def _one_source(self) -> OpcUaUser:
+        if self.password_file is None and self.password_env is None:
+            raise ValueError(f"user {self.name!r}: set password_file or password_env")
+        return self
+
+    def password(self) -> str | None:
+        """The password (None when its environment variable is unset)."""
+        return read_secret(self.password_file, self.password_env, f"opcua.users.{self.name}")
+
+
+class OpcUaSettings(_Strict):
+    """The OPC UA server (:mod:`service.opcua`), off by default.
+
+    * ``endpoint``: ``opc.tcp://host:port/path``; loopback by default.
+    * ``users``: user/password logins; ``user_certificates``: X.509 user certificates (DER or
+      PEM files; the file's stem is the user name; operators).
+    * ``anonymous``: let clients without credentials browse, read and subscribe (never write,
+      never call methods).
+    * ``security``: the policies offered (``None``, ``Basic256Sha256_Sign``,
+      ``Basic256Sha256_SignAndEncrypt``); the server's self-signed certificate is made at first
+      start in ``certificate_dir`` (default: ``opcua/`` beside the store).
+    * ``update_s``: how often values are read from the backend (≤ 1 s; default 0.25 s).
+    """
+
+    enabled: bool = False
+    endpoint: Annotated[str, Field(pattern=r"^opc\.tcp://[^/:]+:[0-9]{1,5}(/.*)?$")] = (
+        "opc.tcp://127.0.0.1:4840/millwatch"
+    )
+    users: tuple[OpcUaUser, ...] = ()
+    user_certificates: tuple[Path, ...] = ()
+    anonymous: bool = False
+    security: tuple[SecurityPolicy, ...] = (
+        "None",
+        "Basic256Sha256_Sign",
+        "Basic256Sha256_SignAndEncrypt",
+    )
+    certificate_dir: Path | None = None
+    update_s: Annotated[float, Field(gt=0, le=1.0)] = 0.25
+
+    @field_validator("users")
+    @classmethod
+    def _unique(cls, value: tuple[OpcUaUser, ...]) -> tuple[OpcUaUser, ...]:
+        names = [u.name for u in value]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"user {twice[0]!r} is configured twice")
+        return value
+
+    @field_validator("security")
+    @classmethod
+    def _some(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        if not value:
+            raise ValueError("no security policy given (None, Basic256Sha256_Sign, "
+                             "Basic256Sha256_SignAndEncrypt)")  # fmt: skip
+        return tuple(dict.fromkeys(value))
+
+
 class ServiceSettings(_Strict):
     zenoh: ZenohSettings = ZenohSettings()
     archive: ArchiveSettings = ArchiveSettings()
@@ -285,6 +380,7 @@ class ServiceSettings(_Strict):
     api: ApiSettings = ApiSettings()
     mills: MillSettings = MillSettings()
     reports: ReportSettings = ReportSettings()
+    opcua: OpcUaSettings = OpcUaSettings()
 
     def resolved(self, base: Path) -> ServiceSettings:
         """The same settings with relative paths made relative to ``base``."""
@@ -314,8 +410,22 @@ class ServiceSettings(_Strict):
                 "reports": self.reports.model_copy(
                     update={"directory": at(self.reports.directory), "mail": mail}
                 ),
+                "opcua": self._resolved_opcua(at),
             }
         )
+
+    def _resolved_opcua(self, at: Any) -> OpcUaSettings:
+        o = self.opcua
+        users = tuple(
+            u.model_copy(update={"password_file": at(u.password_file)})
+            if u.password_file is not None else u
+            for u in o.users
+        )  # fmt: skip
+        return o.model_copy(update={
+            "users": users,
+            "user_certificates": tuple(at(p) for p in o.user_certificates),
+            "certificate_dir": None if o.certificate_dir is None else at(o.certificate_dir),
+        })  # fmt: skip
 
     def load_mills(self) -> dict[str, MillConfig]:
         """The configured mills by id; raises naming the file and field of a bad one."""

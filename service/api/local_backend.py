@@ -111,6 +111,10 @@ class LocalBackend:
             for m, c in self.mills.items()
         ]
 
+    def mill_statuses(self) -> dict[str, dict[str, Any]]:
+        status = self.runtime.status
+        return {m: status.get(m, {}) for m in self.mills}
+
     def mill_detail(self, mill_id: str) -> dict[str, Any]:
         config = config_of(self.mills, mill_id)
         return mill_detail(config, self.runtime.status.get(mill_id, {}), self.worker_info())

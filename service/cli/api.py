@@ -6,7 +6,8 @@ their liveliness tokens, keeps the alarm board from their ``…/@alarms`` messag
 mill's worker for everything else with a zenoh ``get`` (``[api] query_timeout_s``, default 10 s).
 The mills it serves are those of ``[mills]``: a mill no live worker holds is answered
 ``unreachable`` (``/mills``) or 503 (its other routes). Run as many as you need, anywhere that
-reaches the router.
+reaches the router. With ``[opcua] enabled`` it also serves OPC UA, gathered from the workers
+the same way (:mod:`service.opcua`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import uvicorn
 from ingest.zenoh_session import build_config, open_session
 from service.api.app import create_app
 from service.cli.serve import run_until_signal
+from service.opcua.launch import start_opcua
 from service.remote.zenoh_backend import ZenohBackend
 from service.settings import ServiceSettings, load_service_settings
 
@@ -41,11 +43,15 @@ def serve_api(settings: ServiceSettings) -> int:
             timeout_s=settings.api.query_timeout_s,
         )
         backend.start()
+        opcua = None
         try:
+            opcua = start_opcua(backend, settings)
             config = uvicorn.Config(create_app(backend), host=settings.api.host,
                                     port=settings.api.port, log_level="warning")  # fmt: skip
             run_until_signal(uvicorn.Server(config))
         finally:
+            if opcua is not None:
+                opcua.stop()
             backend.close()
     return 0
 

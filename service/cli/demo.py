@@ -24,8 +24,10 @@ from ingest.sim.publisher import ScenePublisher, starting_now
 from ingest.sim.scenes import get_scene
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.api.app import create_app
+from service.api.local_backend import LocalBackend
 from service.cli.args import positive_float, positive_int
 from service.cli.serve import run_until_signal
+from service.opcua.launch import start_opcua
 from service.settings import ServiceSettings
 from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
@@ -37,7 +39,25 @@ log = logging.getLogger(__name__)
 MILLS_DIR = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 
 
-def demo_settings(directory: Path, zenoh_port: int, api_port: int, mills: int) -> ServiceSettings:
+OPCUA_USER = "operator"
+OPCUA_SECRET = "opcua-operator.secret"
+
+
+def demo_opcua(directory: Path, port: int) -> dict[str, object]:
+    """The demo's ``[opcua]``: on, loopback, user ``operator`` with a new random password in
+    ``directory/opcua-operator.secret`` (owner-only), anonymous clients read-only."""
+    secret = directory / OPCUA_SECRET
+    if not secret.exists():
+        secret.touch(mode=0o600)
+        secret.write_text(secrets.token_urlsafe(12) + "\n", encoding="utf-8")
+    return {"enabled": True, "endpoint": f"opc.tcp://127.0.0.1:{port}/millwatch",
+            "users": [{"name": OPCUA_USER, "password_file": str(secret)}],
+            "anonymous": True}  # fmt: skip
+
+
+def demo_settings(
+    directory: Path, zenoh_port: int, api_port: int, mills: int, opcua_port: int = 4840
+) -> ServiceSettings:
     files = sorted(MILLS_DIR.glob("*.toml"))[:mills]
     return ServiceSettings.model_validate({
         "zenoh": {"listen": [tcp_endpoint(zenoh_port)]},
@@ -47,6 +67,7 @@ def demo_settings(directory: Path, zenoh_port: int, api_port: int, mills: int) -
         "worker": {"checkpoint_seconds": 30.0, "stale_after_s": 10.0},
         "api": {"host": "127.0.0.1", "port": api_port},
         "mills": {"files": [str(f) for f in files]},
+        "opcua": demo_opcua(directory, opcua_port),
     })  # fmt: skip
 
 
@@ -111,6 +132,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--scene", default="month", help="catalogue scene each mill plays (default: month)"
     )
     p.add_argument("--port", type=int, default=8080, help="API port on 127.0.0.1 (default 8080)")
+    p.add_argument("--opcua-port", type=int, default=4840,
+                   help="OPC UA port on 127.0.0.1 (default 4840)")  # fmt: skip
     p.add_argument(
         "--dir",
         type=Path,
@@ -139,14 +162,19 @@ def _main(args: argparse.Namespace) -> int:
         )  # fmt: skip
     directory = args.dir or Path(tempfile.mkdtemp(prefix="millwatch-demo-"))
     zenoh_port = free_loopback_port()
-    settings = with_demo_api_key(demo_settings(directory, zenoh_port, args.port, mills))
+    directory.mkdir(parents=True, exist_ok=True)
+    settings = demo_settings(directory, zenoh_port, args.port, mills, args.opcua_port)
+    settings = with_demo_api_key(settings)
     runtime = ServiceRuntime(settings, simulated_mills(settings.load_mills()), MillJob)
     runtime.start()
+    backend = LocalBackend(runtime)
     gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene)
-    server = uvicorn.Server(uvicorn.Config(create_app(runtime), host="127.0.0.1",
+    server = uvicorn.Server(uvicorn.Config(create_app(backend), host="127.0.0.1",
                                            port=args.port, log_level="warning"))  # fmt: skip
     timer = _stop_after(server, args.minutes)
+    opcua = None
     try:
+        opcua = start_opcua(backend, settings)
         gateways.start()
         _announce(settings, runtime, directory, args)
         run_until_signal(server)
@@ -154,6 +182,8 @@ def _main(args: argparse.Namespace) -> int:
         if timer is not None:
             timer.cancel()
         gateways.stop()
+        if opcua is not None:
+            opcua.stop()
         runtime.stop()
     sys.stdout.write(f"millwatch demo stopped; archive and store kept in {directory}\n")
     return 0
@@ -179,6 +209,7 @@ def _announce(settings: ServiceSettings, runtime: ServiceRuntime, directory: Pat
         f"  archive    {settings.archive.directory}\n"
         f"  store      {settings.store.path}\n"
         f"  reports    {settings.reports.directory} (each mill's month, after its local end)\n"
+        f"{_opcua_lines(settings)}"
         f"  then try   millwatch analyze {settings.archive.directory} "
         f"--mill deploy/mills/sag-5200-lrs.toml\n"
         "Ctrl-C stops (final checkpoint, archive files finished).\n"
@@ -202,4 +233,15 @@ def ack_help(base: str, api_key: str | None) -> str:
         f"  ack        curl --noproxy '*' -X POST -H 'X-API-Key: {api_key}' "
         f"-H 'Content-Type: application/json' -d '{{\"by\": \"operator\"}}' "
         f"'{base}/alarms/<alarm_id>/ack'\n"
+    )
+
+
+def _opcua_lines(settings: ServiceSettings) -> str:
+    """Where the OPC UA server listens and how to log in (the demo's own password)."""
+    o = settings.opcua
+    user = o.users[0]
+    return (
+        f"  OPC UA     {o.endpoint} (security None or Basic256Sha256; anonymous: read-only)\n"
+        f"             user {user.name!r}, password {user.password()!r} (in {user.password_file}); "
+        "acknowledge alarms with the condition's Acknowledge method\n"
     )

@@ -5,7 +5,8 @@ it, stores results in SQLite and checkpoints. Its mills are the configured ones 
 ``[worker] partition`` covers (all of them by default), and it answers queries about them over
 zenoh (``…/@query/<what>``) while holding a liveliness token per mill, so ``millwatch api``
 elsewhere can serve them too. SIGTERM or SIGINT (Ctrl-C) stops it cleanly: tokens withdrawn,
-final checkpoint, archive file finished, zenoh session closed.
+final checkpoint, archive file finished, zenoh session closed. With ``[opcua] enabled`` it also
+serves the mills' values and alarms over OPC UA (:mod:`service.opcua`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, try_open
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
+from service.opcua.launch import start_opcua
 from service.remote.queryables import WorkerQueryables
 from service.settings import ServiceSettings, load_service_settings
 from service.worker.mill_job import MillJob
@@ -62,8 +64,10 @@ def serve(settings: ServiceSettings, *, api: bool = True) -> int:
     backend = LocalBackend(runtime)
     assert runtime.session is not None
     queryables = WorkerQueryables(runtime.session, backend)
+    opcua = None
     try:
         queryables.start()
+        opcua = start_opcua(backend, settings)
         if api:
             server = uvicorn.Server(
                 uvicorn.Config(
@@ -77,6 +81,8 @@ def serve(settings: ServiceSettings, *, api: bool = True) -> int:
         else:
             wait_for_signal()
     finally:
+        if opcua is not None:
+            opcua.stop()
         queryables.close()
         runtime.stop()
     return 0
@@ -131,6 +137,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _main(args: argparse.Namespace) -> int:
     settings = load_service_settings(args.config)
     where = "no API" if args.no_api else f"API on http://{settings.api.host}:{settings.api.port}"
+    if settings.opcua.enabled:
+        where += f", OPC UA on {settings.opcua.endpoint}"
     sys.stderr.write(
         f"millwatch serve: worker {worker_identity(settings)!r}, {where}; "
         f"archive {settings.archive.directory}; Ctrl-C stops\n"

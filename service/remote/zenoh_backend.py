@@ -254,6 +254,10 @@ class ZenohBackend:
                 out.append(mill_summary(config, answer["status"], answer["worker"].get("name")))
         return out
 
+    def mill_statuses(self) -> dict[str, dict[str, Any]]:
+        """One gather of every reachable mill's status."""
+        return {m: answer["status"] for m, answer in self.statuses().items()}
+
     def mill_detail(self, mill_id: str) -> dict[str, Any]:
         config = config_of(self.mills, mill_id)
         if mill_id not in self.live_workers():

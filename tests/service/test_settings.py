@@ -88,3 +88,50 @@ def test_mail_settings_refuse_a_password_in_the_file_and_clear_text_logins(
     with pytest.raises(SettingsError, match=r"reports\.mail") as err:
         load_service_settings(path)
     assert message in str(err.value) and "hunter2" not in str(err.value)
+
+
+def test_opcua_is_off_by_default_on_loopback_with_basic256sha256_offered():
+    o = ServiceSettings().opcua
+    assert not o.enabled and not o.anonymous
+    assert o.endpoint == "opc.tcp://127.0.0.1:4840/millwatch"
+    assert "Basic256Sha256_SignAndEncrypt" in o.security and "None" in o.security
+
+
+def test_opcua_password_files_are_relative_and_never_held(tmp_path, monkeypatch):
+    path = tmp_path / "millwatch.toml"
+    path.write_text(
+        '[opcua]\nenabled = true\ncertificate_dir = "pki"\n'
+        '[[opcua.users]]\nname = "operator"\npassword_file = "op.secret"\n'
+        '[[opcua.users]]\nname = "hmi"\npassword_env = "HMI_PW"\nrole = "viewer"\n'
+    )
+    (tmp_path / "op.secret").write_text("op-pw\n")
+    monkeypatch.setenv("HMI_PW", "hmi-pw")
+    s = load_service_settings(path)
+    op, hmi = s.opcua.users
+    assert op.password_file == (tmp_path / "op.secret").resolve()
+    assert s.opcua.certificate_dir == (tmp_path / "pki").resolve()
+    assert (op.password(), hmi.password(), hmi.role) == ("op-pw", "hmi-pw", "viewer")
+    assert "-pw" not in repr(s)
+
+
+@pytest.mark.parametrize(
+    ("users", "message"),
+    [
+        ('name = "op"\npassword = "hunter2"\n', "password: not in the settings file"),
+        ('name = "op"\n', "set password_file or password_env"),
+        ('name = "op"\npassword_env = "X"\nrole = "admin"\n', "opcua.users.0.role"),
+    ],
+)
+def test_opcua_users_refuse_passwords_in_the_file_and_name_the_field(tmp_path, users, message):
+    path = tmp_path / "millwatch.toml"
+    path.write_text("[opcua]\nenabled = true\n[[opcua.users]]\n" + users)
+    with pytest.raises(SettingsError, match=r"opcua\.users") as err:
+        load_service_settings(path)
+    assert message in str(err.value) and "hunter2" not in str(err.value)
+
+
+def test_opcua_endpoint_must_be_opc_tcp(tmp_path):
+    path = tmp_path / "millwatch.toml"
+    path.write_text('[opcua]\nendpoint = "http://127.0.0.1:4840"\n')
+    with pytest.raises(SettingsError, match=r"opcua\.endpoint"):
+        load_service_settings(path)

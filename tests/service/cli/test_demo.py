@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import os
 import re
 import select
@@ -22,10 +23,11 @@ ROOT = Path(__file__).resolve().parents[3]
 
 @pytest.mark.slow
 def test_demo_serves_simulated_mills_and_stops_by_itself(tmp_path):
-    port = free_loopback_port()
+    port, opcua_port = free_loopback_port(), free_loopback_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "service.cli.main", "demo", "--mills", "1", "--speed", "20",
-         "--minutes", "0.3", "--port", str(port), "--dir", str(tmp_path)],
+         "--minutes", "0.3", "--port", str(port), "--dir", str(tmp_path),
+         "--opcua-port", str(opcua_port)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     mill = None
@@ -55,14 +57,39 @@ def test_demo_serves_simulated_mills_and_stops_by_itself(tmp_path):
         assert missing.status_code == 404
         assert missing.headers["content-type"].startswith("application/problem+json")
         assert "nope" in missing.json()["detail"]
+        password = (tmp_path / "opcua-operator.secret").read_text().strip()
+        base, states = f"http://127.0.0.1:{port}", []
+        for _ in range(10):  # the demo runs on: both answers of one moment, within 0.5 s
+            opc = asyncio.run(_opcua_state(opcua_port, password, mill["site"], mill["id"]))
+            states.append((opc, httpx.get(f"{base}/mills/{mill['id']}", timeout=2).json()["state"]))
+            if opc == states[-1][1]:
+                break
+            time.sleep(0.2)
+        assert states[-1][0] == states[-1][1], states
         out, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.communicate(timeout=30)
     assert proc.returncode == 0, err
-    assert "SIMULATED" in "\n".join(head) + out
+    printed = "\n".join(head) + out
+    assert "SIMULATED" in printed
+    assert f"opc.tcp://127.0.0.1:{opcua_port}/millwatch" in printed
+    assert f"user 'operator', password {password!r}" in printed  # the demo prints its credentials
     assert list((tmp_path / "archive").glob("*.mcap")) and (tmp_path / "millwatch.db").exists()
+
+
+async def _opcua_state(port: int, password: str, site: str, mill: str) -> str:
+    """The mill's State over OPC UA, logged in as the demo's operator."""
+    from asyncua import Client, ua
+
+    client = Client(f"opc.tcp://127.0.0.1:{port}/millwatch", timeout=10)
+    client.set_user("operator")
+    client.set_password(password)
+    async with client:
+        ns = await client.get_namespace_index("urn:millwatch")
+        value: str = await client.get_node(ua.NodeId(f"{site}/{mill}/State", ns)).read_value()
+        return value
 
 
 def _printed_lines(proc: subprocess.Popen, last: str) -> list[str]:

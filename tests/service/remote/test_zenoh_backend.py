@@ -296,3 +296,64 @@ def test_the_fleet_and_simulated_flags_over_zenoh_are_the_local_ones(pair):
     assert remote.get(f"/mills/{MILL}/life").json()["simulated"] is True
     alarms = remote.get("/alarms").json()["alarms"]
     assert all(a["simulated"] and a["message"].startswith("SIMULATED DATA") for a in alarms)
+
+
+def test_mill_statuses_over_zenoh_are_the_workers_snapshots(pair):
+    assert pair.backend.mill_statuses() == json.loads(json.dumps(pair.runtime.status))
+
+
+def test_opcua_over_zenoh_shows_what_the_remote_api_answers(pair, tmp_path):
+    """``millwatch api`` with ``[opcua]``: values and retained alarms gathered from the
+    workers (ConditionRefresh by a logged-in user sends the open alarm)."""
+    import asyncio
+
+    from asyncua import Client, ua
+
+    from service.opcua.server import OpcUaServer
+    from service.settings import OpcUaSettings
+
+    (tmp_path / "pw").write_text("pw-1\n")
+    endpoint = f"opc.tcp://127.0.0.1:{free_loopback_port()}/millwatch"
+    settings = OpcUaSettings.model_validate({
+        "enabled": True, "endpoint": endpoint,
+        "users": [{"name": "op", "password_file": str(tmp_path / "pw")}],
+    })  # fmt: skip
+    events: list = []
+
+    class Handler:
+        def event_notification(self, event):
+            events.append(event)
+
+    async def look() -> dict:
+        client = Client(endpoint, timeout=10)
+        client.set_user("op")
+        client.set_password("pw-1")
+        async with client:
+            ns = await client.get_namespace_index("urn:millwatch")
+            sub = await client.create_subscription(50, Handler())
+            await sub.subscribe_events(ua.NodeId(ua.ObjectIds.Server),
+                                       ua.NodeId(ua.ObjectIds.AlarmConditionType))  # fmt: skip
+            await client.get_node(ua.NodeId(ua.ObjectIds.ConditionType)).call_method(
+                ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh),
+                ua.Variant(sub.subscription_id, ua.VariantType.UInt32))  # fmt: skip
+            for _ in range(40):
+                if events:
+                    break
+                await asyncio.sleep(0.05)
+            nodes = [client.get_node(ua.NodeId(f"rustenburg/{MILL}/{p}", ns))
+                     for p in ("State", "StartsThisMonth")]  # fmt: skip
+            values = await client.read_values(nodes)
+            return dict(zip(("State", "StartsThisMonth"), values, strict=True))
+
+    server = OpcUaServer(pair.backend, settings, tmp_path)
+    server.start()
+    try:
+        assert _wait(lambda: server.stats.polls >= 1, 10.0)
+        got = asyncio.run(look())
+    finally:
+        server.stop()
+    assert got["State"] == pair.remote.get(f"/mills/{MILL}").json()["state"]
+    assert got["StartsThisMonth"] == pair.remote.get(f"/mills/{MILL}/starts").json()["count"]
+    open_ids = {a["alarm_id"] for a in pair.remote.get("/alarms?state=open").json()["alarms"]}
+    assert open_ids and {e.NodeId.Identifier.rsplit("/", 1)[-1] for e in events} == open_ids
+    assert all(e.Retain for e in events)

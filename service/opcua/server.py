@@ -1,0 +1,290 @@
+"""The OPC UA server: asyncua in its own thread, mirroring a backend's answers.
+
+:class:`OpcUaServer` runs an asyncio loop in a thread (``millwatch-opcua``) that serves
+``[opcua] endpoint`` and keeps the address space (:mod:`service.opcua.address_space`) equal to
+what the :class:`~service.api.backend.Backend` answers — the REST API's backend, so it is the
+runtime in this process under ``millwatch serve`` and the workers over zenoh under
+``millwatch api``:
+
+* every ``update_s`` (≤ 1 s) it asks every mill's status at once (``mill_statuses``), then per
+  mill ``life`` and ``starts`` (a backend call may block on SQLite or zenoh, so calls run on
+  one helper thread, never on the loop) and writes only the values that changed;
+* every :data:`ALARM_EVERY_S` it looks at the alarm board's version and sends the condition
+  events of the alarms that changed (:mod:`service.opcua.conditions`);
+* Acknowledge calls the backend's ``ack`` as the OPC UA user (:mod:`service.opcua.access`).
+
+A backend error on one mill (its worker gone, a timeout) leaves that mill's values as they were
+and is logged once per kind; the server never stops for it. :meth:`OpcUaServer.start` returns
+once the endpoint listens (or raises :class:`OpcUaError` saying why it cannot);
+:meth:`OpcUaServer.stop` closes it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from asyncua import Server, ua
+from asyncua.crypto.permission_rules import User
+
+from service.api.backend import Backend
+from service.api.mill_views import mill_summary
+from service.errors import ApiError
+from service.opcua.access import CALLER, OPERATOR, AccessRules, Login, Logins, certificate_names
+from service.opcua.address_space import NAMESPACE_URI, MillNodes, root_folder
+from service.opcua.certificate import APPLICATION_URI, ensure_certificate
+from service.opcua.conditions import Conditions
+from service.opcua.ua_types import nid, status
+from service.opcua.values import Point, mill_points
+from service.settings import OpcUaSettings, OpcUaUser, SettingsError
+
+__all__ = ["ALARM_EVERY_S", "OpcUaError", "OpcUaServer", "OpcUaStats"]
+
+log = logging.getLogger(__name__)
+
+ALARM_EVERY_S = 0.2
+START_TIMEOUT_S = 60.0
+_POLICIES = {
+    "None": ua.SecurityPolicyType.NoSecurity,
+    "Basic256Sha256_Sign": ua.SecurityPolicyType.Basic256Sha256_Sign,
+    "Basic256Sha256_SignAndEncrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
+}
+T = TypeVar("T")
+
+
+class OpcUaError(OSError):
+    """The OPC UA server cannot start (the message says why: the endpoint, the port); an
+    ``OSError``, so the command prints it without a traceback."""
+
+
+@dataclass
+class OpcUaStats:
+    """Counters of the running server (for tests and the benchmark); ``poll_s``: how long the
+    latest value updates took (s, wall clock)."""
+
+    polls: int = 0
+    writes: int = 0
+    poll_s: deque[float] = field(default_factory=lambda: deque(maxlen=1000))
+
+
+class OpcUaServer:
+    """Serves ``backend`` over OPC UA as ``settings`` say (module docstring)."""
+
+    def __init__(self, backend: Backend, settings: OpcUaSettings, state_dir: Path) -> None:
+        self.backend = backend
+        self.settings = settings
+        self.certificate_dir = settings.certificate_dir or state_dir / "opcua"
+        self.stats = OpcUaStats()
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._started = threading.Event()
+        self._error: BaseException | None = None
+        self._calls = ThreadPoolExecutor(1, thread_name_prefix="millwatch-opcua-backend")
+        self._logged: set[tuple[str, str]] = set()
+        self._logins: Logins | None = None
+        self._mills: dict[str, MillNodes] = {}
+        self._answers: dict[str, tuple[Any, Any, Any]] = {}  # last answers per mill (helper)
+        self._conditions: Conditions | None = None
+
+    @property
+    def endpoint(self) -> str:
+        return self.settings.endpoint
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        """Start the thread; returns once the endpoint listens, :class:`OpcUaError` if not."""
+        self._thread = threading.Thread(target=self._run, name="millwatch-opcua", daemon=True)
+        self._thread.start()
+        if not self._started.wait(START_TIMEOUT_S):
+            raise OpcUaError(f"OPC UA server on {self.endpoint} did not start within "
+                             f"{START_TIMEOUT_S:g} s")  # fmt: skip
+        if self._error is not None:
+            self._thread.join(timeout=10)
+            raise OpcUaError(f"OPC UA server on {self.endpoint} cannot start: "
+                             f"{self._error}") from self._error  # fmt: skip
+        log.info("OPC UA server on %s", self.endpoint)
+
+    def stop(self) -> None:
+        """Close the endpoint and end the thread (idempotent)."""
+        loop, stop = self._loop, self._stop
+        if loop is not None and stop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(stop.set)
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+        self._calls.shutdown(wait=True, cancel_futures=True)
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as exc:  # reported to start(); after a start, logged
+            if not self._started.is_set():
+                self._error = exc
+                self._started.set()
+            else:
+                log.exception("OPC UA server stopped on an error")
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        server = await self._build()
+        async with server:
+            await self._build_mills(server)
+            self._started.set()
+            tasks = [asyncio.create_task(self._poll_values()),
+                     asyncio.create_task(self._poll_alarms())]  # fmt: skip
+            try:
+                await self._stop.wait()
+            finally:
+                for t in tasks:
+                    t.cancel()
+                await asyncio.gather(*tasks, return_exceptions=True)
+
+    # ------------------------------------------------------------------ building
+    async def _build(self) -> Server:
+        s = self.settings
+        logins = [Login(u.name, _password(u), u.role) for u in s.users]
+        certs = await certificate_names(s.user_certificates)
+        self._logins = Logins(logins, certs, anonymous=s.anonymous)
+        server = Server(user_manager=self._logins)
+        server.iserver.bind_condition_methods = True  # ConditionRefresh
+        await server.init()
+        server.set_endpoint(s.endpoint)
+        server.set_server_name("millwatch")
+        await server.set_application_uri(APPLICATION_URI)
+        tokens: list[type] = [ua.UserNameIdentityToken, ua.X509IdentityToken]
+        if s.anonymous:
+            tokens.append(ua.AnonymousIdentityToken)
+        server.set_identity_tokens(tokens)
+        server.set_security_policy([_POLICIES[p] for p in s.security], AccessRules())
+        cert, key = await ensure_certificate(self.certificate_dir)
+        await server.load_certificate(str(cert))
+        await server.load_private_key(str(key))
+        return server
+
+    async def _build_mills(self, server: Server) -> None:
+        ns = await server.register_namespace(NAMESPACE_URI)
+        root = await root_folder(server, ns)
+        sites: dict[str, Any] = {}
+        for config in self.backend.mills.values():
+            if config.site not in sites:
+                sites[config.site] = await root.add_folder(
+                    nid(config.site, ns), ua.QualifiedName(config.site, ns)
+                )
+            mill = await MillNodes.create(server, ns, sites[config.site], config)
+            await mill.node.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
+            await mill.apply(mill_points(config, {}, None, None))  # every node, values unknown
+            self._mills[config.id] = mill
+        self._conditions = await Conditions.create(server, self._mills)
+        ack_method = server.get_node(nid(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge))
+        server.link_method(ack_method, self._acknowledge)
+
+    # ------------------------------------------------------------------ polling
+    async def _call(self, fn: Callable[..., T], *args: Any) -> T:
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._calls, fn, *args)
+
+    async def _poll_values(self) -> None:
+        period = self.settings.update_s
+        while True:
+            t0 = time.monotonic()
+            try:
+                await self._update_values()
+            except Exception:  # a bug must not freeze every value: logged, tried again
+                log.exception("OPC UA value update failed")
+            self.stats.poll_s.append(time.monotonic() - t0)
+            await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
+
+    async def _update_values(self) -> None:
+        points = await self._call(self._gather_points)
+        writes = 0
+        for mill_id, mill_points_ in points.items():
+            writes += await self._mills[mill_id].apply(mill_points_)
+        self.stats.polls += 1
+        self.stats.writes += writes
+
+    def _gather_points(self) -> dict[str, dict[str, Point]]:
+        """Every mill's points (on the helper thread): the state, stale channels and hold of
+        each mill as ``GET /mills/{id}`` says them (:func:`~service.api.mill_views.mill_summary`
+        of its status; a mill whose worker is gone is ``unreachable``). A mill whose answers
+        equal the last ones is left out."""
+        statuses = self._ask("*", "status", self.backend.mill_statuses)
+        if statuses is None:
+            return {}
+        out = {}
+        for mill_id, config in self.backend.mills.items():
+            status = statuses.get(mill_id)
+            life = self._ask(mill_id, "life", self.backend.life, mill_id)
+            starts = self._ask(mill_id, "starts", self.backend.starts, mill_id, None)
+            answers = (status, life, starts)
+            if self._answers.get(mill_id) == answers:
+                continue  # nothing changed: no points to make, no values to compare
+            self._answers[mill_id] = answers
+            detail = {**mill_summary(config, status, None), "status": status or {}}
+            out[mill_id] = mill_points(config, detail, life, starts)
+        return out
+
+    def _ask(self, mill_id: str, what: str, fn: Callable[..., T], *args: Any) -> T | None:
+        try:
+            return fn(*args)
+        except ApiError as exc:
+            if (mill_id, what) not in self._logged:
+                self._logged.add((mill_id, what))
+                log.warning("OPC UA: no %s of mill %s yet: %s", what, mill_id, exc)
+            return None
+
+    async def _poll_alarms(self) -> None:
+        assert self._conditions is not None
+        version = -1
+        while True:
+            board = await self._call(self._board)
+            if board is not None and board.version != version:
+                version = board.version
+                try:
+                    await self._conditions.sync(reversed(board.rows()))
+                except Exception:
+                    log.exception("OPC UA alarm events failed")
+            await asyncio.sleep(ALARM_EVERY_S)
+
+    def _board(self) -> Any:
+        try:
+            return self.backend.alarm_board()
+        except ApiError:
+            return None
+
+    # ------------------------------------------------------------------ Acknowledge
+    async def _acknowledge(self, parent: ua.NodeId, *args: ua.Variant) -> ua.StatusCode:
+        """``Acknowledge(EventId, Comment)`` on a condition, by the calling user."""
+        assert self._conditions is not None and self._logins is not None
+        user: User | None = CALLER.get()
+        if self._logins.role_of(user) != OPERATOR or user is None or user.name is None:
+            return status(ua.StatusCodes.BadUserAccessDenied)
+        if len(args) != 2:
+            return status(ua.StatusCodes.BadArgumentsMissing)
+        event_id = args[0].Value if isinstance(args[0], ua.Variant) else args[0]
+        comment = args[1].Value if isinstance(args[1], ua.Variant) else args[1]
+        text = comment.Text if isinstance(comment, ua.LocalizedText) else str(comment or "")
+
+        async def ack(alarm_id: str, by: str) -> dict[str, Any]:
+            return await self._call(self.backend.ack, alarm_id, by)
+
+        result = await self._conditions.acknowledge(parent, event_id, text or "", user.name, ack)
+        log.info("OPC UA Acknowledge of %s by %s: %s", parent.to_string(), user.name, result.name)
+        return result
+
+
+def _password(user: OpcUaUser) -> str:
+    """The user's password; :class:`SettingsError` naming the user when there is none."""
+    password = user.password()
+    if not password:
+        raise SettingsError(f"opcua.users.{user.name}: no password (environment variable "
+                            f"{user.password_env} is not set, or the file is empty)")  # fmt: skip
+    return password
