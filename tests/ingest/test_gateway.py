@@ -100,6 +100,14 @@ def _gateway_and_worker(
         publisher = stack.enter_context(
             declare_gateway_publisher(gateway, KEY, blocks_per_s=RATE, retention_s=retention_s)
         )
+        # as the worker's runtime does: query the cache only once the publisher is seen (a
+        # query sent before the route to its cache exists gets no reply on a busy machine)
+        watch = PublisherWatch(worker, keys.mill_pattern("s1", "m1"))
+        deadline, seen = time.monotonic() + 10.0, False
+        while not (seen := KEY in watch.up()) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        watch.undeclare()
+        assert seen, "the worker never saw the gateway publisher within 10 s"
         yield publisher, worker
 
 
