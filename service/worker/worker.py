@@ -204,10 +204,13 @@ class Worker:
         health = self.health[mill_id].channels[channel]
         got = health.accept(block, item.recv_ns)
         if got.block is None:  # not new: counted and dropped, in constant time
+            # INFO: a repeat loses nothing, and recovery's overlaps (archive vs gateway cache,
+            # history vs recovery subscriber) bring a few by design; the count is in /metrics
             self._log_once(
                 (item.key, got.verdict),
                 "%s: %s block seq %d dropped (not beyond seq %s; counted, further ones not "
                 "logged)", item.key, got.verdict, block.seq, health.last_seq,
+                level=logging.INFO,
             )  # fmt: skip
             return
         if got.clock_fault is not None:
@@ -354,10 +357,12 @@ class Worker:
             self.archive_errors += 1
             self._log_once(("archive", type(exc).__name__), "archive write failed: %s", exc)
 
-    def _log_once(self, what: tuple[str, str], msg: str, *args: object) -> None:
+    def _log_once(
+        self, what: tuple[str, str], msg: str, *args: object, level: int = logging.WARNING
+    ) -> None:
         if what not in self._logged:
             self._logged.add(what)
-            log.warning(msg, *args)
+            log.log(level, msg, *args)
 
     # ------------------------------------------------------------------ batches
     def step(self, queue: BlockQueue, timeout_s: float = 0.1) -> int:
