@@ -233,13 +233,14 @@ def _life(r: MonthlyReport) -> Section:
         caption="What drives it: share of damage by component and phase",
     )  # fmt: skip
     scenarios = list(dict.fromkeys(w.scenario for c in comps for w in c.what_if))
+    life_at = {c.component: {w.scenario: w.remaining_life_years for w in c.what_if}
+               for c in comps}  # fmt: skip
     what_if = Table(
         "life_what_if",
         (Column("component", "component", text=True),
          *(Column(f"life_at_{s.replace('/', '_per_')}", f"at {s} starts", "years")
            for s in scenarios)),
-        rows([[c.component, *({w.scenario: w.remaining_life_years for w in c.what_if}.get(s)
-                              for s in scenarios)] for c in comps]),
+        rows([[c.component, *map(life_at[c.component].get, scenarios)] for c in comps]),
         caption="Remaining life at the App. D start rates (damage to date included)",
     )  # fmt: skip
     b = life.basis
