@@ -19,11 +19,13 @@ mills over N processes, each with its own :func:`analyze_files` (a file named af
 from __future__ import annotations
 
 import logging
+import queue
+import threading
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -40,6 +42,8 @@ from service.worker.health import MillHealth
 __all__ = ["OfflineSink", "ReadingStats", "analyze_files"]
 
 log = logging.getLogger(__name__)
+
+_T = TypeVar("_T")
 
 #: Messages handed to the lane at a time (a file's last batch may be smaller).
 BATCH_MESSAGES = 20_000
@@ -191,15 +195,65 @@ def _batches(
         stats.unreadable_tails[str(path)] = reader.error
 
 
-def _ours(batch: MessageBatch, sink: OfflineSink) -> MessageBatch:
-    """The messages of ``batch`` on the sink's mills' keys; the rest is only counted (one by
-    one through the lane it would cost a Python call each)."""
+def _ours(batch: MessageBatch, sink: OfflineSink) -> tuple[MessageBatch, int]:
+    """The messages of ``batch`` on the sink's mills' keys, and how many others it holds (one
+    by one through the lane they would cost a Python call each; they are only counted)."""
     foreign = [c for c, topic in batch.topics.items() if sink.route(topic) is None]
     if not foreign:
-        return batch
+        return batch, 0
     theirs = np.isin(batch.channel, foreign)
-    sink.foreign_blocks += int(np.count_nonzero(theirs))
-    return batch.select(~theirs)
+    return batch.select(~theirs), int(np.count_nonzero(theirs))
+
+
+class _ReadAhead(Generic[_T]):
+    """Iterates ``items`` produced by a reader thread at most ``depth`` ahead: reading a file,
+    decompressing and scanning its chunks release the GIL, so they overlap the analysis
+    (results do not depend on it; memory: ``depth`` batches). An error in the thread is raised
+    in the consumer; :meth:`close` (or the end of a ``with``) stops the thread."""
+
+    def __init__(self, items: Iterator[_T], depth: int = 2) -> None:
+        self._items = items
+        self._box: queue.Queue[tuple[str, Any]] = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="analyze-reader", daemon=True)
+        self._thread.start()
+
+    def _put(self, item: tuple[str, Any]) -> bool:
+        while not self._stop.is_set():
+            try:
+                self._box.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self) -> None:
+        try:
+            for item in self._items:
+                if not self._put(("item", item)):
+                    return
+            self._put(("end", None))
+        except BaseException as exc:  # handed to the consumer, which raises it
+            self._put(("error", exc))
+
+    def __iter__(self) -> Iterator[_T]:
+        while True:
+            kind, value = self._box.get()
+            if kind == "end":
+                return
+            if kind == "error":
+                raise value
+            yield value
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+
+    def __enter__(self) -> _ReadAhead[_T]:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def analyze_files(
@@ -212,18 +266,19 @@ def analyze_files(
 ) -> tuple[OfflineSink, ReadingStats]:
     """Analyse ``configs``' mills over ``files`` (in order, one stream); ``advance(bytes)``
     reports progress; blocks of no given mill in ``uncounted`` files are not counted (another
-    job's share counts them). Returns the sink (its analyzers flushed) and what reading met."""
+    job's share counts them). Returns the sink (its analyzers flushed) and what reading met.
+    The files are read a batch or two ahead by a thread (:class:`_ReadAhead`)."""
     sink = OfflineSink(configs, spectra=spectra)
     lane = BatchLane(sink)
     stats = ReadingStats()
-    for path in files:
-        foreign = sink.foreign_blocks
-        for batch in _batches(path, stats, advance):
-            ours = _ours(batch, sink)
+    read = ((path, batch) for path in files for batch in _batches(path, stats, advance))
+    with _ReadAhead(read) as ahead:
+        for path, batch in ahead:
+            ours, foreign = _ours(batch, sink)
+            if path not in uncounted:
+                sink.foreign_blocks += foreign
             if len(ours):
                 lane.replay(ours)
-        if path in uncounted:
-            sink.foreign_blocks = foreign
     sink.finish()
     stats.files = [str(p) for p in files if p not in uncounted]
     stats.foreign_blocks = sink.foreign_blocks

@@ -204,3 +204,14 @@ def test_jobs_split_the_mills_and_give_the_same_reports(tmp_path):
     assert one == two
     for m in one["mills"]:
         assert m["reading"]["foreign_blocks"] == 0 and m["samples"] == 40_000
+
+
+def test_a_file_that_is_no_mcap_is_named(recording, tmp_path, capsys):
+    """Read by the reader thread, the error reaches the command and names the file."""
+    d = tmp_path / "mixed"
+    d.mkdir()
+    (d / "a.mcap").write_bytes(recording[0].read_bytes())
+    (d / "b.mcap").write_bytes(b"not an archive at all")
+    assert main(["analyze", str(d), "--mill", str(MILL), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "b.mcap" in err and "not an MCAP file" in err
