@@ -150,13 +150,16 @@ class _Job:
     configs: list[MillConfig]
     files: list[tuple[Path, bool]]
     spectra: bool
+    background: bool = False  # the spectra of each mill on a thread of its own
 
 
 def plan_jobs(files: list[Path], configs: list[MillConfig], jobs: int, *,
-              spectra: bool = True) -> list[_Job]:  # fmt: skip
+              spectra: bool = True, cores: int | None = None) -> list[_Job]:  # fmt: skip
     """Split the mills over at most ``jobs`` processes, balanced by the bytes of the files
     named after each mill (``<mill id>_…``, as ``millwatch simulate --out DIR`` writes them);
-    such a file is read only by the job with its mill, any other file by every job."""
+    such a file is read only by the job with its mill, any other file by every job. With
+    fewer mills than ``cores`` (default: this machine's), each mill's spectra run on a thread
+    of their own."""
     ids = sorted((c.id for c in configs), key=len, reverse=True)  # longest prefix wins
 
     def owner(path: Path) -> str | None:
@@ -172,10 +175,12 @@ def plan_jobs(files: list[Path], configs: list[MillConfig], jobs: int, *,
         load[k] += weight[c.id] or 1
     plan = []
     counted: set[Path] = set()
+    # a core left over for each mill's spectra: a thread of their own (same results)
+    background = spectra and len(configs) < (cores or os.cpu_count() or 1)
     for group in groups:
         mine = {c.id for c in group}
         reads = [p for p in files if own[p] is None or own[p] in mine]
-        plan.append(_Job(group, [(p, p not in counted) for p in reads], spectra))
+        plan.append(_Job(group, [(p, p not in counted) for p in reads], spectra, background))
         counted.update(reads)
     return plan
 
@@ -185,12 +190,16 @@ def _run_job(job: _Job, advance: Any) -> dict[str, Any]:
     sink, read = analyze_files(
         [p for p, _ in job.files], job.configs, spectra=job.spectra, advance=advance,
         uncounted=frozenset(p for p, counts in job.files if not counts),
+        background=job.background,
     )  # fmt: skip
-    reports = {
-        mill_id: (analyzer.report(), sink.reading(mill_id))
-        for mill_id, analyzer in sink.analyzers.items()
-        if analyzer.loads.n
-    }
+    try:
+        reports = {
+            mill_id: (analyzer.report(), sink.reading(mill_id))
+            for mill_id, analyzer in sink.analyzers.items()
+            if analyzer.loads.n
+        }
+    finally:
+        sink.close()
     return {"reports": reports, "reading": read}
 
 

@@ -25,12 +25,14 @@ from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, TypeVar, cast
 
 import numpy as np
 
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import MillAnalyzer
+from analytics.spectra.facts import HarmonicWindow
+from analytics.spectra.tracker import HarmonicTracker
 from ingest import keys
 from ingest.archive.batches import BatchReader, MessageBatch
 from ingest.archive.files import ArchiveError
@@ -67,15 +69,82 @@ class ReadingStats:
         self.unreadable_tails |= other.unreadable_tails
 
 
+class BackgroundSpectra:
+    """A mill's :class:`~analytics.spectra.tracker.HarmonicTracker` fed by a thread of its own,
+    in the order the analyzer feeds it (so with the same results): the spectra — about half the
+    work of a running mill — overlap the rest of the analysis on another core. For an offline
+    analysis only, which reads the tracker's windows from its report at the end: :meth:`feed`
+    returns no windows. Reading any other attribute waits until everything fed is analysed."""
+
+    def __init__(self, tracker: HarmonicTracker, depth: int = 32) -> None:
+        self._tracker = tracker
+        self._todo: queue.Queue[tuple[int, float, dict[str, np.ndarray], bool] | None] = (
+            queue.Queue(maxsize=depth)
+        )
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="spectra", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while (item := self._todo.get()) is not None:
+            try:
+                if self._error is None:
+                    self._tracker.feed(*item)
+            except BaseException as exc:  # raised in the analyzer's thread at the next call
+                self._error = exc
+            finally:
+                self._todo.task_done()
+        self._todo.task_done()
+
+    def feed(
+        self, t0_ns: int, fs: float, frame: dict[str, np.ndarray], running: bool
+    ) -> list[HarmonicWindow]:
+        """Queue one frame (copied: the analyzer's arrays are its own) and return at once."""
+        self._raise()
+        self._todo.put((t0_ns, fs, {k: v.copy() for k, v in frame.items()}, running))
+        return []
+
+    def drain(self) -> None:
+        """Wait until every frame fed is analysed (and raise what the tracker raised)."""
+        self._todo.join()
+        self._raise()
+
+    def flush(self) -> list[HarmonicWindow]:
+        self.drain()
+        return self._tracker.flush()
+
+    def close(self) -> None:
+        """Stop the thread (after what is queued)."""
+        if self._thread.is_alive():
+            self._todo.put(None)
+            self._thread.join(timeout=60.0)
+
+    def _raise(self) -> None:
+        if self._error is not None:
+            raise self._error
+
+    def __getattr__(self, name: str) -> Any:
+        self.drain()
+        return getattr(self._tracker, name)
+
+
 class OfflineSink:
     """The :class:`~service.worker.batch_lane.BlockSink` of an offline analysis: routes keys
     (live or replay) to the given mills' channels, admits blocks as the live worker does and
     feeds each mill's :class:`~analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
 
-    def __init__(self, configs: Sequence[MillConfig], *, spectra: bool = True) -> None:
+    def __init__(
+        self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
+    ) -> None:
         self._mills = {c.id: c for c in configs}
         self._health = {c.id: MillHealth.for_channels(list(c.channels)) for c in configs}
         self.analyzers = {c.id: MillAnalyzer(c, spectra=spectra) for c in configs}
+        self._background: list[BackgroundSpectra] = []
+        if spectra and background:  # each mill's spectra on a thread of its own
+            for analyzer in self.analyzers.values():
+                self._background.append(BackgroundSpectra(analyzer.harmonics))
+                # (the analyzer only feeds, flushes and reports its tracker: the wrapper does)
+                analyzer.harmonics = cast(HarmonicTracker, self._background[-1])
         self._live = {
             keys.channel_key(c.site, c.id, ch.key): (c.id, name)
             for c in configs
@@ -146,6 +215,11 @@ class OfflineSink:
         self.commit()
         for analyzer in self.analyzers.values():
             analyzer.flush()
+
+    def close(self) -> None:
+        """Stop the spectra threads (after :meth:`finish` and the reports)."""
+        for spectra in self._background:
+            spectra.close()
 
     def reading(self, mill_id: str) -> dict[str, Any]:
         """One mill's reading counts: blocks, gaps, repeats, clock faults, decode errors and
@@ -263,12 +337,15 @@ def analyze_files(
     spectra: bool = True,
     advance: Callable[[int], None] = lambda _: None,
     uncounted: frozenset[Path] = frozenset(),
+    background: bool = False,
 ) -> tuple[OfflineSink, ReadingStats]:
     """Analyse ``configs``' mills over ``files`` (in order, one stream); ``advance(bytes)``
     reports progress; blocks of no given mill in ``uncounted`` files are not counted (another
-    job's share counts them). Returns the sink (its analyzers flushed) and what reading met.
-    The files are read a batch or two ahead by a thread (:class:`_ReadAhead`)."""
-    sink = OfflineSink(configs, spectra=spectra)
+    job's share counts them); ``background``: each mill's spectra on a thread of its own
+    (:class:`BackgroundSpectra`: for cores that would idle otherwise). Returns the sink (its
+    analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and what reading
+    met. The files are read a batch or two ahead by a thread (:class:`_ReadAhead`)."""
+    sink = OfflineSink(configs, spectra=spectra, background=background)
     lane = BatchLane(sink)
     stats = ReadingStats()
     read = ((path, batch) for path in files for batch in _batches(path, stats, advance))

@@ -215,3 +215,17 @@ def test_a_file_that_is_no_mcap_is_named(recording, tmp_path, capsys):
     assert main(["analyze", str(d), "--mill", str(MILL), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "b.mcap" in err and "not an MCAP file" in err
+
+
+def test_spectra_on_a_thread_of_their_own_give_the_same_report(recording):
+    """With a core to spare the spectra run on their own thread: the same report, bitwise."""
+    from ingest.mill_files import load_mill_config
+    from service.cli.analyze import plan_jobs, run_jobs
+
+    config = load_mill_config(MILL)
+    inline = plan_jobs([recording[0]], [config], 1, cores=1)
+    threaded = plan_jobs([recording[0]], [config], 1, cores=2)
+    assert not inline[0].background and threaded[0].background
+    (a,), (b,) = run_jobs(inline, progress=False), run_jobs(threaded, progress=False)
+    assert json.dumps(a["reports"], sort_keys=True) == json.dumps(b["reports"], sort_keys=True)
+    assert a["reports"]["sag-5200-lrs"][0]["harmonics"]
