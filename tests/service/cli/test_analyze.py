@@ -229,3 +229,34 @@ def test_spectra_on_a_thread_of_their_own_give_the_same_report(recording):
     (a,), (b,) = run_jobs(inline, progress=False), run_jobs(threaded, progress=False)
     assert json.dumps(a["reports"], sort_keys=True) == json.dumps(b["reports"], sort_keys=True)
     assert a["reports"]["sag-5200-lrs"][0]["harmonics"]
+
+
+def test_a_progress_bar_on_a_terminal(recording):
+    """stderr on a (pseudo) terminal: the bar is drawn; piped, none (tested above)."""
+    import fcntl
+    import os
+    import pty
+    import struct
+    import subprocess
+    import sys
+    import termios
+    import time
+
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # 100 columns
+    cmd = [sys.executable, "-m", "service.cli", "analyze", str(recording[0]), "--mill", str(MILL)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=slave)
+    os.close(slave)
+    seen = b""
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        try:
+            got = os.read(master, 4096)
+        except OSError:  # the child closed the terminal
+            break
+        if not got:
+            break
+        seen += got
+    os.close(master)
+    assert proc.wait(timeout=60) == 0
+    assert b"analyze sag-5200-lrs" in seen and b"100%" in seen
