@@ -1,16 +1,18 @@
-"""``millwatch analyze``: offline analysis of an MCAP recording of one mill.
+"""``millwatch analyze``: offline analysis of an archive with the analyzer the live worker runs.
 
-Reads an MCAP file, or every ``*.mcap`` file of a directory in name order (rotated archive files
-sort by time), decodes the wire blocks of the mill's channels (live or replay keys), applies the
-channel calibration (``value = gain · (raw − offset)``), groups the channels into aligned frames
-(:mod:`analytics.signal.frame_aligner`: blocks of equal ``t0``; missing channels and gaps become
-NaN) and
-runs :class:`analytics.mill.loads.LoadAnalysis`: operating states, starts (switch-on and
-short-circuit peaks, rise times), stops, barring, starts per month against the norm (seed 000
-§6.1.3), steady-state metrics and fatigue damage per component and phase (§8.2, App. D).
+Reads MCAP files, or every ``*.mcap`` file of a directory in name order (rotated archive files
+sort by time), as the worker's recovery replays them
+(:mod:`service.worker.offline_analysis`: batches, admission by sequence number, calibration,
+aligned frames) into one :class:`~analytics.mill.analyzer.MillAnalyzer` per mill given:
+operating states, starts (switch-on and short-circuit peaks, rise times), stops, barring,
+starts per month against the norm (seed 000 §6.1.3), steady-state metrics, fatigue damage per
+component and phase (§8.2, App. D), harmonics (§6.2.7) and the alarms they raise.
 
-Output: a human summary, or ``--json`` with the whole report. Malformed blocks are counted and
-skipped (logged once per kind); unreadable files name the file.
+Output: a human summary (damage as closed cycles by phase + open residue = total), or
+``--json`` with the whole report (one mill: the report; several: ``{"mills": [...]}``) and a
+``reading`` part that counts what reading met (repeats, gaps, malformed blocks, foreign keys,
+torn file tails). Mills are split over processes with ``--jobs``; a progress bar shows on a
+terminal. Unreadable files are named.
 """
 
 from __future__ import annotations
@@ -208,7 +210,7 @@ def _job_process(index: int, job: _Job, out: Any) -> None:
     try:
         out.put(("done", index, _run_job(job, lambda n: out.put(("bytes", index, n)))))
     except BaseException as exc:  # reported to the parent, which names the job's mills
-        out.put(("error", index, f"{type(exc).__name__}: {exc}"))
+        out.put(("error", index, str(exc) if isinstance(exc, ValueError) else repr(exc)))
 
 
 def run_jobs(plan: list[_Job], *, progress: bool) -> list[dict[str, Any]]:
@@ -237,8 +239,8 @@ def run_jobs(plan: list[_Job], *, progress: bool) -> list[dict[str, Any]]:
                     bar.update(value)
                 elif kind == "done":
                     results[k] = value
-                else:
-                    raise RuntimeError(f"job of mills {_ids(plan[k])} failed: {value}")
+                else:  # (a user error, e.g. an unreadable file, reads as one)
+                    raise ValueError(f"analysis of mill(s) {_ids(plan[k])}: {value}")
         finally:
             for proc in procs:
                 proc.join(timeout=5.0)
@@ -254,7 +256,9 @@ def _ids(job: _Job) -> str:
 def _check_alive(procs: list[Any], results: dict[int, Any], plan: list[_Job]) -> None:
     for k, proc in enumerate(procs):
         if k not in results and not proc.is_alive() and proc.exitcode not in (None, 0):
-            raise RuntimeError(f"job of mills {_ids(plan[k])} died (exit code {proc.exitcode})")
+            raise RuntimeError(
+                f"the process analysing mill(s) {_ids(plan[k])} died (exit code {proc.exitcode})"
+            )
 
 
 # ---------------------------------------------------------------- output

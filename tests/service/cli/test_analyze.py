@@ -260,3 +260,15 @@ def test_a_progress_bar_on_a_terminal(recording):
     os.close(master)
     assert proc.wait(timeout=60) == 0
     assert b"analyze sag-5200-lrs" in seen and b"100%" in seen
+
+
+def test_an_unreadable_file_in_a_job_process_is_named(recording, tmp_path, capsys):
+    d = tmp_path / "plant"
+    d.mkdir()
+    (d / "sag-5200-lrs_20240101T000000Z.mcap").write_bytes(recording[0].read_bytes())
+    (d / "rod-1100-grid_20240101T000000Z.mcap").write_bytes(b"torn beyond repair")
+    other = MILL.parent / "rod-1100-grid.toml"
+    args = ["analyze", str(d), "--mill", str(MILL), "--mill", str(other), "--jobs", "2"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "rod-1100-grid_20240101T000000Z.mcap" in err and "not an MCAP file" in err
