@@ -131,7 +131,8 @@ def _db(power: float, floor: float) -> float:
 @dataclass
 class _Acc:
     """Welch sums over segments: power spectra (channels × bins), demodulated line powers
-    (channels × lines), revolutions, seconds, angle-tracked count, worst speed spread."""
+    (channels × lines), revolutions, seconds, angle-tracked count, worst speed spread; and the
+    segments dropped meanwhile, per :data:`DROP_REASONS` key."""
 
     spec: np.ndarray
     lines: np.ndarray
@@ -141,6 +142,7 @@ class _Acc:
     angle: int = 0
     spread: float = 0.0
     spans: list[tuple[int, int]] = field(default_factory=list)
+    dropped: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DROP_REASONS, 0))
 
     @classmethod
     def zeros(cls, channels: int, bins: int, lines: int) -> _Acc:
@@ -162,6 +164,7 @@ class _Acc:
         self.lines[:] = 0.0
         self.count, self.revs, self.seconds, self.angle, self.spread = 0, 0.0, 0.0, 0, 0.0
         self.spans = []
+        self.dropped = dict.fromkeys(DROP_REASONS, 0)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -173,6 +176,7 @@ class _Acc:
             "angle": self.angle,
             "spread": self.spread,
             "spans": [list(s) for s in self.spans],
+            "dropped": dict(self.dropped),
         }
 
     @classmethod
@@ -189,6 +193,7 @@ class _Acc:
             int(d["angle"]),
             float(d["spread"]),
             [(int(a), int(b)) for a, b in d["spans"]],
+            dict.fromkeys(DROP_REASONS, 0) | d.get("dropped", {}),  # (none before version 3)
         )
 
 
@@ -278,7 +283,6 @@ class HarmonicTracker:
             "stalls": 0,
             "segments": 0,
         }
-        self._dropped = dict.fromkeys(DROP_REASONS, 0)  # segments dropped, since reset_total
         self.latest: HarmonicWindow | None = None
 
     # ------------------------------------------------------------------ construction
@@ -412,7 +416,9 @@ class HarmonicTracker:
         """Book the segments begun in the buffer as dropped for reason ``why``: one per hop
         start within its ``_approx_revs`` revolutions (the buffer starts at a hop start and
         holds no complete segment)."""
-        self._dropped[why] += max(1, math.ceil(self._approx_revs / self.hop_revs))
+        n = max(1, math.ceil(self._approx_revs / self.hop_revs))
+        self._window.dropped[why] += n
+        self._total.dropped[why] += n
 
     def _append(self, x: np.ndarray, out: list[HarmonicWindow]) -> None:
         """Buffer ``x`` and cut the segments it completes. Without a complete segment waiting
@@ -580,6 +586,7 @@ class HarmonicTracker:
             tracking="angle" if acc.angle * 2 >= acc.count else "time",
             lines=tuple(lines),
             peaks=tuple(peaks),
+            segments_dropped=dict(acc.dropped),
         )
 
     def _floor(self, power: np.ndarray) -> NoiseFloor:
@@ -768,12 +775,11 @@ class HarmonicTracker:
     def reset_total(self) -> None:
         """Forget the long-run average (e.g. after maintenance) and its segment accounting."""
         self._total.reset()
-        self._dropped = dict.fromkeys(DROP_REASONS, 0)
 
     def segment_accounting(self) -> tuple[int, dict[str, int]]:
         """Segments used in the long-run average and segments dropped per reason (every key of
         :data:`DROP_REASONS`), since the start or the last :meth:`reset_total`."""
-        return self._total.count, dict(self._dropped)
+        return self._total.count, dict(self._total.dropped)
 
     def average_spectrum(self, channel: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Long-run average of ``channel``: (frequency Hz, PSD unit²/Hz, line amplitude unit)
@@ -817,7 +823,6 @@ class HarmonicTracker:
             "window": self._window.to_json(),
             "total": self._total.to_json(),
             "counters": dict(self.counters),
-            "dropped": dict(self._dropped),
             "latest": None if self.latest is None else self.latest.to_dict(),
         }
 
@@ -859,7 +864,6 @@ class HarmonicTracker:
         t._window = _Acc.from_json(snapshot["window"], nc, bins, nl)
         t._total = _Acc.from_json(snapshot["total"], nc, bins, nl)
         t.counters.update(snapshot["counters"])
-        t._dropped.update(snapshot.get("dropped", {}))  # (none booked before version 3)
         t.latest = (
             None if snapshot["latest"] is None else HarmonicWindow.from_dict(snapshot["latest"])
         )
