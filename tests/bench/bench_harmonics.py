@@ -117,7 +117,7 @@ def analyzer_run(sc: Scene) -> tuple[list[HarmonicWindow], dict[str, Any], int]:
         windows += m.process().harmonics
     windows += m.flush().harmonics
     speed = next(n for n, c in sc.config.channels.items() if c.kind == "rpm")
-    return windows, m.report(), m.spike_counts()[speed]
+    return windows, m.report(), m.spike_counts().get(speed, 0)
 
 
 def spike_rows(cfg: Any, params: dict[str, Any]) -> list[dict[str, Any]]:
