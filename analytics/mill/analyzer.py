@@ -98,8 +98,11 @@ class MillAnalyzer:
     stages (``aligner``, ``faults``, ``tacho``, ``loads``, ``harmonics``) are its own business.
     """
 
-    def __init__(self, config: MillConfig) -> None:
+    def __init__(self, config: MillConfig, *, spectra: bool = True) -> None:
         self.config = config
+        #: Whether running samples feed the harmonic tracker (False: an offline question that
+        #: needs no spectra, e.g. damage; states, events and damage are the same either way).
+        self.spectra = spectra
         self.analysis_config = analysis_config(config)
         fs = float(config.sample_rate_hz)
         self.aligner = FrameAligner(list(config.channels), fs)
@@ -263,7 +266,7 @@ class MillAnalyzer:
         (not the state at the end of a frame), so spectra do not depend on the framing."""
         n = len(frame)
         shown = self.loads.shown_states
-        if n == 0 or shown.shape[0] != n:
+        if not self.spectra or n == 0 or shown.shape[0] != n:
             return
         running = shown == _RUNNING
         if not running[0] and not running.any():  # a stopped mill costs no spectra
@@ -380,6 +383,8 @@ class MillAnalyzer:
         """The analyzer's report plus harmonics, unexplained peaks and data quality."""
         rep = self.loads.report()
         rep |= harmonics_report(self.harmonics)
+        if not self.spectra:
+            rep["summary"]["spectra"] = "off: no spectra were computed (asked for)"
         rep["data_quality"] = {
             "faults": {n: c.to_dict() for n, c in self.faults.totals().items()},
             "missing_blocks": self.aligner.missing_blocks,

@@ -17,15 +17,16 @@ batches of at least ``min_messages``.
 
 from __future__ import annotations
 
-import io
+import mmap
+import os
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import zstandard
-from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import Chunk
@@ -45,6 +46,7 @@ __all__ = ["BatchReader", "MessageBatch", "archive_batches"]
 _MESSAGE_HEAD = np.dtype([("channel", "<u2"), ("sequence", "<u4"), ("log_time", "<u8"),
                           ("publish_time", "<u8")])  # fmt: skip
 _RECORD_HEAD = 9  # opcode u8 + length u64
+_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, CRC, compression length
 _TOP_LEVEL = np.array([Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANNEL,
                        Opcode.DATA_END], dtype=np.int64)  # fmt: skip
 
@@ -152,15 +154,18 @@ class BatchReader(TailTolerantBase):
         return self._known[1], self._known[2]
 
     def messages(self) -> Iterator[MessageBatch]:
-        """Batches of all messages in file order (single pass; the file is read at once)."""
+        """Batches of all messages in file order (single pass). The file is memory-mapped at
+        its length when opened (a live file may grow: this is a snapshot; archive files are
+        only appended to, never truncated), so its bytes are not copied, only decompressed."""
         self._zstd = zstandard.ZstdDecompressor()
         with open(self.path, "rb") as stream:
-            data = stream.read()  # a live file may grow: this is a snapshot
+            size = os.fstat(stream.fileno()).st_size
+            data = mmap.mmap(stream.fileno(), size, access=mmap.ACCESS_READ) if size else b""
         if data[: len(MCAP_MAGIC)] != MCAP_MAGIC:
             raise ArchiveError(f"{self.path}: not an MCAP file (bad magic)")
         self.valid_bytes = len(MCAP_MAGIC)
         yield from self._records(np.frombuffer(data, dtype=np.uint8))
-        self.torn_bytes = 0 if self.finished else len(data) - self.valid_bytes
+        self.torn_bytes = 0 if self.finished else size - self.valid_bytes
 
     def _records(self, data: np.ndarray) -> Iterator[MessageBatch]:
         """The top-level records from the compiled scan; only chunks, messages, schemas,
@@ -171,8 +176,9 @@ class BatchReader(TailTolerantBase):
         for r in np.flatnonzero(wanted).tolist():
             self.valid_bytes = int(starts[r]) - _RECORD_HEAD
             opcode, a = int(ops[r]), int(starts[r])
+            body = data[a : a + int(lengths[r])].data  # a memoryview: no copy of a chunk
             try:
-                yield from self._record(opcode, data[a : a + int(lengths[r])].tobytes())
+                yield from self._record(opcode, body)
             except (ArchiveError, McapError, zstandard.ZstdError, struct.error, ValueError) as exc:
                 self.error = f"corrupt record at byte {self.valid_bytes}: {exc}"
                 return
@@ -190,14 +196,31 @@ class BatchReader(TailTolerantBase):
 
     def _record(self, opcode: int, body: bytes | memoryview) -> Iterator[MessageBatch]:
         if opcode == Opcode.CHUNK:
-            chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-            data = np.frombuffer(decompress_chunk(chunk, self._zstd), dtype=np.uint8)
-            yield from self._chunk(data)
+            yield from self._chunk(self._decompress(memoryview(body)))
         elif opcode == Opcode.MESSAGE:
             data = np.frombuffer(bytes(body), dtype=np.uint8)
             yield from self._messages(data, np.zeros(1, np.int64), np.array([len(data)]))
         else:
-            self._metadata(opcode, body)  # schemas, channels: no messages
+            self._metadata(opcode, bytes(body))  # schemas, channels: no messages
+
+    def _decompress(self, body: memoryview) -> np.ndarray:
+        """The records of a Chunk record's body (MCAP spec: message start and end time u64,
+        uncompressed size u64, uncompressed CRC u32, compression string, records u64-prefixed),
+        decompressed and CRC-checked as :func:`~ingest.archive.reader.decompress_chunk` does,
+        without copying the compressed bytes first."""
+        start, end, size, crc, n = _CHUNK_HEAD.unpack_from(body, 0)
+        pos = _CHUNK_HEAD.size + n
+        compression = bytes(body[_CHUNK_HEAD.size : pos]).decode()
+        (length,) = struct.unpack_from("<Q", body, pos)
+        pos += 8
+        if length > len(body) - pos:
+            raise ArchiveError("chunk records run past the chunk")
+        records: Any = body[pos : pos + length]  # (Chunk says bytes; any buffer serves)
+        chunk = Chunk(
+            compression=compression, data=records, message_end_time=end,
+            message_start_time=start, uncompressed_crc=crc, uncompressed_size=size,
+        )  # fmt: skip
+        return np.frombuffer(decompress_chunk(chunk, self._zstd), dtype=np.uint8)
 
     def _chunk(self, data: np.ndarray) -> Iterator[MessageBatch]:
         ops, starts, lengths = _scan_records(data)

@@ -81,3 +81,151 @@ def test_recording_of_another_mill(recording, capsys):
     other = MILL.parent / "rod-1100-grid.toml"
     assert main(["analyze", str(recording[0]), "--mill", str(other)]) == 2
     assert "no blocks of mill 'rod-1100-grid'" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- the archive as the plant sent it
+def _messages(path: Path) -> list:
+    from ingest.archive.reader import TailTolerantReader
+
+    return list(TailTolerantReader(path).messages())
+
+
+def _write(directory: Path, prefix: str, messages: list) -> Path:
+    from ingest.archive.writer import ArchiveWriter
+
+    with ArchiveWriter(directory, prefix) as archive:
+        for m in messages:
+            archive.write(m.key, m.payload, m.log_time_ns)
+    return directory
+
+
+def _analyze(paths: list[Path], *extra: str) -> dict:
+    import contextlib
+    import io
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        rc = main(["analyze", *map(str, paths), "--mill", str(MILL), "--json", "--no-progress",
+                   *extra])  # fmt: skip
+    assert rc == 0
+    return json.loads(out.getvalue())
+
+
+def _t0(msg) -> int:
+    from ingest import wire
+
+    return wire.decode_block(msg.payload).t0_ns
+
+
+def test_a_file_that_starts_mid_run_books_its_run_damage(recording, tmp_path):
+    """start-lrs: start at 5 s, stop at 150 s. The archive cut at 40 s (mid-run): the second
+    file alone is analysed as running from its first samples (speed decides), and books the run
+    damage the whole record books after the cut, to the residues at the cut."""
+    out, _ = recording
+    msgs = _messages(out)
+    cut = min(_t0(m) for m in msgs) + 40 * 10**9
+    a = _write(tmp_path / "a", "a", [m for m in msgs if _t0(m) < cut])
+    b = _write(tmp_path / "b", "b", [m for m in msgs if _t0(m) >= cut])
+    whole, first, second = _analyze([a, b]), _analyze([a]), _analyze([b])
+    assert second["starts"] == [] and len(second["stops"]) == 1
+    # the first samples are running at once: no unknown span, the run phase covers the time
+    # up to the stop (dated at the torque drop, 150 s after the scene's start)
+    seconds = second["phase_seconds"]
+    assert seconds.get("unknown", 0.0) == 0.0
+    assert seconds["run"] == pytest.approx(110.0, abs=0.5)
+    assert len(second["steady_state"]) >= 1
+    for comp, d in second["damage"].items():
+        run_b = d["phases"]["run"]
+        inside = whole["damage"][comp]["phases"]["run"] - first["damage"][comp]["phases"]["run"]
+        assert run_b > 0.0
+        bound = first["damage"][comp]["pending_residue"] + d["pending_residue"]
+        assert abs(run_b - inside) <= bound, (comp, run_b, inside, bound)
+
+
+def test_damage_totals_add_up_with_the_residue_on_its_own_line(recording, capsys):
+    out, _ = recording
+    r = _analyze([out])
+    for d in r["damage"].values():
+        closed = sum(d["phases"].values())
+        assert closed == pytest.approx(d["committed"], rel=1e-12)
+        assert closed + d["pending_residue"] == pytest.approx(d["with_residue"], rel=1e-12)
+    capsys.readouterr()
+    assert main(["analyze", str(out), "--mill", str(MILL), "--no-progress"]) == 0
+    text = capsys.readouterr()
+    assert text.out.count("open residue") == len(r["damage"])
+    assert text.out.count("closed cycles") == len(r["damage"])
+    assert "%|" not in text.err  # no progress bar when stderr is not a terminal
+    assert "x real time" in text.err
+
+
+def test_repeats_and_malformed_blocks_are_counted_and_change_nothing(recording, tmp_path):
+    out, _ = recording
+    msgs = _messages(out)
+    bad = [*msgs[:500], msgs[499], *msgs[500:]]  # a duplicate, as a recovery overlap brings
+    torn = msgs[700]
+    bad.insert(701, type(torn)(torn.key, torn.log_time_ns, torn.publish_time_ns, torn.sequence,
+                               torn.payload[:-3], torn.index, torn.channel))  # fmt: skip
+    clean, dirty = _analyze([out]), _analyze([_write(tmp_path / "d", "d", bad)])
+    assert dirty["reading"]["repeated_blocks"] == 1
+    assert sum(dirty["reading"]["malformed_blocks"].values()) == 1
+    for key in ("starts", "stops", "steady_state", "damage", "phase_seconds"):
+        assert dirty[key] == clean[key], key
+
+
+def test_no_spectra_skips_the_harmonics_only(recording):
+    out, _ = recording
+    full, fast = _analyze([out]), _analyze([out], "--no-spectra")
+    for key in ("starts", "stops", "steady_state", "damage", "phase_seconds"):
+        assert fast[key] == full[key], key
+    assert full["harmonics"] and fast["harmonics"] == []
+    assert "off" in fast["summary"]["spectra"]
+
+
+def test_jobs_split_the_mills_and_give_the_same_reports(tmp_path):
+    other = MILL.parent / "rod-1100-grid.toml"
+    d = tmp_path / "plant"
+    for mill in (MILL, other):
+        assert main(["simulate", "--scene", "start-lrs" if mill == MILL else "start-grid",
+                     "--mill", str(mill), "--duration", "40s", "--out", str(d),
+                     "--no-progress"]) == 0  # fmt: skip
+    args = ["analyze", str(d), "--mill", str(MILL), "--mill", str(other), "--json",
+            "--no-progress"]  # fmt: skip
+    import contextlib
+    import io
+
+    runs = []
+    for jobs in ("1", "2"):
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            assert main([*args, "--jobs", jobs]) == 0
+        runs.append(json.loads(buf.getvalue()))
+    one, two = runs
+    assert [m["mill"] for m in one["mills"]] == ["sag-5200-lrs", "rod-1100-grid"]
+    assert one == two
+    for m in one["mills"]:
+        assert m["reading"]["foreign_blocks"] == 0 and m["samples"] == 40_000
+
+
+def test_a_file_that_is_no_mcap_is_named(recording, tmp_path, capsys):
+    """Read by the reader thread, the error reaches the command and names the file."""
+    d = tmp_path / "mixed"
+    d.mkdir()
+    (d / "a.mcap").write_bytes(recording[0].read_bytes())
+    (d / "b.mcap").write_bytes(b"not an archive at all")
+    assert main(["analyze", str(d), "--mill", str(MILL), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "b.mcap" in err and "not an MCAP file" in err
+
+
+def test_spectra_on_a_thread_of_their_own_give_the_same_report(recording):
+    """With a core to spare the spectra run on their own thread: the same report, bitwise."""
+    from ingest.mill_files import load_mill_config
+    from service.cli.analyze import plan_jobs, run_jobs
+
+    config = load_mill_config(MILL)
+    inline = plan_jobs([recording[0]], [config], 1, cores=1)
+    threaded = plan_jobs([recording[0]], [config], 1, cores=2)
+    assert not inline[0].background and threaded[0].background
+    (a,), (b,) = run_jobs(inline, progress=False), run_jobs(threaded, progress=False)
+    assert json.dumps(a["reports"], sort_keys=True) == json.dumps(b["reports"], sort_keys=True)
+    assert a["reports"]["sag-5200-lrs"][0]["harmonics"]

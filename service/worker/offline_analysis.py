@@ -1,0 +1,363 @@
+"""Offline analysis of archive files (``millwatch analyze``): the replay path, with no store.
+
+The files' messages are read as batches (:class:`~ingest.archive.batches.BatchReader`: one
+compiled scan per chunk, no Python object per message) and handed to the worker's
+:class:`~service.worker.batch_lane.BatchLane`. Its regular runs reach each mill's analyzer as
+arrays (:meth:`~analytics.mill.analyzer.MillAnalyzer.add_blocks`); anything irregular — a
+malformed block, a gap, a repeat, a clock fault — goes block by block through
+:meth:`OfflineSink.handle`, with the live worker's admission (a block is new only if its sequence
+number is; see :mod:`service.worker.health`), calibration and alignment. At each of the lane's
+commits every analyzer analyses what it was given as contiguous chunks of
+:data:`~analytics.mill.analyzer.MAX_CHUNK_S`. So an archive analysed here gives the results the
+live worker and a replay give for the same blocks, at the replay's cost per sample.
+
+:func:`analyze_files` runs the mills of one process; ``millwatch analyze --jobs N`` splits the
+mills over N processes, each with its own :func:`analyze_files` (a file named after a mill, as
+``millwatch simulate --out DIR`` names them, is read only by the job that has that mill).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from collections import Counter
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Generic, TypeVar, cast
+
+import numpy as np
+
+from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.analyzer import MillAnalyzer
+from analytics.spectra.facts import HarmonicWindow
+from analytics.spectra.tracker import HarmonicTracker
+from ingest import keys
+from ingest.archive.batches import BatchReader, MessageBatch
+from ingest.archive.files import ArchiveError
+from ingest.wire import WireError, decode_block
+from service.worker.batch_lane import BatchLane
+from service.worker.block_queue import QueuedBlock
+from service.worker.health import MillHealth
+
+__all__ = ["OfflineSink", "ReadingStats", "analyze_files"]
+
+log = logging.getLogger(__name__)
+
+_T = TypeVar("_T")
+
+#: Messages handed to the lane at a time (a file's last batch may be smaller).
+BATCH_MESSAGES = 20_000
+
+
+@dataclass
+class ReadingStats:
+    """What reading the recording met, over all its mills: files read, blocks on keys of no
+    given mill, malformed blocks by kind, files read only up to a torn or corrupt record."""
+
+    files: list[str] = field(default_factory=list)
+    foreign_blocks: int = 0
+    malformed_blocks: Counter[str] = field(default_factory=Counter)
+    unreadable_tails: dict[str, str] = field(default_factory=dict)
+
+    def merge(self, other: ReadingStats) -> None:
+        """Add another job's counts (each file is counted by one job only)."""
+        self.files += [f for f in other.files if f not in self.files]
+        self.foreign_blocks += other.foreign_blocks
+        self.malformed_blocks.update(other.malformed_blocks)
+        self.unreadable_tails |= other.unreadable_tails
+
+
+class BackgroundSpectra:
+    """A mill's :class:`~analytics.spectra.tracker.HarmonicTracker` fed by a thread of its own,
+    in the order the analyzer feeds it (so with the same results): the spectra — about half the
+    work of a running mill — overlap the rest of the analysis on another core. For an offline
+    analysis only, which reads the tracker's windows from its report at the end: :meth:`feed`
+    returns no windows. Reading any other attribute waits until everything fed is analysed."""
+
+    def __init__(self, tracker: HarmonicTracker, depth: int = 32) -> None:
+        self._tracker = tracker
+        self._todo: queue.Queue[tuple[int, float, dict[str, np.ndarray], bool] | None] = (
+            queue.Queue(maxsize=depth)
+        )
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="spectra", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while (item := self._todo.get()) is not None:
+            try:
+                if self._error is None:
+                    self._tracker.feed(*item)
+            except BaseException as exc:  # raised in the analyzer's thread at the next call
+                self._error = exc
+            finally:
+                self._todo.task_done()
+        self._todo.task_done()
+
+    def feed(
+        self, t0_ns: int, fs: float, frame: dict[str, np.ndarray], running: bool
+    ) -> list[HarmonicWindow]:
+        """Queue one frame (copied: the analyzer's arrays are its own) and return at once."""
+        self._raise()
+        self._todo.put((t0_ns, fs, {k: v.copy() for k, v in frame.items()}, running))
+        return []
+
+    def drain(self) -> None:
+        """Wait until every frame fed is analysed (and raise what the tracker raised)."""
+        self._todo.join()
+        self._raise()
+
+    def flush(self) -> list[HarmonicWindow]:
+        self.drain()
+        return self._tracker.flush()
+
+    def close(self) -> None:
+        """Stop the thread (after what is queued)."""
+        if self._thread.is_alive():
+            self._todo.put(None)
+            self._thread.join(timeout=60.0)
+
+    def _raise(self) -> None:
+        if self._error is not None:
+            raise self._error
+
+    def __getattr__(self, name: str) -> Any:
+        self.drain()
+        return getattr(self._tracker, name)
+
+
+class OfflineSink:
+    """The :class:`~service.worker.batch_lane.BlockSink` of an offline analysis: routes keys
+    (live or replay) to the given mills' channels, admits blocks as the live worker does and
+    feeds each mill's :class:`~analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
+
+    def __init__(
+        self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
+    ) -> None:
+        self._mills = {c.id: c for c in configs}
+        self._health = {c.id: MillHealth.for_channels(list(c.channels)) for c in configs}
+        self.analyzers = {c.id: MillAnalyzer(c, spectra=spectra) for c in configs}
+        self._background: list[BackgroundSpectra] = []
+        if spectra and background:  # each mill's spectra on a thread of its own
+            for analyzer in self.analyzers.values():
+                self._background.append(BackgroundSpectra(analyzer.harmonics))
+                # (the analyzer only feeds, flushes and reports its tracker: the wrapper does)
+                analyzer.harmonics = cast(HarmonicTracker, self._background[-1])
+        self._live = {
+            keys.channel_key(c.site, c.id, ch.key): (c.id, name)
+            for c in configs
+            for name, ch in c.channels.items()
+        }
+        self._routes: dict[str, tuple[str, str] | None] = {}
+        self.foreign_blocks = 0
+        self.malformed: Counter[str] = Counter()
+        self._logged: set[tuple[str, str]] = set()
+
+    @property
+    def mills(self) -> Mapping[str, MillConfig]:
+        return self._mills
+
+    @property
+    def health(self) -> Mapping[str, MillHealth]:
+        return self._health
+
+    def route(self, key: str) -> tuple[str, str] | None:
+        """(mill id, channel name) of a live or replay key; None for no given mill."""
+        if key not in self._routes:
+            try:
+                self._routes[key] = self._live.get(keys.to_live(key))
+            except keys.KeyFormatError:
+                self._routes[key] = None
+        return self._routes[key]
+
+    def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
+        """One block the lane could not take as part of a regular run: decode, admit, align
+        (``archive`` is ignored: nothing is archived here)."""
+        route = self.route(item.key)
+        if route is None:
+            self.foreign_blocks += 1
+            return
+        mill_id, channel = route
+        health = self._health[mill_id].channels[channel]
+        try:
+            block = decode_block(item.payload)
+        except WireError as exc:
+            health.decode_error(exc.kind, item.recv_ns)
+            self.malformed[type(exc).__name__] += 1
+            self._log_once(item.key, exc.kind, "malformed block on %s: %s (further ones counted)",
+                           item.key, exc)  # fmt: skip
+            return
+        got = health.accept(block, item.recv_ns)
+        if got.block is None:  # a repeat: counted in the channel's health, dropped
+            return
+        if got.clock_fault is not None:
+            self._log_once(item.key, "clock_fault", "%s: block seq %d has a t0 its sequence "
+                           "number contradicts: analysed at the sequence number's time (further "
+                           "ones counted)", item.key, block.seq)  # fmt: skip
+        self.analyzers[mill_id].add(channel, got.block.t0_ns, got.block.fs, got.block.samples)
+
+    def accept_regular(
+        self, mill_id: str, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray
+    ) -> None:
+        """A run of one mill's regular blocks (health already observed by the lane)."""
+        self.analyzers[mill_id].add_blocks(chan, t0_ns, raw)
+
+    def commit(self) -> None:
+        """Analyse what each mill was given since the last commit (long contiguous chunks)."""
+        for analyzer in self.analyzers.values():
+            if analyzer.backlog:
+                analyzer.process()
+
+    def finish(self) -> None:
+        """End of the recording: every analyzer emits what its stages still hold."""
+        self.commit()
+        for analyzer in self.analyzers.values():
+            analyzer.flush()
+
+    def close(self) -> None:
+        """Stop the spectra threads (after :meth:`finish` and the reports)."""
+        for spectra in self._background:
+            spectra.close()
+
+    def reading(self, mill_id: str) -> dict[str, Any]:
+        """One mill's reading counts: blocks, gaps, repeats, clock faults, decode errors and
+        what its aligner met (JSON-ready)."""
+        channels = self._health[mill_id].channels.values()
+        aligner = self.analyzers[mill_id].aligner
+        return {
+            "blocks": sum(h.blocks for h in channels),
+            "missing_blocks": sum(h.missing_blocks for h in channels),
+            "repeated_blocks": sum(h.repeats for h in channels),
+            "clock_fault_blocks": sum(h.clock_faults for h in channels),
+            "decode_errors": sum(sum(h.decode_errors.values()) for h in channels),
+            "gap_samples": aligner.gap_samples,
+            "late_blocks": aligner.dropped_blocks,
+        }
+
+    def _log_once(self, key: str, kind: str, msg: str, *args: object) -> None:
+        if (key, kind) not in self._logged:
+            self._logged.add((key, kind))
+            log.warning(msg, *args)
+
+
+def _batches(
+    path: Path, stats: ReadingStats, advance: Callable[[int], None]
+) -> Iterator[MessageBatch]:
+    """The file's messages in batches of at least :data:`BATCH_MESSAGES`; ``advance(bytes)``
+    as the reader moves through the file."""
+    reader = BatchReader(path)
+    group: list[MessageBatch] = []
+    size = done = 0
+    try:
+        for batch in reader.messages():
+            group.append(batch)
+            size += len(batch)
+            if size >= BATCH_MESSAGES:
+                yield MessageBatch.concat(group)
+                group, size = [], 0
+                advance(reader.valid_bytes - done)
+                done = reader.valid_bytes
+    except (ArchiveError, OSError) as exc:
+        raise ValueError(f"RECORDING {path}: {exc}") from exc
+    if group:
+        yield MessageBatch.concat(group)
+    advance(path.stat().st_size - done)
+    if reader.error:
+        log.warning("%s: %s (read up to it)", path, reader.error)
+        stats.unreadable_tails[str(path)] = reader.error
+
+
+def _ours(batch: MessageBatch, sink: OfflineSink) -> tuple[MessageBatch, int]:
+    """The messages of ``batch`` on the sink's mills' keys, and how many others it holds (one
+    by one through the lane they would cost a Python call each; they are only counted)."""
+    foreign = [c for c, topic in batch.topics.items() if sink.route(topic) is None]
+    if not foreign:
+        return batch, 0
+    theirs = np.isin(batch.channel, foreign)
+    return batch.select(~theirs), int(np.count_nonzero(theirs))
+
+
+class _ReadAhead(Generic[_T]):
+    """Iterates ``items`` produced by a reader thread at most ``depth`` ahead: reading a file,
+    decompressing and scanning its chunks release the GIL, so they overlap the analysis
+    (results do not depend on it; memory: ``depth`` batches). An error in the thread is raised
+    in the consumer; :meth:`close` (or the end of a ``with``) stops the thread."""
+
+    def __init__(self, items: Iterator[_T], depth: int = 2) -> None:
+        self._items = items
+        self._box: queue.Queue[tuple[str, Any]] = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="analyze-reader", daemon=True)
+        self._thread.start()
+
+    def _put(self, item: tuple[str, Any]) -> bool:
+        while not self._stop.is_set():
+            try:
+                self._box.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self) -> None:
+        try:
+            for item in self._items:
+                if not self._put(("item", item)):
+                    return
+            self._put(("end", None))
+        except BaseException as exc:  # handed to the consumer, which raises it
+            self._put(("error", exc))
+
+    def __iter__(self) -> Iterator[_T]:
+        while True:
+            kind, value = self._box.get()
+            if kind == "end":
+                return
+            if kind == "error":
+                raise value
+            yield value
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+
+    def __enter__(self) -> _ReadAhead[_T]:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def analyze_files(
+    files: Sequence[Path],
+    configs: Sequence[MillConfig],
+    *,
+    spectra: bool = True,
+    advance: Callable[[int], None] = lambda _: None,
+    uncounted: frozenset[Path] = frozenset(),
+    background: bool = False,
+) -> tuple[OfflineSink, ReadingStats]:
+    """Analyse ``configs``' mills over ``files`` (in order, one stream); ``advance(bytes)``
+    reports progress; blocks of no given mill in ``uncounted`` files are not counted (another
+    job's share counts them); ``background``: each mill's spectra on a thread of its own
+    (:class:`BackgroundSpectra`: for cores that would idle otherwise). Returns the sink (its
+    analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and what reading
+    met. The files are read a batch or two ahead by a thread (:class:`_ReadAhead`)."""
+    sink = OfflineSink(configs, spectra=spectra, background=background)
+    lane = BatchLane(sink)
+    stats = ReadingStats()
+    read = ((path, batch) for path in files for batch in _batches(path, stats, advance))
+    with _ReadAhead(read) as ahead:
+        for path, batch in ahead:
+            ours, foreign = _ours(batch, sink)
+            if path not in uncounted:
+                sink.foreign_blocks += foreign
+            if len(ours):
+                lane.replay(ours)
+    sink.finish()
+    stats.files = [str(p) for p in files if p not in uncounted]
+    stats.foreign_blocks = sink.foreign_blocks
+    stats.malformed_blocks = sink.malformed
+    return sink, stats
