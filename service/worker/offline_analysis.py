@@ -69,6 +69,9 @@ class ReadingStats:
         self.unreadable_tails |= other.unreadable_tails
 
 
+_Samples = dict[str, np.ndarray]  # channel → samples of one frame
+
+
 class BackgroundSpectra:
     """A mill's :class:`~analytics.spectra.tracker.HarmonicTracker` fed by a thread of its own,
     in the order the analyzer feeds it (so with the same results): the spectra — about half the
@@ -97,12 +100,7 @@ class BackgroundSpectra:
         self._todo.task_done()
 
     def feed(
-        self,
-        t0_ns: int,
-        fs: float,
-        frame: dict[str, np.ndarray],
-        running: bool,
-        why: str = "run_ended",
+        self, t0_ns: int, fs: float, frame: _Samples, running: bool, why: str = "run_ended"
     ) -> list[HarmonicWindow]:
         """Queue one frame (copied: the analyzer's arrays are its own) and return at once
         (``why``: as the tracker's :meth:`~analytics.spectra.tracker.HarmonicTracker.feed`)."""
