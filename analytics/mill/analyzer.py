@@ -57,6 +57,7 @@ DERIVED_SPEED = "speed_from_tacho"
 #: vanish, short enough that an event window is still in the analyzer's 90 s ring.
 MAX_CHUNK_S = 10.0
 _RUNNING = np.int8(OperatingState.RUNNING)
+_UNKNOWN = np.int8(OperatingState.UNKNOWN)
 _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
@@ -270,7 +271,8 @@ class MillAnalyzer:
         running = shown == _RUNNING
         if not running[0] and not running.any():  # a stopped mill costs no spectra
             self._note_last_good(frame)
-            out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, {}, False)
+            why = _why_not_running(shown[0])
+            out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, {}, False, why)
             return
         held = self._held(frame)
         if running.all():
@@ -281,7 +283,8 @@ class MillAnalyzer:
         for a, b in itertools.pairwise(cuts):
             t_ns = self.faults.time_of(first + a)
             piece = {c: x[a:b] for c, x in held.items()} if running[a] else {}
-            out.harmonics += self.harmonics.feed(t_ns, frame.fs, piece, bool(running[a]))
+            why = _why_not_running(shown[a])
+            out.harmonics += self.harmonics.feed(t_ns, frame.fs, piece, bool(running[a]), why)
 
     def _held(self, frame: Frame) -> dict[str, np.ndarray]:
         """Flagged samples replaced by the last good value (spectra must not see spikes)."""
@@ -456,6 +459,12 @@ class MillAnalyzer:
                 "the snapshot",
                 exc,
             )
+
+
+def _why_not_running(state: np.int8) -> str:
+    """The tracker's reason (:data:`~analytics.spectra.tracker.DROP_REASONS`) for segments
+    left incomplete when the mill shows ``state`` instead of running."""
+    return "state_unknown" if state == _UNKNOWN else "run_ended"
 
 
 def _channel_change(was: list[str], now: list[str]) -> str | None:

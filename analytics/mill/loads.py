@@ -22,7 +22,8 @@ fault detector are never peaks (they are NaN in the ring). For rainflow counting
 value is held across them: the counter sees the signal with the gap closed (a plateau has no
 reversal), so no real reversal is lost and none is invented inside the gap; samples before the
 first valid one are skipped. The state machine labels missing samples ``unknown``; flagged ones
-are ignored.
+are ignored (a flagged speed sample too, unless it is a NaN dropout: then the state is unknown),
+so a telemetry spike on the speed channel interrupts no running phase and no spectrum.
 
 Framing: every stage is a function of the sample stream, not of the blocking (the state machine
 and rainflow are per-sample kernels; phase measurements wait until the phase is decided; sums are
@@ -253,12 +254,16 @@ class LoadAnalysis:
 
     def _block(self, frame: Frame, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Rows in ring order, flagged samples as NaN, written to the ring (built in place when
-        the ring's next samples are in one piece); and where every motor channel is flagged."""
+        the ring's next samples are in one piece); and the samples the state machine ignores:
+        where every motor channel is flagged, or the speed is flagged but not missing (a spike,
+        a rail or zero run: a wrong value says nothing about the state, while a NaN dropout
+        makes the state unknown)."""
         slot = self.ring.slot(n)
         block = np.empty((len(self.rows), n)) if slot is None else slot
         flags = frame.flags or {}
         flagged_all = np.zeros(n, dtype=bool)
         motor_flags = []
+        speed_wrong = None
         for r, name in enumerate(self.rows):
             x = frame.data.get(name)
             if x is None:
@@ -267,11 +272,15 @@ class LoadAnalysis:
             block[r] = x
             f = flags.get(name)
             if f is not None:
+                if r == 0 and f.any():  # (row 0: the speed, before its flags become NaN)
+                    speed_wrong = f & np.isfinite(block[0])
                 block[r, f] = np.nan
                 if name in self.motor:
                     motor_flags.append(f)
         if motor_flags:
             flagged_all = np.logical_and.reduce(motor_flags)
+        if speed_wrong is not None:
+            flagged_all |= speed_wrong
         if slot is None:
             self.ring.write(block)
         else:

@@ -11,7 +11,7 @@ the Unix epoch (seed 000 §6.2.7).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 __all__ = ["HarmonicWindow", "LineMeasurement", "UnexplainedPeak"]
@@ -77,7 +77,9 @@ class HarmonicWindow:
     """The harmonic table of one Welch window (all channels).
 
     ``segments`` are the (start, end) ns of the averaged segments; ``pinion_speed_rpm`` their mean
-    speed (total revolutions / total time); ``resolution_hz`` the bin width at that speed.
+    speed (total revolutions / total time); ``resolution_hz`` the bin width at that speed;
+    ``segments_dropped`` the segments begun and dropped since the previous window, per reason
+    (:data:`analytics.spectra.tracker.DROP_REASONS`; empty in tables stored before issue 18).
     """
 
     t_start_ns: int
@@ -88,6 +90,7 @@ class HarmonicWindow:
     tracking: str
     lines: tuple[LineMeasurement, ...]
     peaks: tuple[UnexplainedPeak, ...]
+    segments_dropped: dict[str, int] = field(default_factory=dict)
 
     def line(self, channel: str, name: str) -> LineMeasurement:
         """The measurement of line ``name`` on ``channel`` (KeyError if absent)."""
@@ -107,6 +110,7 @@ class HarmonicWindow:
             "tracking": self.tracking,
             "lines": [m.to_dict() for m in self.lines],
             "peaks": [p.to_dict() for p in self.peaks],
+            "segments_dropped": dict(self.segments_dropped),
         }
 
     @classmethod
@@ -125,7 +129,7 @@ class HarmonicWindow:
         return cls(
             d["t_start_ns"], d["t_end_ns"], tuple(tuple(s) for s in d["segments"]),
             d["pinion_speed_rpm"], d["resolution_hz"], d["tracking"], tuple(lines),
-            tuple(UnexplainedPeak(**p) for p in d["peaks"]),
+            tuple(UnexplainedPeak(**p) for p in d["peaks"]), dict(d.get("segments_dropped", {})),
         )  # fmt: skip
 
 

@@ -1,14 +1,15 @@
 """The harmonics part of a mill's report: the long-run table of a :class:`HarmonicTracker`.
 
 Seed 000 §6.2.7 and §10.5: the steady-state spectrum's expected lines and unexplained peaks, as
-one row per channel and line, for operators and the monthly report.
+one row per channel and line, for operators and the monthly report, and how many spectral
+segments the table rests on and how many were dropped, and why (issue 18).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from analytics.spectra.tracker import HarmonicTracker
+from analytics.spectra.tracker import HarmonicTracker, describe_segments
 
 __all__ = ["harmonics_report"]
 
@@ -17,16 +18,26 @@ def harmonics_report(tracker: HarmonicTracker) -> dict[str, Any]:
     """Report of the running portions so far (long-run Welch average over every segment).
 
     Keys: ``harmonics`` (one row per channel and expected line), ``unexplained_peaks``, and
-    ``summary`` (segments, running seconds, mean pinion speed, resolution). JSON-ready.
+    ``summary``: ``segments`` (used, as ``segments_used``), ``segments_dropped`` (count per
+    reason, every key of :data:`~analytics.spectra.tracker.DROP_REASONS`), ``segments_note``
+    (the same in one plain sentence), and once a segment is used the running seconds, mean
+    pinion speed, resolution and tracking mode. JSON-ready.
     """
+    used, dropped = tracker.segment_accounting()
+    accounting = {
+        "segments": used,
+        "segments_used": used,
+        "segments_dropped": dropped,
+        "segments_note": describe_segments(used, dropped),
+    }
     table = tracker.total_table()
     if table is None:
-        return {"harmonics": [], "unexplained_peaks": [], "summary": {"segments": 0}}
+        return {"harmonics": [], "unexplained_peaks": [], "summary": accounting}
     return {
         "harmonics": [m.to_dict() for m in table.lines],
         "unexplained_peaks": [p.to_dict() for p in table.peaks],
-        "summary": {
-            "segments": tracker.running_segments,
+        "summary": accounting
+        | {
             "running_s": tracker.counters["running_samples"] / tracker.fs,
             "pinion_speed_rpm": table.pinion_speed_rpm,
             "resolution_hz": table.resolution_hz,

@@ -34,6 +34,16 @@ Algorithm (:class:`HarmonicTracker`, a counter emitting :class:`HarmonicWindow` 
    lie more than ``match_bins`` bins from every expected line, harmonic or sideband → reported
    as possible torsional resonance with the nearest natural frequency (seed 001 model).
 
+Segment accounting: every segment begun (a hop start within a running period) is either *used*
+(averaged into the tables) or *dropped* with one of the reasons of :data:`DROP_REASONS`: the
+running period ended (a stop or trip — or, for the analyzer, an unknown operating state, i.e. a
+speed dropout), a gap in the samples' times, a non-finite sample, or a mill too slow to complete a
+segment in the buffer. :meth:`HarmonicTracker.segment_accounting` gives the counts since the start
+(or the last :meth:`~HarmonicTracker.reset_total`), :func:`describe_segments` says it in words.
+Telemetry spikes are not a reason: the analyzer holds flagged samples at the last good value and
+its state machine ignores them (issue 18), so a spike neither ends a running period nor puts a
+wild speed into the pinion angle.
+
 Knobs with measured errors (``tests/bench/bench_harmonics.py``): ``window_s``, ``overlap``,
 ``window`` (hann, blackmanharris, flattop), ``tracking``. State is bounded: buffers sized from the
 configuration, spectra of fixed length, nothing grows with running time.
@@ -75,16 +85,26 @@ from analytics.spectra.tapers import (
     window_values,
 )
 
-__all__ = ["MAX_DEFER_HOPS", "HarmonicTracker"]
+__all__ = ["DROP_REASONS", "MAX_DEFER_HOPS", "HarmonicTracker", "describe_segments"]
 
 log = logging.getLogger(__name__)
 
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 3  # 2: arrays packed by analytics.snapshot_arrays; 3: dropped segments
+_OLD_VERSIONS = (2,)  # restored with no segment dropped so far
 _SPEED_BLOCKS = 10  # speed block means per segment for the drift estimate
 _TINY = float(np.finfo(float).tiny)
 #: Largest deferral of a complete segment's spectrum, in hops (``stagger`` → 1): under one hop,
 #: so a segment never waits behind the next one.
 MAX_DEFER_HOPS = 0.8
+#: Why a segment begun was dropped, in plain words that follow "N segments dropped" (the keys
+#: are the report's ``segments_dropped`` keys and the ``why`` of :meth:`HarmonicTracker.feed`).
+DROP_REASONS: dict[str, str] = {
+    "run_ended": "incomplete when the running period ended (stop or trip)",
+    "state_unknown": "incomplete when the operating state became unknown (speed telemetry lost)",
+    "gap": "cut by a gap in the samples' times",
+    "non_finite": "cut by a missing (NaN) or infinite sample on a tracked channel or the speed",
+    "too_slow": "not completed: the mill turned too slowly",
+}
 
 
 def _spread(dphi: np.ndarray) -> float:
@@ -111,7 +131,8 @@ def _db(power: float, floor: float) -> float:
 @dataclass
 class _Acc:
     """Welch sums over segments: power spectra (channels × bins), demodulated line powers
-    (channels × lines), revolutions, seconds, angle-tracked count, worst speed spread."""
+    (channels × lines), revolutions, seconds, angle-tracked count, worst speed spread; and the
+    segments dropped meanwhile, per :data:`DROP_REASONS` key."""
 
     spec: np.ndarray
     lines: np.ndarray
@@ -121,6 +142,7 @@ class _Acc:
     angle: int = 0
     spread: float = 0.0
     spans: list[tuple[int, int]] = field(default_factory=list)
+    dropped: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DROP_REASONS, 0))
 
     @classmethod
     def zeros(cls, channels: int, bins: int, lines: int) -> _Acc:
@@ -142,6 +164,7 @@ class _Acc:
         self.lines[:] = 0.0
         self.count, self.revs, self.seconds, self.angle, self.spread = 0, 0.0, 0.0, 0, 0.0
         self.spans = []
+        self.dropped = dict.fromkeys(DROP_REASONS, 0)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -153,6 +176,7 @@ class _Acc:
             "angle": self.angle,
             "spread": self.spread,
             "spans": [list(s) for s in self.spans],
+            "dropped": dict(self.dropped),
         }
 
     @classmethod
@@ -169,6 +193,7 @@ class _Acc:
             int(d["angle"]),
             float(d["spread"]),
             [(int(a), int(b)) for a, b in d["spans"]],
+            dict.fromkeys(DROP_REASONS, 0) | d.get("dropped", {}),  # (none before version 3)
         )
 
 
@@ -305,15 +330,24 @@ class HarmonicTracker:
 
     # ------------------------------------------------------------------ streaming
     def feed(
-        self, t0_ns: int, fs: float, frame: dict[str, np.ndarray], running: bool
+        self,
+        t0_ns: int,
+        fs: float,
+        frame: dict[str, np.ndarray],
+        running: bool,
+        why: str = "run_ended",
     ) -> list[HarmonicWindow]:
-        """Add one frame; returns the windows it completed (usually none)."""
+        """Add one frame; returns the windows it completed (usually none). ``why`` (a key of
+        :data:`DROP_REASONS`): for a frame that is not ``running``, why the mill is not running,
+        booked against the segments it leaves incomplete."""
         out: list[HarmonicWindow] = []
         if not running:
+            if why not in DROP_REASONS:
+                raise ValueError(f"why={why!r} is none of {', '.join(DROP_REASONS)}")
             self.counters["frames_skipped"] += 1
             if self._anchor_ns is not None:  # a run ends: its buffered samples are of no use
                 self.flush(out)
-                self._break_at(self._anchor_offset + self._len)
+                self._break_at(self._anchor_offset + self._len, why)
                 self._anchor_ns = None
             return out
         if fs != self.fs:
@@ -322,14 +356,14 @@ class HarmonicTracker:
         self.counters["running_samples"] += x.shape[1]
         if not self._continuous(t0_ns):
             self.flush(out)
+            self._break_at(0, "gap")
             self._anchor_ns = t0_ns
-            self._break_at(0)
         first = self._anchor_offset + self._len  # run offset of the frame's first sample
         start = 0
         for j in np.flatnonzero(~np.isfinite(x).all(axis=0)):  # non-finite samples break the run
             self._append(x[:, start:j], out)
             self.flush(out)
-            self._break_at(first + int(j) + 1)
+            self._break_at(first + int(j) + 1, "non_finite")
             start = int(j) + 1
         self._append(x[:, start:], out)
         return out
@@ -369,12 +403,22 @@ class HarmonicTracker:
         expected = self._run_time(self._anchor_offset + self._len)
         return abs(t0_ns - expected) <= 0.5e9 / self.fs
 
-    def _break_at(self, offset: int) -> None:
-        """Drop the buffer; the run continues at run sample ``offset``."""
+    def _break_at(self, offset: int, why: str) -> None:
+        """Drop the buffer (its segments begun booked as dropped for reason ``why``); the run
+        continues at run sample ``offset``."""
         if self._len:
             self.counters["breaks"] += 1
+            self._drop_buffer(why)
         self._anchor_offset, self._len, self._approx_revs = offset, 0, 0.0
         self._due = None
+
+    def _drop_buffer(self, why: str) -> None:
+        """Book the segments begun in the buffer as dropped for reason ``why``: one per hop
+        start within its ``_approx_revs`` revolutions (the buffer starts at a hop start and
+        holds no complete segment)."""
+        n = max(1, math.ceil(self._approx_revs / self.hop_revs))
+        self._window.dropped[why] += n
+        self._total.dropped[why] += n
 
     def _append(self, x: np.ndarray, out: list[HarmonicWindow]) -> None:
         """Buffer ``x`` and cut the segments it completes. Without a complete segment waiting
@@ -393,6 +437,7 @@ class HarmonicTracker:
             self._cut_segments(out)
             if self._len >= self.capacity and self._due is None:  # too slow: drop the buffer
                 self.counters["stalls"] += 1
+                self._drop_buffer("too_slow")
                 self._anchor_offset += self._len
                 self._len, self._approx_revs = 0, 0.0
 
@@ -541,6 +586,7 @@ class HarmonicTracker:
             tracking="angle" if acc.angle * 2 >= acc.count else "time",
             lines=tuple(lines),
             peaks=tuple(peaks),
+            segments_dropped=dict(acc.dropped),
         )
 
     def _floor(self, power: np.ndarray) -> NoiseFloor:
@@ -727,8 +773,13 @@ class HarmonicTracker:
         return self._table(self._total) if self._total.count else None
 
     def reset_total(self) -> None:
-        """Forget the long-run average (e.g. after maintenance)."""
+        """Forget the long-run average (e.g. after maintenance) and its segment accounting."""
         self._total.reset()
+
+    def segment_accounting(self) -> tuple[int, dict[str, int]]:
+        """Segments used in the long-run average and segments dropped per reason (every key of
+        :data:`DROP_REASONS`), since the start or the last :meth:`reset_total`."""
+        return self._total.count, dict(self._total.dropped)
 
     def average_spectrum(self, channel: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Long-run average of ``channel``: (frequency Hz, PSD unit²/Hz, line amplitude unit)
@@ -783,7 +834,13 @@ class HarmonicTracker:
         natural_frequencies_hz: Sequence[float] = (),
     ) -> HarmonicTracker:
         """A tracker that continues exactly where the snapshotted one stood."""
-        check_snapshot(snapshot, "harmonic_tracker", _SNAPSHOT_VERSION, "harmonic tracker")
+        version = snapshot.get("version")
+        check_snapshot(
+            snapshot,
+            "harmonic_tracker",
+            version if version in _OLD_VERSIONS else _SNAPSHOT_VERSION,
+            "harmonic tracker",
+        )
         if snapshot["mill"] != config.id:
             raise ValueError(f"snapshot of mill {snapshot['mill']!r}, config is {config.id!r}")
         t = cls(
@@ -846,3 +903,15 @@ class HarmonicTracker:
             return []
         moved = [a[0] for a, b in zip(lines, now, strict=True) if a != b]
         return [f"tracked lines now at other orders or names: {', '.join(moved)}"]
+
+
+def describe_segments(used: int, dropped: dict[str, int]) -> str:
+    """The segment accounting in one plain sentence, e.g. "18 spectral segments used; 3 dropped:
+    2 incomplete when the running period ended (stop or trip), 1 cut by a gap in the samples'
+    times" (``dropped``: counts by :data:`DROP_REASONS` key)."""
+    used_words = f"{used} spectral segment{'' if used == 1 else 's'} used"
+    total = sum(dropped.values())
+    if total == 0:
+        return f"{used_words}, none dropped"
+    parts = [f"{n} {DROP_REASONS[why]}" for why, n in dropped.items() if n]
+    return f"{used_words}; {total} dropped: {', '.join(parts)}"

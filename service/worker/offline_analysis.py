@@ -69,6 +69,9 @@ class ReadingStats:
         self.unreadable_tails |= other.unreadable_tails
 
 
+_Samples = dict[str, np.ndarray]  # channel → samples of one frame
+
+
 class BackgroundSpectra:
     """A mill's :class:`~analytics.spectra.tracker.HarmonicTracker` fed by a thread of its own,
     in the order the analyzer feeds it (so with the same results): the spectra — about half the
@@ -78,7 +81,7 @@ class BackgroundSpectra:
 
     def __init__(self, tracker: HarmonicTracker, depth: int = 32) -> None:
         self._tracker = tracker
-        self._todo: queue.Queue[tuple[int, float, dict[str, np.ndarray], bool] | None] = (
+        self._todo: queue.Queue[tuple[int, float, dict[str, np.ndarray], bool, str] | None] = (
             queue.Queue(maxsize=depth)
         )
         self._error: BaseException | None = None
@@ -97,11 +100,12 @@ class BackgroundSpectra:
         self._todo.task_done()
 
     def feed(
-        self, t0_ns: int, fs: float, frame: dict[str, np.ndarray], running: bool
+        self, t0_ns: int, fs: float, frame: _Samples, running: bool, why: str = "run_ended"
     ) -> list[HarmonicWindow]:
-        """Queue one frame (copied: the analyzer's arrays are its own) and return at once."""
+        """Queue one frame (copied: the analyzer's arrays are its own) and return at once
+        (``why``: as the tracker's :meth:`~analytics.spectra.tracker.HarmonicTracker.feed`)."""
         self._raise()
-        self._todo.put((t0_ns, fs, {k: v.copy() for k, v in frame.items()}, running))
+        self._todo.put((t0_ns, fs, {k: v.copy() for k, v in frame.items()}, running, why))
         return []
 
     def drain(self) -> None:

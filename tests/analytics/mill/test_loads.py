@@ -114,6 +114,23 @@ def test_flagged_samples_are_not_peaks():
     assert np.nanmax(b._window(sc.truth.starts[0].sample, n_spike + 300).motor[0]) == 340.0
 
 
+def test_a_flagged_speed_spike_is_ignored_but_a_speed_dropout_is_unknown():
+    """Seed 000 §5.2.2 spikes on the speed channel say nothing about the state (issue 18: they
+    used to show 'unknown' and end the running period); a NaN dropout leaves it unknown."""
+    sc = scene("steady", seed=1, duration_s=20.0)
+    data = sc.render(0, sc.n_samples)
+    flags = {k: np.zeros(sc.n_samples, dtype=bool) for k in data}
+    data["speed"][5000:5005] = 3.0  # wild values, flagged by the fault stage
+    data["speed"][12_000:12_100] = np.nan  # lost telemetry, flagged as a dropout
+    flags["speed"][5000:5005] = flags["speed"][12_000:12_100] = True
+    a = LoadAnalysis(sc.config)
+    decided = []
+    a.feed(Frame(sc.t0_ns, sc.fs, data, flags), decided)
+    changes = [(tr.sample, tr.state.label) for tr in decided]
+    assert changes == [(0, "running"), (12_000, "unknown"), (12_100, "running")]
+    assert a.report()["phase_seconds"]["unknown"] == pytest.approx(0.1)
+
+
 def test_missing_speed_channel_is_an_error():
     cfg = mill("sag-5200-lrs")
     bad = cfg.model_copy(update={"channels": {k: v for k, v in cfg.channels.items()
