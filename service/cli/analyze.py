@@ -327,8 +327,11 @@ def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
     lines.append(f"  steady-state windows: {len(report['steady_state'])}")
     for comp, d in report["damage"].items():
         lines += _damage_lines(comp, d)
-    if "spectra" in report["summary"]:
-        lines.append(f"  harmonics: {report['summary']['spectra']}")
+    summary = report["summary"]
+    if "spectra" in summary:
+        lines.append(f"  harmonics: {summary['spectra']}")
+    elif "segments_note" in summary:
+        lines.append(f"  harmonics: {summary['segments_note']}")
     lines += _spectral_and_alarm_lines(report)
     problems = {k: stats[k] for k in ("malformed_blocks", "foreign_blocks", "unreadable_tails",
                                       "missing_blocks", "repeated_blocks", "clock_fault_blocks",

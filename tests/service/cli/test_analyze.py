@@ -154,6 +154,7 @@ def test_damage_totals_add_up_with_the_residue_on_its_own_line(recording, capsys
     text = capsys.readouterr()
     assert text.out.count("open residue") == len(r["damage"])
     assert text.out.count("closed cycles") == len(r["damage"])
+    assert "spectral segments used" in text.out
     assert "%|" not in text.err  # no progress bar when stderr is not a terminal
     assert "x real time" in text.err
 
