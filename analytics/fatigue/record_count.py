@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from analytics.fatigue import damage_kernels as _dk
+from analytics.fatigue import exact_sum_kernels as _ek
+from analytics.fatigue import rainflow_kernels as _rk
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.exact_sum import ExactSum
 from analytics.fatigue.miner import DamageRecorder, MinerSum
@@ -33,7 +35,19 @@ from analytics.fatigue.repeat_closure import RepeatClosure
 from analytics.fatigue.residue_modes import ResidueMode
 from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve, equivalent_cycles
 
-__all__ = ["RecordCount", "RecordTotals"]
+__all__ = ["KERNELS", "RecordCount", "RecordTotals"]
+
+#: The compiled kernels a record count calls from Python, for a process that loads them up front
+#: (``millwatch rainflow``: :mod:`service.cli.kernel_preload`); one left out is only loaded later.
+KERNELS = (
+    _rk.feed,
+    _rk.close_half,
+    _rk.four_point,
+    _dk.stresses,
+    _dk.log_damage,
+    _dk.book,
+    _ek._accumulate,
+)
 
 
 @dataclass(frozen=True)

@@ -163,8 +163,10 @@ def run_rainflow(
 ) -> RainflowSummary:
     """Count ``source`` in chunks of ``block_size``; write every cycle to ``cycles_out`` if
     given."""
-    from analytics.fatigue.record_count import RecordCount
+    from analytics.fatigue.record_count import KERNELS, RecordCount
+    from service.cli.kernel_preload import preload
 
+    preload(KERNELS)
     count = RecordCount(
         curve, scale=scale, goodman=goodman, gate=gate, residue=residue, capacity=block_size
     )
