@@ -147,7 +147,8 @@ class RecordCount:
         if self._goodman is None:
             d, eq = self._curve.damage_and_equivalent(cycles.range, self._scale)
             before = self._sums.digits.copy()
-            full, ok = _dk.book(d, eq, np.ascontiguousarray(cycles.count), self._sums.digits)
+            n = np.ascontiguousarray(cycles.count)
+            full, ok = _dk.book(d, eq, d.view(np.int64), eq.view(np.int64), n, self._sums.digits)
             if ok:
                 self._sums.carry()
                 self._count(full, len(cycles))
