@@ -66,7 +66,7 @@ def book(dmg, eq, bits_d, bits_e, counts, digits):
 
     ``bits_d``/``bits_e``: ``dmg``/``eq`` viewed as int64 by the caller — a ``view`` in here
     makes numba load its array implementations with the cached code (~0.05 s, measured), which
-    ``millwatch rainflow`` need not pay (:mod:`service.cli.kernel_preload`)."""
+    ``millwatch rainflow`` need not pay (:mod:`service.kernel_preload`)."""
     full = 0
     for k in range(dmg.shape[0]):
         n = counts[k]

@@ -212,7 +212,7 @@ def close_half(sv, si, n, cv, ci, out_f, out_i):
 
     Allocates nothing (the candidate comes in as arrays): a kernel that allocates makes numba
     load its array implementations when its cached code is loaded (~0.1 s, measured), which a
-    process that only counts need not pay (:mod:`service.cli.kernel_preload`)."""
+    process that only counts need not pay (:mod:`service.kernel_preload`)."""
     n, k = _stack_rule(cv, ci, cv.shape[0], sv, si, n, out_f, out_i, 0)
     for j in range(n - 1):
         _emit(out_f, out_i, k, sv[j], si[j], sv[j + 1], si[j + 1], 0.5)

@@ -38,7 +38,7 @@ from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve, equivalent_c
 __all__ = ["KERNELS", "RecordCount", "RecordTotals"]
 
 #: The compiled kernels a record count calls from Python, for a process that loads them up front
-#: (``millwatch rainflow``: :mod:`service.cli.kernel_preload`); one left out is only loaded later.
+#: (``millwatch rainflow``: :mod:`service.kernel_preload`); one left out is only loaded later.
 KERNELS = (
     _rk.feed,
     _rk.close_half,

@@ -9,9 +9,7 @@ The ``millwatch`` command line: one module per sub-command, composed by ``main``
   ``serve`` (a worker, and the API with it), ``router``, ``api`` (the API alone, over zenoh),
   ``analyze``, ``report`` (one monthly report from a store file, on demand).
 * ``args`` — argument types that name the rule a value broke; ``signal_files`` — ``.npy`` /
-  ``.csv`` signals read in blocks, for the offline commands; ``kernel_preload`` — loads the
-  cached machine code of the compiled kernels a command calls without starting numba's
-  compiler (``rainflow``: the start-up it saves is in the README's command-line table).
+  ``.csv`` signals read in blocks, for the offline commands.
 
 Start-up. ``main.COMMANDS`` names each command's module as a dotted path with the one line
 ``millwatch --help`` lists; only the module of the command being run (or asked for ``--help``) is

@@ -10,7 +10,7 @@ result (ASTM E1049-85; seed 000 §8.2 and App. D). The residue is closed at the 
 Start-up: the module imports argparse and light helpers only, so ``millwatch rainflow --help``
 imports no numpy or numba; the functions that count import what they use when they run. Counting
 then loads the kernels' cached machine code without starting numba's compiler
-(:mod:`service.cli.kernel_preload`), and a fresh process asks OpenBLAS for one thread (counting
+(:mod:`service.kernel_preload`), and a fresh process asks OpenBLAS for one thread (counting
 uses no BLAS); neither changes a result. Measured in the README ("Command line").
 """
 
@@ -168,7 +168,7 @@ def run_rainflow(
     """Count ``source`` in chunks of ``block_size``; write every cycle to ``cycles_out`` if
     given."""
     from analytics.fatigue.record_count import KERNELS, RecordCount
-    from service.cli.kernel_preload import preload
+    from service.kernel_preload import preload
 
     preload(KERNELS)
     count = RecordCount(

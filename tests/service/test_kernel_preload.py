@@ -1,4 +1,4 @@
-"""service.cli.kernel_preload: the cached kernels run without numba's compiler registries, and
+"""service.kernel_preload: the cached kernels run without numba's compiler registries, and
 count exactly as the ``rainflow`` package does (cycles bitwise, the same damage).
 
 Each check runs in fresh processes with a numba cache of its own (``NUMBA_CACHE_DIR``): the first
@@ -19,7 +19,7 @@ import pytest
 import rainflow
 
 from analytics.fatigue.sn_models import build_sn_curve
-from service.cli.kernel_preload import preload
+from service.kernel_preload import preload
 
 #: One process: preload, then hypothesis examples through RecordCount in half mode against
 #: rainflow.extract_cycles (writable and read-only blocks, as the CLI's memory-mapped file gives).
@@ -32,7 +32,7 @@ from hypothesis.extra.numpy import arrays
 
 from analytics.fatigue.record_count import KERNELS, RecordCount
 from analytics.fatigue.sn_models import build_sn_curve
-from service.cli.kernel_preload import preload
+from service.kernel_preload import preload
 
 installed = preload(KERNELS)
 curve = build_sn_curve("shigley")
@@ -120,7 +120,7 @@ def test_cli_rainflow_preloads_and_matches_the_rainflow_package(numba_cache, tmp
 
 
 def test_what_is_not_a_cached_kernel_is_skipped(caplog):
-    caplog.set_level("DEBUG", logger="service.cli.kernel_preload")
+    caplog.set_level("DEBUG", logger="service.kernel_preload")
     assert preload([len, object()]) == 0
     assert "not preloaded" in caplog.text
 
@@ -129,7 +129,7 @@ def test_a_kernel_with_no_cache_is_left_to_numba(tmp_path: Path):
     script = tmp_path / "plus_one.py"
     script.write_text(
         "from numba import njit\n"
-        "from service.cli.kernel_preload import preload\n"
+        "from service.kernel_preload import preload\n"
         "@njit(cache=True)\n"
         "def plus_one(a):\n"
         "    return a + 1\n"

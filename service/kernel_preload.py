@@ -20,7 +20,7 @@ signature not cached) takes numba's ordinary path, which initialises the compile
 or loads as always. The preload uses numba internals (the dispatcher's cache object and
 ``add_overload``, ``rtsys.initialize``; checked with numba 0.68); if they change, it logs why at
 DEBUG and loads nothing, so a command is then only slower, never different
-(``tests/service/cli/test_kernel_preload.py``).
+(``tests/service/test_kernel_preload.py``).
 """
 
 from __future__ import annotations
