@@ -17,10 +17,14 @@ Exactness: the code run is the very machine code numba itself would load from th
 file, so results are bitwise what they are without the preload. Anything the preload does not
 cover (no cache yet — the first run after installing —, an edited kernel, another CPU, a
 signature not cached) takes numba's ordinary path, which initialises the compiler and compiles
-or loads as always. The preload uses numba internals (the dispatcher's cache object and
-``add_overload``, ``rtsys.initialize``; checked with numba 0.68); if they change, it logs why at
-DEBUG and loads nothing, so a command is then only slower, never different
-(``tests/service/test_kernel_preload.py``).
+or loads as always.
+
+Numba internals used: the dispatcher's cache object, ``add_overload`` and ``rtsys.initialize``.
+Their misuse would not always raise (running cached code before the runtime is started crashes
+the process), so the preload runs only on the numba releases it was checked with
+(:data:`CHECKED_NUMBA`; ``tests/service/test_kernel_preload.py``); on any other it loads nothing
+and the command is only slower (``bench_cli_rainflow.py --stages`` shows by how much), never
+different. A failure on a checked release is logged at DEBUG and leaves that kernel to numba.
 """
 
 from __future__ import annotations
@@ -29,9 +33,12 @@ import logging
 from collections.abc import Iterable
 from typing import Any
 
-__all__ = ["preload"]
+__all__ = ["CHECKED_NUMBA", "preload"]
 
 log = logging.getLogger(__name__)
+
+#: numba releases (major.minor) whose internals the preload was checked against.
+CHECKED_NUMBA = frozenset({"0.68"})
 
 
 def preload(kernels: Iterable[Any]) -> int:
@@ -39,10 +46,15 @@ def preload(kernels: Iterable[Any]) -> int:
     this machine; returns how many were installed (a kernel numba's internals did not allow
     adds 0, and the reason is logged at DEBUG)."""
     try:
+        import numba
         from numba.core.compiler_lock import global_compiler_lock
         from numba.core.runtime import rtsys
     except ImportError as exc:
         log.debug("compiled kernels not preloaded: %r", exc)
+        return 0
+    release = ".".join(numba.__version__.split(".")[:2])
+    if release not in CHECKED_NUMBA:
+        log.debug("numba %s is not one preloading was checked with: ordinary path", release)
         return 0
     loaded = 0
     with global_compiler_lock:
