@@ -6,6 +6,8 @@ Composition: the service around the analytics — commands, worker, store, API, 
   a worker (and the API with it), ``api`` the API alone; the offline commands use ``analytics``
   and ``ingest`` directly.
 * ``settings`` — the validated ``millwatch serve`` TOML file, read by the command, never at import.
+* ``kernel_preload`` — a command's compiled kernels loaded from numba's cache without starting
+  numba's compiler (``millwatch rainflow``; the start-up it saves is in the README).
 * ``worker/`` — blocks from zenoh archived, analysed per mill (``MillJob``), stored,
   checkpointed; crash recovery replays the archive; ``runtime`` owns the resources.
 * ``store/`` — SQLite (WAL): events, damage, records, alarms, checkpoints.

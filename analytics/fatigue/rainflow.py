@@ -203,8 +203,10 @@ class RainflowCounter:
         si[:n] = self._I[_k.STACK, :n]
         out_f = np.empty((4, n + 1))
         out_i = np.empty((2, n + 1), dtype=np.int64)
-        cand, cand_i = self._st_f[_k.CAND_VALUE], self._st_i[_k.CAND_INDEX]
-        k = _k.close_half(sv, si, n, cand, cand_i, self._has_candidate(), out_f, out_i)
+        m = int(self._has_candidate())
+        cv = np.full(m, self._st_f[_k.CAND_VALUE])
+        ci = np.full(m, self._st_i[_k.CAND_INDEX], dtype=np.int64)
+        k = _k.close_half(sv, si, n, cv, ci, out_f, out_i)
         return Cycles(out_f, out_i, k)
 
     # ------------------------------------------------------------------ persistence

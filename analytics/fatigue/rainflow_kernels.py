@@ -205,14 +205,15 @@ def feed(x, F, I):  # noqa: E741
 
 
 @njit(cache=True, nogil=True)
-def close_half(sv, si, n, cand, cand_i, has_cand, out_f, out_i):
-    """ASTM closure of a residue, on scratch copies ``sv``/``si``: push the held-back candidate
-    (it may still close full cycles), then count every remaining range as a half cycle."""
-    k = 0
-    if has_cand:
-        cv = np.full(1, cand)
-        ci = np.full(1, cand_i)
-        n, k = _stack_rule(cv, ci, 1, sv, si, n, out_f, out_i, k)
+def close_half(sv, si, n, cv, ci, out_f, out_i):
+    """ASTM closure of a residue, on scratch copies ``sv``/``si`` (``n`` points, room for one
+    more): push the held-back candidate ``cv``/``ci`` (length 1, or 0 when there is none; it
+    may still close full cycles), then count every remaining range as a half cycle.
+
+    Allocates nothing (the candidate comes in as arrays): a kernel that allocates makes numba
+    load its array implementations when its cached code is loaded (~0.1 s, measured), which a
+    process that only counts need not pay (:mod:`service.kernel_preload`)."""
+    n, k = _stack_rule(cv, ci, cv.shape[0], sv, si, n, out_f, out_i, 0)
     for j in range(n - 1):
         _emit(out_f, out_i, k, sv[j], si[j], sv[j + 1], si[j + 1], 0.5)
         k += 1

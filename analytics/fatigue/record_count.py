@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from analytics.fatigue import damage_kernels as _dk
+from analytics.fatigue import exact_sum_kernels as _ek
+from analytics.fatigue import rainflow_kernels as _rk
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.exact_sum import ExactSum
 from analytics.fatigue.miner import DamageRecorder, MinerSum
@@ -33,7 +35,19 @@ from analytics.fatigue.repeat_closure import RepeatClosure
 from analytics.fatigue.residue_modes import ResidueMode
 from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve, equivalent_cycles
 
-__all__ = ["RecordCount", "RecordTotals"]
+__all__ = ["KERNELS", "RecordCount", "RecordTotals"]
+
+#: The compiled kernels a record count calls from Python, for a process that loads them up front
+#: (``millwatch rainflow``: :mod:`service.kernel_preload`); one left out is only loaded later.
+KERNELS = (
+    _rk.feed,
+    _rk.close_half,
+    _rk.four_point,
+    _dk.stresses,
+    _dk.log_damage,
+    _dk.book,
+    _ek._accumulate,
+)
 
 
 @dataclass(frozen=True)
@@ -133,7 +147,8 @@ class RecordCount:
         if self._goodman is None:
             d, eq = self._curve.damage_and_equivalent(cycles.range, self._scale)
             before = self._sums.digits.copy()
-            full, ok = _dk.book(d, eq, np.ascontiguousarray(cycles.count), self._sums.digits)
+            n = np.ascontiguousarray(cycles.count)
+            full, ok = _dk.book(d, eq, d.view(np.int64), eq.view(np.int64), n, self._sums.digits)
             if ok:
                 self._sums.carry()
                 self._count(full, len(cycles))

@@ -16,8 +16,15 @@ at 1 kHz (12 M samples = 3 h 20 min), saved as ``.npy``. Timed:
 
 Both give the same cycle count and the same damage (checked: the run fails otherwise).
 
+``--stages``: where one process spends its time, step by step (wall and CPU of a fresh
+interpreter beside ``--millwatch``, ``--runs`` times, median): the imports, the kernels loaded
+from the cache up front (:mod:`service.kernel_preload`, as the command does) or not (numba's
+ordinary path, which initialises its compiler on the first call: the first chunk's row), and the
+counting and damage of the file in 64 Ki chunks (``RecordCount``, what the command runs).
+``OPENBLAS_NUM_THREADS=1`` in both, as the command sets it.
+
     .venv/bin/python tests/bench/bench_cli_rainflow.py [--samples 12000000] [--runs 5] [--json]
-        [--millwatch /path/to/plain-venv/bin/millwatch]
+        [--millwatch /path/to/plain-venv/bin/millwatch] [--stages]
 """
 
 from __future__ import annotations
@@ -79,6 +86,69 @@ def run_reference(x: np.ndarray) -> tuple[float, float, int, int, float]:
     return wall, cpu, full, len(n) - full, damage
 
 
+#: One process, timed step by step; argv: the .npy file, "preload" or "ordinary". Prints JSON.
+_STAGES = """
+import json, resource, sys, time
+def now():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return time.perf_counter(), r.ru_utime + r.ru_stime
+marks = [("start", now())]
+def mark(name):
+    marks.append((name, now()))
+import numpy as np
+mark("import numpy")
+import numba
+mark("import numba")
+from analytics.fatigue.record_count import KERNELS, RecordCount
+from analytics.fatigue.sn_models import build_sn_curve
+mark("import the counter and its kernels' modules")
+if sys.argv[2] == "preload":
+    from service.kernel_preload import preload
+    preload(KERNELS)
+    mark("preload the cached kernels (runtime started)")
+x = np.load(sys.argv[1], mmap_mode="r")
+count = RecordCount(build_sn_curve("shigley"), scale=2.0)
+count.feed(x[: 1 << 16])
+mark("first 64 Ki chunk")
+for s in range(1 << 16, x.shape[0], 1 << 16):
+    count.feed(x[s : s + (1 << 16)])
+count.close()
+mark("the other chunks: counting and damage")
+print(json.dumps([[n, t - t0, c - c0] for (_, (t0, c0)), (n, (t, c)) in zip(marks, marks[1:])]))
+"""
+
+
+def stages(python: Path, path: Path, runs: int) -> dict[str, list[tuple[str, float, float]]]:
+    """Median wall and CPU s of each step, preloaded and on numba's ordinary path."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    out = {}
+    for mode in ("preload", "ordinary"):
+        done = [
+            json.loads(
+                subprocess.run(
+                    [str(python), "-c", _STAGES, str(path), mode],
+                    capture_output=True, text=True, check=True, timeout=600, env=env,
+                ).stdout
+            )
+            for _ in range(runs)
+        ]  # fmt: skip
+        out[mode] = [
+            (step[0], statistics.median(r[i][1] for r in done),
+             statistics.median(r[i][2] for r in done))
+            for i, step in enumerate(done[0])
+        ]  # fmt: skip
+    return out
+
+
+def print_stages(table: dict[str, list[tuple[str, float, float]]]) -> None:
+    for mode, rows in table.items():
+        print(f"\n{mode}:\n\n| step | wall s | CPU s |\n|---|---:|---:|")
+        for name, wall, cpu in rows:
+            print(f"| {name} | {wall:.3f} | {cpu:.3f} |")
+        total_wall, total_cpu = sum(r[1] for r in rows), sum(r[2] for r in rows)
+        print(f"| total (after the interpreter's start) | {total_wall:.3f} | {total_cpu:.3f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--samples", type=int, default=12_000_000)
@@ -92,9 +162,18 @@ def main() -> None:
         "plain install without the test extra, whose scipy numba imports on its first call)",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--stages", action="store_true", help="only the step-by-step time of one process"
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         path = torque_file(Path(tmp), args.samples)
+        if args.stages:
+            run_cli(args.millwatch, path)  # the cache filled, the file in the page cache
+            table = stages(args.millwatch.parent / "python", path, args.runs)
+            print(f"load average {os.getloadavg()[0]:.1f}; {args.millwatch.parent / 'python'}")
+            print_stages(table)
+            return
         env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(tmp) / "cache")}
         cold = run_cli(args.millwatch, path, env=env)
         run_cli(args.millwatch, path)  # the installed cache is filled, the file in the page cache

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -160,3 +161,25 @@ def test_console_script_runs_and_prints_a_readable_summary(npy):
         check=True,
     )
     assert "damage" in proc.stdout and "FAT 160 normal" in proc.stdout
+
+
+def test_a_fresh_process_asks_openblas_for_one_thread_unless_the_user_chose(npy):
+    code = (
+        "import os, sys\n"
+        "from service.cli.main import main\n"
+        "main(['rainflow', sys.argv[1], '--json'])\n"
+        "print(os.environ['OPENBLAS_NUM_THREADS'])\n"
+    )
+    for chosen, expected in ((None, "1"), ("3", "3")):
+        env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+        if chosen is not None:
+            env["OPENBLAS_NUM_THREADS"] = chosen
+        done = subprocess.run(
+            [sys.executable, "-c", code, str(npy)],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=True,
+        )
+        assert done.stdout.splitlines()[-1] == expected
