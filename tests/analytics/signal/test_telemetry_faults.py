@@ -218,7 +218,7 @@ def test_telemetry_faults_scene_recall() -> None:
         caught += int((big & (kinds != 0)).sum())
         assert not (kinds.astype(bool) & ~injected).any(), name
         assert (kinds[np.isnan(data[name])] == FaultKind.DROPOUT).all()
-        assert counts.dropouts == 2
+        assert counts.dropouts == (2 if injected.any() else 0)  # (none injected on its speed)
     assert harmful > 1000
     assert caught / harmful >= 0.99
 
