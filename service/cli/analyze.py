@@ -306,6 +306,27 @@ def _damage_lines(comp: str, d: dict[str, Any]) -> list[str]:
     return lines
 
 
+#: What the summary's "reading" line says of each count (when not zero).
+_READING = {
+    "foreign_blocks": "blocks on keys of no mill given with --mill (skipped)",
+    "malformed_blocks": "malformed blocks (skipped)",
+    "unreadable_tails": "file(s) read up to a torn or corrupt record",
+    "missing_blocks": "blocks missing (sequence gaps)",
+    "repeated_blocks": "repeated blocks (dropped, as live)",
+    "clock_fault_blocks": "blocks with a clock fault (placed by sequence number)",
+    "gap_samples": "samples of gaps (NaN)",
+    "late_blocks": "blocks too late to align (dropped)",
+}
+
+
+def _count(value: int | dict[str, Any], words: str) -> str:
+    """``3 words``, or for counts by kind / by file ``3 words (a: 1, b: 2)``."""
+    if not isinstance(value, dict):
+        return f"{value} {words}"
+    number = sum(v for v in value.values() if isinstance(v, int)) or len(value)
+    return f"{number} {words} ({', '.join(f'{k}: {v}' for k, v in value.items())})"
+
+
 def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
     lines = [f"mill {report['mill']} ({report['site']}): {report['samples']} samples, "
              f"state now {report['state']}"]  # fmt: skip
@@ -333,11 +354,9 @@ def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
     elif "segments_note" in summary:
         lines.append(f"  harmonics: {summary['segments_note']}")
     lines += _spectral_and_alarm_lines(report)
-    problems = {k: stats[k] for k in ("malformed_blocks", "foreign_blocks", "unreadable_tails",
-                                      "missing_blocks", "repeated_blocks", "clock_fault_blocks",
-                                      "gap_samples", "late_blocks") if stats[k]}  # fmt: skip
+    problems = [_count(stats[k], words) for k, words in _READING.items() if stats[k]]
     if problems:
-        lines.append("  reading: " + ", ".join(f"{k} {v}" for k, v in problems.items()))
+        lines.append("  reading: " + "; ".join(problems))
     return "\n".join(lines) + "\n"
 
 

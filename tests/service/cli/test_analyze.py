@@ -159,18 +159,24 @@ def test_damage_totals_add_up_with_the_residue_on_its_own_line(recording, capsys
     assert "x real time" in text.err
 
 
-def test_repeats_and_malformed_blocks_are_counted_and_change_nothing(recording, tmp_path):
+def test_repeats_and_malformed_blocks_are_counted_and_change_nothing(recording, tmp_path, capsys):
     out, _ = recording
     msgs = _messages(out)
     bad = [*msgs[:500], msgs[499], *msgs[500:]]  # a duplicate, as a recovery overlap brings
     torn = msgs[700]
     bad.insert(701, type(torn)(torn.key, torn.log_time_ns, torn.publish_time_ns, torn.sequence,
                                torn.payload[:-3], torn.index, torn.channel))  # fmt: skip
-    clean, dirty = _analyze([out]), _analyze([_write(tmp_path / "d", "d", bad)])
+    dirty_dir = _write(tmp_path / "d", "d", bad)
+    clean, dirty = _analyze([out]), _analyze([dirty_dir])
     assert dirty["reading"]["repeated_blocks"] == 1
     assert sum(dirty["reading"]["malformed_blocks"].values()) == 1
     for key in ("starts", "stops", "steady_state", "damage", "phase_seconds"):
         assert dirty[key] == clean[key], key
+    capsys.readouterr()
+    assert main(["analyze", str(dirty_dir), "--mill", str(MILL), "--no-progress"]) == 0
+    said = capsys.readouterr().out
+    assert "1 repeated blocks (dropped, as live)" in said
+    assert "1 malformed blocks (skipped) (" in said
 
 
 def test_no_spectra_skips_the_harmonics_only(recording):
