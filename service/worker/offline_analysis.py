@@ -74,10 +74,11 @@ _Samples = dict[str, np.ndarray]  # channel → samples of one frame
 
 class BackgroundSpectra:
     """A mill's :class:`~analytics.spectra.tracker.HarmonicTracker` fed by a thread of its own,
-    in the order the analyzer feeds it (so with the same results): the spectra — about half the
-    work of a running mill — overlap the rest of the analysis on another core. For an offline
-    analysis only, which reads the tracker's windows from its report at the end: :meth:`feed`
-    returns no windows. Reading any other attribute waits until everything fed is analysed."""
+    in the order the analyzer feeds it (so with the same results): the spectra — about two
+    thirds of the work of a running mill — overlap the rest of the analysis on another core.
+    For an offline analysis only, which reads the tracker's windows from its report at the end:
+    :meth:`feed` returns no windows. Reading any other attribute waits until everything fed is
+    analysed."""
 
     def __init__(self, tracker: HarmonicTracker, depth: int = 32) -> None:
         self._tracker = tracker
