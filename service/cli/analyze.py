@@ -375,9 +375,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "  millwatch analyze archive/ --mill deploy/mills/sag-5200-lrs.toml --no-spectra\n"
             "\n"
             'speed (measured, README Benchmarks "Offline analysis"): a week of one mill, running\n'
-            "74 % of the time, at about 1,250-1,430x real time per core with every analysis on\n"
+            "74 % of the time, at about 1,200-1,400x real time per core with every analysis on\n"
             "(1,750x on two cores); --no-spectra skips the harmonic spectra, more than half the\n"
-            "work, for questions about starts, stops and damage: about 2,900x."
+            "work, for questions about starts, stops and damage: about 2,900-3,000x."
         ),
     )
     p.add_argument("recording", type=Path, nargs="+", metavar="RECORDING",
