@@ -36,11 +36,10 @@ from alarms.from_analysis import report_observations
 from alarms.report import alarms_for_report
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import MillAnalyzer
-from ingest import keys, wire
+from ingest import wire
 from ingest.archive.reader import RawMessage
 from ingest.mill_files import load_mill_config
-from service.worker.health import ChannelHealth
-from service.worker.offline_analysis import ReadingStats, analyze_files
+from service.worker.offline_analysis import BlockAdmission, ReadingStats, analyze_files
 
 __all__ = ["add_parser", "analyze_recording", "plan_jobs", "recording_files", "run_jobs"]
 
@@ -59,60 +58,17 @@ def recording_files(path: Path) -> list[Path]:
     return [path]
 
 
-def _channel_names(config: MillConfig) -> dict[str, str]:
-    """Live key → channel name for the mill's channels."""
-    return {
-        keys.channel_key(config.site, config.id, ch.key): name
-        for name, ch in config.channels.items()
-    }
-
-
 class _Blocks:
-    """Decodes messages into (channel, t0, fs, calibrated samples); counts what it skips."""
+    """The Foxglove export's admission of one mill's archive messages, as analyze admits them
+    (:class:`~service.worker.offline_analysis.BlockAdmission`): ``(channel, block)`` of a new
+    block, None for anything else (counted)."""
 
     def __init__(self, config: MillConfig) -> None:
-        self.config = config
-        self.names = _channel_names(config)
-        self.malformed: dict[str, int] = {}
-        self.foreign = 0
-        #: Per channel, the worker's admission: a block is new only if its sequence number is;
-        #: a t0 contradicting it is a clock fault (so an archive with repeats gives live results).
-        self.sequence = {name: ChannelHealth() for name in config.channels}
-        #: key → channel name (None: not the mill's), parsed once per key, not once per message
-        self.known: dict[str, str | None] = {}
-
-    def channel(self, key: str) -> str | None:
-        if key in self.known:
-            return self.known[key]
-        try:
-            name = self.names.get(keys.to_live(key))
-        except keys.KeyFormatError:
-            name = None
-        self.known[key] = name
-        return name
+        self.admission = BlockAdmission([config])
 
     def admit(self, msg: RawMessage) -> tuple[str, wire.Block] | None:
-        """:meth:`decode`, then the worker's admission by sequence number: None for a repeat
-        (counted in :attr:`sequence`) as for anything ``decode`` skips."""
-        got = self.decode(msg)
-        if got is None:
-            return None
-        admitted = self.sequence[got[0]].accept(got[1], msg.log_time_ns)
-        return None if admitted.block is None else (got[0], admitted.block)
-
-    def decode(self, msg: RawMessage) -> tuple[str, wire.Block] | None:
-        name = self.channel(msg.key)
-        if name is None:
-            self.foreign += 1
-            return None
-        try:
-            return name, wire.decode_block(msg.payload)
-        except wire.WireError as exc:
-            kind = type(exc).__name__
-            if kind not in self.malformed:
-                log.warning("malformed block on %s: %s (further ones counted)", msg.key, exc)
-            self.malformed[kind] = self.malformed.get(kind, 0) + 1
-            return None
+        got = self.admission.admit(msg.key, msg.payload, msg.log_time_ns)
+        return None if got is None else (got[1], got[2])
 
 
 def analyze_recording(

@@ -36,12 +36,12 @@ from analytics.spectra.tracker import HarmonicTracker
 from ingest import keys
 from ingest.archive.batches import BatchReader, MessageBatch
 from ingest.archive.files import ArchiveError
-from ingest.wire import WireError, decode_block
+from ingest.wire import Block, WireError, decode_block
 from service.worker.batch_lane import BatchLane
 from service.worker.block_queue import QueuedBlock
 from service.worker.health import MillHealth
 
-__all__ = ["OfflineSink", "ReadingStats", "analyze_files"]
+__all__ = ["BackgroundSpectra", "BlockAdmission", "OfflineSink", "ReadingStats", "analyze_files"]
 
 log = logging.getLogger(__name__)
 
@@ -133,23 +133,15 @@ class BackgroundSpectra:
         return getattr(self._tracker, name)
 
 
-class OfflineSink:
-    """The :class:`~service.worker.batch_lane.BlockSink` of an offline analysis: routes keys
-    (live or replay) to the given mills' channels, admits blocks as the live worker does and
-    feeds each mill's :class:`~analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
+class BlockAdmission:
+    """Routing and the live worker's admission of archived blocks of the given mills: a key
+    (live or replay) names a mill's channel; a payload decodes; a block is new only if its
+    sequence number is (:meth:`~service.worker.health.ChannelHealth.accept`: repeats counted and
+    dropped, a clock fault placed at its sequence number's time). Counts what it skips. Shared by
+    the offline analysis and the Foxglove export (``millwatch archive export``)."""
 
-    def __init__(
-        self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
-    ) -> None:
-        self._mills = {c.id: c for c in configs}
-        self._health = {c.id: MillHealth.for_channels(list(c.channels)) for c in configs}
-        self.analyzers = {c.id: MillAnalyzer(c, spectra=spectra) for c in configs}
-        self._background: list[BackgroundSpectra] = []
-        if spectra and background:  # each mill's spectra on a thread of its own
-            for analyzer in self.analyzers.values():
-                self._background.append(BackgroundSpectra(analyzer.harmonics))
-                # (the analyzer only feeds, flushes and reports its tracker: the wrapper does)
-                analyzer.harmonics = cast(HarmonicTracker, self._background[-1])
+    def __init__(self, configs: Sequence[MillConfig]) -> None:
+        self.health = {c.id: MillHealth.for_channels(list(c.channels)) for c in configs}
         self._live = {
             keys.channel_key(c.site, c.id, ch.key): (c.id, name)
             for c in configs
@@ -160,14 +152,6 @@ class OfflineSink:
         self.malformed: Counter[str] = Counter()
         self._logged: set[tuple[str, str]] = set()
 
-    @property
-    def mills(self) -> Mapping[str, MillConfig]:
-        return self._mills
-
-    @property
-    def health(self) -> Mapping[str, MillHealth]:
-        return self._health
-
     def route(self, key: str) -> tuple[str, str] | None:
         """(mill id, channel name) of a live or replay key; None for no given mill."""
         if key not in self._routes:
@@ -177,31 +161,75 @@ class OfflineSink:
                 self._routes[key] = None
         return self._routes[key]
 
-    def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
-        """One block the lane could not take as part of a regular run: decode, admit, align
-        (``archive`` is ignored: nothing is archived here)."""
-        route = self.route(item.key)
+    def admit(self, key: str, payload: bytes, recv_ns: int) -> tuple[str, str, Block] | None:
+        """(mill id, channel, block) of a new block; None for anything else (counted: another
+        mill's key, a malformed payload, a repeat)."""
+        route = self.route(key)
         if route is None:
             self.foreign_blocks += 1
-            return
+            return None
         mill_id, channel = route
-        health = self._health[mill_id].channels[channel]
+        health = self.health[mill_id].channels[channel]
         try:
-            block = decode_block(item.payload)
+            block = decode_block(payload)
         except WireError as exc:
-            health.decode_error(exc.kind, item.recv_ns)
+            health.decode_error(exc.kind, recv_ns)
             self.malformed[type(exc).__name__] += 1
-            self._log_once(item.key, exc.kind, "malformed block on %s: %s (further ones counted)",
-                           item.key, exc)  # fmt: skip
-            return
-        got = health.accept(block, item.recv_ns)
+            self._log_once(key, exc.kind, "malformed block on %s: %s (further ones counted)",
+                           key, exc)  # fmt: skip
+            return None
+        got = health.accept(block, recv_ns)
         if got.block is None:  # a repeat: counted in the channel's health, dropped
-            return
+            return None
         if got.clock_fault is not None:
-            self._log_once(item.key, "clock_fault", "%s: block seq %d has a t0 its sequence "
-                           "number contradicts: analysed at the sequence number's time (further "
-                           "ones counted)", item.key, block.seq)  # fmt: skip
-        self.analyzers[mill_id].add(channel, got.block.t0_ns, got.block.fs, got.block.samples)
+            self._log_once(key, "clock_fault", "%s: block seq %d has a t0 its sequence number "
+                           "contradicts: analysed at the sequence number's time (further ones "
+                           "counted)", key, block.seq)  # fmt: skip
+        return mill_id, channel, got.block
+
+    def _log_once(self, key: str, kind: str, msg: str, *args: object) -> None:
+        if (key, kind) not in self._logged:
+            self._logged.add((key, kind))
+            log.warning(msg, *args)
+
+
+class OfflineSink:
+    """The :class:`~service.worker.batch_lane.BlockSink` of an offline analysis: the
+    :class:`BlockAdmission` of the given mills feeding each mill's
+    :class:`~analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
+
+    def __init__(
+        self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
+    ) -> None:
+        self._mills = {c.id: c for c in configs}
+        self.admission = BlockAdmission(configs)
+        self.analyzers = {c.id: MillAnalyzer(c, spectra=spectra) for c in configs}
+        self._background: list[BackgroundSpectra] = []
+        if spectra and background:  # each mill's spectra on a thread of their own
+            for analyzer in self.analyzers.values():
+                self._background.append(BackgroundSpectra(analyzer.harmonics))
+                # (the analyzer only feeds, flushes and reports its tracker: the wrapper does)
+                analyzer.harmonics = cast(HarmonicTracker, self._background[-1])
+
+    @property
+    def mills(self) -> Mapping[str, MillConfig]:
+        return self._mills
+
+    @property
+    def health(self) -> Mapping[str, MillHealth]:
+        return self.admission.health
+
+    def route(self, key: str) -> tuple[str, str] | None:
+        """(mill id, channel name) of a live or replay key; None for no given mill."""
+        return self.admission.route(key)
+
+    def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
+        """One block the lane could not take as part of a regular run: admitted, then aligned
+        (``archive`` is ignored: nothing is archived here)."""
+        got = self.admission.admit(item.key, item.payload, item.recv_ns)
+        if got is not None:
+            mill_id, channel, block = got
+            self.analyzers[mill_id].add(channel, block.t0_ns, block.fs, block.samples)
 
     def accept_regular(
         self, mill_id: str, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray
@@ -229,7 +257,7 @@ class OfflineSink:
     def reading(self, mill_id: str) -> dict[str, Any]:
         """One mill's reading counts: blocks, gaps, repeats, clock faults, decode errors and
         what its aligner met (JSON-ready)."""
-        channels = self._health[mill_id].channels.values()
+        channels = self.admission.health[mill_id].channels.values()
         aligner = self.analyzers[mill_id].aligner
         return {
             "blocks": sum(h.blocks for h in channels),
@@ -240,11 +268,6 @@ class OfflineSink:
             "gap_samples": aligner.gap_samples,
             "late_blocks": aligner.dropped_blocks,
         }
-
-    def _log_once(self, key: str, kind: str, msg: str, *args: object) -> None:
-        if (key, kind) not in self._logged:
-            self._logged.add((key, kind))
-            log.warning(msg, *args)
 
 
 def _batches(
@@ -358,11 +381,11 @@ def analyze_files(
         for path, batch in ahead:
             ours, foreign = _ours(batch, sink)
             if path not in uncounted:
-                sink.foreign_blocks += foreign
+                sink.admission.foreign_blocks += foreign
             if len(ours):
                 lane.replay(ours)
     sink.finish()
     stats.files = [str(p) for p in files if p not in uncounted]
-    stats.foreign_blocks = sink.foreign_blocks
-    stats.malformed_blocks = sink.malformed
+    stats.foreign_blocks = sink.admission.foreign_blocks
+    stats.malformed_blocks = sink.admission.malformed
     return sink, stats
