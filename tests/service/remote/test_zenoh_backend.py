@@ -76,14 +76,20 @@ def pair(tmp_path_factory) -> Iterator[Pair]:
     in process (``local``) and over zenoh (``remote``) on the same runtime."""
     tmp = tmp_path_factory.mktemp("zenoh-backend")
     port = free_loopback_port()
+    # the scene ends before the tests run: with the mill's 10 s, stale-channel alarms (and the
+    # worker's stale health) would come part-way through the module, between two answers
+    text = (MILLS / f"{MILL}.toml").read_text()
+    assert "stale_after_s = 10.0 " in text
+    mill_file = tmp / f"{MILL}.toml"
+    mill_file.write_text(text.replace("stale_after_s = 10.0 ", "stale_after_s = 3600.0 ", 1))
     settings = ServiceSettings.model_validate({
         "zenoh": {"listen": [tcp_endpoint(port)]},
         "archive": {"directory": str(tmp / "archive")},
         "store": {"path": str(tmp / "mw.db")},
         "reports": {"directory": str(tmp / "reports")},
         "api": {"api_key": API_KEY},
-        "worker": {"name": "w1"},
-        "mills": {"files": [str(MILLS / f"{MILL}.toml")]},
+        "worker": {"name": "w1", "stale_after_s": 3600.0},
+        "mills": {"files": [str(mill_file)]},
     })  # fmt: skip
     runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
     runtime.start()
