@@ -38,10 +38,9 @@ from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.mill.loads import LoadAnalysis
 from analytics.operation.operating_states import OperatingState, Transition
-from analytics.signal.fault_stage import FaultStage
+from analytics.signal.fault_stage import FaultStage, LastGood
 from analytics.signal.frame_aligner import Frame, FrameAligner
 from analytics.signal.tacho import TachoSpeed
-from analytics.signal.telemetry_faults import hold_last_good
 from analytics.spectra.facts import HarmonicWindow
 from analytics.spectra.report import harmonics_report
 from analytics.spectra.settings import stagger_for
@@ -112,7 +111,7 @@ class MillAnalyzer:
         # mills started together compute their spectra at different samples (issue 5 latency)
         self.harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
         self._gain = {n: (ch.gain, ch.offset) for n, ch in config.channels.items()}
-        self._last_good: dict[str, float] = {}
+        self._last_good = LastGood()
         self._max_chunk = max(1, round(MAX_CHUNK_S * fs))
         self._queued: deque[Frame] = deque()
         self.backlog = 0  # samples aligned but not yet analysed
@@ -270,11 +269,11 @@ class MillAnalyzer:
             return
         running = shown == _RUNNING
         if not running[0] and not running.any():  # a stopped mill costs no spectra
-            self._note_last_good(frame)
+            self._last_good.note(frame)
             why = _why_not_running(shown[0])
             out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, {}, False, why)
             return
-        held = self._held(frame)
+        held = self._last_good.hold(frame)  # spectra must not see spikes
         if running.all():
             out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, held, True)
             return
@@ -285,30 +284,6 @@ class MillAnalyzer:
             piece = {c: x[a:b] for c, x in held.items()} if running[a] else {}
             why = _why_not_running(shown[a])
             out.harmonics += self.harmonics.feed(t_ns, frame.fs, piece, bool(running[a]), why)
-
-    def _held(self, frame: Frame) -> dict[str, np.ndarray]:
-        """Flagged samples replaced by the last good value (spectra must not see spikes)."""
-        if not frame.flags:
-            return frame.data
-        data = dict(frame.data)
-        for name, mask in frame.flags.items():
-            if mask.any():
-                held, last = hold_last_good(data[name], mask, self._last_good.get(name, np.nan))
-                data[name] = held
-                self._last_good[name] = last
-            elif data[name].size:
-                self._last_good[name] = float(data[name][-1])
-        return data
-
-    def _note_last_good(self, frame: Frame) -> None:
-        """What :meth:`_held` would leave in ``_last_good``, without holding anything."""
-        for name, mask in (frame.flags or {}).items():
-            if mask.shape[0] and not mask[-1]:  # the usual case: the last sample is good
-                self._last_good[name] = float(frame.data[name][-1])
-                continue
-            good = np.flatnonzero(~mask)
-            if good.size:
-                self._last_good[name] = float(frame.data[name][good[-1]])
 
     # ------------------------------------------------------------------ reading
     @property
@@ -408,7 +383,9 @@ class MillAnalyzer:
             "tacho": None if self.tacho is None else self.tacho[1].snapshot(),
             "analyzer": self.loads.snapshot(),
             "harmonics": self.harmonics.snapshot(),
-            "last_good": {k: (v if np.isfinite(v) else None) for k, v in self._last_good.items()},
+            "last_good": {
+                k: (v if np.isfinite(v) else None) for k, v in self._last_good.values.items()
+            },
         }
 
     @classmethod
@@ -444,7 +421,7 @@ class MillAnalyzer:
         m.loads = LoadAnalysis.restore(m.analysis_config, snap["analyzer"])
         m._restore_harmonics(snap["harmonics"])
         last = snap["last_good"]
-        m._last_good = {k: (np.nan if v is None else float(v)) for k, v in last.items()}
+        m._last_good = LastGood({k: (np.nan if v is None else float(v)) for k, v in last.items()})
         return m
 
     def _restore_harmonics(self, snap: dict[str, Any]) -> None:

@@ -3,7 +3,8 @@
 Modules::
 
     frame_aligner    FrameAligner: blocks of equal t0 → aligned Frames; gaps as NaN
-    fault_stage      FaultStage: every channel of a frame checked, all delayed alike
+    fault_stage      FaultStage: every channel of a frame checked, all delayed alike;
+                     LastGood: flagged samples held at the last good value, frame to frame
     telemetry_faults TelemetryFaultDetector: spikes, dropouts, zero runs, rail pins per channel
                      (seed 000 §5.2.2); hold_last_good
     tacho            TachoSpeed: pulse train → rpm (seed 000 App. C routine 5)

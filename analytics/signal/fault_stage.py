@@ -10,6 +10,11 @@ configured ``full_scale`` cannot be checked either (the detector's limits are fr
 span) and is delayed only. The output is
 independent of how the input was framed: the detectors are block-independent and the stage only
 concatenates what they decide.
+
+What the stages after it do with the flags is :class:`LastGood`: flagged samples replaced by the
+channel's last good value (:func:`~analytics.signal.telemetry_faults.hold_last_good`), carried
+across frames — the analyzer's spectra and ``millwatch spectrum`` both see the held values, so a
+flagged spike neither enters the speed estimate nor breaks a running period (issue 18).
 """
 
 from __future__ import annotations
@@ -21,10 +26,15 @@ import numpy as np
 from analytics.contracts import check_snapshot
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.signal.frame_aligner import Frame
-from analytics.signal.telemetry_faults import FaultCounts, FaultFlags, TelemetryFaultDetector
+from analytics.signal.telemetry_faults import (
+    FaultCounts,
+    FaultFlags,
+    TelemetryFaultDetector,
+    hold_last_good,
+)
 from analytics.snapshot_arrays import pack_array, unpack_array
 
-__all__ = ["FaultStage"]
+__all__ = ["FaultStage", "LastGood"]
 
 _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
@@ -125,3 +135,38 @@ class FaultStage:
         self.passthrough = {n: unpack_array(v) for n, v in snap["passthrough"].items()}
         self.t_first = snap["t_first"]
         self.emitted = int(snap["emitted"])
+
+
+class LastGood:
+    """Flagged samples of flagged frames replaced by each channel's last good value, carried
+    from frame to frame (NaN before a channel's first good sample: leading flagged samples of a
+    record stay NaN). ``values`` is the state (snapshot it as a plain dict)."""
+
+    def __init__(self, values: dict[str, float] | None = None) -> None:
+        self.values: dict[str, float] = dict(values or {})
+
+    def hold(self, frame: Frame) -> dict[str, np.ndarray]:
+        """``frame.data`` with its flagged samples held (the arrays of unflagged channels are
+        ``frame.data``'s own)."""
+        if not frame.flags:
+            return frame.data
+        data = dict(frame.data)
+        for name, mask in frame.flags.items():
+            if mask.any():
+                data[name], self.values[name] = hold_last_good(
+                    data[name], mask, self.values.get(name, np.nan)
+                )
+            elif data[name].size:
+                self.values[name] = float(data[name][-1])
+        return data
+
+    def note(self, frame: Frame) -> None:
+        """What :meth:`hold` would leave in :attr:`values`, without holding anything (for
+        frames whose values are not used)."""
+        for name, mask in (frame.flags or {}).items():
+            if mask.shape[0] and not mask[-1]:  # the usual case: the last sample is good
+                self.values[name] = float(frame.data[name][-1])
+                continue
+            good = np.flatnonzero(~mask)
+            if good.size:
+                self.values[name] = float(frame.data[name][good[-1]])

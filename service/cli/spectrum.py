@@ -11,6 +11,11 @@ with the drivetrain's expected excitation lines marked and labelled — seed 000
 speed magenta, pinion/girth mesh red, reducer mesh cyan). Peaks that match no expected line are
 marked as possible torsional resonance. ``--report`` writes the harmonic table as JSON.
 
+The samples pass the telemetry fault stage first, as in the analyzer (seed 000 §5.2.2): a flagged
+spike is held at the channel's last good value, so it neither ends a running period nor enters
+the speed estimate; a missing (NaN) sample stays missing and cuts its segment. The output says
+how many spectral segments were used and dropped, and why, and what was flagged per channel.
+
 Example::
 
     millwatch simulate --scene resonance --duration 120s --out r.mcap
@@ -32,6 +37,9 @@ import numpy as np
 
 from analytics.drivetrain.kinematics import ExpectedLine
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.signal.fault_stage import FaultStage, LastGood
+from analytics.signal.frame_aligner import Frame
+from analytics.signal.telemetry_faults import FaultCounts
 from analytics.spectra.report import harmonics_report
 from analytics.spectra.settings import HarmonicSettings, is_running
 from analytics.spectra.tracker import HarmonicTracker
@@ -40,7 +48,7 @@ from ingest.archive.reader import TailTolerantReader
 from ingest.mill_files import load_mill_config
 from service.cli.args import non_negative_float, positive_float
 
-__all__ = ["add_parser", "plot_spectrum", "track_recording"]
+__all__ = ["TrackedRecording", "add_parser", "plot_spectrum", "track_recording"]
 
 log = logging.getLogger(__name__)
 
@@ -133,6 +141,24 @@ def recording_frames(
         yield out
 
 
+@dataclass
+class TrackedRecording:
+    """What :func:`track_recording` read: the tracker, and the telemetry faults the fault stage
+    flagged per checked channel (their samples held at the last good value, a NaN one left
+    missing)."""
+
+    tracker: HarmonicTracker
+    faults: dict[str, FaultCounts]
+
+    def data_quality(self) -> dict[str, Any]:
+        """The report's ``data_quality``: fault counts per checked channel, and what was done."""
+        return {
+            "faults": {n: c.to_dict() for n, c in self.faults.items()},
+            "policy": "flagged samples held at the channel's last good value (a missing one "
+            "stays missing and cuts the segment); they never end a running period",
+        }
+
+
 def track_recording(
     path: Path,
     config: MillConfig,
@@ -140,20 +166,37 @@ def track_recording(
     *,
     settle_s: float = 5.0,
     channels: list[str] | None = None,
-) -> HarmonicTracker:
-    """Feed the running portions of a recording to a new tracker and return it."""
+) -> TrackedRecording:
+    """Feed the running portions of a recording to a new tracker, through the telemetry fault
+    stage: a flagged spike is held at the last good value, so it neither ends a running period
+    (the speed-band test sees the held speed) nor enters the speed estimate (issue 18)."""
     tracker = HarmonicTracker(config, channels, settings)
     speed = tracker.speed_channel
     band = tracker.settings.running_band
     shaft = config.channels[speed].shaft if speed is not None else "pinion"
-    running_s = 0.0
     names = [c.name for c in tracker.channels] + ([speed] if speed is not None else [])
-    for t0, frame in recording_frames(path, config, names):
-        n = len(next(iter(frame.values())))
-        ok = speed is None or is_running(frame[speed], config, shaft=shaft, band=band)
-        running_s = running_s + n / config.sample_rate_hz if ok else 0.0
-        tracker.feed(t0, config.sample_rate_hz, frame, ok and running_s > settle_s)
-    return tracker
+    read = config.model_copy(update={"channels": {n: config.channels[n] for n in names}})
+    stage, last_good = FaultStage(read), LastGood()
+    running_s, fs = 0.0, float(config.sample_rate_hz)
+
+    def feed(frame: Frame | None) -> None:
+        nonlocal running_s
+        if frame is None or len(frame) == 0:
+            return
+        held = last_good.hold(frame)
+        for name in frame.flags or {}:  # a missing sample stays missing (a dropout is no data)
+            missing = ~np.isfinite(frame.data[name])
+            if missing.any():
+                held[name] = np.where(missing, np.nan, held[name])
+        ok = speed is None or is_running(held[speed], config, shaft=shaft, band=band)
+        running_s = running_s + len(frame) / fs if ok else 0.0
+        tracker.feed(frame.t0_ns, fs, held, ok and running_s > settle_s)
+
+    for t0, data in recording_frames(path, config, names):
+        feed(stage.feed(Frame(t0, fs, data)))
+    feed(stage.flush())
+    tracker.flush()
+    return TrackedRecording(tracker, stage.totals())
 
 
 # ---------------------------------------------------------------- plotting
@@ -238,16 +281,17 @@ def _main(args: argparse.Namespace) -> int:
     if not args.recording.is_file():
         raise OSError(f"{args.recording}: no such file")
     settings = HarmonicSettings(window_s=args.window_s)
-    tracker = track_recording(
+    read = track_recording(
         args.recording, config, settings, settle_s=args.settle, channels=args.channel
     )
+    tracker = read.tracker
     if tracker.running_segments == 0:
         raise ValueError(
             f"{args.recording}: no steady running long enough for one "
             f"{tracker.revs}-revolution segment (~{args.window_s:g} s)"
         )
     plot_spectrum(tracker, out, args.channel)
-    report = harmonics_report(tracker)
+    report = harmonics_report(tracker) | {"data_quality": read.data_quality()}
     if args.report is not None:
         args.report.write_text(json.dumps(report, indent=2) + "\n")
     _summary(report, out)
@@ -260,6 +304,14 @@ def _summary(report: dict[str, Any], out: Path) -> None:
         f"{s['segments']} segments, {s['running_s']:.0f} s running at "
         f"{s['pinion_speed_rpm']:.2f} rpm pinion, resolution {s['resolution_hz']:.4f} Hz → {out}\n"
     )
+    sys.stdout.write(s["segments_note"] + "\n")
+    for name, c in report["data_quality"]["faults"].items():
+        if c["flagged_samples"]:
+            sys.stdout.write(
+                f"{name}: {c['spikes']} spikes, {c['dropouts']} dropouts, {c['zero_runs']} "
+                f"zero runs, {c['rail_hits']} rail pins flagged ({c['flagged_samples']} samples "
+                "held at the last good value, a missing one left missing)\n"
+            )
     for p in report["unexplained_peaks"]:
         pct = f" ({p['amplitude_pct']:.1f} % rated)" if p["amplitude_pct"] is not None else ""
         sys.stdout.write(

@@ -7,10 +7,12 @@ import json
 from pathlib import Path
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from analytics.signal.fault_stage import FaultStage
+from analytics.signal.fault_stage import FaultStage, LastGood
 from analytics.signal.frame_aligner import Frame
-from analytics.signal.telemetry_faults import TelemetryFaultDetector
+from analytics.signal.telemetry_faults import TelemetryFaultDetector, hold_last_good
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene
 
@@ -70,3 +72,31 @@ def test_snapshot_restore_continues_exactly():
         assert fa.t0_ns == fb.t0_ns
         for k in fa.data:
             np.testing.assert_array_equal(fa.data[k], fb.data[k])
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    x=st.lists(st.floats(-1e3, 1e3), min_size=1, max_size=60),
+    flagged=st.lists(st.booleans(), min_size=60, max_size=60),
+    cuts=st.lists(st.integers(0, 60), max_size=5),
+    use_note=st.lists(st.booleans(), min_size=6, max_size=6),
+)
+def test_last_good_holds_as_over_the_whole_record_whatever_the_framing(
+    x, flagged, cuts, use_note
+) -> None:
+    """LastGood over frames (some only noted, as for a stopped mill) leaves every held frame as
+    :func:`hold_last_good` of the whole record, and ends with its last good value."""
+    data = np.array(x)
+    mask = np.array(flagged[: data.size])
+    whole, last = hold_last_good(data, mask)
+    keep = LastGood()
+    bounds = [0, *sorted(c for c in cuts if c <= data.size), data.size]
+    for (a, b), note in zip(itertools.pairwise(bounds), use_note, strict=False):
+        frame = Frame(0, 1000.0, {"speed": data[a:b]}, {"speed": mask[a:b]})
+        if note:
+            keep.note(frame)
+        else:
+            np.testing.assert_array_equal(keep.hold(frame)["speed"], whole[a:b])
+    assert keep.values.get("speed", np.nan) == last or (
+        np.isnan(last) and np.isnan(keep.values.get("speed", np.nan))
+    )
