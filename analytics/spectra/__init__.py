@@ -1,6 +1,4 @@
-"""Harmonic tracking: order-tracked spectra of steady running, lines measured.
-
-Harmonic tracking: order-tracked Welch spectra of steady running, expected lines measured.
+"""Harmonic tracking: order-tracked Welch spectra of steady running, lines measured.
 
 Modules::
 
