@@ -301,7 +301,7 @@ def _main(args: argparse.Namespace) -> int:
 def _summary(report: dict[str, Any], out: Path) -> None:
     s = report["summary"]
     sys.stdout.write(
-        f"{s['segments']} segments, {s['running_s']:.0f} s running at "
+        f"{s['running_s']:.0f} s running at "
         f"{s['pinion_speed_rpm']:.2f} rpm pinion, resolution {s['resolution_hz']:.4f} Hz → {out}\n"
     )
     sys.stdout.write(s["segments_note"] + "\n")
