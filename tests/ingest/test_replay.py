@@ -363,8 +363,11 @@ def replay_with(
     speed: float | None,
     at: int,
     action: Callable[[Replayer], None],
+    late_threshold_s: float = 0.15,
 ) -> ReplayReport:
-    """Replay on the fake session; ``action(replayer)`` runs once ``at`` blocks are out."""
+    """Replay on the fake session; ``action(replayer)`` runs once ``at`` blocks are out. A block
+    is late after ``late_threshold_s``: under the 0.2 s pause (a pause counted as lateness is
+    caught) and over a busy 2-core machine's scheduling stalls (the default 0.05 s is not)."""
     box: list[Replayer] = []
 
     def on_progress(p: ReplayProgress) -> None:
@@ -374,7 +377,7 @@ def replay_with(
     fake = cast(zenoh.Session, session)
     remap = KeyRemap(run="r1")
     box.append(Replayer(fake, blocks, remap, speed=speed, on_progress=on_progress,
-                        progress_interval_s=0.0,
+                        progress_interval_s=0.0, late_threshold_s=late_threshold_s,
                         publisher_factory=fake_factory(session)))  # fmt: skip
     return box[0].run()
 
@@ -389,8 +392,8 @@ def test_pause_resumes_where_it_stopped_without_counting_late() -> None:
     report = replay_with(session, blocks_every(10, 21), 1.0, 10, pause_for_200ms)  # 0.2 s
     times = [t for _, _, t in session.log]
     assert report.blocks == 21 and report.late_resyncs == 0
-    assert 0.2 <= times[10] - times[9] <= 0.3  # the pause, plus one 10 ms step
-    assert times[-1] - times[10] == pytest.approx(0.1, abs=0.03)  # pacing resumed, no burst
+    assert 0.2 <= times[10] - times[9] <= 0.35  # the pause, plus one 10 ms step
+    assert times[-1] - times[10] == pytest.approx(0.1, abs=0.05)  # pacing resumed, no burst
     assert all(p.undeclared for p in session.publishers)
 
 
@@ -398,8 +401,8 @@ def test_speed_change_mid_replay() -> None:
     session = FakeSession()
     report = replay_with(session, blocks_every(10, 41), 1.0, 11, lambda r: r.set_speed(4.0))
     times = [t for _, _, t in session.log]
-    assert times[10] - times[0] == pytest.approx(0.1, abs=0.03)
-    assert times[40] - times[10] == pytest.approx(0.3 / 4, abs=0.03)
+    assert times[10] - times[0] == pytest.approx(0.1, abs=0.05)
+    assert times[40] - times[10] == pytest.approx(0.3 / 4, abs=0.05)  # not 0.3 s at 1x
     assert report.speed == 4.0 and report.late_resyncs == 0
 
 
