@@ -470,8 +470,9 @@ def test_replay_at_speed_two_takes_half_the_archive_span(tmp_path: Path) -> None
         timer.undeclare()
         subscriber.undeclare()
     assert report.archive_span_s == pytest.approx(0.598)
-    assert report.wall_s == pytest.approx(0.299, abs=0.05)
-    assert 0.29 <= wall <= 0.45
-    assert arrivals[-1] - arrivals[0] == pytest.approx(0.299, abs=0.05)  # seen by the subscriber
-    assert report.x_real_time == pytest.approx(2.0, rel=0.15)
+    # paced at 2x: 0.3 s (unpaced would be ~0, 1x 0.6 s); a loaded machine may stall ~0.1 s
+    assert report.wall_s == pytest.approx(0.299, abs=0.1)
+    assert 0.29 <= wall <= 0.5
+    assert arrivals[-1] - arrivals[0] == pytest.approx(0.299, abs=0.1)  # seen by the subscriber
+    assert report.x_real_time == pytest.approx(2.0, rel=0.3)
     assert report.late_resyncs <= 1  # a loaded CI machine may stall once
