@@ -160,6 +160,20 @@ def sample_times_ns(t0_ns: int, fs: float, n: int, first: int = 0) -> np.ndarray
     return t0_ns + np.round(i * (1e9 / fs)).astype(np.int64)
 
 
+def envelopes(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(min, max, mean) of each row of samples (one block each), NaN-aware: a row with missing
+    samples (a dropout) gives the envelope of the rest, all NaN when none is finite. Row sums
+    are numpy's 1-D sums (bitwise those of each row alone)."""
+    low, high = rows.min(axis=1), rows.max(axis=1)
+    mean = rows.sum(axis=1) / rows.shape[1]
+    for k in np.flatnonzero(np.isnan(low)).tolist():
+        finite = rows[k][np.isfinite(rows[k])]
+        low[k] = high[k] = mean[k] = math.nan
+        if finite.size:
+            low[k], high[k], mean[k] = finite.min(), finite.max(), finite.mean()
+    return low, high, mean
+
+
 def sample_time_ns(t0_ns: int, fs: float, i: int) -> int:
     """Time of sample ``i`` of a block starting at ``t0_ns``, as :func:`sample_times_ns`."""
     if float(fs).is_integer():
@@ -265,14 +279,13 @@ class FoxgloveExportWriter:
         """One ``millwatch.SampleEnvelope`` (min, max, mean; NaN-aware) at ``t_ns``."""
         if values.shape[0] == 0:
             return
-        low = float(values.min())
-        if not math.isnan(low):
-            high, mean = float(values.max()), float(values.sum()) / values.shape[0]
-        else:  # dropouts: the envelope of the rest
-            finite = values[np.isfinite(values)]
-            low = high = mean = math.nan
-            if finite.size:
-                low, high, mean = float(finite.min()), float(finite.max()), float(finite.mean())
+        low, high, mean = envelopes(values[None, :])
+        self.envelope(mill, channel, t_ns, float(low[0]), float(high[0]), float(mean[0]))
+
+    def envelope(
+        self, mill: str, channel: str, t_ns: int, low: float, high: float, mean: float
+    ) -> None:
+        """One ``millwatch.SampleEnvelope`` of numbers :func:`envelopes` computed."""
         self.numbers(topic(mill, "overview", channel), ENVELOPE_SCHEMA, t_ns, [low, high, mean])
         self.counts.overview += 1
 

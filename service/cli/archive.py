@@ -237,6 +237,7 @@ def _export(args: argparse.Namespace) -> int:
     from ingest.mill_files import load_mill_config
     from service.cli.analyze import _Blocks, recording_files
     from service.export.foxglove import export_archive
+    from service.worker.offline_analysis import export_files
 
     if args.out.exists() and not args.force:
         raise ArchiveCommandError(f"--out {args.out}: file exists; remove it or add --force")
@@ -252,6 +253,7 @@ def _export(args: argparse.Namespace) -> int:
         start_ns=args.start, end_ns=args.end, context_s=args.context,
         damage_step_s=args.damage_step, samples=not args.no_samples, progress=progress,
         overwrite=args.force,
+        feed=lambda export, read, advance: export_files(read, config, export, advance),
     )  # fmt: skip
     took = time.perf_counter() - started
     c = result.counts

@@ -7,8 +7,9 @@
   is the per-block composition, :data:`~service.export.foxglove.Admit` what the caller passes to
   decode and admit messages.
 
-Data flow: archive files → ``Admit`` (the command's decoding and admission, as
-``millwatch analyze``) → ``SpanExport`` → analyzer, alarms → writer. Called by ``cli/archive``
-(``millwatch archive export``); imports ``analytics``, ``ingest`` and ``alarms`` only. A new
+Data flow: archive files → the command's reading and admission, as ``millwatch analyze``
+(``Feed``: batches, regular runs as arrays into ``SpanExport.blocks``; or ``Admit``, message by
+message) → ``SpanExport`` → analyzer, alarms → writer. Called by ``cli/archive`` (``millwatch
+archive export``); imports ``analytics``, ``ingest`` and ``alarms`` only. A new
 export format goes here as a module of its own.
 """

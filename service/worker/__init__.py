@@ -22,8 +22,8 @@ Modules, low to high (a module imports only those above it):
 * ``batch_lane`` — archived blocks as arrays (replay), through the worker's public methods.
 * ``parallel_replay`` — a long archive tail replayed by several processes, mills split.
 * ``offline_analysis`` — ``millwatch analyze``: archive files through the batch lane into the
-  mills' analyzers, with no store (the replay path's cost per sample); its block admission is
-  the Foxglove export's too.
+  mills' analyzers, with no store (the replay path's cost per sample); ``export_files`` reads
+  the same way into a Foxglove export (``millwatch archive export``).
 * ``recovery`` — :func:`~service.worker.recovery.recover`: restore checkpoints, replay the
   archive tail (one process or several), then go live.
 * ``drain_watch`` — whether each mill's blocks are still being analysed (``/ready``).

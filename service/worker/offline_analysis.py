@@ -25,7 +25,7 @@ from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Generic, TypeVar, cast
+from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast
 
 import numpy as np
 
@@ -36,12 +36,22 @@ from analytics.spectra.tracker import HarmonicTracker
 from ingest import keys
 from ingest.archive.batches import BatchReader, MessageBatch
 from ingest.archive.files import ArchiveError
-from ingest.wire import Block, WireError, decode_block
+from ingest.wire import Block, WireError, decode_block, decode_headers
 from service.worker.batch_lane import BatchLane
 from service.worker.block_queue import QueuedBlock
 from service.worker.health import MillHealth
 
-__all__ = ["BackgroundSpectra", "BlockAdmission", "OfflineSink", "ReadingStats", "analyze_files"]
+if TYPE_CHECKING:  # (the export imports the Foxglove SDK: analyze does not need it)
+    from service.export.foxglove import SpanExport
+
+__all__ = [
+    "BackgroundSpectra",
+    "BlockAdmission",
+    "OfflineSink",
+    "ReadingStats",
+    "analyze_files",
+    "export_files",
+]
 
 log = logging.getLogger(__name__)
 
@@ -193,23 +203,13 @@ class BlockAdmission:
             log.warning(msg, *args)
 
 
-class OfflineSink:
-    """The :class:`~service.worker.batch_lane.BlockSink` of an offline analysis: the
-    :class:`BlockAdmission` of the given mills feeding each mill's
-    :class:`~analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
+class _AdmittingSink:
+    """What the offline sinks share: the given mills and their :class:`BlockAdmission` (the
+    channels' health, routing)."""
 
-    def __init__(
-        self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
-    ) -> None:
+    def __init__(self, configs: Sequence[MillConfig]) -> None:
         self._mills = {c.id: c for c in configs}
         self.admission = BlockAdmission(configs)
-        self.analyzers = {c.id: MillAnalyzer(c, spectra=spectra) for c in configs}
-        self._background: list[BackgroundSpectra] = []
-        if spectra and background:  # each mill's spectra on a thread of their own
-            for analyzer in self.analyzers.values():
-                self._background.append(BackgroundSpectra(analyzer.harmonics))
-                # (the analyzer only feeds, flushes and reports its tracker: the wrapper does)
-                analyzer.harmonics = cast(HarmonicTracker, self._background[-1])
 
     @property
     def mills(self) -> Mapping[str, MillConfig]:
@@ -222,6 +222,24 @@ class OfflineSink:
     def route(self, key: str) -> tuple[str, str] | None:
         """(mill id, channel name) of a live or replay key; None for no given mill."""
         return self.admission.route(key)
+
+
+class OfflineSink(_AdmittingSink):
+    """The :class:`~service.worker.batch_lane.BlockSink` of an offline analysis: the
+    :class:`BlockAdmission` of the given mills feeding each mill's
+    :class:`~analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
+
+    def __init__(
+        self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
+    ) -> None:
+        super().__init__(configs)
+        self.analyzers = {c.id: MillAnalyzer(c, spectra=spectra) for c in configs}
+        self._background: list[BackgroundSpectra] = []
+        if spectra and background:  # each mill's spectra on a thread of their own
+            for analyzer in self.analyzers.values():
+                self._background.append(BackgroundSpectra(analyzer.harmonics))
+                # (the analyzer only feeds, flushes and reports its tracker: the wrapper does)
+                analyzer.harmonics = cast(HarmonicTracker, self._background[-1])
 
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
         """One block the lane could not take as part of a regular run: admitted, then aligned
@@ -297,7 +315,7 @@ def _batches(
         stats.unreadable_tails[str(path)] = reader.error
 
 
-def _ours(batch: MessageBatch, sink: OfflineSink) -> tuple[MessageBatch, int]:
+def _ours(batch: MessageBatch, sink: _AdmittingSink) -> tuple[MessageBatch, int]:
     """The messages of ``batch`` on the sink's mills' keys, and how many others it holds (one
     by one through the lane they would cost a Python call each; they are only counted)."""
     foreign = [c for c, topic in batch.topics.items() if sink.route(topic) is None]
@@ -305,6 +323,17 @@ def _ours(batch: MessageBatch, sink: OfflineSink) -> tuple[MessageBatch, int]:
         return batch, 0
     theirs = np.isin(batch.channel, foreign)
     return batch.select(~theirs), int(np.count_nonzero(theirs))
+
+
+def _sink_batches(
+    files: Sequence[Path], sink: _AdmittingSink, stats: ReadingStats, advance: Callable[[int], None]
+) -> Iterator[tuple[Path, MessageBatch, int]]:
+    """(file, the messages of a batch on the sink's mills' keys, how many others) of ``files``
+    in order, read a batch or two ahead by a thread (:class:`_ReadAhead`)."""
+    read = ((path, batch) for path in files for batch in _batches(path, stats, advance))
+    with _ReadAhead(read) as ahead:
+        for path, batch in ahead:
+            yield (path, *_ours(batch, sink))
 
 
 class _ReadAhead(Generic[_T]):
@@ -372,20 +401,77 @@ def analyze_files(
     job's share counts them); ``background``: each mill's spectra on a thread of its own
     (:class:`BackgroundSpectra`: for cores that would idle otherwise). Returns the sink (its
     analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and what reading
-    met. The files are read a batch or two ahead by a thread (:class:`_ReadAhead`)."""
+    met. The files are read a batch or two ahead by a thread (:func:`_sink_batches`)."""
     sink = OfflineSink(configs, spectra=spectra, background=background)
     lane = BatchLane(sink)
     stats = ReadingStats()
-    read = ((path, batch) for path in files for batch in _batches(path, stats, advance))
-    with _ReadAhead(read) as ahead:
-        for path, batch in ahead:
-            ours, foreign = _ours(batch, sink)
-            if path not in uncounted:
-                sink.admission.foreign_blocks += foreign
-            if len(ours):
-                lane.replay(ours)
+    for path, ours, foreign in _sink_batches(files, sink, stats, advance):
+        if path not in uncounted:
+            sink.admission.foreign_blocks += foreign
+        if len(ours):
+            lane.replay(ours)
     sink.finish()
     stats.files = [str(p) for p in files if p not in uncounted]
     stats.foreign_blocks = sink.admission.foreign_blocks
     stats.malformed_blocks = sink.admission.malformed
     return sink, stats
+
+
+class _SpanSink(_AdmittingSink):
+    """The :class:`~service.worker.batch_lane.BlockSink` of a Foxglove export: the
+    :class:`BlockAdmission` of one mill feeding a
+    :class:`~service.export.foxglove.SpanExport` (regular runs as arrays, the rest block by
+    block)."""
+
+    def __init__(self, config: MillConfig, export: SpanExport) -> None:
+        super().__init__([config])
+        self._names = list(config.channels)
+        self.export = export
+
+    def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
+        got = self.admission.admit(item.key, item.payload, item.recv_ns)
+        if got is not None:
+            self.export.block(got[1], got[2])
+
+    def accept_regular(
+        self, mill_id: str, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray
+    ) -> None:
+        self.export.blocks(self._names, chan, t0_ns, raw)
+
+    def commit(self) -> None:
+        """Nothing to do: the export analyses as its backlog fills."""
+
+
+def _wanted(batch: MessageBatch, export: SpanExport) -> MessageBatch:
+    """The messages of ``batch`` the export needs: blocks whose header times touch the span
+    and its context, and every malformed one (admission counts it); the rest stay undecoded."""
+    head, ok = decode_headers(batch.buf, batch.offset, batch.length)
+    t0 = head["t0_ns"].astype(np.int64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_end = t0 + np.round(head["n"] * (1e9 / head["fs"])).astype(np.int64)
+    keep = np.ones(len(batch), dtype=bool)
+    if export.lo is not None:
+        keep &= t_end > export.lo
+    if export.hi is not None:
+        keep &= t0 < export.hi
+    keep |= ~ok
+    return batch if keep.all() else batch.select(keep)
+
+
+def export_files(
+    files: Sequence[Path],
+    config: MillConfig,
+    export: SpanExport,
+    advance: Callable[[int], None] = lambda _: None,
+) -> None:
+    """Feed ``export`` the blocks of mill ``config`` in ``files`` (in order), admitted as
+    :func:`analyze_files` admits them and read the same way (batches, the lane's regular runs
+    as arrays); ``advance(bytes)`` reports progress. Blocks outside the export's span and
+    context are skipped on their header times, undecoded."""
+    sink = _SpanSink(config, export)
+    lane = BatchLane(sink)
+    for _, ours, _ in _sink_batches(files, sink, ReadingStats(), advance):
+        if len(ours):
+            ours = _wanted(ours, export)
+        if len(ours):
+            lane.replay(ours)

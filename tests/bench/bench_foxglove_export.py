@@ -9,7 +9,9 @@ scene (stopped, start, running, stop, rocking) at 1 kHz on the 4 channels of
 ``deploy/mills/sag-5200-lrs.toml`` (100-sample float32 blocks) into MCAP archives with the real
 writer (``millwatch simulate``), then exports each whole recording
 in-process (:func:`service.export.foxglove.export_archive`: the analyzer, the alarms and the
-Foxglove writer; no progress bar) once with every sample and once with ``--no-samples``. Prints
+Foxglove writer; no progress bar) once with every sample and once with ``--no-samples``, each
+read as the command reads (``batches``: :func:`service.worker.offline_analysis.export_files`,
+regular runs as arrays) and message by message (``blocks``, the reading before). Prints
 wall and CPU seconds (CPU: every thread of the process, the SDK's compression threads included;
 the steadier figure on a shared machine), both per mill-hour of data (÷ analysed s × 3600),
 messages and output MB per mill-hour.
@@ -18,6 +20,7 @@ messages and output MB per mill-hour.
 from __future__ import annotations
 
 import argparse
+import itertools
 import tempfile
 import time
 from pathlib import Path
@@ -26,7 +29,8 @@ from analytics.drivetrain.mill_config import MillConfig
 from ingest.mill_files import load_mill_config
 from service.cli.analyze import _Blocks
 from service.cli.main import main as millwatch
-from service.export.foxglove import Admit, export_archive
+from service.export.foxglove import Admit, Feed, export_archive
+from service.worker.offline_analysis import export_files
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 
@@ -38,7 +42,8 @@ def admit(config: MillConfig) -> Admit:
 
 def run(seconds: float) -> None:
     config = load_mill_config(MILL)
-    print(f"{'scene':<10}{'case':<14}{'wall s':>8}{'CPU s':>8}{'wall s/mill-h':>15}"
+    batches: Feed = lambda export, read, advance: export_files(read, config, export, advance)  # noqa: E731
+    print(f"{'scene':<10}{'case':<14}{'reading':<9}{'wall s':>8}{'CPU s':>8}{'wall s/mill-h':>15}"
           f"{'CPU s/mill-h':>14}{'messages':>10}{'MB':>7}{'MB/mill-h':>11}")  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         for scene, duration in (("steady", seconds), ("start-lrs", None)):
@@ -47,10 +52,13 @@ def run(seconds: float) -> None:
             if duration is not None:
                 args += ["--duration", f"{duration}s"]
             assert millwatch([*args, "--no-progress"]) == 0
-            for name, samples in (("every sample", True), ("--no-samples", False)):
-                out = Path(tmp) / f"{scene}-{samples}.mcap"
+            for (name, samples), (reading, feed) in itertools.product(
+                (("every sample", True), ("--no-samples", False)),
+                (("batches", batches), ("blocks", None)),
+            ):
+                out = Path(tmp) / f"{scene}-{samples}-{reading}.mcap"
                 started, cpu = time.perf_counter(), time.process_time()
-                result = export_archive([archive], config, out, admit, samples=samples)
+                result = export_archive([archive], config, out, admit, samples=samples, feed=feed)
                 wall, cpu = time.perf_counter() - started, time.process_time() - cpu
                 c = result.counts
                 messages = (
@@ -59,7 +67,7 @@ def run(seconds: float) -> None:
                 mb = out.stat().st_size / 1e6
                 per_hour = 3600.0 / result.analysed_s
                 hourly = f"{wall * per_hour:>15.1f}{cpu * per_hour:>14.1f}"
-                print(f"{scene:<10}{name:<14}{wall:>8.2f}{cpu:>8.2f}{hourly}{messages:>10}"
+                print(f"{scene:<10}{name:<14}{reading:<9}{wall:>8.2f}{cpu:>8.2f}{hourly}{messages:>10}"
                       f"{mb:>7.1f}{mb * per_hour:>11.0f}")  # fmt: skip
 
 
