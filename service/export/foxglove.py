@@ -178,14 +178,12 @@ class SpanExport:
         if n == 0:
             return
         t_end = t0_ns + round(n * 1e9 / self.fs)
-        keep = self._between(t0_ns, t_end, self.lo, self.hi)
+        keep = self.wanted_blocks(t0_ns, t_end)
         if not keep.all():
             if not keep.any():
                 return
             chan, t0_ns, raw, t_end = chan[keep], t0_ns[keep], raw[keep], t_end[keep]
-        inside = (t0_ns >= (self.start if self.start is not None else t0_ns)) & (
-            t_end <= (self.end if self.end is not None else t_end)
-        )  # wholly inside the span
+        inside = self._inside(t0_ns, t_end)
         values: dict[int, np.ndarray] = {}
         row = np.empty(chan.shape[0], dtype=np.int64)  # a block's row in its channel's array
         for ci in np.unique(chan).tolist():
@@ -210,14 +208,22 @@ class SpanExport:
         if self.analyzer.backlog >= _CHUNK_SAMPLES:
             self._advance()
 
-    @staticmethod
-    def _between(t0: np.ndarray, t_end: np.ndarray, lo: int | None, hi: int | None) -> np.ndarray:
-        """Blocks ``[t0, t_end)`` that overlap ``[lo, hi)`` (None = open)."""
-        out = np.ones(t0.shape[0], dtype=bool)
-        if lo is not None:
-            out &= t_end > lo
-        if hi is not None:
-            out &= t0 < hi
+    def wanted_blocks(self, t0_ns: np.ndarray, t_end_ns: np.ndarray) -> np.ndarray:
+        """:meth:`wanted` of many blocks ``[t0_ns[k], t_end_ns[k])`` (a mask)."""
+        out = np.ones(t0_ns.shape[0], dtype=bool)
+        if self.lo is not None:
+            out &= t_end_ns > self.lo
+        if self.hi is not None:
+            out &= t0_ns < self.hi
+        return out
+
+    def _inside(self, t0_ns: np.ndarray, t_end_ns: np.ndarray) -> np.ndarray:
+        """Blocks wholly inside the span (a mask): written whole, no edge to cut."""
+        out = np.ones(t0_ns.shape[0], dtype=bool)
+        if self.start is not None:
+            out &= t0_ns >= self.start
+        if self.end is not None:
+            out &= t_end_ns <= self.end
         return out
 
     def _written(self, first: int, last: int) -> None:

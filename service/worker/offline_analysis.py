@@ -444,17 +444,15 @@ class _SpanSink(_AdmittingSink):
 
 def _wanted(batch: MessageBatch, export: SpanExport) -> MessageBatch:
     """The messages of ``batch`` the export needs: blocks whose header times touch the span
-    and its context, and every malformed one (admission counts it); the rest stay undecoded."""
+    and its context (:meth:`~service.export.foxglove.SpanExport.wanted_blocks`), and every
+    malformed one (admission counts it); the rest stay undecoded. An open span needs all."""
+    if export.lo is None and export.hi is None:
+        return batch
     head, ok = decode_headers(batch.buf, batch.offset, batch.length)
     t0 = head["t0_ns"].astype(np.int64)
     with np.errstate(divide="ignore", invalid="ignore"):
         t_end = t0 + np.round(head["n"] * (1e9 / head["fs"])).astype(np.int64)
-    keep = np.ones(len(batch), dtype=bool)
-    if export.lo is not None:
-        keep &= t_end > export.lo
-    if export.hi is not None:
-        keep &= t0 < export.hi
-    keep |= ~ok
+    keep = export.wanted_blocks(t0, t_end) | ~ok
     return batch if keep.all() else batch.select(keep)
 
 
