@@ -39,7 +39,8 @@ from analytics.mill.analyzer import MillAnalyzer
 from ingest import wire
 from ingest.archive.reader import RawMessage
 from ingest.mill_files import load_mill_config
-from service.worker.offline_analysis import BlockAdmission, ReadingStats, analyze_files
+from service.worker.admission import BlockAdmission
+from service.worker.offline_analysis import ReadingStats, analyze_files
 
 __all__ = ["add_parser", "analyze_recording", "plan_jobs", "recording_files", "run_jobs"]
 
@@ -60,15 +61,15 @@ def recording_files(path: Path) -> list[Path]:
 
 class _Blocks:
     """The Foxglove export's admission of one mill's archive messages, as analyze admits them
-    (:class:`~service.worker.offline_analysis.BlockAdmission`): ``(channel, block)`` of a new
+    (:class:`~service.worker.admission.BlockAdmission`): ``(channel, block)`` of a new
     block, None for anything else (counted)."""
 
     def __init__(self, config: MillConfig) -> None:
-        self.admission = BlockAdmission([config])
+        self.admission = BlockAdmission([config], replayed=True, warn_foreign=False)
 
     def admit(self, msg: RawMessage) -> tuple[str, wire.Block] | None:
         got = self.admission.admit(msg.key, msg.payload, msg.log_time_ns)
-        return None if got is None else (got[1], got[2])
+        return None if got is None else (got.channel, got.block)
 
 
 def analyze_recording(

@@ -109,30 +109,25 @@ class _Assembler:
         return t0, out
 
 
-def _channel_names(config: MillConfig) -> dict[str, str]:
-    """Key segment → configured channel name."""
-    return {ch.key: name for name, ch in config.channels.items()}
-
-
 def recording_frames(
     path: Path, config: MillConfig, names: list[str], frame_s: float = 1.0
 ) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
-    """(t0_ns, frame) of channels ``names`` of ``config`` from one MCAP file, in time order."""
-    by_segment = _channel_names(config)
+    """(t0_ns, frame) of channels ``names`` of ``config`` from one MCAP file, in time order
+    (live keys or a replay run's: :class:`~ingest.keys.ChannelRoutes`)."""
+    routes = keys.ChannelRoutes([config], replayed=True)
     asm = _Assembler(tuple(names), float(config.sample_rate_hz))
     minimum = round(frame_s * config.sample_rate_hz)
     bad = 0
     for msg in TailTolerantReader(path).messages():
+        route = routes.route(msg.key)
+        if route is None or route[1] not in names:
+            continue
         try:
-            key = keys.parse_key(msg.key)
             block = wire.decode_block(msg.payload)
-        except (keys.KeyFormatError, wire.WireError):
+        except wire.WireError:
             bad += 1
             continue
-        name = by_segment.get(key.signal_segment)
-        if key.site != config.site or key.mill != config.id or name not in names:
-            continue
-        asm.add(name, block)
+        asm.add(route[1], block)
         while (out := asm.frame(minimum)) is not None:
             yield out
     if bad:
