@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import enum
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import TYPE_CHECKING
@@ -221,20 +221,21 @@ class ChannelRoutes:
             for config in configs
             for name, key in mill_channel_keys(config).items()
         }
-        self._replayed = replayed
         self._seen: dict[str, tuple[str, str] | None] = {}
+        #: (mill id, channel name) of a key; None for a key of no given mill's channel. (Live
+        #: only: the dictionary's own lookup, no Python call — the worker routes every block.)
+        self.route: Callable[[str], tuple[str, str] | None] = (
+            self._route_replayed if replayed else self._live.get
+        )
 
-    def route(self, key: str) -> tuple[str, str] | None:
-        """(mill id, channel name) of ``key``; None for a key of no given mill's channel."""
+    def _route_replayed(self, key: str) -> tuple[str, str] | None:
         found = self._live.get(key)
-        if found is not None or not self._replayed:
-            return found
-        if key not in self._seen:  # (parsed once a key: offline tools meet few distinct keys)
+        if found is None and key not in self._seen:  # (parsed once a key)
             try:
                 self._seen[key] = self._live.get(to_live(key))
             except KeyFormatError:
                 self._seen[key] = None
-        return self._seen[key]
+        return found if found is not None else self._seen[key]
 
 
 def _split_prefix(expr: str) -> tuple[str | None, list[str]]:
