@@ -1,6 +1,7 @@
 """``millwatch spectrum``: the steady-state torque spectrum of a recording, expected lines marked.
 
-Reads one MCAP recording (``millwatch simulate --out`` or the ingest archive), keeps only the
+Reads one MCAP recording (``millwatch simulate --out`` or the ingest archive; its blocks admitted
+as ``millwatch analyze`` admits them: :mod:`service.worker.admission`), keeps only the
 running portions (pinion speed within the running band for ``--settle`` seconds: a plain
 speed-band test, :func:`analytics.spectra.settings.is_running`, not the analyzer's operating-state
 machine, whose run edges differ), feeds them to
@@ -43,10 +44,11 @@ from analytics.signal.telemetry_faults import FaultCounts
 from analytics.spectra.report import harmonics_report
 from analytics.spectra.settings import HarmonicSettings, is_running
 from analytics.spectra.tracker import HarmonicTracker
-from ingest import keys, wire
+from ingest import wire
 from ingest.archive.reader import TailTolerantReader
 from ingest.mill_files import load_mill_config
 from service.cli.args import non_negative_float, positive_float
+from service.worker.admission import BlockAdmission
 
 __all__ = ["TrackedRecording", "add_parser", "plot_spectrum", "track_recording"]
 
@@ -112,26 +114,19 @@ class _Assembler:
 def recording_frames(
     path: Path, config: MillConfig, names: list[str], frame_s: float = 1.0
 ) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
-    """(t0_ns, frame) of channels ``names`` of ``config`` from one MCAP file, in time order
-    (live keys or a replay run's: :class:`~ingest.keys.ChannelRoutes`)."""
-    routes = keys.ChannelRoutes([config], replayed=True)
+    """(t0_ns, frame) of channels ``names`` of ``config`` from one MCAP file, in time order,
+    of the blocks ``millwatch analyze`` admits (:class:`~service.worker.admission.BlockAdmission`:
+    live keys or a replay run's; malformed blocks and repeats counted and skipped)."""
+    admission = BlockAdmission([config], replayed=True, warn_foreign=False)
     asm = _Assembler(tuple(names), float(config.sample_rate_hz))
     minimum = round(frame_s * config.sample_rate_hz)
-    bad = 0
     for msg in TailTolerantReader(path).messages():
-        route = routes.route(msg.key)
-        if route is None or route[1] not in names:
+        got = admission.admit(msg.key, msg.payload, msg.log_time_ns)
+        if got is None or got.channel not in names:
             continue
-        try:
-            block = wire.decode_block(msg.payload)
-        except wire.WireError:
-            bad += 1
-            continue
-        asm.add(route[1], block)
+        asm.add(got.channel, got.block)
         while (out := asm.frame(minimum)) is not None:
             yield out
-    if bad:
-        log.warning("%s: %d undecodable messages skipped", path, bad)
     while (out := asm.frame(1)) is not None:
         yield out
 
