@@ -16,14 +16,18 @@ What is here:
   lifecycle, snapshots and restores its state.
 * :mod:`alarms.wire` — the ``…/@alarms`` message of a transition (publish, decode).
 * :mod:`alarms.report` — the alarms a recording would have raised (``millwatch analyze``).
+* :mod:`alarms.times` — a moment as text, the one ISO-8601 form of every surface (alarm
+  messages, the alarm wire, and every ``service`` surface, which imports it from here).
 
 Data flow: analyzer facts → ``from_analysis`` → observations → ``engine`` (``rules`` decide,
 ``lifecycle`` records) → transitions out; the caller stores them (``service.store``) and
 publishes them (``wire``). No I/O here: imports only :mod:`analytics`.
 
-Where things go: a new rule is a rule in :mod:`alarms.rules` (and its quantity in
-:mod:`alarms.observations`); a new alarm field is a field of :class:`Alarm`, a store migration and
-the API model (``tests/service/api/test_models.py`` names what is missing).
+Where things go: a moment written as text anywhere → :func:`alarms.times.iso_utc` or
+:func:`alarms.times.iso_local`, never a format of its own; a new rule is a rule in
+:mod:`alarms.rules` (and its quantity in :mod:`alarms.observations`); a new alarm field is a
+field of :class:`Alarm`, a store migration and the API model
+(``tests/service/api/test_models.py`` names what is missing).
 """
 
 from alarms.engine import AlarmEngine, UnknownAlarmError

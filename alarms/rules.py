@@ -21,8 +21,8 @@ Lifecycle knobs (:mod:`alarms.engine` applies them):
 
 Rules and their defaults (fields of ``MillConfig.alarms``; *option*: not a seed value). A
 message states the time of the value that raised (or escalated) the alarm, in the site's time
-zone to the second (``2026-11-02 17:00:38 SAST``), and the start-peak advice is the mill's
-starter's (:data:`START_ADVICE`: Grid, LRS, E-LRS).
+zone with its offset (:func:`alarms.times.iso_local`: ``2026-11-02T17:00:38.412+02:00``), and
+the start-peak advice is the mill's starter's (:data:`START_ADVICE`: Grid, LRS, E-LRS).
 
 =========================== ===================================== ====================== =======
 rule                        levels                                clears                 source
@@ -56,17 +56,16 @@ history).
 
 from __future__ import annotations
 
-import zoneinfo
 from collections.abc import Mapping
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any, Literal
 
 from alarms.observations import QUANTITIES, Kind, Observation, local_month
+from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig, Starter
 
-__all__ = ["Level", "Rule", "RuleBook", "Severity", "build_rules", "local_time"]
+__all__ = ["Level", "Rule", "RuleBook", "Severity", "build_rules"]
 
 
 class Severity(StrEnum):
@@ -182,14 +181,14 @@ class Rule:
         subject = obs.subject
         fields.setdefault("month", local_month(obs.t_ns, time_zone))
         fields.update(
-            time=local_time(obs.t_ns, time_zone),
+            time=iso_local(obs.t_ns, time_zone),
             value=self.fmt(obs.value),
             subject=subject or "the mill",
             where=f" on {subject}" if subject else "",
         )
         headline = self.headline.format_map(fields)
         if raised_ns is not None and raised_ns != obs.t_ns:
-            headline += f" (alarm raised {local_time(raised_ns, time_zone)})"
+            headline += f" (alarm raised {iso_local(raised_ns, time_zone)})"
         criterion = self.criterion or (
             f"{severity} {self.direction} {self.fmt(self.threshold(severity, obs))}"
         )
@@ -199,14 +198,6 @@ class Rule:
 def _short(value: Any) -> Any:
     """Context numbers in messages: four significant digits."""
     return f"{value:.4g}" if isinstance(value, float) else value
-
-
-def local_time(t_ns: int, time_zone: str) -> str:
-    """``YYYY-MM-DD HH:MM:SS ZONE`` in the site's time zone (what the control room's clock shows,
-    with the zone's abbreviation, e.g. ``SAST``)."""
-    zone = zoneinfo.ZoneInfo(time_zone)
-    local = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=UTC).astimezone(zone)
-    return local.strftime("%Y-%m-%d %H:%M:%S %Z")
 
 
 @dataclass(frozen=True, slots=True)

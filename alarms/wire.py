@@ -13,7 +13,7 @@ subscribe to :func:`ingest.keys.alarm_pattern`). Encoding ``application/json``, 
                                             # recurred | cleared
         "seq": 1,                           # 1, 2, … per alarm: gaps mean a missed message
         "t_ns": 1763692440000000000,        # int64 ns since the Unix epoch, UTC
-        "time_utc": "2025-11-21T02:34:00Z",
+        "time_utc": "2025-11-21T02:34:00.000Z", # RFC 3339, ms (alarms.times)
         "severity": "alarm",                # warning | alarm | critical (after the transition)
         "state": "raised",                  # raised | acknowledged | cleared
         "value": 312.0, "threshold": 300.0, # null for acknowledgements and quiet clears
@@ -39,10 +39,10 @@ from __future__ import annotations
 
 import json
 import math
-from datetime import UTC, datetime
 from typing import Any
 
 from alarms.lifecycle import Transition
+from alarms.times import iso_utc
 
 __all__ = [
     "ALARM_ENCODING",
@@ -69,15 +69,11 @@ def _finite(value: Any) -> Any:
     return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
-def _utc(t_ns: int) -> str:
-    return datetime.fromtimestamp(t_ns // 1_000_000_000, tz=UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
-
-
 def transition_message(transition: Transition, site: str | None = None) -> dict[str, Any]:
     """The message as plain data (see the module docstring)."""
     alarm = {k: _finite(v) for k, v in transition.alarm.to_dict().items()}
     body = {k: _finite(v) for k, v in transition.to_row().items() if k != "alarm_id"}
-    body["time_utc"] = _utc(transition.t_ns)
+    body["time_utc"] = iso_utc(transition.t_ns)
     return {"v": WIRE_VERSION, "schema": ALARM_SCHEMA, "site": site, "transition": body,
             "alarm": alarm}  # fmt: skip
 

@@ -34,16 +34,24 @@ Layout, version 1 (``/``-separated chunks)::
   ``…/@worker/<worker>`` per mill while it runs; ``*``/``**`` never match either chunk.
 
 No other module formats keys: use :func:`build_key`, :func:`parse_key` and the
-pattern helpers. :func:`key_matches` implements zenoh's ``*``/``**``/verbatim rules
-for concrete keys (used by the archive reader, which must not need a session).
+pattern helpers. The map between a mill file's channels and their keys is built here too:
+:func:`mill_channel_keys` (channel name → key) and :class:`ChannelRoutes` (key → mill id and
+channel name), for the worker, offline analysis, the simulator, subscriptions and tools alike.
+:func:`key_matches` implements zenoh's ``*``/``**``/verbatim rules for concrete keys (used by
+the archive reader, which must not need a session).
 """
 
 from __future__ import annotations
 
 import enum
 import re
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from functools import lru_cache
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # (only the annotation: keys stays importable without pydantic)
+    from analytics.drivetrain.mill_config import MillConfig
 
 ROOT = "millwatch"
 LAYOUT_VERSION = "v1"
@@ -188,6 +196,46 @@ def channel_key(site: str, mill: str, segment: str, *, replay_run: str | None = 
     config's ``pinion_torque_nbs``); raises :class:`KeyFormatError` naming the bad part."""
     signal, side = _parse_signal(segment)
     return build_key(site, mill, signal, side, replay_run=replay_run)
+
+
+def mill_channel_keys(config: MillConfig) -> dict[str, str]:
+    """A mill's live channel keys by configured channel name, in configuration order (the
+    ``key`` of each channel of the mill file is its ``<signal>`` chunk)."""
+    return {
+        name: channel_key(config.site, config.id, channel.key)
+        for name, channel in config.channels.items()
+    }
+
+
+class ChannelRoutes:
+    """The one key → ``(mill id, configured channel name)`` map of the given mills.
+
+    ``replayed=False`` (the live worker and its archive replay): live keys only, so blocks of a
+    replay run can never be taken for the mill's live data (the ``@replay`` promise above).
+    ``replayed=True`` (offline tools reading a recording, which may come from a replay run): a
+    replay run's key of a channel routes like its live key."""
+
+    def __init__(self, configs: Iterable[MillConfig], *, replayed: bool = False) -> None:
+        self._live = {
+            key: (config.id, name)
+            for config in configs
+            for name, key in mill_channel_keys(config).items()
+        }
+        self._seen: dict[str, tuple[str, str] | None] = {}
+        #: (mill id, channel name) of a key; None for a key of no given mill's channel. (Live
+        #: only: the dictionary's own lookup, no Python call — the worker routes every block.)
+        self.route: Callable[[str], tuple[str, str] | None] = (
+            self._route_replayed if replayed else self._live.get
+        )
+
+    def _route_replayed(self, key: str) -> tuple[str, str] | None:
+        found = self._live.get(key)
+        if found is None and key not in self._seen:  # (parsed once a key)
+            try:
+                self._seen[key] = self._live.get(to_live(key))
+            except KeyFormatError:
+                self._seen[key] = None
+        return found if found is not None else self._seen[key]
 
 
 def _split_prefix(expr: str) -> tuple[str | None, list[str]]:

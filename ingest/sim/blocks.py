@@ -52,10 +52,7 @@ def scene_blocks(
         raise ValueError(f"block_samples must be > 0, got {block_samples}")
     config = scene.config
     fs = float(config.sample_rate_hz)
-    channel_keys = {
-        name: keys.channel_key(config.site, config.id, ch.key)
-        for name, ch in config.channels.items()
-    }
+    channel_keys = keys.mill_channel_keys(config)
     units = {name: wire.Unit.from_symbol(ch.units) for name, ch in config.channels.items()}
     seq = dict.fromkeys(channel_keys, 0)
     blocks_per_chunk = max(1, round(chunk_seconds * fs / block_samples))

@@ -155,8 +155,8 @@ class ScenePublisher:
         publisher of each of its channels is up (issue 16), so declaring them one by one,
         waiting after the first, would stall both."""
         config = self.scene.config
-        for ch in config.channels.values():
-            self._publisher(keys.channel_key(config.site, config.id, ch.key))
+        for key in keys.mill_channel_keys(config).values():
+            self._publisher(key)
         first = next(iter(self._publishers.values()), None)
         waits = first is not None and self._wait_subscribers_s > 0
         if waits and first is not None and not first.wait_for_subscribers(self._wait_subscribers_s):

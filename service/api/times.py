@@ -2,8 +2,9 @@
 
 The API's times are int64 nanoseconds since the Unix epoch, UTC (exact, sortable, the poll
 cursor). :func:`with_iso` adds beside each ``<name>_ns`` an ``<name>`` with the same instant as
-ISO-8601 UTC (``2024-05-01T10:40:00.123456789Z`` — nanoseconds kept when not whole seconds),
-the convention of ``/life``'s ``evaluated_at_ns``/``evaluated_at``. :func:`ns_of` turns a query time
+ISO-8601 UTC in the one form of every surface (:func:`alarms.times.iso_utc`:
+``2024-05-01T10:40:00.123Z``, milliseconds; the exact instant is the ``_ns`` beside it), the
+convention of ``/life``'s ``evaluated_at_ns``/``evaluated_at``. :func:`ns_of` turns a query time
 given as ISO-8601 (``since=`` of ``/alarms``, which takes integer ns too) into ns.
 """
 
@@ -15,7 +16,9 @@ from typing import Annotated, Any
 
 from pydantic import BeforeValidator
 
-__all__ = ["IsoTime", "iso_utc", "ns_of", "with_iso"]
+from alarms.times import iso_utc
+
+__all__ = ["IsoTime", "ns_of", "with_iso"]
 
 _NS = 1_000_000_000
 _INT64_MAX = 2**63 - 1
@@ -33,13 +36,6 @@ def _text_only(value: Any) -> Any:
 IsoTime = Annotated[datetime, BeforeValidator(_text_only)]
 """An ISO-8601 time in a query (numbers refused: they are ns, validated as such)."""
 _SUFFIX = "_ns"
-
-
-def iso_utc(t_ns: int) -> str:
-    """``t_ns`` (ns UTC) as ISO-8601 UTC with a ``Z``; fraction only when not whole seconds."""
-    seconds, frac = divmod(t_ns, _NS)
-    text = datetime.fromtimestamp(seconds, tz=UTC).strftime("%Y-%m-%dT%H:%M:%S")
-    return f"{text}.{frac:09d}Z" if frac else f"{text}Z"
 
 
 def with_iso(data: Any) -> Any:

@@ -26,7 +26,6 @@ import queue
 import sys
 import time
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -34,12 +33,14 @@ from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type info
 
 from alarms.from_analysis import report_observations
 from alarms.report import alarms_for_report
+from alarms.times import iso_utc
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import MillAnalyzer
 from ingest import wire
 from ingest.archive.reader import RawMessage
 from ingest.mill_files import load_mill_config
-from service.worker.offline_analysis import BlockAdmission, ReadingStats, analyze_files
+from service.worker.admission import BlockAdmission
+from service.worker.offline_analysis import ReadingStats, analyze_files
 
 __all__ = ["add_parser", "analyze_recording", "plan_jobs", "recording_files", "run_jobs"]
 
@@ -60,15 +61,15 @@ def recording_files(path: Path) -> list[Path]:
 
 class _Blocks:
     """The Foxglove export's admission of one mill's archive messages, as analyze admits them
-    (:class:`~service.worker.offline_analysis.BlockAdmission`): ``(channel, block)`` of a new
+    (:class:`~service.worker.admission.BlockAdmission`): ``(channel, block)`` of a new
     block, None for anything else (counted)."""
 
     def __init__(self, config: MillConfig) -> None:
-        self.admission = BlockAdmission([config])
+        self.admission = BlockAdmission([config], replayed=True, warn_foreign=False)
 
     def admit(self, msg: RawMessage) -> tuple[str, wire.Block] | None:
         got = self.admission.admit(msg.key, msg.payload, msg.log_time_ns)
-        return None if got is None else (got[1], got[2])
+        return None if got is None else (got.channel, got.block)
 
 
 def analyze_recording(
@@ -218,10 +219,6 @@ def _check_alive(procs: list[Any], results: dict[int, Any], plan: list[_Job]) ->
 
 
 # ---------------------------------------------------------------- output
-def _when(t_ns: int) -> str:
-    return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3] + "Z"
-
-
 def _fmt(x: float | None, spec: str = ".1f") -> str:
     return "—" if x is None else format(x, spec)
 
@@ -288,15 +285,15 @@ def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
              f"state now {report['state']}"]  # fmt: skip
     for s in report["starts"]:
         lines.append(
-            f"  start {_when(s['t_ns'])}{' FAILED' if s['failed'] else ''}: switch-on "
+            f"  start {iso_utc(s['t_ns'])}{' FAILED' if s['failed'] else ''}: switch-on "
             f"{_fmt(s['switch_on_peak_pct'])} %, short-circuit {_fmt(s['short_circuit_peak_pct'])}"
             f" %, rise 10-90 {_fmt(s['rise_time_10_90_ms'])} ms, accel {_fmt(s['accel_s'])} s"
         )
     for s in report["stops"]:
-        lines.append(f"  {s['kind']:5} {_when(s['t_ns'])}: rocking peak "
+        lines.append(f"  {s['kind']:5} {iso_utc(s['t_ns'])}: rocking peak "
                      f"{_fmt(s['rocking_peak_pct'])} % for {_fmt(s['rocking_s'])} s")  # fmt: skip
     for b in report["barring"]:
-        lines.append(f"  barring {_when(b['t_ns'])}: peak {b['peak_pct']:.1f} %, average "
+        lines.append(f"  barring {iso_utc(b['t_ns'])}: peak {b['peak_pct']:.1f} %, average "
                      f"{b['average_pct']:.1f} %, {b['duration_s']:.0f} s")  # fmt: skip
     for month, m in report["starts_per_month"].items():
         lines.append(f"  starts {month}: {m['starts']} ({m['failed_starts']} failed), "

@@ -26,12 +26,12 @@ import sys
 import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
+from alarms.times import iso_utc
 from ingest.archive.files import MCAP_MAGIC, ArchiveError
 from ingest.archive.reader import TailTolerantReader
 from ingest.archive.recovery import recover_file
@@ -280,10 +280,7 @@ def _info(args: argparse.Namespace) -> int:
 
 
 def _iso(t_ns: int | None) -> str:
-    if t_ns is None:
-        return "-"
-    moment = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=UTC)
-    return moment.strftime("%Y-%m-%dT%H:%M:%S") + f".{t_ns % 1_000_000_000 // 1_000_000:03d}Z"
+    return "-" if t_ns is None else iso_utc(t_ns)
 
 
 def _describe(info: FileInfo) -> str:

@@ -41,6 +41,7 @@ from pathlib import Path
 import zenoh
 from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
+from alarms.times import iso_utc
 from ingest import keys
 from ingest.archive.files import ArchiveError
 from ingest.gateway import DEFAULT_RETENTION_S
@@ -263,14 +264,9 @@ def _progress(enabled: bool) -> Iterator[Callable[[ReplayProgress], None]]:
         def on_progress(p: ReplayProgress) -> None:
             bar.update(p.blocks - bar.n)
             if p.archive_time_ns is not None:
-                bar.set_postfix_str(f"{_iso(p.archive_time_ns)} {p.bytes / 1e6:.1f} MB")
+                bar.set_postfix_str(f"{iso_utc(p.archive_time_ns)} {p.bytes / 1e6:.1f} MB")
 
         yield on_progress
-
-
-def _iso(t_ns: int) -> str:
-    moment = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=UTC)
-    return moment.strftime("%Y-%m-%dT%H:%M:%S") + f".{t_ns % 1_000_000_000 // 1_000_000:03d}Z"
 
 
 def _print_report(report: ReplayReport, remap: KeyRemap, *, as_json: bool) -> None:

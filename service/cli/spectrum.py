@@ -1,6 +1,7 @@
 """``millwatch spectrum``: the steady-state torque spectrum of a recording, expected lines marked.
 
-Reads one MCAP recording (``millwatch simulate --out`` or the ingest archive), keeps only the
+Reads one MCAP recording (``millwatch simulate --out`` or the ingest archive; its blocks admitted
+as ``millwatch analyze`` admits them: :mod:`service.worker.admission`), keeps only the
 running portions (pinion speed within the running band for ``--settle`` seconds: a plain
 speed-band test, :func:`analytics.spectra.settings.is_running`, not the analyzer's operating-state
 machine, whose run edges differ), feeds them to
@@ -43,10 +44,11 @@ from analytics.signal.telemetry_faults import FaultCounts
 from analytics.spectra.report import harmonics_report
 from analytics.spectra.settings import HarmonicSettings, is_running
 from analytics.spectra.tracker import HarmonicTracker
-from ingest import keys, wire
+from ingest import wire
 from ingest.archive.reader import TailTolerantReader
 from ingest.mill_files import load_mill_config
 from service.cli.args import non_negative_float, positive_float
+from service.worker.admission import BlockAdmission
 
 __all__ = ["TrackedRecording", "add_parser", "plot_spectrum", "track_recording"]
 
@@ -109,34 +111,22 @@ class _Assembler:
         return t0, out
 
 
-def _channel_names(config: MillConfig) -> dict[str, str]:
-    """Key segment → configured channel name."""
-    return {ch.key: name for name, ch in config.channels.items()}
-
-
 def recording_frames(
     path: Path, config: MillConfig, names: list[str], frame_s: float = 1.0
 ) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
-    """(t0_ns, frame) of channels ``names`` of ``config`` from one MCAP file, in time order."""
-    by_segment = _channel_names(config)
+    """(t0_ns, frame) of channels ``names`` of ``config`` from one MCAP file, in time order,
+    of the blocks ``millwatch analyze`` admits (:class:`~service.worker.admission.BlockAdmission`:
+    live keys or a replay run's; malformed blocks and repeats counted and skipped)."""
+    admission = BlockAdmission([config], replayed=True, warn_foreign=False)
     asm = _Assembler(tuple(names), float(config.sample_rate_hz))
     minimum = round(frame_s * config.sample_rate_hz)
-    bad = 0
     for msg in TailTolerantReader(path).messages():
-        try:
-            key = keys.parse_key(msg.key)
-            block = wire.decode_block(msg.payload)
-        except (keys.KeyFormatError, wire.WireError):
-            bad += 1
+        got = admission.admit(msg.key, msg.payload, msg.log_time_ns)
+        if got is None or got.channel not in names:
             continue
-        name = by_segment.get(key.signal_segment)
-        if key.site != config.site or key.mill != config.id or name not in names:
-            continue
-        asm.add(name, block)
+        asm.add(got.channel, got.block)
         while (out := asm.frame(minimum)) is not None:
             yield out
-    if bad:
-        log.warning("%s: %d undecodable messages skipped", path, bad)
     while (out := asm.frame(1)) is not None:
         yield out
 

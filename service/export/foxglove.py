@@ -25,7 +25,6 @@ import sys
 from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +33,7 @@ from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type info
 
 from alarms.from_analysis import report_observations
 from alarms.report import alarms_for_report
+from alarms.times import iso_utc
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
 from ingest import keys, wire
@@ -76,12 +76,6 @@ _KEEP = 100_000
 #: Aligned samples gathered before the analyzer runs (as ``millwatch analyze``; long chunks cost
 #: less per sample, the results do not depend on it).
 _CHUNK_SAMPLES = 30_000
-
-
-def iso(t_ns: int) -> str:
-    """``2024-01-01T00:00:00.000Z`` of int ns since the epoch (UTC)."""
-    moment = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=UTC)
-    return moment.strftime("%Y-%m-%dT%H:%M:%S") + f".{t_ns % 1_000_000_000 // 1_000_000:03d}Z"
 
 
 @dataclass(frozen=True)
@@ -356,7 +350,7 @@ def event_line(event: dict[str, Any]) -> str:
     flags = [w for w in ("failed", "shock_load", "above_limit") if event.get(w)]
     if event.get("alarm"):
         flags.append(f"level {event['alarm']}")
-    return f"{kind} at {iso(int(event['t_ns']))}: " + ", ".join(parts + flags)
+    return f"{kind} at {iso_utc(int(event['t_ns']))}: " + ", ".join(parts + flags)
 
 
 # ---------------------------------------------------------------- reading the archive
@@ -485,10 +479,10 @@ def _empty_span(
     spans = mill_spans(files, admit)
     if not spans:
         return _no_mill(config, files)
-    held = "; ".join(f"{iso(a)} .. {iso(b)}" for a, b in spans[:20])
+    held = "; ".join(f"{iso_utc(a)} .. {iso_utc(b)}" for a, b in spans[:20])
     if len(spans) > 20:
         held += f"; … ({len(spans)} spans)"
-    span = f"{'-' if start is None else iso(start)} .. {'-' if end is None else iso(end)}"
+    span = f"{'-' if start is None else iso_utc(start)} .. {'-' if end is None else iso_utc(end)}"
     return ValueError(f"--start/--end: the span {span} holds no samples of mill {config.id}; "
                       f"the archive holds it (sample time) {held}")  # fmt: skip
 
@@ -517,7 +511,7 @@ def export_archive(
     command's batch reading, :func:`service.worker.offline_analysis.export_files`); default:
     message by message through ``admit_for(config)``."""
     if start_ns is not None and end_ns is not None and end_ns <= start_ns:
-        raise ValueError(f"--end {iso(end_ns)} is not after --start {iso(start_ns)}")
+        raise ValueError(f"--end {iso_utc(end_ns)} is not after --start {iso_utc(start_ns)}")
     margin = round(context_s * 1e9)
     lo = None if start_ns is None else start_ns - margin
     read = plan_files(files, lo, None if end_ns is None else end_ns + margin)

@@ -35,6 +35,7 @@ from typing import Any
 import zenoh
 from prometheus_client import CollectorRegistry
 
+from alarms.times import iso_utc
 from alarms.wire import AlarmWireError
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.keys import (
@@ -217,8 +218,7 @@ class ZenohBackend:
             return (f"No worker analyses mill {mill_id!r}: no worker's [worker] partition covers "
                     "it, or its worker has not started yet.")  # fmt: skip
         worker, t_ns = left
-        when = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(t_ns / 1e9))
-        return (f"Mill {mill_id!r} is unreachable: {self._who(worker)} left at {when}; "
+        return (f"Mill {mill_id!r} is unreachable: {self._who(worker)} left at {iso_utc(t_ns)}; "
                 "its data is not analysed until it is back.")  # fmt: skip
 
     def _remember(self, info: Mapping[str, Any]) -> None:

@@ -46,6 +46,7 @@ from typing import Any
 
 from pydantic import ConfigDict, with_config
 
+from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
@@ -251,10 +252,8 @@ def life_to_dict(report: LifeReport) -> dict[str, Any]:
 
 
 def local_iso(t_ns: int | None, tz: zoneinfo.ZoneInfo) -> str | None:
-    """ISO-8601 local time of ``t_ns`` (seconds), None for None."""
-    if t_ns is None:
-        return None
-    return datetime.fromtimestamp(t_ns / 1e9, tz).isoformat(timespec="seconds")
+    """:func:`alarms.times.iso_local` of ``t_ns`` in ``tz``, None for None."""
+    return None if t_ns is None else iso_local(t_ns, tz)
 
 
 # ----------------------------------------------------------------------------- computing

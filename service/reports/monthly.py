@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from alarms.lifecycle import Alarm
+from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
@@ -476,7 +477,7 @@ def _start_row(e: EventRow, config: MillConfig, zone: zoneinfo.ZoneInfo) -> Star
     switch_on = _peak(d.get("switch_on", ()), "motor_pct")
     return StartRow(
         t_ns=e.t_ns,
-        local_time=_local(e.t_ns, zone).strftime("%Y-%m-%d %H:%M:%S"),
+        local_time=iso_local(e.t_ns, zone),
         failed=bool(d.get("failed", False)),
         switch_on_pct=switch_on,
         short_circuit_pct=_peak(d.get("short_circuit", ()), "motor_pct"),

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 from typing import Any
 
+from alarms.times import iso_local
 from analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
 from analytics.mill.report import STARTS_NORM_PER_MONTH, starts_status
 from service.errors import BadRequest
@@ -133,7 +134,7 @@ def _start(event: EventRow, tz: zoneinfo.ZoneInfo, alarms: AlarmThresholds) -> d
     peak = d.get("switch_on_peak_pct")
     return {
         "t_ns": event.t_ns,
-        "local_time": datetime.fromtimestamp(event.t_ns / 1e9, tz).isoformat(),
+        "local_time": iso_local(event.t_ns, tz),
         "end_t_ns": event.t_end_ns,
         "failed": bool(d.get("failed", False)),
         "switch_on_peak_pct": peak,

@@ -3,7 +3,7 @@
 Block path (``millwatch serve``; DESIGN.md "Data flow")::
 
     zenoh callback ─▶ block_queue ─▶ worker.Worker.step: for each block
-        archive (raw bytes, first) ─▶ decode ─▶ health (per channel) ─▶ mill_job.MillJob (queued)
+        archive (raw bytes, first) ─▶ admission (route, decode, health) ─▶ mill_job.MillJob (queued)
     end of the batch: each mill's analysis ─▶ one store transaction ─▶ alarms to ``on_alarms``
     every checkpoint interval, one mill at a time: snapshot + archive position ─▶ store
 
@@ -12,6 +12,9 @@ Modules, low to high (a module imports only those above it):
 * ``block_queue`` — the bounded queue between zenoh callbacks and the worker; drops counted.
 * ``health`` — per-channel sequencing (a block is new only if its sequence number is; repeats
   and clock faults counted), lifetime counters (checkpointed), losses, staleness, rates, latency.
+* ``admission`` — :class:`~service.worker.admission.BlockAdmission`, the one decision whether a
+  block is analysed (route by key, decode, sequence) and its counters, for the live worker, its
+  replay and offline analysis alike.
 * ``checkpoints`` — when each mill is checkpointed; which archived blocks a checkpoint covers.
 * ``partition`` — which configured mills this worker analyses when several share a router.
 * ``worker`` — :class:`~service.worker.worker.Worker`: routing, the block path above, commits,
@@ -30,8 +33,9 @@ Modules, low to high (a module imports only those above it):
 * ``runtime`` — :class:`~service.worker.runtime.ServiceRuntime` owns the resources (store,
   archive, zenoh session, worker thread), starts them in order and closes them in reverse.
 
-Where things go: a new per-block check or counter → ``health`` (and ``Worker.handle``, and
-``batch_lane`` for the array path, which must count the same); a new per-mill result or store row
+Where things go: a new per-block check or counter → ``health`` and ``admission`` (and
+``ChannelHealth.follows_on`` / ``observe_run`` for the batch lane's array path, which must count
+the same); a new per-mill result or store row
 → ``mill_job``; a new start-up or shutdown step → ``runtime``; a new recovery step →
 ``recovery``, calling only public ``Worker`` methods.
 """

@@ -11,9 +11,11 @@ mill's aligner takes them all at once (``Worker.accept_regular`` →
 when the timing is not regular). A mill with anything irregular in the batch — a malformed or
 foreign block, a gap, a repeat — goes block by block through ``Worker.handle`` in arrival order
 instead, so every count, data-quality event and sample is exactly what block-by-block handling
-gives. Blocks on keys of no configured mill go through ``Worker.handle`` too (they are only
-counted). A held mill's blocks move its health counters either way but never reach its pipeline
-(the worker's ``accept_regular`` and ``handle`` see to that).
+gives: a run is regular by the admission rule itself
+(:meth:`~service.worker.health.ChannelHealth.follows_on`, see :mod:`service.worker.admission`).
+Blocks on keys of no configured mill go through ``Worker.handle`` too (they are only counted).
+A held mill's blocks move its health counters either way but never reach its pipeline (the
+worker's ``accept_regular`` and ``handle`` see to that).
 
 The lane talks to the worker only through :class:`BlockSink`, the worker's public methods it
 needs, so it does not import the worker. Its Python work is per batch and per mill, never per
@@ -188,22 +190,7 @@ class BatchLane:
         step = round(n * 1e9 / fs)
         for ci in np.unique(chan).tolist():
             sel = np.flatnonzero(chan == ci)
-            seq = head["seq"][sel]
-            h = health[names[ci]]
-            first, final = int(seq[0]), int(seq[-1])
-            if (
-                h.last_seq is not None and first != h.last_seq + 1
-            ) or final - first != sel.size - 1:
-                return False
-            if np.any(np.diff(seq) != 1):
-                return False
-            # t0 on the sequence numbers' grid (no clock fault): within half a block of it
-            t0 = head["t0_ns"][sel].astype(np.int64)
-            expected = h.expected_t0(first)
-            ref = t0[0] if expected is None else expected[0]
-            if h.in_clock_fault or np.any(
-                np.abs(t0 - (ref + np.arange(sel.size) * step)) > step // 2
-            ):
+            if not health[names[ci]].follows_on(head["seq"][sel], head["t0_ns"][sel], step):
                 return False
             per_channel[ci] = sel
         start = batch.offset[idx] + head["header_len"].astype(np.int64)

@@ -22,11 +22,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from datetime import UTC, datetime
 
 import numpy as np
 import numpy.typing as npt
 
+from alarms.times import iso_utc
 from ingest.archive.files import ArchivePosition, archive_file_order
 
 __all__ = ["CheckpointRestoreError", "CheckpointSchedule", "MillHeldError", "covers", "earliest"]
@@ -66,8 +66,7 @@ def _where(position: ArchivePosition | None) -> str:
         return "(taken without an archive position)"
     at = f"at archive file {position.file}, message {position.index}"
     if position.log_time_ns:
-        t = datetime.fromtimestamp(position.log_time_ns / 1e9, tz=UTC)
-        at += f", logged {t.isoformat(timespec='seconds').replace('+00:00', 'Z')}"
+        at += f", logged {iso_utc(position.log_time_ns)}"
     return f"({at})"
 
 

@@ -185,6 +185,24 @@ class ChannelHealth:
         """:meth:`accept`, for callers that need only the verdict."""
         return self.accept(block, recv_ns).verdict
 
+    def follows_on(self, seq: np.ndarray, t0_ns: np.ndarray, step_ns: int) -> bool:
+        """Whether :meth:`accept` of blocks with sequence numbers ``seq`` and start times
+        ``t0_ns`` (ns), each ``step_ns`` long, one after the other, would admit each as new
+        with no gap, repeat or clock fault — the same rule for a run at once (the batch lane's
+        regular runs, then counted by :meth:`observe_run`). Changes nothing. (A channel in a
+        clock-fault episode is never such a run: its blocks go one by one.)"""
+        first = int(seq[0])
+        if self.in_clock_fault or (self.last_seq is not None and first != self.last_seq + 1):
+            return False
+        if np.any(np.diff(seq.astype(np.int64)) != 1):
+            return False
+        tolerance = max(step_ns // 2, 1)
+        expected = self.expected_t0(first)
+        if expected is not None and abs(int(t0_ns[0]) - expected[0]) > expected[1]:
+            return False
+        # each block where its predecessor's t0 and duration put it (as accept checks)
+        return not np.any(np.abs(np.diff(t0_ns.astype(np.int64)) - step_ns) > tolerance)
+
     def observe_run(
         self, blocks: int, samples: int, nonfinite: int, last_seq: int, last_t0_ns: int,
         last_sample_ns: int, last_recv_ns: int,

@@ -5,8 +5,9 @@ compiled scan per chunk, no Python object per message) and handed to the worker'
 :class:`~service.worker.batch_lane.BatchLane`. Its regular runs reach each mill's analyzer as
 arrays (:meth:`~analytics.mill.analyzer.MillAnalyzer.add_blocks`); anything irregular — a
 malformed block, a gap, a repeat, a clock fault — goes block by block through
-:meth:`OfflineSink.handle`, with the live worker's admission (a block is new only if its sequence
-number is; see :mod:`service.worker.health`), calibration and alignment. At each of the lane's
+:meth:`OfflineSink.handle`, with the live worker's admission (:mod:`service.worker.admission`:
+the same :class:`~service.worker.admission.BlockAdmission`, counters and all, taking a replay
+run's keys as their live ones), calibration and alignment. At each of the lane's
 commits every analyzer analyses what it was given as contiguous chunks of
 :data:`~analytics.mill.analyzer.MAX_CHUNK_S`. So an archive analysed here gives the results the
 live worker and a replay give for the same blocks, at the replay's cost per sample.
@@ -33,10 +34,10 @@ from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import MillAnalyzer
 from analytics.spectra.facts import HarmonicWindow
 from analytics.spectra.tracker import HarmonicTracker
-from ingest import keys
 from ingest.archive.batches import BatchReader, MessageBatch
 from ingest.archive.files import ArchiveError
-from ingest.wire import Block, WireError, decode_block, decode_headers
+from ingest.wire import decode_headers
+from service.worker.admission import BlockAdmission
 from service.worker.batch_lane import BatchLane
 from service.worker.block_queue import QueuedBlock
 from service.worker.health import MillHealth
@@ -46,7 +47,6 @@ if TYPE_CHECKING:  # (the export imports the Foxglove SDK: analyze does not need
 
 __all__ = [
     "BackgroundSpectra",
-    "BlockAdmission",
     "OfflineSink",
     "ReadingStats",
     "analyze_files",
@@ -64,7 +64,8 @@ BATCH_MESSAGES = 20_000
 @dataclass
 class ReadingStats:
     """What reading the recording met, over all its mills: files read, blocks on keys of no
-    given mill, malformed blocks by kind, files read only up to a torn or corrupt record."""
+    given mill, malformed blocks by kind (:attr:`ingest.wire.WireError.kind`, as the worker's
+    channel health counts them), files read only up to a torn or corrupt record."""
 
     files: list[str] = field(default_factory=list)
     foreign_blocks: int = 0
@@ -143,73 +144,13 @@ class BackgroundSpectra:
         return getattr(self._tracker, name)
 
 
-class BlockAdmission:
-    """Routing and the live worker's admission of archived blocks of the given mills: a key
-    (live or replay) names a mill's channel; a payload decodes; a block is new only if its
-    sequence number is (:meth:`~service.worker.health.ChannelHealth.accept`: repeats counted and
-    dropped, a clock fault placed at its sequence number's time). Counts what it skips. Shared by
-    the offline analysis and the Foxglove export (``millwatch archive export``)."""
-
-    def __init__(self, configs: Sequence[MillConfig]) -> None:
-        self.health = {c.id: MillHealth.for_channels(list(c.channels)) for c in configs}
-        self._live = {
-            keys.channel_key(c.site, c.id, ch.key): (c.id, name)
-            for c in configs
-            for name, ch in c.channels.items()
-        }
-        self._routes: dict[str, tuple[str, str] | None] = {}
-        self.foreign_blocks = 0
-        self.malformed: Counter[str] = Counter()
-        self._logged: set[tuple[str, str]] = set()
-
-    def route(self, key: str) -> tuple[str, str] | None:
-        """(mill id, channel name) of a live or replay key; None for no given mill."""
-        if key not in self._routes:
-            try:
-                self._routes[key] = self._live.get(keys.to_live(key))
-            except keys.KeyFormatError:
-                self._routes[key] = None
-        return self._routes[key]
-
-    def admit(self, key: str, payload: bytes, recv_ns: int) -> tuple[str, str, Block] | None:
-        """(mill id, channel, block) of a new block; None for anything else (counted: another
-        mill's key, a malformed payload, a repeat)."""
-        route = self.route(key)
-        if route is None:
-            self.foreign_blocks += 1
-            return None
-        mill_id, channel = route
-        health = self.health[mill_id].channels[channel]
-        try:
-            block = decode_block(payload)
-        except WireError as exc:
-            health.decode_error(exc.kind, recv_ns)
-            self.malformed[type(exc).__name__] += 1
-            self._log_once(key, exc.kind, "malformed block on %s: %s (further ones counted)",
-                           key, exc)  # fmt: skip
-            return None
-        got = health.accept(block, recv_ns)
-        if got.block is None:  # a repeat: counted in the channel's health, dropped
-            return None
-        if got.clock_fault is not None:
-            self._log_once(key, "clock_fault", "%s: block seq %d has a t0 its sequence number "
-                           "contradicts: analysed at the sequence number's time (further ones "
-                           "counted)", key, block.seq)  # fmt: skip
-        return mill_id, channel, got.block
-
-    def _log_once(self, key: str, kind: str, msg: str, *args: object) -> None:
-        if (key, kind) not in self._logged:
-            self._logged.add((key, kind))
-            log.warning(msg, *args)
-
-
 class _AdmittingSink:
     """What the offline sinks share: the given mills and their :class:`BlockAdmission` (the
     channels' health, routing)."""
 
     def __init__(self, configs: Sequence[MillConfig]) -> None:
         self._mills = {c.id: c for c in configs}
-        self.admission = BlockAdmission(configs)
+        self.admission = BlockAdmission(configs, replayed=True, warn_foreign=False)
 
     @property
     def mills(self) -> Mapping[str, MillConfig]:
@@ -246,8 +187,8 @@ class OfflineSink(_AdmittingSink):
         (``archive`` is ignored: nothing is archived here)."""
         got = self.admission.admit(item.key, item.payload, item.recv_ns)
         if got is not None:
-            mill_id, channel, block = got
-            self.analyzers[mill_id].add(channel, block.t0_ns, block.fs, block.samples)
+            block = got.block
+            self.analyzers[got.mill_id].add(got.channel, block.t0_ns, block.fs, block.samples)
 
     def accept_regular(
         self, mill_id: str, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray
@@ -315,20 +256,23 @@ def _batches(
         stats.unreadable_tails[str(path)] = reader.error
 
 
-def _ours(batch: MessageBatch, sink: _AdmittingSink) -> tuple[MessageBatch, int]:
-    """The messages of ``batch`` on the sink's mills' keys, and how many others it holds (one
-    by one through the lane they would cost a Python call each; they are only counted)."""
+def _ours(batch: MessageBatch, sink: _AdmittingSink) -> tuple[MessageBatch, Counter[str]]:
+    """The messages of ``batch`` on the sink's mills' keys, and how many others it holds per
+    key (one by one through the lane they would cost a Python call each; they are only
+    counted)."""
     foreign = [c for c, topic in batch.topics.items() if sink.route(topic) is None]
     if not foreign:
-        return batch, 0
+        return batch, Counter()
     theirs = np.isin(batch.channel, foreign)
-    return batch.select(~theirs), int(np.count_nonzero(theirs))
+    found, counts = np.unique(batch.channel[theirs], return_counts=True)
+    per_key = Counter({batch.topics[int(c)]: int(n) for c, n in zip(found, counts, strict=True)})
+    return batch.select(~theirs), per_key
 
 
 def _sink_batches(
     files: Sequence[Path], sink: _AdmittingSink, stats: ReadingStats, advance: Callable[[int], None]
-) -> Iterator[tuple[Path, MessageBatch, int]]:
-    """(file, the messages of a batch on the sink's mills' keys, how many others) of ``files``
+) -> Iterator[tuple[Path, MessageBatch, Counter[str]]]:
+    """(file, the messages of a batch on the sink's mills' keys, the others per key) of ``files``
     in order, read a batch or two ahead by a thread (:class:`_ReadAhead`)."""
     read = ((path, batch) for path in files for batch in _batches(path, stats, advance))
     with _ReadAhead(read) as ahead:
@@ -407,13 +351,14 @@ def analyze_files(
     stats = ReadingStats()
     for path, ours, foreign in _sink_batches(files, sink, stats, advance):
         if path not in uncounted:
-            sink.admission.foreign_blocks += foreign
+            for key, blocks in foreign.items():
+                sink.admission.count_foreign(key, blocks)
         if len(ours):
             lane.replay(ours)
     sink.finish()
     stats.files = [str(p) for p in files if p not in uncounted]
     stats.foreign_blocks = sink.admission.foreign_blocks
-    stats.malformed_blocks = sink.admission.malformed
+    stats.malformed_blocks = sink.admission.malformed()
     return sink, stats
 
 
@@ -431,7 +376,7 @@ class _SpanSink(_AdmittingSink):
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
         got = self.admission.admit(item.key, item.payload, item.recv_ns)
         if got is not None:
-            self.export.block(got[1], got[2])
+            self.export.block(got.channel, got.block)
 
     def accept_regular(
         self, mill_id: str, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray

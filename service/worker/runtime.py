@@ -47,7 +47,7 @@ from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.reader import ArchiveReader
 from ingest.archive.writer import ArchiveWriter
 from ingest.gateway import PublisherWatch, RecoveringSubscriber, declare_recovering_subscriber
-from ingest.keys import alarm_key, channel_key, live_pattern, mill_pattern
+from ingest.keys import alarm_key, live_pattern, mill_channel_keys, mill_pattern
 from ingest.zenoh_session import build_config, connected_peers, open_retrying
 from service.reports.month_end import MonthEndJob
 from service.settings import ServiceSettings
@@ -171,10 +171,7 @@ class ServiceRuntime:
         those up already now, the others from a thread within ``[worker] gateway_wait_s``."""
         assert self.session is not None
         self._watch = PublisherWatch(self.session, live_pattern())
-        self._unsubscribed = {
-            m: {channel_key(c.site, c.id, ch.key) for ch in c.channels.values()}
-            for m, c in self.mills.items()
-        }
+        self._unsubscribed = {m: set(mill_channel_keys(c).values()) for m, c in self.mills.items()}
         wait_s = self.settings.worker.gateway_wait_s
         self._subscribe_ready(worker, final=wait_s == 0)
         if self._unsubscribed:

@@ -32,6 +32,8 @@ from it: nothing is lost.
 
 Bad input never stops the worker: an undecodable block is archived, counted per channel and kind
 and logged once per kind; a block whose key belongs to no configured mill is archived and counted.
+Which blocks are analysed — routing, decoding, sequence numbers, clock faults — is decided by
+:class:`~service.worker.admission.BlockAdmission`, as for a replay and offline analysis.
 """
 
 from __future__ import annotations
@@ -51,12 +53,12 @@ from alarms.engine import AlarmEngine
 from alarms.lifecycle import Transition
 from alarms.observations import Observation
 from analytics.drivetrain.mill_config import MillConfig
-from ingest import keys
 from ingest.archive.files import ArchivePosition
 from ingest.archive.writer import ArchiveWriter
-from ingest.wire import Block, WireError, decode_block
+from ingest.wire import Block
 from service.store.database import Store
 from service.store.records import DamageRow, EventRow
+from service.worker.admission import BlockAdmission
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.checkpoints import (
     STEP_BUDGET_S,
@@ -152,9 +154,8 @@ class Worker:
         self.archive = archive
         self.checkpoint_seconds = checkpoint_seconds
         self._clock = clock
-        self._routes = _routes(mills)
-        self.health = {m: MillHealth.for_channels(list(c.channels)) for m, c in mills.items()}
-        self.unrouted: Counter[str] = Counter()
+        #: Routing, decoding, sequencing and their counters (:mod:`service.worker.admission`).
+        self.admission = BlockAdmission(mills.values())
         self.archive_errors = 0
         self.blocks_handled = 0
         #: Held mills (see the module docstring): mill id → why (the restore error's message).
@@ -185,44 +186,14 @@ class Worker:
         if archive and self.archive is not None:
             self._archive(self.archive, item)
         self.blocks_handled += 1
-        route = self._routes.get(item.key)
-        if route is None:
-            self.unrouted[item.key] += 1
-            self._log_once(
-                ("unrouted", item.key), "blocks on %s belong to no configured mill", item.key
-            )
+        got = self.admission.admit(item.key, item.payload, item.recv_ns)
+        if got is None:  # foreign, malformed or a repeat: counted (and logged once) by admission
             return
-        mill_id, channel = route
-        try:
-            block = decode_block(item.payload)
-        except WireError as exc:
-            self.health[mill_id].channels[channel].decode_error(exc.kind, item.recv_ns)
-            self._log_once(
-                (item.key, exc.kind), "%s: %s (counted; further ones not logged)", item.key, exc
-            )
-            return
-        health = self.health[mill_id].channels[channel]
-        got = health.accept(block, item.recv_ns)
-        if got.block is None:  # not new: counted and dropped, in constant time
-            # INFO: a repeat loses nothing, and recovery's overlaps (archive vs gateway cache,
-            # history vs recovery subscriber) bring a few by design; the count is in /metrics
-            self._log_once(
-                (item.key, got.verdict),
-                "%s: %s block seq %d dropped (not beyond seq %s; counted, further ones not "
-                "logged)", item.key, got.verdict, block.seq, health.last_seq,
-                level=logging.INFO,
-            )  # fmt: skip
-            return
+        mill_id, channel, block = got.mill_id, got.channel, got.block
         if got.clock_fault is not None:
-            self._clock_fault(mill_id, channel, item.key, block.seq, *got.clock_fault)
-        block = got.block
+            self._clock_fault(mill_id, channel, block.seq, *got.clock_fault)
         if got.loss is not None:
             self._lost(mill_id, channel, got.loss.as_dict() | {"seq": block.seq})
-            self._log_once(
-                (item.key, "gap"),
-                "%s: %d block(s) lost before seq %d (stored as a data-quality event; further "
-                "gaps not logged)", item.key, got.loss.blocks, block.seq,
-            )  # fmt: skip
         if mill_id in self.held:
             self.held_blocks[mill_id] += 1
             return
@@ -239,22 +210,24 @@ class Worker:
                    for e in shown):  # fmt: skip
             shown.appendleft(entry)
 
-    def _clock_fault(
-        self, mill_id: str, channel: str, key: str, seq: int, sent: int, given: int
-    ) -> None:
-        """The start of a clock-fault episode: a data-quality event, logged once a channel."""
+    def _clock_fault(self, mill_id: str, channel: str, seq: int, sent: int, given: int) -> None:
+        """The start of a clock-fault episode: a data-quality event (logged by admission)."""
         self._quality(mill_id, channel, given, "clock_fault", seq=seq, t0_ns=sent,
                       expected_t0_ns=given)  # fmt: skip
-        self._log_once(
-            (key, "clock_fault"),
-            "%s: block seq %d says t0=%d ns, its sequence number puts it at %d ns: clock fault, "
-            "analysed at the sequence number's time (further ones not logged)",
-            key, seq, sent, given,
-        )  # fmt: skip
 
     def route(self, key: str) -> tuple[str, str] | None:
         """(mill id, configured channel name) of a zenoh key; None for no configured mill."""
-        return self._routes.get(key)
+        return self.admission.route(key)
+
+    @property
+    def health(self) -> dict[str, MillHealth]:
+        """Each mill's channel health (the admission's counters), by mill id."""
+        return self.admission.health
+
+    @property
+    def unrouted(self) -> Counter[str]:
+        """Blocks on keys of no configured mill, per key."""
+        return self.admission.foreign
 
     def accept_regular(
         self, mill_id: str, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray
@@ -357,12 +330,10 @@ class Worker:
             self.archive_errors += 1
             self._log_once(("archive", type(exc).__name__), "archive write failed: %s", exc)
 
-    def _log_once(
-        self, what: tuple[str, str], msg: str, *args: object, level: int = logging.WARNING
-    ) -> None:
+    def _log_once(self, what: tuple[str, str], msg: str, *args: object) -> None:
         if what not in self._logged:
             self._logged.add(what)
-            log.log(level, msg, *args)
+            log.warning(msg, *args)
 
     # ------------------------------------------------------------------ batches
     def step(self, queue: BlockQueue, timeout_s: float = 0.1) -> int:
@@ -656,12 +627,3 @@ class PendingResults:
         if self.transitions:
             latest = {t.alarm_id: t.alarm for t in self.transitions}
             Store.put_alarm_transitions(db, self.transitions, list(latest.values()))
-
-
-def _routes(mills: dict[str, MillConfig]) -> dict[str, tuple[str, str]]:
-    """zenoh key → (mill id, configured channel name)."""
-    routes: dict[str, tuple[str, str]] = {}
-    for mill_id, config in mills.items():
-        for name, channel in config.channels.items():
-            routes[keys.channel_key(config.site, config.id, channel.key)] = (mill_id, name)
-    return routes

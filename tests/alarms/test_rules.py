@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from alarms.observations import QUANTITIES
-from alarms.rules import Severity, build_rules, local_time
+from alarms.rules import Severity, build_rules
+from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig, Starter
 from tests.alarms.helpers import NS, T0, engine, feed, kinds, mill, with_alarms
 
@@ -109,7 +110,7 @@ def test_message_reads_like_an_engineer_wrote_it():
     t_s = 2 * 3600 + 14 * 60 + 7  # 02:14:07 local
     (t,) = feed(eng, "start_peak_pct", [312], start_s=t_s)
     assert t.message == (
-        "Start at 2026-11-02 02:14:07 SAST with the liquid resistance starter (LRS) reached "
+        "Start at 2026-11-02T02:14:07.000+02:00 with the liquid resistance starter (LRS) reached "
         "312 % of rated motor torque (alarm above 300 %, seed 000 §6.2.1, §10.2, §10.4): LRS "
         "starts average 233 % switch-on and 197 % short-circuit peaks (Table 6): check the "
         "liquid resistance starter (electrolyte density, verify with the strain gauges) and the "
@@ -148,20 +149,23 @@ def test_grid_mill_start_names_the_grid_starter():
 
 def test_message_time_is_the_time_of_the_raising_value():
     """A level alarm is raised by the value that completes the raise delay; its message states
-    that value's time (to the second, site zone), which is the alarm's ``raised_ns``; a later
+    that value's time (site zone, with its offset), which is the alarm's ``raised_ns``; a later
     escalation states its own value's time and when the alarm was raised."""
     eng = engine("ball-dual-lrs")
     first = feed(eng, "load_sharing_imbalance_pct", [12, 12], step_s=38, mill_id="ball-dual-lrs")
     assert first == []  # 38 s < 60 s raise delay
     (raised,) = feed(eng, "load_sharing_imbalance_pct", [12], start_s=76, mill_id="ball-dual-lrs")
     assert raised.alarm.raised_ns == raised.t_ns == T0 + 76 * NS
-    assert f"at {local_time(raised.t_ns, 'Africa/Johannesburg')}" in raised.message
-    assert "at 2026-11-02 00:01:16 SAST" in raised.message
+    assert f"at {iso_local(raised.t_ns, 'Africa/Johannesburg')}" in raised.message
+    assert "at 2026-11-02T00:01:16.000+02:00" in raised.message
     later = feed(eng, "load_sharing_imbalance_pct", [25, 25, 25], step_s=200, start_s=200,
                  mill_id="ball-dual-lrs")  # fmt: skip
     assert kinds(later) == ["escalated"]
     (esc,) = later
-    assert "at 2026-11-02 00:06:40 SAST (alarm raised 2026-11-02 00:01:16 SAST)" in esc.message
+    assert (
+        "at 2026-11-02T00:06:40.000+02:00 (alarm raised 2026-11-02T00:01:16.000+02:00)"
+        in esc.message
+    )
 
 
 def test_alarm_options_come_from_the_mill_file():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -144,15 +145,19 @@ _FORMATTED_KEY = re.compile(
 )
 
 
-def test_no_formatted_keys_outside_the_keys_module() -> None:
-    owners = {REPO / "ingest" / "keys.py"}
-    offenders = [
+def _modules_but_keys(found: Callable[[str], object]) -> list[str]:
+    """The product's modules other than ``ingest/keys.py`` whose text ``found`` something in."""
+    owner = REPO / "ingest" / "keys.py"
+    return [
         str(path.relative_to(REPO))
         for package in ("analytics", "ingest", "alarms", "service")
         for path in (REPO / package).rglob("*.py")
-        if path not in owners and _FORMATTED_KEY.search(path.read_text(encoding="utf-8"))
+        if path != owner and found(path.read_text(encoding="utf-8"))
     ]
-    assert offenders == []
+
+
+def test_no_formatted_keys_outside_the_keys_module() -> None:
+    assert _modules_but_keys(_FORMATTED_KEY.search) == []
 
 
 def test_channel_key_takes_the_mill_config_segment():
@@ -208,3 +213,27 @@ def test_telemetry_and_alarm_subscriptions_never_see_each_other():
         assert not zenoh.KeyExpr(pattern).intersects(zenoh.KeyExpr(key))
     assert not key_matches(alarm_pattern(), telemetry)
     assert zenoh.KeyExpr(alarm_pattern()).intersects(zenoh.KeyExpr(key))
+
+
+def test_the_key_map_of_a_mill_file_both_ways():
+    """:func:`mill_channel_keys` and :class:`ChannelRoutes` are inverse; a replay run's key is
+    its channel only where asked for (offline tools), never for the live worker."""
+    from ingest.keys import ChannelRoutes, mill_channel_keys
+    from ingest.mill_files import load_mill_config
+
+    config = load_mill_config(REPO / "deploy" / "mills" / "ball-dual-lrs.toml")
+    by_name = mill_channel_keys(config)
+    assert list(by_name) == list(config.channels)
+    live, offline = ChannelRoutes([config]), ChannelRoutes([config], replayed=True)
+    for name, key in by_name.items():
+        assert live.route(key) == offline.route(key) == (config.id, name)
+        assert parse_key(key).signal_segment == config.channels[name].key
+        assert live.route(to_replay(key, "r1")) is None
+        assert offline.route(to_replay(key, "r1")) == (config.id, name)
+    for other in (build_key("elsewhere", config.id, "speed"), "not/a/key", "millwatch/v1"):
+        assert live.route(other) is None and offline.route(other) is None
+
+
+def test_channel_keys_of_a_mill_file_are_built_in_the_keys_module_only() -> None:
+    """One key map: nothing else turns a mill file's channels into keys itself."""
+    assert _modules_but_keys(lambda text: "channel_key(" in text) == []

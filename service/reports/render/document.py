@@ -22,13 +22,13 @@ from __future__ import annotations
 
 import math
 import threading
-import zoneinfo
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
-from datetime import datetime
 from typing import Literal
 
 from matplotlib.figure import Figure as MplFigure
+
+from alarms.times import iso_local
 
 __all__ = [
     "MAX_CHARS",
@@ -81,12 +81,8 @@ def fmt(x: float | None, digits: int = 3) -> str:
 
 
 def local_time(t_ns: int | None, time_zone: str) -> str:
-    """``YYYY-MM-DD HH:MM:SS`` in the site's time zone, ``–`` for none."""
-    if t_ns is None:
-        return "–"
-    return datetime.fromtimestamp(t_ns / 1e9, tz=zoneinfo.ZoneInfo(time_zone)).strftime(
-        "%Y-%m-%d %H:%M:%S"
-    )
+    """:func:`alarms.times.iso_local` of ``t_ns`` in the site's time zone, ``–`` for none."""
+    return "–" if t_ns is None else iso_local(t_ns, time_zone)
 
 
 def _text(value: Cell, digits: int) -> str:

@@ -129,7 +129,7 @@ def test_with_enough_history_life_is_a_range_with_its_basis(store):
     assert life.history.starts == 4
     assert life.basis.miner_limit == 1.0 and life.basis.sn_curve["model"] == "shigley"
     assert "Miner limit D = 1" in life.note and "shigley" in life.note
-    assert life.history.monitored_since == "2024-01-01T02:00:00+02:00"  # ISO beside the ns
+    assert life.history.monitored_since == "2024-01-01T02:00:00.000+02:00"  # ISO beside the ns
     for c in life.components.values():
         assert [p.basis for p in c.projections] == ["last_30_days", "since_monitoring",
                                                     "worst_month"]  # fmt: skip

@@ -1,0 +1,141 @@
+"""Block admission: the one decision whether a received or archived block reaches a mill's
+analysis, made the same way by the live worker, its archive replay and offline analysis.
+
+For each message (a zenoh key and a payload)::
+
+    route the key (ingest.keys.ChannelRoutes) ─ no given mill's channel ─▶ foreign: counted by key
+    decode the payload (ingest.wire) ──────────── malformed ─▶ the channel's decode errors by kind
+    the channel's sequence (ChannelHealth.accept) ─ repeat ─▶ the channel's duplicates / replays
+    ──▶ admitted: the block (placed at its sequence number's time on a clock fault) with the
+        loss (gap) or clock-fault episode it reveals
+
+:class:`BlockAdmission` holds the counters (lifetime totals per channel in
+:class:`~service.worker.health.MillHealth`, foreign blocks per key) and logs each kind once per
+key. What a caller does with an admission is its own: the worker stores a gap or a clock fault
+as a data-quality event and holds back a held mill's blocks; offline analysis only analyses.
+The batch lane's regular runs (:mod:`service.worker.batch_lane`) are admitted by the same rule
+at once: :meth:`~service.worker.health.ChannelHealth.follows_on` then
+:meth:`~service.worker.health.ChannelHealth.observe_run`.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from collections.abc import Iterable
+from typing import NamedTuple
+
+from analytics.drivetrain.mill_config import MillConfig
+from ingest.keys import ChannelRoutes
+from ingest.wire import Block, WireError, decode_block
+from service.worker.health import Loss, MillHealth
+
+__all__ = ["Admitted", "BlockAdmission"]
+
+log = logging.getLogger(__name__)
+
+
+class Admitted(NamedTuple):
+    """A block admitted for analysis: its mill and configured channel, the ``block`` (re-timed
+    to its sequence number's time on a clock fault), the ``loss`` its sequence number reveals,
+    and ``clock_fault`` = (t0 sent, t0 given), both ns, when it starts a clock-fault episode.
+    (A named tuple: one is made for every block, and a tuple is the cheapest record.)"""
+
+    mill_id: str
+    channel: str
+    block: Block
+    loss: Loss | None = None
+    clock_fault: tuple[int, int] | None = None
+
+
+class BlockAdmission:
+    """Routing, decoding and sequencing of the blocks of the given mills, with their counters
+    (see the module docstring). ``replayed``: keys of a replay run count as their live keys
+    (:class:`~ingest.keys.ChannelRoutes`; offline tools), never for the live worker.
+    ``warn_foreign``: log a foreign key once at WARNING (a key of no configured mill on the
+    worker's subscription is a configuration mistake); offline tools given some of a
+    recording's mills skip the others' keys by design, at DEBUG."""
+
+    def __init__(
+        self, configs: Iterable[MillConfig], *, replayed: bool = False, warn_foreign: bool = True
+    ) -> None:
+        configs = list(configs)
+        self._foreign_level = logging.WARNING if warn_foreign else logging.DEBUG
+        self.routes = ChannelRoutes(configs, replayed=replayed)
+        self._route = self.routes.route
+        self.health = {c.id: MillHealth.for_channels(list(c.channels)) for c in configs}
+        #: Blocks on keys of no given mill, per key.
+        self.foreign: Counter[str] = Counter()
+        self._logged: set[tuple[str, str]] = set()
+
+    def route(self, key: str) -> tuple[str, str] | None:
+        """(mill id, channel name) of ``key``; None for no given mill."""
+        return self.routes.route(key)
+
+    @property
+    def foreign_blocks(self) -> int:
+        """Blocks on keys of no given mill, in all."""
+        return sum(self.foreign.values())
+
+    def malformed(self) -> Counter[str]:
+        """Malformed blocks of the given mills by kind (:attr:`ingest.wire.WireError.kind`)."""
+        out: Counter[str] = Counter()
+        for mill in self.health.values():
+            for channel in mill.channels.values():
+                out.update(channel.decode_errors)
+        return out
+
+    def count_foreign(self, key: str, blocks: int = 1) -> None:
+        """Count ``blocks`` blocks on ``key``, a key of no given mill (read in bulk by offline
+        analysis, which skips them without decoding)."""
+        self.foreign[key] += blocks
+
+    def admit(self, key: str, payload: bytes, recv_ns: int) -> Admitted | None:
+        """The admitted block of message (``key``, ``payload``) received at ``recv_ns`` (ns
+        UTC); None for a block refused: a foreign key, a malformed payload or a repeat (each
+        counted, logged once a key and kind)."""
+        route = self._route(key)
+        if route is None:
+            self.count_foreign(key)
+            self._log_once(key, "foreign", "blocks on %s belong to no configured mill", key,
+                           level=self._foreign_level)  # fmt: skip
+            return None
+        mill_id, channel = route
+        health = self.health[mill_id].channels[channel]
+        try:
+            block = decode_block(payload)
+        except WireError as exc:
+            health.decode_error(exc.kind, recv_ns)
+            self._log_once(key, exc.kind, "%s: %s (counted; further ones not logged)", key, exc)
+            return None
+        got = health.accept(block, recv_ns)
+        if got.block is None:
+            # INFO: a repeat loses nothing, and recovery's overlaps (archive vs gateway cache,
+            # history vs recovery subscriber) bring a few by design; the count is in /metrics
+            self._log_once(
+                key, got.verdict,
+                "%s: %s block seq %d dropped (not beyond seq %s; counted, further ones not "
+                "logged)", key, got.verdict, block.seq, health.last_seq, level=logging.INFO,
+            )  # fmt: skip
+            return None
+        if got.clock_fault is not None:
+            self._log_once(
+                key, "clock_fault",
+                "%s: block seq %d says t0=%d ns, its sequence number puts it at %d ns: clock "
+                "fault, analysed at the sequence number's time (further ones not logged)",
+                key, block.seq, *got.clock_fault,
+            )  # fmt: skip
+        if got.loss is not None:
+            self._log_once(
+                key, "gap",
+                "%s: %d block(s) lost before seq %d (counted as missing; further gaps not "
+                "logged)", key, got.loss.blocks, block.seq,
+            )  # fmt: skip
+        return Admitted(mill_id, channel, got.block, got.loss, got.clock_fault)
+
+    def _log_once(
+        self, key: str, kind: str, msg: str, *args: object, level: int = logging.WARNING
+    ) -> None:
+        if (key, kind) not in self._logged:
+            self._logged.add((key, kind))
+            log.log(level, msg, *args)
