@@ -247,7 +247,7 @@ def _damage_lines(comp: str, d: dict[str, Any]) -> list[str]:
     residue on its own line, the total."""
     phases = {p: v for p, v in d["phases"].items() if v}
     closed = sum(d["phases"].values())
-    lines = [f"  damage {comp} (Miner sum, S-N curve {d['curve']}, Kt {d['kt']:g}):"]
+    lines = [f"  damage {comp} (Miner sum, S-N curve {d['curve']}, {d['stress_factors']}):"]
     parts = " + ".join(f"{p} {v:.3g}" for p, v in phases.items()) or "none"
     lines.append(f"    closed cycles      {closed:.3g}  ({parts})")
     unattributed = d["committed"] - closed
