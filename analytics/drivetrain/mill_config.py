@@ -43,6 +43,7 @@ from pydantic import (
 )
 
 from analytics.drivetrain.shaft_stress import ShaftStressModel, StressConcentration
+from analytics.drivetrain.torsional_params import TorsionalParams
 from analytics.fatigue.sn_curves import SNCurve
 from analytics.fatigue.sn_models import SN_MODEL_PARAMETERS, SNModelParameters, build_sn_curve
 
@@ -416,6 +417,12 @@ class MillConfig(_Frozen):
     )
     alarms: AlarmThresholds = Field(default_factory=AlarmThresholds)
     life: LifeConfig = Field(default_factory=LifeConfig)
+    torsional: TorsionalParams | None = Field(
+        default=None,
+        description="The drivetrain's lumped torsional model referred to the pinion shaft "
+        "(Fedin & Vinogradov 2018 Table 2): natural frequencies for the harmonic tracker and "
+        "the resonance_margin alarm. None: no model (the analysis says so).",
+    )
     simulated: bool = Field(
         default=False,
         description="The mill's data come from the simulator (the demo, example mills): every "

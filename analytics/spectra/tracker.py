@@ -69,6 +69,7 @@ import numpy as np
 from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.kinematics import ExpectedLine, expected_lines
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.drivetrain.torsional_model import natural_frequencies_of
 from analytics.snapshot_arrays import pack_array, unpack_array
 from analytics.spectra.facts import HarmonicWindow
 from analytics.spectra.order_kernels import (
@@ -118,6 +119,10 @@ class HarmonicTracker:
     stay in the buffer meanwhile, so every window is bitwise what it is without stagger; only
     the sample at which it is returned moves (deterministically: at the deferral's end, at a
     stop, gap or non-finite sample, or at :meth:`flush`). ``stagger_for(mill id)`` spreads mills.
+
+    ``natural_frequencies_hz``: the torsional natural frequencies (Hz) each unexplained peak is
+    compared with; None (default): those of the mill file's ``[torsional]`` model
+    (:func:`~analytics.drivetrain.torsional_model.natural_frequencies_of`; none without one).
     """
 
     def __init__(
@@ -125,7 +130,7 @@ class HarmonicTracker:
         config: MillConfig,
         channels: Sequence[str] | None = None,
         settings: HarmonicSettings | None = None,
-        natural_frequencies_hz: Sequence[float] = (),
+        natural_frequencies_hz: Sequence[float] | None = None,
         stagger: float = 0.0,
     ) -> None:
         self.config = config
@@ -149,7 +154,9 @@ class HarmonicTracker:
             self.channels,
             expected_lines(config, None, self.settings.kinematics),
             (self.revs, self._win_sum),
-            natural_frequencies_hz,
+            natural_frequencies_of(config)
+            if natural_frequencies_hz is None
+            else natural_frequencies_hz,
         )
         self._grid: tuple[np.ndarray, np.ndarray] | None = None  # see _grid_taper
         nc, nl = len(self.channels), len(self._lines)
@@ -521,7 +528,7 @@ class HarmonicTracker:
         cls,
         config: MillConfig,
         snapshot: dict[str, Any],
-        natural_frequencies_hz: Sequence[float] = (),
+        natural_frequencies_hz: Sequence[float] | None = None,
     ) -> HarmonicTracker:
         """A tracker that continues exactly where the snapshotted one stood."""
         version = snapshot.get("version")

@@ -235,7 +235,11 @@ def _spectral_and_alarm_lines(report: dict[str, Any]) -> list[str]:
     ]
     lines += [
         f"  UNEXPLAINED peak {p['channel']} {p['frequency_hz']:.2f} Hz (possible torsional "
-        "resonance)"
+        + (
+            "resonance)"
+            if p.get("nearest_natural_hz") is None
+            else f"resonance; nearest natural frequency {p['nearest_natural_hz']:.2f} Hz)"
+        )
         for p in report["unexplained_peaks"]
     ]
     alarms = report["alarms"]
@@ -309,6 +313,8 @@ def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
         lines.append(f"  harmonics: {summary['spectra']}")
     elif "segments_note" in summary:
         lines.append(f"  harmonics: {summary['segments_note']}")
+    if "torsional_model" in summary:
+        lines.append(f"  torsional model: {summary['torsional_model']}")
     lines += _spectral_and_alarm_lines(report)
     problems = [_count(stats[k], words) for k, words in _READING.items() if stats[k]]
     if problems:

@@ -79,7 +79,7 @@ TREE = model_tree(MillConfig)
 def test_the_tree_holds_every_section():
     names = {m.__name__ for m in TREE}
     assert {"MillConfig", "DriveConfig", "ShaftConfig", "MaterialConfig", "ChannelConfig",
-            "AlarmThresholds", "LifeConfig"} <= names  # fmt: skip
+            "AlarmThresholds", "LifeConfig", "TorsionalParams"} <= names  # fmt: skip
 
 
 @pytest.mark.parametrize("model", list(TREE), ids=lambda m: m.__name__)
