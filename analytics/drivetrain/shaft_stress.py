@@ -105,6 +105,13 @@ class ShaftStressModel:
             return f"K_f {self.kf_torsion:g} on the whole combined stress (App. D)"
         return f"K_f {self.kf_torsion:g} on torsion"
 
+    def summary(self) -> str:
+        """Every component's factors in one phrase (reports' basis of the damage)."""
+        return (
+            f"{self.describe('pinion_combined')} in pinion_combined; "
+            f"{self.describe('pinion_torsion')} in pinion_torsion and motor_torsion"
+        )
+
     def as_dict(self) -> dict[str, float | str]:
         """Plain data: what a snapshot's damage was computed with (the factors used by
         :attr:`mode`)."""

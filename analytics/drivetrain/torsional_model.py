@@ -27,6 +27,12 @@ MSHTS 5500×6500 chain 1.24, 3.96, 104.1 Hz; with the pinion mass (r = 0.578 m, 
 1.24, 3.96, 101.2, 323.0 Hz. The 3× drive-gear excitation of the MRG mill (3 × 150 rpm = 7.5 Hz)
 lies 11 % below its 8.4 Hz mode — the resonance behind its measured K_H = 1.58 (seed 001 §2.1).
 
+A mill's model is the ``[torsional]`` table of its file
+(:class:`~analytics.drivetrain.torsional_params.TorsionalParams`): :func:`natural_frequencies_of`
+gives its natural frequencies to the harmonic tracker, :func:`design_resonances` the expected
+lines within ``alarms.resonance_margin_warn`` of one at rated speed, :func:`torsional_note` both
+in words (or that the file has no model).
+
 Dynamic factor (eq. 13): ``K'_v = M_total / M_nom = 1 + M_dyn / M_nom`` from a measured torque
 record. Units: kg·m², kg, N·m/rad, N/m, m, rad, Hz, N·m (kN·m for measured torque).
 """

@@ -686,7 +686,8 @@ class LoadAnalysis:
             raise SnapshotMismatch(
                 f"mill {self.config.id!r}: the snapshot's damage was computed with the stress "
                 f"concentration {_factors(was)}, the configuration now gives {_factors(now)} "
-                "([shafts] of the mill file); re-analyse the archive, or restore the old values"
+                f"([shafts] of the mill file); to continue from it, set {_settings(was)} in "
+                "[shafts], or analyse the archive afresh with the new factors"
             )
 
     def _load(self, d: dict[str, Any]) -> None:
@@ -725,6 +726,13 @@ def _factors(d: dict[str, Any]) -> str:
     if d["mode"] == "single_kt":
         return f"K_f {d['kf_torsion']:g} on the whole stress (App. D)"
     return f"K_f {d['kf_bending']:g} on bending and {d['kf_torsion']:g} on torsion"
+
+
+def _settings(d: dict[str, Any]) -> str:
+    """``[shafts]`` values (notch sensitivity 1) that give a snapshot's fatigue factors."""
+    if d["mode"] == "single_kt":
+        return f'stress_concentration = "single_kt", kt_torsion = {d["kf_torsion"]:g}'
+    return f"kt_bending = {d['kf_bending']:g}, kt_torsion = {d['kf_torsion']:g}"
 
 
 def _plain(obj: Any) -> Any:

@@ -168,3 +168,15 @@ def test_combined_is_the_weighted_sum_at_45_degrees(
     nominal = float(app_d.combined(np.array([sigma]), np.array([tau]))[0])
     assert nominal == pytest.approx(0.5 * sigma + tau, rel=1e-12, abs=1e-9)
     assert app_d.combined_scale == kf_t
+
+
+def test_the_factors_in_words():
+    model = ShaftConfig(kt_bending=2.5, kt_torsion=2.0, notch_sensitivity=0.8).stress_model()
+    assert model.describe("pinion_combined_bs") == "K_f 2.2 on bending, 1.8 on torsion"
+    assert model.describe("motor_torsion") == "K_f 1.8 on torsion"
+    assert model.summary() == (
+        "K_f 2.2 on bending, 1.8 on torsion in pinion_combined; K_f 1.8 on torsion in "
+        "pinion_torsion and motor_torsion"
+    )
+    app_d = ShaftConfig(stress_concentration="single_kt").stress_model()
+    assert app_d.describe("pinion_combined") == "K_f 2 on the whole combined stress (App. D)"
