@@ -25,8 +25,9 @@ Units: stress MPa, factors dimensionless, angle rad.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -118,3 +119,37 @@ class ShaftStressModel:
         if self.mode == "single_kt":
             return {"mode": self.mode, "kf_torsion": self.kf_torsion}
         return {"mode": self.mode, "kf_bending": self.kf_bending, "kf_torsion": self.kf_torsion}
+
+    def refusal(self, was: Mapping[str, Any] | None, scales: Collection[float]) -> str | None:
+        """Why damage and rainflow residues computed with the factors ``was`` (a snapshot's
+        :meth:`as_dict`) cannot continue under this model, naming the ``[shafts]`` values that
+        would continue them; None when they can. ``was`` None: a snapshot from before the
+        factors were recorded, App. D's one factor on every trace — its recorders' ``scales``
+        (none: nothing analysed yet, nothing to refuse)."""
+        if was is None:
+            if not scales:
+                return None
+            was = {"mode": "single_kt", "kf_torsion": max(scales)}
+        now = self.as_dict()
+        if dict(was) == now:
+            return None
+        return (
+            f"the snapshot's damage was computed with the stress concentration {_words(was)}, "
+            f"the configuration now gives {_words(now)} ([shafts] of the mill file); to "
+            f"continue from it, set {_settings(was)} in [shafts], or analyse the archive afresh "
+            "with the new factors"
+        )
+
+
+def _words(d: Mapping[str, Any]) -> str:
+    """Recorded fatigue factors in words."""
+    if d["mode"] == "single_kt":
+        return f"K_f {d['kf_torsion']:g} on the whole stress (App. D)"
+    return f"K_f {d['kf_bending']:g} on bending and {d['kf_torsion']:g} on torsion"
+
+
+def _settings(d: Mapping[str, Any]) -> str:
+    """``[shafts]`` values (notch sensitivity 1) that give recorded fatigue factors."""
+    if d["mode"] == "single_kt":
+        return f'stress_concentration = "single_kt", kt_torsion = {d["kf_torsion"]:g}'
+    return f"kt_bending = {d['kf_bending']:g}, kt_torsion = {d['kf_torsion']:g}"

@@ -672,23 +672,12 @@ class LoadAnalysis:
         return a
 
     def _check_stress(self, snapshot: dict[str, Any]) -> None:
-        """:class:`SnapshotMismatch` when the snapshot's damage and rainflow residues were
-        computed with other fatigue factors than the configuration gives now (a snapshot from
-        before they were recorded: App. D's one factor, its recorders' scale, on every trace)."""
-        was = snapshot.get("stress")
-        if was is None:
-            scales = {d["recorder"]["scale"] for d in snapshot["damage"].values()}
-            if not scales:  # no frame analysed yet: no damage to be inconsistent with
-                return
-            was = {"mode": "single_kt", "kf_torsion": max(scales)}
-        now = self.stress_model.as_dict()
-        if was != now:
-            raise SnapshotMismatch(
-                f"mill {self.config.id!r}: the snapshot's damage was computed with the stress "
-                f"concentration {_factors(was)}, the configuration now gives {_factors(now)} "
-                f"([shafts] of the mill file); to continue from it, set {_settings(was)} in "
-                "[shafts], or analyse the archive afresh with the new factors"
-            )
+        """:class:`SnapshotMismatch` when the snapshot's damage was computed with other fatigue
+        factors (:meth:`~analytics.drivetrain.shaft_stress.ShaftStressModel.refusal`)."""
+        scales = {d["recorder"]["scale"] for d in snapshot["damage"].values()}
+        why = self.stress_model.refusal(snapshot.get("stress"), scales)
+        if why is not None:
+            raise SnapshotMismatch(f"mill {self.config.id!r}: {why}")
 
     def _load(self, d: dict[str, Any]) -> None:
         """Set every attribute :meth:`snapshot` wrote (the same list, in the same order)."""
@@ -719,20 +708,6 @@ class LoadAnalysis:
         self.starts_total = int(
             d.get("starts_total", sum(m["starts"] for m in self.starts_per_month.values()))
         )
-
-
-def _factors(d: dict[str, Any]) -> str:
-    """A snapshot's or configuration's fatigue factors in words."""
-    if d["mode"] == "single_kt":
-        return f"K_f {d['kf_torsion']:g} on the whole stress (App. D)"
-    return f"K_f {d['kf_bending']:g} on bending and {d['kf_torsion']:g} on torsion"
-
-
-def _settings(d: dict[str, Any]) -> str:
-    """``[shafts]`` values (notch sensitivity 1) that give a snapshot's fatigue factors."""
-    if d["mode"] == "single_kt":
-        return f'stress_concentration = "single_kt", kt_torsion = {d["kf_torsion"]:g}'
-    return f"kt_bending = {d['kf_bending']:g}, kt_torsion = {d['kf_torsion']:g}"
 
 
 def _plain(obj: Any) -> Any:
