@@ -9,7 +9,11 @@ One function per kind of analysis fact, so live (the worker, fact by fact) and o
 * a steady-state window → ``oscillation_range_pct`` per motor and pinion torque channel (range
   per revolution, % of rated motor torque, Tables 14–15), ``bending_amplitude_mpa`` per bending
   channel (half the per-revolution range, §8.1), ``load_sharing_imbalance_pct`` (dual drives);
-* an unexplained spectral peak → ``unexplained_peak_hz`` (§6.2.7).
+* an unexplained spectral peak → ``unexplained_peak_hz`` (§6.2.7);
+* a harmonic window's resonance margins (:mod:`analytics.spectra.resonance`) →
+  ``resonance_margin`` per channel (Fedin & Vinogradov 2018). Offline, the report's long-run
+  table gives one margin per channel at the end of the record: a level with a raise delay is
+  confirmed only by the live worker's windows.
 """
 
 from __future__ import annotations
@@ -19,7 +23,13 @@ from typing import Any
 
 from alarms.observations import Observation
 
-__all__ = ["event_observations", "peak_observations", "report_observations", "window_observations"]
+__all__ = [
+    "event_observations",
+    "peak_observations",
+    "report_observations",
+    "resonance_observations",
+    "window_observations",
+]
 
 
 def event_observations(mill_id: str, event: dict[str, Any]) -> list[Observation]:
@@ -94,6 +104,28 @@ def peak_observations(
     ]
 
 
+def resonance_observations(
+    mill_id: str, margins: Iterable[dict[str, Any]], t_ns: int
+) -> list[Observation]:
+    """``resonance_margin`` per channel (dicts of
+    :class:`~analytics.spectra.resonance.ResonanceMargin`)."""
+    return [
+        Observation(
+            mill_id,
+            "resonance_margin",
+            float(m["margin"]),
+            t_ns,
+            {
+                "channel": m["channel"],
+                "line": m["line"],
+                "frequency_hz": m["frequency_hz"],
+                "natural_hz": m["natural_hz"],
+            },
+        )
+        for m in margins
+    ]
+
+
 def report_observations(mill_id: str, report: dict[str, Any]) -> list[Observation]:
     """Every observation a whole analysis report holds, in time order."""
     out: list[Observation] = []
@@ -103,6 +135,8 @@ def report_observations(mill_id: str, report: dict[str, Any]) -> list[Observatio
         out += window_observations(mill_id, window)
     if report.get("unexplained_peaks") and report.get("t_end_ns") is not None:
         out += peak_observations(mill_id, report["unexplained_peaks"], int(report["t_end_ns"]))
+    if report.get("resonance_margins") and report.get("t_end_ns") is not None:
+        out += resonance_observations(mill_id, report["resonance_margins"], int(report["t_end_ns"]))
     return sorted(out, key=lambda o: o.t_ns)
 
 

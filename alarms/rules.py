@@ -56,6 +56,7 @@ history).
 
 from __future__ import annotations
 
+import string
 from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import StrEnum
@@ -94,7 +95,8 @@ class Level:
 
 
 class _Defaults(dict[str, Any]):
-    """``str.format_map`` mapping: context keys missing from an observation show as ``?``."""
+    """``str.format_map`` mapping: context keys missing from an observation (or None) show as
+    ``?``."""
 
     def __missing__(self, key: str) -> str:
         return "?"
@@ -106,7 +108,10 @@ class Rule:
 
     ``headline`` is a ``str.format`` template over ``time`` (local), ``value`` (formatted with
     ``value_format``), ``subject``, ``where`` (" on <subject>" or "") and the observation's
-    context; ``criterion`` replaces the generated "<severity> above <limit>" text when the
+    context (a None value counts as missing); ``clauses``: ``(name, template, fallback)`` —
+    ``{name}`` in the headline is ``template`` formatted when the context holds every field it
+    names (not None), else ``fallback``, so an optional fact never reads "None Hz" or "? Hz";
+    ``criterion`` replaces the generated "<severity> above <limit>" text when the
     threshold itself means nothing to a reader. ``scale_key``: thresholds and deadband are
     multiplied by ``context[scale_key]`` (default ``default_scale``).
     """
@@ -127,6 +132,7 @@ class Rule:
     clear_on_ack: bool = False
     latched: bool = False
     criterion: str | None = None
+    clauses: tuple[tuple[str, str, str], ...] = ()
     scale_key: str | None = None
     default_scale: float = 1.0
 
@@ -141,7 +147,8 @@ class Rule:
     def scale(self, obs: Observation) -> float:
         if self.scale_key is None:
             return 1.0
-        return float(obs.context.get(self.scale_key, self.default_scale))
+        value = obs.context.get(self.scale_key)
+        return float(self.default_scale if value is None else value)
 
     def threshold(self, severity: Severity, obs: Observation) -> float:
         """The threshold of ``severity`` for this observation (scaled)."""
@@ -177,7 +184,7 @@ class Rule:
         ``time`` is ``obs``'s (the value that raised or escalated the alarm); ``raised_ns``: the
         alarm was raised earlier (an escalation or recurrence), said after the headline."""
         level = next(lv for lv in self.levels if lv.severity == severity)
-        fields = _Defaults({k: _short(v) for k, v in obs.context.items()})
+        fields = _Defaults({k: _short(v) for k, v in obs.context.items() if v is not None})
         subject = obs.subject
         fields.setdefault("month", local_month(obs.t_ns, time_zone))
         fields.update(
@@ -186,6 +193,10 @@ class Rule:
             subject=subject or "the mill",
             where=f" on {subject}" if subject else "",
         )
+        for name, template, fallback in self.clauses:
+            needed = [f for _, f, _, _ in string.Formatter().parse(template) if f]
+            known = all(f in fields for f in needed)
+            fields[name] = template.format_map(fields) if known else fallback
         headline = self.headline.format_map(fields)
         if raised_ns is not None and raised_ns != obs.t_ns:
             headline += f" (alarm raised {iso_local(raised_ns, time_zone)})"
@@ -338,8 +349,10 @@ def _unexplained_peak(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "unexplained_peak", "unexplained_peak_hz", _levels((Severity.WARNING, 0.0)),
-        headline="Spectral peak at {value}{where} ({time}) matches no drivetrain excitation; "
-        "nearest natural frequency {nearest_natural_hz} Hz",
+        headline="Spectral peak at {value}{where} ({time}) matches no drivetrain excitation"
+        "{natural}",
+        clauses=(("natural", "; nearest natural frequency {nearest_natural_hz} Hz",
+                  "; the mill file has no torsional model to compare it with"),),
         advice="possible torsional resonance: compare with the drivetrain model and inspect",
         source="seed 000 §6.2.7, seed 001", value_format="{:.2f} Hz",
         criterion="warning: unexplained by the drivetrain kinematics",
@@ -354,8 +367,9 @@ def _resonance(config: MillConfig) -> Rule:
     return Rule(
         "resonance_margin", "resonance_margin",
         _levels((Severity.WARNING, a.resonance_margin_warn)),
-        headline="Excitation {line} at {frequency_hz} Hz{where} is only {value} from the natural "
-        "frequency {natural_hz} Hz ({time})",
+        headline="Excitation{excitation}{where} is only {value} from{natural} ({time})",
+        clauses=(("excitation", " {line} at {frequency_hz} Hz", ""),
+                 ("natural", " the natural frequency {natural_hz} Hz", " a natural frequency")),
         advice="running close to resonance amplifies torque oscillations: review speed and model",
         source="seed 001, seed 000 §6.1.1", value_format="{:.1%}", direction="below",
         deadband=a.resonance_margin_deadband, raise_delay_s=a.raise_delay_s,

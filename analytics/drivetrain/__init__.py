@@ -5,8 +5,12 @@ Modules::
     mill_config      MillConfig: one validated, frozen description of a mill (TOML → pydantic)
     kinematics       expected excitation lines (orders, frequencies) of a steady spectrum
     stress           volts → strain → stress, section moduli, combined stress (seed 000 App. D)
-    torsional_model  lumped torsional model: natural frequencies, resonance warnings, dynamic
-                     factor meter (seed 001)
+    shaft_stress     ShaftStressModel: the fatigue factors K_f of bending and torsion and the
+                     local combined stress rainflow counts (Diering 2011 §8.1–8.2, App. D)
+    torsional_params TorsionalParams: the [torsional] table of a mill file (Fedin & Vinogradov
+                     2018 Table 2, referred to the pinion shaft)
+    torsional_model  lumped torsional model: natural frequencies (natural_frequencies_of a
+                     mill), resonance warnings, the model in words, dynamic factor meter
 
 Data flow: everything else reads a :class:`~analytics.drivetrain.mill_config.MillConfig` and
 asks these modules for rated torques, stresses and expected lines; nothing here holds samples

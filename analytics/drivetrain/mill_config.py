@@ -9,7 +9,7 @@ Sources of the defaults (seed 000 = Diering 2011, seed 001 = Fedin & Vinogradov 
 * rated torque ``T_rated = P / (2π n / 60)``; pinion rated torque = ``T_rated × reducer ratio``
   (seed 000 §6.2.1: 5200 kW, 995 rpm, 113/20 → 49.91 kN·m and 281.97 kN·m),
 * telemetry bandwidth 0–250 Hz, 1 kHz per channel (seed 000 §5.1.2–5.1.3),
-* shaft diameters 0.2 m / 0.31 m, E = 207 GPa, ν = 0.3 (seed 000 §5.2.3),
+* shaft diameters 0.2 m / 0.31 m (seed 000 §5.2.3),
 * 820M17, S_ut = 980 MPa, Marin factors 0.68/0.75/0.897/1.0, K_t = 2.2 at the keyway
   (seed 000 §8.1); K_t = 2 on the torque trace and the FAT 160/100 curves (seed 000 App. D),
 * alarm thresholds: start peak 250/300 % (seed 000 Tables 4, 6: LRS 233 % average);
@@ -42,6 +42,8 @@ from pydantic import (
     model_validator,
 )
 
+from analytics.drivetrain.shaft_stress import ShaftStressModel, StressConcentration
+from analytics.drivetrain.torsional_params import TorsionalParams
 from analytics.fatigue.sn_curves import SNCurve
 from analytics.fatigue.sn_models import SN_MODEL_PARAMETERS, SNModelParameters, build_sn_curve
 
@@ -125,13 +127,37 @@ class DriveConfig(_Frozen):
 
 
 class ShaftConfig(_Frozen):
-    """Shaft diameters (m) at the gauges, stress-concentration factors (seed 000 §5.2.3, §8.1)."""
+    """Shaft diameters (m) at the gauges, stress-concentration factors (seed 000 §5.2.3, §8.1).
+
+    ``kt_bending``/``kt_torsion``: theoretical factors K_t of pinion bending and of torsion;
+    ``notch_sensitivity`` q turns each into K_f = 1 + q(K_t − 1) (Diering 2011 §8.1 eq. 5);
+    ``stress_concentration``: ``"per_load"`` (each load its own K_f in the combined stress,
+    Diering 2011 §8.1–8.2) or ``"single_kt"`` (App. D: the torsion K_f on the whole combined
+    trace; then ``kt_bending`` is unused and refused). :mod:`analytics.drivetrain.shaft_stress`
+    applies them."""
 
     motor_diameter_m: Positive = 0.2
     pinion_diameter_m: Positive = 0.31
     kt_bending: Annotated[float, Field(ge=1.0, le=10.0)] = 2.2
     kt_torsion: Annotated[float, Field(ge=1.0, le=10.0)] = 2.0
-    notch_sensitivity: Fraction = 1.0
+    notch_sensitivity: Annotated[float, Field(ge=0, le=1)] = 1.0
+    stress_concentration: StressConcentration = "per_load"
+
+    @model_validator(mode="after")
+    def _bending_factor_used(self) -> ShaftConfig:
+        if self.stress_concentration == "single_kt" and "kt_bending" in self.model_fields_set:
+            raise ValueError(
+                'kt_bending is not used with stress_concentration = "single_kt" (App. D puts '
+                "the torsion factor kt_torsion on the whole combined stress): remove it, or use "
+                '"per_load"'
+            )
+        return self
+
+    def stress_model(self) -> ShaftStressModel:
+        """The fatigue factors and combined stress of these shafts."""
+        return ShaftStressModel.from_factors(
+            self.kt_bending, self.kt_torsion, self.notch_sensitivity, self.stress_concentration
+        )
 
 
 class SNModel(_Frozen):
@@ -157,18 +183,33 @@ class SNModel(_Frozen):
         return {**SN_MODEL_PARAMETERS[self.name], **self.params}
 
 
+#: Material fields removed because nothing read them (a file that sets one is refused, saying why).
+_REMOVED_MATERIAL = {
+    "elastic_modulus_gpa": "channels are calibrated by their own gain and offset",
+    "poisson_ratio": "channels are calibrated by their own gain and offset",
+}
+
+
 class MaterialConfig(_Frozen):
-    """Shaft material (stress in MPa, modulus in GPa) and S-N model (seed 000 §5.2.3, §8.1)."""
+    """Shaft material (stress in MPa) and S-N model (seed 000 §8.1)."""
 
     name: str = "820M17"
     s_ut_mpa: Annotated[float, Field(gt=100, le=3000)] = 980.0
-    elastic_modulus_gpa: Positive = 207.0
-    poisson_ratio: Annotated[float, Field(gt=0, lt=0.5)] = 0.3
     ka: Fraction = 0.68
     kb: Fraction = 0.75
     kc: Fraction = 0.897
     kd: Fraction = 1.0
     sn: SNModel = Field(default_factory=SNModel)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _removed(cls, data: Any) -> Any:
+        """Fields a mill file may still carry that nothing reads any more: refused in words."""
+        unused = sorted(set(data) & set(_REMOVED_MATERIAL)) if isinstance(data, dict) else []
+        if unused:
+            raise ValueError("; ".join(f"{name} is not used: {_REMOVED_MATERIAL[name]}; remove it"
+                                       for name in unused))  # fmt: skip
+        return data
 
     @property
     def endurance_limit_mpa(self) -> float:
@@ -376,6 +417,12 @@ class MillConfig(_Frozen):
     )
     alarms: AlarmThresholds = Field(default_factory=AlarmThresholds)
     life: LifeConfig = Field(default_factory=LifeConfig)
+    torsional: TorsionalParams | None = Field(
+        default=None,
+        description="The drivetrain's lumped torsional model referred to the pinion shaft "
+        "(Fedin & Vinogradov 2018 Table 2): natural frequencies for the harmonic tracker and "
+        "the resonance_margin alarm. None: no model (the analysis says so).",
+    )
     simulated: bool = Field(
         default=False,
         description="The mill's data come from the simulator (the demo, example mills): every "

@@ -27,6 +27,12 @@ MSHTS 5500×6500 chain 1.24, 3.96, 104.1 Hz; with the pinion mass (r = 0.578 m, 
 1.24, 3.96, 101.2, 323.0 Hz. The 3× drive-gear excitation of the MRG mill (3 × 150 rpm = 7.5 Hz)
 lies 11 % below its 8.4 Hz mode — the resonance behind its measured K_H = 1.58 (seed 001 §2.1).
 
+A mill's model is the ``[torsional]`` table of its file
+(:class:`~analytics.drivetrain.torsional_params.TorsionalParams`): :func:`natural_frequencies_of`
+gives its natural frequencies to the harmonic tracker, :func:`design_resonances` the expected
+lines within ``alarms.resonance_margin_warn`` of one at rated speed, :func:`torsional_note` both
+in words (or that the file has no model).
+
 Dynamic factor (eq. 13): ``K'_v = M_total / M_nom = 1 + M_dyn / M_nom`` from a measured torque
 record. Units: kg·m², kg, N·m/rad, N/m, m, rad, Hz, N·m (kN·m for measured torque).
 """
@@ -36,72 +42,37 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from analytics.contracts import check_snapshot
-from analytics.drivetrain.kinematics import ExpectedLine
+from analytics.drivetrain.kinematics import ExpectedLine, expected_lines
+from analytics.drivetrain.mill_config import MillConfig
+from analytics.drivetrain.torsional_params import TorsionalParams, pitch_radius_m
 
 __all__ = [
+    "NO_MODEL_NOTE",
     "SEED_001_MILLS",
     "DynamicFactorMeter",
     "Mode",
     "ResonanceWarning",
     "TorsionalModel",
     "TorsionalParams",
+    "design_resonances",
     "dynamic_factor",
+    "natural_frequencies_of",
     "pitch_radius_m",
     "resonance_warnings",
+    "torsional_note",
 ]
 
-Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-
-
-def pitch_radius_m(module_mm: float, teeth: int, helix_deg: float = 0.0) -> float:
-    """Pitch radius ``m_n z / (2 cos β)`` in m of a (helical) gear (normal module in mm)."""
-    return module_mm * teeth / (2.0 * math.cos(math.radians(helix_deg))) / 1000.0
-
-
-class TorsionalParams(BaseModel):
-    """Seed 001 Table 2 parameters, referred to the pinion shaft. Proposed as an optional
-    ``MillConfig.torsional`` field.
-
-    ``I1``/``I2``/``I3`` kg·m² (rotor; shaft, coupling and drive gear; girth gear and drum),
-    ``c01``/``c12``/``c23`` N·m/rad (motor field, shafting, gear mesh), ``m`` kg and ``c2`` N/m
-    (transverse pinion assembly; Table 2 prints the unit as N·m), ``r`` m pinion pitch radius;
-    the transverse DOF is used only when ``m``, ``c2`` and ``r`` are all given. ``psi``:
-    vibrational energy dissipation coefficient Ψ (seed 001: 0.3–0.5); ``resonance_band``:
-    relative distance within which an excitation line counts as near a natural frequency.
-    """
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
-
-    I1: Pos
-    I2: Pos
-    I3: Pos
-    c01: Pos
-    c12: Pos
-    c23: Pos
-    m: Pos | None = None
-    c2: Pos | None = None
-    r: Pos | None = None
-    psi: Annotated[float, Field(gt=0, le=2)] = 0.4
-    resonance_band: Annotated[float, Field(gt=0, lt=1)] = 0.15
-
-    @model_validator(mode="after")
-    def _transverse_complete(self) -> TorsionalParams:
-        given = [v is not None for v in (self.m, self.c2, self.r)]
-        if any(given) and not all(given):
-            raise ValueError("the transverse pinion DOF needs all of m, c2 and r")
-        return self
-
-    @property
-    def transverse(self) -> bool:
-        """Whether the transverse pinion mass is part of the model."""
-        return self.m is not None
-
+#: What a mill file without a ``[torsional]`` table means for the analysis, in words.
+NO_MODEL_NOTE = (
+    "the mill file has no [torsional] table (the drivetrain's torsional model, Fedin & "
+    "Vinogradov 2018): unexplained spectral peaks are not compared with natural frequencies, "
+    "and the resonance_margin alarm cannot fire"
+)
 
 #: Seed 001 Table 2 (and Table 1 for the pinion radius: module 25 mm, helix 6°, 25/46 teeth).
 SEED_001_MILLS: dict[str, TorsionalParams] = {
@@ -301,3 +272,33 @@ class DynamicFactorMeter:
         meter._max, meter._count = float(snapshot["max"]), int(snapshot["count"])
         meter._parts = [float(snapshot["sum"])] if meter._count else []
         return meter
+
+
+def natural_frequencies_of(config: MillConfig) -> tuple[float, ...]:
+    """Natural frequencies (Hz, lowest first) of the mill's ``[torsional]`` model; empty when
+    the mill file has none."""
+    if config.torsional is None:
+        return ()
+    return tuple(TorsionalModel(config.torsional).natural_frequencies_hz())
+
+
+def design_resonances(config: MillConfig) -> list[ResonanceWarning]:
+    """Expected excitation lines at rated speed within ``alarms.resonance_margin_warn`` of a
+    natural frequency of the mill's model (Fedin & Vinogradov 2018 §2.2), closest first; none
+    without a model."""
+    natural = natural_frequencies_of(config)
+    return resonance_warnings(natural, expected_lines(config), config.alarms.resonance_margin_warn)
+
+
+def torsional_note(config: MillConfig) -> str:
+    """The torsional model of a mill in one sentence: its natural frequencies and the expected
+    lines near them at rated speed, or :data:`NO_MODEL_NOTE`."""
+    natural = natural_frequencies_of(config)
+    if not natural:
+        return NO_MODEL_NOTE
+    text = "natural frequencies " + ", ".join(f"{f:.2f}" for f in natural) + " Hz (the mill "
+    text += "file's torsional model, Fedin & Vinogradov 2018)"
+    near = design_resonances(config)
+    if not near:
+        return text + "; no expected excitation line within the resonance margin at rated speed"
+    return text + "; at rated speed " + "; ".join(w.message() for w in near)

@@ -320,6 +320,12 @@ class MillAnalyzer:
         return self.loads.windows
 
     @property
+    def natural_frequencies_hz(self) -> tuple[float, ...]:
+        """The torsional natural frequencies (Hz) of the mill file's model (empty without one)
+        that the harmonic windows' peaks and resonance margins are measured against."""
+        return self.harmonics.natural_frequencies_hz
+
+    @property
     def tracked_channels(self) -> list[str]:
         """Channels whose harmonics are tracked."""
         return [ch.name for ch in self.harmonics.channels]

@@ -10,12 +10,13 @@ and
 :class:`~analytics.fatigue.miner.DamageRecorder` per component feed
 :mod:`analytics.mill.phase_damage`.
 
-Components (seed 000 §8.2, App. D), per drive side, on the material's S-N curve and scaled by
-K_t (``shafts.kt_torsion``, App. D applies one K_t = 2 to the whole stress trace):
+Components (Diering 2011 §8.1–8.2), per drive side, on the material's S-N curve, with the
+fatigue factors of :mod:`analytics.drivetrain.shaft_stress` (``[shafts]`` of the mill file):
 
-* ``pinion_combined`` — σ_θ at θ = 45° (eq. 12 with σ_y = 0): ½σ_b + ½σ_b·cos 2θ + τ·sin 2θ,
-  σ_b the pinion bending stress (MPa), τ = 16T/(πd³) from the pinion torque;
-* ``pinion_torsion`` — τ of the pinion shaft; ``motor_torsion`` — τ of the motor shaft.
+* ``pinion_combined`` — σ_θ at θ = 45° (eq. 12 with σ_y = 0): K_f,b·σ_b·(½ + ½cos 2θ) +
+  K_f,t·τ·sin 2θ, σ_b the pinion bending stress (MPa), τ = 16T/(πd³) from the pinion torque
+  (or App. D's one factor on the whole trace, ``stress_concentration = "single_kt"``);
+* ``pinion_torsion`` — τ of the pinion shaft; ``motor_torsion`` — τ of the motor shaft (K_f,t).
 
 Missing and flagged samples (policy). NaN samples (dropouts) and samples flagged by a telemetry
 fault detector are never peaks (they are NaN in the ring). For rainflow counting the last valid
@@ -43,9 +44,9 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
+from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.drivetrain.stress import THETA_SEED, combined_stress, shear_stress_from_torque
+from analytics.drivetrain.stress import shear_stress_from_torque
 from analytics.fatigue.miner import DamageRecorder
 from analytics.fatigue.rainflow import RainflowCounter
 from analytics.mill.phase_damage import (
@@ -121,6 +122,7 @@ class LoadAnalysis:
     CONFIGURED = frozenset({
         "config", "fs", "settings", "window_s", "keep_windows", "keep_events",
         "speed_ch", "rated_rpm", "sides", "motor", "pinion", "bending", "rows", "components",
+        "stress_model",
     })  # fmt: skip
 
     def __init__(
@@ -190,6 +192,7 @@ class LoadAnalysis:
                 rows.append(name or f"(missing {kind} {sh} {side})")
         self.rows = rows
         self.components = component_names(cfg)
+        self.stress_model = cfg.shafts.stress_model()
 
     def _meter(self) -> SteadyStateMeter:
         t_m = 100.0 / self.config.motor_rated_torque_knm
@@ -205,9 +208,12 @@ class LoadAnalysis:
 
     def _new_damage(self, t0_ns: int) -> None:
         cfg = self.config
-        curve = cfg.material.sn_curve()
+        curve, model = cfg.material.sn_curve(), self.stress_model
         for c in self.components:
-            rec = DamageRecorder(curve, scale=cfg.shafts.kt_torsion)
+            combined = c.startswith("pinion_combined")
+            rec = DamageRecorder(
+                curve, scale=model.combined_scale if combined else model.torsion_scale
+            )
             self.damage[c] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone)
 
     # ------------------------------------------------------------ feeding
@@ -461,7 +467,7 @@ class LoadAnalysis:
             sfx = f"_{side}" if side else ""
             tm, tp, sb = block[1 + 3 * k], block[2 + 3 * k], block[3 + 3 * k]  # missing: NaN
             tau_p = shear_stress_from_torque(tp, cfg.shafts.pinion_diameter_m)
-            out[f"pinion_combined{sfx}"] = combined_stress(sb, tau_p, THETA_SEED)
+            out[f"pinion_combined{sfx}"] = self.stress_model.combined(sb, tau_p)
             out[f"pinion_torsion{sfx}"] = tau_p
             out[f"motor_torsion{sfx}"] = shear_stress_from_torque(tm, cfg.shafts.motor_diameter_m)
         return out
@@ -585,9 +591,7 @@ class LoadAnalysis:
             "starts_per_month": months_table(self.starts_per_month, failed, cfg.alarms),
             "steady_state": list(self.windows),
             "phase_seconds": seconds,
-            "damage": damage_table(
-                self.damage, residues, seconds, self.starts_total, self.n / self.fs
-            ),
+            "damage": self._damage_table(residues, seconds),
         }
 
     # ------------------------------------------------------------ persistence
@@ -627,7 +631,16 @@ class LoadAnalysis:
             "meter": self.meter.snapshot(),
             "barring": None if self.barring is None else self.barring.snapshot(),
             "starts_total": self.starts_total,
+            "stress": self.stress_model.as_dict(),
         }
+
+    def _damage_table(self, residues: dict[str, Any], seconds: dict[str, float]) -> dict[str, Any]:
+        """:func:`~analytics.mill.report.damage_table`, each component with the fatigue
+        factors its stress carries in words (``stress_factors``)."""
+        table = damage_table(self.damage, residues, seconds, self.starts_total, self.n / self.fs)
+        for comp, row in table.items():
+            row["stress_factors"] = self.stress_model.describe(comp)
+        return table
 
     def _ring_needed_from(self) -> int:
         """Oldest ring sample a later phase window, barring session or steady window may read."""
@@ -654,8 +667,17 @@ class LoadAnalysis:
                 f"snapshot of mill {snapshot['mill']!r}, configuration is {config.id!r}"
             )
         a = cls(config, settings=settings, window_s=window_s)
+        a._check_stress(snapshot)
         a._load(snapshot)
         return a
+
+    def _check_stress(self, snapshot: dict[str, Any]) -> None:
+        """:class:`SnapshotMismatch` when the snapshot's damage was computed with other fatigue
+        factors (:meth:`~analytics.drivetrain.shaft_stress.ShaftStressModel.refusal`)."""
+        scales = {d["recorder"]["scale"] for d in snapshot["damage"].values()}
+        why = self.stress_model.refusal(snapshot.get("stress"), scales)
+        if why is not None:
+            raise SnapshotMismatch(f"mill {self.config.id!r}: {why}")
 
     def _load(self, d: dict[str, Any]) -> None:
         """Set every attribute :meth:`snapshot` wrote (the same list, in the same order)."""

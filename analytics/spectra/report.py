@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from analytics.drivetrain.torsional_model import torsional_note
+from analytics.spectra.resonance import resonance_margins
 from analytics.spectra.tracker import HarmonicTracker, describe_segments
 
 __all__ = ["harmonics_report"]
@@ -17,11 +19,14 @@ __all__ = ["harmonics_report"]
 def harmonics_report(tracker: HarmonicTracker) -> dict[str, Any]:
     """Report of the running portions so far (long-run Welch average over every segment).
 
-    Keys: ``harmonics`` (one row per channel and expected line), ``unexplained_peaks``, and
-    ``summary``: ``segments`` (used, as ``segments_used``), ``segments_dropped`` (count per
-    reason, every key of :data:`~analytics.spectra.tracker.DROP_REASONS`), ``segments_note``
-    (the same in one plain sentence), and once a segment is used the running seconds, mean
-    pinion speed, resolution and tracking mode. JSON-ready.
+    Keys: ``harmonics`` (one row per channel and expected line), ``unexplained_peaks``,
+    ``resonance_margins`` (per channel, the measured excitation nearest a torsional natural
+    frequency: :mod:`analytics.spectra.resonance`), and ``summary``: ``torsional_model`` (the
+    mill's natural frequencies in words, or that its file has no model), ``segments`` (used,
+    as ``segments_used``), ``segments_dropped`` (count per reason, every key of
+    :data:`~analytics.spectra.tracker.DROP_REASONS`), ``segments_note`` (the same in one plain
+    sentence), and once a segment is used the running seconds, mean pinion speed, resolution
+    and tracking mode. JSON-ready.
     """
     used, dropped = tracker.segment_accounting()
     accounting = {
@@ -29,13 +34,22 @@ def harmonics_report(tracker: HarmonicTracker) -> dict[str, Any]:
         "segments_used": used,
         "segments_dropped": dropped,
         "segments_note": describe_segments(used, dropped),
+        "torsional_model": torsional_note(tracker.config),
     }
     table = tracker.total_table()
     if table is None:
-        return {"harmonics": [], "unexplained_peaks": [], "summary": accounting}
+        return {
+            "harmonics": [],
+            "unexplained_peaks": [],
+            "resonance_margins": [],
+            "summary": accounting,
+        }
     return {
         "harmonics": [m.to_dict() for m in table.lines],
         "unexplained_peaks": [p.to_dict() for p in table.peaks],
+        "resonance_margins": [
+            m.to_dict() for m in resonance_margins(table, tracker.natural_frequencies_hz)
+        ],
         "summary": accounting
         | {
             "running_s": tracker.counters["running_samples"] / tracker.fs,

@@ -44,6 +44,10 @@ Telemetry spikes are not a reason: the analyzer holds flagged samples at the las
 its state machine ignores them (issue 18), so a spike neither ends a running period nor puts a
 wild speed into the pinion angle.
 
+Modules: this one streams (buffering, segmentation, segment spectra, persistence);
+:mod:`analytics.spectra.segments` holds the Welch sums and the segment accounting,
+:mod:`analytics.spectra.tables` turns averaged segments into the harmonic tables (steps 4–5).
+
 Knobs with measured errors (``tests/bench/bench_harmonics.py``): ``window_s``, ``overlap``,
 ``window`` (hann, blackmanharris, flattop), ``tracking``. State is bounded: buffers sized from the
 configuration, spectra of fixed length, nothing grows with running time.
@@ -58,7 +62,6 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -66,8 +69,9 @@ import numpy as np
 from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.kinematics import ExpectedLine, expected_lines
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.drivetrain.torsional_model import natural_frequencies_of
 from analytics.snapshot_arrays import pack_array, unpack_array
-from analytics.spectra.facts import HarmonicWindow, LineMeasurement, UnexplainedPeak
+from analytics.spectra.facts import HarmonicWindow
 from analytics.spectra.order_kernels import (
     angle_prefix,
     center_taper,
@@ -76,14 +80,16 @@ from analytics.spectra.order_kernels import (
     power_of,
     resample,
 )
-from analytics.spectra.running_median import NoiseFloor, local_maxima
-from analytics.spectra.settings import HarmonicSettings
-from analytics.spectra.tapers import (
-    COSINE_WINDOWS,
-    interpolation_table,
-    response_at,
-    window_values,
+from analytics.spectra.segments import (
+    DROP_REASONS,
+    SegmentSpectrum,
+    WelchSums,
+    describe_segments,
+    speed_spread,
 )
+from analytics.spectra.settings import HarmonicSettings
+from analytics.spectra.tables import HarmonicTables, TrackedChannel, line_orders
+from analytics.spectra.tapers import COSINE_WINDOWS, window_values
 
 __all__ = ["DROP_REASONS", "MAX_DEFER_HOPS", "HarmonicTracker", "describe_segments"]
 
@@ -91,133 +97,10 @@ log = logging.getLogger(__name__)
 
 _SNAPSHOT_VERSION = 3  # 2: arrays packed by analytics.snapshot_arrays; 3: dropped segments
 _OLD_VERSIONS = (2,)  # restored with no segment dropped so far
-_SPEED_BLOCKS = 10  # speed block means per segment for the drift estimate
-_TINY = float(np.finfo(float).tiny)
 #: Largest deferral of a complete segment's spectrum, in hops (``stagger`` → 1): under one hop,
 #: so a segment never waits behind the next one.
 MAX_DEFER_HOPS = 0.8
-#: Why a segment begun was dropped, in plain words that follow "N segments dropped" (the keys
-#: are the report's ``segments_dropped`` keys and the ``why`` of :meth:`HarmonicTracker.feed`).
-DROP_REASONS: dict[str, str] = {
-    "run_ended": "incomplete when the running period ended (stop or trip)",
-    "state_unknown": "incomplete when the operating state became unknown (speed telemetry lost)",
-    "gap": "cut by a gap in the samples' times",
-    "non_finite": "cut by a missing (NaN) or infinite sample on a tracked channel or the speed",
-    "too_slow": "not completed: the mill turned too slowly",
-}
-
-
-def _spread(dphi: np.ndarray) -> float:
-    """(max − min) / mean of the means of ``np.array_split(dphi, _SPEED_BLOCKS)``: the blocks of
-    equal length summed as rows of one array (numpy's row sums are its 1-D sums: bitwise the
-    blocks' ``mean()``, without a call per block)."""
-    q, r = divmod(dphi.shape[0], _SPEED_BLOCKS)
-    if q == 0:
-        means = np.array([b.mean() for b in np.array_split(dphi, _SPEED_BLOCKS)])
-    else:
-        long = dphi[: r * (q + 1)].reshape(r, q + 1).sum(axis=1) / (q + 1)
-        means = np.concatenate((long, dphi[r * (q + 1) :].reshape(-1, q).sum(axis=1) / q))
-    return float((means.max() - means.min()) / means.mean())
-
-
-def _db(power: float, floor: float) -> float:
-    """10 log10(power / floor), 0 dB for an all-zero spectrum."""
-    return 10.0 * math.log10(max(float(power), _TINY) / max(float(floor), _TINY))
-
-
-# --------------------------------------------------------------------------- accumulator
-
-
-@dataclass
-class _Acc:
-    """Welch sums over segments: power spectra (channels × bins), demodulated line powers
-    (channels × lines), revolutions, seconds, angle-tracked count, worst speed spread; and the
-    segments dropped meanwhile, per :data:`DROP_REASONS` key."""
-
-    spec: np.ndarray
-    lines: np.ndarray
-    count: int = 0
-    revs: float = 0.0
-    seconds: float = 0.0
-    angle: int = 0
-    spread: float = 0.0
-    spans: list[tuple[int, int]] = field(default_factory=list)
-    dropped: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DROP_REASONS, 0))
-
-    @classmethod
-    def zeros(cls, channels: int, bins: int, lines: int) -> _Acc:
-        return cls(np.zeros((channels, bins)), np.zeros((channels, lines)))
-
-    def add(self, seg: _Segment, keep_spans: bool) -> None:
-        self.spec += seg.power
-        self.lines += seg.line_power
-        self.count += 1
-        self.revs += seg.revs
-        self.seconds += seg.seconds
-        self.angle += int(seg.angle)
-        self.spread = max(self.spread, seg.spread)
-        if keep_spans:
-            self.spans.append((seg.t_start_ns, seg.t_end_ns))
-
-    def reset(self) -> None:
-        self.spec[:] = 0.0
-        self.lines[:] = 0.0
-        self.count, self.revs, self.seconds, self.angle, self.spread = 0, 0.0, 0.0, 0, 0.0
-        self.spans = []
-        self.dropped = dict.fromkeys(DROP_REASONS, 0)
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "spec": pack_array(self.spec) if self.count else None,  # all zeros when empty
-            "lines": pack_array(self.lines),
-            "count": self.count,
-            "revs": self.revs,
-            "seconds": self.seconds,
-            "angle": self.angle,
-            "spread": self.spread,
-            "spans": [list(s) for s in self.spans],
-            "dropped": dict(self.dropped),
-        }
-
-    @classmethod
-    def from_json(cls, d: dict[str, Any], channels: int, bins: int, lines: int) -> _Acc:
-        spec = d["spec"]
-        return cls(
-            np.zeros((channels, bins))
-            if spec is None
-            else unpack_array(spec, shape=(channels, bins)),
-            unpack_array(d["lines"], shape=(channels, lines)),
-            int(d["count"]),
-            float(d["revs"]),
-            float(d["seconds"]),
-            int(d["angle"]),
-            float(d["spread"]),
-            [(int(a), int(b)) for a, b in d["spans"]],
-            dict.fromkeys(DROP_REASONS, 0) | d.get("dropped", {}),  # (none before version 3)
-        )
-
-
-@dataclass(frozen=True)
-class _Segment:
-    power: np.ndarray
-    line_power: np.ndarray
-    revs: float
-    seconds: float
-    angle: bool
-    spread: float
-    t_start_ns: int
-    t_end_ns: int
-
-
-# --------------------------------------------------------------------------- the tracker
-
-
-@dataclass(frozen=True)
-class _Channel:
-    name: str
-    kind: str
-    unit: str
-    rated: float | None  # kN·m for torque, None for bending
+_spread = speed_spread  # (the name the tests know)
 
 
 class HarmonicTracker:
@@ -236,6 +119,10 @@ class HarmonicTracker:
     stay in the buffer meanwhile, so every window is bitwise what it is without stagger; only
     the sample at which it is returned moves (deterministically: at the deferral's end, at a
     stop, gap or non-finite sample, or at :meth:`flush`). ``stagger_for(mill id)`` spreads mills.
+
+    ``natural_frequencies_hz``: the torsional natural frequencies (Hz) each unexplained peak is
+    compared with; None (default): those of the mill file's ``[torsional]`` model
+    (:func:`~analytics.drivetrain.torsional_model.natural_frequencies_of`; none without one).
     """
 
     def __init__(
@@ -243,12 +130,11 @@ class HarmonicTracker:
         config: MillConfig,
         channels: Sequence[str] | None = None,
         settings: HarmonicSettings | None = None,
-        natural_frequencies_hz: Sequence[float] = (),
+        natural_frequencies_hz: Sequence[float] | None = None,
         stagger: float = 0.0,
     ) -> None:
         self.config = config
         self.settings = settings or HarmonicSettings()
-        self.natural_frequencies_hz = tuple(float(f) for f in natural_frequencies_hz)
         self.fs = float(config.sample_rate_hz)
         self.channels = self._channels(config, channels)
         self.speed_channel = next((n for n, c in config.channels.items() if c.kind == "rpm"), None)
@@ -262,10 +148,17 @@ class HarmonicTracker:
         self._lines = [
             ln for ln in expected_lines(config, None, self.settings.kinematics) if ln.observable
         ]
-        self._all_lines = expected_lines(config, None, self.settings.kinematics)
-        self._unobservable_rows: dict[str, list[LineMeasurement]] = {}
+        self._tables = HarmonicTables(
+            config,
+            self.settings,
+            self.channels,
+            expected_lines(config, None, self.settings.kinematics),
+            (self.revs, self._win_sum),
+            natural_frequencies_of(config)
+            if natural_frequencies_hz is None
+            else natural_frequencies_hz,
+        )
         self._grid: tuple[np.ndarray, np.ndarray] | None = None  # see _grid_taper
-        self._rho, self._delta = interpolation_table(self.settings.window)
         nc, nl = len(self.channels), len(self._lines)
         self._buf = np.zeros((nc + 1, self.capacity + self.defer_samples))
         self._len = 0
@@ -274,8 +167,8 @@ class HarmonicTracker:
         self._approx_revs = 0.0
         self._anchor_ns: int | None = None
         self._anchor_offset = 0  # run sample index of buffer[0]
-        self._window = _Acc.zeros(nc, self.bins, nl)
-        self._total = _Acc.zeros(nc, self.bins, nl)
+        self._window = WelchSums.zeros(nc, self.bins, nl)
+        self._total = WelchSums.zeros(nc, self.bins, nl)
         self.counters = {
             "frames_skipped": 0,
             "running_samples": 0,
@@ -287,7 +180,7 @@ class HarmonicTracker:
 
     # ------------------------------------------------------------------ construction
     @staticmethod
-    def _channels(config: MillConfig, names: Sequence[str] | None) -> tuple[_Channel, ...]:
+    def _channels(config: MillConfig, names: Sequence[str] | None) -> tuple[TrackedChannel, ...]:
         if names is None:
             names = [n for n, c in config.channels.items() if c.kind in ("torque", "bending")]
         out = []
@@ -299,7 +192,7 @@ class HarmonicTracker:
             if ch.kind == "torque":
                 motor = ch.shaft == "motor"
                 rated = config.motor_rated_torque_knm if motor else config.pinion_rated_torque_knm
-            out.append(_Channel(name, ch.kind, ch.units, rated))
+            out.append(TrackedChannel(name, ch.kind, ch.units, rated))
         if not out:
             raise ValueError("no torque or bending channel to track")
         return tuple(out)
@@ -484,7 +377,7 @@ class HarmonicTracker:
         self._approx_revs = float(self._buf[-1, :rest].sum())
 
     # ------------------------------------------------------------------ one segment
-    def _segment(self, x: np.ndarray, phi: np.ndarray, end: int) -> _Segment:
+    def _segment(self, x: np.ndarray, phi: np.ndarray, end: int) -> SegmentSpectrum:
         """Spectrum and line demodulation of samples ``[0, end)`` covering ``M`` revolutions."""
         self.counters["segments"] += 1
         data, dphi = x[:-1], x[-1]
@@ -495,7 +388,7 @@ class HarmonicTracker:
         power = self._power(data, phi, end)
         line_power = self._demodulate(data[:, :end], phi, end)
         t0 = self._run_time(self._anchor_offset)
-        return _Segment(
+        return SegmentSpectrum(
             power,
             line_power,
             float(phi[end]),
@@ -538,12 +431,6 @@ class HarmonicTracker:
             self._grid = grid, window_values(self.settings.window, grid / self.revs)
         return self._grid
 
-    def _orders(self, rev_hz: float) -> np.ndarray:
-        """Orders of the tracked lines; fixed-frequency lines converted at ``rev_hz``."""
-        return np.array(
-            [ln.order if ln.order is not None else ln.frequency_hz / rev_hz for ln in self._lines]
-        )
-
     def _demodulate(self, data: np.ndarray, phi: np.ndarray, end: int) -> np.ndarray:
         """Squared amplitudes of every tracked line, demodulated at its exact order."""
         p = phi[:end]
@@ -552,215 +439,20 @@ class HarmonicTracker:
         qs = q.sum()
         mean = data @ q / qs  # (the kernel demodulates data − mean)
         rev_hz = phi[end] / (end / self.fs)
-        amp = 2.0 * demodulate(data, q, p, self._orders(rev_hz), mean) / qs  # (lines, channels)
+        amp = (
+            2.0 * demodulate(data, q, p, line_orders(self._lines, rev_hz), mean) / qs
+        )  # (lines, channels)
         return (amp.real**2 + amp.imag**2).T
 
-    def _add(self, seg: _Segment) -> HarmonicWindow | None:
+    def _add(self, seg: SegmentSpectrum) -> HarmonicWindow | None:
         self._window.add(seg, keep_spans=True)
         self._total.add(seg, keep_spans=False)
         if self._window.count < self.settings.segments_per_window:
             return None
-        window = self._table(self._window)
+        window = self._tables.table(self._window)
         self._window.reset()
         self.latest = window
         return window
-
-    # ------------------------------------------------------------------ tables
-    def _table(self, acc: _Acc) -> HarmonicWindow:
-        rev_hz = acc.revs / acc.seconds
-        spec = acc.spec / acc.count
-        line_amp = np.sqrt(acc.lines / acc.count)
-        lines: list[LineMeasurement] = []
-        peaks: list[UnexplainedPeak] = []
-        for k, ch in enumerate(self.channels):
-            floor = self._floor(spec[k])
-            lines += self._measure(ch, spec[k], floor, line_amp[k], rev_hz, acc.angle > 0)
-            peaks += self._peaks(ch, spec[k], floor, rev_hz, acc)
-        spans = tuple(acc.spans)
-        return HarmonicWindow(
-            t_start_ns=spans[0][0] if spans else 0,
-            t_end_ns=spans[-1][1] if spans else 0,
-            segments=spans,
-            pinion_speed_rpm=60.0 * rev_hz,
-            resolution_hz=rev_hz / self.revs,
-            tracking="angle" if acc.angle * 2 >= acc.count else "time",
-            lines=tuple(lines),
-            peaks=tuple(peaks),
-            segments_dropped=dict(acc.dropped),
-        )
-
-    def _floor(self, power: np.ndarray) -> NoiseFloor:
-        """Running median of the power spectrum over ± ``floor_bins`` bins (noise floor),
-        taken at the bins read (:class:`analytics.spectra.running_median.NoiseFloor`)."""
-        return NoiseFloor(power, self.settings.floor_bins)
-
-    def _amplitude(self, power: float) -> float:
-        """Amplitude of a bin-centred line whose |FFT|² is ``power``."""
-        return 2.0 * math.sqrt(power) / self._win_sum
-
-    def _measure(
-        self,
-        ch: _Channel,
-        power: np.ndarray,
-        floor: NoiseFloor,
-        demod_amp: np.ndarray,
-        rev_hz: float,
-        locked: bool,
-    ) -> list[LineMeasurement]:
-        mag = np.sqrt(power)
-        orders = self._orders(rev_hz)
-        bins = orders * self.revs
-        k = self._line_peaks(mag, bins)
-        rows = zip(  # (plain floats: no numpy scalar per line)
-            self._lines, orders.tolist(), bins.tolist(), k.tolist(),
-            self._interpolate_many(mag, k).tolist(), floor.at(k).tolist(), mag[k].tolist(),
-            demod_amp.tolist(), strict=True,
-        )  # fmt: skip
-        out = [
-            self._measure_line(
-                ch,
-                ln,
-                order,
-                b,
-                (kj, delta, fl, mk),
-                demod,
-                rev_hz,
-                locked and ln.order is not None,
-            )
-            for ln, order, b, kj, delta, fl, mk, demod in rows
-        ]
-        unobservable = self._unobservable_rows.get(ch.name)
-        if unobservable is None:  # (constant per channel: frozen rows made once)
-            unobservable = [
-                self._unobservable(ch, ln) for ln in self._all_lines if not ln.observable
-            ]
-            self._unobservable_rows[ch.name] = unobservable
-        return out + unobservable
-
-    def _line_peaks(self, mag: np.ndarray, bins: np.ndarray) -> np.ndarray:
-        """The largest bin within ± ``search_bins`` of each expected bin (the first of equals;
-        the window clipped to bins 1 … len − 2)."""
-        r = self.settings.search_bins
-        centre = np.rint(bins).astype(np.int64)  # (round half to even, as round())
-        lo = np.maximum(1, centre - r)
-        hi = np.minimum(mag.shape[0] - 2, centre + r)
-        if np.any(hi < lo):
-            raise ValueError("an expected line lies outside the spectrum")
-        idx = np.minimum(lo[:, None] + np.arange(2 * r + 1), hi[:, None])  # (repeats hi)
-        return lo + np.argmax(mag[idx], axis=1)
-
-    def _interpolate_many(self, mag: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """Fractional bin offset δ ∈ [−½, ½] of the peak at each bin of ``k`` (3-bin ratio
-        method, one ``np.interp`` call); 0 at the ends or where the bin is empty."""
-        n = mag.shape[0]
-        if n < 3:
-            return np.zeros(k.shape[0])
-        kk = np.clip(k, 1, n - 2)
-        valid = (k > 0) & (k < n - 1) & (mag[kk] > 0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rho = np.where(valid, (mag[kk + 1] - mag[kk - 1]) / mag[kk], 0.0)
-        return np.where(valid, np.interp(rho, self._rho, self._delta), 0.0)
-
-    def _measure_line(
-        self,
-        ch: _Channel,
-        ln: ExpectedLine,
-        order: float,
-        b: float,
-        peak: tuple[int, float, float, float],
-        demod: float,
-        rev_hz: float,
-        locked: bool,
-    ) -> LineMeasurement:
-        """Peak ``peak`` = (bin ``k``, its interpolated offset, the floor there, the magnitude
-        ``|FFT|`` there) of the search
-        ± ``search_bins`` around the expected bin ``b`` (:meth:`_line_peaks`); amplitude from
-        the demodulated value (window-response corrected), or — for a peak more than ½ bin off —
-        from the interpolated FFT bin. ``locked``: order-tracked shaft line, which cannot leave
-        its order, so a far-off maximum (a neighbour's lobe) is ignored and the exact order is
-        used."""
-        k, delta, floor, mag_k = peak
-        snr = _db(mag_k**2, floor)
-        detected = snr >= self.settings.peak_snr_db
-        eps = (k + delta - b) if detected else 0.0
-        if locked and abs(eps) > 0.5:
-            eps = 0.0
-        if abs(eps) <= 0.5:
-            amp = demod / response_at(self.settings.window, eps)
-        else:
-            amp = self._amplitude(mag_k**2) / response_at(self.settings.window, delta)
-        measured = (b + eps) / self.revs
-        return LineMeasurement(
-            ch.name, ln.name, ln.family, ln.kind, ln.order, order * rev_hz, measured,
-            measured * rev_hz, amp, ch.unit, self._pct(ch, amp), snr, detected, True,
-        )  # fmt: skip
-
-    @staticmethod
-    def _unobservable(ch: _Channel, ln: ExpectedLine) -> LineMeasurement:
-        nan = math.nan
-        return LineMeasurement(
-            ch.name, ln.name, ln.family, ln.kind, ln.order, ln.frequency_hz, nan, nan, nan,
-            ch.unit, None, nan, False, False,
-        )  # fmt: skip
-
-    @staticmethod
-    def _pct(ch: _Channel, amp: float) -> float | None:
-        return None if ch.rated is None else 100.0 * amp / ch.rated
-
-    # ------------------------------------------------------------------ unexplained peaks
-    def _candidates(self, power: np.ndarray, floor: NoiseFloor) -> np.ndarray:
-        """Local maxima ``peak_snr_db`` above the floor within the low/high order limits."""
-        mill = self.config.excitation_orders()["mill_speed"]
-        lo = max(2.5, 0.5 * mill * self.revs)
-        limit_hz = min(
-            self.settings.kinematics.bandwidth_hz or self.config.telemetry_bandwidth_hz,
-            self.fs / 2.0,
-        )
-        hi = limit_hz / (self.config.pinion_speed_rpm / 60.0) * self.revs
-        k = local_maxima(power, lo, hi)
-        return floor.exceeded(k, 10.0 ** (self.settings.peak_snr_db / 10.0))
-
-    def _peaks(
-        self, ch: _Channel, power: np.ndarray, floor: NoiseFloor, rev_hz: float, acc: _Acc
-    ) -> list[UnexplainedPeak]:
-        cand = self._candidates(power, floor)
-        if cand.shape[0] == 0:
-            return []
-        deltas = self._interpolate_many(np.sqrt(power), cand)  # (each as _interpolate's)
-        line_bins = self._orders(rev_hz) * self.revs
-        tol = self.settings.match_bins + acc.spread * line_bins
-        positions = cand + deltas
-        explained = (np.abs(line_bins[None, :] - positions[:, None]) <= tol).any(axis=1)
-        all_lines, min_peak = self._all_lines, self._min_peak(ch)
-        out = []
-        rows = zip(
-            cand.tolist(), deltas.tolist(), positions.tolist(), explained.tolist(), strict=True
-        )
-        for k, delta, bin_pos, known in rows:
-            amp = self._amplitude(power[k]) / response_at(self.settings.window, delta)
-            if amp < min_peak or known:
-                continue
-            f = bin_pos / self.revs * rev_hz
-            near = min(all_lines, key=lambda ln: abs(ln.frequency_hz - f), default=None)
-            out.append(
-                UnexplainedPeak(
-                    ch.name, f, bin_pos / self.revs, amp, ch.unit, self._pct(ch, amp),
-                    _db(power[k], floor[k]),
-                    near.name if near else None, near.frequency_hz if near else None,
-                    self._nearest_natural(f),
-                )
-            )  # fmt: skip
-        return out
-
-    def _min_peak(self, ch: _Channel) -> float:
-        if ch.rated is None:
-            return self.settings.min_peak_mpa
-        return self.settings.min_peak_pct / 100.0 * ch.rated
-
-    def _nearest_natural(self, f: float) -> float | None:
-        if not self.natural_frequencies_hz:
-            return None
-        return min(self.natural_frequencies_hz, key=lambda fn: abs(fn - f))
 
     # ------------------------------------------------------------------ reading
     @property
@@ -770,7 +462,7 @@ class HarmonicTracker:
 
     def total_table(self) -> HarmonicWindow | None:
         """The harmonic table over every running segment so far (None before the first)."""
-        return self._table(self._total) if self._total.count else None
+        return self._tables.table(self._total) if self._total.count else None
 
     def reset_total(self) -> None:
         """Forget the long-run average (e.g. after maintenance) and its segment accounting."""
@@ -802,6 +494,11 @@ class HarmonicTracker:
         rpm = 60.0 * acc.revs / acc.seconds if acc.count else None
         return expected_lines(self.config, rpm, self.settings.kinematics)
 
+    @property
+    def natural_frequencies_hz(self) -> tuple[float, ...]:
+        """The torsional natural frequencies (Hz) unexplained peaks are compared with."""
+        return self._tables.natural_frequencies_hz
+
     # ------------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
         """The complete state as plain JSON-serialisable data (arrays packed, exact)."""
@@ -831,7 +528,7 @@ class HarmonicTracker:
         cls,
         config: MillConfig,
         snapshot: dict[str, Any],
-        natural_frequencies_hz: Sequence[float] = (),
+        natural_frequencies_hz: Sequence[float] | None = None,
     ) -> HarmonicTracker:
         """A tracker that continues exactly where the snapshotted one stood."""
         version = snapshot.get("version")
@@ -861,8 +558,8 @@ class HarmonicTracker:
         t._buf[:, :n] = unpack_array(snapshot["buffer"], shape=(nc + 1, n))
         t._len, t._approx_revs = n, float(snapshot["approx_revs"])
         t._anchor_ns, t._anchor_offset = snapshot["anchor_ns"], int(snapshot["anchor_offset"])
-        t._window = _Acc.from_json(snapshot["window"], nc, bins, nl)
-        t._total = _Acc.from_json(snapshot["total"], nc, bins, nl)
+        t._window = WelchSums.from_json(snapshot["window"], nc, bins, nl)
+        t._total = WelchSums.from_json(snapshot["total"], nc, bins, nl)
         t.counters.update(snapshot["counters"])
         t.latest = (
             None if snapshot["latest"] is None else HarmonicWindow.from_dict(snapshot["latest"])
@@ -903,15 +600,3 @@ class HarmonicTracker:
             return []
         moved = [a[0] for a, b in zip(lines, now, strict=True) if a != b]
         return [f"tracked lines now at other orders or names: {', '.join(moved)}"]
-
-
-def describe_segments(used: int, dropped: dict[str, int]) -> str:
-    """The segment accounting in one plain sentence, e.g. "18 spectral segments used; 3 dropped:
-    2 incomplete when the running period ended (stop or trip), 1 cut by a gap in the samples'
-    times" (``dropped``: counts by :data:`DROP_REASONS` key)."""
-    used_words = f"{used} spectral segment{'' if used == 1 else 's'} used"
-    total = sum(dropped.values())
-    if total == 0:
-        return f"{used_words}, none dropped"
-    parts = [f"{n} {DROP_REASONS[why]}" for why, n in dropped.items() if n]
-    return f"{used_words}; {total} dropped: {', '.join(parts)}"

@@ -232,7 +232,11 @@ def _spectral_and_alarm_lines(report: dict[str, Any]) -> list[str]:
     ]
     lines += [
         f"  UNEXPLAINED peak {p['channel']} {p['frequency_hz']:.2f} Hz (possible torsional "
-        "resonance)"
+        + (
+            "resonance)"
+            if p.get("nearest_natural_hz") is None
+            else f"resonance; nearest natural frequency {p['nearest_natural_hz']:.2f} Hz)"
+        )
         for p in report["unexplained_peaks"]
     ]
     alarms = report["alarms"]
@@ -244,7 +248,7 @@ def _damage_lines(comp: str, d: dict[str, Any]) -> list[str]:
     residue on its own line, the total."""
     phases = {p: v for p, v in d["phases"].items() if v}
     closed = sum(d["phases"].values())
-    lines = [f"  damage {comp} (Miner sum, S-N curve {d['curve']}, Kt {d['kt']:g}):"]
+    lines = [f"  damage {comp} (Miner sum, S-N curve {d['curve']}, {d['stress_factors']}):"]
     parts = " + ".join(f"{p} {v:.3g}" for p, v in phases.items()) or "none"
     lines.append(f"    closed cycles      {closed:.3g}  ({parts})")
     unattributed = d["committed"] - closed
@@ -306,6 +310,8 @@ def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
         lines.append(f"  harmonics: {summary['spectra']}")
     elif "segments_note" in summary:
         lines.append(f"  harmonics: {summary['segments_note']}")
+    if "torsional_model" in summary:
+        lines.append(f"  torsional model: {summary['torsional_model']}")
     lines += _spectral_and_alarm_lines(report)
     problems = [_count(stats[k], words) for k, words in _READING.items() if stats[k]]
     if problems:

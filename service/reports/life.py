@@ -599,7 +599,7 @@ def _basis(config: MillConfig) -> LifeBasis:
             "N_D": curve.N_D,
             "m2": curve.m2,
             "stress": str(curve.kind),
-            "kt": config.shafts.kt_torsion,
+            "stress_concentration": config.shafts.stress_model().summary(),
             "source": "seed 000 §8.1–8.2, App. D",
         },
         damage="prior (see prior) + stored daily damage of attributed rainflow cycles, or the "

@@ -32,10 +32,17 @@ from typing import Any
 import numpy as np
 
 from alarms.engine import AlarmEngine
-from alarms.from_analysis import event_observations, peak_observations, window_observations
+from alarms.from_analysis import (
+    event_observations,
+    peak_observations,
+    resonance_observations,
+    window_observations,
+)
 from alarms.observations import Observation, local_month
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.drivetrain.torsional_model import NO_MODEL_NOTE
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
+from analytics.spectra.resonance import resonance_margins
 from analytics.spectra.settings import stagger_for
 from ingest.wire import Block
 from service.store.records import DamageRow, EventRow
@@ -79,6 +86,8 @@ class MillJob:
         self._held_events: list[EventRow] = []  # stored with the next finish()
         self._covered_until: int | None = None  # monitored time stored up to here (ns)
         self._tz = zoneinfo.ZoneInfo(config.time_zone)
+        if config.torsional is None:  # said once, at start (the report says it too)
+            log.info("mill %s: %s", config.id, NO_MODEL_NOTE)
 
     # ------------------------------------------------------------------ feeding
     def feed_block(self, channel: str, block: Block) -> MillUpdate:
@@ -138,6 +147,10 @@ class MillJob:
                 update.records.append(("harmonics", int(hw.t_end_ns), _compact(hw.to_dict())))
                 self._next_harmonics_ns = int(hw.t_end_ns) + HARMONICS_EVERY_NS
             observations += peak_observations(self.config.id, peaks, int(hw.t_end_ns))
+            margins = resonance_margins(hw, self.analyzer.natural_frequencies_hz)
+            observations += resonance_observations(
+                self.config.id, [m.to_dict() for m in margins], int(hw.t_end_ns)
+            )
         if observations:
             update.alarm_transitions += self.alarms.observe_all(observations)
 

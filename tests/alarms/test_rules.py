@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from alarms.observations import QUANTITIES
+from alarms.observations import QUANTITIES, Observation
 from alarms.rules import Severity, build_rules
 from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig, Starter
@@ -210,9 +210,29 @@ def test_context_numbers_are_rounded_and_missing_ones_marked():
     ctx = {"channel": "pinion_torque", "line": "girth_mesh", "frequency_hz": 64.123456}
     (t,) = feed(eng, "resonance_margin", [0.05], **ctx)
     assert t.message.startswith(
-        "Excitation girth_mesh at 64.12 Hz on pinion_torque is only 5.0% from the natural "
-        "frequency ? Hz"
+        "Excitation girth_mesh at 64.12 Hz on pinion_torque is only 5.0% from a natural frequency ("
     )
+
+
+@pytest.mark.parametrize("context", ["empty", "none"])
+def test_no_message_shows_a_missing_or_none_value_with_a_unit(context: str) -> None:
+    """Every rule's message with its context missing, or every context key None (a peak of a
+    mill without a torsional model): never "None", never "? Hz"."""
+    config = mill()
+    book = build_rules(config)
+    keys = {"channel", "side", "component", "month", "line", "frequency_hz", "natural_hz",
+            "nearest_natural_hz", "amplitude_pct", "stage", "error", "switch_on_peak_pct",
+            "short_circuit_peak_pct", "remaining_design_life_years"}  # fmt: skip
+    ctx = {} if context == "empty" else dict.fromkeys(keys)
+    for rule in book.rules.values():
+        obs = Observation(config.id, rule.quantity, 1.0, T0, ctx)
+        for level in rule.levels:
+            text = rule.message(obs, level.severity, config.time_zone)
+            assert "None" not in text and "? Hz" not in text, (rule.name, text)
+    peak = book.rule("unexplained_peak")
+    text = peak.message(Observation(config.id, "unexplained_peak_hz", 12.0, T0, ctx),
+                        Severity.WARNING, config.time_zone)  # fmt: skip
+    assert "no torsional model to compare it with" in text
 
 
 def test_critical_bending_advice_overrides_the_rule_advice():
@@ -246,6 +266,7 @@ def test_the_alarms_package_imports_only_analytics_and_plain_libraries():
     from pathlib import Path
 
     allowed = {"alarms", "analytics", "pydantic", "__future__", "collections", "dataclasses"}
+    allowed |= {"string"}
     allowed |= {"datetime", "enum", "json", "logging", "math", "threading", "typing", "zoneinfo"}
     package = Path(__file__).resolve().parents[2] / "alarms"
     for path in package.glob("*.py"):

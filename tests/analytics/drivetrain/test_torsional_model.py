@@ -157,3 +157,35 @@ def test_dynamic_factor_meter_streams_and_restores() -> None:
         m.feed(x[1234:])
         assert m.value == pytest.approx(dynamic_factor(x), rel=1e-12)
     assert math.isnan(DynamicFactorMeter().value)
+
+
+# ---------------------------------------------------------------- a mill's model (mill file)
+def test_the_shipped_mills_carry_a_model_in_words():
+    from pathlib import Path
+
+    from analytics.drivetrain.torsional_model import (
+        NO_MODEL_NOTE,
+        design_resonances,
+        natural_frequencies_of,
+        torsional_note,
+    )
+    from ingest.mill_files import load_mill_config
+
+    mills = Path(__file__).resolve().parents[3] / "deploy" / "mills"
+    for path in sorted(mills.glob("*.toml")):
+        cfg = load_mill_config(path)
+        natural = natural_frequencies_of(cfg)
+        assert len(natural) == 4 and natural[0] > 1.0, path.name  # no rigid-body mode
+        assert design_resonances(cfg) == [], path.name  # no expected line near a mode
+        assert torsional_note(cfg).startswith("natural frequencies ")
+    sag = load_mill_config(mills / "sag-5200-lrs.toml")
+    wide = sag.model_copy(
+        update={"alarms": sag.alarms.model_copy(update={"resonance_margin_warn": 0.35})}
+    )
+    near = design_resonances(wide)
+    assert {"pinion_3x", "liner_passing"} <= {w.line for w in near}
+    assert all(abs(w.separation_pct) <= 35.0 for w in near)
+    assert [abs(w.separation_pct) for w in near] == sorted(abs(w.separation_pct) for w in near)
+    assert "pinion_3x at 8.81 Hz is -30.5 % from natural frequency 12.67 Hz" in torsional_note(wide)
+    bare = sag.model_copy(update={"torsional": None})
+    assert natural_frequencies_of(bare) == () and torsional_note(bare) == NO_MODEL_NOTE

@@ -8,6 +8,8 @@ import json
 import numpy as np
 import pytest
 
+from analytics.contracts import SnapshotMismatch
+from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.loads import (
     KEEP_START_DAYS,
     KEEP_START_MONTHS,
@@ -193,7 +195,8 @@ def test_every_attribute_is_configured_or_in_the_snapshot():
     from the configuration: else a restored analysis would silently miss it."""
     a = run(scene("start-lrs", seed=1, duration_s=20.0))
     snap = a.snapshot()
-    state = set(snap) - {"kind", "version", "mill"}
+    # ("stress": the fatigue factors the state was computed with, checked on restore)
+    state = set(snap) - {"kind", "version", "mill", "stress"}
     assert not state & LoadAnalysis.CONFIGURED
     assert set(vars(a)) == LoadAnalysis.CONFIGURED | state
     b = LoadAnalysis.restore(a.config, json.loads(json.dumps(snap)))
@@ -208,8 +211,31 @@ def test_snapshot_keys_and_order_are_those_of_stored_checkpoints():
         "kind", "version", "mill", "n", "t0_ns", "steady_until", "open_start", "open_stop",
         "stop_after_start", "starts", "stops", "barrings", "windows", "starts_per_day",
         "starts_per_month", "phase_samples", "lead", "discontinuities", "last", "sm",
-        "timeline", "ring", "counters", "damage", "meter", "barring", "starts_total",
+        "timeline", "ring", "counters", "damage", "meter", "barring", "starts_total", "stress",
     ]  # fmt: skip
     assert (snap["kind"], snap["version"]) == ("mill_analyzer", 2)
     with pytest.raises(ValueError, match="not a mill_analyzer snapshot of version 2"):
         LoadAnalysis.restore(mill("sag-5200-lrs"), snap | {"version": 1})
+
+
+def test_a_snapshot_with_other_fatigue_factors_is_refused_in_words():
+    """Damage and rainflow residues computed with other stress-concentration factors cannot
+    continue under new ones: the restore says which factors, before and now."""
+    a = run(scene("start-lrs", seed=1, duration_s=20.0))
+    old = a.snapshot()
+    del old["stress"]  # a checkpoint from before the factors were recorded: App. D, K_t 2
+    for d in old["damage"].values():
+        d["recorder"]["scale"] = 2.0
+    with pytest.raises(SnapshotMismatch) as refused:
+        LoadAnalysis.restore(a.config, old)
+    words = str(refused.value)
+    assert "with the stress concentration K_f 2 on the whole stress (App. D), the " in words
+    assert "configuration now gives K_f 2.2 on bending and 2 on torsion" in words
+    assert 'set stress_concentration = "single_kt", kt_torsion = 2 in [shafts]' in words
+    data = a.config.model_dump(mode="json", exclude_unset=True)
+    data["shafts"] = {"stress_concentration": "single_kt", "kt_torsion": 2.0}
+    app_d = MillConfig.model_validate(data)
+    assert LoadAnalysis.restore(app_d, old).n == a.n
+    bent = data | {"shafts": {"kt_bending": 3.0}}
+    with pytest.raises(SnapshotMismatch, match="K_f 3 on bending"):
+        LoadAnalysis.restore(MillConfig.model_validate(bent), a.snapshot())

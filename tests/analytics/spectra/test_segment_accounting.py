@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from analytics.drivetrain.torsional_model import torsional_note
 from analytics.spectra.facts import HarmonicWindow
 from analytics.spectra.report import harmonics_report
 from analytics.spectra.settings import HarmonicSettings
@@ -157,4 +158,5 @@ def test_describe_segments_in_plain_words() -> None:
     report = harmonics_report(HarmonicTracker(CONFIG))
     note = "0 spectral segments used, none dropped"
     assert report["summary"] == {"segments": 0, "segments_used": 0, "segments_dropped": none,
-                                 "segments_note": note}  # fmt: skip
+                                 "segments_note": note,
+                                 "torsional_model": torsional_note(CONFIG)}  # fmt: skip
