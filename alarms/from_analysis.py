@@ -4,11 +4,13 @@ One function per kind of analysis fact, so live (the worker, fact by fact) and o
 (``millwatch analyze``, from the report) derive exactly the same observations:
 
 * a start event → ``start_peak_pct`` per side: the larger of the switch-on and short-circuit
-  peaks of the motor shaft, % of rated (seed 000 §6.1.1, §7.2);
-* a barring event → ``barring_peak_pct`` (Tables 12–13);
+  peaks of the motor shaft, % of rated (seed 000 §6.1.1, §7.2), with the motor torque
+  channel's name (the mill file's) in the context;
+* a barring event → ``barring_peak_pct`` (Tables 12–13), with the torque channel's name;
 * a steady-state window → ``oscillation_range_pct`` per motor and pinion torque channel (range
   per revolution, % of rated motor torque, Tables 14–15), ``bending_amplitude_mpa`` per bending
-  channel (half the per-revolution range, §8.1), ``load_sharing_imbalance_pct`` (dual drives);
+  channel (the window's, half the per-revolution range, §8.1), ``load_sharing_imbalance_pct``
+  (dual drives); channels by the mill file's names, as the window has them;
 * an unexplained spectral peak → ``unexplained_peak_hz`` (§6.2.7).
 """
 
@@ -34,7 +36,7 @@ def event_observations(mill_id: str, event: dict[str, Any]) -> list[Observation]
                 "barring_peak_pct",
                 float(event["peak_pct"]),
                 int(event["t_ns"]),
-                {"side": event.get("side")},
+                {"side": event.get("side"), "channel": event.get("channel")},
             )
         ]
     return []
@@ -42,12 +44,15 @@ def event_observations(mill_id: str, event: dict[str, Any]) -> list[Observation]
 
 def _start(mill_id: str, event: dict[str, Any]) -> Iterator[Observation]:
     sides: dict[Any, list[float]] = {}
+    channels: dict[Any, str | None] = {}
     for peak in [*event.get("switch_on", ()), *event.get("short_circuit", ())]:
         if peak.get("motor_pct") is not None:
             sides.setdefault(peak.get("side"), []).append(float(peak["motor_pct"]))
+            channels[peak.get("side")] = peak.get("motor_channel")
     for side, values in sides.items():
         context = {
             "side": side,
+            "channel": channels[side],
             "switch_on_peak_pct": event.get("switch_on_peak_pct"),
             "short_circuit_peak_pct": event.get("short_circuit_peak_pct"),
         }
@@ -62,10 +67,10 @@ def window_observations(mill_id: str, window: dict[str, Any]) -> list[Observatio
         for ch, v in window.get("range_pct", {}).items()
         if v is not None
     ]
-    for ch, rng in window.get("range_per_rev", {}).items():
-        if ch.startswith("bending") and rng is not None:
+    for ch, amplitude in window.get("bending_amplitude_mpa", {}).items():
+        if amplitude is not None:
             out.append(
-                Observation(mill_id, "bending_amplitude_mpa", float(rng) / 2.0, t, {"channel": ch})
+                Observation(mill_id, "bending_amplitude_mpa", float(amplitude), t, {"channel": ch})
             )
     if window.get("imbalance_pct") is not None:
         out.append(

@@ -19,5 +19,6 @@ Data flow: block → MillAnalyzer (calibrate, align, flag, tacho) → LoadAnalys
 → events, windows, damage; → HarmonicTracker on the running samples. A new per-mill output
 is read through a public method/property on MillAnalyzer (callers never reach into its
 stages); a new piece of LoadAnalysis state goes in its ``snapshot``/``_load`` (a test fails
-otherwise); a new report table is a function in ``report``.
+otherwise); a new report table is a function in ``report``. Every per-channel result is keyed by
+the channel's name in the mill file (``loads.steady_channels``), never by a side index.
 """

@@ -128,13 +128,14 @@ def _steady(
     osc: GaugeMetricFamily, bending: GaugeMetricFamily, mill: str, window: dict[str, Any]
 ) -> None:
     """The latest steady-state window, as :func:`alarms.from_analysis.window_observations`
-    reads it (bending amplitude = half the per-revolution range)."""
+    reads it (the window's bending amplitude: half the per-revolution range); channels by the
+    mill file's names."""
     for channel, value in sorted(window.get("range_pct", {}).items()):
         if _finite(value):
             osc.add_metric([mill, channel], value)
-    for channel, rng in sorted(window.get("range_per_rev", {}).items()):
-        if channel.startswith("bending") and _finite(rng):
-            bending.add_metric([mill, channel], rng / 2.0)
+    for channel, amplitude in sorted(window.get("bending_amplitude_mpa", {}).items()):
+        if _finite(amplitude):
+            bending.add_metric([mill, channel], amplitude)
 
 
 def _finite(value: Any) -> bool:

@@ -263,7 +263,8 @@ class MillJob:
         self.alarms.restore(snapshot["alarms"])
         self._next_damage = int(snapshot["next_damage"])
         self._last_window_ns = int(snapshot["last_window_ns"])
-        self._latest_window = snapshot["latest_window"]
+        windows = self.analyzer.steady_windows  # (as restored: channels by the mill file's names)
+        self._latest_window = windows[-1] if windows else snapshot["latest_window"]
         self._next_harmonics_ns = int(snapshot["next_harmonics_ns"])
         self._covered_until = self.analyzer.next_sample_ns
         self._held_events += self._restart_events()

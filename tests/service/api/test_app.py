@@ -344,7 +344,10 @@ def test_domain_gauges_per_mill_and_component(client, live_api):
     bending = {s.labels["channel"]: s.value
                for s in scraped["millwatch_bending_amplitude_megapascals"]}  # fmt: skip
     per_rev = window.get("range_per_rev", {})
-    assert bending == pytest.approx({c: r / 2 for c, r in per_rev.items() if c.startswith("bend")})
+    config = live_api.runtime.mills[MILL]
+    named = {c for c, ch in config.channels.items() if ch.kind == "bending"}  # the mill file's
+    assert bending == pytest.approx({c: per_rev[c] / 2 for c in named})
+    assert set(osc) == {c for c, ch in config.channels.items() if ch.kind == "torque"}
     assert osc and bending  # the 120 s feed reaches steady running
 
 
