@@ -37,6 +37,7 @@ import numpy as np
 from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.mill.loads import LoadAnalysis
+from analytics.mill.results import ComponentDamage
 from analytics.operation.operating_states import OperatingState, Transition
 from analytics.signal.fault_stage import FaultStage, LastGood
 from analytics.signal.frame_aligner import Frame, FrameAligner
@@ -340,10 +341,10 @@ class MillAnalyzer:
         """Miner damage of the closed rainflow cycles so far, per component (dimensionless)."""
         return {comp: pd.committed for comp, pd in self.loads.damage.items()}
 
-    def damage_summary(self) -> dict[str, dict[str, float]]:
+    def damage_summary(self) -> dict[str, ComponentDamage]:
         """Miner damage per component: ``committed``, ``pending_residue``, ``with_residue``
         (:meth:`LoadAnalysis.damage_summary <analytics.mill.loads.LoadAnalysis.damage_summary>`)."""
-        return self.loads.damage_summary()
+        return {c: ComponentDamage(**d) for c, d in self.loads.damage_summary().items()}
 
     def damage_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
         """Attributed Miner damage per component, local day and phase so far (exact sums; the

@@ -305,7 +305,7 @@ class SpanExport:
         self.damage_at = n
         for comp, d in a.damage_summary().items():
             base = self.base.get(comp, 0.0)
-            self.writer.damage(self.mill, comp, t, d["committed"] - base, d["with_residue"] - base)
+            self.writer.damage(self.mill, comp, t, d.committed - base, d.with_residue - base)
 
     def _collect(self, out: AnalyzerOutput) -> None:
         start = self._span_start()

@@ -36,8 +36,10 @@ from alarms.from_analysis import event_observations, peak_observations, window_o
 from alarms.observations import Observation, local_month
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
+from analytics.mill.results import ComponentDamage, SteadyWindowResult
 from analytics.spectra.settings import stagger_for
 from ingest.wire import Block
+from service.status import MillStatus
 from service.store.records import DamageRow, EventRow
 from service.worker.worker import MillUpdate
 
@@ -75,6 +77,7 @@ class MillJob:
         self._next_damage = self._damage_every + round(stagger_for(config.id) * self._damage_every)
         self._last_window_ns = -1
         self._latest_window: dict[str, Any] | None = None
+        self._latest_typed: SteadyWindowResult | None = None
         self._next_harmonics_ns = 0
         self._held_events: list[EventRow] = []  # stored with the next finish()
         self._covered_until: int | None = None  # monitored time stored up to here (ns)
@@ -218,19 +221,29 @@ class MillJob:
         return self.analyzer.spike_counts()
 
     # ------------------------------------------------------------------ reading
-    def status(self) -> dict[str, Any]:
+    def status(self) -> MillStatus:
+        """The analysis part of the mill's status (the worker adds health and hold)."""
         a = self.analyzer
-        return {
-            "state": a.state,
-            "samples": a.samples,
-            "last_sample_ns": a.next_sample_ns,
-            "latest_steady": self._latest_window,
-            "open_alarms": len(self.alarms.open_alarms(self.config.id)),
-            "monitored_since_ns": a.first_sample_ns,
-            "simulated": self.config.simulated,
-            "damage": self._damage_summary(),
-            "starts_this_month": self._starts_this_month(),
-        }
+        return MillStatus(
+            state=a.state,
+            samples=a.samples,
+            last_sample_ns=a.next_sample_ns,
+            latest_steady=self._latest_steady(),
+            open_alarms=len(self.alarms.open_alarms(self.config.id)),
+            monitored_since_ns=a.first_sample_ns,
+            simulated=self.config.simulated,
+            damage=self._damage_summary(),
+            starts_this_month=self._starts_this_month(),
+        )
+
+    def _latest_steady(self) -> SteadyWindowResult | None:
+        """The latest steady window, typed (validated once per window)."""
+        w = self._latest_window
+        if w is None:
+            return None
+        if self._latest_typed is None or self._latest_typed.t_ns != w["t_ns"]:
+            self._latest_typed = SteadyWindowResult.model_validate(w)
+        return self._latest_typed
 
     def _starts_this_month(self) -> int:
         """Starts in the local calendar month of the last analysed sample (0 before any)."""
@@ -239,7 +252,7 @@ class MillJob:
             return 0
         return self.analyzer.starts_in_month(local_month(int(t_ns), self.config.time_zone))
 
-    def _damage_summary(self) -> dict[str, dict[str, float]]:
+    def _damage_summary(self) -> dict[str, ComponentDamage]:
         """Miner damage per component so far: closed cycles (``committed``), what closing the
         open rainflow residue now as half cycles would add (``pending_residue``), and their sum
         (``with_residue``). Cheap (the residue is a few turning points); called by the worker

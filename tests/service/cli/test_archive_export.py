@@ -104,8 +104,8 @@ def test_whole_recording_conclusions_equal_millwatch_analyze(whole, recording):
     for comp, want in analyzer.damage_summary().items():
         *_, last = whole[f"/sag-5200-lrs/damage/{comp}"]
         assert last[1] == T0 + 220 * S
-        assert last[3].committed == want["committed"]
-        assert last[3].with_residue == pytest.approx(want["with_residue"], rel=1e-12)
+        assert last[3].committed == want.committed
+        assert last[3].with_residue == pytest.approx(want.with_residue, rel=1e-12)
     states = [d.value for *_, d in whole["/sag-5200-lrs/state"]]
     assert states == ["stopped", "starting", "running", "stopping", "stopped"]
     want = {(h["channel"], h["name"]) for h in report["harmonics"] if h["detected"]}

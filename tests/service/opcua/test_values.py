@@ -22,6 +22,7 @@ from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene
 from ingest.sim.spec import StartEvent
 from service.api.mill_views import mill_detail
+from service.api.models import MillSummary
 from service.opcua.address_space import datavalue
 from service.opcua.values import Kind, Point, mill_points
 from service.reports.history import life_inputs
@@ -49,11 +50,15 @@ def answers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
             worker.handle(QueuedBlock(b.key, b.payload, b.t_end_ns))
         worker.commit()
         status = worker.status(stale_after_s=10.0)[MILL.id]
-        now = status["last_sample_ns"]
-        life = compute_life(life_inputs(store, MILL, now, live=status["damage"],
+        now = status.last_sample_ns
+        assert now is not None
+        life = compute_life(life_inputs(store, MILL, now, live=status.live_damage(),
                                         last_sample_ns=now))  # fmt: skip
+        detail = mill_detail(MILL, status, {"name": "w1"})
         return {
-            "detail": mill_detail(MILL, status, {"name": "w1"}),
+            "summary": MillSummary.model_validate(detail),
+            "status": status,
+            "detail": detail,
             "life": life_to_dict(life),
             "starts": starts_in_month(store, MILL, current_month(MILL, now)),
         }
@@ -61,7 +66,8 @@ def answers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 
 @pytest.fixture(scope="module")
 def points(answers: dict[str, Any]) -> dict[str, Point]:
-    return mill_points(MILL, answers["detail"], answers["life"], answers["starts"])
+    return mill_points(MILL, answers["summary"], answers["status"], answers["life"],
+                       answers["starts"])  # fmt: skip
 
 
 def good_number(point: Point) -> float:
@@ -72,8 +78,9 @@ def good_number(point: Point) -> float:
 
 
 def test_steady_state_of_every_channel_is_good_and_as_the_worker_reported_it(answers, points):
-    window = answers["detail"]["status"]["latest_steady"]
+    window = answers["detail"]["status"]["latest_steady"]  # as REST answers it
     assert window is not None  # the scene ran long enough to close steady windows
+    assert answers["status"].latest_steady.model_dump() == window
     for name in STEADY:
         base = f"SteadyState/{name}/"
         assert good_number(points[base + "Mean"]) == window["mean"][name]
@@ -109,7 +116,7 @@ def test_values_are_as_answered(answers, points):
 
 
 def test_every_channel_and_component_has_its_points_with_units():
-    p = mill_points(MILL, {}, None, None)
+    p = mill_points(MILL, None, None, None, None)
     for name, channel in MILL.channels.items():
         assert p[f"Channels/{name}/LagS"].unit == "s"
         if channel.kind in ("torque", "bending"):

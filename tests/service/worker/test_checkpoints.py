@@ -304,7 +304,7 @@ def test_a_checkpoint_that_cannot_be_restored_holds_the_mill_naming_it_and_the_w
     [record] = caplog.records  # logged once, naming the consequence
     assert record.levelno == logging.ERROR and record.getMessage().startswith(text)
     assert "mill mill-a is held: its blocks are archived but not analysed" in record.getMessage()
-    assert second.status(10.0)["mill-a"]["state"] == "held"
+    assert second.status(10.0)["mill-a"].state == "held"
     # its alarm engine was not restored: an acknowledgement is refused, saying why
     request = second.request_ack("mill-a", "mill-a:start_peak:-:1", "op")
     second.step(BlockQueue(10), timeout_s=0.0)
@@ -383,10 +383,10 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         assert analyzer.loads.n == 0 and analyzer.backlog == 0  # its pipeline got nothing
         mill_a = [b for b in blocks[cut_b:stop] if _mill_of(second, b.key) == "mill-a"]
         assert second.held_blocks["mill-a"] == len(mill_a) > 0
-        health = second.status(10.0)["mill-a"]
-        assert health["state"] == "held" and health["held_reason"] == second.held["mill-a"]
-        torque = health["health"]["channels"]["motor_torque"]
-        assert torque["blocks"] == len(mill_a) // 3  # motor, pinion torque, speed (no bending)
+        held = second.status(10.0)["mill-a"]
+        assert held.state == "held" and held.held_reason == second.held["mill-a"]
+        torque = held.channel_health["motor_torque"]
+        assert torque.blocks == len(mill_a) // 3  # motor, pinion torque, speed (no bending)
         # no alarm observations reached the held mill's fresh engine; mill-b's did
         assert {a.mill_id for a in store.alarms() if a.rule == "stale_channel"} == {"mill-b"}
         assert second.checkpoints_written == 1  # mill-b's only
