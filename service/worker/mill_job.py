@@ -184,7 +184,7 @@ class MillJob:
         if t_ns is None:  # nothing analysed: no damage, no rate
             return []
         if seconds < life.min_monitoring_days * 86_400 or (
-            self.analyzer.loads.starts_total < life.min_starts
+            self.analyzer.starts_total < life.min_starts
         ):
             return []
         prior = life.prior_damage
