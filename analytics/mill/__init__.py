@@ -5,8 +5,9 @@ One analyzer object per mill, used alike by live ingest, replay and offline anal
 
 Modules (each imports only the ones listed before it)::
 
-    results          typed results as they leave the analyzer (a steady-state window, a
-                     component's damage), read by attribute by every surface
+    results          typed results as they leave the analyzer (start/stop/barring events, a
+                     steady-state window, a component's damage), read by attribute by every
+                     surface
     phase_damage     PhaseTimeline, PhaseDamage: the damage recorder by operating phase and local
                      day, the cost of a start, monthly projections (seed 000 §8.3, App. D); here
                      because it joins fatigue (cycles, Miner) with operation (states)

@@ -38,7 +38,13 @@ import numpy as np
 from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.mill.loads import LoadAnalysis
-from analytics.mill.results import ComponentDamage
+from analytics.mill.results import (
+    BarringEvent,
+    ComponentDamage,
+    StartEvent,
+    StopEvent,
+    parse_event,
+)
 from analytics.operation.operating_states import OperatingState, Transition
 from analytics.signal.fault_stage import FaultStage, LastGood
 from analytics.signal.frame_aligner import Frame, FrameAligner
@@ -63,14 +69,15 @@ _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
 class AnalyzerOutput:
-    """What one block completed: analyzer events and harmonic windows (usually none), and the
-    operating-state changes decided in it (``(t_ns, state label)``, oldest first; not counted by
-    ``bool``, which tells whether there is anything to store)."""
+    """What one block completed: analyzer events (typed: :data:`~analytics.mill.results.
+    AnalyzerEvent`) and harmonic windows (usually none), and the operating-state changes decided
+    in it (``(t_ns, state label)``, oldest first; not counted by ``bool``, which tells whether
+    there is anything to store)."""
 
     __slots__ = ("events", "harmonics", "states")
 
     def __init__(self) -> None:
-        self.events: list[dict[str, Any]] = []
+        self.events: list[StartEvent | StopEvent | BarringEvent] = []
         self.harmonics: list[HarmonicWindow] = []
         self.states: list[tuple[int, str]] = []
 
@@ -290,7 +297,7 @@ class MillAnalyzer:
             name, conv = self._tacho
             frame.data[DERIVED_SPEED] = conv.feed(frame.data[name])
         decided: list[Transition] = []
-        out.events += self._loads.feed(frame, decided)
+        out.events += [parse_event(e) for e in self._loads.feed(frame, decided)]
         out.states += [(self._loads.t_ns(tr.sample), tr.state.label) for tr in decided]
         self._feed_spectra(frame, out)
 

@@ -316,8 +316,9 @@ class SpanExport:
                 self._show_state()
                 self.writer.state(self.mill, t, label)
         for event in out.events:
-            if self._in_span(int(event["t_ns"])):
-                self.writer.event(self.mill, event, event_line(event))
+            if self._in_span(event.t_ns):
+                data = event.to_json()
+                self.writer.event(self.mill, data, event_line(data))
         for window in out.harmonics:
             if self._in_span(window.t_end_ns):
                 self.writer.harmonics(self.mill, window)

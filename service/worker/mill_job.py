@@ -36,7 +36,12 @@ from alarms.from_analysis import event_observations, peak_observations, window_o
 from alarms.observations import Observation, local_month
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
-from analytics.mill.results import ComponentDamage, SteadyWindowResult
+from analytics.mill.results import (
+    AnalyzerEvent,
+    ComponentDamage,
+    StartEvent,
+    SteadyWindowResult,
+)
 from analytics.spectra.settings import stagger_for
 from ingest.wire import Block
 from service.status import MillStatus
@@ -134,7 +139,8 @@ class MillJob:
             observations += self._event_observations(event)
         for window in self._new_windows():
             update.records.append(("steady", int(window["t_ns"]), window))
-            observations += window_observations(self.config.id, window)
+            self._latest_typed = SteadyWindowResult.model_validate(window)
+            observations += window_observations(self.config.id, self._latest_typed)
         for hw in out.harmonics:
             peaks = [p.to_dict() for p in hw.peaks]
             if peaks or hw.t_end_ns >= self._next_harmonics_ns:
@@ -144,17 +150,16 @@ class MillJob:
         if observations:
             update.alarm_transitions += self.alarms.observe_all(observations)
 
-    def _event_row(self, event: dict[str, Any]) -> EventRow:
-        return EventRow(self.config.id, str(event["event"]), int(event["t_ns"]), event,
-                        event.get("end_t_ns"))  # fmt: skip
+    def _event_row(self, event: AnalyzerEvent) -> EventRow:
+        return EventRow(self.config.id, event.event, event.t_ns, event.to_json(), event.end_t_ns)
 
-    def _event_observations(self, event: dict[str, Any]) -> list[Observation]:
+    def _event_observations(self, event: AnalyzerEvent) -> list[Observation]:
         obs = event_observations(self.config.id, event)
-        if event.get("event") == "start":
-            month = local_month(int(event["t_ns"]), self.config.time_zone)
+        if isinstance(event, StartEvent):
+            month = local_month(event.t_ns, self.config.time_zone)
             count = self.analyzer.starts_in_month(month)
             obs.append(Observation(self.config.id, "starts_this_month", float(count),
-                                   int(event["t_ns"]), {"month": month}))  # fmt: skip
+                                   event.t_ns, {"month": month}))  # fmt: skip
         return obs
 
     def _new_windows(self) -> list[dict[str, Any]]:
