@@ -1,14 +1,17 @@
-"""Observations for the alarm engine, from what the mill analysis reports.
+"""Observations for the alarm engine, from what the mill analysis reports (its typed results,
+:mod:`analytics.mill.results`).
 
 One function per kind of analysis fact, so live (the worker, fact by fact) and offline
 (``millwatch analyze``, from the report) derive exactly the same observations:
 
 * a start event → ``start_peak_pct`` per side: the larger of the switch-on and short-circuit
-  peaks of the motor shaft, % of rated (seed 000 §6.1.1, §7.2);
-* a barring event → ``barring_peak_pct`` (Tables 12–13);
+  peaks of the motor shaft, % of rated (seed 000 §6.1.1, §7.2), with the motor torque
+  channel's name (the mill file's) in the context;
+* a barring event → ``barring_peak_pct`` (Tables 12–13), with the torque channel's name;
 * a steady-state window → ``oscillation_range_pct`` per motor and pinion torque channel (range
   per revolution, % of rated motor torque, Tables 14–15), ``bending_amplitude_mpa`` per bending
-  channel (half the per-revolution range, §8.1), ``load_sharing_imbalance_pct`` (dual drives);
+  channel (the window's, half the per-revolution range, §8.1), ``load_sharing_imbalance_pct``
+  (dual drives); channels by the mill file's names, as the window has them;
 * an unexplained spectral peak → ``unexplained_peak_hz`` (§6.2.7);
 * a harmonic window's resonance margins (:mod:`analytics.spectra.resonance`) →
   ``resonance_margin`` per channel (Fedin & Vinogradov 2018). Offline, the report's long-run
@@ -22,6 +25,13 @@ from collections.abc import Iterable, Iterator
 from typing import Any
 
 from alarms.observations import Observation
+from analytics.mill.results import (
+    AnalyzerEvent,
+    BarringEvent,
+    StartEvent,
+    SteadyWindowResult,
+    parse_event,
+)
 
 __all__ = [
     "event_observations",
@@ -32,55 +42,45 @@ __all__ = [
 ]
 
 
-def event_observations(mill_id: str, event: dict[str, Any]) -> list[Observation]:
+def event_observations(mill_id: str, event: AnalyzerEvent) -> list[Observation]:
     """Observations of one analyzer event (start, stop, barring)."""
-    kind = event.get("event")
-    if kind == "start":
+    if isinstance(event, StartEvent):
         return list(_start(mill_id, event))
-    if kind == "barring" and event.get("peak_pct") is not None:
-        return [
-            Observation(
-                mill_id,
-                "barring_peak_pct",
-                float(event["peak_pct"]),
-                int(event["t_ns"]),
-                {"side": event.get("side")},
-            )
-        ]
+    if isinstance(event, BarringEvent):
+        context = {"side": None, "channel": event.channel}
+        return [Observation(mill_id, "barring_peak_pct", event.peak_pct, event.t_ns, context)]
     return []
 
 
-def _start(mill_id: str, event: dict[str, Any]) -> Iterator[Observation]:
-    sides: dict[Any, list[float]] = {}
-    for peak in [*event.get("switch_on", ()), *event.get("short_circuit", ())]:
-        if peak.get("motor_pct") is not None:
-            sides.setdefault(peak.get("side"), []).append(float(peak["motor_pct"]))
+def _start(mill_id: str, event: StartEvent) -> Iterator[Observation]:
+    sides: dict[str | None, list[float]] = {}
+    channels: dict[str | None, str | None] = {}
+    for peak in [*event.switch_on, *event.short_circuit]:
+        sides.setdefault(peak.side, []).append(peak.motor_pct)
+        channels[peak.side] = peak.motor_channel
     for side, values in sides.items():
         context = {
             "side": side,
-            "switch_on_peak_pct": event.get("switch_on_peak_pct"),
-            "short_circuit_peak_pct": event.get("short_circuit_peak_pct"),
+            "channel": channels[side],
+            "switch_on_peak_pct": event.switch_on_peak_pct,
+            "short_circuit_peak_pct": event.short_circuit_peak_pct,
         }
-        yield Observation(mill_id, "start_peak_pct", max(values), int(event["t_ns"]), context)
+        yield Observation(mill_id, "start_peak_pct", max(values), event.t_ns, context)
 
 
-def window_observations(mill_id: str, window: dict[str, Any]) -> list[Observation]:
-    """Observations of one steady-state window (a dict of the analyzer's report)."""
-    t = int(window["t_ns"])
+def window_observations(mill_id: str, window: SteadyWindowResult) -> list[Observation]:
+    """Observations of one steady-state window."""
+    t = window.t_ns
     out = [
         Observation(mill_id, "oscillation_range_pct", float(v), t, {"channel": ch})
-        for ch, v in window.get("range_pct", {}).items()
-        if v is not None
+        for ch, v in window.range_pct.items()
     ]
-    for ch, rng in window.get("range_per_rev", {}).items():
-        if ch.startswith("bending") and rng is not None:
-            out.append(
-                Observation(mill_id, "bending_amplitude_mpa", float(rng) / 2.0, t, {"channel": ch})
-            )
-    if window.get("imbalance_pct") is not None:
-        out.append(
-            Observation(mill_id, "load_sharing_imbalance_pct", float(window["imbalance_pct"]), t)
-        )
+    out += [
+        Observation(mill_id, "bending_amplitude_mpa", float(v), t, {"channel": ch})
+        for ch, v in window.bending_amplitude_mpa.items()
+    ]
+    if window.imbalance_pct is not None:
+        out.append(Observation(mill_id, "load_sharing_imbalance_pct", window.imbalance_pct, t))
     return out
 
 
@@ -127,12 +127,13 @@ def resonance_observations(
 
 
 def report_observations(mill_id: str, report: dict[str, Any]) -> list[Observation]:
-    """Every observation a whole analysis report holds, in time order."""
+    """Every observation a whole analysis report holds (its events and windows read as the
+    typed results they are), in time order."""
     out: list[Observation] = []
     for event in [*report.get("starts", ()), *report.get("barring", ())]:
-        out += event_observations(mill_id, {"event": _kind(event), **event})
+        out += event_observations(mill_id, parse_event({"event": _kind(event), **event}))
     for window in report.get("steady_state", ()):
-        out += window_observations(mill_id, window)
+        out += window_observations(mill_id, SteadyWindowResult.model_validate(window))
     if report.get("unexplained_peaks") and report.get("t_end_ns") is not None:
         out += peak_observations(mill_id, report["unexplained_peaks"], int(report["t_end_ns"]))
     if report.get("resonance_margins") and report.get("t_end_ns") is not None:

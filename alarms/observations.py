@@ -62,8 +62,8 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
     "start_peak_pct": QuantitySpec(
         "% rated motor torque", Kind.EVENT, "side",
         "peak motor-shaft torque of one start (max of switch-on and short-circuit peaks, "
-        "seed 000 §6.1.1); context: side (dual drives), switch_on_peak_pct, "
-        "short_circuit_peak_pct",
+        "seed 000 §6.1.1); context: side (dual drives), channel (the motor torque channel's "
+        "name in the mill file), switch_on_peak_pct, short_circuit_peak_pct",
     ),
     "starts_this_month": QuantitySpec(
         "starts", Kind.LEVEL, None,
@@ -82,7 +82,8 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
     ),
     "barring_peak_pct": QuantitySpec(
         "% rated motor torque", Kind.EVENT, "side",
-        "peak torque of one barring session (seed 000 §6.2.3, Tables 12–13)",
+        "peak torque of one barring session (seed 000 §6.2.3, Tables 12–13); context: "
+        "channel (the torque channel measured, by its name in the mill file)",
     ),
     "unexplained_peak_hz": QuantitySpec(
         "Hz", Kind.EVENT, "channel",

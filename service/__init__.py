@@ -6,6 +6,9 @@ Composition: the service around the analytics — commands, worker, store, API, 
   a worker (and the API with it), ``api`` the API alone; the offline commands use ``analytics``
   and ``ingest`` directly.
 * ``settings`` — the validated ``millwatch serve`` TOML file, read by the command, never at import.
+* ``status`` — a mill's status as the worker reports it (``MillStatus``: health, state, latest
+  steady-state window, damage by component, …): the one typed model the worker produces and
+  REST, OPC UA, ``/metrics``, the reports and the remote protocol read by attribute.
 * ``kernel_preload`` — a command's compiled kernels loaded from numba's cache without starting
   numba's compiler (``millwatch rainflow``; the start-up it saves is in the README).
 * ``worker/`` — blocks from zenoh archived, analysed per mill (``MillJob``), stored,

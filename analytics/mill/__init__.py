@@ -5,6 +5,9 @@ One analyzer object per mill, used alike by live ingest, replay and offline anal
 
 Modules (each imports only the ones listed before it)::
 
+    results          typed results as they leave the analyzer (start/stop/barring events, a
+                     steady-state window, a component's damage), read by attribute by every
+                     surface
     phase_damage     PhaseTimeline, PhaseDamage: the damage recorder by operating phase and local
                      day, the cost of a start, monthly projections (seed 000 §8.3, App. D); here
                      because it joins fatigue (cycles, Miner) with operation (states)
@@ -19,5 +22,6 @@ Data flow: block → MillAnalyzer (calibrate, align, flag, tacho) → LoadAnalys
 → events, windows, damage; → HarmonicTracker on the running samples. A new per-mill output
 is read through a public method/property on MillAnalyzer (callers never reach into its
 stages); a new piece of LoadAnalysis state goes in its ``snapshot``/``_load`` (a test fails
-otherwise); a new report table is a function in ``report``.
+otherwise); a new report table is a function in ``report``. Every per-channel result is keyed by
+the channel's name in the mill file (``loads.steady_channels``), never by a side index.
 """

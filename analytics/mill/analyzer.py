@@ -30,13 +30,21 @@ from __future__ import annotations
 import itertools
 import logging
 from collections import deque
-from typing import Any
+from collections.abc import Callable
+from typing import Any, Protocol
 
 import numpy as np
 
 from analytics.contracts import SnapshotMismatch, check_snapshot
 from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from analytics.mill.loads import LoadAnalysis
+from analytics.mill.results import (
+    BarringEvent,
+    ComponentDamage,
+    StartEvent,
+    StopEvent,
+    parse_event,
+)
 from analytics.operation.operating_states import OperatingState, Transition
 from analytics.signal.fault_stage import FaultStage, LastGood
 from analytics.signal.frame_aligner import Frame, FrameAligner
@@ -46,7 +54,7 @@ from analytics.spectra.report import harmonics_report
 from analytics.spectra.settings import stagger_for
 from analytics.spectra.tracker import HarmonicTracker
 
-__all__ = ["DERIVED_SPEED", "AnalyzerOutput", "MillAnalyzer"]
+__all__ = ["DERIVED_SPEED", "AnalyzerOutput", "MillAnalyzer", "SpectraRunner"]
 
 log = logging.getLogger(__name__)
 
@@ -61,14 +69,15 @@ _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
 class AnalyzerOutput:
-    """What one block completed: analyzer events and harmonic windows (usually none), and the
-    operating-state changes decided in it (``(t_ns, state label)``, oldest first; not counted by
-    ``bool``, which tells whether there is anything to store)."""
+    """What one block completed: analyzer events (typed: :data:`~analytics.mill.results.
+    AnalyzerEvent`) and harmonic windows (usually none), and the operating-state changes decided
+    in it (``(t_ns, state label)``, oldest first; not counted by ``bool``, which tells whether
+    there is anything to store)."""
 
     __slots__ = ("events", "harmonics", "states")
 
     def __init__(self) -> None:
-        self.events: list[dict[str, Any]] = []
+        self.events: list[StartEvent | StopEvent | BarringEvent] = []
         self.harmonics: list[HarmonicWindow] = []
         self.states: list[tuple[int, str]] = []
 
@@ -86,6 +95,23 @@ def analysis_config(config: MillConfig) -> MillConfig:
     return config.model_copy(update={"channels": {**config.channels, DERIVED_SPEED: derived}})
 
 
+class SpectraRunner(Protocol):
+    """What runs a mill's harmonic tracker for :class:`MillAnalyzer` (its ``spectra_runner``
+    builds one around the tracker): fed and flushed in the analyzer's order, as
+    :meth:`HarmonicTracker.feed <analytics.spectra.tracker.HarmonicTracker.feed>` and ``flush``
+    with the same results (windows fed may come back later, from ``flush`` or the report);
+    ``drain`` returns once everything fed is analysed."""
+
+    def feed(
+        self, t0_ns: int, fs: float, frame: dict[str, np.ndarray], running: bool,
+        why: str = "run_ended",
+    ) -> list[HarmonicWindow]: ...  # fmt: skip
+
+    def flush(self) -> list[HarmonicWindow]: ...
+
+    def drain(self) -> None: ...
+
+
 class MillAnalyzer:
     """The analyzer of one mill: the composition of every stage, from raw blocks to events,
     harmonic windows, reports and snapshots (module docstring). The one object live ingest,
@@ -93,23 +119,38 @@ class MillAnalyzer:
 
     Feed it with :meth:`push` (or :meth:`add`/:meth:`add_blocks` then :meth:`process`), one
     decoded block at a time in arrival order. Read it through the properties and methods under
-    "reading" (sample counts, times in ns since the Unix epoch, damage as Miner sums); its
-    stages (``aligner``, ``faults``, ``tacho``, ``loads``, ``harmonics``) are its own business.
+    "reading" (sample counts, times in ns since the Unix epoch, damage as Miner sums, start
+    counts, alignment counters); its stages (``_aligner``, ``_faults``, ``_tacho``, ``_loads``,
+    ``_harmonics``) are private.
+
+    ``spectra_runner``: builds what runs the harmonic tracker instead of the analyzer's own
+    thread (a :class:`SpectraRunner` around the tracker, e.g. a background thread of an offline
+    analysis); the results are the same, and the analyzer drains it before it reads the
+    tracker (report, snapshot).
     """
 
-    def __init__(self, config: MillConfig, *, spectra: bool = True) -> None:
+    def __init__(
+        self,
+        config: MillConfig,
+        *,
+        spectra: bool = True,
+        spectra_runner: Callable[[HarmonicTracker], SpectraRunner] | None = None,
+    ) -> None:
         self.config = config
         #: Whether running samples feed the harmonic tracker (False: an offline question that
         #: needs no spectra, e.g. damage; states, events and damage are the same either way).
         self.spectra = spectra
         self.analysis_config = analysis_config(config)
         fs = float(config.sample_rate_hz)
-        self.aligner = FrameAligner(list(config.channels), fs)
-        self.faults = FaultStage(config)
-        self.tacho = self._tacho(fs)
-        self.loads = LoadAnalysis(self.analysis_config)
+        self._aligner = FrameAligner(list(config.channels), fs)
+        self._faults = FaultStage(config)
+        self._tacho = self._tacho_stage(fs)
+        self._loads = LoadAnalysis(self.analysis_config)
         # mills started together compute their spectra at different samples (issue 5 latency)
-        self.harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
+        self._harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
+        #: What feeds the tracker: the tracker itself, or the runner built around it
+        self._runner = None if spectra_runner is None else spectra_runner(self._harmonics)
+        self._spectra: SpectraRunner | HarmonicTracker = self._runner or self._harmonics
         self._gain = {n: (ch.gain, ch.offset) for n, ch in config.channels.items()}
         self._last_good = LastGood()
         self._max_chunk = max(1, round(MAX_CHUNK_S * fs))
@@ -118,7 +159,7 @@ class MillAnalyzer:
         #: Why :meth:`restore` started the spectra afresh (the snapshot's did not fit), or None.
         self.spectra_restarted: str | None = None
 
-    def _tacho(self, fs: float) -> tuple[str, TachoSpeed] | None:
+    def _tacho_stage(self, fs: float) -> tuple[str, TachoSpeed] | None:
         if DERIVED_SPEED not in self.analysis_config.channels:
             return None
         name, ch = next((n, c) for n, c in self.config.channels.items() if c.kind == "tacho")
@@ -137,7 +178,7 @@ class MillAnalyzer:
         Callers with many blocks at hand (a worker's batch, a replay) add them all and process
         once: the analysis then runs over long contiguous chunks, which costs far less per
         sample than block by block and gives bitwise the same results."""
-        frames = self.aligner.push(channel, t0_ns, fs, self.calibrated(channel, raw))
+        frames = self._aligner.push(channel, t0_ns, fs, self.calibrated(channel, raw))
         if frames:
             self._queue_frames(frames)
 
@@ -157,7 +198,7 @@ class MillAnalyzer:
         one length, at the mill's rate). Regular runs are aligned in one go
         (:meth:`~analytics.signal.frame_aligner.FrameAligner.push_blocks`), anything else block by
         block — the same frames either way."""
-        names = self.aligner.channels
+        names = self._aligner.channels
         scaled = [ci for ci in np.unique(chan).tolist() if self._scaled(names[ci])]
         rows = raw  # uncalibrated float rows: the aligner casts them while it gathers
         if scaled or raw.dtype.kind != "f":
@@ -166,11 +207,11 @@ class MillAnalyzer:
             gain, offset = self._gain[names[ci]]
             sel = chan == ci
             rows[sel] = gain * (rows[sel] - offset)
-        frames = self.aligner.push_blocks(chan, t0_ns, rows)
+        frames = self._aligner.push_blocks(chan, t0_ns, rows)
         if frames is None:
             frames = []
             for k, ci in enumerate(chan.tolist()):
-                frames += self.aligner.push(names[ci], int(t0_ns[k]), self.aligner.fs, rows[k])
+                frames += self._aligner.push(names[ci], int(t0_ns[k]), self._aligner.fs, rows[k])
         if frames:
             self._queue_frames(frames)
 
@@ -178,7 +219,7 @@ class MillAnalyzer:
         """Stop waiting for ``channels`` (e.g. silent for a while): the aligner's oldest groups
         that lack only them become frames (NaN there) and wait for :meth:`process`
         (:meth:`~analytics.signal.frame_aligner.FrameAligner.release_absent`)."""
-        frames = self.aligner.release_absent(channels)
+        frames = self._aligner.release_absent(channels)
         if frames:
             self._queue_frames(frames)
 
@@ -208,10 +249,10 @@ class MillAnalyzer:
         fault stage holds back ``delay`` samples, so feeding m gives max(0, held + m − delay))."""
         room = self._max_chunk
         if until is not None:
-            want = until - self.loads.n
+            want = until - self._loads.n
             if want <= 0:
                 return 0
-            room = min(room, want + self.faults.delay - self.faults.held)
+            room = min(room, want + self._faults.delay - self._faults.held)
         return room
 
     def _take(self, m: int) -> Frame:
@@ -238,139 +279,159 @@ class MillAnalyzer:
 
     def flush(self) -> AnalyzerOutput:
         """End of a record: emit what the aligner and the fault stage still hold."""
-        self._queue_frames(self.aligner.flush())
+        self._queue_frames(self._aligner.flush())
         out = self.process()
-        tail = self.faults.flush()
+        tail = self._faults.flush()
         if tail is not None:
             self._analyse(tail, out)
-        out.harmonics += self.harmonics.flush()  # spectra put off by the stagger
+        out.harmonics += self._spectra.flush()  # spectra put off by the stagger
         return out
 
     def _frame(self, frame: Frame, out: AnalyzerOutput) -> None:
-        flagged = self.faults.feed(frame)
+        flagged = self._faults.feed(frame)
         if flagged is not None:
             self._analyse(flagged, out)
 
     def _analyse(self, frame: Frame, out: AnalyzerOutput) -> None:
-        if self.tacho is not None:
-            name, conv = self.tacho
+        if self._tacho is not None:
+            name, conv = self._tacho
             frame.data[DERIVED_SPEED] = conv.feed(frame.data[name])
         decided: list[Transition] = []
-        out.events += self.loads.feed(frame, decided)
-        out.states += [(self.loads.t_ns(tr.sample), tr.state.label) for tr in decided]
-        self._harmonics(frame, out)
+        out.events += [parse_event(e) for e in self._loads.feed(frame, decided)]
+        out.states += [(self._loads.t_ns(tr.sample), tr.state.label) for tr in decided]
+        self._feed_spectra(frame, out)
 
-    def _harmonics(self, frame: Frame, out: AnalyzerOutput) -> None:
+    def _feed_spectra(self, frame: Frame, out: AnalyzerOutput) -> None:
         """Feed the harmonic tracker the running samples: the state after each sample decides
         (not the state at the end of a frame), so spectra do not depend on the framing."""
         n = len(frame)
-        shown = self.loads.shown_states
+        shown = self._loads.shown_states
         if not self.spectra or n == 0 or shown.shape[0] != n:
             return
         running = shown == _RUNNING
         if not running[0] and not running.any():  # a stopped mill costs no spectra
             self._last_good.note(frame)
             why = _why_not_running(shown[0])
-            out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, {}, False, why)
+            out.harmonics += self._spectra.feed(frame.t0_ns, frame.fs, {}, False, why)
             return
         held = self._last_good.hold(frame)  # spectra must not see spikes
         if running.all():
-            out.harmonics += self.harmonics.feed(frame.t0_ns, frame.fs, held, True)
+            out.harmonics += self._spectra.feed(frame.t0_ns, frame.fs, held, True)
             return
         cuts = [0, *(np.flatnonzero(running[1:] != running[:-1]) + 1).tolist(), n]
-        first = self.loads.n - n  # stream index of the frame's first sample
+        first = self._loads.n - n  # stream index of the frame's first sample
         for a, b in itertools.pairwise(cuts):
-            t_ns = self.faults.time_of(first + a)
+            t_ns = self._faults.time_of(first + a)
             piece = {c: x[a:b] for c, x in held.items()} if running[a] else {}
             why = _why_not_running(shown[a])
-            out.harmonics += self.harmonics.feed(t_ns, frame.fs, piece, bool(running[a]), why)
+            out.harmonics += self._spectra.feed(t_ns, frame.fs, piece, bool(running[a]), why)
 
     # ------------------------------------------------------------------ reading
     @property
     def state(self) -> str:
         """Operating state after the last sample analysed (``"running"``, ``"stopped"``, …)."""
-        return self.loads.state.label
+        return self._loads.state.label
 
     @property
     def samples(self) -> int:
         """Stream samples analysed so far (aligned samples still waiting not included)."""
-        return self.loads.n
+        return self._loads.n
 
     @property
     def first_sample_ns(self) -> int | None:
         """Time of the first sample analysed (ns since the Unix epoch); None before any."""
-        return self.loads.t0_ns
+        return self._loads.t0_ns
 
     @property
     def next_sample_ns(self) -> int | None:
         """Time of the next sample to analyse, i.e. just past the last one analysed (ns since
         the Unix epoch); None before any sample."""
-        a = self.loads
+        a = self._loads
         return a.t_ns(a.n) if a.t0_ns is not None else None
 
     @property
     def seconds_analysed(self) -> float:
         """Stream time analysed so far: samples / sample rate (s)."""
-        return self.loads.n / self.loads.fs
+        return self._loads.n / self._loads.fs
 
     @property
     def steady_windows(self) -> list[dict[str, Any]]:
         """The most recent steady-state windows (plain dicts with ``t_ns``), oldest first; at
         most the number :meth:`keep_recent` set."""
-        return self.loads.windows
+        return self._loads.windows
 
     @property
     def natural_frequencies_hz(self) -> tuple[float, ...]:
         """The torsional natural frequencies (Hz) of the mill file's model (empty without one)
         that the harmonic windows' peaks and resonance margins are measured against."""
-        return self.harmonics.natural_frequencies_hz
+        return self._tracker().natural_frequencies_hz
 
     @property
     def tracked_channels(self) -> list[str]:
         """Channels whose harmonics are tracked."""
-        return [ch.name for ch in self.harmonics.channels]
+        return [ch.name for ch in self._tracker().channels]
 
     def keep_recent(self, windows: int, events: int) -> None:
         """Keep only the last ``windows`` steady windows and ``events`` events of each kind in
         memory (and in snapshots), for a caller that stores each as it comes; the default
         keeps what an offline report shows (a day of windows, 2000 events)."""
-        self.loads.keep_windows = windows
-        self.loads.keep_events = events
+        self._loads.keep_windows = windows
+        self._loads.keep_events = events
 
     def starts_in_month(self, month: str) -> int:
         """Starts counted in the local calendar month ``month`` (``"YYYY-MM"``, site time
         zone); 0 for a month not (or no longer) kept."""
-        return self.loads.starts_per_month.get(month, {}).get("starts", 0)
+        return self._loads.starts_per_month.get(month, {}).get("starts", 0)
+
+    @property
+    def starts_total(self) -> int:
+        """Starts counted since the first sample analysed (every one, however old)."""
+        return self._loads.starts_total
+
+    @property
+    def missing_blocks(self) -> int:
+        """Blocks the aligner never received (filled with NaN)."""
+        return self._aligner.missing_blocks
+
+    @property
+    def gap_samples(self) -> int:
+        """Samples of the gaps the aligner filled with NaN."""
+        return self._aligner.gap_samples
+
+    @property
+    def late_blocks(self) -> int:
+        """Blocks that came after their time was analysed (dropped by the aligner)."""
+        return self._aligner.dropped_blocks
 
     def committed_damage(self) -> dict[str, float]:
         """Miner damage of the closed rainflow cycles so far, per component (dimensionless)."""
-        return {comp: pd.committed for comp, pd in self.loads.damage.items()}
+        return {comp: pd.committed for comp, pd in self._loads.damage.items()}
 
-    def damage_summary(self) -> dict[str, dict[str, float]]:
+    def damage_summary(self) -> dict[str, ComponentDamage]:
         """Miner damage per component: ``committed``, ``pending_residue``, ``with_residue``
         (:meth:`LoadAnalysis.damage_summary <analytics.mill.loads.LoadAnalysis.damage_summary>`)."""
-        return self.loads.damage_summary()
+        return {c: ComponentDamage(**d) for c, d in self._loads.damage_summary().items()}
 
     def damage_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
         """Attributed Miner damage per component, local day and phase so far (exact sums; the
         same however often it is called)."""
-        return self.loads.damage_by_day()
+        return self._loads.damage_by_day()
 
     def spike_counts(self) -> dict[str, int]:
         """Telemetry spikes flagged so far, per checked channel."""
-        return {n: c.spikes for n, c in self.faults.totals().items()}
+        return {n: c.spikes for n, c in self._faults.totals().items()}
 
     def report(self) -> dict[str, Any]:
         """The analyzer's report plus harmonics, unexplained peaks and data quality."""
-        rep = self.loads.report()
-        rep |= harmonics_report(self.harmonics)
+        rep = self._loads.report()
+        rep |= harmonics_report(self._tracker())
         if not self.spectra:
             rep["summary"]["spectra"] = "off: no spectra were computed (asked for)"
         rep["data_quality"] = {
-            "faults": {n: c.to_dict() for n, c in self.faults.totals().items()},
-            "missing_blocks": self.aligner.missing_blocks,
-            "gap_samples": self.aligner.gap_samples,
-            "late_blocks": self.aligner.dropped_blocks,
+            "faults": {n: c.to_dict() for n, c in self._faults.totals().items()},
+            "missing_blocks": self.missing_blocks,
+            "gap_samples": self.gap_samples,
+            "late_blocks": self.late_blocks,
         }
         return rep
 
@@ -384,11 +445,11 @@ class MillAnalyzer:
             "kind": "mill_monitor",
             "version": _SNAPSHOT_VERSION,
             "mill": self.config.id,
-            "aligner": self.aligner.snapshot(),
-            "faults": self.faults.snapshot(),
-            "tacho": None if self.tacho is None else self.tacho[1].snapshot(),
-            "analyzer": self.loads.snapshot(),
-            "harmonics": self.harmonics.snapshot(),
+            "aligner": self._aligner.snapshot(),
+            "faults": self._faults.snapshot(),
+            "tacho": None if self._tacho is None else self._tacho[1].snapshot(),
+            "analyzer": self._loads.snapshot(),
+            "harmonics": self._tracker().snapshot(),
             "last_good": {
                 k: (v if np.isfinite(v) else None) for k, v in self._last_good.values.items()
             },
@@ -420,20 +481,28 @@ class MillAnalyzer:
             raise SnapshotMismatch(f"mill {config.id!r}: {changed}")
         m = cls(config)
         # in the configuration's order, which add_blocks' channel numbers follow
-        m.aligner = FrameAligner.restore(snap["aligner"], list(config.channels))
-        m.faults.restore(snap["faults"])
-        if m.tacho is not None and snap["tacho"] is not None:
-            m.tacho = (m.tacho[0], TachoSpeed.restore(snap["tacho"]))
-        m.loads = LoadAnalysis.restore(m.analysis_config, snap["analyzer"])
+        m._aligner = FrameAligner.restore(snap["aligner"], list(config.channels))
+        m._faults.restore(snap["faults"])
+        if m._tacho is not None and snap["tacho"] is not None:
+            m._tacho = (m._tacho[0], TachoSpeed.restore(snap["tacho"]))
+        m._loads = LoadAnalysis.restore(m.analysis_config, snap["analyzer"])
         m._restore_harmonics(snap["harmonics"])
         last = snap["last_good"]
         m._last_good = LastGood({k: (np.nan if v is None else float(v)) for k, v in last.items()})
         return m
 
+    def _tracker(self) -> HarmonicTracker:
+        """The harmonic tracker, once everything fed to it is analysed."""
+        if self._runner is not None:
+            self._runner.drain()
+        return self._harmonics
+
     def _restore_harmonics(self, snap: dict[str, Any]) -> None:
-        """The tracker of ``snap``, or (when it does not fit) the fresh one ``__init__`` built."""
+        """The tracker of ``snap``, or (when it does not fit) the fresh one ``__init__`` built
+        (a restored analyzer feeds its tracker itself: :meth:`restore` injects no runner)."""
         try:
-            self.harmonics = HarmonicTracker.restore(self.analysis_config, snap)
+            self._harmonics = HarmonicTracker.restore(self.analysis_config, snap)
+            self._spectra = self._harmonics
         except SnapshotMismatch as exc:
             self.spectra_restarted = str(exc)
             log.warning(

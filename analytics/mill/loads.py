@@ -72,7 +72,7 @@ from analytics.operation.transients import (
 from analytics.signal.frame_aligner import Frame
 from analytics.signal.sample_ring import SampleRing
 
-__all__ = ["LoadAnalysis", "component_names"]
+__all__ = ["LoadAnalysis", "component_names", "steady_channels"]
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +81,8 @@ _RING_S = 90.0
 _KEEP_EVENTS = 2000
 _KEEP_WINDOWS = 1440
 _SNAPSHOT_KIND = "mill_analyzer"  # the name LoadAnalysis had when checkpoints were first written
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 3  # 2: arrays packed by analytics.snapshot_arrays; 3: steady channels named
+#: by the mill file (a version-2 snapshot is renamed on restore: :func:`_from_version_2`)
 #: Local days and calendar months of start counts kept (state stays bounded; 400 days ≈ 14
 #: months). The total since the start of the record is kept apart (``starts_total``).
 KEEP_START_DAYS = 400
@@ -93,6 +94,23 @@ def _channel(config: MillConfig, kind: str, shaft: str, side: str | None) -> str
         if ch.kind == kind and ch.shaft == shaft and ch.side == side:
             return name
     return None
+
+
+def steady_channels(config: MillConfig) -> dict[str, float | None]:
+    """The channels a steady-state window reports, by their names in the mill file, in the
+    order of the analysis' rows (per drive side: motor torque, pinion torque, pinion bending;
+    a channel the mill file lacks is left out, never derived from another), each with its scale
+    to % of the motor's rated torque (pinion torque referred to the motor by the reducer ratio,
+    Diering 2011 §6.2.4 Tables 14–15; None for bending, which stays in MPa)."""
+    t_m = 100.0 / config.motor_rated_torque_knm
+    scale = {"motor": t_m, "pinion": t_m / config.drive.reducer_ratio}
+    out: dict[str, float | None] = {}
+    for side in config.sides:
+        for kind, shaft in (("torque", "motor"), ("torque", "pinion"), ("bending", "pinion")):
+            name = _channel(config, kind, shaft, side)
+            if name is not None:
+                out[name] = scale[shaft] if kind == "torque" else None
+    return out
 
 
 def component_names(config: MillConfig) -> list[str]:
@@ -195,15 +213,12 @@ class LoadAnalysis:
         self.stress_model = cfg.shafts.stress_model()
 
     def _meter(self) -> SteadyStateMeter:
-        t_m = 100.0 / self.config.motor_rated_torque_knm
-        ratio = self.config.drive.reducer_ratio
-        chans: dict[str, float | None] = {}
-        for k in range(len(self.sides)):
-            chans[f"motor_torque{k}"] = t_m
-            chans[f"pinion_torque{k}"] = t_m / ratio
-            chans[f"bending{k}"] = None
-        imb = ("motor_torque0", "motor_torque1") if len(self.sides) == 2 else None
+        """The steady-state meter over the mill file's torque and bending channels, by their
+        names in the mill file (:func:`steady_channels`)."""
         rev = self.config.pinion_speed_rpm / 60.0 / self.fs
+        bs, nbs = (*self.motor, None)[:2]  # a dual drive's sides (single drive: nbs None)
+        imb = (bs, nbs) if bs is not None and nbs is not None else None
+        chans = steady_channels(self.config)
         return SteadyStateMeter(chans, rev, self.fs, self.window_s, imb)
 
     def _new_damage(self, t0_ns: int) -> None:
@@ -376,7 +391,7 @@ class LoadAnalysis:
     def _start_event(self, n0: int, tr: Transition) -> dict[str, Any]:
         failed = tr.state != OperatingState.RUNNING
         m = measure_start(self._window(n0, tr.sample), failed, self.settings)
-        d = dataclasses.asdict(m)
+        d = self._named_peaks(dataclasses.asdict(m))
         on = max(m.switch_on, key=lambda p: p.motor_pct, default=None)
         sc = max(m.short_circuit, key=lambda p: p.motor_pct, default=None)
         d |= {
@@ -392,6 +407,14 @@ class LoadAnalysis:
             "alarm": self._start_alarm(on.motor_pct if on else None),
         }
         return _keep(self.starts, d, self.keep_events)
+
+    def _named_peaks(self, d: dict[str, Any]) -> dict[str, Any]:
+        """The start's per-side peaks with the mill file's names of the channels they were
+        measured on (``motor_channel``, ``pinion_channel``; None where the mill has none)."""
+        for peak in (*d["switch_on"], *d["short_circuit"]):
+            k = self.sides.index(peak["side"])
+            peak["motor_channel"], peak["pinion_channel"] = self.motor[k], self.pinion[k]
+        return d
 
     def _start_alarm(self, pct: float | None) -> str | None:
         """The start's level: strictly above the warning / alarm peak (% of rated motor
@@ -423,6 +446,7 @@ class LoadAnalysis:
             "event": "barring",
             "t_ns": self.t_ns(m.sample),
             "end_t_ns": self.t_ns(m.end_sample),
+            "channel": self.motor[0] or self.pinion[0],  # the torque measured (_barring_add)
             "peak_limit_pct": self.config.barring_peak_limit_pct,
             "above_limit": m.peak_pct > self.config.barring_peak_limit_pct,
         }
@@ -527,15 +551,24 @@ class LoadAnalysis:
 
     def _steady_feed(self, lo: int, hi: int) -> None:
         """Running samples ``[lo, hi)`` to the steady-state meter. The ring's rows after speed
-        are motor, pinion, bending per side (a missing channel's row is NaN): the meter's
-        channels in order (:meth:`_meter`), so they go as one array."""
+        are motor, pinion, bending per side (a missing channel's row is NaN); the meter's
+        channels are those rows the mill file has, in that order (:func:`steady_channels`), so
+        with every channel present they go as one view of the ring's array."""
         start, data = self.ring.read(lo, hi)
         speed = np.abs(data[0]) / self.rated_rpm
-        for w in self.meter.feed_rows(start, speed, data[1:]):
+        rows = [self.rows.index(name) for name in self.meter.channels]
+        x = data[1:] if rows == list(range(1, len(self.rows))) else data[rows]
+        for w in self.meter.feed_rows(start, speed, x):
             _keep(self.windows, self._window_dict(w), self.keep_windows)
 
     def _window_dict(self, w: SteadyWindow) -> dict[str, Any]:
-        return dataclasses.asdict(w) | {"t_ns": self.t_ns(w.sample)}
+        """A steady window as reported: its fields, ``t_ns`` (its first sample's time) and
+        ``bending_amplitude_mpa`` per bending channel (half the range per revolution, Diering
+        2011 §8.1: what the bending alarms, metrics and reports show)."""
+        amplitude = {name: w.range_per_rev[name] / 2.0
+                     for name, scale in self.meter.channels.items() if scale is None}  # fmt: skip
+        return dataclasses.asdict(w) | {"t_ns": self.t_ns(w.sample),
+                                        "bending_amplitude_mpa": amplitude}  # fmt: skip
 
     # ------------------------------------------------------------ report
     def damage_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
@@ -661,6 +694,8 @@ class LoadAnalysis:
     ) -> LoadAnalysis:
         """An analysis for ``config`` that continues exactly where the snapshotted one stood
         (pass the same ``settings``/``window_s`` as the original; thresholds are restored)."""
+        if snapshot.get("kind") == _SNAPSHOT_KIND and snapshot.get("version") == 2:
+            snapshot = _from_version_2(config, snapshot)
         check_snapshot(snapshot, _SNAPSHOT_KIND, _SNAPSHOT_VERSION)
         if snapshot["mill"] != config.id:
             raise ValueError(
@@ -708,6 +743,37 @@ class LoadAnalysis:
         self.starts_total = int(
             d.get("starts_total", sum(m["starts"] for m in self.starts_per_month.values()))
         )
+
+
+def _from_version_2(config: MillConfig, snap: dict[str, Any]) -> dict[str, Any]:
+    """A version-2 snapshot in the form of version 3: version 2 keyed the steady-state
+    channels by drive-side index (``motor_torque0``, ``pinion_torque0``, ``bending0``, …, a
+    channel the mill lacks included); version 3 by the mill file's channel names, only the
+    channels the mill has, and its windows carry ``bending_amplitude_mpa``."""
+    names: dict[str, str] = {}
+    for k, side in enumerate(config.sides):
+        for old, kind, shaft in ((f"motor_torque{k}", "torque", "motor"),
+                                 (f"pinion_torque{k}", "torque", "pinion"),
+                                 (f"bending{k}", "bending", "pinion")):  # fmt: skip
+            name = _channel(config, kind, shaft, side)
+            if name is not None:
+                names[old] = name
+
+    def rename(d: dict[str, Any]) -> dict[str, Any]:
+        return {names[k]: v for k, v in d.items() if k in names}
+
+    meter = snap["meter"] | {
+        key: rename(snap["meter"][key])
+        for key in ("part_max", "part_min", "sums", "counts", "rev_max", "rev_min")
+    }
+    bending = [n for n, scale in steady_channels(config).items() if scale is None]
+    windows = []
+    for w in snap["windows"]:
+        w = w | {f: rename(w[f]) for f in ("mean", "range_per_rev", "mean_pct", "range_pct")}
+        per_rev = w["range_per_rev"]
+        w["bending_amplitude_mpa"] = {n: per_rev[n] / 2.0 for n in bending if n in per_rev}
+        windows.append(w)
+    return snap | {"version": _SNAPSHOT_VERSION, "meter": meter, "windows": windows}
 
 
 def _plain(obj: Any) -> Any:

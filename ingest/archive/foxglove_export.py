@@ -33,6 +33,10 @@ Topics of one mill ``<mill>`` (schema in brackets; protobuf encoding throughout)
 * ``/<mill>/harmonics/<channel>/<line>`` [``millwatch.HarmonicLine``]: each detected drivetrain
   line of each spectral window: ``frequency_hz``, ``amplitude`` (channel units), ``amplitude_pct``
   (% rated, NaN for bending), ``snr_db``, stamped at the window's end.
+* ``/<mill>/steady/<channel>`` [``millwatch.SteadyState``]: each steady-state window of each
+  torque and bending channel (the mill file's names): ``mean`` and ``range_per_rev`` (channel
+  units), ``mean_pct`` and ``range_pct`` (% of rated motor torque, NaN for bending),
+  ``bending_amplitude_mpa`` (NaN for torque), stamped at the window's first sample.
 * ``/<mill>/alarms`` [``foxglove.Log``]: each alarm transition (raised, escalated, cleared…),
   level Warning/Error/Fatal by severity, Info when cleared.
 
@@ -67,6 +71,7 @@ __all__ = [
     "HARMONIC_SCHEMA",
     "SAMPLE_SCHEMA",
     "START_SCHEMA",
+    "STEADY_SCHEMA",
     "ExportCounts",
     "FoxgloveExportWriter",
     "encode_doubles",
@@ -83,6 +88,7 @@ ENVELOPE_SCHEMA = "millwatch.SampleEnvelope"
 DAMAGE_SCHEMA = "millwatch.Damage"
 START_SCHEMA = "millwatch.StartPeaks"
 HARMONIC_SCHEMA = "millwatch.HarmonicLine"
+STEADY_SCHEMA = "millwatch.SteadyState"
 #: Fields (all ``double``, numbered from 1) of each custom schema.
 _FIELDS = {
     SAMPLE_SCHEMA: ("value",),
@@ -90,6 +96,7 @@ _FIELDS = {
     DAMAGE_SCHEMA: ("committed", "with_residue"),
     START_SCHEMA: ("switch_on_peak_pct", "short_circuit_peak_pct", "rise_time_10_90_ms", "accel_s"),
     HARMONIC_SCHEMA: ("frequency_hz", "amplitude", "amplitude_pct", "snr_db"),
+    STEADY_SCHEMA: ("mean", "range_per_rev", "mean_pct", "range_pct", "bending_amplitude_mpa"),
 }
 #: Event fields that count stream samples of one analysis run: meaningless in a file.
 _STREAM_FIELDS = frozenset({"sample", "end_sample"})
@@ -206,6 +213,7 @@ class ExportCounts:
     events: int = 0
     damage: int = 0
     harmonics: int = 0
+    steady: int = 0
     alarms: int = 0
     topics: set[str] = field(default_factory=set)
 
@@ -334,6 +342,15 @@ class FoxgloveExportWriter:
                 name = topic(mill, "harmonics", m.channel, m.name)
                 self.numbers(name, HARMONIC_SCHEMA, window.t_end_ns, values)
                 self.counts.harmonics += 1
+
+    def steady(self, mill: str, window: dict[str, Any]) -> None:
+        """One steady-state window of the analyzer (``millwatch.SteadyState`` per channel, by
+        the mill file's channel names), stamped at its first sample."""
+        fields = _FIELDS[STEADY_SCHEMA]
+        for channel in window["range_per_rev"]:
+            values = [_number(window.get(f, {}).get(channel)) for f in fields]
+            self.numbers(topic(mill, "steady", channel), STEADY_SCHEMA, int(window["t_ns"]), values)
+        self.counts.steady += 1
 
     def log_line(
         self, mill: str, sub: str, t_ns: int, level: LogLevel, name: str, text: str

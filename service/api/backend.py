@@ -24,6 +24,7 @@ from prometheus_client import CollectorRegistry
 from analytics.drivetrain.mill_config import MillConfig
 from service.api.alarm_board import AlarmBoard
 from service.reports.monthly import MonthlyReport
+from service.status import MillStatus
 
 __all__ = ["Backend"]
 
@@ -43,7 +44,7 @@ class Backend(Protocol):
 
     def mill_detail(self, mill_id: str) -> dict[str, Any]: ...
 
-    def mill_statuses(self) -> dict[str, dict[str, Any]]:
+    def mill_statuses(self) -> dict[str, MillStatus]:
         """Every reachable mill's worker status snapshot (``status`` of ``GET /mills/{id}``),
         in one call; a mill whose worker is gone is missing. For pollers of every mill (the
         OPC UA server), which need no worker details."""

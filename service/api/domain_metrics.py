@@ -35,7 +35,9 @@ from typing import Any
 
 from prometheus_client.core import GaugeMetricFamily, Metric
 
+from analytics.mill.results import SteadyWindowResult
 from analytics.operation.operating_states import OperatingState
+from service.status import NO_STATUS, MillStatus
 
 __all__ = ["MILL_STATES", "LifeCache", "domain_families"]
 
@@ -82,7 +84,9 @@ def _gauge(name: str, doc: str, *labels: str) -> GaugeMetricFamily:
 
 
 def domain_families(
-    mills: Iterable[str], status: Mapping[str, Any], life: Callable[[str], dict[str, Any] | None]
+    mills: Iterable[str],
+    status: Mapping[str, MillStatus],
+    life: Callable[[str], dict[str, Any] | None],
 ) -> Iterator[Metric]:
     """The domain gauges of the module docstring for ``mills``."""
     damage = _gauge("millwatch_damage_ratio", "Miner damage so far incl. the estimated prior "
@@ -99,15 +103,16 @@ def domain_families(
     state = _gauge("millwatch_mill_state", "1 for the mill's current state, 0 for the others.",
                    "state")  # fmt: skip
     for mill in sorted(mills):
-        s = status.get(mill, {})
+        s = status.get(mill, NO_STATUS)
         _life(damage, remaining, mill, life(mill))
-        _steady(osc, bending, mill, s.get("latest_steady") or {})
-        if s.get("starts_this_month") is not None:
-            starts.add_metric([mill], s["starts_this_month"])
-        for channel, ch in sorted(s.get("health", {}).get("channels", {}).items()):
-            if _finite(ch.get("lag_s")):
-                lag.add_metric([mill, channel], ch["lag_s"])
-        current = "held" if s.get("held_reason") else str(s.get("state", "unknown"))
+        if s.latest_steady is not None:
+            _steady(osc, bending, mill, s.latest_steady)
+        if s.starts_this_month is not None:
+            starts.add_metric([mill], s.starts_this_month)
+        for channel, ch in sorted(s.channel_health.items()):
+            if ch.lag_s is not None and math.isfinite(ch.lag_s):
+                lag.add_metric([mill, channel], ch.lag_s)
+        current = "held" if s.held_reason else s.state
         for name in MILL_STATES:
             state.add_metric([mill, name], 1 if name == current else 0)
     yield from (damage, remaining, osc, bending, starts, lag, state)
@@ -125,16 +130,17 @@ def _life(
 
 
 def _steady(
-    osc: GaugeMetricFamily, bending: GaugeMetricFamily, mill: str, window: dict[str, Any]
+    osc: GaugeMetricFamily, bending: GaugeMetricFamily, mill: str, window: SteadyWindowResult
 ) -> None:
     """The latest steady-state window, as :func:`alarms.from_analysis.window_observations`
-    reads it (bending amplitude = half the per-revolution range)."""
-    for channel, value in sorted(window.get("range_pct", {}).items()):
+    reads it (the window's bending amplitude: half the per-revolution range); channels by the
+    mill file's names."""
+    for channel, value in sorted(window.range_pct.items()):
         if _finite(value):
             osc.add_metric([mill, channel], value)
-    for channel, rng in sorted(window.get("range_per_rev", {}).items()):
-        if channel.startswith("bending") and _finite(rng):
-            bending.add_metric([mill, channel], rng / 2.0)
+    for channel, amplitude in sorted(window.bending_amplitude_mpa.items()):
+        if _finite(amplitude):
+            bending.add_metric([mill, channel], amplitude)
 
 
 def _finite(value: Any) -> bool:

@@ -33,6 +33,7 @@ from service.api.mill_views import (
 )
 from service.reports.fleet import FleetMill, build_fleet, fleet_entry, fleet_to_dict
 from service.reports.monthly import MonthlyReport
+from service.status import NO_STATUS, MillStatus
 from service.worker.partition import worker_identity
 from service.worker.runtime import MILL_CHECKS, ServiceRuntime
 
@@ -80,10 +81,11 @@ class LocalBackend:
         return detail
 
     # ------------------------------------------------------------------ mills
-    def status(self, mill_id: str) -> dict[str, Any]:
-        """The worker's status snapshot of one mill (404 for a mill not analysed here)."""
+    def status(self, mill_id: str) -> MillStatus:
+        """The worker's status snapshot of one mill (404 for a mill not analysed here;
+        :data:`~service.status.NO_STATUS` before the worker reported it)."""
         config_of(self.mills, mill_id)
-        return self.runtime.status.get(mill_id, {})
+        return self.runtime.status.get(mill_id, NO_STATUS)
 
     def worker_info(self) -> dict[str, Any]:
         """This worker: name, partition, counters and its own readiness checks (the per-mill
@@ -107,17 +109,17 @@ class LocalBackend:
 
     def mills_overview(self) -> list[dict[str, Any]]:
         return [
-            mill_summary(c, self.runtime.status.get(m, {}), self.worker_name)
+            mill_summary(c, self.runtime.status.get(m, NO_STATUS), self.worker_name)
             for m, c in self.mills.items()
         ]
 
-    def mill_statuses(self) -> dict[str, dict[str, Any]]:
+    def mill_statuses(self) -> dict[str, MillStatus]:
         status = self.runtime.status
-        return {m: status.get(m, {}) for m in self.mills}
+        return {m: status.get(m, NO_STATUS) for m in self.mills}
 
     def mill_detail(self, mill_id: str) -> dict[str, Any]:
         config = config_of(self.mills, mill_id)
-        return mill_detail(config, self.runtime.status.get(mill_id, {}), self.worker_info())
+        return mill_detail(config, self.runtime.status.get(mill_id, NO_STATUS), self.worker_info())
 
     def life(self, mill_id: str) -> dict[str, Any]:
         return mill_life(self.runtime, mill_id)
@@ -137,7 +139,7 @@ class LocalBackend:
         config = config_of(self.mills, mill_id)
         board = self.alarm_board()
         return fleet_entry(store_of(self.runtime), config, time.time_ns(),
-                           status=self.runtime.status.get(mill_id, {}),
+                           status=self.runtime.status.get(mill_id),
                            open_alarms=[a for a in board.rows(mill_id) if a.open])  # fmt: skip
 
     def fleet(self, site: str) -> dict[str, Any]:

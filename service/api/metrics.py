@@ -28,6 +28,7 @@ from prometheus_client.registry import Collector
 from alarms.lifecycle import Alarm
 from service.api.domain_metrics import LifeCache, domain_families
 from service.api.mill_views import mill_life
+from service.status import NO_STATUS, MillStatus
 from service.worker.runtime import ServiceRuntime
 
 __all__ = ["RuntimeCollector", "metrics_registry", "mill_families", "open_alarms"]
@@ -82,7 +83,7 @@ class RuntimeCollector(Collector):
 
 
 def mill_families(
-    mills: Iterable[str], status: Mapping[str, Any], life: LifeSource = lambda mill: None
+    mills: Iterable[str], status: Mapping[str, MillStatus], life: LifeSource = lambda mill: None
 ) -> Iterator[Metric]:
     """Decode errors, missing blocks, samples and whether held per mill, from the workers'
     statuses, and the domain gauges (:mod:`service.api.domain_metrics`: damage and remaining
@@ -123,16 +124,16 @@ def mill_families(
         labels=["mill"],
     )
     for mill in sorted(mills):
-        s = status.get(mill, {})
-        for channel, ch in s.get("health", {}).get("channels", {}).items():
-            for kind, n in ch.get("decode_errors", {}).items():
+        s = status.get(mill, NO_STATUS)
+        for channel, ch in s.channel_health.items():
+            for kind, n in ch.decode_errors.items():
                 errors.add_metric([mill, channel, kind], n)
-            missing.add_metric([mill, channel], ch.get("missing_blocks", 0))
-            for kind in ("duplicate", "replay"):
-                repeated.add_metric([mill, channel, kind], ch.get(kind + "s", 0))
-            clock.add_metric([mill, channel], ch.get("clock_faults", 0))
-        samples.add_metric([mill], s.get("samples", 0))
-        held.add_metric([mill], 1 if s.get("held_reason") else 0)
+            missing.add_metric([mill, channel], ch.missing_blocks)
+            repeated.add_metric([mill, channel, "duplicate"], ch.duplicates)
+            repeated.add_metric([mill, channel, "replay"], ch.replays)
+            clock.add_metric([mill, channel], ch.clock_faults)
+        samples.add_metric([mill], s.samples or 0)
+        held.add_metric([mill], 1 if s.held_reason else 0)
     yield from (errors, missing, repeated, clock, samples, held)
 
 

@@ -19,6 +19,7 @@ from service.reports.history import life_inputs
 from service.reports.life import compute_life, life_to_dict
 from service.reports.monthly import MonthlyReport, build_monthly_report
 from service.reports.starts import current_month, starts_in_month
+from service.status import NO_STATUS, MillStatus
 from service.store.database import Store
 from service.worker.runtime import ServiceRuntime
 
@@ -59,7 +60,7 @@ def site_mills(mills: Mapping[str, MillConfig], site: str) -> dict[str, MillConf
 
 
 def mill_summary(
-    config: MillConfig, status: Mapping[str, Any] | None, worker: str | None
+    config: MillConfig, status: MillStatus | None, worker: str | None
 ) -> dict[str, Any]:
     """One line of ``GET /mills``: state, stale channels and why the mill is held (if it is)
     from the worker's status; a mill without status (``None``: its worker is gone) is
@@ -68,10 +69,9 @@ def mill_summary(
     if status is None:
         state, stale, held = UNREACHABLE, list(config.channels), None
     else:
-        state = status.get("state", "unknown")
-        stale = status.get("health", {}).get("stale_channels", [])
-        held = status.get("held_reason")
-        simulated = bool(status.get("simulated", simulated))  # the worker's config decides
+        state, stale, held = status.state, status.stale_channels, status.held_reason
+        if status.simulated is not None:
+            simulated = status.simulated  # the worker's config decides
     return {
         "id": config.id,
         "site": config.site,
@@ -86,17 +86,18 @@ def mill_summary(
 
 
 def mill_detail(
-    config: MillConfig, status: Mapping[str, Any] | None, worker: Mapping[str, Any]
+    config: MillConfig, status: MillStatus | None, worker: Mapping[str, Any]
 ) -> dict[str, Any]:
-    """``GET /mills/{id}``: the summary, rated torques, the worker's status of the mill, and
-    the worker that analyses it (name, partition, counters; ``live`` False when it is gone)."""
+    """``GET /mills/{id}``: the summary, rated torques, the worker's status of the mill (as
+    JSON data: what the worker set, ``{}`` without a status), and the worker that analyses it
+    (name, partition, counters; ``live`` False when it is gone)."""
     return {
         **mill_summary(config, status, worker.get("name")),
         "rated_torque_knm": {
             "motor": config.motor_rated_torque_knm,
             "pinion": config.pinion_rated_torque_knm,
         },
-        "status": dict(status or {}),
+        "status": {} if status is None else status.to_json(),
         "worker_status": dict(worker),
     }
 
@@ -123,11 +124,11 @@ def mill_life(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
     worker's live damage (closed cycles not yet stored, the open residue)."""
     config = mill_config(runtime, mill_id)
     store = store_of(runtime)
-    status = runtime.status.get(mill_id, {})
+    status = runtime.status.get(mill_id, NO_STATUS)
     with store.read_snapshot():
         report = compute_life(life_inputs(store, config, time.time_ns(),
-                                          live=status.get("damage"),
-                                          last_sample_ns=status.get("last_sample_ns")))  # fmt: skip
+                                          live=status.live_damage(),
+                                          last_sample_ns=status.last_sample_ns))  # fmt: skip
     return life_to_dict(report)
 
 

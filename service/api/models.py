@@ -10,6 +10,8 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic.config import JsonDict
 
+from service.status import MillStatus
+
 __all__ = [
     "AckBody",
     "AlarmDetail",
@@ -80,9 +82,12 @@ class MillDetail(MillSummary):
     """``GET /mills/{mill_id}``."""
 
     rated_torque_knm: dict[str, float] = Field(description="motor and pinion, kN·m.")
-    status: dict[str, Any] = Field(
+    status: MillStatus = Field(
         description="The worker's status of the mill: health per channel, state, samples, "
-        "damage so far, open alarms, held_reason."
+        "the latest steady-state window, damage so far per component, open alarms, "
+        "held_reason (per channel and component by the mill file's names; every *_ns time "
+        "also as ISO-8601 UTC under its name without _ns). Only what the worker reported: a "
+        "held mill's holds health, state and held_reason; a mill not reported yet is {}."
     )
     worker_status: dict[str, Any] = Field(
         description="The worker: name, partition, counters, its own readiness checks; live "

@@ -155,7 +155,7 @@ def _run_job(job: _Job, advance: Any) -> dict[str, Any]:
         reports = {
             mill_id: (analyzer.report(), sink.reading(mill_id))
             for mill_id, analyzer in sink.analyzers.items()
-            if analyzer.loads.n
+            if analyzer.samples
         }
     finally:
         sink.close()

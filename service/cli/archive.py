@@ -262,7 +262,8 @@ def _export(args: argparse.Namespace) -> int:
         f"{args.out}: mill {config.id}, samples {_iso(result.first_sample_ns)} .. "
         f"{_iso(result.last_sample_ns)} (sample time), {len(c.topics)} topics\n"
         f"  {c.samples} samples, {c.overview} overview, {c.states} states, {c.events} events, "
-        f"{c.damage} damage, {c.harmonics} harmonic, {c.alarms} alarm messages\n"
+        f"{c.damage} damage, {c.harmonics} harmonic, {c.steady} steady-state windows, "
+        f"{c.alarms} alarm messages\n"
         f"  {result.files_read} files read ({result.files_skipped} skipped), "
         f"{result.analysed_s:.0f} s analysed, {took:.1f} s\n"
     )

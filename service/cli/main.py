@@ -24,8 +24,10 @@ __all__ = ["COMMANDS", "Command", "build_parser", "main"]
 
 #: Errors a user can fix from the message alone: printed without a traceback (the commands'
 #: own, e.g. :class:`~service.cli.signal_files.SignalFileError`, are ``ValueError``\ s), and
-#: those of :data:`MODULE_ERRORS`.
-USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, KeyError, OSError)
+#: those of :data:`MODULE_ERRORS`. Not ``KeyError``: a missing key is a programming error (its
+#: message is only the key, e.g. ``'start_cost'``), shown with its traceback; a command that
+#: looks up what a user named raises a ``ValueError`` naming what exists.
+USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError)
 
 #: User errors defined in modules a command imports, as ``(module, class)``: looked up, not
 #: imported, when a command fails (a command that raised one has imported its module).

@@ -7,7 +7,8 @@ span go to :class:`ingest.archive.foxglove_export.FoxgloveExportWriter` stamped 
 sample time; the same blocks feed the real :class:`~analytics.mill.analyzer.MillAnalyzer` (from a
 context before and after the span, so the operating state is known when the span begins and
 events that cross its end are measured whole), whose state changes, events (with start peaks),
-harmonic lines and damage are written on the same timeline; the alarms are those
+steady-state windows (per channel, by the mill file's names), harmonic lines and damage are
+written on the same timeline; the alarms are those
 ``millwatch analyze`` reports (:func:`alarms.report.alarms_for_report`).
 
 Times: the span selects by *sample* time (wire block ``t0``), not by the archive's MCAP log
@@ -19,6 +20,7 @@ outside the span and its context are skipped on their header's time, undecoded.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import sys
@@ -98,8 +100,8 @@ class SpanExport:
     ``context_s`` before the span to ``context_s`` after it (so the state at the start is known,
     and a start or stop that begins in the span is measured although it ends after), and its
     conclusions inside the span are written:
-    state changes, events, Miner damage booked since the span start every ``damage_step_s`` of
-    sample time, alarm transitions."""
+    state changes, events, steady-state windows, Miner damage booked since the span start every
+    ``damage_step_s`` of sample time, alarm transitions."""
 
     def __init__(
         self,
@@ -129,6 +131,7 @@ class SpanExport:
         self.state_before: str = "unknown"
         self.state_shown = False
         self.damage_at = -1  # stream sample of the last damage written
+        self._last_window_ns = -1  # the newest steady window written (or outside the span)
 
     # ------------------------------------------------------------ span
     def wanted(self, t0_ns: int, t_end_ns: int) -> bool:
@@ -296,7 +299,7 @@ class SpanExport:
         self.damage_at = n
         for comp, d in a.damage_summary().items():
             base = self.base.get(comp, 0.0)
-            self.writer.damage(self.mill, comp, t, d["committed"] - base, d["with_residue"] - base)
+            self.writer.damage(self.mill, comp, t, d.committed - base, d.with_residue - base)
 
     def _collect(self, out: AnalyzerOutput) -> None:
         start = self._span_start()
@@ -307,11 +310,23 @@ class SpanExport:
                 self._show_state()
                 self.writer.state(self.mill, t, label)
         for event in out.events:
-            if self._in_span(int(event["t_ns"])):
-                self.writer.event(self.mill, event, event_line(event))
+            if self._in_span(event.t_ns):
+                data = event.to_json()
+                self.writer.event(self.mill, data, event_line(data))
         for window in out.harmonics:
             if self._in_span(window.t_end_ns):
                 self.writer.harmonics(self.mill, window)
+        for steady in self._new_windows():
+            if self._in_span(int(steady["t_ns"])):
+                self.writer.steady(self.mill, steady)
+
+    def _new_windows(self) -> list[dict[str, Any]]:
+        """The analyzer's steady windows completed since the last call, oldest first."""
+        new = list(itertools.takewhile(lambda w: w["t_ns"] > self._last_window_ns,
+                                       reversed(self.analyzer.steady_windows)))  # fmt: skip
+        if new:
+            self._last_window_ns = int(new[0]["t_ns"])
+        return new[::-1]
 
     def _show_state(self) -> None:
         """The state in force at the span start, once (before the first change inside it)."""

@@ -37,6 +37,7 @@ from asyncua.crypto.permission_rules import User
 
 from service.api.backend import Backend
 from service.api.mill_views import mill_summary
+from service.api.models import MillSummary
 from service.errors import ApiError
 from service.opcua.access import CALLER, OPERATOR, AccessRules, Login, Logins, certificate_names
 from service.opcua.address_space import NAMESPACE_URI, MillNodes, root_folder
@@ -181,7 +182,7 @@ class OpcUaServer:
                 )
             mill = await MillNodes.create(server, ns, sites[config.site], config)
             await mill.node.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
-            await mill.apply(mill_points(config, {}, None, None))  # every node, values unknown
+            await mill.apply(mill_points(config, None, None, None, None))  # every node, unknown
             self._mills[config.id] = mill
         self._conditions = await Conditions.create(server, self._mills)
         ack_method = server.get_node(nid(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge))
@@ -228,8 +229,8 @@ class OpcUaServer:
             if self._answers.get(mill_id) == answers:
                 continue  # nothing changed: no points to make, no values to compare
             self._answers[mill_id] = answers
-            detail = {**mill_summary(config, status, None), "status": status or {}}
-            out[mill_id] = mill_points(config, detail, life, starts)
+            summary = MillSummary.model_validate(mill_summary(config, status, None))
+            out[mill_id] = mill_points(config, summary, status, life, starts)
         return out
 
     def _ask(self, mill_id: str, what: str, fn: Callable[..., T], *args: Any) -> T | None:

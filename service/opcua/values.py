@@ -1,7 +1,9 @@
 """What the OPC UA server shows of a mill: the backend's answers flattened to named points.
 
-Pure: the REST bodies in (``GET /mills/{id}``, ``/mills/{id}/life``, ``/mills/{id}/starts``: the
-same :class:`~service.api.backend.Backend` answers), ``{path: Point}`` out. A path is the browse
+Pure: the backend's answers in — the mill's line of ``GET /mills`` and its status
+(:class:`~service.status.MillStatus`, read by attribute), ``/mills/{id}/life`` and
+``/mills/{id}/starts`` (the same :class:`~service.api.backend.Backend` answers as REST) —
+``{path: Point}`` out. A path is the browse
 path under the mill's node (``SteadyState/motor_torque/RangePct``); it is also the string part of
 the variable's NodeId, so a SCADA tag list can be written from this table:
 
@@ -42,10 +44,15 @@ from enum import Enum
 from typing import Any
 
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.results import SteadyWindowResult
+from service.api.models import MillSummary
+from service.status import NO_STATUS, MillHealthStatus, MillStatus
 
 __all__ = ["Kind", "Point", "mill_points", "ns_to_datetime"]
 
 _UNIT_OF_KIND = {"torque": "kN·m", "bending": "MPa", "rpm": "rpm"}
+#: The per-channel points of a steady window: mean, range_per_rev, mean_pct, range_pct.
+_STEADY_FIELDS = ("Mean", "RangePerRev", "MeanPct", "RangePct")
 
 
 class Kind(Enum):
@@ -84,24 +91,27 @@ def _count(value: Any) -> int | None:
 
 def mill_points(
     config: MillConfig,
-    detail: Mapping[str, Any],
+    summary: MillSummary | None,
+    status: MillStatus | None,
     life: Mapping[str, Any] | None,
     starts: Mapping[str, Any] | None,
 ) -> dict[str, Point]:
-    """Every point of one mill (module docstring); ``life``/``starts`` None when the backend
-    could not answer them (their points are then ``None``)."""
-    status = detail.get("status") or {}
+    """Every point of one mill (module docstring): ``summary`` its line of ``GET /mills``
+    (state, hold, stale channels), ``status`` the worker's (None: its worker is gone);
+    ``life``/``starts`` None when the backend could not answer them (their points are then
+    ``None``; all None: every point unknown)."""
+    status = status or NO_STATUS
     points = {
-        "State": Point(detail.get("state"), Kind.STRING),
-        "HeldReason": Point(detail.get("held_reason"), Kind.STRING),
-        "StaleChannels": Point(list(detail.get("stale_channels") or []), Kind.STRINGS),
-        "LastSampleTime": Point(ns_to_datetime(status.get("last_sample_ns")), Kind.TIME),
-        "OpenAlarms": Point(_count(status.get("open_alarms")), Kind.UINT),
+        "State": Point(summary and summary.state, Kind.STRING),
+        "HeldReason": Point(summary and summary.held_reason, Kind.STRING),
+        "StaleChannels": Point([] if summary is None else summary.stale_channels, Kind.STRINGS),
+        "LastSampleTime": Point(ns_to_datetime(status.last_sample_ns), Kind.TIME),
+        "OpenAlarms": Point(status.open_alarms, Kind.UINT),
     }
     points.update(_starts_points(starts or {}))
-    points.update(_steady_points(config, status.get("latest_steady")))
+    points.update(_steady_points(config, status.latest_steady))
     points.update(_life_points(config, life or {}))
-    points.update(_channel_points(config, status.get("health") or {}))
+    points.update(_channel_points(config, status.health))
     return points
 
 
@@ -118,20 +128,19 @@ def steady_channels(config: MillConfig) -> list[str]:
     return [n for n, c in config.channels.items() if c.kind in ("torque", "bending")]
 
 
-def _steady_points(config: MillConfig, window: Mapping[str, Any] | None) -> dict[str, Point]:
-    w = window or {}
+def _steady_points(config: MillConfig, w: SteadyWindowResult | None) -> dict[str, Point]:
     out = {
-        "SteadyState/Time": Point(ns_to_datetime(w.get("t_ns")), Kind.TIME),
-        "SteadyState/SpeedPct": Point(_num(w.get("speed_pct")), Kind.DOUBLE, "%"),
-        "SteadyState/ImbalancePct": Point(_num(w.get("imbalance_pct")), Kind.DOUBLE, "%"),
-    }
+        "SteadyState/Time": Point(None if w is None else ns_to_datetime(w.t_ns), Kind.TIME),
+        "SteadyState/SpeedPct": Point(None if w is None else w.speed_pct, Kind.DOUBLE, "%"),
+        "SteadyState/ImbalancePct": Point(None if w is None else w.imbalance_pct, Kind.DOUBLE,
+                                          "%"),
+    }  # fmt: skip
+    none: dict[str, float] = {}
+    tables = (none,) * 4 if w is None else (w.mean, w.range_per_rev, w.mean_pct, w.range_pct)
     for name in steady_channels(config):
         unit = _UNIT_OF_KIND[config.channels[name].kind]
-        base = f"SteadyState/{name}/"
-        fields = (("mean", "Mean", unit), ("range_per_rev", "RangePerRev", unit),
-                  ("mean_pct", "MeanPct", "%"), ("range_pct", "RangePct", "%"))  # fmt: skip
-        for field, label, u in fields:
-            out[base + label] = Point(_num((w.get(field) or {}).get(name)), Kind.DOUBLE, u)
+        for table, label, u in zip(tables, _STEADY_FIELDS, (unit, unit, "%", "%"), strict=True):
+            out[f"SteadyState/{name}/{label}"] = Point(table.get(name), Kind.DOUBLE, u)
     return out
 
 
@@ -153,15 +162,14 @@ def _life_points(config: MillConfig, life: Mapping[str, Any]) -> dict[str, Point
     return out
 
 
-def _channel_points(config: MillConfig, health: Mapping[str, Any]) -> dict[str, Point]:
-    channels = health.get("channels") or {}
+def _channel_points(config: MillConfig, health: MillHealthStatus | None) -> dict[str, Point]:
+    channels = {} if health is None else health.channels
     out = {"Channels/MissingBlocksTotal": Point(
-        _count(health.get("missing_blocks_total")), Kind.UINT)}  # fmt: skip
+        None if health is None else health.missing_blocks_total, Kind.UINT)}  # fmt: skip
     for name in config.channels:
-        c = channels.get(name) or {}
+        c = channels.get(name)
         base = f"Channels/{name}/"
-        out[base + "LagS"] = Point(_num(c.get("lag_s")), Kind.DOUBLE, "s")
-        out[base + "MissingBlocks"] = Point(_count(c.get("missing_blocks")), Kind.UINT)
-        stale = c.get("stale")
-        out[base + "Stale"] = Point(stale if isinstance(stale, bool) else None, Kind.BOOL)
+        out[base + "LagS"] = Point(c and c.lag_s, Kind.DOUBLE, "s")
+        out[base + "MissingBlocks"] = Point(c and c.missing_blocks, Kind.UINT)
+        out[base + "Stale"] = Point(c and c.stale, Kind.BOOL)
     return out

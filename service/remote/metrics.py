@@ -20,6 +20,8 @@ from service.api.alarm_board import AlarmBoard
 from service.api.domain_metrics import LifeCache
 from service.api.metrics import mill_families, open_alarms
 from service.api.mill_views import UNREACHABLE
+from service.remote.protocol import StatusAnswer
+from service.status import MillStatus
 
 __all__ = ["RemoteCollector", "StatusSource", "remote_registry"]
 
@@ -30,7 +32,7 @@ class StatusSource(Protocol):
     @property
     def mills(self) -> Mapping[str, MillConfig]: ...
 
-    def statuses(self) -> dict[str, dict[str, Any]]: ...
+    def statuses(self) -> dict[str, StatusAnswer]: ...
 
     def alarm_board(self) -> AlarmBoard: ...
 
@@ -54,7 +56,7 @@ class RemoteCollector(Collector):
 
     def collect(self) -> Iterator[Metric]:
         gathered = self.backend.statuses()
-        workers = {a["worker"]["name"]: a["worker"] for a in gathered.values()}
+        workers = {a.worker["name"]: a.worker for a in gathered.values()}
         for name, key, doc in _WORKER_COUNTERS:
             family = CounterMetricFamily(name, doc, labels=["worker"])
             for worker, info in sorted(workers.items()):
@@ -74,7 +76,7 @@ class RemoteCollector(Collector):
         for mill in sorted(self.backend.mills):
             reachable.add_metric([mill], 1 if mill in gathered else 0)
         yield reachable
-        status = {m: gathered[m]["status"] if m in gathered else {"state": UNREACHABLE}
+        status = {m: gathered[m].status if m in gathered else MillStatus(state=UNREACHABLE)
                   for m in self.backend.mills}  # fmt: skip
 
         # life only of mills whose worker answers (an unreachable one would cost a timeout)

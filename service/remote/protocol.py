@@ -8,7 +8,8 @@ here. A question about a mill is a zenoh ``get`` on ``millwatch/v1/<site>/<mill>
 =========  ======================  ==============================================
 what       arguments               answer
 =========  ======================  ==============================================
-status     —                       ``{"status": <mill status>, "worker": <info>}``
+status     —                       :class:`StatusAnswer`: ``{"status": MillStatus,
+                                   "worker": <info>}``
 life       —                       ``GET /mills/{id}/life`` body
 starts     ``month`` (optional)    ``GET /mills/{id}/starts`` body
 spectrum   —                       ``GET /mills/{id}/spectrum`` body
@@ -18,11 +19,12 @@ alarm      ``alarm_id``            ``GET /alarms/{id}`` body
 ack        ``alarm_id``, ``by``    the alarm after acknowledgement
 =========  ======================  ==============================================
 
-Answers are UTF-8 JSON (:data:`JSON`). Errors are ``reply_err`` with problem JSON (``status``,
-``title``, ``detail``): :func:`problem_of` on the worker, :func:`problem_from` on the API, which
-raises the same :mod:`service.api.errors` exception, so the remote API answers what an in-process
-one would. A new question is a member of :class:`Question`, an entry in the worker's
-``ANSWERS`` and a method of the backend that asks it.
+Answers are UTF-8 JSON (:data:`JSON`); a typed answer is sent as its model's JSON data and
+read back with ``model_validate`` (:class:`StatusAnswer`). Errors are ``reply_err`` with problem
+JSON (``status``, ``title``, ``detail``): :func:`problem_of` on the worker,
+:func:`problem_from` on the API, which raises the same :mod:`service.api.errors` exception, so
+the remote API answers what an in-process one would. A new question is a member of
+:class:`Question`, an entry in the worker's ``ANSWERS`` and a method of the backend that asks it.
 """
 
 from __future__ import annotations
@@ -31,12 +33,16 @@ import json
 from enum import StrEnum
 from typing import Any
 
+from pydantic import BaseModel, Field
+
 from service.api.errors import error_for_status, status_of
 from service.errors import ApiError, BadRequest
+from service.status import MillStatus
 
 __all__ = [
     "JSON",
     "Question",
+    "StatusAnswer",
     "alarm_args",
     "alarm_id_of",
     "by_of",
@@ -65,6 +71,17 @@ class Question(StrEnum):
     ALARM = "alarm"
     ACK = "ack"
     FLEET = "fleet"
+
+
+class StatusAnswer(BaseModel):
+    """The answer to ``status``: the mill's status and the worker that analyses it."""
+
+    status: MillStatus
+    worker: dict[str, Any] = Field(description="Name, partition, counters, readiness checks.")
+
+    def to_json(self) -> dict[str, Any]:
+        """As sent: the status as the worker set it (:meth:`MillStatus.to_json`)."""
+        return {"status": self.status.to_json(), "worker": self.worker}
 
 
 # ---------------------------------------------------------------------- arguments

@@ -41,6 +41,7 @@ from service.errors import ApiError, NotFound, Unavailable
 from service.remote.protocol import (
     JSON,
     Question,
+    StatusAnswer,
     alarm_id_of,
     by_of,
     decode_args,
@@ -78,7 +79,9 @@ def _ack(backend: LocalBackend, mill_id: str, args: dict[str, Any]) -> Any:
 
 
 ANSWERS: dict[Question, Answer] = {
-    Question.STATUS: lambda b, m, _: {"status": b.status(m), "worker": b.worker_info()},
+    Question.STATUS: lambda b, m, _: StatusAnswer(
+        status=b.status(m), worker=b.worker_info()
+    ).to_json(),
     Question.LIFE: lambda b, m, _: b.life(m),
     Question.STARTS: lambda b, m, a: b.starts(m, month_of(a)),
     Question.SPECTRUM: lambda b, m, _: b.spectrum(m),

@@ -34,6 +34,7 @@ from typing import Any
 
 import zenoh
 from prometheus_client import CollectorRegistry
+from pydantic import ValidationError
 
 from alarms.times import iso_utc
 from alarms.wire import AlarmWireError
@@ -53,6 +54,7 @@ from service.errors import GatewayTimeout, NotFound, Unavailable
 from service.remote.metrics import remote_registry
 from service.remote.protocol import (
     Question,
+    StatusAnswer,
     alarm_args,
     decode,
     encode,
@@ -62,6 +64,7 @@ from service.remote.protocol import (
 from service.remote.report_codec import ReportDecodeError, report_from_dict
 from service.reports.fleet import build_fleet, fleet_mill_from_dict, fleet_to_dict
 from service.reports.monthly import MonthlyReport
+from service.status import MillStatus
 
 __all__ = ["DEFAULT_TIMEOUT_S", "ZenohBackend"]
 
@@ -236,12 +239,18 @@ class ZenohBackend:
     def alarm_board(self) -> AlarmBoard:
         return self._board
 
-    def statuses(self) -> dict[str, dict[str, Any]]:
-        """Every reachable mill's ``{"status", "worker"}`` (one gather)."""
-        gathered = self._gather(Question.STATUS)
-        for answer in gathered.values():
-            self._remember(answer.get("worker", {}))
-        return gathered
+    def statuses(self) -> dict[str, StatusAnswer]:
+        """Every reachable mill's status and worker (one gather); an answer that does not fit
+        this API's version is logged and left out (its mill counts as unreachable)."""
+        out = {}
+        for mill_id, raw in self._gather(Question.STATUS).items():
+            try:
+                out[mill_id] = StatusAnswer.model_validate(raw)
+            except ValidationError as exc:
+                log.warning("status of %s unreadable: %s", mill_id, exc)
+                continue
+            self._remember(out[mill_id].worker)
+        return out
 
     def mills_overview(self) -> list[dict[str, Any]]:
         gathered = self.statuses()
@@ -251,20 +260,20 @@ class ZenohBackend:
             if answer is None:
                 out.append(mill_summary(config, None, self._worker_gone(mill_id)["name"]))
             else:
-                out.append(mill_summary(config, answer["status"], answer["worker"].get("name")))
+                out.append(mill_summary(config, answer.status, answer.worker.get("name")))
         return out
 
-    def mill_statuses(self) -> dict[str, dict[str, Any]]:
+    def mill_statuses(self) -> dict[str, MillStatus]:
         """One gather of every reachable mill's status."""
-        return {m: answer["status"] for m, answer in self.statuses().items()}
+        return {m: answer.status for m, answer in self.statuses().items()}
 
     def mill_detail(self, mill_id: str) -> dict[str, Any]:
         config = config_of(self.mills, mill_id)
         if mill_id not in self.live_workers():
             return mill_detail(config, None, self._worker_gone(mill_id))
-        answer = self._ask(mill_id, Question.STATUS)
-        self._remember(answer["worker"])
-        return mill_detail(config, answer["status"], answer["worker"])
+        answer = StatusAnswer.model_validate(self._ask(mill_id, Question.STATUS))
+        self._remember(answer.worker)
+        return mill_detail(config, answer.status, answer.worker)
 
     def life(self, mill_id: str) -> dict[str, Any]:
         return self._ask(mill_id, Question.LIFE)
@@ -323,18 +332,13 @@ class ZenohBackend:
         (``held_mills``: why a held one is not), as the in-process ``/ready`` says."""
         gathered = self.statuses()
         stale = {
-            m: gathered[m]["status"].get("health", {}).get("stale_channels", [])
-            if m in gathered
-            else list(c.channels)
+            m: gathered[m].status.stale_channels if m in gathered else list(c.channels)
             for m, c in self.mills.items()
         }
-        held = {m: a["status"]["held_reason"] for m, a in gathered.items()
-                if a["status"].get("held_reason")}  # fmt: skip
-        stalled = {m: a["status"]["stalled_reason"] for m, a in gathered.items()
-                   if a["status"].get("stalled_reason")}  # fmt: skip
-        workers = {
-            a["worker"].get("name"): a["worker"].get("checks", {}) for a in gathered.values()
-        }
+        held = {m: a.status.held_reason for m, a in gathered.items() if a.status.held_reason}
+        stalled = {m: a.status.stalled_reason for m, a in gathered.items()
+                   if a.status.stalled_reason}  # fmt: skip
+        workers = {a.worker.get("name"): a.worker.get("checks", {}) for a in gathered.values()}
         checks: dict[str, Any] = {
             "zenoh": not self.session.is_closed() and bool(self.session.info.routers_zid()),
             "workers": workers,
@@ -358,7 +362,7 @@ class ZenohBackend:
         """Each live worker's month-end report job, as its status answers carry it (without
         the per-mill ``latest`` months of the in-process answer)."""
         workers = {
-            a["worker"].get("name"): a["worker"].get("reports", {"enabled": None})
+            a.worker.get("name"): a.worker.get("reports", {"enabled": None})
             for a in self.statuses().values()
         }
         return {"workers": workers}

@@ -28,6 +28,7 @@ from service.reports.history import last_months, life_inputs, monthly_trend
 from service.reports.life import compute_life, local_iso, years_range_text
 from service.reports.plain import plain
 from service.reports.starts import current_month
+from service.status import NO_STATUS, MillStatus
 from service.store.database import Store
 
 __all__ = [
@@ -127,16 +128,16 @@ def fleet_entry(
     config: MillConfig,
     now_ns: int,
     *,
-    status: Mapping[str, Any] | None = None,
+    status: MillStatus | None = None,
     open_alarms: Sequence[Alarm] = (),
 ) -> FleetMill:
     """One mill's fleet line from its store (read in one snapshot), the worker's status (live
     damage, analysed position) and its open alarms."""
-    status = status or {}
+    status = status or NO_STATUS
     months = last_months(current_month(config, now_ns), FLEET_MONTHS)
     with store.read_snapshot():
-        inputs = life_inputs(store, config, now_ns, live=status.get("damage"),
-                             last_sample_ns=status.get("last_sample_ns"))  # fmt: skip
+        inputs = life_inputs(store, config, now_ns, live=status.live_damage(),
+                             last_sample_ns=status.last_sample_ns)  # fmt: skip
         life = compute_life(inputs)
         trend = monthly_trend(store, config, months)
     gov = life.components.get(life.governing_component or "")

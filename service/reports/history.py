@@ -200,20 +200,22 @@ class _Sampled:
 
 
 def _sampled_steady(store: Store, mill_id: str, lo: int, hi: int) -> _Sampled:
-    """The sampled windows' oscillation ranges and bending amplitudes (range per revolution
-    / 2) per channel; the channels are those of the newest window in ``[lo, hi)``."""
+    """The sampled windows' oscillation ranges and bending amplitudes (the windows', half the
+    range per revolution) per channel; the channels are those of the newest window in
+    ``[lo, hi)``."""
     newest = store.records(mill_id, "steady", lo, limit=1, until_ns=hi)
     window = newest[0][1] if newest else {}
     ranges = sorted(window.get("range_pct") or {})
-    bending = sorted(k for k in window.get("range_per_rev") or {} if k.startswith("bending"))
-    paths = [("range_pct", ch) for ch in ranges] + [("range_per_rev", ch) for ch in bending]
+    bending = sorted(window.get("bending_amplitude_mpa") or {})
+    paths = [("range_pct", ch) for ch in ranges]
+    paths += [("bending_amplitude_mpa", ch) for ch in bending]
     rows = store.record_values(mill_id, "steady", paths, (lo, hi), TREND_SAMPLE_NS)
     cols = np.array([[np.nan if v is None else float(v) for v in values] for _, values in rows],
                     dtype=float).reshape(len(rows), len(paths))  # fmt: skip
     n = len(ranges)
     return _Sampled(np.array([t for t, _ in rows], dtype=np.int64),
                     {ch: cols[:, i] for i, ch in enumerate(ranges)},
-                    {ch: cols[:, n + i] / 2.0 for i, ch in enumerate(bending)})  # fmt: skip
+                    {ch: cols[:, n + i] for i, ch in enumerate(bending)})  # fmt: skip
 
 
 def _stats(columns: dict[str, np.ndarray], i: int, j: int) -> ChannelStats:

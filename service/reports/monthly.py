@@ -418,21 +418,18 @@ class _MonthReader:
 
     def steady(self) -> _SteadyRows:
         """Only the fields the report uses, extracted by SQLite (no per-window JSON decode)."""
-        (ranges, per_rev), rows = self.store.record_columns(
+        (ranges, bending), rows = self.store.record_columns(
             self.mill_id, "steady", [("sample",), ("end_sample",)],
-            [("range_pct",), ("range_per_rev",)], *self.window,
+            [("range_pct",), ("bending_amplitude_mpa",)], *self.window,
         )  # fmt: skip
-        cols = [[r[i] for r in rows] for i in range(3 + len(ranges) + len(per_rev))]
+        cols = [[r[i] for r in rows] for i in range(3 + len(ranges) + len(bending))]
         t = list(cols[0])
         values = [[None if v is None else float(v) for v in c] for c in cols[3:]]
-        bending = {ch: c for ch, c in zip(per_rev, values[len(ranges) :], strict=True)
-                   if ch.startswith("bending")}  # fmt: skip
         return _SteadyRows(
             t_ns=t,
             end_ns=[_window_end(*w) for w in zip(t, cols[1], cols[2], strict=True)],
             range_pct=dict(zip(ranges, values[: len(ranges)], strict=True)),
-            bending={ch: [None if v is None else v / 2.0 for v in c]  # amplitude = range / 2
-                     for ch, c in bending.items()},
+            bending=dict(zip(bending, values[len(ranges) :], strict=True)),
         )  # fmt: skip
 
     def harmonic_tables(self) -> list[tuple[int, dict[str, Any]]]:

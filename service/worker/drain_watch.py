@@ -15,7 +15,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+
+from service.status import MillStatus
 
 __all__ = ["DrainWatch"]
 
@@ -37,17 +38,17 @@ class DrainWatch:
         #: Stalled mills: mill id → what the operator should read.
         self.stalled: dict[str, str] = {}
 
-    def update(self, status: Mapping[str, Mapping[str, Any]]) -> None:
-        """Take the worker's status (``Worker.status``: ``health.channels.*.blocks`` and
-        ``samples`` per mill; held mills are not analysed on purpose and are skipped)."""
+    def update(self, status: Mapping[str, MillStatus]) -> None:
+        """Take the worker's status (``Worker.status``: the channels' blocks and the samples
+        analysed per mill; held mills are not analysed on purpose and are skipped)."""
         now = self._clock()
         for mill_id, s in status.items():
-            if s.get("held_reason"):
+            if s.held_reason:
                 self._progress.pop(mill_id, None)
                 self.stalled.pop(mill_id, None)
                 continue
-            blocks = sum(c.get("blocks", 0) for c in s["health"]["channels"].values())
-            samples = int(s.get("samples", 0))
+            blocks = sum(c.blocks for c in s.channel_health.values())
+            samples = s.samples or 0
             last = self._progress.get(mill_id)
             if last is None or samples != last.samples or blocks == last.blocks:
                 # analysis moving, or nothing new to analyse: not stalled; the clock restarts

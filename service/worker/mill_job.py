@@ -42,9 +42,16 @@ from alarms.observations import Observation, local_month
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.drivetrain.torsional_model import NO_MODEL_NOTE
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
+from analytics.mill.results import (
+    AnalyzerEvent,
+    ComponentDamage,
+    StartEvent,
+    SteadyWindowResult,
+)
 from analytics.spectra.resonance import resonance_margins
 from analytics.spectra.settings import stagger_for
 from ingest.wire import Block
+from service.status import MillStatus
 from service.store.records import DamageRow, EventRow
 from service.worker.worker import MillUpdate
 
@@ -82,6 +89,7 @@ class MillJob:
         self._next_damage = self._damage_every + round(stagger_for(config.id) * self._damage_every)
         self._last_window_ns = -1
         self._latest_window: dict[str, Any] | None = None
+        self._latest_typed: SteadyWindowResult | None = None
         self._next_harmonics_ns = 0
         self._held_events: list[EventRow] = []  # stored with the next finish()
         self._covered_until: int | None = None  # monitored time stored up to here (ns)
@@ -140,7 +148,8 @@ class MillJob:
             observations += self._event_observations(event)
         for window in self._new_windows():
             update.records.append(("steady", int(window["t_ns"]), window))
-            observations += window_observations(self.config.id, window)
+            self._latest_typed = SteadyWindowResult.model_validate(window)
+            observations += window_observations(self.config.id, self._latest_typed)
         for hw in out.harmonics:
             peaks = [p.to_dict() for p in hw.peaks]
             if peaks or hw.t_end_ns >= self._next_harmonics_ns:
@@ -154,17 +163,16 @@ class MillJob:
         if observations:
             update.alarm_transitions += self.alarms.observe_all(observations)
 
-    def _event_row(self, event: dict[str, Any]) -> EventRow:
-        return EventRow(self.config.id, str(event["event"]), int(event["t_ns"]), event,
-                        event.get("end_t_ns"))  # fmt: skip
+    def _event_row(self, event: AnalyzerEvent) -> EventRow:
+        return EventRow(self.config.id, event.event, event.t_ns, event.to_json(), event.end_t_ns)
 
-    def _event_observations(self, event: dict[str, Any]) -> list[Observation]:
+    def _event_observations(self, event: AnalyzerEvent) -> list[Observation]:
         obs = event_observations(self.config.id, event)
-        if event.get("event") == "start":
-            month = local_month(int(event["t_ns"]), self.config.time_zone)
+        if isinstance(event, StartEvent):
+            month = local_month(event.t_ns, self.config.time_zone)
             count = self.analyzer.starts_in_month(month)
             obs.append(Observation(self.config.id, "starts_this_month", float(count),
-                                   int(event["t_ns"]), {"month": month}))  # fmt: skip
+                                   event.t_ns, {"month": month}))  # fmt: skip
         return obs
 
     def _new_windows(self) -> list[dict[str, Any]]:
@@ -194,7 +202,7 @@ class MillJob:
         if t_ns is None:  # nothing analysed: no damage, no rate
             return []
         if seconds < life.min_monitoring_days * 86_400 or (
-            self.analyzer.loads.starts_total < life.min_starts
+            self.analyzer.starts_total < life.min_starts
         ):
             return []
         prior = life.prior_damage
@@ -231,19 +239,29 @@ class MillJob:
         return self.analyzer.spike_counts()
 
     # ------------------------------------------------------------------ reading
-    def status(self) -> dict[str, Any]:
+    def status(self) -> MillStatus:
+        """The analysis part of the mill's status (the worker adds health and hold)."""
         a = self.analyzer
-        return {
-            "state": a.state,
-            "samples": a.samples,
-            "last_sample_ns": a.next_sample_ns,
-            "latest_steady": self._latest_window,
-            "open_alarms": len(self.alarms.open_alarms(self.config.id)),
-            "monitored_since_ns": a.first_sample_ns,
-            "simulated": self.config.simulated,
-            "damage": self._damage_summary(),
-            "starts_this_month": self._starts_this_month(),
-        }
+        return MillStatus(
+            state=a.state,
+            samples=a.samples,
+            last_sample_ns=a.next_sample_ns,
+            latest_steady=self._latest_steady(),
+            open_alarms=len(self.alarms.open_alarms(self.config.id)),
+            monitored_since_ns=a.first_sample_ns,
+            simulated=self.config.simulated,
+            damage=self._damage_summary(),
+            starts_this_month=self._starts_this_month(),
+        )
+
+    def _latest_steady(self) -> SteadyWindowResult | None:
+        """The latest steady window, typed (validated once per window)."""
+        w = self._latest_window
+        if w is None:
+            return None
+        if self._latest_typed is None or self._latest_typed.t_ns != w["t_ns"]:
+            self._latest_typed = SteadyWindowResult.model_validate(w)
+        return self._latest_typed
 
     def _starts_this_month(self) -> int:
         """Starts in the local calendar month of the last analysed sample (0 before any)."""
@@ -252,7 +270,7 @@ class MillJob:
             return 0
         return self.analyzer.starts_in_month(local_month(int(t_ns), self.config.time_zone))
 
-    def _damage_summary(self) -> dict[str, dict[str, float]]:
+    def _damage_summary(self) -> dict[str, ComponentDamage]:
         """Miner damage per component so far: closed cycles (``committed``), what closing the
         open rainflow residue now as half cycles would add (``pending_residue``), and their sum
         (``with_residue``). Cheap (the residue is a few turning points); called by the worker
@@ -276,7 +294,8 @@ class MillJob:
         self.alarms.restore(snapshot["alarms"])
         self._next_damage = int(snapshot["next_damage"])
         self._last_window_ns = int(snapshot["last_window_ns"])
-        self._latest_window = snapshot["latest_window"]
+        windows = self.analyzer.steady_windows  # (as restored: channels by the mill file's names)
+        self._latest_window = windows[-1] if windows else snapshot["latest_window"]
         self._next_harmonics_ns = int(snapshot["next_harmonics_ns"])
         self._covered_until = self.analyzer.next_sample_ns
         self._held_events += self._restart_events()

@@ -26,7 +26,7 @@ from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 import numpy as np
 
@@ -88,8 +88,8 @@ class BackgroundSpectra:
     in the order the analyzer feeds it (so with the same results): the spectra — about two
     thirds of the work of a running mill — overlap the rest of the analysis on another core.
     For an offline analysis only, which reads the tracker's windows from its report at the end:
-    :meth:`feed` returns no windows. Reading any other attribute waits until everything fed is
-    analysed."""
+    :meth:`feed` returns no windows. A :class:`~analytics.mill.analyzer.SpectraRunner`, given to
+    the analyzer as its ``spectra_runner`` (it drains the runner before it reads the tracker)."""
 
     def __init__(self, tracker: HarmonicTracker, depth: int = 32) -> None:
         self._tracker = tracker
@@ -139,10 +139,6 @@ class BackgroundSpectra:
         if self._error is not None:
             raise self._error
 
-    def __getattr__(self, name: str) -> Any:
-        self.drain()
-        return getattr(self._tracker, name)
-
 
 class _AdmittingSink:
     """What the offline sinks share: the given mills and their :class:`BlockAdmission` (the
@@ -174,13 +170,17 @@ class OfflineSink(_AdmittingSink):
         self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
     ) -> None:
         super().__init__(configs)
-        self.analyzers = {c.id: MillAnalyzer(c, spectra=spectra) for c in configs}
         self._background: list[BackgroundSpectra] = []
-        if spectra and background:  # each mill's spectra on a thread of their own
-            for analyzer in self.analyzers.values():
-                self._background.append(BackgroundSpectra(analyzer.harmonics))
-                # (the analyzer only feeds, flushes and reports its tracker: the wrapper does)
-                analyzer.harmonics = cast(HarmonicTracker, self._background[-1])
+        # each mill's spectra on a thread of their own
+        runner = self._background_spectra if spectra and background else None
+        self.analyzers = {
+            c.id: MillAnalyzer(c, spectra=spectra, spectra_runner=runner) for c in configs
+        }
+
+    def _background_spectra(self, tracker: HarmonicTracker) -> BackgroundSpectra:
+        """A mill analyzer's spectra runner: its tracker on a thread of its own."""
+        self._background.append(BackgroundSpectra(tracker))
+        return self._background[-1]
 
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
         """One block the lane could not take as part of a regular run: admitted, then aligned
@@ -217,15 +217,15 @@ class OfflineSink(_AdmittingSink):
         """One mill's reading counts: blocks, gaps, repeats, clock faults, decode errors and
         what its aligner met (JSON-ready)."""
         channels = self.admission.health[mill_id].channels.values()
-        aligner = self.analyzers[mill_id].aligner
+        analyzer = self.analyzers[mill_id]
         return {
             "blocks": sum(h.blocks for h in channels),
             "missing_blocks": sum(h.missing_blocks for h in channels),
             "repeated_blocks": sum(h.repeats for h in channels),
             "clock_fault_blocks": sum(h.clock_faults for h in channels),
             "decode_errors": sum(sum(h.decode_errors.values()) for h in channels),
-            "gap_samples": aligner.gap_samples,
-            "late_blocks": aligner.dropped_blocks,
+            "gap_samples": analyzer.gap_samples,
+            "late_blocks": analyzer.late_blocks,
         }
 
 

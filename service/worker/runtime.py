@@ -51,6 +51,7 @@ from ingest.keys import alarm_key, live_pattern, mill_channel_keys, mill_pattern
 from ingest.zenoh_session import build_config, connected_peers, open_retrying
 from service.reports.month_end import MonthEndJob
 from service.settings import ServiceSettings
+from service.status import MillStatus
 from service.store.database import Store
 from service.worker.block_queue import BlockQueue
 from service.worker.drain_watch import DrainWatch
@@ -101,7 +102,7 @@ class ServiceRuntime:
         self._alarm_publishers: dict[str, zenoh.Publisher] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self.status: dict[str, Any] = {}
+        self.status: dict[str, MillStatus] = {}
         #: Called in the worker thread with each batch of stored alarm transitions (e.g. the
         #: API's alarm board), before they are published on zenoh; must be quick.
         self.alarm_listeners: list[Callable[[list[Transition]], None]] = []
@@ -278,9 +279,10 @@ class ServiceRuntime:
         assert self.worker is not None
         status = self.worker.status(self.settings.worker.stale_after_s)
         self.drain_watch.update(status)
-        for mill_id, s in status.items():
-            s["stalled_reason"] = self.drain_watch.stalled.get(mill_id)
-        self.status = status
+        self.status = {
+            m: s.model_copy(update={"stalled_reason": self.drain_watch.stalled.get(m)})
+            for m, s in status.items()
+        }
 
     def stop(self) -> None:
         """Stop in reverse order; safe to call twice."""
@@ -347,8 +349,8 @@ class ServiceRuntime:
         """What ``GET /ready`` reports: zenoh up, archive writable, store reachable, fresh data,
         every mill analysed (``held_mills``: why a held mill is not; see
         :mod:`service.worker.worker`)."""
-        stale = {m: s["health"]["stale_channels"] for m, s in self.status.items()}
-        held = {m: s["held_reason"] for m, s in self.status.items() if s.get("held_reason")}
+        stale = {m: s.stale_channels for m, s in self.status.items()}
+        held = {m: s.held_reason for m, s in self.status.items() if s.held_reason}
         flags = {
             "zenoh": self.session is not None
             and (not self.settings.zenoh.connect or connected_peers(self.session) > 0),
@@ -357,8 +359,7 @@ class ServiceRuntime:
             and (self.worker is None or self.worker.archive_errors == 0),
             "store": self._store_ok(),
         }
-        stalled = {m: s["stalled_reason"] for m, s in self.status.items()
-                   if s.get("stalled_reason")}  # fmt: skip
+        stalled = {m: s.stalled_reason for m, s in self.status.items() if s.stalled_reason}
         per_mill = {  # the MILL_CHECKS
             "data_fresh": {m: not s for m, s in stale.items()},
             "analysed": {m: m not in held for m in self.status},

@@ -56,6 +56,7 @@ from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.files import ArchivePosition
 from ingest.archive.writer import ArchiveWriter
 from ingest.wire import Block
+from service.status import MillHealthStatus, MillStatus
 from service.store.database import Store
 from service.store.records import DamageRow, EventRow
 from service.worker.admission import BlockAdmission
@@ -128,7 +129,7 @@ class MillPipeline(Protocol):
 
     def spike_counts(self) -> dict[str, int]: ...
 
-    def status(self) -> dict[str, Any]: ...
+    def status(self) -> MillStatus: ...
 
     def snapshot(self) -> dict[str, Any]: ...
 
@@ -574,7 +575,7 @@ class Worker:
             raise CheckpointRestoreError(mill_id, at, exc) from exc
 
     # ------------------------------------------------------------------ reading
-    def status(self, stale_after_s: float) -> dict[str, Any]:
+    def status(self, stale_after_s: float) -> dict[str, MillStatus]:
         """Per mill: channel health, the pipeline's status and ``held_reason`` (None unless
         held). A held mill's pipeline holds nothing of it, so its status is only the health,
         ``state`` :data:`HELD` and the reason."""
@@ -586,12 +587,13 @@ class Worker:
                 c.missing_blocks for c in self.health[mill_id].channels.values()
             )
             health["recent_losses"] = list(self.losses[mill_id])
+            typed = MillHealthStatus.model_validate(health)
             reason = self.held.get(mill_id)
             if reason is None:
-                out[mill_id] = {"health": health, **self.pipelines[mill_id].status(),
-                                "held_reason": None}  # fmt: skip
+                out[mill_id] = self.pipelines[mill_id].status().model_copy(
+                    update={"health": typed, "held_reason": None})  # fmt: skip
             else:
-                out[mill_id] = {"health": health, "state": HELD, "held_reason": reason}
+                out[mill_id] = MillStatus(health=typed, state=HELD, held_reason=reason)
         return out
 
 

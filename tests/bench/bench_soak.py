@@ -104,7 +104,7 @@ def containers(worker: Worker) -> dict[str, float]:
     """Means over mills of what an analyzer keeps for its report."""
     out = {"windows": 0.0, "events": 0.0, "days": 0.0}
     for pipeline in worker.pipelines.values():
-        a = pipeline.analyzer.loads  # type: ignore[attr-defined]
+        a = pipeline.analyzer._loads  # type: ignore[attr-defined]  # (its kept containers)
         out["windows"] += len(a.windows)
         out["events"] += len(a.starts) + len(a.stops) + len(a.barrings)
         out["days"] += max((len(pd.by_day) for pd in a.damage.values()), default=0)

@@ -37,6 +37,7 @@ def mills_router(backend: Backend) -> APIRouter:
         "/mills/{mill_id}",
         summary="One mill: state, latest metrics, data health",
         response_model=MillDetail,
+        response_model_exclude_unset=True,  # the status holds what the worker reported
         responses=problem_responses(404, 422),
     )
     def mill(mill_id: MillId) -> dict[str, Any]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from re import compile as re_compile
 
 import numpy as np
 import pytest
@@ -135,9 +136,9 @@ def test_process_until_stops_at_that_sample_and_snapshot_needs_an_empty_queue():
         raise AssertionError("a snapshot with frames waiting must be refused")
     for until in (1, 7_777, 7_777, 20_000):
         m.process(until=until)
-        assert m.loads.n == until
+        assert m.samples == until
     m.process()
-    assert m.backlog == 0 and m.loads.n == 30_000 - m.faults.delay
+    assert m.backlog == 0 and m.samples == 30_000 - m._faults.delay
     assert m.snapshot()["kind"] == "mill_monitor"
 
 
@@ -159,19 +160,19 @@ def test_restore_after_a_pinion_speed_change_restarts_only_the_spectra(caplog):
     for b in all_blocks[: 4 * 40]:  # 40 s: started, running, spectra in progress
         first.push(*b)
     snap = json.loads(json.dumps(first.snapshot()))
-    assert first.state == "running" and first.harmonics.counters["running_samples"] > 0
+    assert first.state == "running" and first._harmonics.counters["running_samples"] > 0
 
     with caplog.at_level("WARNING", logger="analytics.mill.analyzer"):
         second = MillAnalyzer.restore(_faster(config), snap)
     again = json.loads(json.dumps(second.snapshot()))
     for part in ("aligner", "faults", "tacho", "analyzer", "last_good"):  # all but the spectra
         assert again[part] == snap[part], part
-    assert second.loads.report()["damage"] == first.loads.report()["damage"]
+    assert second.report()["damage"] == first.report()["damage"]
     assert second.state == "running"
-    fresh = second.harmonics
-    assert fresh.bins != first.harmonics.bins and fresh._len == 0 and fresh.latest is None
+    fresh = second._harmonics
+    assert fresh.bins != first._harmonics.bins and fresh._len == 0 and fresh.latest is None
     assert set(fresh.counters.values()) == {0}
-    assert fresh.stagger == first.harmonics.stagger  # built as __init__ builds it
+    assert fresh.stagger == first._harmonics.stagger  # built as __init__ builds it
     [record] = caplog.records
     assert "mill 'sag-5200-lrs'" in record.message and "65 / 11018" in record.message
     assert "spectra restart" in record.message and "damage" in record.message
@@ -179,8 +180,8 @@ def test_restore_after_a_pinion_speed_change_restarts_only_the_spectra(caplog):
 
     for b in all_blocks[4 * 40 :]:  # the mill goes on being analysed
         second.push(*b)
-    assert second.loads.n == ref.loads.n
-    assert second.harmonics.counters["running_samples"] > 0
+    assert second.samples == ref.samples
+    assert second._harmonics.counters["running_samples"] > 0
     # damage does not depend on the speed: the continued totals are the uninterrupted ones
     assert json.loads(report(second))["damage"] == json.loads(report(ref))["damage"]
 
@@ -347,3 +348,59 @@ def test_a_speed_dropout_and_a_stop_are_the_reasons_segments_are_dropped():
     assert dropped["gap"] == dropped["non_finite"] == dropped["too_slow"] == 0
     assert "incomplete when the operating state became unknown" in summary["segments_note"]
     assert "incomplete when the running period ended (stop or trip)" in summary["segments_note"]
+
+
+class _CountingRunner:
+    """A spectra runner that feeds the tracker itself, counting what went through it."""
+
+    def __init__(self, tracker) -> None:
+        self.tracker, self.fed, self.drained = tracker, 0, 0
+
+    def feed(self, t0_ns, fs, frame, running, why="run_ended"):
+        self.fed += 1
+        return self.tracker.feed(t0_ns, fs, frame, running, why)
+
+    def flush(self):
+        return self.tracker.flush()
+
+    def drain(self) -> None:
+        self.drained += 1
+
+
+def test_an_injected_spectra_runner_runs_the_tracker_with_the_same_results():
+    config = load_mill_config(MILLS / "sag-5200-lrs.toml")
+    scene = get_scene("steady", config, seed=3, duration_s=40.0)
+    plain, runners = MillAnalyzer(config), []
+    injected = MillAnalyzer(config, spectra_runner=lambda t: runners.append(_CountingRunner(t))
+                            or runners[-1])  # fmt: skip
+    for b in blocks(scene, 1000):
+        plain.push(*b)
+        injected.push(*b)
+    assert report(injected) == report(plain)
+    [runner] = runners
+    assert runner.fed > 0 and runner.drained > 0  # fed through it; drained before the report
+    assert injected.snapshot() == plain.snapshot()
+
+
+def test_the_stages_are_private_and_read_through_the_analyzer():
+    """Callers read the analyzer's public API (samples, starts, alignment counters), never its
+    stages: no public stage attribute, and no module outside analytics/mill touches one."""
+    config = load_mill_config(MILLS / "ball-dual-lrs.toml")
+    m = MillAnalyzer(config)
+    for stage in ("aligner", "faults", "tacho", "loads", "harmonics"):
+        assert not hasattr(m, stage), stage
+    assert (m.samples, m.starts_total, m.missing_blocks, m.gap_samples, m.late_blocks) == (
+        0, 0, 0, 0, 0)  # fmt: skip
+    root = Path(__file__).resolve().parents[3]
+    # an analyzer's stage read or swapped: analyzer.loads…, self.analyzers[m]._aligner…,
+    # analyzer.harmonics = …
+    reach = re_compile(r"analyzers?\b[\w\[\]\"'()]*\.(_?(aligner|faults|tacho|loads|harmonics))\b")
+    offenders = [
+        f"{path.relative_to(root)}:{n}"
+        for package in ("analytics", "ingest", "alarms", "service")
+        for path in sorted((root / package).rglob("*.py"))
+        if path.parent != root / "analytics" / "mill"
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if reach.search(line)
+    ]
+    assert offenders == []

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import re
 
 import numpy as np
 import pytest
@@ -43,7 +44,10 @@ def test_start_lrs_report(tmp_path):
     }
     assert len(r["steady_state"]) >= 1 and r["state"] == "stopped"
     w = r["steady_state"][0]
-    assert 80 < w["mean_pct"]["motor_torque0"] < 100 and w["range_per_rev"]["bending0"] > 10
+    assert 80 < w["mean_pct"]["motor_torque"] < 100 and w["range_per_rev"]["pinion_bending"] > 10
+    assert w["bending_amplitude_mpa"] == {
+        "pinion_bending": w["range_per_rev"]["pinion_bending"] / 2
+    }
     assert set(r["damage"]) == set(component_names(sc.config))
     for d in r["damage"].values():
         assert sum(d["phases"].values()) == pytest.approx(d["committed"], rel=1e-12)
@@ -63,6 +67,88 @@ def test_dual_drive_events(dual_scene):
                                                         abs=1.0)  # fmt: skip
     assert r["steady_state"][0]["imbalance_pct"] > 0  # barring side carries more (Table 15)
     assert r["damage"]["pinion_combined_nbs"]["phases"]["barring"] >= 0.0
+
+
+def test_dual_drive_results_carry_the_mill_files_channel_names(dual_scene):
+    """Each side of a dual drive by its own name in the mill file, never a side index."""
+    cfg = dual_scene.config
+    r = run(dual_scene).report()
+    torque = {n for n, c in cfg.channels.items() if c.kind == "torque"}
+    bending = {n for n, c in cfg.channels.items() if c.kind == "bending"}
+    assert torque == {"motor_torque_bs", "motor_torque_nbs", "pinion_torque_bs",
+                      "pinion_torque_nbs"}  # fmt: skip
+    for w in r["steady_state"]:
+        assert set(w["mean"]) == set(w["range_per_rev"]) == torque | bending
+        assert set(w["range_pct"]) == set(w["mean_pct"]) == torque
+        assert set(w["bending_amplitude_mpa"]) == bending == {"pinion_bending_bs",
+                                                              "pinion_bending_nbs"}  # fmt: skip
+    peaks = [
+        (p["side"], p["motor_channel"], p["pinion_channel"]) for p in r["starts"][0]["switch_on"]
+    ]
+    assert peaks == [("bs", "motor_torque_bs", "pinion_torque_bs"),
+                     ("nbs", "motor_torque_nbs", "pinion_torque_nbs")]  # fmt: skip
+    assert r["barring"][0]["channel"] == "motor_torque_bs"
+    assert [k for k in _keys(r) if re.search(r"[a-z][0-9]$", k)] == []  # no side index
+
+
+def _keys(obj: object) -> list[str]:
+    """Every dict key of a JSON-like report, nested."""
+    if isinstance(obj, dict):
+        return [k for k, v in obj.items() for k in (k, *_keys(v))]
+    if isinstance(obj, list):
+        return [k for v in obj for k in _keys(v)]
+    return []
+
+
+def test_a_missing_channel_is_left_out_not_named_by_index():
+    """A mill file without a pinion torque gauge: the steady windows report the channels it
+    has; nothing is derived under a made-up name."""
+    cfg = mill("sag-5200-lrs")
+    cfg = cfg.model_copy(update={"channels": {k: v for k, v in cfg.channels.items()
+                                              if k != "pinion_torque"}})  # fmt: skip
+    sc = scene("steady", seed=1, duration_s=130.0)
+    data = sc.render(0, sc.n_samples)
+    del data["pinion_torque"]
+    a = LoadAnalysis(cfg)
+    for lo in range(0, sc.n_samples, 5000):
+        a.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo : lo + 5000] for k, v in data.items()}))
+    windows = a.report()["steady_state"]
+    assert len(windows) == 2
+    assert set(windows[0]["range_per_rev"]) == {"motor_torque", "pinion_bending"}
+    assert set(windows[0]["range_pct"]) == {"motor_torque"}
+    full = run(sc, frame=5000).report()["steady_state"]
+    assert windows[0]["range_pct"] == {"motor_torque": full[0]["range_pct"]["motor_torque"]}
+
+
+def test_a_version_2_snapshot_is_restored_under_the_mill_files_names(dual_scene):
+    """Checkpoints written before the channels were named by the mill file (side indices)
+    continue exactly, under the new names."""
+    sc = dual_scene
+    whole = run(sc, frame=1000).report()
+    data = sc.render(0, sc.n_samples)
+    cut = 90_000  # running, a window closed: the steady-state meter is mid-window
+    a = LoadAnalysis(sc.config)
+    for lo in range(0, cut, 1000):
+        a.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo : lo + 1000] for k, v in data.items()}))
+    snap = json.loads(json.dumps(a.snapshot()))
+    assert snap["windows"]  # a window closed before the cut
+    old = {f"{kind}{k}": f"{name}_{side}"
+           for k, side in enumerate(("bs", "nbs"))
+           for kind, name in (("motor_torque", "motor_torque"), ("pinion_torque", "pinion_torque"),
+                              ("bending", "pinion_bending"))}  # fmt: skip
+    back = {v: k for k, v in old.items()}
+    v2 = snap | {"version": 2,
+                 "meter": snap["meter"] | {f: {back[c]: x for c, x in snap["meter"][f].items()}
+                                           for f in ("part_max", "part_min", "sums", "counts",
+                                                     "rev_max", "rev_min")},
+                 "windows": [{k: ({back[c]: x for c, x in v.items()} if k in (
+                     "mean", "range_per_rev", "mean_pct", "range_pct") else v)
+                              for k, v in w.items() if k != "bending_amplitude_mpa"}
+                             for w in snap["windows"]]}  # fmt: skip
+    b = LoadAnalysis.restore(sc.config, v2)
+    for lo in range(cut, sc.n_samples, 1000):
+        b.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo : lo + 1000] for k, v in data.items()}))
+    assert json.dumps(b.report(), sort_keys=True) == json.dumps(whole, sort_keys=True)
 
 
 def test_framing_does_not_change_a_bit(dual_scene):
@@ -213,8 +299,9 @@ def test_snapshot_keys_and_order_are_those_of_stored_checkpoints():
         "starts_per_month", "phase_samples", "lead", "discontinuities", "last", "sm",
         "timeline", "ring", "counters", "damage", "meter", "barring", "starts_total", "stress",
     ]  # fmt: skip
-    assert (snap["kind"], snap["version"]) == ("mill_analyzer", 2)
-    with pytest.raises(ValueError, match="not a mill_analyzer snapshot of version 2"):
+    # version 3: steady channels by the mill file's names (version 2 is renamed on restore)
+    assert (snap["kind"], snap["version"]) == ("mill_analyzer", 3)
+    with pytest.raises(ValueError, match="not a mill_analyzer snapshot of version 3"):
         LoadAnalysis.restore(mill("sag-5200-lrs"), snap | {"version": 1})
 
 

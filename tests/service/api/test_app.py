@@ -61,10 +61,10 @@ def test_life_of_two_minutes_is_damage_so_far_and_insufficient_history(client, l
 
 
 def test_life_damage_agrees_with_the_workers_live_summary(client, live_api):
-    live = live_api.runtime.status[MILL]["damage"]["pinion_combined"]
+    live = live_api.runtime.status[MILL].damage["pinion_combined"]
     body = client.get(f"/mills/{MILL}/life").json()["components"]["pinion_combined"]
-    assert body["damage_monitored"] == pytest.approx(live["committed"])
-    assert body["damage_pending_residue"] == pytest.approx(live["pending_residue"])
+    assert body["damage_monitored"] == pytest.approx(live.committed)
+    assert body["damage_pending_residue"] == pytest.approx(live.pending_residue)
 
 
 # ---------------------------------------------------------------------- starts, spectrum
@@ -88,7 +88,7 @@ def test_a_bad_month_is_a_readable_422(client, month):
 def test_spectrum_is_the_latest_harmonic_table(client, live_api):
     body = client.get(f"/mills/{MILL}/spectrum").json()
     assert body["harmonics"]["lines"] and body["t_ns"] == body["harmonics"]["t_end_ns"]
-    assert body["t_ns"] <= live_api.runtime.status[MILL]["last_sample_ns"]
+    assert body["t_ns"] <= live_api.runtime.status[MILL].last_sample_ns
 
 
 @pytest.mark.parametrize("path", ["life", "starts", "spectrum"])
@@ -237,6 +237,8 @@ def test_a_held_mill_makes_ready_503_naming_it_and_mills_say_why(tmp_path):
     assert detail.status_code == 200
     assert detail.json()["held_reason"] == reason
     assert detail.json()["status"]["health"]["channels"]["motor_torque"]["blocks"] > 0
+    # only what the worker reports of a held mill, as before the status was typed
+    assert set(detail.json()["status"]) == {"health", "state", "held_reason", "stalled_reason"}
     assert f'millwatch_mill_held{{mill="{MILL}"}} 1.0' in metrics
 
 
@@ -254,7 +256,7 @@ def test_metrics_in_prometheus_text_format(client, live_api):
     assert samples[("millwatch_queue_dropped_blocks_total", ())] == 0
     assert ("millwatch_queue_depth_blocks", ()) in samples
     assert samples[("millwatch_archive_errors_total", ())] == 0
-    state = live_api.runtime.status[MILL]["state"]
+    state = live_api.runtime.status[MILL].state
     assert samples[("millwatch_mill_state", (("mill", MILL), ("state", state)))] == 1
     states = {dict(k)["state"]: v for (n, k), v in samples.items() if n == "millwatch_mill_state"}
     assert set(states) == set(MILL_STATES) and sum(states.values()) == 1  # one 0/1 per state
@@ -286,6 +288,15 @@ def test_openapi_documents_problems_examples_and_the_api_key(client):
     assert "304" in spec["paths"]["/alarms"]["get"]["responses"]
     for name in ("LifeReport", "FleetView", "MonthStarts", "Spectrum", "AlarmList"):
         assert spec["components"]["schemas"][name].get("examples"), name
+    # the mill's status is documented field by field (one typed model, service.status)
+    schemas = spec["components"]["schemas"]
+    detail = next(s for n, s in schemas.items() if n.startswith("MillDetail"))
+    assert detail["properties"]["status"]["$ref"].split("/")[-1].startswith("MillStatus")
+    status = next(s for n, s in schemas.items() if n.startswith("MillStatus"))
+    assert {"health", "state", "latest_steady", "damage", "held_reason"} <= set(
+        status["properties"]
+    )
+    assert all(p.get("description") for n, p in status["properties"].items() if n != "health")
 
 
 # ---------------------------------------------------------------------- docs offline
@@ -335,16 +346,20 @@ def test_domain_gauges_per_mill_and_component(client, live_api):
         assert remaining == []
     status = live_api.runtime.status[MILL]
     (starts,) = scraped["millwatch_starts_this_month"]
-    assert starts.value == status["starts_this_month"] >= 1  # the fed LRS start
+    assert starts.value == status.starts_this_month >= 1  # the fed LRS start
     lags = {s.labels["channel"] for s in scraped["millwatch_channel_lag_seconds"]}
-    assert lags == set(status["health"]["channels"])
-    window = status["latest_steady"] or {}
+    assert lags == set(status.channel_health)
+    window = status.latest_steady
+    assert window is not None  # the 120 s feed reaches steady running
     osc = {s.labels["channel"]: s.value for s in scraped["millwatch_oscillation_range_percent"]}
-    assert osc == pytest.approx({c: v for c, v in window.get("range_pct", {}).items()})
+    assert osc == pytest.approx(window.range_pct)
     bending = {s.labels["channel"]: s.value
                for s in scraped["millwatch_bending_amplitude_megapascals"]}  # fmt: skip
-    per_rev = window.get("range_per_rev", {})
-    assert bending == pytest.approx({c: r / 2 for c, r in per_rev.items() if c.startswith("bend")})
+    per_rev = window.range_per_rev
+    config = live_api.runtime.mills[MILL]
+    named = {c for c, ch in config.channels.items() if ch.kind == "bending"}  # the mill file's
+    assert bending == pytest.approx({c: per_rev[c] / 2 for c in named})
+    assert set(osc) == {c for c, ch in config.channels.items() if ch.kind == "torque"}
     assert osc and bending  # the 120 s feed reaches steady running
 
 

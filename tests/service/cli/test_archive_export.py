@@ -89,7 +89,8 @@ def test_whole_recording_conclusions_equal_millwatch_analyze(whole, recording):
     assert not any("/samples/" in t for t in whole)
     schemas = {"state": "foxglove.KeyValuePair", "events": "foxglove.Event", "log": "foxglove.Log",
                "damage": "millwatch.Damage", "overview": "millwatch.SampleEnvelope",
-               "starts": "millwatch.StartPeaks", "harmonics": "millwatch.HarmonicLine"}  # fmt: skip
+               "starts": "millwatch.StartPeaks", "harmonics": "millwatch.HarmonicLine",
+               "steady": "millwatch.SteadyState"}  # fmt: skip
     for topic, messages in whole.items():
         assert {s for s, *_ in messages} == {schemas[topic.split("/")[2]]}, topic
     analyzer, _ = analyze_recording([recording[0]], load_mill_config(MILL))
@@ -103,8 +104,8 @@ def test_whole_recording_conclusions_equal_millwatch_analyze(whole, recording):
     for comp, want in analyzer.damage_summary().items():
         *_, last = whole[f"/sag-5200-lrs/damage/{comp}"]
         assert last[1] == T0 + 220 * S
-        assert last[3].committed == want["committed"]
-        assert last[3].with_residue == pytest.approx(want["with_residue"], rel=1e-12)
+        assert last[3].committed == want.committed
+        assert last[3].with_residue == pytest.approx(want.with_residue, rel=1e-12)
     states = [d.value for *_, d in whole["/sag-5200-lrs/state"]]
     assert states == ["stopped", "starting", "running", "stopping", "stopped"]
     want = {(h["channel"], h["name"]) for h in report["harmonics"] if h["detected"]}
@@ -112,6 +113,21 @@ def test_whole_recording_conclusions_equal_millwatch_analyze(whole, recording):
     assert ("motor_torque", "girth_mesh") in got and got <= want
     (schema, _, _, mesh), *_ = whole["/sag-5200-lrs/harmonics/motor_torque/girth_mesh"]
     assert schema == "millwatch.HarmonicLine" and mesh.frequency_hz > 0 and mesh.snr_db > 0
+    steady = {t.split("/")[3]: m for t, m in whole.items() if "/steady/" in t}
+    assert set(steady) == {"motor_torque", "pinion_torque", "pinion_bending"}  # the mill file's
+    for channel, messages in steady.items():  # each window of analyze, at its first sample
+        windows = report["steady_state"]
+        assert [t for _, t, _, _ in messages] == [w["t_ns"] for w in windows] != []
+        for (*_, got), w in zip(messages, windows, strict=True):
+            assert (got.mean, got.range_per_rev) == (
+                w["mean"][channel],
+                w["range_per_rev"][channel],
+            )
+            if channel == "pinion_bending":
+                assert got.bending_amplitude_mpa == w["bending_amplitude_mpa"][channel]
+                assert np.isnan(got.range_pct)
+            else:
+                assert got.range_pct == w["range_pct"][channel]
     overview = whole["/sag-5200-lrs/overview/speed"]
     assert len(overview) == 2200 and overview[0][1] == T0  # one per archived block
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -54,3 +55,27 @@ def test_the_errors_looked_up_by_module_exist() -> None:
 
     for module, name in MODULE_ERRORS:
         assert issubclass(getattr(importlib.import_module(module), name), Exception)
+
+
+def test_a_key_error_is_a_programming_error_shown_with_its_traceback(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A ``KeyError`` deep in a command is a bug: it propagates (Python prints the traceback),
+    not ``millwatch: error: 'start_cost'``; a user's mistake still reads as one line."""
+    import numpy as np
+
+    import service.cli.rainflow as rainflow
+
+    signal = tmp_path / "x.npy"
+    np.save(signal, np.sin(np.linspace(0.0, 20.0, 500)) * 100.0)
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise KeyError("start_cost")
+
+    monkeypatch.setattr(rainflow, "run_rainflow", broken)
+    with pytest.raises(KeyError, match="start_cost"):
+        main(["rainflow", str(signal), "--no-progress"])
+    assert "millwatch: error" not in capsys.readouterr().err
+    assert main(["rainflow", str(tmp_path / "missing.npy"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("millwatch: error: ") and "missing.npy" in err

@@ -25,6 +25,7 @@ from service.api.app import create_app
 from service.api.local_backend import LocalBackend
 from service.opcua.server import OpcUaServer
 from service.settings import OpcUaSettings
+from service.status import NO_STATUS
 from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
 from tests.integration.live import wait as wait_until
@@ -141,7 +142,7 @@ def _feed(runtime: ServiceRuntime, port: int, configs: list[MillConfig]) -> None
     # blocks are counted when taken; the analysis of a batch follows: wait for a status
     # snapshot that has analysed (nearly) every sample of every mill
     analysed = (SCENE_S - 1.0) * 1000
-    assert wait_until(lambda: all(runtime.status.get(c.id, {}).get("samples", 0) >= analysed
+    assert wait_until(lambda: all((runtime.status.get(c.id, NO_STATUS).samples or 0) >= analysed
                                   for c in configs), 90.0)  # fmt: skip
 
 

@@ -1,62 +1,122 @@
 """The points of a mill from the REST bodies: every path present, values as answered, unknowns
-None (never a made-up number), units per channel kind."""
+None (never a made-up number), units per channel kind.
+
+The bodies come from the real producers: a dual-drive scene (a start, then steady running long
+enough to close steady-state windows) analysed by the real worker into a real store, and the
+REST views of :mod:`service.api.mill_views` over them — so a key the analyzer does not produce
+cannot pass here (it once did: the steady-state points read ``BadWaitingForInitialData`` for
+ever, keyed by names the analyzer never used)."""
 
 from __future__ import annotations
 
+import math
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
+
+import pytest
+from asyncua import ua
 
 from ingest.mill_files import load_mill_config
-from service.opcua.values import Kind, mill_points
+from ingest.sim.blocks import scene_blocks
+from ingest.sim.scenes import get_scene
+from ingest.sim.spec import StartEvent
+from service.api.mill_views import mill_detail
+from service.api.models import MillSummary
+from service.opcua.address_space import datavalue
+from service.opcua.values import Kind, Point, mill_points
+from service.reports.history import life_inputs
+from service.reports.life import compute_life, life_to_dict
+from service.reports.starts import current_month, starts_in_month
+from service.store.database import Store
+from service.worker.block_queue import QueuedBlock
+from service.worker.mill_job import MillJob
+from service.worker.worker import Worker
 
 MILL = load_mill_config(Path(__file__).resolve().parents[3] / "deploy/mills/ball-dual-lrs.toml")
-
-DETAIL = {
-    "state": "running",
-    "held_reason": None,
-    "stale_channels": ["speed"],
-    "status": {
-        "last_sample_ns": 1_700_000_000_000_000_000,
-        "open_alarms": 2,
-        "latest_steady": {
-            "t_ns": 1_700_000_000_500_000_000,
-            "speed_pct": 99.5,
-            "imbalance_pct": 3.25,
-            "mean": {"pinion_torque_bs": 120.0},
-            "range_per_rev": {"pinion_torque_bs": 30.0, "pinion_bending_bs": 42.0},
-            "mean_pct": {"pinion_torque_bs": 80.0},
-            "range_pct": {"pinion_torque_bs": 20.0},
-        },
-        "health": {
-            "missing_blocks_total": 7,
-            "channels": {"speed": {"lag_s": 0.25, "missing_blocks": 7, "stale": True}},
-        },
-    },
-}
-LIFE = {"components": {"pinion_combined_bs": {
-    "damage": 1e-3, "remaining_life_years_min": None,
-    "projections": [{"basis": "last_30_days", "rate_per_year": 2e-3}]}}}  # fmt: skip
-STARTS = {"count": 4, "failed": 1, "count_status": "ok"}
+STEADY = [n for n, c in MILL.channels.items() if c.kind in ("torque", "bending")]
 
 
-def test_values_are_as_answered_and_unknowns_none():
-    p = mill_points(MILL, DETAIL, LIFE, STARTS)
-    assert p["State"].value == "running" and p["StaleChannels"].value == ["speed"]
-    assert p["LastSampleTime"].value == datetime(2023, 11, 14, 22, 13, 20, tzinfo=UTC)
-    assert (p["OpenAlarms"].value, p["StartsThisMonth"].value) == (2, 4)
-    assert p["SteadyState/pinion_torque_bs/RangePct"].value == 20.0
-    assert p["SteadyState/pinion_bending_bs/RangePerRev"].value == 42.0
-    assert p["SteadyState/pinion_bending_bs/RangePct"].value is None
-    assert p["Components/pinion_combined_bs/Damage"].value == 1e-3
-    assert p["Components/pinion_combined_bs/RemainingLifeYears"].value is None
-    assert p["Components/pinion_combined_bs/DamageRatePerYear"].value == 2e-3
-    assert p["Components/pinion_combined_nbs/Damage"].value is None  # not in the answer
-    assert p["Channels/speed/Stale"].value is True
-    assert p["Channels/speed/MissingBlocks"].value == 7
+@pytest.fixture(scope="module")
+def answers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """``GET /mills/{id}``, ``/life`` and ``/starts`` of the mill after a start and ~3 minutes
+    of running, as the REST views answer them from the worker's status and the store."""
+    scene = get_scene("start-lrs", MILL, seed=4, duration_s=200.0,
+                      events=(StartEvent(at_s=5.0),))  # fmt: skip
+    with Store(tmp_path_factory.mktemp("opcua") / "mw.db") as store:
+        job = MillJob(MILL, damage_every_s=10.0)
+        worker = Worker({MILL.id: MILL}, {MILL.id: job}, store, None)
+        for b in scene_blocks(scene):
+            worker.handle(QueuedBlock(b.key, b.payload, b.t_end_ns))
+        worker.commit()
+        status = worker.status(stale_after_s=10.0)[MILL.id]
+        now = status.last_sample_ns
+        assert now is not None
+        life = compute_life(life_inputs(store, MILL, now, live=status.live_damage(),
+                                        last_sample_ns=now))  # fmt: skip
+        detail = mill_detail(MILL, status, {"name": "w1"})
+        return {
+            "summary": MillSummary.model_validate(detail),
+            "status": status,
+            "detail": detail,
+            "life": life_to_dict(life),
+            "starts": starts_in_month(store, MILL, current_month(MILL, now)),
+        }
+
+
+@pytest.fixture(scope="module")
+def points(answers: dict[str, Any]) -> dict[str, Point]:
+    return mill_points(MILL, answers["summary"], answers["status"], answers["life"],
+                       answers["starts"])  # fmt: skip
+
+
+def good_number(point: Point) -> float:
+    """The point's value, asserting it is written as a Good, finite number."""
+    assert datavalue(point).StatusCode.is_good()
+    assert isinstance(point.value, float) and math.isfinite(point.value), point
+    return point.value
+
+
+def test_steady_state_of_every_channel_is_good_and_as_the_worker_reported_it(answers, points):
+    window = answers["detail"]["status"]["latest_steady"]  # as REST answers it
+    assert window is not None  # the scene ran long enough to close steady windows
+    assert answers["status"].latest_steady.model_dump() == window
+    for name in STEADY:
+        base = f"SteadyState/{name}/"
+        assert good_number(points[base + "Mean"]) == window["mean"][name]
+        assert good_number(points[base + "RangePerRev"]) == window["range_per_rev"][name] > 0
+        if MILL.channels[name].kind == "torque":
+            assert good_number(points[base + "MeanPct"]) == window["mean_pct"][name] > 50
+            assert good_number(points[base + "RangePct"]) == window["range_pct"][name]
+        else:  # bending: MPa only, no % of rated torque
+            assert points[base + "RangePct"].value is None
+            assert datavalue(points[base + "RangePct"]).StatusCode.value == (
+                ua.StatusCodes.BadWaitingForInitialData)  # fmt: skip
+    assert good_number(points["SteadyState/ImbalancePct"]) == window["imbalance_pct"]
+    assert good_number(points["SteadyState/SpeedPct"]) > 90
+
+
+def test_values_are_as_answered(answers, points):
+    detail, life, starts = answers["detail"], answers["life"], answers["starts"]
+    status = detail["status"]
+    assert points["State"].value == detail["state"] == "running"
+    assert points["LastSampleTime"].value == datetime.fromtimestamp(
+        status["last_sample_ns"] / 1e9, UTC)  # fmt: skip
+    assert points["OpenAlarms"].value == status["open_alarms"]
+    assert points["StartsThisMonth"].value == starts["count"] == 1
+    assert points["StartsStatus"].value == starts["count_status"]
+    for comp in MILL.components:
+        assert good_number(points[f"Components/{comp}/Damage"]) == life["components"][comp][
+            "damage"] > 0  # fmt: skip
+        assert points[f"Components/{comp}/RemainingLifeYears"].value is None  # minutes only
+    for name, ch in status["health"]["channels"].items():
+        assert points[f"Channels/{name}/LagS"].value == ch["lag_s"]
+        assert points[f"Channels/{name}/Stale"].value is ch["stale"]
+    assert points["Channels/MissingBlocksTotal"].value == 0
 
 
 def test_every_channel_and_component_has_its_points_with_units():
-    p = mill_points(MILL, {}, None, None)
+    p = mill_points(MILL, None, None, None, None)
     for name, channel in MILL.channels.items():
         assert p[f"Channels/{name}/LagS"].unit == "s"
         if channel.kind in ("torque", "bending"):

@@ -305,7 +305,9 @@ def test_the_fleet_and_simulated_flags_over_zenoh_are_the_local_ones(pair):
 
 
 def test_mill_statuses_over_zenoh_are_the_workers_snapshots(pair):
-    assert pair.backend.mill_statuses() == json.loads(json.dumps(pair.runtime.status))
+    local = {m: s.to_json() for m, s in pair.runtime.status.items()}
+    remote = {m: s.to_json() for m, s in pair.backend.mill_statuses().items()}
+    assert remote == json.loads(json.dumps(local))
 
 
 def test_opcua_over_zenoh_shows_what_the_remote_api_answers(pair, tmp_path):

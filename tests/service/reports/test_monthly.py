@@ -83,8 +83,9 @@ def test_steady_trends_are_the_stored_windows(store, report):
     assert [p.t_ns for p in report.steady.points] == [t for t, _ in stored]
     for p, (_t, w) in zip(report.steady.points, stored, strict=True):
         assert p.range_pct == w["range_pct"]
-        assert p.bending_amplitude_mpa == {k: v / 2 for k, v in w["range_per_rev"].items()
-                                           if k.startswith("bending")}  # fmt: skip
+        bending = [n for n, ch in CONFIG.channels.items() if ch.kind == "bending"]
+        assert p.bending_amplitude_mpa == w["bending_amplitude_mpa"]
+        assert p.bending_amplitude_mpa == {k: w["range_per_rev"][k] / 2 for k in bending}
     day = report.steady.days[0]
     for ch, mean in day.range_pct_mean.items():
         values = [w["range_pct"][ch] for _t, w in stored]
@@ -93,8 +94,10 @@ def test_steady_trends_are_the_stored_windows(store, report):
 
 def test_a_stored_nan_is_kept_in_its_window_and_left_out_of_daily_statistics(tmp_path):
     t0 = 1704067200 * 10**9  # 2024-01-01T02:00 in Johannesburg
-    windows = [{"sample": 0, "end_sample": 60_000, "range_pct": {"motor_torque0": v},
-                "range_per_rev": {"bending0": 20.0}} for v in (10.0, math.nan, 14.0)]  # fmt: skip
+    windows = [{"sample": 0, "end_sample": 60_000, "range_pct": {"motor_torque": v},
+                "range_per_rev": {"pinion_bending": 20.0},
+                "bending_amplitude_mpa": {"pinion_bending": 10.0}}
+               for v in (10.0, math.nan, 14.0)]  # fmt: skip
     with Store(tmp_path / "nan.db") as s:
         with s.transaction() as db:
             Store.add_events(db, [EventRow(CONFIG.id, "start", t0 - 60 * 10**9, {})])
@@ -102,10 +105,10 @@ def test_a_stored_nan_is_kept_in_its_window_and_left_out_of_daily_statistics(tmp
                 Store.add_record(db, CONFIG.id, "steady", t0 + i * 60 * 10**9, w)
         r = build_monthly_report(s, CONFIG, MONTH)
         assert r.source.last_ns == t0 + 120 * 10**9 + 60 * 10**9  # the last window's end
-    assert [math.isnan(p.range_pct["motor_torque0"]) for p in r.steady.points] == [0, 1, 0]
-    assert r.steady.days[0].range_pct_mean == {"motor_torque0": 12.0}
-    assert r.steady.days[0].bending_amplitude_max == {"bending0": 10.0}
-    assert report_to_dict(r)["steady"]["points"][1]["range_pct"] == {"motor_torque0": None}
+    assert [math.isnan(p.range_pct["motor_torque"]) for p in r.steady.points] == [0, 1, 0]
+    assert r.steady.days[0].range_pct_mean == {"motor_torque": 12.0}
+    assert r.steady.days[0].bending_amplitude_max == {"pinion_bending": 10.0}
+    assert report_to_dict(r)["steady"]["points"][1]["range_pct"] == {"motor_torque": None}
     # starts, steady and the 12-month trend; no damage, so no damage or cumulative figure
     assert render_html(r).count("<svg") == 3 and render_pdf(r).startswith(b"%PDF")
 

@@ -61,7 +61,7 @@ def _state(worker: Worker, store: Store) -> str:
             "damage": store.damage(m),
             "health": worker.health[m].as_dict(0, 1e12),
             "report": worker.pipelines[m].analyzer.report(),  # type: ignore[attr-defined]
-            "samples": worker.pipelines[m].analyzer.loads.n,  # type: ignore[attr-defined]
+            "samples": worker.pipelines[m].analyzer.samples,  # type: ignore[attr-defined]
         }
         for m in worker.mills
     }
@@ -101,4 +101,4 @@ def test_regular_mills_take_the_fast_lane(tmp_path: Path) -> None:
         for batch in archive_batches(tmp_path / "a", "w", min_messages=2000):
             lane.handle(batch)
         assert lane.regular_blocks > 0.6 * (lane.regular_blocks + lane.slow_blocks)
-        assert np.isfinite(worker.pipelines["mill-0"].analyzer.loads.n)
+        assert np.isfinite(worker.pipelines["mill-0"].analyzer.samples)  # type: ignore[attr-defined]

@@ -183,9 +183,9 @@ def test_the_live_analyzer_keeps_few_windows_yet_every_one_is_stored(monkeypatch
     restored.restore(json.loads(json.dumps(pipeline.snapshot())))
     assert len(stored) == 5  # 60 s windows
     for p in (pipeline, restored):
-        a = p.analyzer.loads
-        assert len(a.windows) == 2 and a.windows[-1]["t_ns"] == stored[-1][1]
-        assert a.keep_events < 100
+        a = p.analyzer
+        assert len(a.steady_windows) == 2 and a.steady_windows[-1]["t_ns"] == stored[-1][1]
+        assert a._loads.keep_events < 100  # (the setting of keep_recent, in its stage)
 
 
 def pipeline_channel(config, key: str) -> str:
@@ -264,9 +264,10 @@ def test_recovery_after_a_pinion_speed_change_keeps_damage_and_restarts_spectra(
     assert blocks[0].recv_ns < restarts[0].t_ns < blocks[crash].recv_ns
     assert "11083 bins in the snapshot" in restarts[0].data["reason"]
     analyzer = second.pipelines["mill-a"].analyzer  # type: ignore[attr-defined]
-    assert analyzer.loads.n == reference.pipelines["mill-a"].analyzer.loads.n  # type: ignore[attr-defined]
-    assert analyzer.harmonics.bins == HarmonicTracker(FASTER).bins != HarmonicTracker(MILL_A).bins
-    assert analyzer.harmonics.counters["running_samples"] > 0
+    assert analyzer.samples == reference.pipelines["mill-a"].analyzer.samples  # type: ignore[attr-defined]
+    tracker = analyzer._harmonics  # (its geometry: a stage's own business, read by the test)
+    assert tracker.bins == HarmonicTracker(FASTER).bins != HarmonicTracker(MILL_A).bins
+    assert tracker.counters["running_samples"] > 0
 
 
 WITHOUT_BENDING = MILL_A.model_copy(
@@ -304,7 +305,7 @@ def test_a_checkpoint_that_cannot_be_restored_holds_the_mill_naming_it_and_the_w
     [record] = caplog.records  # logged once, naming the consequence
     assert record.levelno == logging.ERROR and record.getMessage().startswith(text)
     assert "mill mill-a is held: its blocks are archived but not analysed" in record.getMessage()
-    assert second.status(10.0)["mill-a"]["state"] == "held"
+    assert second.status(10.0)["mill-a"].state == "held"
     # its alarm engine was not restored: an acknowledgement is refused, saying why
     request = second.request_ack("mill-a", "mill-a:start_peak:-:1", "op")
     second.step(BlockQueue(10), timeout_s=0.0)
@@ -380,13 +381,13 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         second.checkpoint()
         second.archive.close()  # type: ignore[union-attr]
         analyzer = second.pipelines["mill-a"].analyzer  # type: ignore[attr-defined]
-        assert analyzer.loads.n == 0 and analyzer.backlog == 0  # its pipeline got nothing
+        assert analyzer.samples == 0 and analyzer.backlog == 0  # its pipeline got nothing
         mill_a = [b for b in blocks[cut_b:stop] if _mill_of(second, b.key) == "mill-a"]
         assert second.held_blocks["mill-a"] == len(mill_a) > 0
-        health = second.status(10.0)["mill-a"]
-        assert health["state"] == "held" and health["held_reason"] == second.held["mill-a"]
-        torque = health["health"]["channels"]["motor_torque"]
-        assert torque["blocks"] == len(mill_a) // 3  # motor, pinion torque, speed (no bending)
+        held = second.status(10.0)["mill-a"]
+        assert held.state == "held" and held.held_reason == second.held["mill-a"]
+        torque = held.channel_health["motor_torque"]
+        assert torque.blocks == len(mill_a) // 3  # motor, pinion torque, speed (no bending)
         # no alarm observations reached the held mill's fresh engine; mill-b's did
         assert {a.mill_id for a in store.alarms() if a.rule == "stale_channel"} == {"mill-b"}
         assert second.checkpoints_written == 1  # mill-b's only

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Any
-
+from service.status import ChannelStatus, MillHealthStatus, MillStatus
 from service.worker.drain_watch import DrainWatch
+from service.worker.health import ChannelHealth
 
 
-def status(blocks: int, samples: int, held: str | None = None) -> dict[str, Any]:
-    return {"health": {"channels": {"a": {"blocks": blocks}}}, "samples": samples,
-            "held_reason": held}  # fmt: skip
+def status(blocks: int, samples: int, held: str | None = None) -> MillStatus:
+    """A mill's status with one channel (its health as the worker's health reports it)."""
+    channel = ChannelStatus.model_validate(ChannelHealth().as_dict(0, 10.0) | {"blocks": blocks})
+    health = MillHealthStatus(stale_channels=[], channels={"a": channel})
+    return MillStatus(health=health, samples=samples, held_reason=held)
 
 
 def test_a_mill_whose_blocks_arrive_but_are_not_analysed_is_named() -> None:
