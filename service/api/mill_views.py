@@ -132,18 +132,27 @@ def mill_life(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
     return life_to_dict(report)
 
 
+def mill_month(runtime: ServiceRuntime, config: MillConfig) -> str:
+    """The mill's current month: the local calendar month of its last analysed sample, as
+    ``status.starts_this_month`` counts it (a replayed or recovering mill's month is its data's,
+    not the wall clock's); the wall clock's month before any sample."""
+    last = runtime.status.get(config.id, NO_STATUS).last_sample_ns
+    return current_month(config, time.time_ns() if last is None else last)
+
+
 def mill_starts(runtime: ServiceRuntime, mill_id: str, month: str | None) -> dict[str, Any]:
-    """The starts of ``month`` (default: the current month in the site's time zone)."""
+    """The starts of ``month`` (default: the mill's current month, :func:`mill_month`)."""
     config = mill_config(runtime, mill_id)
-    month = month or current_month(config, time.time_ns())
+    month = month or mill_month(runtime, config)
     return starts_in_month(store_of(runtime), config, month)
 
 
 def mill_monthly_report(runtime: ServiceRuntime, mill_id: str, month: str | None) -> MonthlyReport:
-    """The monthly report of ``month`` (default: the current month in the site's time zone);
-    a malformed month is a :class:`~service.reports.starts.MonthError` (422)."""
+    """The monthly report of ``month`` (default: the mill's current month,
+    :func:`mill_month`); a malformed month is a :class:`~service.reports.starts.MonthError`
+    (422)."""
     config = mill_config(runtime, mill_id)
-    month = month or current_month(config, time.time_ns())
+    month = month or mill_month(runtime, config)
     return build_monthly_report(store_of(runtime), config, month)
 
 

@@ -38,7 +38,10 @@ Month = Annotated[
     str | None,
     Query(
         pattern=MONTH_PATTERN,
-        description="YYYY-MM, a calendar month in the site's time zone; default: this month.",
+        description=(
+            "YYYY-MM, a calendar month in the site's time zone; default: the mill's current "
+            "month, that of its last analysed sample (as status.starts_this_month)."
+        ),
         examples=["2024-05"],
     ),
 ]

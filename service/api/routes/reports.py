@@ -10,7 +10,8 @@ site side by side (:mod:`service.reports.fleet_document`, from the same answer a
 where reports go, the last run (due, written, mailed, failed), the failures waiting for their
 next try with their cause, each mill's newest complete month.
 
-* ``month``: the site's local calendar month; default: the current one.
+* ``month``: the site's local calendar month; default: the mill's current one (that of its
+  last analysed sample).
 * ``format``: wins when given; otherwise the ``Accept`` header chooses (``text/html``,
   ``text/csv`` or ``application/zip``, ``application/pdf``, ``application/json``; anything else
   gives JSON).

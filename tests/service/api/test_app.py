@@ -16,6 +16,7 @@ from ingest.keys import alarm_pattern
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.api.app import create_app
 from service.api.domain_metrics import MILL_STATES
+from service.reports.starts import current_month
 from service.settings import ServiceSettings
 from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
@@ -77,6 +78,16 @@ def test_starts_of_this_month_with_peaks_against_limits(client):
     assert start["peak_status"] in ("warning", "alarm")
     other = client.get(f"/mills/{MILL}/starts", params={"month": "2001-02"}).json()
     assert other["count"] == 0 and other["starts"] == [] and other["month"] == "2001-02"
+
+
+def test_the_default_month_is_the_mills_own_as_its_status_counts_it(client, live_api):
+    """/starts, the status's starts_this_month and OPC UA's StartsThisMonth count one month: that
+    of the mill's last analysed sample (a replayed mill's, not the wall clock's)."""
+    status = live_api.runtime.status[MILL]
+    config = live_api.runtime.mills[MILL]
+    body = client.get(f"/mills/{MILL}/starts").json()
+    assert body["month"] == current_month(config, status.last_sample_ns)
+    assert body["count"] == status.starts_this_month
 
 
 @pytest.mark.parametrize("month", ["2024-13", "May", "2024-5", "0001-01"])
