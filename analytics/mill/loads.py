@@ -38,7 +38,7 @@ import dataclasses
 import logging
 import math
 import zoneinfo
-from datetime import datetime
+from datetime import datetime, time, timedelta
 from typing import Any
 
 import numpy as np
@@ -162,6 +162,8 @@ class LoadAnalysis:
         self.starts_per_month: dict[str, dict[str, int]] = {}
         self.starts_total = 0
         self.phase_samples = dict.fromkeys(PHASE_OF_STATE.values(), 0)
+        #: Samples of the closed phases per local day and phase (the last KEEP_START_DAYS days).
+        self.phase_days: dict[str, dict[str, int]] = {}
         self.discontinuities = 0
 
     # ------------------------------------------------------------ configuration
@@ -328,6 +330,9 @@ class LoadAnalysis:
         prev, prev_at = self.timeline.states[-1], self.timeline.samples[-1]
         self.timeline.add(tr)
         self.phase_samples[PHASE_OF_STATE[OperatingState(prev)]] += tr.sample - prev_at
+        self._book_days(self.phase_days, prev, prev_at, tr.sample)
+        while len(self.phase_days) > KEEP_START_DAYS:
+            del self.phase_days[min(self.phase_days)]
         events: list[dict[str, Any]] = []
         st = tr.state
         if st in (OperatingState.RUNNING, OperatingState.STOPPING) and self.open_start >= 0:
@@ -437,6 +442,37 @@ class LoadAnalysis:
         if self.barring is not None:
             self._barring_add(self.sm.decided_until)
 
+    def _book_days(self, into: dict[str, dict[str, int]], state: int, a: int, b: int) -> None:
+        """Samples ``[a, b)`` of ``state`` added to ``into`` (local day → phase → samples),
+        cut at the site's local midnights."""
+        phase = PHASE_OF_STATE[OperatingState(state)]
+        while a < b:
+            day, nxt = self._day_and_next(a)
+            cut = min(b, nxt)
+            per_day = into.setdefault(day, {})
+            per_day[phase] = per_day.get(phase, 0) + cut - a
+            a = cut
+
+    def _day_and_next(self, sample: int) -> tuple[str, int]:
+        """The local day of ``sample`` and the first stream sample of the next local day."""
+        local = self._local(sample)
+        midnight = datetime.combine(local.date() + timedelta(days=1), time(), local.tzinfo)
+        mid_ns = int(midnight.timestamp()) * 1_000_000_000
+        k = max(math.ceil((mid_ns - (self.t0_ns or 0)) * self.fs / 1e9), sample + 1)
+        while k - 1 > sample and self.t_ns(k - 1) >= mid_ns:
+            k -= 1
+        while self.t_ns(k) < mid_ns:
+            k += 1
+        return local.date().isoformat(), k
+
+    def phase_seconds_by_day(self) -> dict[str, dict[str, float]]:
+        """Seconds per local day and phase so far: the closed phases, and the current one up
+        to the last sample fed (the same phases as :meth:`report`'s ``phase_seconds``)."""
+        days = {d: dict(p) for d, p in self.phase_days.items()}
+        self._book_days(days, self.timeline.states[-1], self.timeline.samples[-1], self.n)
+        return {d: {p: k / self.fs for p, k in sorted(ph.items())}
+                for d, ph in sorted(days.items())}  # fmt: skip
+
     def _local(self, sample: int) -> datetime:
         tz = zoneinfo.ZoneInfo(self.config.time_zone)
         return datetime.fromtimestamp(self.t_ns(sample) / 1e9, tz=tz)
@@ -542,6 +578,15 @@ class LoadAnalysis:
             out[comp] = pd.days()
         return out
 
+    def cycles_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
+        """Attributed rainflow cycles per component, local day and phase so far (half cycles
+        0.5), booked with the damage of :meth:`damage_by_day`."""
+        out = {}
+        for comp, pd in self.damage.items():
+            pd.attribute(self.timeline, self.sm.decided_until)
+            out[comp] = pd.cycle_days()
+        return out
+
     def damage_summary(self) -> dict[str, dict[str, float]]:
         """Miner damage per component so far: closed cycles (``committed``), what closing the
         open rainflow residue now as half cycles would add (``pending_residue``), and their sum
@@ -627,6 +672,7 @@ class LoadAnalysis:
             "meter": self.meter.snapshot(),
             "barring": None if self.barring is None else self.barring.snapshot(),
             "starts_total": self.starts_total,
+            "phase_days": self.phase_days,
         }
 
     def _ring_needed_from(self) -> int:
@@ -686,6 +732,7 @@ class LoadAnalysis:
         self.starts_total = int(
             d.get("starts_total", sum(m["starts"] for m in self.starts_per_month.values()))
         )
+        self.phase_days = d.get("phase_days", {})  # (none in a snapshot from before they were)
 
 
 def _plain(obj: Any) -> Any:

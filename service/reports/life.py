@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 import zoneinfo
 from collections import defaultdict
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta
 from typing import Any
@@ -50,6 +50,7 @@ from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
+    SECONDS_PER_YEAR,
     project_monthly_damage,
     start_cost,
 )
@@ -70,10 +71,10 @@ __all__ = [
     "life_to_dict",
     "local_iso",
     "midnight_ns",
+    "monitored_seconds",
     "years_range_text",
 ]
 
-SECONDS_PER_YEAR = 365.25 * 86_400.0
 DAY_NS = 86_400 * 10**9
 _NS = 1_000_000_000
 WORST_MONTH_MIN_DAYS = 7.0
@@ -90,8 +91,9 @@ class LifeInputs:
     ``rows``: stored daily damage rows up to the evaluation day; ``coverage``: the monitored
     intervals ``(first analysed sample, just past the last)`` in ns, oldest first, up to the
     evaluation time (one per local day);
-    ``starts``: starts since monitoring began; ``phase_seconds``: seconds in the ``start``,
-    ``stop`` and ``run`` phases over the monitored time; ``live``: the worker's damage summary
+    ``starts``: starts since monitoring began; ``phase_seconds``: seconds per operating phase
+    (``start``, ``stop``, ``run``, ``stopped``, …) over the monitored time, as the analyzer
+    counted them; ``live``: the worker's damage summary
     per component (``committed``, ``pending_residue``), only when evaluating now."""
 
     config: MillConfig
@@ -271,7 +273,15 @@ class _Ctx:
 
     def monitored_s(self, lo: int, hi: int) -> float:
         """Monitored seconds within ``[lo, hi)``."""
-        return math.fsum(max(min(b, hi) - max(a, lo), 0) for a, b in self.coverage) / _NS
+        return monitored_seconds(self.coverage, lo, hi)
+
+
+def monitored_seconds(coverage: Iterable[tuple[int, int]], lo: int, hi: int) -> float:
+    """Monitored seconds within ``[lo, hi)`` (ns): the overlap of the monitored intervals
+    ``coverage`` (the store's first and just-past-last analysed sample per local day, ns) with
+    it. The one computation of monitored time: remaining life, page 1 of the monthly report and
+    its trend."""
+    return math.fsum(max(min(b, hi) - max(a, lo), 0) for a, b in coverage) / _NS
 
 
 def compute_life(inputs: LifeInputs) -> LifeReport:
@@ -323,7 +333,7 @@ def _span(coverage: list[tuple[int, int]]) -> tuple[int | None, int | None]:
 
 def _history(inputs: LifeInputs, tz: zoneinfo.ZoneInfo) -> LifeHistory:
     since, last = _span(inputs.coverage)
-    days = math.fsum(b - a for a, b in inputs.coverage) / DAY_NS
+    days = monitored_seconds(inputs.coverage, since or 0, last or 0) / 86_400.0
     life = inputs.config.life
     return LifeHistory(
         monitored_since_ns=since,
@@ -521,7 +531,7 @@ def _worst_month(ctx: _Ctx, rows: list[DamageRow], comp: str) -> tuple[float | N
 def _end_date(ctx: _Ctx, years: float) -> tuple[str, bool]:
     """The date ``years`` after the last analysed sample; capped at 9999-12-31 (flag)."""
     start = _local_day(ctx.end_ns, ctx.tz)
-    days = years * 365.25
+    days = years * SECONDS_PER_YEAR / 86_400.0
     if days >= (LAST_DATE - start).days:
         return LAST_DATE.isoformat(), True
     return (start + timedelta(days=days)).isoformat(), False

@@ -22,8 +22,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import date, timedelta
 
+from analytics.mill.phase_damage import SECONDS_PER_YEAR
 from service.reports.history import MonthTrend
-from service.reports.life import SECONDS_PER_YEAR, LifeReport, midnight_ns
+from service.reports.life import LifeReport, midnight_ns
 from service.store.records import DamageRow
 
 __all__ = [

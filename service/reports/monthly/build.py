@@ -46,12 +46,13 @@ from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
+    SECONDS_PER_YEAR,
     StartCost,
     project_monthly_damage,
     start_cost,
 )
-from service.reports.history import last_months, life_inputs, monthly_trend, phase_seconds
-from service.reports.life import compute_life, local_iso
+from service.reports.history import last_months, life_inputs, monthly_trend
+from service.reports.life import compute_life, local_iso, monitored_seconds
 from service.reports.month_summary import SummaryStart, build_cumulative, build_summary
 from service.reports.monthly.model import (
     AlarmEntry,
@@ -84,7 +85,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-SECONDS_PER_YEAR = 365.25 * 86_400.0
 #: Months of the long-term trend (seed 000 §10.6), the report's month the last.
 TREND_MONTHS = 12
 
@@ -102,9 +102,9 @@ def build_monthly_report(
         harmonics, harm_span = harmonics_section(reader, config.time_zone)
         span = results_span(events, steady_rows, harm_span)
         starts = _starts(events, config, reader.days)
-        seconds = _phase_seconds(reader, events, span)
+        seconds = reader.phase_seconds()
         damage = _damage(reader.damage(), starts.count, seconds)
-        covered = _covered_seconds(reader, span)
+        covered = monitored_seconds(reader.coverage(), reader.start_ns, reader.end_ns)
         stored_alarms = store.alarms(mill_id=config.id)
         alarms = _alarms(stored_alarms, reader.start_ns, reader.end_ns)
         long_view = _long_view(store, config, month, reader, starts, stored_alarms)
@@ -185,19 +185,6 @@ def _starts(events: list[EventRow], config: MillConfig, days: list[str]) -> Star
 
 
 # ----------------------------------------------------------------------------- damage
-def _phase_seconds(
-    reader: MonthReader, events: list[EventRow], span: tuple[int | None, int | None]
-) -> dict[str, float]:
-    """Seconds in start, stop and run phases within the month's stored span
-    (:func:`service.reports.history.phase_seconds`)."""
-    if span[0] is None or span[1] is None:
-        return {"start": 0.0, "stop": 0.0, "run": 0.0}
-    lo, hi = max(reader.start_ns, span[0]), min(reader.end_ns, span[1])
-    before = reader.last_before()
-    running = before is not None and before.kind == "start" and not before.data.get("failed")
-    return phase_seconds(events, lo, hi, running)
-
-
 def _damage(rows: list[DamageRow], starts: int, seconds: dict[str, float]) -> list[ComponentDamage]:
     by_comp: dict[str, dict[str, dict[str, float]]] = defaultdict(lambda: defaultdict(dict))
     for r in rows:
@@ -210,7 +197,8 @@ def _damage(rows: list[DamageRow], starts: int, seconds: dict[str, float]) -> li
                 phases[phase].append(d)
         per_phase = {p: math.fsum(v) for p, v in sorted(phases.items())}
         full = {"start": 0.0, "stop": 0.0, "run": 0.0, **per_phase}
-        cost = start_cost(full, starts, seconds["start"] + seconds["stop"], seconds["run"])
+        cost = start_cost(full, starts, seconds.get("start", 0.0) + seconds.get("stop", 0.0),
+                          seconds.get("run", 0.0))  # fmt: skip
         out.append(
             ComponentDamage(
                 component=comp,
@@ -224,17 +212,6 @@ def _damage(rows: list[DamageRow], starts: int, seconds: dict[str, float]) -> li
             )
         )
     return out
-
-
-def _covered_seconds(reader: MonthReader, span: tuple[int | None, int | None]) -> float:
-    """Seconds of the month under monitoring: the whole month where damage rows exist on both
-    sides of it, else from/to the first/last stored result."""
-    if span[0] is None or span[1] is None:
-        return 0.0
-    before, after = reader.has_damage_outside()
-    lo = reader.start_ns if before else max(reader.start_ns, span[0])
-    hi = reader.end_ns if after else min(reader.end_ns, span[1])
-    return max(hi - lo, 0) / 1e9
 
 
 def _what_if(damage: list[ComponentDamage], starts: int, covered_s: float) -> list[WhatIfRow]:

@@ -62,24 +62,18 @@ class MonthReader:
     def events(self) -> list[EventRow]:
         return self.store.events(self.mill_id, since_ns=self.start_ns, until_ns=self.end_ns)
 
-    def last_before(self) -> EventRow | None:
-        """The last start or stop before the month (is the mill running when it begins?)."""
-        before = [
-            e
-            for kind in ("start", "stop")
-            for e in self.store.events(
-                self.mill_id, kind, until_ns=self.start_ns, limit=1, newest_first=True
-            )
-        ]
-        return max(before, key=lambda e: e.t_ns, default=None)
-
     def damage(self) -> list[DamageRow]:
         return self.store.damage(self.mill_id, self.days[0], self.days[-1])
 
-    def has_damage_outside(self) -> tuple[bool, bool]:
-        """Whether daily damage rows exist before / after the month (monitoring covered it)."""
-        lo, hi = self.store.damage_days(self.mill_id)
-        return (lo is not None and lo < self.days[0], hi is not None and hi > self.days[-1])
+    def phase_seconds(self) -> dict[str, float]:
+        """Seconds per operating phase on the month's days, as the analyzer counted them."""
+        return self.store.phase_seconds(self.mill_id, self.days[0], self.days[-1])
+
+    def coverage(self) -> list[tuple[int, int]]:
+        """The monitored intervals (first and just-past-last analysed sample per local day,
+        ns) touching the month."""
+        return [(a, b) for _, a, b in self.store.mill_days(self.mill_id, self.end_ns)
+                if b > self.start_ns]  # fmt: skip
 
     def steady(self) -> SteadyRows:
         """Only the fields the report uses, extracted by SQLite (no per-window JSON decode)."""
