@@ -18,6 +18,7 @@ from collections.abc import Iterable, Iterator
 from typing import Any
 
 from alarms.observations import Observation
+from analytics.operation.transients import start_peaks
 
 __all__ = ["event_observations", "peak_observations", "report_observations", "window_observations"]
 
@@ -41,17 +42,13 @@ def event_observations(mill_id: str, event: dict[str, Any]) -> list[Observation]
 
 
 def _start(mill_id: str, event: dict[str, Any]) -> Iterator[Observation]:
-    sides: dict[Any, list[float]] = {}
-    for peak in [*event.get("switch_on", ()), *event.get("short_circuit", ())]:
-        if peak.get("motor_pct") is not None:
-            sides.setdefault(peak.get("side"), []).append(float(peak["motor_pct"]))
-    for side, values in sides.items():
+    for side, value in start_peaks(event).items():
         context = {
             "side": side,
             "switch_on_peak_pct": event.get("switch_on_peak_pct"),
             "short_circuit_peak_pct": event.get("short_circuit_peak_pct"),
         }
-        yield Observation(mill_id, "start_peak_pct", max(values), int(event["t_ns"]), context)
+        yield Observation(mill_id, "start_peak_pct", value, int(event["t_ns"]), context)
 
 
 def window_observations(mill_id: str, window: dict[str, Any]) -> list[Observation]:

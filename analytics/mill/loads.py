@@ -67,6 +67,8 @@ from analytics.operation.transients import (
     TransientSettings,
     measure_start,
     measure_stop,
+    start_peak_level,
+    start_peaks,
 )
 from analytics.signal.frame_aligner import Frame
 from analytics.signal.sample_ring import SampleRing
@@ -378,6 +380,7 @@ class LoadAnalysis:
         d = dataclasses.asdict(m)
         on = max(m.switch_on, key=lambda p: p.motor_pct, default=None)
         sc = max(m.short_circuit, key=lambda p: p.motor_pct, default=None)
+        peak = max(start_peaks(d).values(), default=None)
         d |= {
             "event": "start",
             "t_ns": self.t_ns(m.sample),
@@ -388,17 +391,17 @@ class LoadAnalysis:
             "rise_time_10_90_ms": None if on is None else on.rise_10_90_ms,
             "rise_time_20_80_ms": None if on is None else on.rise_20_80_ms,
             "shock_load": bool(on is not None and on.shock),
-            "alarm": self._start_alarm(on.motor_pct if on else None),
+            "start_peak_pct": peak,
+            "alarm": self._start_alarm(peak),
         }
         return _keep(self.starts, d, self.keep_events)
 
     def _start_alarm(self, pct: float | None) -> str | None:
-        """The start's level: strictly above the warning / alarm peak (% of rated motor
-        torque), as the alarm rules judge it (seed 000 §7.2)."""
+        """The start's level (:func:`~analytics.operation.transients.start_peak_level`, as
+        the alarm rule judges it), None when below the warning level or without a peak."""
         a = self.config.alarms
-        if pct is None or pct <= a.start_peak_warn_pct:
-            return None
-        return "alarm" if pct > a.start_peak_alarm_pct else "warning"
+        level = start_peak_level(pct, a.start_peak_warn_pct, a.start_peak_alarm_pct)
+        return level if level in ("warning", "alarm") else None
 
     def _stop_event(self, n0: int, n1: int) -> dict[str, Any]:
         from_start = self.stop_after_start

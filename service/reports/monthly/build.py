@@ -156,7 +156,7 @@ def _start_row(e: EventRow, config: MillConfig, zone: zoneinfo.ZoneInfo) -> Star
         pinion_switch_on_pct=_peak(d.get("switch_on", ()), "pinion_pct"),
         rise_10_90_ms=d.get("rise_time_10_90_ms"),
         accel_s=d.get("accel_s"),
-        status=peak_status(switch_on, config.alarms),
+        status=peak_status(d, config.alarms),
     )
 
 
