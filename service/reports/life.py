@@ -1,5 +1,7 @@
 """Remaining fatigue life per component, with its honesty built in: one computation for
-``GET /mills/{id}/life``, the monthly report and the fleet view.
+``GET /mills/{id}/life``, the monthly report, the fleet view, the ``remaining_life`` alarm
+(the worker computes it with :func:`compute_life` from the same history,
+:class:`~service.reports.history.LifeLedger`) and the ``millwatch_remaining_life_years`` gauge.
 
 Basis (seed 000 §8.2: rainflow + Palmgren–Miner on the configured S-N curve, failure at the
 Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
@@ -21,7 +23,9 @@ Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
   with at least :data:`WORST_MONTH_MIN_DAYS` days monitored. A rate is the stored damage of its
   period per year of *monitored* time in it: per local day, from its first to its last analysed
   sample (the store's coverage, :meth:`~service.store.database.Store.mill_days`), so a
-  telemetry outage of days does not dilute the rate (gaps within a day are not subtracted).
+  telemetry outage of days does not dilute the rate (gaps within a day are not subtracted);
+  :func:`monitored_seconds` is the one computation of monitored time (the monthly report's
+  page 1 and trend use it too).
 * **end dates**: present exactly when the life is; a date beyond 9999-12-31 is given as
   ``9999-12-31`` with ``end_date_capped`` true (practically unlimited).
 * **what drives it**: monitored damage by phase (store names: ``start``, ``run``, ``stop``,

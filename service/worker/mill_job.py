@@ -10,9 +10,16 @@ new steady-state windows) into
 * event rows (starts, stops, barring sessions),
 * records (``steady`` windows, ``harmonics`` tables),
 * alarm observations → alarm transitions (:mod:`alarms`), and
-* daily damage totals per component and phase, taken every ``damage_every_s`` seconds of
-  *sample* time (not wall time): the analysis stops at exactly those samples, so the rows and the
-  remaining-life observations are the same however the blocks were batched, and
+* daily totals — damage and counted cycles per component and phase, seconds per operating
+  phase, monitored time — taken every ``damage_every_s`` seconds of *sample* time (not wall
+  time): the analysis stops at exactly those samples, so the rows are the same however the
+  blocks were batched; :meth:`MillJob.book` takes them at any moment too (the worker does with
+  each checkpoint, so a clean stop books every analysed sample),
+* ``remaining_life_years`` observations every ``life_every_s`` of sample time (at a damage
+  interval): :func:`~service.reports.life.compute_life` on the mill's stored history (read
+  once, :meth:`MillJob.read_history`) plus the rows this job booked since
+  (:class:`~service.reports.history.LifeLedger`), with the analyzer's live damage — what
+  ``GET /mills/{id}/life`` answers on the same data, and
 * a ``spectra_restarted`` data-quality event per tracked channel when a restore had to start
   the spectra afresh (the mill's configuration moved their geometry since the checkpoint; see
   :meth:`MillAnalyzer.restore <analytics.mill.analyzer.MillAnalyzer.restore>`), stored with the

@@ -16,7 +16,10 @@ checkpointed — the mills' turns spread over the interval (:mod:`service.worker
 step stalls for all of them at once: the worker flushes the archive, takes the archive position
 and snapshots the mill's pipeline *in the same thread that processes blocks*, so the snapshot
 covers exactly the mill's blocks before the position, and stores it in a small transaction of
-its own. After a crash :func:`service.worker.recovery.recover` restores every mill's newest
+its own, with the mill's running daily totals up to its last analysed sample
+(:meth:`MillPipeline.book`): live, the store lags the analysis by at most one interval, and the
+final checkpoint of a clean stop books every analysed sample. After a crash
+:func:`service.worker.recovery.recover` restores every mill's newest
 checkpoint (:meth:`Worker.restore_checkpoints`) and re-reads the archive from the earliest of
 their positions through the same path (without archiving again), skipping for each mill the
 blocks its checkpoint already holds, so the results equal an uninterrupted run; only blocks that
