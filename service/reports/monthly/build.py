@@ -51,6 +51,7 @@ from analytics.mill.phase_damage import (
     project_monthly_damage,
     start_cost,
 )
+from analytics.operation.transients import start_peaks
 from service.reports.history import last_months, life_inputs, monthly_trend
 from service.reports.life import compute_life, local_iso, monitored_seconds
 from service.reports.month_summary import SummaryStart, build_cumulative, build_summary
@@ -157,6 +158,7 @@ def _start_row(e: EventRow, config: MillConfig, zone: zoneinfo.ZoneInfo) -> Star
         rise_10_90_ms=d.get("rise_time_10_90_ms"),
         accel_s=d.get("accel_s"),
         status=peak_status(d, config.alarms),
+        peak_pct=max(start_peaks(d).values(), default=None),
     )
 
 
@@ -263,11 +265,13 @@ def _long_view(
 
 
 def _worst_start(starts: Starts, zone: zoneinfo.ZoneInfo) -> SummaryStart | None:
-    peaks = [s for s in starts.starts if s.switch_on_pct is not None]
+    """The start with the highest peak (switch-on or short-circuit, as the alarm judges)."""
+    peaks = [s for s in starts.starts if s.peak_pct is not None]
     if not peaks:
         return None
-    w = max(peaks, key=lambda s: s.switch_on_pct or 0.0)
-    return SummaryStart(w.t_ns, local_iso(w.t_ns, zone) or "", w.switch_on_pct, w.status)
+    w = max(peaks, key=lambda s: s.peak_pct or 0.0)
+    return SummaryStart(w.t_ns, local_iso(w.t_ns, zone) or "", w.switch_on_pct, w.status,
+                        w.peak_pct)  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- alarms, quality

@@ -51,8 +51,9 @@ class DataSource:
 
 @dataclass(frozen=True, slots=True)
 class StartRow:
-    """One switch-on: peaks in % of rated motor torque (max over drive sides), status against
-    the start-peak levels (strictly above, as the alarm rule)."""
+    """One switch-on: peaks in % of rated motor torque (max over drive sides); ``peak_pct``, the
+    start's peak (the larger of switch-on and short-circuit), and its status against the
+    start-peak levels (strictly above, as the ``start_peak`` alarm judges it)."""
 
     t_ns: int
     local_time: str
@@ -63,6 +64,7 @@ class StartRow:
     rise_10_90_ms: float | None
     accel_s: float | None
     status: str
+    peak_pct: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
