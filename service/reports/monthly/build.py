@@ -306,7 +306,7 @@ def _notes(
     sim = (
         ["SIMULATED DATA: this mill is fed by the simulator, not by a plant."] if simulated else []
     )
-    if span[0] is None:
+    if span[0] is None and covered_s <= 0:
         return [*sim, "No results are stored for this month: nothing to report."]
     hours = covered_s / 3600.0
     covered = f"{hours / 24.0:.2f} days" if hours >= 48.0 else f"{hours:.2f} hours"
