@@ -100,6 +100,8 @@ class MillJob:
         self._next_harmonics_ns = 0
         self._held_events: list[EventRow] = []  # stored with the next finish()
         self._covered_until: int | None = None  # monitored time stored up to here (ns)
+        #: The daily totals last booked (after a restore: none, so all are booked again).
+        self._booked: dict[tuple[str, ...], Any] = {}
         self._tz = zoneinfo.ZoneInfo(config.time_zone)
 
     # ------------------------------------------------------------------ feeding
@@ -157,7 +159,17 @@ class MillJob:
         return update
 
     def _book(self, update: MillUpdate) -> None:
-        rows, phases, days = self._damage_rows(), self._phase_rows(), self._days()
+        """The daily totals that changed since the last booking (the analyzer keeps a year of
+        days: the store gets only the days that moved, usually today's)."""
+        rows = [
+            r
+            for r in self._damage_rows()
+            if self._booked.get((r.component, r.phase, r.day)) != (r.damage, r.cycles)
+        ]
+        phases = [p for p in self._phase_rows() if self._booked.get((p.phase, p.day)) != p.seconds]
+        days = self._days()
+        self._booked.update({(r.component, r.phase, r.day): (r.damage, r.cycles) for r in rows})
+        self._booked.update({(p.phase, p.day): p.seconds for p in phases})
         self.ledger.add(rows=rows, phases=phases, days=days)
         update.damage += rows
         update.phases += phases
@@ -325,6 +337,7 @@ class MillJob:
         self._latest_window = snapshot["latest_window"]
         self._next_harmonics_ns = int(snapshot["next_harmonics_ns"])
         self._covered_until = self.analyzer.next_sample_ns
+        self._booked = {}
         self._held_events += self._restart_events()
 
     def _restart_events(self) -> list[EventRow]:
