@@ -32,6 +32,7 @@ from analytics.mill.results import (
     SteadyWindowResult,
     parse_event,
 )
+from analytics.operation.transients import start_peaks
 
 __all__ = [
     "event_observations",
@@ -53,19 +54,16 @@ def event_observations(mill_id: str, event: AnalyzerEvent) -> list[Observation]:
 
 
 def _start(mill_id: str, event: StartEvent) -> Iterator[Observation]:
-    sides: dict[str | None, list[float]] = {}
-    channels: dict[str | None, str | None] = {}
-    for peak in [*event.switch_on, *event.short_circuit]:
-        sides.setdefault(peak.side, []).append(peak.motor_pct)
-        channels[peak.side] = peak.motor_channel
-    for side, values in sides.items():
+    """``start_peak_pct`` per side: the start's peak as :func:`start_peaks` judges it."""
+    channels = {p.side: p.motor_channel for p in [*event.switch_on, *event.short_circuit]}
+    for side, value in start_peaks(event.to_json()).items():
         context = {
             "side": side,
             "channel": channels[side],
             "switch_on_peak_pct": event.switch_on_peak_pct,
             "short_circuit_peak_pct": event.short_circuit_peak_pct,
         }
-        yield Observation(mill_id, "start_peak_pct", max(values), event.t_ns, context)
+        yield Observation(mill_id, "start_peak_pct", value, event.t_ns, context)
 
 
 def window_observations(mill_id: str, window: SteadyWindowResult) -> list[Observation]:

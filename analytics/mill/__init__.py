@@ -8,8 +8,9 @@ Modules (each imports only the ones listed before it)::
     results          typed results as they leave the analyzer (start/stop/barring events, a
                      steady-state window, a component's damage), read by attribute by every
                      surface
-    phase_damage     PhaseTimeline, PhaseDamage: the damage recorder by operating phase and local
-                     day, the cost of a start, monthly projections (seed 000 §8.3, App. D); here
+    phase_damage     PhaseTimeline, PhaseDamage: the damage and cycle recorder by operating phase
+                     and local day, the cost of a start, monthly projections, the one
+                     SECONDS_PER_YEAR of damage rates (seed 000 §8.3, App. D); here
                      because it joins fatigue (cycles, Miner) with operation (states)
     report           the tables of the load report (starts per month, phase seconds, damage,
                      start cost, projections), from plain pieces

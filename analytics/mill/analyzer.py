@@ -417,6 +417,17 @@ class MillAnalyzer:
         same however often it is called)."""
         return self._loads.damage_by_day()
 
+    def cycles_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
+        """Counted rainflow cycles per component, local day and phase so far (a half cycle
+        0.5), the cycles whose damage :meth:`damage_by_day` books."""
+        return self._loads.cycles_by_day()
+
+    def phase_seconds_by_day(self) -> dict[str, dict[str, float]]:
+        """Seconds analysed per local day and phase (``stopped``, ``start``, ``run``, ``stop``,
+        ``barring``, ``unknown``) so far, the current phase up to the last sample analysed; the
+        days' sums are the report's ``phase_seconds``."""
+        return self._loads.phase_seconds_by_day()
+
     def spike_counts(self) -> dict[str, int]:
         """Telemetry spikes flagged so far, per checked channel."""
         return {n: c.spikes for n, c in self._faults.totals().items()}

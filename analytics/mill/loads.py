@@ -39,7 +39,7 @@ import dataclasses
 import logging
 import math
 import zoneinfo
-from datetime import datetime
+from datetime import datetime, time, timedelta
 from typing import Any
 
 import numpy as np
@@ -68,6 +68,8 @@ from analytics.operation.transients import (
     TransientSettings,
     measure_start,
     measure_stop,
+    start_peak_level,
+    start_peaks,
 )
 from analytics.signal.frame_aligner import Frame
 from analytics.signal.sample_ring import SampleRing
@@ -182,6 +184,8 @@ class LoadAnalysis:
         self.starts_per_month: dict[str, dict[str, int]] = {}
         self.starts_total = 0
         self.phase_samples = dict.fromkeys(PHASE_OF_STATE.values(), 0)
+        #: Samples of the closed phases per local day and phase (the last KEEP_START_DAYS days).
+        self.phase_days: dict[str, dict[str, int]] = {}
         self.discontinuities = 0
 
     # ------------------------------------------------------------ configuration
@@ -349,6 +353,9 @@ class LoadAnalysis:
         prev, prev_at = self.timeline.states[-1], self.timeline.samples[-1]
         self.timeline.add(tr)
         self.phase_samples[PHASE_OF_STATE[OperatingState(prev)]] += tr.sample - prev_at
+        self._book_days(self.phase_days, prev, prev_at, tr.sample)
+        while len(self.phase_days) > KEEP_START_DAYS:
+            del self.phase_days[min(self.phase_days)]
         events: list[dict[str, Any]] = []
         st = tr.state
         if st in (OperatingState.RUNNING, OperatingState.STOPPING) and self.open_start >= 0:
@@ -394,6 +401,7 @@ class LoadAnalysis:
         d = self._named_peaks(dataclasses.asdict(m))
         on = max(m.switch_on, key=lambda p: p.motor_pct, default=None)
         sc = max(m.short_circuit, key=lambda p: p.motor_pct, default=None)
+        peak = max(start_peaks(d).values(), default=None)
         d |= {
             "event": "start",
             "t_ns": self.t_ns(m.sample),
@@ -404,7 +412,8 @@ class LoadAnalysis:
             "rise_time_10_90_ms": None if on is None else on.rise_10_90_ms,
             "rise_time_20_80_ms": None if on is None else on.rise_20_80_ms,
             "shock_load": bool(on is not None and on.shock),
-            "alarm": self._start_alarm(on.motor_pct if on else None),
+            "start_peak_pct": peak,
+            "alarm": self._start_alarm(peak),
         }
         return _keep(self.starts, d, self.keep_events)
 
@@ -417,12 +426,11 @@ class LoadAnalysis:
         return d
 
     def _start_alarm(self, pct: float | None) -> str | None:
-        """The start's level: strictly above the warning / alarm peak (% of rated motor
-        torque), as the alarm rules judge it (seed 000 §7.2)."""
+        """The start's level (:func:`~analytics.operation.transients.start_peak_level`, as
+        the alarm rule judges it), None when below the warning level or without a peak."""
         a = self.config.alarms
-        if pct is None or pct <= a.start_peak_warn_pct:
-            return None
-        return "alarm" if pct > a.start_peak_alarm_pct else "warning"
+        level = start_peak_level(pct, a.start_peak_warn_pct, a.start_peak_alarm_pct)
+        return level if level in ("warning", "alarm") else None
 
     def _stop_event(self, n0: int, n1: int) -> dict[str, Any]:
         from_start = self.stop_after_start
@@ -466,6 +474,37 @@ class LoadAnalysis:
     def _barring_progress(self) -> None:
         if self.barring is not None:
             self._barring_add(self.sm.decided_until)
+
+    def _book_days(self, into: dict[str, dict[str, int]], state: int, a: int, b: int) -> None:
+        """Samples ``[a, b)`` of ``state`` added to ``into`` (local day → phase → samples),
+        cut at the site's local midnights."""
+        phase = PHASE_OF_STATE[OperatingState(state)]
+        while a < b:
+            day, nxt = self._day_and_next(a)
+            cut = min(b, nxt)
+            per_day = into.setdefault(day, {})
+            per_day[phase] = per_day.get(phase, 0) + cut - a
+            a = cut
+
+    def _day_and_next(self, sample: int) -> tuple[str, int]:
+        """The local day of ``sample`` and the first stream sample of the next local day."""
+        local = self._local(sample)
+        midnight = datetime.combine(local.date() + timedelta(days=1), time(), local.tzinfo)
+        mid_ns = int(midnight.timestamp()) * 1_000_000_000
+        k = max(math.ceil((mid_ns - (self.t0_ns or 0)) * self.fs / 1e9), sample + 1)
+        while k - 1 > sample and self.t_ns(k - 1) >= mid_ns:
+            k -= 1
+        while self.t_ns(k) < mid_ns:
+            k += 1
+        return local.date().isoformat(), k
+
+    def phase_seconds_by_day(self) -> dict[str, dict[str, float]]:
+        """Seconds per local day and phase so far: the closed phases, and the current one up
+        to the last sample fed (the same phases as :meth:`report`'s ``phase_seconds``)."""
+        days = {d: dict(p) for d, p in self.phase_days.items()}
+        self._book_days(days, self.timeline.states[-1], self.timeline.samples[-1], self.n)
+        return {d: {p: k / self.fs for p, k in sorted(ph.items())}
+                for d, ph in sorted(days.items())}  # fmt: skip
 
     def _local(self, sample: int) -> datetime:
         tz = zoneinfo.ZoneInfo(self.config.time_zone)
@@ -581,6 +620,15 @@ class LoadAnalysis:
             out[comp] = pd.days()
         return out
 
+    def cycles_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
+        """Attributed rainflow cycles per component, local day and phase so far (half cycles
+        0.5), booked with the damage of :meth:`damage_by_day`."""
+        out = {}
+        for comp, pd in self.damage.items():
+            pd.attribute(self.timeline, self.sm.decided_until)
+            out[comp] = pd.cycle_days()
+        return out
+
     def damage_summary(self) -> dict[str, dict[str, float]]:
         """Miner damage per component so far: closed cycles (``committed``), what closing the
         open rainflow residue now as half cycles would add (``pending_residue``), and their sum
@@ -665,6 +713,7 @@ class LoadAnalysis:
             "barring": None if self.barring is None else self.barring.snapshot(),
             "starts_total": self.starts_total,
             "stress": self.stress_model.as_dict(),
+            "phase_days": self.phase_days,
         }
 
     def _damage_table(self, residues: dict[str, Any], seconds: dict[str, float]) -> dict[str, Any]:
@@ -743,6 +792,7 @@ class LoadAnalysis:
         self.starts_total = int(
             d.get("starts_total", sum(m["starts"] for m in self.starts_per_month.values()))
         )
+        self.phase_days = d.get("phase_days", {})  # (none in a snapshot from before they were)
 
 
 def _from_version_2(config: MillConfig, snap: dict[str, Any]) -> dict[str, Any]:

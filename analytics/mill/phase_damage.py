@@ -39,6 +39,7 @@ from analytics.snapshot_arrays import pack_array, unpack_array
 __all__ = [
     "APP_D_SCENARIOS",
     "MONTH_S",
+    "SECONDS_PER_YEAR",
     "PhaseDamage",
     "PhaseTimeline",
     "StartCost",
@@ -58,6 +59,9 @@ PHASES = tuple(PHASE_OF_STATE.values())
 
 MONTH_S = 28 * 86_400.0
 """A month as App. D counts it: 4 weeks (``tm = tw*4``)."""
+
+SECONDS_PER_YEAR = 365.25 * 86_400.0
+"""A Julian year (s): the one year every damage rate and remaining life is counted in."""
 
 APP_D_SCENARIOS = {"5/day": 140.0, "1/day": 28.0, "1/week": 4.0, "1/month": 1.0}
 """Starts per (4-week) month of the four App. D scenarios."""
@@ -106,7 +110,8 @@ class PhaseTimeline:
 
 
 class PhaseDamage:
-    """Damage of one component (a :class:`DamageRecorder`: curve, K_t scale) by phase and day.
+    """Damage of one component (a :class:`DamageRecorder`: curve, K_t scale) by phase and day,
+    and the cycles counted by phase and day (a half cycle counts 0.5; sums of halves are exact).
 
     ``record(cycles, timeline, decided_until)`` attributes the decided cycles and keeps the rest
     pending. ``t0_ns``/``fs`` convert stream samples to time; ``time_zone`` names the site's days.
@@ -129,12 +134,13 @@ class PhaseDamage:
         self.by_phase: dict[str, MinerSum] = {p: MinerSum() for p in PHASES}
         self.by_day: dict[str, dict[str, MinerSum]] = {}
         self.total = MinerSum()
+        self.cycles_by_day: dict[str, dict[str, float]] = {}
         self.batch = 4096
         # cycles not yet costed: rows range, mean, count; and stream i_end (grown on demand)
         self._raw_f = np.empty((3, 0))
         self._raw_i = np.empty(0, dtype=np.int64)
         self._n_raw = 0
-        self._pend: list[tuple[np.ndarray, np.ndarray]] = []
+        self._pend: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # damage, i_end, count
 
     def record(
         self, cycles: Cycles, timeline: PhaseTimeline, decided_until: int, offset: int = 0
@@ -176,12 +182,12 @@ class PhaseDamage:
         self._n_raw = 0
         d = self.recorder.damage_of(r, m, c)
         self.total.add_block(d, exact=True)
-        self._pend.append((d, i))
+        self._pend.append((d, i, c.copy()))
 
     @property
     def oldest_pending(self) -> int | None:
         """Smallest stream ``i_end`` of a cycle not yet attributed (the timeline must keep it)."""
-        ends = [int(i.min()) for _, i in self._pend]
+        ends = [int(i.min()) for _, i, _ in self._pend]
         if self._n_raw:
             ends.append(int(self._raw_i[: self._n_raw].min()))
         return min(ends, default=None)
@@ -192,18 +198,39 @@ class PhaseDamage:
         if not self._pend:
             return
         if len(self._pend) == 1:
-            dmg, i_end = self._pend[0]
+            dmg, i_end, cnt = self._pend[0]
         else:
-            dmg = np.concatenate([d for d, _ in self._pend])
-            i_end = np.concatenate([i for _, i in self._pend])
-        if not self._attribute_one_day(dmg, i_end, timeline, decided_until):
-            ready = i_end < decided_until
-            self._pend = [(dmg[~ready], i_end[~ready])] if not ready.all() else []
-            if ready.any():
-                self._attribute(dmg[ready], i_end[ready], timeline)
+            dmg, i_end, cnt = (np.concatenate(parts) for parts in zip(*self._pend, strict=True))
+        ready = i_end < decided_until
+        if not ready.any():
+            self._pend = [(dmg, i_end, cnt)]
+            return
+        self._count_cycles(cnt[ready], i_end[ready], timeline)
+        if not self._attribute_one_day(dmg, i_end, timeline, decided_until, cnt):
+            self._pend = [(dmg[~ready], i_end[~ready], cnt[~ready])] if not ready.all() else []
+            self._attribute(dmg[ready], i_end[ready], timeline)
+
+    def _count_cycles(self, cnt: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline) -> None:
+        """Book the cycle counts of the decided cycles by local day and phase (as damage)."""
+        states = timeline.states_at(i_end)
+        lo, hi = self._day(int(i_end.min())), self._day(int(i_end.max()))
+        days = None if lo == hi else np.array([self._day(int(s)) for s in i_end])
+        for day in [lo] if days is None else np.unique(days).tolist():
+            sel = None if days is None else days == day
+            per_state = np.bincount(states if sel is None else states[sel],
+                                    weights=cnt if sel is None else cnt[sel])  # fmt: skip
+            per_day = self.cycles_by_day.setdefault(str(day), {})
+            for st in np.flatnonzero(per_state).tolist():
+                phase = PHASE_OF_STATE[OperatingState(st)]
+                per_day[phase] = per_day.get(phase, 0.0) + float(per_state[st])
 
     def _attribute_one_day(
-        self, dmg: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline, decided_until: int
+        self,
+        dmg: np.ndarray,
+        i_end: np.ndarray,
+        timeline: PhaseTimeline,
+        decided_until: int,
+        cnt: np.ndarray,
     ) -> bool:
         """The usual case in one compiled pass
         (:func:`analytics.fatigue.damage_kernels.attribute_split`):
@@ -220,16 +247,14 @@ class PhaseDamage:
         )  # fmt: skip
         if not ok:
             return False
-        if n_left == dmg.shape[0]:
-            self._pend = [(dmg, i_end)]
-            return True
         day = self._day(int(lo))
         if self._day(int(hi)) != day:
             return False
         sums = [(st, hilo(digits_value(digits[st]))) for st in np.flatnonzero(counts).tolist()]
         if not all(math.isfinite(h) for _, (h, _) in sums):
             return False  # the checked path raises
-        self._pend = [(left_d[:n_left], left_i[:n_left])] if n_left else []
+        left_c = cnt[i_end >= decided_until]
+        self._pend = [(left_d[:n_left], left_i[:n_left], left_c)] if n_left else []
         per_day = self.by_day.setdefault(day, {})
         for st, (h, lw) in sums:
             block = (h, lw, int(counts[st]))
@@ -259,6 +284,8 @@ class PhaseDamage:
     def _prune_days(self) -> None:
         while len(self.by_day) > self.keep_days:
             del self.by_day[min(self.by_day)]
+        while len(self.cycles_by_day) > self.keep_days:
+            del self.cycles_by_day[min(self.cycles_by_day)]
 
     def _day(self, sample: int) -> str:
         t = self.t0_ns + sample * 1e9 / self.fs
@@ -285,6 +312,10 @@ class PhaseDamage:
         """Attributed damage per local day and phase."""
         return {d: {p: s.value for p, s in ph.items()} for d, ph in sorted(self.by_day.items())}
 
+    def cycle_days(self) -> dict[str, dict[str, float]]:
+        """Attributed cycles per local day and phase (a half cycle counts 0.5)."""
+        return {d: dict(ph) for d, ph in sorted(self.cycles_by_day.items())}
+
     # ------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
         self._compute()
@@ -298,8 +329,10 @@ class PhaseDamage:
             "by_phase": {p: s.snapshot() for p, s in self.by_phase.items()},
             "by_day": {d: {p: s.snapshot() for p, s in v.items()} for d, v in self.by_day.items()},
             "total": self.total.snapshot(),
-            "pending_damage": pack_array(_joined([d for d, _ in self._pend], np.float64)),
-            "pending_i_end": pack_array(_joined([i for _, i in self._pend], np.int64), "<i8"),
+            "cycles_by_day": self.cycles_by_day,
+            "pending_damage": pack_array(_joined([d for d, _, _ in self._pend], np.float64)),
+            "pending_i_end": pack_array(_joined([i for _, i, _ in self._pend], np.int64), "<i8"),
+            "pending_count": pack_array(_joined([c for _, _, c in self._pend], np.float64)),
         }
 
     @classmethod
@@ -317,10 +350,13 @@ class PhaseDamage:
             day: {p: MinerSum.restore(s) for p, s in v.items()} for day, v in d["by_day"].items()
         }
         pd.total = MinerSum.restore(d["total"])
+        # (a snapshot from before cycles were kept: none counted, pending ones as full cycles)
+        pd.cycles_by_day = {day: dict(v) for day, v in d.get("cycles_by_day", {}).items()}
         dmg = unpack_array(d["pending_damage"])
         i_end = unpack_array(d["pending_i_end"], "<i8", shape=dmg.shape)
+        cnt = unpack_array(d["pending_count"]) if "pending_count" in d else np.ones(dmg.shape)
         if dmg.size:
-            pd._pend = [(dmg, i_end)]
+            pd._pend = [(dmg, i_end, cnt)]
         return pd
 
 

@@ -134,6 +134,9 @@ class StartEvent(_Event):
     rise_time_10_90_ms: float | None
     rise_time_20_80_ms: float | None
     shock_load: bool
+    #: The start's peak as the start-peak levels judge it (the larger of switch-on and
+    #: short-circuit, % rated motor torque; absent from starts stored before it existed).
+    start_peak_pct: float | None = None
     alarm: str | None
 
 

@@ -22,6 +22,7 @@ back from the peak; flagged samples (telemetry spikes) are NaN in the window and
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -41,6 +42,8 @@ __all__ = [
     "measure_start",
     "measure_stop",
     "rise_time_ms",
+    "start_peak_level",
+    "start_peaks",
 ]
 
 SHOCK_RISE_MS = 40.0
@@ -296,6 +299,37 @@ def _peak(
 
 
 # ---------------------------------------------------------------- start
+def start_peaks(start: Mapping[str, Any]) -> dict[Any, float]:
+    """A start's peak motor torque per drive side (``None`` on a single drive), % of rated
+    motor torque: the larger of its switch-on and short-circuit peaks (Diering 2011 §6.1.1,
+    Figure 20 items 1 and 3), the value the start-peak levels judge (§7.2). ``start``: a start
+    event as plain data (``switch_on`` and ``short_circuit`` lists of peaks with ``side`` and
+    ``motor_pct``, as :class:`StartMeasure` gives them); sides without a peak are left out.
+
+    >>> start_peaks({"switch_on": [{"side": None, "motor_pct": 233.0}],
+    ...              "short_circuit": [{"side": None, "motor_pct": 197.0}]})
+    {None: 233.0}
+    """
+    out: dict[Any, float] = {}
+    for peak in [*start.get("switch_on", ()), *start.get("short_circuit", ())]:
+        pct = peak.get("motor_pct")
+        if pct is not None and math.isfinite(pct):
+            side = peak.get("side")
+            out[side] = max(out.get(side, -math.inf), float(pct))
+    return out
+
+
+def start_peak_level(pct: float | None, warn_pct: float, alarm_pct: float) -> str:
+    """The level of a start peak (% rated motor torque) against the start-peak warning and
+    alarm levels (Diering 2011 §7.2, Tables 4–6): ``alarm`` / ``warning`` strictly above them,
+    else ``ok``; ``n/a`` without a peak. The alarm rule ``start_peak`` judges alike."""
+    if pct is None:
+        return "n/a"
+    if pct > alarm_pct:
+        return "alarm"
+    return "warning" if pct > warn_pct else "ok"
+
+
 def measure_start(
     w: PhaseWindow, failed: bool, settings: TransientSettings | None = None
 ) -> StartMeasure:

@@ -12,7 +12,8 @@ What is here:
   and the fleet.
 * :mod:`service.reports.history` — a mill's history read from the store (bounded, indexed):
   the life inputs as of a time, the per-month trend, phase seconds.
-* :mod:`service.reports.monthly` — the monthly report as plain data, built from the store;
+* :mod:`service.reports.monthly` — the monthly report as plain data, built from the store (a
+  package: building, the report's dataclasses, the store reader, the trend sections);
   :mod:`service.reports.month_summary` — its page 1 and cumulative damage against design life.
 * :mod:`service.reports.fleet` — the mills of a site side by side and the visit order
   (``GET /sites/{site}/fleet``).
@@ -39,7 +40,7 @@ Every answer about a mill carries ``simulated`` from its configuration (the demo
 simulated).
 
 Where things go: new data of the monthly report is a field of ``MonthlyReport`` built in
-:mod:`service.reports.monthly`; showing it is a section function in
+:mod:`service.reports.monthly` (its map says which module); showing it is a section function in
 :mod:`service.reports.monthly_document` added to its ``SECTIONS`` (a figure is a builder in
 :mod:`service.reports.figures`) — every format follows without a change. A new format is a
 renderer over ``Document`` in :mod:`service.reports.render` and an entry of ``FORMATS`` in

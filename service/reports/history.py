@@ -8,10 +8,14 @@ index, the fields extracted by SQLite). Call inside
 :meth:`~service.store.database.Store.read_snapshot` to see one state of the store.
 
 * :func:`life_inputs` — what :func:`~service.reports.life.compute_life` needs as of a time
-  (now for ``GET /mills/{id}/life``, a month's end for the report): the one life computation.
+  (now for ``GET /mills/{id}/life``, a month's end for the report): the one life computation;
+  :class:`LifeLedger` — the same history held in memory by the worker for its alarm.
 * :func:`monthly_trend` — starts, damage per component, oscillation range and bending amplitude
   per local calendar month (seed 000 §10.6 "long term trending").
-* :func:`phase_seconds` — seconds in the start, stop and run phases from start/stop events.
+Monitored time is :func:`service.reports.life.monitored_seconds` of the store's coverage
+everywhere (page 1 of the report, the trend, remaining life). Seconds per operating phase are
+the analyzer's own, stored per day (:meth:`~service.store.database.Store.phase_seconds`), not
+re-derived from events.
 """
 
 from __future__ import annotations
@@ -25,19 +29,19 @@ from datetime import date, datetime, timedelta
 import numpy as np
 
 from analytics.drivetrain.mill_config import MillConfig
-from service.reports.life import LifeInputs, midnight_ns
+from service.reports.life import LifeInputs, midnight_ns, monitored_seconds
 from service.reports.starts import month_bounds_ns
 from service.store.database import Store
-from service.store.records import DamageRow, EventRow
+from service.store.records import DamageRow, PhaseRow
 
 __all__ = [
     "TREND_SAMPLE_NS",
     "ChannelStats",
+    "LifeLedger",
     "MonthTrend",
     "last_months",
     "life_inputs",
     "monthly_trend",
-    "phase_seconds",
 ]
 
 TREND_SAMPLE_NS = 3 * 3_600 * 10**9
@@ -45,47 +49,101 @@ TREND_SAMPLE_NS = 3 * 3_600 * 10**9
 (up to 240 a month)."""
 
 
-def phase_seconds(
-    events: Iterable[EventRow], lo: int, hi: int, running_at_lo: bool
-) -> dict[str, float]:
-    """Seconds in ``start``, ``stop`` and ``run`` within ``[lo, hi)``: a start from switch-on
-    to the end of acceleration, a stop from switch-off to rest, running between a successful
-    start and the next stop (``running_at_lo``: the mill was running at ``lo``)."""
-    out = {"start": 0.0, "stop": 0.0, "run": 0.0}
-    run_since = lo if running_at_lo else None
-    for e in (e for e in events if e.kind in ("start", "stop")):
-        end = e.t_end_ns if e.t_end_ns is not None else e.t_ns
-        out[e.kind] += _clip(e.t_ns, end, lo, hi)
-        if e.kind == "stop" and run_since is not None:
-            out["run"] += _clip(run_since, e.t_ns, lo, hi)
-            run_since = None
-        elif e.kind == "start" and not e.data.get("failed"):
-            run_since = end
-    if run_since is not None:
-        out["run"] += _clip(run_since, hi, lo, hi)
-    return out
+class LifeLedger:
+    """What remaining life is computed from, for one mill: the store's daily damage rows,
+    monitored days, phase seconds and start times, held in memory.
+
+    :func:`life_inputs` reads one from the store for each answer (``GET /mills/{id}/life``, the
+    report); the worker keeps one per mill, read from the store once at start and given each
+    row it stores (:meth:`add`, with the store's own rule: a day's row is replaced, a day's
+    span widened, a start counted once), so its ``remaining_life`` alarm is computed by
+    :func:`~service.reports.life.compute_life` from the same inputs ``/life`` reads — the same
+    answer, without reading the store at every damage interval."""
+
+    def __init__(self, config: MillConfig) -> None:
+        self.config = config
+        self._tz = zoneinfo.ZoneInfo(config.time_zone)
+        self._rows: dict[tuple[str, str, str], DamageRow] = {}
+        self._days: dict[str, tuple[int, int]] = {}
+        self._phases: dict[tuple[str, str], float] = {}
+        self._starts: set[int] = set()
+
+    @classmethod
+    def from_store(cls, store: Store, config: MillConfig) -> LifeLedger:
+        """The mill's history as the store holds it now."""
+        ledger = cls(config)
+        ledger.add(
+            rows=store.damage(config.id),
+            phases=store.phases(config.id),
+            days=[(d, a, b) for d, a, b in store.mill_days(config.id) if b > a]
+            or _days_of_damage(store, config),
+            starts=[e.t_ns for e in store.event_times(config.id, ("start",), 0, _END_NS)],
+        )
+        return ledger
+
+    def add(
+        self,
+        rows: Iterable[DamageRow] = (),
+        phases: Iterable[PhaseRow] = (),
+        days: Iterable[tuple[str, int, int]] = (),
+        starts: Iterable[int] = (),
+    ) -> None:
+        """Rows as the store takes them (:class:`~service.store.database.Store`'s
+        ``set_damage``, ``set_phases``, ``extend_days``; start events by time)."""
+        for r in rows:
+            self._rows[(r.component, r.phase, r.day)] = r
+        for p in phases:
+            self._phases[(p.phase, p.day)] = p.seconds
+        for day, first, last in days:
+            lo, hi = self._days.get(day, (first, last))
+            self._days[day] = (min(lo, first), max(hi, last))
+        self._starts.update(starts)
+
+    def inputs(
+        self,
+        until_ns: int,
+        live: Mapping[str, Mapping[str, float]] | None = None,
+        last_sample_ns: int | None = None,
+    ) -> LifeInputs:
+        """The life inputs before ``until_ns`` (see :func:`life_inputs`)."""
+        if last_sample_ns is not None:
+            until_ns = max(until_ns, last_sample_ns)
+        coverage = [(a, min(b, until_ns)) for _, (a, b) in sorted(self._days.items())
+                    if a < until_ns]  # fmt: skip
+        if coverage and last_sample_ns is not None and last_sample_ns > coverage[-1][1]:
+            coverage[-1] = (coverage[-1][0], min(last_sample_ns, until_ns))  # not yet stored
+        if not coverage:
+            return LifeInputs(self.config, [], [], 0, {}, until_ns, live)
+        since, end = coverage[0][0], coverage[-1][1]
+        last_day = _day(end - 1, self._tz)
+        rows = sorted((r for r in self._rows.values() if r.day <= last_day),
+                      key=lambda r: (r.day, r.component, r.phase))  # fmt: skip
+        starts = sum(since <= t < end for t in self._starts)
+        parts: dict[str, list[float]] = {}
+        for (phase, day), seconds in sorted(self._phases.items(), key=lambda kv: kv[0][::-1]):
+            if day <= last_day:
+                parts.setdefault(phase, []).append(seconds)
+        phase_s = {p: math.fsum(v) for p, v in sorted(parts.items())}
+        return LifeInputs(self.config, rows, coverage, starts, phase_s, end, live)
 
 
-def _clip(lo: int, hi: int, span_lo: int, span_hi: int) -> float:
-    return max(0, min(hi, span_hi) - max(lo, span_lo)) / 1e9
+_END_NS = 2**63 - 1
 
 
-def _coverage(store: Store, config: MillConfig, until_ns: int) -> list[tuple[int, int]]:
-    """The monitored intervals before ``until_ns`` (one per local day); whole days of the
-    daily damage rows for a store written before the monitored time was kept."""
-    days = store.mill_days(config.id, until_ns)
-    if days or store.mill_span(config.id)[0] is not None:
-        return [(a, b) for _, a, b in days if b > a]
+def _days_of_damage(store: Store, config: MillConfig) -> list[tuple[str, int, int]]:
+    """Whole local days of the daily damage rows as the monitored time, for a store written
+    before the monitored time was kept."""
+    if store.mill_span(config.id)[0] is not None:
+        return []
     lo_day, hi_day = store.damage_days(config.id)
     if lo_day is None or hi_day is None:
         return []
     tz = zoneinfo.ZoneInfo(config.time_zone)
     out, day = [], date.fromisoformat(lo_day)
     while day.isoformat() <= hi_day:
-        a, b = midnight_ns(day, tz), midnight_ns(day + timedelta(days=1), tz)
-        if a < until_ns:
-            out.append((a, min(b, until_ns)))
-        day += timedelta(days=1)
+        nxt = day + timedelta(days=1)
+        out.append((day.isoformat(), midnight_ns(day, tz), midnight_ns(nxt, tz)))
+        day = nxt
     return out
 
 
@@ -102,21 +160,7 @@ def life_inputs(
     ``live`` and ``last_sample_ns``: the worker's damage summary and analysed position (only
     when evaluating now: then data time, not the wall clock, bounds it — a replay or a gateway
     clock ahead of ours is not cut off)."""
-    if last_sample_ns is not None:
-        until_ns = max(until_ns, last_sample_ns)
-    coverage = _coverage(store, config, until_ns)
-    if coverage and last_sample_ns is not None and last_sample_ns > coverage[-1][1]:
-        coverage[-1] = (coverage[-1][0], min(last_sample_ns, until_ns))  # live, not yet stored
-    since, last = (coverage[0][0], coverage[-1][1]) if coverage else (None, None)
-    end = last if last is not None else until_ns
-    tz = zoneinfo.ZoneInfo(config.time_zone)
-    rows = store.damage(config.id, until_day=_day(end - 1, tz)) if since is not None else []
-    starts, seconds = 0, {"start": 0.0, "stop": 0.0, "run": 0.0}
-    if since is not None and last is not None:
-        starts = store.count_events(config.id, "start", since, last)
-        events = store.event_times(config.id, ("start", "stop"), since, last)
-        seconds = phase_seconds(events, since, last, running_at_lo=False)
-    return LifeInputs(config, rows, coverage, starts, seconds, end, live)
+    return LifeLedger.from_store(store, config).inputs(until_ns, live, last_sample_ns)
 
 
 def _day(t_ns: int, tz: zoneinfo.ZoneInfo) -> str:
@@ -171,13 +215,13 @@ def monthly_trend(
     if rows is None:
         rows = store.damage(config.id, months[0] + "-01", months[-1] + "-31")
     steady = _sampled_steady(store, config.id, lo, hi)
-    days = store.mill_days(config.id, hi)
+    coverage = [(x, y) for _, x, y in store.mill_days(config.id, hi)]
     out = []
     for month, (a, b) in zip(months, bounds, strict=True):
-        covered = sum(max(min(b, y) - max(a, x), 0) for _, x, y in days)
+        covered = monitored_seconds(coverage, a, b)
         i, j = np.searchsorted(steady.t_ns, [a, b]).tolist()
         out.append(MonthTrend(
-            month, covered / 86_400e9, store.count_events(config.id, "start", a, b),
+            month, covered / 86_400.0, store.count_events(config.id, "start", a, b),
             _month_damage(rows, month), _stats(steady.ranges, i, j),
             _stats(steady.bending, i, j), j - i,
         ))  # fmt: skip

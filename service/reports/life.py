@@ -1,5 +1,7 @@
 """Remaining fatigue life per component, with its honesty built in: one computation for
-``GET /mills/{id}/life``, the monthly report and the fleet view.
+``GET /mills/{id}/life``, the monthly report, the fleet view, the ``remaining_life`` alarm
+(the worker computes it with :func:`compute_life` from the same history,
+:class:`~service.reports.history.LifeLedger`) and the ``millwatch_remaining_life_years`` gauge.
 
 Basis (seed 000 §8.2: rainflow + Palmgren–Miner on the configured S-N curve, failure at the
 Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
@@ -21,7 +23,9 @@ Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
   with at least :data:`WORST_MONTH_MIN_DAYS` days monitored. A rate is the stored damage of its
   period per year of *monitored* time in it: per local day, from its first to its last analysed
   sample (the store's coverage, :meth:`~service.store.database.Store.mill_days`), so a
-  telemetry outage of days does not dilute the rate (gaps within a day are not subtracted).
+  telemetry outage of days does not dilute the rate (gaps within a day are not subtracted);
+  :func:`monitored_seconds` is the one computation of monitored time (the monthly report's
+  page 1 and trend use it too).
 * **end dates**: present exactly when the life is; a date beyond 9999-12-31 is given as
   ``9999-12-31`` with ``end_date_capped`` true (practically unlimited).
 * **what drives it**: monitored damage by phase (store names: ``start``, ``run``, ``stop``,
@@ -39,7 +43,7 @@ from __future__ import annotations
 import math
 import zoneinfo
 from collections import defaultdict
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta
 from typing import Any
@@ -51,6 +55,7 @@ from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
+    SECONDS_PER_YEAR,
     project_monthly_damage,
     start_cost,
 )
@@ -71,10 +76,10 @@ __all__ = [
     "life_to_dict",
     "local_iso",
     "midnight_ns",
+    "monitored_seconds",
     "years_range_text",
 ]
 
-SECONDS_PER_YEAR = 365.25 * 86_400.0
 DAY_NS = 86_400 * 10**9
 _NS = 1_000_000_000
 WORST_MONTH_MIN_DAYS = 7.0
@@ -91,8 +96,9 @@ class LifeInputs:
     ``rows``: stored daily damage rows up to the evaluation day; ``coverage``: the monitored
     intervals ``(first analysed sample, just past the last)`` in ns, oldest first, up to the
     evaluation time (one per local day);
-    ``starts``: starts since monitoring began; ``phase_seconds``: seconds in the ``start``,
-    ``stop`` and ``run`` phases over the monitored time; ``live``: the worker's damage summary
+    ``starts``: starts since monitoring began; ``phase_seconds``: seconds per operating phase
+    (``start``, ``stop``, ``run``, ``stopped``, …) over the monitored time, as the analyzer
+    counted them; ``live``: the worker's damage summary
     per component (``committed``, ``pending_residue``), only when evaluating now."""
 
     config: MillConfig
@@ -270,7 +276,15 @@ class _Ctx:
 
     def monitored_s(self, lo: int, hi: int) -> float:
         """Monitored seconds within ``[lo, hi)``."""
-        return math.fsum(max(min(b, hi) - max(a, lo), 0) for a, b in self.coverage) / _NS
+        return monitored_seconds(self.coverage, lo, hi)
+
+
+def monitored_seconds(coverage: Iterable[tuple[int, int]], lo: int, hi: int) -> float:
+    """Monitored seconds within ``[lo, hi)`` (ns): the overlap of the monitored intervals
+    ``coverage`` (the store's first and just-past-last analysed sample per local day, ns) with
+    it. The one computation of monitored time: remaining life, page 1 of the monthly report and
+    its trend."""
+    return math.fsum(max(min(b, hi) - max(a, lo), 0) for a, b in coverage) / _NS
 
 
 def compute_life(inputs: LifeInputs) -> LifeReport:
@@ -322,7 +336,7 @@ def _span(coverage: list[tuple[int, int]]) -> tuple[int | None, int | None]:
 
 def _history(inputs: LifeInputs, tz: zoneinfo.ZoneInfo) -> LifeHistory:
     since, last = _span(inputs.coverage)
-    days = math.fsum(b - a for a, b in inputs.coverage) / DAY_NS
+    days = monitored_seconds(inputs.coverage, since or 0, last or 0) / 86_400.0
     life = inputs.config.life
     return LifeHistory(
         monitored_since_ns=since,
@@ -520,7 +534,7 @@ def _worst_month(ctx: _Ctx, rows: list[DamageRow], comp: str) -> tuple[float | N
 def _end_date(ctx: _Ctx, years: float) -> tuple[str, bool]:
     """The date ``years`` after the last analysed sample; capped at 9999-12-31 (flag)."""
     start = _local_day(ctx.end_ns, ctx.tz)
-    days = years * 365.25
+    days = years * SECONDS_PER_YEAR / 86_400.0
     if days >= (LAST_DATE - start).days:
         return LAST_DATE.isoformat(), True
     return (start + timedelta(days=days)).isoformat(), False

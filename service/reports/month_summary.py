@@ -22,8 +22,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import date, timedelta
 
+from analytics.mill.phase_damage import SECONDS_PER_YEAR
 from service.reports.history import MonthTrend
-from service.reports.life import SECONDS_PER_YEAR, LifeReport, midnight_ns
+from service.reports.life import LifeReport, midnight_ns
 from service.store.records import DamageRow
 
 __all__ = [
@@ -61,12 +62,14 @@ class ComponentSummary:
 @dataclass(frozen=True, slots=True)
 class SummaryStart:
     """The worst start of the month: its time (ns, local ISO-8601), switch-on peak (% rated
-    motor torque) and status against the start-peak levels."""
+    motor torque), status against the start-peak levels, and the peak that status judges
+    (``peak_pct``: the larger of switch-on and short-circuit)."""
 
     t_ns: int
     local_time: str
     switch_on_pct: float | None
     status: str
+    peak_pct: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

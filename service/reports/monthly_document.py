@@ -91,14 +91,13 @@ def _alarms_raised(r: MonthlyReport) -> list[Cell]:
 
 
 def _worst_start(r: MonthlyReport) -> list[Cell]:
-    s = r.starts
-    peaks = [st for st in s.starts if st.switch_on_pct is not None]
+    s, worst = r.starts, r.summary.worst_start
     levels = f"warning above {fmt(s.peak_warn_pct)} %, alarm above {fmt(s.peak_alarm_pct)} %"
-    if not peaks:
-        return ["worst start: switch-on peak", None, "% rated", "n/a", f"no start; {levels}"]
-    worst = max(peaks, key=lambda st: st.switch_on_pct or 0.0)
-    return ["worst start: switch-on peak", worst.switch_on_pct, "% rated", worst.status,
-            f"at {worst.local_time}; {levels}"]  # fmt: skip
+    if worst is None:
+        return ["worst start: peak", None, "% rated", "n/a", f"no start; {levels}"]
+    when = next(st.local_time for st in s.starts if st.t_ns == worst.t_ns)
+    return ["worst start: peak", worst.peak_pct, "% rated", worst.status,
+            f"at {when}; switch-on or short-circuit; {levels}"]  # fmt: skip
 
 
 def _summary_table(r: MonthlyReport) -> Table:
@@ -310,7 +309,8 @@ def _starts(r: MonthlyReport) -> Section:
         rows([[st.local_time, st.t_ns, st.failed, st.switch_on_pct, st.short_circuit_pct,
                st.pinion_switch_on_pct, st.rise_10_90_ms, st.accel_s, st.status]
               for st in s.starts]),
-        caption="Each switch-on (peaks: maximum over the drive sides)",
+        caption="Each switch-on (peaks: maximum over the drive sides; status: the larger of the "
+        "switch-on and short-circuit peaks against the start-peak levels, as the alarm judges)",
     )  # fmt: skip
     per_day = Table(
         "starts_per_day",

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 import zoneinfo
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 from typing import Any
@@ -21,6 +21,7 @@ from typing import Any
 from alarms.times import iso_local
 from analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
 from analytics.mill.report import STARTS_NORM_PER_MONTH, starts_status
+from analytics.operation.transients import start_peak_level, start_peaks
 from service.errors import BadRequest
 from service.store.database import Store
 from service.store.records import EventRow
@@ -90,14 +91,14 @@ def month_bounds_ns(month: str, time_zone: str) -> tuple[int, int]:
     return start, end
 
 
-def peak_status(pct: float | None, alarms: AlarmThresholds) -> str:
-    """A start's switch-on peak (% rated motor torque) against the start-peak levels (§7.2,
-    Tables 4–6): ``alarm`` / ``warning`` strictly above them, ``ok``, ``n/a`` without a peak."""
-    if pct is None:
-        return "n/a"
-    if pct > alarms.start_peak_alarm_pct:
-        return "alarm"
-    return "warning" if pct > alarms.start_peak_warn_pct else "ok"
+def peak_status(start: Mapping[str, Any], alarms: AlarmThresholds) -> str:
+    """A start's peak (% rated motor torque, the larger of switch-on and short-circuit:
+    :func:`~analytics.operation.transients.start_peaks`) against the start-peak levels
+    (:func:`~analytics.operation.transients.start_peak_level`, as the ``start_peak`` alarm
+    judges it): ``alarm``, ``warning``, ``ok``, ``n/a`` without a peak. ``start``: a start
+    event's data."""
+    peak = max(start_peaks(start).values(), default=None)
+    return start_peak_level(peak, alarms.start_peak_warn_pct, alarms.start_peak_alarm_pct)
 
 
 @dataclass(frozen=True, slots=True)
@@ -141,7 +142,7 @@ def _start(event: EventRow, tz: zoneinfo.ZoneInfo, alarms: AlarmThresholds) -> d
         "short_circuit_peak_pct": d.get("short_circuit_peak_pct"),
         "rise_time_10_90_ms": d.get("rise_time_10_90_ms"),
         "shock_load": bool(d.get("shock_load", False)),
-        "peak_status": "ok" if peak is None else peak_status(peak, alarms),  # API: ok|warning|alarm
+        "peak_status": peak_status(d, alarms).replace("n/a", "ok"),  # API: ok|warning|alarm
     }
 
 

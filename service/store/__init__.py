@@ -5,10 +5,12 @@ The embedded store: SQLite in WAL mode (one writer, the worker; any number of re
 What is here:
 
 * :mod:`service.store.database` — :class:`~service.store.database.Store`: the file, its
-  transactions, the worker's writes (events, daily damage, records, alarms, checkpoints) and
+  transactions, the worker's writes (events, daily damage and cycles, daily phase seconds,
+  monitored days, records, alarms, checkpoints) and
   the reads of the API and the reports.
 * :mod:`service.store.migrations` — the schema as forward migrations, applied on open.
-* :mod:`service.store.records` — the row types (``EventRow``, ``DamageRow``; the alarm records
+* :mod:`service.store.records` — the row types (``EventRow``, ``DamageRow``, ``PhaseRow``; the
+  alarm records
   are :mod:`alarms.lifecycle`'s) and their mapping to SQL by column name.
 * :mod:`service.store.sampler` — columns of the JSON ``records`` extracted by SQLite, so a
   month of steady windows is read without decoding each one.

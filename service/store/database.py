@@ -15,8 +15,9 @@ Design notes:
 * Everything one analyzed frame produces is written in one transaction
   (:meth:`Store.transaction`), and the checkpoint that covers it is written in the same way, so
   after a crash the store never holds results newer than its last checkpoint plus replay.
-* Damage rows are *set*, not added: the worker writes each day's running totals (exact sums
-  kept in the analyzer), so replaying the archive tail after a crash is idempotent.
+* Damage rows (with their cycle counts) and phase seconds are *set*, not added: the worker
+  writes each day's running totals (kept in the analyzer), so replaying the archive tail after a
+  crash is idempotent.
 * Opening a file migrates it (:mod:`service.store.migrations`); rows are mapped by column name
   (:mod:`service.store.records`); the JSON ``records`` are read column-wise by
   :mod:`service.store.sampler`.
@@ -25,6 +26,7 @@ Design notes:
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 import threading
 from collections.abc import Iterator, Mapping, Sequence
@@ -35,7 +37,15 @@ from typing import Any
 from alarms.lifecycle import Alarm, TransitionRecord
 from service.store import migrations, sampler
 from service.store.migrations import StoreError
-from service.store.records import DamageRow, EventRow, column_list, columns, from_row, to_params
+from service.store.records import (
+    DamageRow,
+    EventRow,
+    PhaseRow,
+    column_list,
+    columns,
+    from_row,
+    to_params,
+)
 
 __all__ = ["CHECKPOINTS_KEPT", "Store"]
 
@@ -133,6 +143,15 @@ class Store:
             f"INSERT OR REPLACE INTO damage_daily ({column_list(DamageRow)}) "
             f"VALUES ({', '.join('?' * len(columns(DamageRow)))})",
             [to_params(DamageRow, r) for r in rows],
+        )
+
+    @staticmethod
+    def set_phases(db: sqlite3.Connection, rows: Sequence[PhaseRow]) -> None:
+        """Set running daily phase seconds (inside :meth:`transaction`); idempotent."""
+        db.executemany(
+            f"INSERT OR REPLACE INTO phase_daily ({column_list(PhaseRow)}) "
+            f"VALUES ({', '.join('?' * len(columns(PhaseRow)))})",
+            [to_params(PhaseRow, r) for r in rows],
         )
 
     @staticmethod
@@ -300,6 +319,28 @@ class Store:
                 args.append(value)
         rows = self._query_rows(sql + " ORDER BY day, component, phase", tuple(args))
         return [from_row(DamageRow, r) for r in rows]
+
+    def phases(self, mill_id: str) -> list[PhaseRow]:
+        """Daily phase-seconds rows of a mill, oldest first."""
+        sql = f"SELECT {column_list(PhaseRow)} FROM phase_daily WHERE mill_id = ?"
+        rows = self._query_rows(sql + " ORDER BY day, phase", (mill_id,))
+        return [from_row(PhaseRow, r) for r in rows]
+
+    def phase_seconds(
+        self, mill_id: str, since_day: str | None = None, until_day: str | None = None
+    ) -> dict[str, float]:
+        """Seconds per operating phase of a mill, summed over the local days in ``[since_day,
+        until_day]`` (``YYYY-MM-DD``, both included; all days when not given)."""
+        sql = "SELECT phase, seconds FROM phase_daily WHERE mill_id = ?"
+        args: list[Any] = [mill_id]
+        for clause, value in (("day >= ?", since_day), ("day <= ?", until_day)):
+            if value is not None:
+                sql += " AND " + clause
+                args.append(value)
+        parts: dict[str, list[float]] = {}
+        for phase, seconds in self._query(sql + " ORDER BY day, phase", tuple(args)):
+            parts.setdefault(str(phase), []).append(float(seconds))
+        return {p: math.fsum(v) for p, v in sorted(parts.items())}
 
     def mill_span(self, mill_id: str) -> tuple[int | None, int | None]:
         """Time of the first analysed sample and just past the last one (ns), ``None`` before

@@ -78,6 +78,12 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             last_ns INTEGER NOT NULL, PRIMARY KEY (mill_id, day))""",
         "ALTER TABLE alarms ADD COLUMN simulated INTEGER NOT NULL DEFAULT 0",
     ),
+    (  # 5 → 6: seconds per mill, operating phase and local day, as the analyzer counts them
+        # (stopped and unknown included), which the cost of a start and the report read
+        """CREATE TABLE phase_daily (
+            mill_id TEXT NOT NULL, phase TEXT NOT NULL, day TEXT NOT NULL,
+            seconds REAL NOT NULL, PRIMARY KEY (mill_id, phase, day))""",
+    ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 _PART_CHECKPOINTS = 4  # the schema version that brought checkpoint_parts

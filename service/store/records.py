@@ -10,7 +10,7 @@ as 0/1 and read back as ``bool``; an :class:`~enum.Enum` is stored as its value 
 
 Row types: the alarm records are :mod:`alarms.lifecycle`'s (:class:`~alarms.lifecycle.Alarm`,
 :class:`~alarms.lifecycle.TransitionRecord`); the worker's rows are defined here
-(:class:`EventRow`, :class:`DamageRow`).
+(:class:`EventRow`, :class:`DamageRow`, :class:`PhaseRow`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-__all__ = ["DamageRow", "EventRow", "column_list", "columns", "from_row", "to_params"]
+__all__ = [
+    "DamageRow",
+    "EventRow",
+    "PhaseRow",
+    "column_list",
+    "columns",
+    "from_row",
+    "to_params",
+]
 
 R = TypeVar("R")
 
@@ -53,6 +61,18 @@ class DamageRow:
     day: str  # YYYY-MM-DD in the site's time zone
     damage: float
     cycles: float
+
+
+@dataclass(frozen=True, slots=True)
+class PhaseRow:
+    """Seconds one mill spent in one operating phase (``stopped``, ``start``, ``run``,
+    ``stop``, ``barring``, ``unknown``) on one local calendar day, as its analyzer counts them
+    (a row of ``phase_daily``)."""
+
+    mill_id: str
+    phase: str
+    day: str  # YYYY-MM-DD in the site's time zone
+    seconds: float
 
 
 @functools.cache

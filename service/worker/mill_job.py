@@ -10,9 +10,16 @@ new steady-state windows) into
 * event rows (starts, stops, barring sessions),
 * records (``steady`` windows, ``harmonics`` tables),
 * alarm observations → alarm transitions (:mod:`alarms`), and
-* daily damage totals per component and phase, taken every ``damage_every_s`` seconds of
-  *sample* time (not wall time): the analysis stops at exactly those samples, so the rows and the
-  remaining-life observations are the same however the blocks were batched, and
+* daily totals — damage and counted cycles per component and phase, seconds per operating
+  phase, monitored time — taken every ``damage_every_s`` seconds of *sample* time (not wall
+  time): the analysis stops at exactly those samples, so the rows are the same however the
+  blocks were batched; :meth:`MillJob.book` takes them at any moment too (the worker does with
+  each checkpoint, so a clean stop books every analysed sample),
+* ``remaining_life_years`` observations every ``life_every_s`` of sample time (at a damage
+  interval): :func:`~service.reports.life.compute_life` on the mill's stored history (read
+  once, :meth:`MillJob.read_history`) plus the rows this job booked since
+  (:class:`~service.reports.history.LifeLedger`), with the analyzer's live damage — what
+  ``GET /mills/{id}/life`` answers on the same data, and
 * a ``spectra_restarted`` data-quality event per tracked channel when a restore had to start
   the spectra afresh (the mill's configuration moved their geometry since the checkpoint; see
   :meth:`MillAnalyzer.restore <analytics.mill.analyzer.MillAnalyzer.restore>`), stored with the
@@ -51,8 +58,11 @@ from analytics.mill.results import (
 from analytics.spectra.resonance import resonance_margins
 from analytics.spectra.settings import stagger_for
 from ingest.wire import Block
+from service.reports.history import LifeLedger
+from service.reports.life import LifeReport, compute_life
 from service.status import MillStatus
-from service.store.records import DamageRow, EventRow
+from service.store.database import Store
+from service.store.records import DamageRow, EventRow, PhaseRow
 from service.worker.worker import MillUpdate
 
 __all__ = ["MillJob", "split_local_days"]
@@ -60,6 +70,9 @@ __all__ = ["MillJob", "split_local_days"]
 log = logging.getLogger(__name__)
 
 DAMAGE_EVERY_S = 60.0
+#: Remaining life is observed for its alarm at most every hour of sample time (at a damage
+#: interval): it moves slowly, and computing it reads the mill's whole stored history.
+LIFE_EVERY_S = 3600.0
 #: A harmonic table is stored at most every 5 minutes of sample time (a window completes about
 #: every 10 s while running; storing each, with every expected line, took ~1.8 MB per running
 #: hour), and at once whenever a window holds an unexplained peak.
@@ -70,7 +83,6 @@ HARMONICS_EVERY_NS = 300 * 1_000_000_000
 #: :meth:`MillJob.finish` step (a damage interval) makes.
 WINDOWS_KEPT = 60
 EVENTS_KEPT = 20
-SECONDS_PER_YEAR = 365.25 * 86400.0
 
 
 class MillJob:
@@ -78,7 +90,12 @@ class MillJob:
     the mill's :class:`~analytics.mill.analyzer.MillAnalyzer`, runs its alarms and returns
     store rows; see the module docstring."""
 
-    def __init__(self, config: MillConfig, damage_every_s: float = DAMAGE_EVERY_S) -> None:
+    def __init__(
+        self,
+        config: MillConfig,
+        damage_every_s: float = DAMAGE_EVERY_S,
+        life_every_s: float = LIFE_EVERY_S,
+    ) -> None:
         self.config = config
         self.analyzer = MillAnalyzer(config)
         self.analyzer.keep_recent(windows=WINDOWS_KEPT, events=EVENTS_KEPT)
@@ -87,12 +104,19 @@ class MillJob:
         # the first interval is longer by a fraction fixed by the mill id, so mills started
         # together do not all attribute their damage in the same instant (issue 5 latency)
         self._next_damage = self._damage_every + round(stagger_for(config.id) * self._damage_every)
+        self._life_every = round(life_every_s * config.sample_rate_hz)
+        self._next_life = self._next_damage
+        #: The mill's history as the store holds it (:meth:`read_history`), and every row this
+        #: job gives the worker to store: what the remaining-life alarm is computed from.
+        self.ledger = LifeLedger(config)
         self._last_window_ns = -1
         self._latest_window: dict[str, Any] | None = None
         self._latest_typed: SteadyWindowResult | None = None
         self._next_harmonics_ns = 0
         self._held_events: list[EventRow] = []  # stored with the next finish()
         self._covered_until: int | None = None  # monitored time stored up to here (ns)
+        #: The daily totals last booked (after a restore: none, so all are booked again).
+        self._booked: dict[tuple[str, ...], Any] = {}
         self._tz = zoneinfo.ZoneInfo(config.time_zone)
         if config.torsional is None:  # said once, at start (the report says it too)
             log.info("mill %s: %s", config.id, NO_MODEL_NOTE)
@@ -135,16 +159,52 @@ class MillJob:
             self._fold(out, update)
             if self.analyzer.samples < self._next_damage:
                 return update
-            update.damage += self._damage_rows()
-            update.days += self._days()
-            update.alarm_transitions += self.alarms.observe_all(self._life_observations())
+            self._book(update)
+            if self.analyzer.samples >= self._next_life:
+                update.alarm_transitions += self.alarms.observe_all(self._life_observations())
+                self._next_life = self.analyzer.samples + self._life_every
             self._next_damage = self.analyzer.samples + self._damage_every
+
+    def book(self) -> MillUpdate:
+        """The running daily totals of everything analysed so far (damage and cycles per
+        component, phase and day; seconds per phase and day; the monitored time since the last
+        booking), for the worker's checkpoint of this mill: a clean stop books every analysed
+        sample. No alarm observations (those stay at the damage intervals' samples, the same
+        however the worker was stopped and started)."""
+        update = MillUpdate()
+        self._book(update)
+        return update
+
+    def _book(self, update: MillUpdate) -> None:
+        """The daily totals that changed since the last booking (the analyzer keeps a year of
+        days: the store gets only the days that moved, usually today's)."""
+        rows = [
+            r
+            for r in self._damage_rows()
+            if self._booked.get((r.component, r.phase, r.day)) != (r.damage, r.cycles)
+        ]
+        phases = [p for p in self._phase_rows() if self._booked.get((p.phase, p.day)) != p.seconds]
+        days = self._days()
+        self._booked.update({(r.component, r.phase, r.day): (r.damage, r.cycles) for r in rows})
+        self._booked.update({(p.phase, p.day): p.seconds for p in phases})
+        self.ledger.add(rows=rows, phases=phases, days=days)
+        update.damage += rows
+        update.phases += phases
+        update.days += days
+
+    def read_history(self, store: Store) -> None:
+        """Take the mill's history from ``store`` (at start, and after another process
+        replayed the mill into it): the remaining-life alarm is computed from it and from the
+        rows this job books since, as ``GET /mills/{id}/life`` computes it from the store."""
+        self.ledger = LifeLedger.from_store(store, self.config)
 
     def _fold(self, out: AnalyzerOutput, update: MillUpdate) -> None:
         """Events, steady windows and harmonic tables of ``out`` as rows and alarm input."""
         observations: list[Observation] = []
         for event in out.events:
             update.events.append(self._event_row(event))
+            if isinstance(event, StartEvent):
+                self.ledger.add(starts=[event.t_ns])
             observations += self._event_observations(event)
         for window in self._new_windows():
             update.records.append(("steady", int(window["t_ns"]), window))
@@ -192,43 +252,53 @@ class MillJob:
         self._covered_until = now
         return split_local_days(first, now, self._tz)
 
+    def life(self) -> LifeReport:
+        """Remaining life now (:func:`~service.reports.life.compute_life`) from the mill's
+        stored history and this job's rows (:attr:`ledger`) with the analyzer's live damage:
+        the inputs ``GET /mills/{id}/life`` reads once the rows are stored."""
+        t_ns = self.analyzer.next_sample_ns
+        live = {c: d.model_dump() for c, d in self.analyzer.damage_summary().items()}
+        inputs = self.ledger.inputs(t_ns or 0, live, t_ns)
+        return compute_life(inputs)
+
     def _life_observations(self) -> list[Observation]:
-        """``remaining_life_years`` per component: (1 − D) / (D per year so far), the damage
-        rate taken over everything this analyzer has seen (seed 000 §8.2; Miner limit 1), D
-        with the configured estimated prior damage; none before the minimum history of
-        ``[life]`` (as ``GET /mills/{id}/life``: no extrapolation of a few minutes)."""
-        seconds, t_ns = self.analyzer.seconds_analysed, self.analyzer.next_sample_ns
-        life = self.config.life
+        """``remaining_life_years`` per component: the shortest of its remaining-life range
+        (:meth:`life`, as ``/life``, the report and the ``millwatch_remaining_life_years``
+        gauge give it; Diering 2011 §8.2, Miner limit 1, the configured prior damage included);
+        none while the history is below the ``[life]`` minimum."""
+        t_ns = self.analyzer.next_sample_ns
         if t_ns is None:  # nothing analysed: no damage, no rate
             return []
-        if seconds < life.min_monitoring_days * 86_400 or (
-            self.analyzer.starts_total < life.min_starts
-        ):
-            return []
-        prior = life.prior_damage
+        report = self.life()
         out = []
-        for comp, monitored in self.analyzer.committed_damage().items():
-            if monitored <= 0.0 or seconds <= 0.0:
+        for comp, c in report.components.items():
+            if report.status != "ok" or c.remaining_life_years_min is None:
                 continue
-            per_year = monitored / seconds * SECONDS_PER_YEAR
-            before = prior.get(comp, 0.0) if isinstance(prior, dict) else (prior or 0.0)
-            damage = monitored + before
             out.append(Observation(self.config.id, "remaining_life_years",
-                                   max(1.0 - damage, 0.0) / per_year, t_ns, {
+                                   c.remaining_life_years_min, t_ns, {
                                        "component": comp,
                                        "remaining_design_life_years":
                                            self.config.design_life_years,
-                                       "rate_window_s": seconds,
                                    }))  # fmt: skip
         return out
 
     def _damage_rows(self) -> list[DamageRow]:
+        """Damage and counted cycles per component, local day and phase so far."""
         rows = []
+        cycles = self.analyzer.cycles_by_day()
         for comp, days in self.analyzer.damage_by_day().items():
             for day, phases in days.items():
+                counted = cycles.get(comp, {}).get(day, {})
                 for phase, damage in phases.items():
-                    rows.append(DamageRow(self.config.id, comp, phase, day, damage, 0.0))
+                    rows.append(DamageRow(self.config.id, comp, phase, day, damage,
+                                          counted.get(phase, 0.0)))  # fmt: skip
         return rows
+
+    def _phase_rows(self) -> list[PhaseRow]:
+        """Seconds per local day and operating phase so far, as the analyzer counts them."""
+        return [PhaseRow(self.config.id, phase, day, seconds)
+                for day, phases in self.analyzer.phase_seconds_by_day().items()
+                for phase, seconds in phases.items()]  # fmt: skip
 
     def observe(self, observations: list[Observation]) -> MillUpdate:
         """Alarm observations from outside the analysis (the worker's data-quality checks)."""
@@ -283,6 +353,7 @@ class MillJob:
             "monitor": self.analyzer.snapshot(),
             "alarms": self.alarms.snapshot(),
             "next_damage": self._next_damage,
+            "next_life": self._next_life,
             "last_window_ns": self._last_window_ns,
             "latest_window": self._latest_window,
             "next_harmonics_ns": self._next_harmonics_ns,
@@ -293,11 +364,13 @@ class MillJob:
         self.analyzer.keep_recent(windows=WINDOWS_KEPT, events=EVENTS_KEPT)
         self.alarms.restore(snapshot["alarms"])
         self._next_damage = int(snapshot["next_damage"])
+        self._next_life = int(snapshot.get("next_life", self._next_damage))
         self._last_window_ns = int(snapshot["last_window_ns"])
         windows = self.analyzer.steady_windows  # (as restored: channels by the mill file's names)
         self._latest_window = windows[-1] if windows else snapshot["latest_window"]
         self._next_harmonics_ns = int(snapshot["next_harmonics_ns"])
         self._covered_until = self.analyzer.next_sample_ns
+        self._booked = {}
         self._held_events += self._restart_events()
 
     def _restart_events(self) -> list[EventRow]:

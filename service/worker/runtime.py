@@ -26,7 +26,8 @@ background, see :mod:`ingest.zenoh_session`); ``/ready`` says which endpoints ar
 
 Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the report job (between reports), stop the
 worker thread after its current batch,
-write a final checkpoint, finish the archive file (footer and index), undeclare the subscribers,
+write a final checkpoint (which books every mill's analysis up to its last analysed sample),
+finish the archive file (footer and index), undeclare the subscribers,
 close the zenoh session and the store.
 """
 

@@ -16,7 +16,10 @@ checkpointed — the mills' turns spread over the interval (:mod:`service.worker
 step stalls for all of them at once: the worker flushes the archive, takes the archive position
 and snapshots the mill's pipeline *in the same thread that processes blocks*, so the snapshot
 covers exactly the mill's blocks before the position, and stores it in a small transaction of
-its own. After a crash :func:`service.worker.recovery.recover` restores every mill's newest
+its own, with the mill's running daily totals up to its last analysed sample
+(:meth:`MillPipeline.book`): live, the store lags the analysis by at most one interval, and the
+final checkpoint of a clean stop books every analysed sample. After a crash
+:func:`service.worker.recovery.recover` restores every mill's newest
 checkpoint (:meth:`Worker.restore_checkpoints`) and re-reads the archive from the earliest of
 their positions through the same path (without archiving again), skipping for each mill the
 blocks its checkpoint already holds, so the results equal an uninterrupted run; only blocks that
@@ -58,7 +61,7 @@ from ingest.archive.writer import ArchiveWriter
 from ingest.wire import Block
 from service.status import MillHealthStatus, MillStatus
 from service.store.database import Store
-from service.store.records import DamageRow, EventRow
+from service.store.records import DamageRow, EventRow, PhaseRow
 from service.worker.admission import BlockAdmission
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.checkpoints import (
@@ -82,8 +85,8 @@ HELD = "held"
 
 @dataclass
 class MillUpdate:
-    """What one block changed: new events, daily damage totals, timestamped records, alarm
-    transitions with the alarms' new state."""
+    """What one block changed: new events, daily damage totals (with cycle counts) and phase
+    seconds, timestamped records, alarm transitions with the alarms' new state."""
 
     events: list[EventRow] = field(default_factory=list)
     damage: list[DamageRow] = field(default_factory=list)
@@ -91,10 +94,11 @@ class MillUpdate:
     alarm_transitions: list[Transition] = field(default_factory=list)
     #: Monitored time analysed: ``(local day, first sample, just past the last)`` in ns.
     days: list[tuple[str, int, int]] = field(default_factory=list)
+    phases: list[PhaseRow] = field(default_factory=list)
 
     def __bool__(self) -> bool:
         return bool(self.events or self.damage or self.records or self.alarm_transitions
-                    or self.days)  # fmt: skip
+                    or self.days or self.phases)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -112,6 +116,9 @@ class AckRequest:
 class MillPipeline(Protocol):
     """One mill's analysis: fed decoded blocks per configured channel, in arrival order;
     ``add_block`` / ``add_blocks`` only queue blocks, ``finish`` analyses what was queued;
+    ``book`` gives the running daily totals (damage, cycles, phase seconds, monitored time) of
+    everything analysed so far, for a checkpoint; ``read_history`` takes what the store holds
+    of the mill (its remaining-life alarm is computed from that and its own rows);
     ``alarms`` is the mill's alarm engine (acknowledgements go to it)."""
 
     @property
@@ -124,6 +131,10 @@ class MillPipeline(Protocol):
     def release_absent(self, channels: set[str]) -> None: ...
 
     def finish(self) -> MillUpdate: ...
+
+    def book(self) -> MillUpdate: ...
+
+    def read_history(self, store: Store) -> None: ...
 
     def observe(self, observations: list[Observation]) -> MillUpdate: ...
 
@@ -179,6 +190,8 @@ class Worker:
         self._outside: queue.SimpleQueue[Observation] = queue.SimpleQueue()
         #: Each mill's newest unrecoverable losses (stored; newest first), for its status.
         self.losses = {m: deque(store.losses(m, LOSSES_SHOWN), LOSSES_SHOWN) for m in mills}
+        for pipeline in pipelines.values():
+            pipeline.read_history(store)
 
     # ------------------------------------------------------------------ one block
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
@@ -470,10 +483,15 @@ class Worker:
 
     def _checkpoint_mill(self, mill_id: str, position: ArchivePosition | None) -> None:
         """One mill's snapshot (exact at ``position``: taken on this thread between blocks),
-        serialised and stored at once, so it shares nothing mutable with the live pipeline.
+        serialised and stored at once, so it shares nothing mutable with the live pipeline,
+        in the transaction that books the mill's running daily totals up to its last analysed
+        sample (:meth:`MillPipeline.book`): the store lags the analysis by at most one
+        checkpoint interval, and the checkpoint of a clean stop books every analysed sample.
         Nothing for a held mill: its last good checkpoint must stay for the revert."""
         if mill_id in self.held:
             return
+        booked = PendingResults()
+        booked.add(mill_id, self.pipelines[mill_id].book())
         channels = self.health[mill_id].channels
         seqs = {c: h.last_seq for c, h in channels.items()}
         counters = {c: h.counters() for c, h in channels.items()}
@@ -481,6 +499,7 @@ class Worker:
                  "last_seq": {mill_id: seqs}, "health": {mill_id: counters}}  # fmt: skip
         where = position.as_dict() if position else {}
         with self.store.transaction() as db:
+            booked.write(db)
             size = Store.put_checkpoint(db, mill_id, self._clock(), where, state)
         self.checkpoints_written += 1
         self.checkpoint_bytes += size
@@ -513,6 +532,7 @@ class Worker:
         the ``transitions`` that process stored to :attr:`on_alarms`."""
         for mill_id, snapshot in snapshots.items():
             self.pipelines[mill_id].restore(snapshot)
+            self.pipelines[mill_id].read_history(self.store)  # with what that process stored
             self.health[mill_id] = health[mill_id]
         self.blocks_handled += handled
         if transitions and self.on_alarms is not None:
@@ -604,6 +624,7 @@ class PendingResults:
         self.events: list[EventRow] = []
         self.records: list[tuple[str, str, int, dict[str, Any]]] = []
         self.damage: dict[tuple[str, str, str, str], DamageRow] = {}
+        self.phases: dict[tuple[str, str, str], PhaseRow] = {}
         self.transitions: list[Transition] = []
         self.days: dict[tuple[str, str], tuple[int, int]] = {}
 
@@ -615,15 +636,19 @@ class PendingResults:
         self.records += [(mill_id, kind, t, data) for kind, t, data in update.records]
         for row in update.damage:
             self.damage[(row.mill_id, row.component, row.phase, row.day)] = row
+        for p in update.phases:
+            self.phases[(p.mill_id, p.phase, p.day)] = p
         self.transitions += update.alarm_transitions
 
     def __bool__(self) -> bool:
-        return bool(self.events or self.records or self.damage or self.transitions or self.days)
+        return bool(self.events or self.records or self.damage or self.transitions or self.days
+                    or self.phases)  # fmt: skip
 
     def write(self, db: Any) -> None:
         Store.extend_days(db, self.days)
         Store.add_events(db, self.events)
         Store.set_damage(db, list(self.damage.values()))
+        Store.set_phases(db, list(self.phases.values()))
         for mill_id, kind, t_ns, data in self.records:
             Store.add_record(db, mill_id, kind, t_ns, data)
         if self.transitions:

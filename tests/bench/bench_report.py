@@ -198,12 +198,13 @@ PARTS = {
 
 def long_view_parts(store: Store, config: Any) -> dict[str, Any]:
     """The report's long-view sections alone (what reading the history costs)."""
-    from service.reports import monthly as m
     from service.reports.history import life_inputs, monthly_trend
     from service.reports.life import compute_life
+    from service.reports.monthly import build as m
+    from service.reports.monthly.reader import MonthReader
 
     end = month_bounds_ns(MONTH, config.time_zone)[1]
-    reader = m._MonthReader(store, config, MONTH)
+    reader = MonthReader(store, config, MONTH)
     starts = m._starts(reader.events(), config, reader.days)
     alarms = store.alarms(mill_id=config.id)
     return {

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hst
 
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.miner import DamageRecorder
@@ -93,6 +96,44 @@ def test_blocking_does_not_change_the_sums_and_snapshot_round_trips():
         many.batch = 100
     many.attribute(timeline(), 10**9)
     assert many.phases() == one.phases() and many.committed == one.committed
+
+
+def _counted(r, i, c, decided, splits, days_tz="Africa/Johannesburg") -> PhaseDamage:
+    """Cycles ``(r, i, c)`` recorded in the pieces ``splits`` cut, attributed up to
+    ``decided`` after each piece, through a snapshot round trip each time."""
+    pd = PhaseDamage(DamageRecorder(CURVE), T0 - 2 * 3600 * 10**9, FS, days_tz)
+    pd.batch = 16
+    cuts = [0, *sorted(splits), len(r)]
+    for lo, hi in itertools.pairwise(cuts):
+        part = Cycles.from_arrays(r[lo:hi], np.zeros(hi - lo), c[lo:hi], i[lo:hi] - 1, i[lo:hi])
+        pd.record(part, timeline(), decided)
+        pd.attribute(timeline(), decided)
+        pd = PhaseDamage.restore(json.loads(json.dumps(pd.snapshot())))
+        pd.batch = 16
+    return pd
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=hst.integers(0, 120),
+    decided=hst.integers(0, 3 * 3600 * 1000),
+    splits=hst.lists(hst.integers(0, 120), max_size=4),
+    seed=hst.integers(0, 2**16),
+)
+def test_cycle_counts_by_day_and_phase_do_not_depend_on_the_split(n, decided, splits, seed):
+    """Counted cycles (half cycles 0.5) follow the damage: the same per day and phase however
+    the cycles are split and snapshotted, and only decided cycles are counted."""
+    rng = np.random.default_rng(seed)
+    r = rng.uniform(0, 300, n)
+    i = np.sort(rng.integers(1, 3 * 3600 * 1000, n))  # across a local midnight
+    c = rng.choice([0.5, 1.0], n)
+    one = _counted(r, i, c, decided, [])
+    split = _counted(r, i, c, decided, [k for k in splits if k <= n])
+    assert split.cycle_days() == one.cycle_days()
+    assert split.days() == one.days()
+    counted = math.fsum(v for ph in one.cycle_days().values() for v in ph.values())
+    assert counted == math.fsum(c[i < decided].tolist())
+    assert set(one.cycle_days()) == set(one.days())
 
 
 def test_start_cost_in_hours_of_running():

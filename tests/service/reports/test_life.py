@@ -230,7 +230,8 @@ def test_the_report_has_page_one_cumulative_damage_and_a_trend(store):
     assert report.life.evaluated_at_ns == store.mill_span(SIM.id)[1]
     assert s.life_status == "ok" and s.starts == 2 and s.starts_norm == (3, 5)
     assert s.previous_month == "2024-01" and s.worst_start is not None
-    assert s.worst_start.switch_on_pct == max(x.switch_on_pct for x in report.starts.starts)
+    assert s.worst_start.peak_pct == max(x.peak_pct for x in report.starts.starts)
+    assert s.worst_start.peak_pct >= s.worst_start.switch_on_pct  # switch-on or short-circuit
     starts = next(c for c in s.changes if c.quantity == "starts")
     assert (starts.this_month, starts.last_month, starts.change) == (2.0, 2.0, 0.0)
     comp = next(c for c in s.components if c.component == "pinion_combined")
@@ -247,6 +248,11 @@ def test_the_report_has_page_one_cumulative_damage_and_a_trend(store):
     assert len(report.trend) == 12 and [t.starts for t in report.trend[-2:]] == [2, 2]
     assert report.trend[-1].damage["pinion_combined"] > 0
     assert report.trend[-1].windows_sampled > 0 and report.trend[-1].bending_amplitude_mpa.mean
+    # one monitored time: page 1, the trend and /life (both months) say the same
+    hours = report.trend[-1].monitored_days * 24
+    assert f"Monitoring covered {hours:.2f} hours of the month." in report.notes
+    both = sum(t.monitored_days for t in report.trend)
+    assert report.life.history.monitored_days == pytest.approx(both, rel=1e-12)
 
 
 def test_the_report_data_travel_as_json_and_back(store):

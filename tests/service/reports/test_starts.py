@@ -49,10 +49,25 @@ def test_current_month_is_the_sites_local_month():
     assert current_month(CONFIG, t) == "2024-01"
 
 
+def _start(switch_on: float | None, short_circuit: float | None = None) -> dict:
+    return {"switch_on": [] if switch_on is None else [{"side": None, "motor_pct": switch_on}],
+            "short_circuit": [] if short_circuit is None else
+            [{"side": None, "motor_pct": short_circuit}]}  # fmt: skip
+
+
 def test_start_peaks_count_strictly_above_the_levels():
     a = AlarmThresholds()  # warning above 250 %, alarm above 300 % (§7.2)
-    assert [peak_status(p, a) for p in (None, 249.9, 250.0, 250.1, 300.0, 300.1)] == [
+    assert [peak_status(_start(p), a) for p in (None, 249.9, 250.0, 250.1, 300.0, 300.1)] == [
         "n/a", "ok", "ok", "warning", "warning", "alarm"]  # fmt: skip
+
+
+def test_a_start_peak_is_the_larger_of_switch_on_and_short_circuit_as_the_alarm_judges():
+    """One start-peak level: the report's status, the event's ``alarm`` and the ``start_peak``
+    alarm rule all judge max(switch-on, short-circuit) per side."""
+    a = AlarmThresholds()
+    assert peak_status(_start(200.0, 260.0), a) == "warning"
+    assert peak_status(_start(320.0, 260.0), a) == "alarm"
+    assert peak_status(_start(None, 260.0), a) == "warning"
 
 
 def test_start_count_against_norm_and_levels():

@@ -84,6 +84,7 @@ def test_checkpoints_of_the_old_format_are_dropped_with_a_warning(tmp_path, capl
     db.execute("DROP TABLE checkpoint_parts")
     db.execute("DROP TABLE mill_days")  # schema 5
     db.execute("ALTER TABLE alarms DROP COLUMN simulated")  # schema 5
+    db.execute("DROP TABLE phase_daily")  # schema 6
     db.execute("CREATE TABLE checkpoints (id INTEGER PRIMARY KEY, created_ns INTEGER NOT NULL, "
                "position_json TEXT NOT NULL, state_json TEXT NOT NULL)")  # fmt: skip
     db.execute("INSERT INTO checkpoints VALUES (1, 5, '{}', '{\"pipelines\": {}}')")

@@ -137,7 +137,7 @@ def _life_alarms(config: MillConfig) -> set[str]:
     scene = get_scene("steady", config, seed=1, duration_s=90.0)  # > the rule's 60 s delay
     items = [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
     with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
-        pipeline = MillJob(config, damage_every_s=5.0)
+        pipeline = MillJob(config, damage_every_s=5.0, life_every_s=5.0)
         worker = Worker({config.id: config}, {config.id: pipeline}, store, None)
         for item in items:
             worker.handle(item)

@@ -1,0 +1,37 @@
+"""The monthly damage report of one mill as plain data, built from the store.
+
+What is here:
+
+* :mod:`service.reports.monthly.build` — :func:`build_monthly_report`: the month read in one
+  snapshot of the store; starts, damage by day, phase and component, the cost of a start and
+  the App. D what-if table, alarms, data quality, page 1 and the long view (life, cumulative
+  damage, trend); its module docstring lists the sections and their sources.
+* :mod:`service.reports.monthly.model` — the report's data: one frozen dataclass per section,
+  :class:`MonthlyReport`, and :func:`report_to_dict` (JSON-ready plain data).
+* :mod:`service.reports.monthly.reader` — the month read from the store, bounded on the
+  indexes (only the fields the report shows; harmonic tables one per hour).
+* :mod:`service.reports.monthly.trends` — the steady-state and harmonic trend sections.
+
+Data flow: store → :class:`~service.reports.monthly.reader.MonthReader` → section builders →
+:class:`MonthlyReport` → :mod:`service.reports.monthly_document` (what it says) → renderers.
+Where things go: new data is a field of a dataclass in ``model`` built in ``build`` (a trend
+section in ``trends``); how it shows is :mod:`service.reports.monthly_document`'s business.
+This package's names below are its public face: callers import them from here.
+"""
+
+from service.reports.monthly.build import (
+    STARTS_NORM_PER_MONTH,
+    TREND_MONTHS,
+    MonthError,
+    build_monthly_report,
+)
+from service.reports.monthly.model import MonthlyReport, report_to_dict
+
+__all__ = [
+    "STARTS_NORM_PER_MONTH",
+    "TREND_MONTHS",
+    "MonthError",
+    "MonthlyReport",
+    "build_monthly_report",
+    "report_to_dict",
+]
