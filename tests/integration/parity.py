@@ -308,21 +308,14 @@ def report_csv_figures(
             *(rf"steady/(max|mean)/{re.escape(b)}/range_per_rev" for b in bending),
         ),
         (
-            (
-                r"seconds/run",
-                Tolerance(
-                    rel=1e-12,
-                    why="derived: 3600·damage_run / run_damage_per_hour, rounding of / and ·",
-                ),
-            ),
-            (
-                r"steady/mean/.*",
-                Tolerance(
-                    rel=1e-12, why="the report's mean over the windows, summed in its own order"
-                ),
-            ),
+            ("seconds/run", Tolerance(relative=1e-12, why=DERIVED_RUN)),
+            (r"steady/mean/.*", Tolerance(relative=1e-12, why=MEAN)),
         ),
     )
+
+
+DERIVED_RUN = "derived: 3600·damage_run / run_damage_per_hour, rounding of / and ·"
+MEAN = "the report's mean over the windows, summed in its own order"
 
 
 def _steady_daily(rows: list[dict[str, str]]) -> dict[str, float | None]:
