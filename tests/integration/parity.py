@@ -76,8 +76,8 @@ EXACT = Tolerance()
 class Figures:
     """One surface's figures: ``values`` quantity → value (None: the surface shows no number,
     e.g. an OPC UA node with a Bad status); ``covers``: patterns (regular expressions, whole
-    quantity) of the quantities it renders; ``tolerances``: (pattern, tolerance), first match
-    wins, exact otherwise."""
+    quantity) of the quantities it renders; ``tolerances``: (pattern, tolerance), the widest
+    of those matching applies, exact when none does."""
 
     surface: str
     values: dict[str, float | None]
@@ -88,7 +88,13 @@ class Figures:
         return any(re.fullmatch(p, quantity) for p in self.covers)
 
     def tolerance(self, quantity: str) -> Tolerance:
-        return next((t for p, t in self.tolerances if re.fullmatch(p, quantity)), EXACT)
+        """The widest bounds of every tolerance whose pattern matches, with all their
+        reasons (exact when none matches)."""
+        found = [t for p, t in self.tolerances if re.fullmatch(p, quantity)]
+        if not found:
+            return EXACT
+        return Tolerance(max(t.absolute for t in found), max(t.relative for t in found),
+                         "; ".join(t.why for t in found))  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,6 +196,22 @@ def steady_figures(
         values[f"steady/max/{name}"] = max(vs)
         values[f"steady/mean/{name}"] = sum(vs) / len(vs)
     return values
+
+
+def without_prior(figures: Figures, priors: Mapping[str, float]) -> Figures:
+    """A surface that shows damage so far *including* the damage before monitoring (``/life``,
+    OPC UA ``Damage``, ``millwatch_damage_ratio``) with that prior taken off again, ``priors``
+    per component as ``/life`` states them (``damage_prior``, from the mill file's ``[life]``):
+    exact to the rounding of the surface's sum (2 ulp of the prior; exact with no prior)."""
+    values, tolerances = dict(figures.values), list(figures.tolerances)
+    for q, v in figures.values.items():
+        m = re.fullmatch(r"damage/([^/]+)/with_residue", q)
+        prior = priors.get(m.group(1), 0.0) if m else 0.0
+        if v is not None and prior:
+            values[q] = v - prior
+            why = f"shown as the prior damage {prior:g} + the monitored damage"
+            tolerances.append((re.escape(q), Tolerance(absolute=2 * math.ulp(prior), why=why)))
+    return Figures(figures.surface, values, figures.covers, tuple(tolerances))
 
 
 def with_zero_phases(

@@ -15,6 +15,7 @@ from tests.integration.parity import (
     metrics_figures,
     mismatches,
     table,
+    without_prior,
 )
 
 PRODUCER = Figures(
@@ -126,3 +127,25 @@ def test_the_matrix_shows_every_quantity_of_every_surface():
     damage = next(line for line in lines if line.startswith("damage/"))
     assert damage.split()[-1] == "·"  # not rendered by that surface
     assert isinstance(Mismatch("s", "q", 1.0, None).line(), str)
+
+
+def test_a_prior_shown_in_the_damage_is_taken_off_exact_to_the_rounding_of_the_sum():
+    monitored = 1.3103052180184303e-09
+    shown = Figures("OPC UA", {"damage/pinion_combined_bs/with_residue": 0.15 + monitored},
+                    (r"damage/[^/]+/with_residue",))  # fmt: skip
+    producer = Figures("analyze", {"damage/pinion_combined_bs/with_residue": monitored}, (".*",))
+    assert mismatches(producer, shown) != []  # 0.15 of prior is not monitored damage
+    got = without_prior(shown, {"pinion_combined_bs": 0.15})
+    assert mismatches(producer, got) == []
+    assert "prior damage 0.15" in got.tolerance("damage/pinion_combined_bs/with_residue").why
+    assert without_prior(shown, {}) == shown  # no prior, nothing changed, no tolerance
+    wrong = replace_value(got, "damage/pinion_combined_bs/with_residue", monitored * 1.01)
+    assert mismatches(producer, wrong) != []
+
+
+def test_tolerances_that_match_together_give_the_widest_bound_and_every_reason():
+    f = surface({}, ("seconds/.*", Tolerance(absolute=0.004, why="a")),
+                ("seconds/run", Tolerance(relative=1e-12, why="b")))  # fmt: skip
+    t = f.tolerance("seconds/run")
+    assert (t.absolute, t.relative, t.why) == (0.004, 1e-12, "a; b")
+    assert f.tolerance("starts") == Tolerance()
