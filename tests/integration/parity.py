@@ -309,10 +309,8 @@ def report_csv_figures(
             if p != "per_start":
                 values[f"damage/{comp}/{p}"] = v
         values[f"damage/{comp}/committed"] = float(row["damage [1]"])
-        per_hour, run = (
-            _column(row, "run_damage_per_hour").get(""),
-            values.get(f"damage/{comp}/run"),
-        )
+        per_hour = float(row["run_damage_per_hour [1/h]"] or 0.0)
+        run = values.get(f"damage/{comp}/run")
         if values["seconds/run"] is None and run and per_hour:
             values["seconds/run"] = 3600.0 * run / per_hour  # the first component that has it
     with_zero_phases(values, phases, [r["component"] for r in tables["damage"]])
