@@ -22,6 +22,7 @@ from __future__ import annotations
 import bisect
 import math
 import zoneinfo
+from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
@@ -56,6 +57,24 @@ PHASE_OF_STATE = {
     OperatingState.BARRING: "barring",
 }
 PHASES = tuple(PHASE_OF_STATE.values())
+
+
+def phase_totals(seconds: Iterable[tuple[str, float]]) -> dict[str, float]:
+    """Seconds per operating phase from ``(phase, seconds)`` parts (e.g. per local day):
+    every phase of :data:`PHASES` in its order (0 for one not seen, as ``millwatch analyze``
+    reports them), each an exact sum (``math.fsum``), then any other phase named.
+
+    >>> phase_totals([("run", 1.5), ("stopped", 2.0), ("run", 0.5)])["run"]
+    2.0
+    >>> list(phase_totals([]))
+    ['unknown', 'stopped', 'start', 'run', 'stop', 'barring']
+    """
+    parts: dict[str, list[float]] = {}
+    for phase, s in seconds:
+        parts.setdefault(phase, []).append(s)
+    known = {p: math.fsum(parts.pop(p, ())) for p in PHASES}
+    return known | {p: math.fsum(v) for p, v in sorted(parts.items())}
+
 
 MONTH_S = 28 * 86_400.0
 """A month as App. D counts it: 4 weeks (``tm = tw*4``)."""

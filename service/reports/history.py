@@ -29,6 +29,7 @@ from datetime import date, datetime, timedelta
 import numpy as np
 
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.phase_damage import phase_totals
 from service.reports.life import LifeInputs, midnight_ns, monitored_seconds
 from service.reports.starts import month_bounds_ns
 from service.store.database import Store
@@ -119,11 +120,11 @@ class LifeLedger:
         rows = sorted((r for r in self._rows.values() if r.day <= last_day),
                       key=lambda r: (r.day, r.component, r.phase))  # fmt: skip
         starts = sum(since <= t < end for t in self._starts)
-        parts: dict[str, list[float]] = {}
-        for (phase, day), seconds in sorted(self._phases.items(), key=lambda kv: kv[0][::-1]):
-            if day <= last_day:
-                parts.setdefault(phase, []).append(seconds)
-        phase_s = {p: math.fsum(v) for p, v in sorted(parts.items())}
+        phase_s = phase_totals(
+            (phase, seconds)
+            for (phase, day), seconds in sorted(self._phases.items(), key=lambda kv: kv[0][::-1])
+            if day <= last_day
+        )
         return LifeInputs(self.config, rows, coverage, starts, phase_s, end, live)
 
 

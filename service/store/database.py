@@ -26,7 +26,6 @@ Design notes:
 from __future__ import annotations
 
 import json
-import math
 import sqlite3
 import threading
 from collections.abc import Iterator, Mapping, Sequence
@@ -35,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from alarms.lifecycle import Alarm, TransitionRecord
+from analytics.mill.phase_damage import phase_totals
 from service.store import migrations, sampler
 from service.store.migrations import StoreError
 from service.store.records import (
@@ -330,17 +330,17 @@ class Store:
         self, mill_id: str, since_day: str | None = None, until_day: str | None = None
     ) -> dict[str, float]:
         """Seconds per operating phase of a mill, summed over the local days in ``[since_day,
-        until_day]`` (``YYYY-MM-DD``, both included; all days when not given)."""
+        until_day]`` (``YYYY-MM-DD``, both included; all days when not given): every phase
+        the analyzer knows, 0 for one not seen, as ``millwatch analyze`` reports them
+        (:func:`~analytics.mill.phase_damage.phase_totals`)."""
         sql = "SELECT phase, seconds FROM phase_daily WHERE mill_id = ?"
         args: list[Any] = [mill_id]
         for clause, value in (("day >= ?", since_day), ("day <= ?", until_day)):
             if value is not None:
                 sql += " AND " + clause
                 args.append(value)
-        parts: dict[str, list[float]] = {}
-        for phase, seconds in self._query(sql + " ORDER BY day, phase", tuple(args)):
-            parts.setdefault(str(phase), []).append(float(seconds))
-        return {p: math.fsum(v) for p, v in sorted(parts.items())}
+        rows = self._query(sql + " ORDER BY day, phase", tuple(args))
+        return phase_totals((str(phase), float(seconds)) for phase, seconds in rows)
 
     def mill_span(self, mill_id: str) -> tuple[int | None, int | None]:
         """Time of the first analysed sample and just past the last one (ns), ``None`` before

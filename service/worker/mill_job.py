@@ -175,6 +175,23 @@ class MillJob:
         self._book(update)
         return update
 
+    def book_final(self) -> MillUpdate:
+        """:meth:`book` as ``millwatch analyze`` ends a record: of a copy of the analyzer
+        flushed (the aligner's partial frames and the samples the fault stage's look-ahead
+        holds analysed), so a clean stop books every sample received, as the offline analysis
+        of the same archive does. The live analyzer and its checkpoint stay unflushed, so a
+        restart continues exactly and re-books these days' totals as it goes on. Only totals
+        (damage, cycles, phase seconds, monitored time): what the flush would complete of an
+        event or spectrum is left to the data after a restart."""
+        live = self.analyzer
+        flushed = MillAnalyzer.restore(self.config, live.snapshot())
+        flushed.flush()
+        self.analyzer = flushed
+        try:
+            return self.book()
+        finally:
+            self.analyzer = live
+
     def _book(self, update: MillUpdate) -> None:
         """The daily totals that changed since the last booking (the analyzer keeps a year of
         days: the store gets only the days that moved, usually today's)."""

@@ -327,7 +327,7 @@ class ServiceRuntime:
         assert self.worker is not None
         while self.queue.depth:
             self.worker.step(self.queue, timeout_s=0.0)
-        self.worker.checkpoint()
+        self.worker.checkpoint(final=True)
         self._refresh_status()
         self.worker = None
 

@@ -134,6 +134,8 @@ class MillPipeline(Protocol):
 
     def book(self) -> MillUpdate: ...
 
+    def book_final(self) -> MillUpdate: ...
+
     def read_history(self, store: Store) -> None: ...
 
     def observe(self, observations: list[Observation]) -> MillUpdate: ...
@@ -458,14 +460,24 @@ class Worker:
             self.on_alarms(pending.transitions)
 
     # ------------------------------------------------------------------ checkpoints
-    def checkpoint(self, mills: Iterable[str] | None = None) -> ArchivePosition | None:
+    def checkpoint(
+        self, mills: Iterable[str] | None = None, *, final: bool = False
+    ) -> ArchivePosition | None:
         """Store the results so far, flush the archive and store the snapshot of each of
         ``mills`` (default: every mill; never a held one) with the archive position, one
-        transaction per mill."""
+        transaction per mill. ``final`` (a clean stop, the worker's last act): then also book
+        each mill's totals as ``millwatch analyze`` ends a record, the samples the fault
+        stage's look-ahead still holds included (:meth:`MillPipeline.book_final`); the
+        checkpoint stays the unflushed one, so a restart continues exactly."""
         self.commit()
         position = self.archive.flush() if self.archive is not None else None
         for mill_id in self.pipelines if mills is None else mills:
             self._checkpoint_mill(mill_id, position)
+            if final and mill_id not in self.held:
+                booked = PendingResults()
+                booked.add(mill_id, self.pipelines[mill_id].book_final())
+                with self.store.transaction() as db:
+                    booked.write(db)
         return position
 
     def _checkpoint_due(self) -> None:

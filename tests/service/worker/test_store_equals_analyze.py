@@ -52,8 +52,9 @@ def _blocks() -> list[SceneBlock]:
 BLOCKS = _blocks()
 
 
-def _offline(blocks: list[SceneBlock]) -> MillAnalyzer:
-    """The same blocks through an analyzer of its own, analysed as far as the worker's."""
+def _offline(blocks: list[SceneBlock], *, flush: bool = False) -> MillAnalyzer:
+    """The same blocks through an analyzer of its own, analysed as far as the worker's (with
+    ``flush``: to the end of the record, as ``millwatch analyze`` does)."""
     routes = {keys.channel_key(CONFIG.site, CONFIG.id, ch.key): name
               for name, ch in CONFIG.channels.items()}  # fmt: skip
     analyzer = MillAnalyzer(CONFIG)
@@ -61,6 +62,8 @@ def _offline(blocks: list[SceneBlock]) -> MillAnalyzer:
         block = decode_block(b.payload)
         analyzer.add(routes[b.key], block.t0_ns, block.fs, block.samples)
     analyzer.process()
+    if flush:
+        analyzer.flush()
     return analyzer
 
 
@@ -105,25 +108,43 @@ def stopped(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
                     checkpoint_seconds=3600.0)  # fmt: skip
     _feed(worker, BLOCKS)
     before_stop = _stored_damage(store)[0], store.phase_seconds(CONFIG.id)
-    worker.checkpoint()
+    worker.checkpoint(final=True)  # what a clean stop (SIGTERM) does last
     yield SimpleNamespace(store=store, job=job, before_stop=before_stop)
     store.close()
 
 
-def test_a_clean_stop_books_the_analyzers_phase_seconds_damage_and_cycles(stopped):
-    offline = _offline(BLOCKS)
-    analysed = stopped.job.analyzer
-    assert analysed.samples == offline.samples > 0.9 * DURATION_S * CONFIG.sample_rate_hz
-    seconds = {p: s for p, s in offline.report()["phase_seconds"].items() if s > 0}
+def test_a_clean_stop_books_every_sample_as_analyze_does(stopped):
+    """The final booking is of the record analysed to its end (the fault stage's look-ahead
+    included), as ``millwatch analyze`` of the same blocks books it."""
+    offline = _offline(BLOCKS, flush=True)
+    assert offline.samples == DURATION_S * CONFIG.sample_rate_hz
+    seconds = offline.report()["phase_seconds"]
     stored = stopped.store.phase_seconds(CONFIG.id)
-    assert stored.keys() == seconds.keys() == {"run", "stop", "stopped", "start"}
+    assert list(stored) == list(seconds)  # every phase, zeros included, in analyze's order
+    assert {p for p, s in stored.items() if s > 0} == {"run", "stop", "stopped", "start"}
     for phase, s in seconds.items():
-        assert stored[phase] == pytest.approx(s, rel=1e-12), phase
-    assert math.fsum(stored.values()) == pytest.approx(analysed.seconds_analysed, rel=1e-12)
+        assert stored[phase] == pytest.approx(s, rel=1e-12, abs=1e-12), phase
+    assert math.fsum(stored.values()) == pytest.approx(DURATION_S, rel=1e-12)
     damage, cycles = _stored_damage(stopped.store)
     want_damage, want_cycles = _analyzed_damage(offline)
     assert damage == want_damage and cycles == want_cycles
     assert all(c > 0 for c in cycles.values()) and len(cycles) >= 3 * 4  # components × phases
+    assert stopped.store.mill_span(CONFIG.id)[1] == offline.next_sample_ns
+
+
+def test_the_final_booking_leaves_the_live_analysis_and_its_checkpoint_unflushed(stopped):
+    """A restart continues from the checkpoint exactly: the worker's own analyzer (and so the
+    snapshot the final checkpoint stored) still holds the look-ahead samples back."""
+    unflushed = _offline(BLOCKS)
+    assert stopped.job.analyzer.samples == unflushed.samples < DURATION_S * 1000
+    ((_, state),) = stopped.store.latest_checkpoints().values()
+    snap = state["pipelines"][CONFIG.id]["monitor"]
+    assert MillAnalyzer.restore(CONFIG, snap).samples == unflushed.samples
+
+
+def test_before_the_stop_the_last_interval_was_not_yet_booked(stopped):
+    damage, _ = _stored_damage(stopped.store)
+    stored = stopped.store.phase_seconds(CONFIG.id)
     # before the stop, the rows of the last damage interval (up to a minute) were not booked
     before, before_seconds = stopped.before_stop
     assert math.fsum(before_seconds.values()) < math.fsum(stored.values())
