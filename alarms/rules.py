@@ -241,9 +241,9 @@ START_ADVICE = {
     Starter.GRID: (
         "fixed grid resistor (Grid) starter",
         "Grid starters average 542 % switch-on and 324 % short-circuit peaks "
-        "(Diering 2011 Table 6); "
-        "Diering 2011 strongly recommends not using Grid starters on mills (§10.4): plan the change "
-        "to an LRS or E-LRS starter and keep the number of starts to a minimum until then",
+        "(Diering 2011 Table 6), which strongly recommends not using Grid starters on mills "
+        "(§10.4): plan the change to an LRS or E-LRS starter and keep the number of starts to "
+        "a minimum until then",
     ),
     Starter.LRS: (
         "liquid resistance starter (LRS)",

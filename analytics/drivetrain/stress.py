@@ -106,7 +106,8 @@ def bending_moment_from_stress(sigma: ArrayLike, d: float) -> np.ndarray:
 
 def notch_stress(nominal: ArrayLike, k: float) -> np.ndarray:
     """Local stress = K·nominal stress, with K = K_t (theoretical) or K_f (fatigue, K_f = 1 +
-    q(K_t − 1); Diering 2011 takes q = 1 so K_f = K_t = 2.2, eq. 5). Always explicit, never implied."""
+    q(K_t − 1); Diering 2011 takes q = 1 so K_f = K_t = 2.2, eq. 5). Always explicit, never
+    implied."""
     return np.asarray(nominal, dtype=np.float64) * _positive("stress concentration factor", k)
 
 
@@ -115,7 +116,8 @@ def principal_angle(sigma_x: ArrayLike, tau: ArrayLike) -> np.ndarray:
     """θ of eq. 13, tan 2θ = 2τ/σ_x (σ_y = 0), per sample, in rad.
 
     The branch is the one that makes σ_θ of eq. 12 the *maximum* principal stress
-    (2θ = atan2(2τ, σ_x), θ in (−90°, 90°]). Diering 2011's Matlab (App. D) instead takes the record's
+    (2θ = atan2(2τ, σ_x), θ in (−90°, 90°]). Diering 2011's Matlab (App. D) instead takes the
+    record's
     maximum of ``atan(2τ/σ_x)/2`` as one angle for the whole record.
     """
     s = np.asarray(sigma_x, dtype=np.float64)
@@ -128,7 +130,8 @@ def combined_stress(
 ) -> np.ndarray:
     """σ_θ = ½σ_x + ½σ_x·cos 2θ + τ·sin 2θ (eq. 12 with σ_y = 0), MPa, vectorised.
 
-    ``theta`` (rad): a fixed angle (default 45°, as Diering 2011 found at the torque peaks) or an array
+    ``theta`` (rad): a fixed angle (default 45°, as Diering 2011 found at the torque peaks) or an
+    array
     such as :func:`principal_angle` ``(sigma_x, tau)``, which turns σ_θ into the maximum principal
     stress ½σ_x + √(¼σ_x² + τ²).
     """

@@ -91,7 +91,8 @@ class OperatingState(IntEnum):
 class StateThresholds:
     """Named knobs of the state machine. Fractions of rated speed / rated motor torque; times s.
 
-    Not from the sources (chosen, documented): Diering 2011 gives the shapes (Figure 20, 27), not the
+    Not from the sources (chosen, documented): Diering 2011 gives the shapes (Figure 20, 27), not
+    the
     detection levels. ``torque_on`` sits below the lowest switch-on peak of Tables 3–11 (E-LRS
     dual, 56 % − 2σ ≈ 15 %) and far above telemetry noise; ``min_on_s`` exceeds the interference
     spikes of §5.2.2 (a few to 20 samples); ``speed_start`` lies above an inching drive's speed

@@ -9,7 +9,7 @@ What is here, in the order data flows:
 
 - ``spec``         what a scene is: ``SceneSpec``, ``SceneParams``, the event types
 - ``scenes``       the catalogue of named scenes and scene files → ``SceneSpec``
-- ``seed_tables``  the sources' numbers (Diering 2011): peak torques per starter, barring, bending, line weights
+- ``seed_tables``  Diering 2011's numbers: peak torques per starter, barring, bending, line weights
 - ``waveforms``    signal shapes: raised-cosine fronts, ringing, the steady oscillation lines
 - ``segments``     one operating stretch each (idle, start, run, stop, barring) → drivetrain state
 - ``timeline``     events → consecutive segments, angle-continuous
