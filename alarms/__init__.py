@@ -1,6 +1,6 @@
-"""Alarm rules and lifecycle (seed 000 §10.6: alarms a control room acts on).
+"""Alarm rules and lifecycle (Diering 2011 §10.6: alarms a control room acts on).
 
-Alarm rules and the alarm lifecycle (seed 000 §10.6: diagnostic alarms a control room acts on).
+Alarm rules and the alarm lifecycle (Diering 2011 §10.6: diagnostic alarms a control room acts on).
 
 What is here:
 

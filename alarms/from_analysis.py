@@ -5,7 +5,7 @@ One function per kind of analysis fact, so live (the worker, fact by fact) and o
 (``millwatch analyze``, from the report) derive exactly the same observations:
 
 * a start event → ``start_peak_pct`` per side: the larger of the switch-on and short-circuit
-  peaks of the motor shaft, % of rated (seed 000 §6.1.1, §7.2), with the motor torque
+  peaks of the motor shaft, % of rated (Diering 2011 §6.1.1, §7.2), with the motor torque
   channel's name (the mill file's) in the context;
 * a barring event → ``barring_peak_pct`` (Tables 12–13), with the torque channel's name;
 * a steady-state window → ``oscillation_range_pct`` per motor and pinion torque channel (range

@@ -1,7 +1,7 @@
 """The alarm lifecycle: raised → acknowledged → cleared, with latching and escalation in place.
 
 States (:class:`AlarmState`) and transitions (:class:`TransitionKind`), after the alarm-management
-practice control rooms know (ISA-18.2 style, simplified; seed 000 §10.6 asks for "diagnostic
+practice control rooms know (ISA-18.2 style, simplified; Diering 2011 §10.6 asks for "diagnostic
 alarms" a site acts on):
 
 * ``raised`` — the condition was confirmed; nobody has acknowledged it yet.

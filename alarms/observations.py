@@ -14,10 +14,11 @@ Quantities come in two kinds (:class:`Kind`):
   peak nobody can explain, a failed archive write). It raises at once; a rule-specific policy
   clears it (:mod:`alarms.rules`).
 
-Sources of the vocabulary: seed 000 (Diering 2011) §6.1 (the seven torque characteristics of a
+Sources of the vocabulary: Diering 2011 §6.1 (the seven torque characteristics of a
 start/run/stop record), §6.1.3 and §6.2.8 (starts per month), §6.2.3 (barring), §6.2.4
 (steady-state oscillation, Tables 14–15), §8.1 (bending amplitude), §8.3 (damage rate), §5.2
-(telemetry interference); seed 001 (torsional natural frequencies) for the resonance margin.
+(telemetry interference); Fedin & Vinogradov 2018 (torsional natural frequencies) for the resonance
+margin.
 """
 
 from __future__ import annotations
@@ -62,42 +63,42 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
     "start_peak_pct": QuantitySpec(
         "% rated motor torque", Kind.EVENT, "side",
         "peak motor-shaft torque of one start (max of switch-on and short-circuit peaks, "
-        "seed 000 §6.1.1); context: side (dual drives), channel (the motor torque channel's "
+        "Diering 2011 §6.1.1); context: side (dual drives), channel (the motor torque channel's "
         "name in the mill file), switch_on_peak_pct, short_circuit_peak_pct",
     ),
     "starts_this_month": QuantitySpec(
         "starts", Kind.LEVEL, None,
-        "starts so far in the site's local calendar month (seed 000 §6.1.3, §6.2.8); "
+        "starts so far in the site's local calendar month (Diering 2011 §6.1.3, §6.2.8); "
         "context: month 'YYYY-MM'",
     ),
     "oscillation_range_pct": QuantitySpec(
         "% rated motor torque", Kind.LEVEL, "channel",
         "peak-to-peak steady-state torque oscillation range of one window and torque channel "
-        "(seed 000 §6.2.4, Tables 14–15)",
+        "(Diering 2011 §6.2.4, Tables 14–15)",
     ),
     "bending_amplitude_mpa": QuantitySpec(
         "MPa", Kind.LEVEL, "channel",
         "once-per-revolution pinion-shaft bending stress amplitude (half the range) of one "
-        "window (seed 000 §8.1)",
+        "window (Diering 2011 §8.1)",
     ),
     "barring_peak_pct": QuantitySpec(
         "% rated motor torque", Kind.EVENT, "side",
-        "peak torque of one barring session (seed 000 §6.2.3, Tables 12–13); context: "
+        "peak torque of one barring session (Diering 2011 §6.2.3, Tables 12–13); context: "
         "channel (the torque channel measured, by its name in the mill file)",
     ),
     "unexplained_peak_hz": QuantitySpec(
         "Hz", Kind.EVENT, "channel",
-        "frequency of a spectral peak matching no expected excitation line (seed 000 §6.2.7); "
+        "frequency of a spectral peak matching no expected excitation line (Diering 2011 §6.2.7); "
         "context: amplitude_pct, nearest_natural_hz",
     ),
     "resonance_margin": QuantitySpec(
         "fraction", Kind.LEVEL, "channel",
         "|f_exc − f_n| / f_n of the excitation line nearest a torsional natural frequency "
-        "(seed 001); context: line, frequency_hz, natural_hz",
+        "(Fedin & Vinogradov 2018); context: line, frequency_hz, natural_hz",
     ),
     "remaining_life_years": QuantitySpec(
         "years", Kind.LEVEL, "component",
-        "projected remaining fatigue life at the current damage rate (seed 000 §8.2–8.3); "
+        "projected remaining fatigue life at the current damage rate (Diering 2011 §8.2–8.3); "
         "context: remaining_design_life_years (default: the mill's design life)",
     ),
     "stale_channel": QuantitySpec(
@@ -105,7 +106,7 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
     ),
     "spike_rate": QuantitySpec(
         "spikes/min", Kind.LEVEL, "channel",
-        "telemetry interference spikes per minute (seed 000 §5.2.2)",
+        "telemetry interference spikes per minute (Diering 2011 §5.2.2)",
     ),
     "sequence_gaps": QuantitySpec(
         "blocks/min", Kind.LEVEL, "channel", "blocks missing from the sequence, per minute"
@@ -164,7 +165,7 @@ def derive_start_counts(observations: Iterable[Observation], time_zone: str) -> 
     """``starts_this_month`` observations from ``start_peak_pct`` ones, in time order.
 
     A start is one distinct ``t_ns`` per mill (both sides of a dual-drive start carry the start's
-    time); the count restarts with each local calendar month (seed 000 §6.1.3).
+    time); the count restarts with each local calendar month (Diering 2011 §6.1.3).
     """
     starts = sorted({(o.mill_id, o.t_ns) for o in observations if o.quantity == "start_peak_pct"})
     counts: dict[tuple[str, str], int] = {}

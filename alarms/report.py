@@ -1,4 +1,4 @@
-"""Alarms a recording would have raised, for ``millwatch analyze`` (seed 000 §10.6 reports).
+"""Alarms a recording would have raised, for ``millwatch analyze`` (Diering 2011 §10.6 reports).
 
 :func:`alarms_for_report` runs a fresh :class:`~alarms.engine.AlarmEngine` over a list of
 observations in time order and returns the alarm history as plain data: one dict per alarm (its

@@ -3,8 +3,8 @@
 A :class:`Rule` says when a quantity (:data:`alarms.observations.QUANTITIES`) is abnormal — one
 threshold per severity, compared *strictly* (``>`` for ``above`` rules, ``<`` for ``below``) — how
 it returns to normal, and what to tell the control room. :func:`build_rules` makes the rule book
-of one mill from ``MillConfig.alarms`` — the ``[alarms]`` section of the mill file: the seed
-thresholds and the knobs the seed says nothing about (deadbands, delays, data-quality limits,
+of one mill from ``MillConfig.alarms`` — the ``[alarms]`` section of the mill file: Diering 2011's
+thresholds and the knobs the sources say nothing about (deadbands, delays, data-quality limits,
 resonance margin, life fractions, load-sharing limits), each a named, validated field.
 
 Lifecycle knobs (:mod:`alarms.engine` applies them):
@@ -19,7 +19,7 @@ Lifecycle knobs (:mod:`alarms.engine` applies them):
 * ``latched``: a condition that returns to normal before anyone acknowledged it keeps the alarm
   raised until acknowledged (the control room must see that it happened).
 
-Rules and their defaults (fields of ``MillConfig.alarms``; *option*: not a seed value). A
+Rules and their defaults (fields of ``MillConfig.alarms``; *option*: not a source value). A
 message states the time of the value that raised (or escalated) the alarm, in the site's time
 zone with its offset (:func:`alarms.times.iso_local`: ``2026-11-02T17:00:38.412+02:00``), and
 the start-peak advice is the mill's starter's (:data:`START_ADVICE`: Grid, LRS, E-LRS).
@@ -36,7 +36,8 @@ bending_amplitude (level)   warning > 25, alarm > 43,             ≤ 23 MPa for
                             critical > 90 MPa
 barring_peak (event)        alarm > 185 % single / 314 % dual     1 clean session or ack Tab. 12–13
 unexplained_peak (event)    warning on any reported peak          1 h without recurrence §6.2.7
-resonance_margin (level)    warning < 10 % (*option*)             ≥ 12 % for 5 min       seed 001
+resonance_margin (level)    warning < 10 % (*option*)             ≥ 12 % for 5 min       Fedin &
+Vinogradov 2018
 remaining_life (level)      warning < 1.0×, alarm < 0.5× the      ≥ 1.05× for 5 min      §8.3
                             remaining design life (*option*)
 stale_channel (level)       warning > 10 s (*option*)             data again             §5.1
@@ -233,15 +234,16 @@ def _levels(*pairs: tuple[Severity, float]) -> tuple[Level, ...]:
     return tuple(Level(sev, thr) for sev, thr in pairs)
 
 
-#: Start-peak advice per starter (seed 000 §6.2.1–6.2.2, Tables 6 and 11: average peak
+#: Start-peak advice per starter (Diering 2011 §6.2.1–6.2.2, Tables 6 and 11: average peak
 #: switch-on / short-circuit torque, % of motor rated torque; §10.2 starter maintenance; §10.4
 #: design service factors and "Grid type starters [should] not [be] used for mill applications").
 START_ADVICE = {
     Starter.GRID: (
         "fixed grid resistor (Grid) starter",
-        "Grid starters average 542 % switch-on and 324 % short-circuit peaks (seed 000 Table 6); "
-        "the seed strongly recommends not using Grid starters on mills (§10.4): plan the change "
-        "to an LRS or E-LRS starter and keep the number of starts to a minimum until then",
+        "Grid starters average 542 % switch-on and 324 % short-circuit peaks "
+        "(Diering 2011 Table 6), which strongly recommends not using Grid starters on mills "
+        "(§10.4): plan the change to an LRS or E-LRS starter and keep the number of starts to "
+        "a minimum until then",
     ),
     Starter.LRS: (
         "liquid resistance starter (LRS)",
@@ -259,7 +261,7 @@ START_ADVICE = {
 
 
 def _start_peak(config: MillConfig) -> Rule:
-    """Start peak torque, % of motor rated torque (seed 000 §7.2, §10.4; Table 6: E-LRS averages
+    """Start peak torque, % of motor rated torque (Diering 2011 §7.2, §10.4; Table 6: E-LRS averages
     92 %, LRS 233 %, Grid 542 %), with advice for the mill's starter (:data:`START_ADVICE`).
     Event; clears after ``clean_starts_to_clear`` clean starts."""
     a = config.alarms
@@ -270,13 +272,13 @@ def _start_peak(config: MillConfig) -> Rule:
                 (Severity.ALARM, a.start_peak_alarm_pct)),
         headline=f"Start at {{time}}{{where}} with the {starter} reached {{value}} of rated "
         "motor torque",
-        advice=advice, source="seed 000 §6.2.1, §10.2, §10.4", value_format="{:.0f} %",
+        advice=advice, source="Diering 2011 §6.2.1, §10.2, §10.4", value_format="{:.0f} %",
         deadband=a.start_peak_deadband_pct, clean_events_to_clear=a.clean_starts_to_clear,
     )  # fmt: skip
 
 
 def _starts_per_month(config: MillConfig) -> Rule:
-    """Starts in the local calendar month (seed 000 §6.1.3 supplier norm 3–5, §6.2.8 field
+    """Starts in the local calendar month (Diering 2011 §6.1.3 supplier norm 3–5, §6.2.8 field
     average 20–22, §10.3 "recorded and scrutinized"). Level without delays (a count does not
     chatter); latched: a busy month must be acknowledged even after the count resets."""
     a = config.alarms
@@ -287,12 +289,12 @@ def _starts_per_month(config: MillConfig) -> Rule:
         headline="{value} starts in the calendar month {month} (latest at {time})",
         advice="every start exposes the drivetrain to start-up peaks: record and scrutinize "
         "each stop (supplier norm 3–5 starts a month)",
-        source="seed 000 §6.1.3, §6.2.8, §10.3", value_format="{:.0f}", latched=True,
+        source="Diering 2011 §6.1.3, §6.2.8, §10.3", value_format="{:.0f}", latched=True,
     )  # fmt: skip
 
 
 def _oscillation(config: MillConfig) -> Rule:
-    """Steady-state torque oscillation range, % of motor rated torque (seed 000 Tables 14–15:
+    """Steady-state torque oscillation range, % of motor rated torque (Diering 2011 Tables 14–15:
     23.6 % average, 45.4 % max on single-drive motor shafts; §7.4, §10.5)."""
     a = config.alarms
     return Rule(
@@ -302,14 +304,14 @@ def _oscillation(config: MillConfig) -> Rule:
         headline="Steady-state torque oscillation range{where} reached {value} of rated motor "
         "torque at {time}",
         advice="check the spectrum (gear mesh, liner passing, pinion speed) and gear wear",
-        source="seed 000 Tables 14–15, §10.5", value_format="{:.0f} %",
+        source="Diering 2011 Tables 14–15, §10.5", value_format="{:.0f} %",
         deadband=a.oscillation_deadband_pct, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
 def _bending(config: MillConfig) -> Rule:
-    """Pinion-shaft bending stress amplitude, MPa (seed 000 §8.1: < 25 MPa by experience, 43 MPa
+    """Pinion-shaft bending stress amplitude, MPa (Diering 2011 §8.1: < 25 MPa by experience, 43 MPa
     for a fatigue reserve factor of 2, > 90 MPa fails within weeks; §10.1 alignment)."""
     a = config.alarms
     levels = (
@@ -322,14 +324,14 @@ def _bending(config: MillConfig) -> Rule:
         "bending_amplitude", "bending_amplitude_mpa", levels,
         headline="Pinion-shaft bending amplitude{where} reached {value} at {time}",
         advice="check the alignment of the whole drivetrain (bearing and gear wear, foundation)",
-        source="seed 000 §8.1, §10.1", value_format="{:.1f} MPa",
+        source="Diering 2011 §8.1, §10.1", value_format="{:.1f} MPa",
         deadband=a.bending_deadband_mpa, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
 def _barring(config: MillConfig) -> Rule:
-    """Barring peak torque above the drive's limit (seed 000 §6.2.3, Tables 12–13: 185 % single,
+    """Barring peak torque above the drive's limit (Diering 2011 §6.2.3, Tables 12–13: 185 % single,
     314 % dual). Event; clears after one clean barring session or on acknowledgement."""
     a = config.alarms
     return Rule(
@@ -337,13 +339,13 @@ def _barring(config: MillConfig) -> Rule:
         _levels((Severity.ALARM, config.barring_peak_limit_pct)),
         headline="Barring at {time}{where} reached {value} of rated motor torque",
         advice="the charge may have set during a long stop: loosen it before a full start",
-        source="seed 000 §6.2.3, Tables 12–13", value_format="{:.0f} %",
+        source="Diering 2011 §6.2.3, Tables 12–13", value_format="{:.0f} %",
         deadband=a.barring_deadband_pct, clean_events_to_clear=1, clear_on_ack=True,
     )  # fmt: skip
 
 
 def _unexplained_peak(config: MillConfig) -> Rule:
-    """A spectral peak matching no expected excitation (seed 000 §6.2.7, Figure 36: 10–15 Hz
+    """A spectral peak matching no expected excitation (Diering 2011 §6.2.7, Figure 36: 10–15 Hz
     peaks pointing to torsional resonance). Event: every reported peak offends (the harmonic
     tracker already applied its SNR and amplitude gates); clears after a quiet hour."""
     a = config.alarms
@@ -354,14 +356,15 @@ def _unexplained_peak(config: MillConfig) -> Rule:
         clauses=(("natural", "; nearest natural frequency {nearest_natural_hz} Hz",
                   "; the mill file has no torsional model to compare it with"),),
         advice="possible torsional resonance: compare with the drivetrain model and inspect",
-        source="seed 000 §6.2.7, seed 001", value_format="{:.2f} Hz",
+        source="Diering 2011 §6.2.7, Fedin & Vinogradov 2018", value_format="{:.2f} Hz",
         criterion="warning: unexplained by the drivetrain kinematics",
         quiet_s_to_clear=a.unexplained_peak_quiet_s,
     )  # fmt: skip
 
 
 def _resonance(config: MillConfig) -> Rule:
-    """Excitation close to a torsional natural frequency (seed 001 torsional model; seed 000
+    """Excitation close to a torsional natural frequency (Fedin & Vinogradov 2018 torsional model;
+    Diering 2011
     §6.1.1 resonance near 90 % speed during acceleration). Level, lower is worse."""
     a = config.alarms
     return Rule(
@@ -371,14 +374,15 @@ def _resonance(config: MillConfig) -> Rule:
         clauses=(("excitation", " {line} at {frequency_hz} Hz", ""),
                  ("natural", " the natural frequency {natural_hz} Hz", " a natural frequency")),
         advice="running close to resonance amplifies torque oscillations: review speed and model",
-        source="seed 001, seed 000 §6.1.1", value_format="{:.1%}", direction="below",
+        source="Fedin & Vinogradov 2018, Diering 2011 §6.1.1", value_format="{:.1%}",
+        direction="below",
         deadband=a.resonance_margin_deadband, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
 def _remaining_life(config: MillConfig) -> Rule:
-    """Projected remaining life shorter than the remaining design life (seed 000 §8.2–8.3:
+    """Projected remaining life shorter than the remaining design life (Diering 2011 §8.2–8.3:
     bending range, start transients and start count drive damage). Level, lower is worse;
     thresholds are fractions of ``context['remaining_design_life_years']`` (default: the
     mill's ``design_life_years``)."""
@@ -390,7 +394,7 @@ def _remaining_life(config: MillConfig) -> Rule:
         "({time})",
         advice="the damage rate is too high: review bending (alignment), start peaks and "
         "start count in the damage report",
-        source="seed 000 §8.2–8.3", value_format="{:.1f} years", direction="below",
+        source="Diering 2011 §8.2–8.3", value_format="{:.1f} years", direction="below",
         deadband=a.life_deadband_fraction, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s, scale_key="remaining_design_life_years",
         default_scale=config.design_life_years,
@@ -398,59 +402,59 @@ def _remaining_life(config: MillConfig) -> Rule:
 
 
 def _stale(config: MillConfig) -> Rule:
-    """No data from a channel (seed 000 §5.1: telemetry links drop out). The value is already a
+    """No data from a channel (Diering 2011 §5.1: telemetry links drop out). The value is already a
     duration, so no delays; clears as soon as data flows again."""
     a = config.alarms
     return Rule(
         "stale_channel", "stale_channel", _levels((Severity.WARNING, a.stale_after_s)),
         headline="No data{where} for {value} (at {time})",
         advice="check the telemetry transmitter, the gateway and the network link",
-        source="seed 000 §5.1", value_format="{:.0f} s", deadband=a.stale_after_s * 0.5,
+        source="Diering 2011 §5.1", value_format="{:.0f} s", deadband=a.stale_after_s * 0.5,
     )  # fmt: skip
 
 
 def _spike_rate(config: MillConfig) -> Rule:
-    """Telemetry interference spikes per minute (seed 000 §5.2.2: two-way radios and phones)."""
+    """Telemetry interference spikes per minute (Diering 2011 §5.2.2: two-way radios and phones)."""
     a = config.alarms
     return Rule(
         "spike_rate", "spike_rate", _levels((Severity.WARNING, a.spike_rate_warn_per_min)),
         headline="Telemetry spikes{where}: {value} ({time})",
         advice="check the telemetry antenna and radio sources near the mill; flagged samples "
         "are excluded from the analysis",
-        source="seed 000 §5.2.2", value_format="{:.1f} per minute",
+        source="Diering 2011 §5.2.2", value_format="{:.1f} per minute",
         deadband=a.spike_rate_deadband_per_min, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
 def _sequence_gaps(config: MillConfig) -> Rule:
-    """Blocks missing from a channel's sequence (seed 000 §5.1 telemetry path; the wire
+    """Blocks missing from a channel's sequence (Diering 2011 §5.1 telemetry path; the wire
     format's sequence numbers)."""
     a = config.alarms
     return Rule(
         "sequence_gaps", "sequence_gaps", _levels((Severity.WARNING, a.sequence_gaps_warn_per_min)),
         headline="Data blocks missing{where}: {value} ({time})",
         advice="check the sensor gateway and the network between gateway and service",
-        source="seed 000 §5.1", value_format="{:.0f} per minute",
+        source="Diering 2011 §5.1", value_format="{:.0f} per minute",
         raise_delay_s=a.raise_delay_s, clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
 
 
 def _archive(config: MillConfig) -> Rule:
-    """Archive writes failing: raw data is being lost (the archive is the log; seed 000 §10.6
+    """Archive writes failing: raw data is being lost (the archive is the log; Diering 2011 §10.6
     long-term trending needs it). Event, latched; clears after clean reports."""
     a = config.alarms
     return Rule(
         "archive_write_failures", "archive_write_failures", _levels((Severity.ALARM, 0.0)),
         headline="{value} failed at {time}: raw telemetry is not being archived",
         advice="check the archive disk (space, permissions, health)",
-        source="seed 000 §10.6", value_format="{:.0f} archive writes",
+        source="Diering 2011 §10.6", value_format="{:.0f} archive writes",
         clean_events_to_clear=a.archive_clean_reports_to_clear, latched=True,
     )  # fmt: skip
 
 
 def _report_delivery(config: MillConfig) -> Rule:
-    """A monthly report that could not be made or mailed after its retries (seed 000 §10.6:
+    """A monthly report that could not be made or mailed after its retries (Diering 2011 §10.6:
     reports "automatically generated and distributed to site management"). Event per stage
     (files, mail), latched: the site must see it even once a later attempt succeeded."""
     return Rule(
@@ -458,22 +462,22 @@ def _report_delivery(config: MillConfig) -> Rule:
         headline="Monthly report {month}: {stage} failed after {value} ({time}): {error}",
         advice="fix the cause (reports directory: space, permissions; mail: SMTP host, "
         "credentials, recipients); the service tries again, or run 'millwatch report'",
-        source="seed 000 §10.6", value_format="{:.0f} attempts",
+        source="Diering 2011 §10.6", value_format="{:.0f} attempts",
         criterion="alarm: the report did not reach its destination",
         clean_events_to_clear=1, latched=True,
     )  # fmt: skip
 
 
 def _load_sharing(config: MillConfig) -> Rule:
-    """Dual-drive load-sharing imbalance between barring and non-barring sides (seed 000 §6.2.2,
-    Table 15 compares the sides; the limits are engineering defaults, not seed values)."""
+    """Dual-drive load-sharing imbalance between barring and non-barring sides (Diering 2011 §6.2.2,
+    Table 15 compares the sides; the limits are engineering defaults, not source values)."""
     a = config.alarms
     return Rule(
         "load_sharing", "load_sharing_imbalance_pct",
         _levels((Severity.WARNING, a.imbalance_warn_pct), (Severity.ALARM, a.imbalance_alarm_pct)),
         headline="Load sharing between the drive sides is {value} out of balance at {time}",
         advice="check the drives' load-sharing control and the pinion alignment of both sides",
-        source="seed 000 §6.2.2, Table 15", value_format="{:.0f} %",
+        source="Diering 2011 §6.2.2, Table 15", value_format="{:.0f} %",
         deadband=a.imbalance_deadband_pct, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,
     )  # fmt: skip

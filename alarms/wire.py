@@ -18,7 +18,7 @@ subscribe to :func:`ingest.keys.alarm_pattern`). Encoding ``application/json``, 
         "state": "raised",                  # raised | acknowledged | cleared
         "value": 312.0, "threshold": 300.0, # null for acknowledgements and quiet clears
         "by": null,                         # who acknowledged
-        "message": "Start at … (alarm above 300 %, seed 000 §7.2, §10.4): check …"
+        "message": "Start at … (alarm above 300 %, Diering 2011 §7.2, §10.4): check …"
       },
       "alarm": {                            # the alarm's whole state after the transition
         "alarm_id": "sag-5200-lrs:start_peak:-:1763692440000000000",

@@ -1,6 +1,6 @@
 """The contracts every stateful analytics object keeps, stated once.
 
-DESIGN.md "Numerical contract" and "Persistence and recovery"; the idea is pyLife's
+README "The numerical contract" and "Persistence and recovery"; the idea is pyLife's
 ``AbstractDetector`` ("``process(signal)`` is equivalent to ``process(signal[:n])`` then
 ``process(signal[n:])``"), which every detector inherits instead of restating it.
 

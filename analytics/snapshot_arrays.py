@@ -1,6 +1,6 @@
 """numpy arrays inside snapshots: base64 of the little-endian bytes, exact and compact.
 
-DESIGN.md "Persistence and recovery": every stateful analytics object snapshots its complete
+README "Persistence and recovery": every stateful analytics object snapshots its complete
 state as plain JSON-serialisable data. Arrays used to go in as JSON lists of numbers; a float
 list costs ~20 bytes and a float→text conversion per element, and NaN/±inf need special cases.
 :func:`pack_array` stores the raw bytes instead (8 bytes → ~10.7 characters of base64, no

@@ -1,6 +1,7 @@
 """The README's "Layout" block, generated from the packages' ``__init__.py`` docstrings.
 
-Each package's docstring is its map (STYLE.md); the first line of each is its one-line summary,
+Each package's docstring is its map (README "Design"); the first line of each is its one-line
+summary,
 and the README shows those lines as a tree. ``python -m tests.readme_layout`` prints the block,
 ``--write`` puts it into README.md; ``tests/test_layout.py`` fails while the README is stale.
 """

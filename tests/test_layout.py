@@ -1,6 +1,6 @@
 """The layout keeps the architecture: dependency direction, no import circles, small rooms.
 
-DESIGN.md "Layout": ``service`` → ``alarms`` → ``analytics``; ``service`` → ``ingest`` →
+README "Layout": ``service`` → ``alarms`` → ``analytics``; ``service`` → ``ingest`` →
 ``analytics``; ``analytics`` imports nothing of the others. Every import counts — module level,
 inside a function, behind ``TYPE_CHECKING`` — because a circle hidden behind either is still a
 circle a reader has to untangle (issue "One room per job").
@@ -114,7 +114,7 @@ def test_no_folder_holds_more_than_fifteen_modules():
 
 
 def test_every_package_has_a_map():
-    """Each ``__init__.py`` says what is in its folder (STYLE.md "package map")."""
+    """Each ``__init__.py`` says what is in its folder (README "Design" "package map")."""
     bare = [
         name
         for name, path in MODULES.items()

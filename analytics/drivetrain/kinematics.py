@@ -1,11 +1,11 @@
 """Drivetrain kinematics: the lines a steady-state torque spectrum is expected to contain.
 
-Sources: seed 000 (Diering 2011) §6.1.2 and §6.2.7 list the expected excitation frequencies of a
+Sources: Diering 2011 §6.1.2 and §6.2.7 list the expected excitation frequencies of a
 grinding-mill drivetrain — mill speed, pinion-shaft speed, shell-liner passing (mill speed ×
 liners, 20–35), motor-shaft speed, pinion/girth gear mesh and main-reducer gear mesh — and show
-±-frequency sidebands around the reducer mesh (Figure 36); seed 001 (Fedin & Vinogradov 2018)
+±-frequency sidebands around the reducer mesh (Figure 36); Fedin & Vinogradov 2018
 eq. 12 adds the gear kinematic error at 3× the drive-gear (pinion) rotation (``p_p = 3ω₁``) and at
-tooth-mesh frequency; seed 003 (Toram 2005, §5 and App. E eq. E.4) adds the grinding-media
+tooth-mesh frequency; Toram 2005 (Toram 2005, §5 and App. E eq. E.4) adds the grinding-media
 oscillation, a rigid-body pendulum of the charge at ``ω_n = √(m g e / I)`` (1.3–1.9 Hz on a 0.3 m
 lab mill), a line at a fixed frequency rather than an order of shaft rotation.
 
@@ -13,7 +13,7 @@ The base orders come from :meth:`analytics.drivetrain.mill_config.MillConfig.exc
 (cycles per
 pinion revolution); this module adds the harmonics and the ±mill-speed sidebands of the mesh
 lines, the optional media line, evaluates them at a measured pinion speed and marks each line
-*not observable* above the telemetry bandwidth (seed 000 §5.1.2: 0–250 Hz) or Nyquist. Units:
+*not observable* above the telemetry bandwidth (Diering 2011 §5.1.2: 0–250 Hz) or Nyquist. Units:
 frequency Hz, speed rpm, order in cycles per pinion revolution.
 """
 
@@ -47,7 +47,7 @@ class KinematicsOptions(BaseModel):
 
     ``mesh_harmonics``: highest harmonic of each mesh line (1 = fundamental only);
     ``mesh_sidebands``: ±k·mill-speed sidebands around each mesh line and its harmonics;
-    ``media_oscillation_hz``: grinding-media oscillation frequency (seed 003), None = none;
+    ``media_oscillation_hz``: grinding-media oscillation frequency (Toram 2005), None = none;
     ``bandwidth_hz``: telemetry bandwidth, None = ``MillConfig.telemetry_bandwidth_hz``.
     """
 
@@ -82,7 +82,7 @@ class ExpectedLine:
 
 
 def media_oscillation_hz(mass_kg: float, eccentricity_m: float, inertia_kgm2: float) -> float:
-    """Linearised grinding-media pendulum, seed 003 App. E eq. E.4: ``√(m g e / I) / 2π`` in Hz.
+    """Linearised grinding-media pendulum, Toram 2005 App. E eq. E.4: ``√(m g e / I) / 2π`` in Hz.
 
     ``mass_kg`` charge mass, ``eccentricity_m`` distance from the mill centre to the charge's
     centre of gravity, ``inertia_kgm2`` the charge's moment of inertia about the mill axis.

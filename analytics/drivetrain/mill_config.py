@@ -1,23 +1,24 @@
 """Mill configuration: one validated, frozen description of a grinding-mill drivetrain.
 
-A mill is described by one TOML file (DESIGN.md, "Conventions"); this module holds the pydantic v2
+A mill is described by one TOML file (README "Conventions"); this module holds the pydantic v2
 model and its derived kinematics. It is pure: :meth:`MillConfig.from_toml_text` parses text, the
 file is read by :func:`ingest.mill_files.load_mill_config`.
 
-Sources of the defaults (seed 000 = Diering 2011, seed 001 = Fedin & Vinogradov 2018):
+Sources of the defaults (README "References"):
 
 * rated torque ``T_rated = P / (2π n / 60)``; pinion rated torque = ``T_rated × reducer ratio``
-  (seed 000 §6.2.1: 5200 kW, 995 rpm, 113/20 → 49.91 kN·m and 281.97 kN·m),
-* telemetry bandwidth 0–250 Hz, 1 kHz per channel (seed 000 §5.1.2–5.1.3),
-* shaft diameters 0.2 m / 0.31 m (seed 000 §5.2.3),
+  (Diering 2011 §6.2.1: 5200 kW, 995 rpm, 113/20 → 49.91 kN·m and 281.97 kN·m),
+* telemetry bandwidth 0–250 Hz, 1 kHz per channel (Diering 2011 §5.1.2–5.1.3),
+* shaft diameters 0.2 m / 0.31 m (Diering 2011 §5.2.3),
 * 820M17, S_ut = 980 MPa, Marin factors 0.68/0.75/0.897/1.0, K_t = 2.2 at the keyway
-  (seed 000 §8.1); K_t = 2 on the torque trace and the FAT 160/100 curves (seed 000 App. D),
-* alarm thresholds: start peak 250/300 % (seed 000 Tables 4, 6: LRS 233 % average);
+  (Diering 2011 §8.1); K_t = 2 on the torque trace and the FAT 160/100 curves (Diering 2011 App. D),
+* alarm thresholds: start peak 250/300 % (Diering 2011 Tables 4, 6: LRS 233 % average);
   starts/month 5 (supplier norm 3–5, §6.1.3) and 20 (field average 20–22, §6.2.8);
   steady-state oscillation range 25/45 % (Table 14: 23.6 % average, 45.4 % max);
   bending amplitude 25/43/90 MPa (§8.1); barring peak 185 % single / 314 % dual (Tables 12–13),
 * excitation orders: mill, pinion, liner passing (20–35 liners), motor, pinion/girth mesh and
-  reducer mesh (seed 000 §6.1.2) and 3× drive-gear rotation (seed 001 eq. 12, ``p_p = 3ω₁``).
+  reducer mesh (Diering 2011 §6.1.2) and 3× drive-gear rotation (Fedin & Vinogradov 2018 eq. 12,
+  ``p_p = 3ω₁``).
 
 Errors: a :class:`pydantic.ValidationError` converts to one line per problem with
 :func:`describe_validation_error`, e.g. ``drive.reducer_ratio: must be > 0``.
@@ -85,14 +86,15 @@ class _Frozen(BaseModel):
 
 
 class DriveLayout(StrEnum):
-    """Single or dual pinion drive (seed 000 §5, Table 2)."""
+    """Single or dual pinion drive (Diering 2011 §5, Table 2)."""
 
     SINGLE = "single"
     DUAL = "dual"
 
 
 class Starter(StrEnum):
-    """Soft-start device (seed 000 §6.2.1): fixed grid resistor, liquid resistance, enhanced LRS."""
+    """Soft-start device (Diering 2011 §6.2.1): fixed grid resistor, liquid resistance, enhanced
+    LRS."""
 
     GRID = "Grid"
     LRS = "LRS"
@@ -127,7 +129,7 @@ class DriveConfig(_Frozen):
 
 
 class ShaftConfig(_Frozen):
-    """Shaft diameters (m) at the gauges, stress-concentration factors (seed 000 §5.2.3, §8.1).
+    """Shaft diameters (m) at the gauges, stress-concentration factors (Diering 2011 §5.2.3, §8.1).
 
     ``kt_bending``/``kt_torsion``: theoretical factors K_t of pinion bending and of torsion;
     ``notch_sensitivity`` q turns each into K_f = 1 + q(K_t − 1) (Diering 2011 §8.1 eq. 5);
@@ -191,7 +193,7 @@ _REMOVED_MATERIAL = {
 
 
 class MaterialConfig(_Frozen):
-    """Shaft material (stress in MPa) and S-N model (seed 000 §8.1)."""
+    """Shaft material (stress in MPa) and S-N model (Diering 2011 §8.1)."""
 
     name: str = "820M17"
     s_ut_mpa: Annotated[float, Field(gt=100, le=3000)] = 980.0
@@ -213,7 +215,7 @@ class MaterialConfig(_Frozen):
 
     @property
     def endurance_limit_mpa(self) -> float:
-        """S_e = k_a k_b k_c k_d · 0.5 S_ut in MPa (seed 000 §8.1 eqs. 2–4)."""
+        """S_e = k_a k_b k_c k_d · 0.5 S_ut in MPa (Diering 2011 §8.1 eqs. 2–4)."""
         return self.ka * self.kb * self.kc * self.kd * 0.5 * self.s_ut_mpa
 
     def sn_curve(self) -> SNCurve:
@@ -236,10 +238,10 @@ class ChannelConfig(_Frozen):
     """One telemetry channel.
 
     ``value = gain · (raw − offset)`` converts raw samples to engineering units (zero offset
-    subtracted, then the shunt-calibration gain, seed 000 §5.2.6). ``full_scale`` is the fixed
+    subtracted, then the shunt-calibration gain, Diering 2011 §5.2.6). ``full_scale`` is the fixed
     range (engineering units) that sets rainflow bin edges. ``kind`` is ``torque`` (kN·m),
     ``bending`` (MPa), ``rpm`` (speed, rpm) or ``tacho`` (reflector pulse train in V, converted
-    to speed with ``pulses_per_rev``, seed 000 §5.2.5).
+    to speed with ``pulses_per_rev``, Diering 2011 §5.2.5).
     """
 
     key: Annotated[str, Field(pattern=_KEY_PATTERN, max_length=120)]
@@ -278,8 +280,8 @@ NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 
 
 class AlarmThresholds(_Frozen):
-    """The ``[alarms]`` section: thresholds (seed values; % are of motor rated torque, sources in
-    the module docstring) and the rules' options the seed does not fix — deadbands, delays (s),
+    """The ``[alarms]`` section: thresholds (source values; % are of motor rated torque, sources in
+    the module docstring) and the rules' options the sources do not fix — deadbands, delays (s),
     data-quality limits, resonance margin, life fractions, load-sharing limits. Those options'
     defaults are engineering judgement; every field names its unit. :mod:`alarms.rules` says
     which rule uses which field."""
@@ -296,7 +298,7 @@ class AlarmThresholds(_Frozen):
     barring_peak_pct: Positive | None = Field(
         default=None, description="None: 185 % single drive, 314 % dual drive (Tables 12-13)"
     )
-    # Rule options: engineering judgement, not seed values (alarms.rules says which rule uses
+    # Rule options: engineering judgement, not source values (alarms.rules says which rule uses
     # which). Times in s, deadbands in the rule's unit, rates per minute, fractions as named.
     # fmt: off
     raise_delay_s: NonNegative = 60.0             # a level stays beyond this long to raise …
@@ -352,7 +354,7 @@ _PRIOR_RATE = re.compile(r"^first_([1-9]\d{0,3})_days$")
 class LifeConfig(_Frozen):
     """How remaining life is projected (``[life]`` of a mill file; :mod:`service.reports.life`).
 
-    Damage before monitoring began (seed 000 §8.3: a 15-year-old shaft is not new): the date
+    Damage before monitoring began (Diering 2011 §8.3: a 15-year-old shaft is not new): the date
     the drivetrain was ``commissioned`` and *either* an estimated ``prior_damage`` (Miner sum,
     one value for every component or a table per component) *or* an assumed ``prior_rate``:
     ``"first_<N>_days"`` applies the damage rate of the first N days of monitoring from
@@ -396,12 +398,12 @@ class LifeConfig(_Frozen):
         return int(m.group(1)) if m else None
 
 
-#: Barring peak limits in % of motor rated torque (seed 000 Tables 12–13, §6.2.3).
+#: Barring peak limits in % of motor rated torque (Diering 2011 Tables 12–13, §6.2.3).
 BARRING_LIMIT_PCT = {DriveLayout.SINGLE: 185.0, DriveLayout.DUAL: 314.0}
 
 
 class MillConfig(_Frozen):
-    """A mill: identity, drivetrain, shafts, material, channels, alarms (DESIGN.md)."""
+    """A mill: identity, drivetrain, shafts, material, channels, alarms (README "Design")."""
 
     id: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_\-]*$", max_length=64)]
     site: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_\-]*$", max_length=64)]
@@ -475,12 +477,12 @@ class MillConfig(_Frozen):
 
     @property
     def motor_rated_torque_knm(self) -> float:
-        """T_rated = P / (2π n / 60) per motor, kN·m (seed 000 §6.2.1)."""
+        """T_rated = P / (2π n / 60) per motor, kN·m (Diering 2011 §6.2.1)."""
         return self.drive.motor_power_kw / (2.0 * math.pi * self.drive.motor_speed_rpm / 60.0)
 
     @property
     def pinion_rated_torque_knm(self) -> float:
-        """Motor rated torque × reducer ratio, kN·m (seed 000 §6.2.1)."""
+        """Motor rated torque × reducer ratio, kN·m (Diering 2011 §6.2.1)."""
         return self.motor_rated_torque_knm * self.drive.reducer_ratio
 
     @property
@@ -502,8 +504,9 @@ class MillConfig(_Frozen):
     def excitation_orders(self) -> dict[str, float]:
         """Expected excitations as orders of pinion rotation (cycles per pinion revolution).
 
-        Seed 000 §6.1.2 lists mill speed, pinion speed, liner passing, motor speed, pinion/girth
-        mesh and reducer mesh; seed 001 eq. 12 adds 3× the drive-gear (pinion) rotation.
+        Diering 2011 §6.1.2 lists mill speed, pinion speed, liner passing, motor speed, pinion/girth
+        mesh and reducer mesh; Fedin & Vinogradov 2018 eq. 12 adds 3× the drive-gear (pinion)
+        rotation.
         """
         d = self.drive
         mill = d.pinion_teeth / d.girth_teeth

@@ -3,12 +3,12 @@ stress, and the Goodman fatigue reserve factor.
 
 Sources
 -------
-* Seed 000 (Diering 2011) §5.2.1 shunt calibration (Hoffmann), §5.2.3 torque and §5.2.4 bending
+* Diering 2011 §5.2.1 shunt calibration (Hoffmann), §5.2.3 torque and §5.2.4 bending
   bridges, §5.2.6 zero offset and gain; App. C routines 1–3 (the Matlab that does the same).
-* Seed 000 §8.1 eqs. 6–10: von Mises mean/alternating stress, modified Goodman line, fatigue
+* Diering 2011 §8.1 eqs. 6–10: von Mises mean/alternating stress, modified Goodman line, fatigue
   reserve factor (FRF); Peterson for K_t = K_f = 2.2 at the keyway. Eqs. 1–4 (S_e from the Marin
   factors, Shigley) are :func:`analytics.fatigue.sn_curves.marin_endurance_limit`.
-* Seed 000 §8.2 eqs. 11–13: plane stress transformation (Hearn) with σ_y = 0.
+* Diering 2011 §8.2 eqs. 11–13: plane stress transformation (Hearn) with σ_y = 0.
 
 Units
 -----
@@ -16,7 +16,7 @@ torque and bending moment kN·m; stress MPa; diameter m; section modulus m³; mo
 strain m/m (dimensionless); bridge output V; gains MPa/V; angles rad.
 Handy identity: ``T [kN·m] = τ [MPa] · Z_p [m³] · 10³``.
 
-Notes on the seed
+Notes on Diering 2011
 -----------------
 * §5.2.1 prints ε_s = (1/k)(R_s/(R+R_s) − 1) = 474.68 µm/m. The formula is *negative*
   (−474.68 µm/m for k = 2.11, R = 350.9 Ω, R_s = 350 kΩ): a shunt lowers the arm's resistance, i.e.
@@ -61,7 +61,7 @@ __all__ = [
 ]
 
 THETA_SEED = math.pi / 4
-"""θ = 45°: the angle the seed found to coincide with the torque peaks (§8.2), in rad."""
+"""θ = 45°: the angle Diering 2011 found to coincide with the torque peaks (§8.2), in rad."""
 
 _KNM_PER_MPA_M3 = 1e3  # 1 MPa · 1 m³ = 1 MN·m = 10³ kN·m
 
@@ -106,7 +106,8 @@ def bending_moment_from_stress(sigma: ArrayLike, d: float) -> np.ndarray:
 
 def notch_stress(nominal: ArrayLike, k: float) -> np.ndarray:
     """Local stress = K·nominal stress, with K = K_t (theoretical) or K_f (fatigue, K_f = 1 +
-    q(K_t − 1); the seed takes q = 1 so K_f = K_t = 2.2, eq. 5). Always explicit, never implied."""
+    q(K_t − 1); Diering 2011 takes q = 1 so K_f = K_t = 2.2, eq. 5). Always explicit, never
+    implied."""
     return np.asarray(nominal, dtype=np.float64) * _positive("stress concentration factor", k)
 
 
@@ -115,7 +116,8 @@ def principal_angle(sigma_x: ArrayLike, tau: ArrayLike) -> np.ndarray:
     """θ of eq. 13, tan 2θ = 2τ/σ_x (σ_y = 0), per sample, in rad.
 
     The branch is the one that makes σ_θ of eq. 12 the *maximum* principal stress
-    (2θ = atan2(2τ, σ_x), θ in (−90°, 90°]). The seed's Matlab (App. D) instead takes the record's
+    (2θ = atan2(2τ, σ_x), θ in (−90°, 90°]). Diering 2011's Matlab (App. D) instead takes the
+    record's
     maximum of ``atan(2τ/σ_x)/2`` as one angle for the whole record.
     """
     s = np.asarray(sigma_x, dtype=np.float64)
@@ -128,7 +130,8 @@ def combined_stress(
 ) -> np.ndarray:
     """σ_θ = ½σ_x + ½σ_x·cos 2θ + τ·sin 2θ (eq. 12 with σ_y = 0), MPa, vectorised.
 
-    ``theta`` (rad): a fixed angle (default 45°, as the seed found at the torque peaks) or an array
+    ``theta`` (rad): a fixed angle (default 45°, as Diering 2011 found at the torque peaks) or an
+    array
     such as :func:`principal_angle` ``(sigma_x, tau)``, which turns σ_θ into the maximum principal
     stress ½σ_x + √(¼σ_x² + τ²).
     """
@@ -146,7 +149,7 @@ def shear_modulus(E: float, nu: float) -> float:
 
 @dataclass(frozen=True, slots=True)
 class ShuntCalibration:
-    """Shunt calibration of a full strain-gauge bridge (seed 000 §5.2.1, Hoffmann).
+    """Shunt calibration of a full strain-gauge bridge (Diering 2011 §5.2.1, Hoffmann).
 
     ``gauge_factor`` k; ``gauge_resistance`` R and ``shunt_resistance`` R_s in Ω;
     ``shunt_voltage`` V_s in V, the bridge-output step seen when the shunt is applied.
@@ -166,7 +169,7 @@ class ShuntCalibration:
     @property
     def strain(self) -> float:
         """ε_s = (1/k)(R_s/(R + R_s) − 1) = −R/(k(R + R_s)), m/m — signed, negative (see module
-        docstring); written without the cancellation of the seed's form."""
+        docstring); written without the cancellation of Diering 2011's form."""
         r, rs = self.gauge_resistance, self.shunt_resistance
         return -r / (self.gauge_factor * (r + rs))
 
@@ -199,7 +202,7 @@ class ChannelCalibration:
     """Volts → engineering units for one channel: ``(V − zero_offset)·gain`` (§5.2.6).
 
     ``gain`` in unit/V (MPa/V from :class:`ShuntCalibration`, or kN·m/V = MPa/V · Z·10³); its sign
-    carries the bridge polarity (the seed flips the torque channels). ``zero_offset`` in V.
+    carries the bridge polarity (Diering 2011 flips the torque channels). ``zero_offset`` in V.
     """
 
     gain: float

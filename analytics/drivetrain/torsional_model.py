@@ -1,11 +1,14 @@
-"""Lumped torsional model of a mill drive (seed 001, Fedin & Vinogradov 2018, eqs. 10–15, Table 2).
+"""Lumped torsional model of a mill drive (Fedin & Vinogradov 2018, Fedin & Vinogradov 2018, eqs.
+10–15, Table 2).
 
-The drive of seed 001 Fig. 4: motor rotor ``I1`` tied to the grid by the electromagnetic
+The drive of Fedin & Vinogradov 2018 Fig. 4: motor rotor ``I1`` tied to the grid by the
+electromagnetic
 stiffness ``c01``; shafting with the elastic coupling ``c12`` to the drive gear (pinion) ``I2``;
 the gear mesh ``c23`` to the girth gear and drum ``I3``; optionally the pinion assembly of mass
 ``m`` moving transversely on supports of stiffness ``c2``, coupled to the mesh through the pinion
 pitch radius ``r`` (a mesh deflection ``φ2 − φ3 − x/r``). All inertias and stiffnesses are
-referred to the pinion shaft (seed 001: the motor drives the pinion directly; with a reducer,
+referred to the pinion shaft (Fedin & Vinogradov 2018: the motor drives the pinion directly; with a
+reducer,
 multiply motor-side values by ``ratio²``).
 
 Equation 10 as printed is not symmetric: the ``c23`` terms of the pinion and of the ``x`` rows
@@ -25,7 +28,8 @@ MRG 5500×7500 torsional chain 3.11, 8.40, 107.8 Hz; with the transverse pinion 
 (r = 0.314 m from module 25 mm, 25 teeth, helix 6°, Table 1) 3.11, 8.39, 98.8, 343.6 Hz;
 MSHTS 5500×6500 chain 1.24, 3.96, 104.1 Hz; with the pinion mass (r = 0.578 m, 46 teeth)
 1.24, 3.96, 101.2, 323.0 Hz. The 3× drive-gear excitation of the MRG mill (3 × 150 rpm = 7.5 Hz)
-lies 11 % below its 8.4 Hz mode — the resonance behind its measured K_H = 1.58 (seed 001 §2.1).
+lies 11 % below its 8.4 Hz mode — the resonance behind its measured K_H = 1.58 (Fedin & Vinogradov
+2018 §2.1).
 
 A mill's model is the ``[torsional]`` table of its file
 (:class:`~analytics.drivetrain.torsional_params.TorsionalParams`): :func:`natural_frequencies_of`
@@ -74,7 +78,8 @@ NO_MODEL_NOTE = (
     "and the resonance_margin alarm cannot fire"
 )
 
-#: Seed 001 Table 2 (and Table 1 for the pinion radius: module 25 mm, helix 6°, 25/46 teeth).
+#: Fedin & Vinogradov 2018 Table 2 (and Table 1 for the pinion radius: module 25 mm, helix 6°,
+#: 25/46 teeth).
 SEED_001_MILLS: dict[str, TorsionalParams] = {
     "MRG 5500x7500": TorsionalParams(
         I1=19.3e3, I2=1.5e3, I3=19.3e3, c01=2.0e7, c12=2.2e7, c23=6.2e8,
@@ -101,7 +106,8 @@ class Mode:
 
 @dataclass(frozen=True)
 class ResonanceWarning:
-    """An excitation line within the band of a natural frequency (seed 001 §2.2, ISO 6336)."""
+    """An excitation line within the band of a natural frequency (Fedin & Vinogradov 2018 §2.2, ISO
+    6336)."""
 
     line: str
     line_hz: float
@@ -118,7 +124,7 @@ class ResonanceWarning:
 
 
 class TorsionalModel:
-    """Undamped modes and damped forced response of the seed 001 lumped drive."""
+    """Undamped modes and damped forced response of the Fedin & Vinogradov 2018 lumped drive."""
 
     def __init__(self, params: TorsionalParams) -> None:
         self.params = params
@@ -214,7 +220,8 @@ def resonance_warnings(
 
 
 def dynamic_factor(torque: np.ndarray, nominal: float | None = None) -> float:
-    """Seed 001 eq. 13: ``K'_v = M_total / M_nom`` — the largest |torque| of the record over the
+    """Fedin & Vinogradov 2018 eq. 13: ``K'_v = M_total / M_nom`` — the largest |torque| of the
+    record over the
     nominal torque (``nominal``, same unit; default: the record's mean). NaN for an empty or
     all-NaN record or a zero nominal."""
     x = np.asarray(torque, dtype=np.float64)

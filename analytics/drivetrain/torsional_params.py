@@ -31,7 +31,8 @@ class TorsionalParams(BaseModel):
     ``c01``/``c12``/``c23`` N·m/rad (motor field, shafting, gear mesh), ``m`` kg and ``c2`` N/m
     (transverse pinion assembly; Table 2 prints the unit as N·m), ``r`` m pinion pitch radius;
     the transverse DOF is used only when ``m``, ``c2`` and ``r`` are all given. ``psi``:
-    vibrational energy dissipation coefficient Ψ (seed 001: 0.3–0.5). How near a natural
+    vibrational energy dissipation coefficient Ψ (Fedin & Vinogradov 2018: 0.3–0.5). How near a
+    natural
     frequency an excitation may come is the alarm option ``alarms.resonance_margin_warn``.
     """
 

@@ -13,7 +13,8 @@ field        dtype    meaning
 ``i_end``    int64    sample index of the second reversal
 ============ ======== ==============================================================
 
-Sample indices convert to time with the block convention of DESIGN.md: ``t = t0 + i·1e9/fs`` ns.
+Sample indices convert to time with the block convention of README "Design": ``t = t0 + i·1e9/fs``
+ns.
 
 The cycles returned by :meth:`analytics.fatigue.rainflow.RainflowCounter.feed` are a *view* of the
 counter's output buffer, valid until the next ``feed``: recorders consume them at once; call
@@ -109,7 +110,7 @@ class Cycles:
 
     def times_ns(self, t0_ns: int, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
         """Start and end times of each cycle, int64 ns since the Unix epoch, for a record whose
-        sample 0 is at ``t0_ns`` and sampled at ``fs_hz`` (DESIGN.md: t = t0 + i·1e9/fs)."""
+        sample 0 is at ``t0_ns`` and sampled at ``fs_hz`` (README "Design": t = t0 + i·1e9/fs)."""
         step = 1e9 / fs_hz
         start = t0_ns + np.rint(self.i_start * step).astype(np.int64)
         end = t0_ns + np.rint(self.i_end * step).astype(np.int64)

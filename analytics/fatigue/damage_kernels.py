@@ -4,7 +4,7 @@
 :mod:`analytics.mill.phase_damage`.
 
 Sources: the S-N formula of :mod:`analytics.fatigue.sn_curves` (1/N = exp(m·ln(S/S_D) − ln N_D),
-seed 000
+Diering 2011
 §8.2, EN 1993-1-9 §7); the exact sums of :mod:`analytics.fatigue.exact_sum`.
 
 A stopped mill's noise closes ~1000 rainflow cycles a second per mill, so the per-cycle cost of

@@ -1,9 +1,9 @@
 """Cycle matrices with fixed bins: range-mean and valley-peak ("from-to") histograms of rainflow
 cycles.
 
-Sources: ASTM E1049-85 §5.4.4 (rainflow cycles); seed 002 (Fotopoulos 1983) ch. 3 (range-mean
+Sources: ASTM E1049-85 §5.4.4 (rainflow cycles); Fotopoulos 1983 ch. 3 (range-mean
 counting, half cycles) and Table 3.2 (spectra in 1 kN range classes); fatpack's rainflow matrix;
-STYLE.md (bins from configuration, never from the data's min/max).
+README "Design" (bins from configuration, never from the data's min/max).
 
 Units: edges and values in the unit of the counted signal (MPa for stress); counts are int64
 numbers of *half* cycles (a full cycle adds 2), so sums are exact and matrices of different days,

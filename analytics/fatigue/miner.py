@@ -1,8 +1,9 @@
 """Palmgren-Miner damage that stays exact over a year of 1 kHz data.
 
-Sources: seed 000 (Diering 2011) §8.2 and App. D (rainflow + Miner's rule on pinion-shaft stress);
-DESIGN.md "Numerical contract" (damage sums exact over ~10¹⁰ cycles); the Prometheus client's
-``_total`` counters, which refuse negative increments (STYLE.md). Summation: Knuth's TwoSum and
+Sources: Diering 2011 §8.2 and App. D (rainflow + Miner's rule on pinion-shaft stress);
+README "The numerical contract" (damage sums exact over ~10¹⁰ cycles); the Prometheus client's
+``_total`` counters, which refuse negative increments (README "Design"). Summation: Knuth's TwoSum
+and
 Dekker's Fast2Sum (double-double accumulation), Higham, *Accuracy and Stability of Numerical
 Algorithms*, §4.3–4.4.
 
@@ -172,7 +173,7 @@ class DamageRecorder:
     """Miner damage of one signal on one S-N curve, fed with rainflow cycles block by block.
 
     ``scale`` multiplies cycle ranges *and* means before the curve is read (e.g. K_t, applied to
-    the whole stress signal as in seed 000 App. D; a unit conversion). ``mean_correction``:
+    the whole stress signal as in Diering 2011 App. D; a unit conversion). ``mean_correction``:
     optional :class:`~analytics.fatigue.sn_curves.GoodmanCorrection` on the (scaled) cycle means.
 
     Each block's damage is summed exactly and accumulated in a :class:`MinerSum`, so the live

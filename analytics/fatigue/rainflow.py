@@ -1,10 +1,10 @@
 """Continual (Čačko-style) rainflow counting: cycles are closed as the samples arrive.
 
 Source: ASTM E1049-85 (2011) §5.4.4, the three-point rule with the starting point counted as a
-half cycle; seed 002 (Fotopoulos 1983) ch. 3.2–3.3 for the rules and the treatment of half cycles;
-seed 000 (Diering 2011) §8.2 and App. D for rainflow + Miner on pinion-shaft stress.
+half cycle; Fotopoulos 1983 ch. 3.2–3.3 for the rules and the treatment of half cycles;
+Diering 2011 §8.2 and App. D for rainflow + Miner on pinion-shaft stress.
 
-Numerical contract (DESIGN.md):
+Numerical contract (README "Design"):
 
 * The cycles :meth:`RainflowCounter.feed` returns over a record, followed by
   :meth:`RainflowCounter.close` in ``"half"`` mode, equal — bitwise, in order, with the same sample
@@ -68,7 +68,8 @@ class NonFiniteSampleError(ValueError):
         self.value = value
         super().__init__(
             f"sample {index} is {value!r}: rainflow counting needs finite values. Flag or drop bad "
-            "telemetry before counting; millwatch never interpolates it silently (seed 000 §5.2.2)."
+            "telemetry before counting; millwatch never interpolates it silently "
+            "(Diering 2011 §5.2.2)."
         )
 
 

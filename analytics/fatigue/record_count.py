@@ -8,7 +8,7 @@ per cycle (:meth:`~analytics.fatigue.miner.DamageRecorder.block_damage`, bitwise
 (:class:`~analytics.fatigue.exact_sum.ExactSum`) — so that Python runs once per chunk (tens of
 thousands of samples), not once per block or cycle. The totals do not depend on the chunking:
 the counter is exact for any split, and the damage is the correctly rounded sum of every cycle's
-damage (the float ``curve.damage`` of all cycles gives; seed 000 §8.2, App. D).
+damage (the float ``curve.damage`` of all cycles gives; Diering 2011 §8.2, App. D).
 
 Residue (:mod:`analytics.fatigue.residue_modes`): ``half`` books every cycle the counter emits and
 the ASTM closure; ``repeat`` books the counter's full cycles and the standard closure of the record
@@ -61,13 +61,14 @@ class RecordTotals:
     damage: float
     damage_committed: float  # the cycles closed while counting
     damage_residue: float  # the closure's
-    equivalent_cycles: float  # Σ n·(S/S_ref)^m1 at S_ref = the curve's knee range (seed 002 eq. 4)
+    #: Σ n·(S/S_ref)^m1 at S_ref = the curve's knee range (Fotopoulos 1983 eq. 4)
+    equivalent_cycles: float
     reference_range: float  # S_ref, MPa
     slope: float  # m1
     residue_length: int
 
     def equivalent_range(self, n_ref: float) -> float:
-        """Seed 002 eq. 4: the range (MPa) that, ``n_ref`` times, does the same damage on a
+        """Fotopoulos 1983 eq. 4: the range (MPa) that, ``n_ref`` times, does the same damage on a
         single-slope curve of slope m1; 0.0 for no cycles."""
         total = self.equivalent_cycles
         if total == 0.0:

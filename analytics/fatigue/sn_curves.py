@@ -3,16 +3,16 @@ damage-equivalent range.
 
 Sources
 -------
-* Seed 000 (Diering 2011) §8.1 eqs. 1–4: S_e from the Marin factors (Shigley); §8.2 eqs. 14–16:
+* Diering 2011 §8.1 eqs. 1–4: S_e from the Marin factors (Shigley); §8.2 eqs. 14–16:
   the Shigley line from 0.8·S_ut at 10³ cycles to S_e at 10⁶ cycles.
-* Seed 000 App. D: section 1 continues the Shigley slope below S_e (no fatigue limit); section 2
+* Diering 2011 App. D: section 1 continues the Shigley slope below S_e (no fatigue limit); section 2
   changes the slope to m₂ = 2m₁ − 1 below the knee at 10⁶ (Haibach); section 3 uses separate curves
   for normal (m = 3, FAT 160 at 2·10⁶) and shear (m = 5, FAT 100 at 2·10⁶) stress ranges.
 * EN 1993-1-9 §7, Fig. 7.1/7.2: Δσ_C at N_C = 2·10⁶, knee Δσ_D at N_D = 5·10⁶, then m = 5 to the
   cut-off Δσ_L at N_L = 10⁸ (Δσ_D = 0.737·Δσ_C, Δσ_L = 0.549·Δσ_D); shear m = 5 from Δτ_C at 2·10⁶
   to the cut-off Δτ_L = 0.457·Δτ_C at 10⁸. Below the cut-off a cycle does no damage.
-* Seed 002 (Fotopoulos 1983) §4.2 eq. 4, n₁ = n₂(S₂/S₁)^m: a spectrum as cycles of one reference
-  range (the seed writes the S-N slope as the signed −m; here m > 0).
+* Fotopoulos 1983 §4.2 eq. 4, n₁ = n₂(S₂/S₁)^m: a spectrum as cycles of one reference
+  range (Diering 2011 writes the S-N slope as the signed −m; here m > 0).
 
 Units: stress MPa; N and counts in cycles (a half cycle counts 0.5); damage dimensionless.
 
@@ -92,7 +92,7 @@ def marin_endurance_limit(
     ke: float = 1.0,
     kf: float = 1.0,
 ) -> float:
-    """S_e = k_a·k_b·k_c·k_d·k_e·k_f·S'_e with S'_e = 0.5·S_ut (seed 000 eqs. 2–3, Shigley), MPa
+    """S_e = k_a·k_b·k_c·k_d·k_e·k_f·S'_e with S'_e = 0.5·S_ut (Diering 2011 eqs. 2–3, Shigley), MPa
     amplitude. Seed §8.1: S_ut 980, k 0.68, 0.75, 0.897, 1 → S_e = 0.4575·S'_e ≈ 224.2 MPa."""
     factors = {"ka": ka, "kb": kb, "kc": kc, "kd": kd, "ke": ke, "kf": kf}
     for name, k in factors.items():
@@ -186,7 +186,7 @@ class SNCurve:
     # ------------------------------------------------------------ constructors
     @classmethod
     def shigley(cls, S_ut: float, S_e: float, name: str = "Shigley") -> SNCurve:
-        """Seed 000 eqs. 14–16: the line from 0.8·S_ut at 10³ to S_e at 10⁶ cycles, continued
+        """Diering 2011 eqs. 14–16: the line from 0.8·S_ut at 10³ to S_e at 10⁶ cycles, continued
         below S_e with the same slope (App. D section 1). Amplitude curve, MPa.
 
         log S_f = b·log N + C, b = −⅓·log(0.8·S_ut/S_e), C = log((0.8·S_ut)²/S_e); m1 = −1/b.
@@ -200,19 +200,19 @@ class SNCurve:
     @classmethod
     def fat_normal(cls, fat: float = 160.0) -> SNCurve:
         """EN 1993-1-9 normal-stress range curve of detail category ``fat`` (Δσ_C at 2·10⁶, MPa):
-        m = 3 to the knee at 5·10⁶, m = 5 to the cut-off at 10⁸ (seed 000 App. D section 3)."""
+        m = 3 to the knee at 5·10⁶, m = 5 to the cut-off at 10⁸ (Diering 2011 App. D section 3)."""
         S_D = _positive("FAT", fat) * (2e6 / 5e6) ** (1.0 / 3.0)
         return cls(m1=3.0, S_D=S_D, N_D=5e6, m2=5.0, N_L=1e8, name=f"FAT {fat:g} normal")
 
     @classmethod
     def fat_shear(cls, fat: float = 100.0) -> SNCurve:
         """EN 1993-1-9 shear-stress range curve of category ``fat`` (Δτ_C at 2·10⁶, MPa): m = 5 to
-        the cut-off at 10⁸ (seed 000 App. D section 3)."""
+        the cut-off at 10⁸ (Diering 2011 App. D section 3)."""
         return cls(m1=5.0, S_D=_positive("FAT", fat), N_D=2e6, N_L=1e8, name=f"FAT {fat:g} shear")
 
     # ------------------------------------------------------------ variants (new objects)
     def with_fatigue_limit(self) -> SNCurve:
-        """Haibach: slope m2 = 2·m1 − 1 below the knee (seed 000 App. D section 2)."""
+        """Haibach: slope m2 = 2·m1 − 1 below the knee (Diering 2011 App. D section 2)."""
         return dataclasses.replace(self, m2=2.0 * self.m1 - 1.0, name=self._suffixed("Haibach"))
 
     def with_m2(self, m2: float) -> SNCurve:
@@ -314,7 +314,8 @@ class SNCurve:
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`damage_of_ranges` (bitwise) and, from the same logarithm, each cycle's
         ``(S/S_D)^m1`` — the cycles of the knee range it equals on a single-slope curve of slope
-        m1 (seed 002 eq. 4; range and amplitude give the same ratio, halving is exact). Both new
+        m1 (Fotopoulos 1983 eq. 4; range and amplitude give the same ratio, halving is exact). Both
+        new
         arrays; a ratio may overflow to ``inf`` (the caller then sums it another way)."""
         r = np.ascontiguousarray(ranges, dtype=np.float64)
         s, q = np.empty(r.shape[0]), np.empty(r.shape[0])
@@ -392,14 +393,15 @@ def _spectrum(ranges: ArrayLike, counts: ArrayLike, m: float) -> tuple[np.ndarra
 
 def equivalent_cycles(ranges: ArrayLike, counts: ArrayLike, m: float, S_ref: float) -> float:
     """Σ nᵢ (Sᵢ/S_ref)^m: the number of cycles of range ``S_ref`` that does the same damage on a
-    single-slope curve of slope ``m`` (seed 002 eq. 4 summed over the spectrum)."""
+    single-slope curve of slope ``m`` (Fotopoulos 1983 eq. 4 summed over the spectrum)."""
     s, n = _spectrum(ranges, counts, m)
     return math.exp(_log_sum_of_powers(s, n, m, _positive("S_ref", S_ref)))
 
 
 def equivalent_range(ranges: ArrayLike, counts: ArrayLike, m: float, N_ref: float) -> float:
     """S_eq = (Σ nᵢ Sᵢ^m / N_ref)^(1/m): the range that, applied ``N_ref`` times, does the same
-    damage on a single-slope curve of slope ``m`` (seed 002 eq. 4). 0.0 for an empty spectrum."""
+    damage on a single-slope curve of slope ``m`` (Fotopoulos 1983 eq. 4). 0.0 for an empty
+    spectrum."""
     s, n = _spectrum(ranges, counts, m)
     log_sum = _log_sum_of_powers(s, n, m, 1.0)
     if math.isinf(log_sum):

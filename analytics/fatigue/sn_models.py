@@ -1,7 +1,7 @@
 """Named S-N models: the one place that turns a model name and its parameters into a curve.
 
 Used by the CLI options and by mill configuration files, so that ``shigley-limit`` means the same
-curve everywhere. Defaults are seed 000 (Diering 2011) App. D section 1: pinion shaft of
+curve everywhere. Defaults are Diering 2011 App. D section 1: pinion shaft of
 S_ut = 850 MPa with Marin factors k_a = 0.8, k_b = 0.688, k_c = 0.814, k_d = k_e = k_f = 1, so
 S_e = 0.5·850·0.8·0.688·0.814 = 190.4 MPa (amplitude).
 

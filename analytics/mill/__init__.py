@@ -1,7 +1,7 @@
 """The per-mill composition: MillAnalyzer, and the stages only it combines.
 
 One analyzer object per mill, used alike by live ingest, replay and offline analysis
-(DESIGN.md: identical results for the same samples).
+(README "Design": identical results for the same samples).
 
 Modules (each imports only the ones listed before it)::
 
@@ -10,7 +10,7 @@ Modules (each imports only the ones listed before it)::
                      surface
     phase_damage     PhaseTimeline, PhaseDamage: the damage and cycle recorder by operating phase
                      and local day, the cost of a start, monthly projections, the one
-                     SECONDS_PER_YEAR of damage rates (seed 000 §8.3, App. D); here
+                     SECONDS_PER_YEAR of damage rates (Diering 2011 §8.3, App. D); here
                      because it joins fatigue (cycles, Miner) with operation (states)
     report           the tables of the load report (starts per month, phase seconds, damage,
                      start cost, projections), from plain pieces

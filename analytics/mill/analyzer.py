@@ -1,18 +1,19 @@
 """The analyzer of one mill: decoded channel blocks in, events, reports and snapshots out.
 
-DESIGN.md asks that live ingest, ``millwatch replay`` through zenoh and offline
+README "Design" asks that live ingest, ``millwatch replay`` through zenoh and offline
 ``millwatch analyze`` give identical results for the same samples. They all feed this class,
 block by block, in arrival order::
 
     block (channel, t0, fs, raw samples)
       → calibration (value = gain·(raw − offset), mill config)
       → FrameAligner       blocks of equal t0 → aligned frames; gaps and dead channels as NaN
-      → FaultStage         spike/dropout/rail flags per channel (seed 000 §5.2.2), aligned delay
-      → tacho → rpm        when the mill has a pulse channel and no rpm channel (seed 000 App. C
-                           routine 5, seed 003 ch. IV)
+      → FaultStage         spike/dropout/rail flags per channel (Diering 2011 §5.2.2), aligned delay
+      → tacho → rpm        when the mill has a pulse channel and no rpm channel (Diering 2011 App. C
+                           routine 5, Toram 2005 ch. IV)
       → LoadAnalysis       states, starts/stops/barring, steady-state windows, rainflow damage
-                           by component, phase and day (seed 000 §6, §8, App. D)
-      → HarmonicTracker    order-tracked spectra, only while running (seed 000 §6.2.7, seed 001)
+                           by component, phase and day (Diering 2011 §6, §8, App. D)
+      → HarmonicTracker    order-tracked spectra, only while running (Diering 2011 §6.2.7, Fedin &
+      Vinogradov 2018)
 
 Work follows the scene: the harmonic tracker skips every sample that is not steady running (the
 state after each sample decides, so spectra do not depend on the framing), and the analyzer

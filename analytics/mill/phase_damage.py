@@ -1,6 +1,6 @@
 """Fatigue damage by operating phase and day; the cost of a start; monthly projections.
 
-Sources: seed 000 (Diering 2011) §8.2 and App. D (rainflow + Miner on pinion-shaft stress; the
+Sources: Diering 2011 §8.2 and App. D (rainflow + Miner on pinion-shaft stress; the
 record cut into start, run and stop portions; damage per month for 5 starts/day, 1/day, 1/week and
 1/month, a month being 4 weeks), §8.3 (start transients and starts per month drive damage; bending
 dominates), §6.1.3 (starts are counted per month, norm 3–5).
@@ -388,7 +388,7 @@ def _joined(parts: list[np.ndarray], dtype: type) -> np.ndarray:
 @dataclass(frozen=True, slots=True)
 class StartCost:
     """Damage of one start-stop cycle (start + stop phases per switch-on), the steady damage
-    rate, and the start expressed as hours of steady running (seed 000 §8.3, App. D)."""
+    rate, and the start expressed as hours of steady running (Diering 2011 §8.3, App. D)."""
 
     starts: int
     damage_per_start: float | None

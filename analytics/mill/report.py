@@ -1,6 +1,6 @@
 """The tables of a :class:`~analytics.mill.loads.LoadAnalysis` report, from plain pieces.
 
-Sources: seed 000 §6.1.3 and §6.2.8 (starts per month against the supplier norm of 3–5; field
+Sources: Diering 2011 §6.1.3 and §6.2.8 (starts per month against the supplier norm of 3–5; field
 average 20–22, peak 90), §8.3 and App. D (damage by phase, the cost of a start, damage per month
 for 5 starts/day, 1/day, 1/week, 1/month). Alarm levels come from the mill configuration.
 
@@ -35,13 +35,13 @@ __all__ = [
 ]
 
 STARTS_NORM_PER_MONTH = (3, 5)
-"""Supplier norm for starts per month (seed 000 §6.1.3)."""
+"""Supplier norm for starts per month (Diering 2011 §6.1.3)."""
 
 
 def starts_status(n: int, alarms: AlarmThresholds) -> str:
     """Starts of one calendar month against the norm and the configured levels: ``alarm`` above
     the alarm level, ``warning`` above the warning level (strictly above, as the alarm rules of
-    :mod:`alarms.rules` and seed 000 §6.1.3/§10.3 put it), ``above norm`` beyond 3–5, else
+    :mod:`alarms.rules` and Diering 2011 §6.1.3/§10.3 put it), ``above norm`` beyond 3–5, else
     ``ok``."""
     if n > alarms.starts_per_month_alarm:
         return "alarm"

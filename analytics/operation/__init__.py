@@ -3,8 +3,8 @@
 Modules::
 
     operating_states OperatingStateMachine: stopped/starting/running/stopping/barring/unknown
-                     from speed and torque, one Transition per change (seed 000 §6.1)
-    transients       start, stop and barring measures on one phase's samples (seed 000 §6.2)
+                     from speed and torque, one Transition per change (Diering 2011 §6.1)
+    transients       start, stop and barring measures on one phase's samples (Diering 2011 §6.2)
     steady_state     SteadyStateMeter: steady windows of running (mean, oscillation, imbalance)
     state_kernels, steady_kernels   their compiled loops
 

@@ -1,13 +1,13 @@
 """Operating-state machine of a mill: stopped, starting, running, stopping, barring, unknown.
 
-Sources: seed 000 (Diering 2011) §6.1.1 and Figure 20 (the start/run/stop record: switch-on,
+Sources: Diering 2011 §6.1.1 and Figure 20 (the start/run/stop record: switch-on,
 acceleration, short-circuit peak when the starter is bypassed, steady running, switch-off, rocking
 to rest), Figure 27 (barring: an inching drive turns the stopped mill very slowly), §6.1.3 (every
 stop and restart counts).
 
 Input per sample: mill speed as a fraction of rated shaft speed (``|rpm| / rated rpm`` of the shaft
 the speed is measured on) and the largest absolute motor torque over the drive sides as a fraction
-of the motor rated torque (``T_rated = P / (2π n / 60)``, seed 000 §6.2.1). NaN in either input
+of the motor rated torque (``T_rated = P / (2π n / 60)``, Diering 2011 §6.2.1). NaN in either input
 means *missing* (telemetry dropout): the output is ``UNKNOWN`` for those samples and the machine
 resumes where it was. ``-inf`` torque means *flagged* (e.g. a telemetry spike): the sample is
 ignored without an ``UNKNOWN`` label.
@@ -73,7 +73,7 @@ _SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
 
 
 class OperatingState(IntEnum):
-    """Operating state of a mill (phase of the start/run/stop record, seed 000 Figure 20)."""
+    """Operating state of a mill (phase of the start/run/stop record, Diering 2011 Figure 20)."""
 
     UNKNOWN = 0
     STOPPED = 1
@@ -91,7 +91,8 @@ class OperatingState(IntEnum):
 class StateThresholds:
     """Named knobs of the state machine. Fractions of rated speed / rated motor torque; times s.
 
-    Not from the seeds (chosen, documented): the seeds give the shapes (Figure 20, 27), not the
+    Not from the sources (chosen, documented): Diering 2011 gives the shapes (Figure 20, 27), not
+    the
     detection levels. ``torque_on`` sits below the lowest switch-on peak of Tables 3–11 (E-LRS
     dual, 56 % − 2σ ≈ 15 %) and far above telemetry noise; ``min_on_s`` exceeds the interference
     spikes of §5.2.2 (a few to 20 samples); ``speed_start`` lies above an inching drive's speed

@@ -1,4 +1,4 @@
-"""Compiled per-sample kernel of the operating-state machine (seed 000 §6.1, §6.2).
+"""Compiled per-sample kernel of the operating-state machine (Diering 2011 §6.1, §6.2).
 
 The plain-Python API, the states and their thresholds are in
 :mod:`analytics.operation.operating_states`; this is its sample loop, with the layout of the state

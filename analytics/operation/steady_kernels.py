@@ -1,5 +1,5 @@
 """Compiled kernels of the steady-state meter: revolution counting and the per-revolution fold of
-extremes, sums and counts (seed 000 §6.2.4).
+extremes, sums and counts (Diering 2011 §6.2.4).
 
 The plain-Python API is :class:`analytics.operation.steady_state.SteadyStateMeter`.
 """

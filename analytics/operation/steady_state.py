@@ -1,7 +1,7 @@
 """Steady-state metrics per window of running: mean torque, oscillation range per revolution,
 bending range per revolution, dual-drive load sharing.
 
-Sources: seed 000 (Diering 2011) App. C routine 4 (range per revolution: the mean of the
+Sources: Diering 2011 App. C routine 4 (range per revolution: the mean of the
 per-revolution maxima minus the mean of the per-revolution minima), §6.2.4 Tables 14–15 (torque
 oscillation ranges, % of motor rated torque on both shafts), §6.2.6 Tables 16–17 (bending range,
 MPa), §6.2.2 (unequal load sharing of dual drives), §6.1.1 Figure 20 item 4 (average torque).

@@ -1,6 +1,6 @@
 """Start, stop and barring events measured on the samples of one operating phase.
 
-Sources: seed 000 (Diering 2011) §6.1.1 and Figure 20 (switch-on peak, acceleration with the
+Sources: Diering 2011 §6.1.1 and Figure 20 (switch-on peak, acceleration with the
 material-load peak at 45–60° of mill rotation and a resonance near 90 % speed, short-circuit peak
 when the starter is bypassed, switch-off, rocking to rest), the rise-time norms 10–90 % and
 20–80 % with transients of 10–40 ms classed as shock loads (§6.1.1), Figure 27 and Tables 12–13
@@ -14,7 +14,7 @@ is a few vectorised passes over ≤ a minute of samples, paid once per event.
 
 Definitions (named in the docstrings of the functions): peaks are found at the largest sample and
 denoised by a local fit of the front's shape (:func:`fitted_peak`; ``peak_fit_half_width = 0``
-gives the raw sample maximum the seed's routines read); rise times interpolate linearly between
+gives the raw sample maximum Diering 2011's routines read); rise times interpolate linearly between
 samples at the 10/90 % and 20/80 % levels between the pre-transient baseline and the peak, walking
 back from the peak; flagged samples (telemetry spikes) are NaN in the window and never peaks.
 """
@@ -47,12 +47,12 @@ __all__ = [
 ]
 
 SHOCK_RISE_MS = 40.0
-"""A transient rising in ≤ 40 ms (10–90 %) is a shock load (seed 000 §6.1.1)."""
+"""A transient rising in ≤ 40 ms (10–90 %) is a shock load (Diering 2011 §6.1.1)."""
 
 
 @dataclass(frozen=True, slots=True)
 class TransientSettings:
-    """Windows (s) and levels of the event measurements; named knobs, not from the seeds unless
+    """Windows (s) and levels of the event measurements; named knobs, not from the sources unless
     stated. ``trip_fall_ms``: a switch-off whose torque falls 10–90 % faster is called a trip."""
 
     baseline_s: float = 0.2
@@ -115,7 +115,7 @@ class PeakMeasure:
 
 @dataclass(frozen=True, slots=True)
 class StartMeasure:
-    """One switch-on (seed 000 Figure 20 items 1–3); ``failed``: never reached running."""
+    """One switch-on (Diering 2011 Figure 20 items 1–3); ``failed``: never reached running."""
 
     sample: int
     end_sample: int
@@ -187,7 +187,7 @@ def rise_time_ms(
     peak: float | None = None,
 ) -> float | None:
     """Rise time (ms) from ``low`` to ``high`` (fractions) of ``peak − baseline``, walking back
-    from the peak at index ``k_peak`` no further than ``lo`` (seed 000 §6.1.1 norms); ``peak``
+    from the peak at index ``k_peak`` no further than ``lo`` (Diering 2011 §6.1.1 norms); ``peak``
     defaults to ``x[k_peak]``."""
     peak = float(x[k_peak]) if peak is None else peak
     amp = peak - baseline
@@ -226,7 +226,7 @@ def _moving_average(x: np.ndarray, n: int) -> np.ndarray:
 def fitted_peak(x: np.ndarray, k: int, half_width: int) -> float:
     """Peak value of ``x`` near its largest sample ``k``, denoised by a local least-squares fit.
 
-    Model (the shape of a switch-on or short-circuit front, seed 000 §6.1.1 Figure 20): a smooth
+    Model (the shape of a switch-on or short-circuit front, Diering 2011 §6.1.1 Figure 20): a smooth
     rise to a zero-slope top (cubic in t − t_p without linear term) and a free decay after it
     (quadratic from t_p, continuous), over ``k ± half_width`` samples, t_p searched on a 0.05
     sample grid in [k − 1, k + 1]. Returns the fitted curve's largest value *at a sample* (the

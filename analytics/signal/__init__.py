@@ -6,8 +6,8 @@ Modules::
     fault_stage      FaultStage: every channel of a frame checked, all delayed alike;
                      LastGood: flagged samples held at the last good value, frame to frame
     telemetry_faults TelemetryFaultDetector: spikes, dropouts, zero runs, rail pins per channel
-                     (seed 000 §5.2.2); hold_last_good
-    tacho            TachoSpeed: pulse train → rpm (seed 000 App. C routine 5)
+                     (Diering 2011 §5.2.2); hold_last_good
+    tacho            TachoSpeed: pulse train → rpm (Diering 2011 App. C routine 5)
     sample_ring      SampleRing: the last seconds of several channels by stream sample
     *_kernels        compiled loops of the aligner, fault detector and tacho
 

@@ -3,7 +3,7 @@
 Each checked channel has its own :class:`~analytics.signal.telemetry_faults.TelemetryFaultDetector`,
 which decides a sample only once it has seen a few samples after it (its look-ahead). This stage
 runs them all and re-assembles the decided samples into frames that carry a boolean ``flags``
-mask per channel (True = spike, dropout, zero run or rail pin, seed 000 §5.2.2). Channels that
+mask per channel (True = spike, dropout, zero run or rail pin, Diering 2011 §5.2.2). Channels that
 are not checked — tacho pulse trains, whose edges are steps by design — go through a delay line
 of the same length, so the output frames stay aligned sample for sample. A channel without a
 configured ``full_scale`` cannot be checked either (the detector's limits are fractions of the

@@ -1,6 +1,7 @@
 """Group per-channel blocks into aligned multi-channel frames.
 
-The wire format (DESIGN.md) carries one channel per block; the analyzer wants, for every sample
+The wire format (README "Design") carries one channel per block; the analyzer wants, for every
+sample
 time, every channel of the mill. Gateways and the simulator emit identical block boundaries on
 every channel (blocks with the same ``t0`` and length), so alignment is a grouping by ``t0``:
 
@@ -14,7 +15,7 @@ every channel (blocks with the same ``t0`` and length), so alignment is a groupi
   :attr:`FrameAligner.missing_blocks` counts them;
 * the bound is wide (:data:`MAX_PENDING`, ten minutes of 100-sample blocks at 1 kHz) so that the
   frames do not depend on the order in which channels arrive: after a restart one channel's
-  missed blocks may be recovered long after another's newer ones (DESIGN.md "Persistence and
+  missed blocks may be recovered long after another's newer ones (README "Persistence and
   recovery"), and the same blocks must give the same frames as an uninterrupted run;
 * frames come out in time order and contiguous: a jump in ``t0`` beyond the end of the previous
   frame is filled with all-NaN frames of at most ``gap_chunk`` samples (:attr:`gap_samples`

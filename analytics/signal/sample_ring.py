@@ -2,7 +2,8 @@
 
 Event measurements (a start, a stop) look back at the samples of a phase once the phase has been
 decided, a few seconds to a minute after it began; the ring keeps exactly ``capacity`` samples per
-channel whatever the running time (bounded state, DESIGN.md). Snapshots hold only the samples a
+channel whatever the running time (bounded state, README "Design"). Snapshots hold only the samples
+a
 consumer still needs, packed by :mod:`analytics.snapshot_arrays` (exact, compact, JSON-safe).
 """
 

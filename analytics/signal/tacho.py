@@ -1,9 +1,9 @@
 """Shaft speed (rpm) from a tacho / reflector pulse train, streaming.
 
-Sources: seed 000 (Diering 2011) §5.1.1 (optical sensor and reflectors stuck to the shaft; the
+Sources: Diering 2011 §5.1.1 (optical sensor and reflectors stuck to the shaft; the
 accuracy depends on the number of reflectors, often only 6) and App. C routine 5 (threshold the
 trace at a midway value, take the rising edges, speed = 60 / (N · Δt) with N reflectors, then
-low-pass filter); seed 003 (Toram 2005) ch. IV (70-link chain and magnetic pickup: pulses per
+low-pass filter); Toram 2005 ch. IV (70-link chain and magnetic pickup: pulses per
 revolution counted over time give the instantaneous speed).
 
 Method, per sample:

@@ -1,6 +1,6 @@
 """Streaming detection of telemetry spikes, dropouts, zero runs and rail pins, per channel.
 
-Source: seed 000 (Diering 2011) §5.2.2: interference from two-way radios and phones put spikes
+Source: Diering 2011 §5.2.2: interference from two-way radios and phones put spikes
 into the strain-gauge telemetry; the automatic "despiking" routines tried could not tell errors
 from real transients and removed important parts of the signal, so the data were cleaned by
 hand. The real transients that must survive are the shock loads of §6.1.1: switch-on and
@@ -13,7 +13,7 @@ Bernstein's inequality: a signal band-limited to ``B`` Hz with ``|x − c| ≤ A
 ``|x⁽ᵏ⁾| ≤ (2πB)ᵏ A``. With the telemetry bandwidth (B = 250 Hz) and A = half the full-scale
 span ``W/2`` the first-difference bound is ``2πB·A/fs = 0.785 W`` per sample: rigorous, but it
 only rejects rail-to-rail jumps. What can actually carry a large amplitude on these channels is
-a shock transient, and its fastest form in the seed is a front of height ≤ W rising in
+a shock transient, and its fastest form in Diering 2011 is a front of height ≤ W rising in
 ``t_r ≥ 10 ms``. Modelled as a raised cosine of duration ``D = t_r / 0.59`` (0.59 = its 10–90 %
 fraction), i.e. an effective bandwidth ``B_t = 1/(2D) ≈ 30 Hz``, Bernstein gives per sample
 
@@ -63,8 +63,8 @@ loses no real cycle and creates none: the held values form a plateau at an exist
 candidate, and a plateau is no reversal (ASTM E1049 counts plateaus once), so the turning points
 and hence the cycles are exactly those of the good samples with the flagged ones *skipped*;
 unlike skipping, holding keeps the channels sample-aligned, which the combined stress
-σ_θ = ½σ_x + ½σ_x cos2θ + τ sin2θ (seed 000 §8.2) needs. Linear interpolation across the gap
-(the seed's manual method) would also be cycle-neutral but needs unbounded look-ahead (a 5 s
+σ_θ = ½σ_x + ½σ_x cos2θ + τ sin2θ (Diering 2011 §8.2) needs. Linear interpolation across the gap
+(Diering 2011's manual method) would also be cycle-neutral but needs unbounded look-ahead (a 5 s
 dropout). Spectral estimators should skip frames with flags rather than use held values.
 Flagged real samples are lost either way, which is why the criterion above never flags a
 smooth trajectory.
@@ -182,7 +182,7 @@ class TelemetryFaultDetector:
     """Streaming per-channel detector of spikes, dropouts, zero runs and rail pins.
 
     ``full_scale``: (low, high) of the channel in engineering units (its rails; W = high − low).
-    ``fs``: sample rate (Hz). ``min_rise_s``: the fastest real 10–90 % rise (seed 000 §6.1.1:
+    ``fs``: sample rate (Hz). ``min_rise_s``: the fastest real 10–90 % rise (Diering 2011 §6.1.1:
     10 ms). ``noise_rms``: starting guess of the channel noise (default 0.05 % of W); the scale
     is then tracked from the data with time constant ~1/``noise_rate`` samples. ``noise_k``:
     threshold in noise σ of the third difference. ``margin``: factor on the transient jerk

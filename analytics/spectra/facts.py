@@ -1,11 +1,11 @@
 """The facts the harmonic tracker emits: one :class:`HarmonicWindow` per Welch window, holding a
 :class:`LineMeasurement` per expected line and channel and the :class:`UnexplainedPeak` s.
 
-Frozen plain data (DESIGN.md "Shape of the analytics code": counters emit facts, recorders and
+Frozen plain data (README "Shape of the analytics code": counters emit facts, recorders and
 reports consume them); ``to_dict`` gives JSON-ready data (NaN as None) and
 ``HarmonicWindow.from_dict`` reads it back.
 Units: torque kN·m and % of the shaft's rated torque, bending MPa, frequency Hz, time ns since
-the Unix epoch (seed 000 §6.2.7).
+the Unix epoch (Diering 2011 §6.2.7).
 """
 
 from __future__ import annotations
@@ -49,7 +49,8 @@ class LineMeasurement:
 
 @dataclass(frozen=True)
 class UnexplainedPeak:
-    """A spectral peak matching no expected line: possible torsional resonance (seed 000 §6.2.7).
+    """A spectral peak matching no expected line: possible torsional resonance (Diering 2011
+    §6.2.7).
 
     ``nearest_line``/``nearest_line_hz``: the closest expected line; ``nearest_natural_hz``: the
     closest natural frequency of the torsional model, if one was given.

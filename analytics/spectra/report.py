@@ -1,6 +1,6 @@
 """The harmonics part of a mill's report: the long-run table of a :class:`HarmonicTracker`.
 
-Seed 000 §6.2.7 and §10.5: the steady-state spectrum's expected lines and unexplained peaks, as
+Diering 2011 §6.2.7 and §10.5: the steady-state spectrum's expected lines and unexplained peaks, as
 one row per channel and line, for operators and the monthly report, and how many spectral
 segments the table rests on and how many were dropped, and why (issue 18).
 """

@@ -1,10 +1,11 @@
 """Harmonic tracking of steady-state torque oscillations: order-tracked Welch spectra while running.
 
-Sources: seed 000 (Diering 2011) §6.1.2 and §6.2.7 — PSD plots of the steady-state torque compared
+Sources: Diering 2011 §6.1.2 and §6.2.7 — PSD plots of the steady-state torque compared
 with the drivetrain's expected excitation frequencies tell which cause to fix, and peaks that match
 none of them (10–15 Hz in Figure 36) point to torsional resonance; §6.2.4 — steady oscillations of
-10–45 % of motor rated torque; §10.5 — simple frequency analysis for operators; seed 001 eq. 12 —
-the 3× drive-gear line; seed 003 — the grinding-media line. The expected lines come from
+10–45 % of motor rated torque; §10.5 — simple frequency analysis for operators; Fedin & Vinogradov
+2018 eq. 12 —
+the 3× drive-gear line; Toram 2005 — the grinding-media line. The expected lines come from
 :mod:`analytics.drivetrain.kinematics`.
 
 Algorithm (:class:`HarmonicTracker`, a counter emitting :class:`HarmonicWindow` facts):
@@ -32,7 +33,8 @@ Algorithm (:class:`HarmonicTracker`, a counter emitting :class:`HarmonicWindow` 
 5. Unexplained peaks: local maxima of the averaged spectrum ``peak_snr_db`` above a running-median
    noise floor and above ``min_peak_pct`` % of rated torque (``min_peak_mpa`` for bending), that
    lie more than ``match_bins`` bins from every expected line, harmonic or sideband → reported
-   as possible torsional resonance with the nearest natural frequency (seed 001 model).
+   as possible torsional resonance with the nearest natural frequency (Fedin & Vinogradov 2018
+   model).
 
 Segment accounting: every segment begun (a hop start within a running period) is either *used*
 (averaged into the tables) or *dropped* with one of the reasons of :data:`DROP_REASONS`: the
@@ -54,7 +56,7 @@ configuration, spectra of fixed length, nothing grows with running time.
 
 Units: torque kN·m and % of the shaft's rated torque (motor rated on the motor shaft, motor rated ×
 reducer ratio on the pinion shaft, i.e. % of motor rated torque referred through the reducer as in
-seed 000 Table 14), bending MPa, speed rpm, frequency Hz, time int64 ns since the Unix epoch.
+Diering 2011 Table 14), bending MPa, speed rpm, frequency Hz, time int64 ns since the Unix epoch.
 """
 
 from __future__ import annotations

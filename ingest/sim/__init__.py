@@ -2,14 +2,14 @@
 
 A *scene* is a mill configuration plus a timeline of operating events (starts, stops, trips,
 failed starts, barring sessions) and faults (telemetry spikes, dropouts, an extra torsional
-line). The record of a start follows seed 000 §6.1.1, Figure 20, with the numbers of its
+line). The record of a start follows Diering 2011 §6.1.1, Figure 20, with the numbers of its
 Tables 3–17. Same seed, same samples — bitwise, whatever the chunk size.
 
 What is here, in the order data flows:
 
 - ``spec``         what a scene is: ``SceneSpec``, ``SceneParams``, the event types
 - ``scenes``       the catalogue of named scenes and scene files → ``SceneSpec``
-- ``seed_tables``  the seed's numbers: peak torques per starter, barring, bending, line weights
+- ``seed_tables``  Diering 2011's numbers: peak torques per starter, barring, bending, line weights
 - ``waveforms``    signal shapes: raised-cosine fronts, ringing, the steady oscillation lines
 - ``segments``     one operating stretch each (idle, start, run, stop, barring) → drivetrain state
 - ``timeline``     events → consecutive segments, angle-continuous

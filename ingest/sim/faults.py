@@ -4,7 +4,7 @@
 - :class:`ExtraLine` values: a sine at ``frequency_hz`` added to both torque channels while the
   mill turns (scaled by the oscillation scale of the frame),
 - :class:`Patch` values: samples of one channel overwritten by wild values (telemetry
-  interference, seed 000 §5.2.2) or by NaN (telemetry loss).
+  interference, Diering 2011 §5.2.2) or by NaN (telemetry loss).
 
 All random draws happen when the plan is built, in event order; applying it to a render is then a
 pure function of the sample range, so chunks do not change what is patched.

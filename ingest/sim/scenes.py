@@ -16,12 +16,12 @@ events::
     kind = "trip"
     at_s = 400
 
-Catalogue (seed 000 numbers behind each are in :mod:`ingest.sim.renderer`):
+Catalogue (Diering 2011 numbers behind each are in :mod:`ingest.sim.renderer`):
 
 ``steady``            10 min of steady running,
 ``start-lrs``, ``start-grid``, ``start-elrs``
                       one start (that starter), 2 min running, stop, rest,
-``month``             30 days with ~90 switch-ons (seed 000 §6.2.8: peak 90 stops a month),
+``month``             30 days with ~90 switch-ons (Diering 2011 §6.2.8: peak 90 stops a month),
                       failed starts, trips, barring after long stops, spikes and dropouts,
 ``barring``           a barring session on a stopped mill (Figure 27, Tables 12–13),
 ``telemetry-faults``  steady running with interference spikes and dropouts (§5.2.2),
@@ -125,7 +125,7 @@ def _cycle_events(t: float, length: float, rng: np.random.Generator) -> list[Any
     idle = max(600.0, float(rng.uniform(0.05, 0.5)) * length)
     events: list[Any] = []
     start = t + idle
-    if idle > 4 * 3600.0:  # long standstill: bar the mill first (seed 000 §6.1.1)
+    if idle > 4 * 3600.0:  # long standstill: bar the mill first (Diering 2011 §6.1.1)
         events.append(BarringEvent(at_s=start - 1200.0, sweeps=int(rng.integers(1, 3))))
     if rng.random() < 0.08:
         events.append(FailedStartEvent(at_s=start - 600.0))
@@ -145,7 +145,7 @@ def month_events(
     dropouts: int = 6,
 ) -> list[Any]:
     """A month of operation: ``cycles`` stop-to-stop cycles of random length (≥ 30 min; with
-    failed starts ~90 switch-ons, seed 000 §6.2.8), spikes and dropouts at random times."""
+    failed starts ~90 switch-ons, Diering 2011 §6.2.8), spikes and dropouts at random times."""
     lengths = np.maximum(rng.exponential(1.0, cycles), 0.05)
     lengths = 1800.0 + lengths / lengths.sum() * (days * DAY_S - 3600.0 - 1800.0 * cycles)
     events: list[Any] = []

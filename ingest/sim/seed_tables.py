@@ -1,8 +1,9 @@
-"""The numbers of seed 000 that drive the simulator: transient peaks, barring, bending, sharing.
+"""The numbers of Diering 2011 that drive the simulator: transient peaks, barring, bending, sharing.
 
-Switch-on and short-circuit peak torque per starter and side (seed 000 Tables 3–11), barring peak
+Switch-on and short-circuit peak torque per starter and side (Diering 2011 Tables 3–11), barring
+peak
 and average torque (Tables 12–13), bending ranges (Tables 16–17), the relative weight of each
-steady oscillation line (§6.2.4, §6.2.7), and the few values the seeds do not give (acceleration
+steady oscillation line (§6.2.4, §6.2.7), and the few values the sources do not give (acceleration
 times, dual-drive imbalance), marked as chosen. Percent are of motor rated torque.
 """
 
@@ -49,11 +50,11 @@ BARRING_AVG_RATIO = {DriveLayout.SINGLE: 0.795, DriveLayout.DUAL: 0.776}
 BARRING_BEND_RATIO = {DriveLayout.SINGLE: 0.63, DriveLayout.DUAL: 0.33}
 #: Steady bending range, MPa (Table 16 and Table 17 averages).
 BENDING_RANGE_MPA = {DriveLayout.SINGLE: 15.29, DriveLayout.DUAL: 37.5}
-#: Acceleration time to full speed, s (not in the seeds: chosen, Grid fastest, E-LRS slowest).
+#: Acceleration time to full speed, s (not in the sources: chosen, Grid fastest, E-LRS slowest).
 ACCEL_TIME_S = {Starter.GRID: (6.0, 10.0), Starter.LRS: (10.0, 16.0), Starter.E_LRS: (14.0, 22.0)}
-#: Dual-drive load-sharing imbalance, % (seed 000 §6.2.2: "lower for E-LRS"; values chosen).
+#: Dual-drive load-sharing imbalance, % (Diering 2011 §6.2.2: "lower for E-LRS"; values chosen).
 IMBALANCE_PCT = {Starter.GRID: 10.0, Starter.LRS: 10.0, Starter.E_LRS: 4.0}
-#: Relative weight of each excitation in the steady oscillation (seed 000 §6.2.4, §6.2.7: mesh,
+#: Relative weight of each excitation in the steady oscillation (Diering 2011 §6.2.4, §6.2.7: mesh,
 #: liner passing and pinion speed dominate; reducer lines lesser).
 HARMONIC_WEIGHTS = {
     "mill_speed": 0.08,

@@ -3,7 +3,7 @@
 A :class:`Segment` covers samples ``[n_start, n_end)`` and writes, for any times within it, the
 pinion speed and angle, the scale of the steady oscillation lines, and per side the torque and
 bending amplitude into a :class:`Frame` (torque in pu of motor rated). The kinds follow the
-record of a start in seed 000 §6.1.1, Figure 20:
+record of a start in Diering 2011 §6.1.1, Figure 20:
 
 - :class:`IdleSegment`: at rest,
 - :class:`StartSegment`: switch-on peak, acceleration with the material load peaking at 45–60° of

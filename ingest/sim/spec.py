@@ -2,7 +2,8 @@
 
 :class:`SceneSpec` (name, seed, duration, start time, initial state, :class:`SceneParams`, events)
 is validated by pydantic and loads from a scene file (:mod:`ingest.sim.scenes`). Operating events
-(start, stop, trip, failed start, barring; seed 000 §6.1.1, Figures 20 and 27) change the state of
+(start, stop, trip, failed start, barring; Diering 2011 §6.1.1, Figures 20 and 27) change the state
+of
 the mill; fault events (telemetry spikes and dropouts, §5.2.2; an extra torsional line) are laid
 over the signals. Times are s since the scene start; % are of motor rated torque.
 """
@@ -98,14 +99,15 @@ class FailedStartEvent(_Event):
 
 
 class BarringEvent(_Event):
-    """Inching-drive session on a stopped mill (seed 000 §6.1.1, Figure 27)."""
+    """Inching-drive session on a stopped mill (Diering 2011 §6.1.1, Figure 27)."""
 
     kind: Literal["barring"] = "barring"
     sweeps: Annotated[int, Field(ge=1, le=5)] = 2
 
 
 class SpikesEvent(_Event):
-    """Telemetry interference (seed 000 §5.2.2): bursts of wild samples on telemetry channels."""
+    """Telemetry interference (Diering 2011 §5.2.2): bursts of wild samples on telemetry
+    channels."""
 
     kind: Literal["spikes"] = "spikes"
     bursts: Annotated[int, Field(ge=1, le=10_000)] = 1

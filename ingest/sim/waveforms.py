@@ -1,10 +1,11 @@
 """Signal shapes of the simulator: transient fronts, ringing, and the steady oscillation lines.
 
 - :func:`raised_cosine`: the front of a switch-on or short-circuit peak (10–90 % rise in 10–40 ms,
-  seed 000 §6.1.1; :data:`RC_10_90` converts a rise time into a front duration),
+  Diering 2011 §6.1.1; :data:`RC_10_90` converts a rise time into a front duration),
 - :func:`ringing`: the decaying ring at the first torsional mode after a peak (Figure 20),
 - :class:`HarmonicSet` / :func:`build_harmonics`: steady-state oscillations as functions of the
-  pinion angle — mill speed, pinion speed, 3× pinion (seed 001 eq. 12), liner passing, mesh, and
+  pinion angle — mill speed, pinion speed, 3× pinion (Fedin & Vinogradov 2018 eq. 12), liner
+  passing, mesh, and
   on the motor shaft motor speed and reducer mesh — only lines within the telemetry bandwidth
   (§5.1.2), scaled so that their peak-to-peak range equals the configured % of rated torque
   (Table 14).

@@ -1,6 +1,6 @@
 """The REST API application (FastAPI): :func:`create_app` over a backend.
 
-Layering (STYLE.md): route → backend → store/runtime or zenoh; routes stay short, and domain
+Layering (README "Design"): route → backend → store/runtime or zenoh; routes stay short, and domain
 errors become HTTP responses in one handler, as ``application/problem+json`` (RFC 9457) with a
 sentence a person understands. The app is built by :func:`create_app` from a
 :class:`~service.api.backend.Backend`: a :class:`~service.api.local_backend.LocalBackend` over a

@@ -1,6 +1,6 @@
 """What the REST routes ask, whoever answers: the :class:`Backend` protocol.
 
-Two implementations (DESIGN.md "Scale"):
+Two implementations (README "Scale"):
 
 * :class:`service.api.local_backend.LocalBackend` — the runtime in this process answers
   (``millwatch serve``, the demo): store reads, the worker's status snapshot, acks through the

@@ -5,7 +5,7 @@ sort by time), as the worker's recovery replays them
 (:mod:`service.worker.offline_analysis`: batches, admission by sequence number, calibration,
 aligned frames) into one :class:`~analytics.mill.analyzer.MillAnalyzer` per mill given:
 operating states, starts (switch-on and short-circuit peaks, rise times), stops, barring,
-starts per month against the norm (seed 000 §6.1.3), steady-state metrics, fatigue damage per
+starts per month against the norm (Diering 2011 §6.1.3), steady-state metrics, fatigue damage per
 component and phase (§8.2, App. D), harmonics (§6.2.7) and the alarms they raise.
 
 Output: a human summary (damage as closed cycles by phase + open residue = total), or

@@ -2,7 +2,7 @@
 
 Starts, on loopback only: the worker (zenoh subscriber, MCAP archive, analysis, SQLite store,
 checkpoints), one simulated sensor gateway per mill publishing a month-long scene of starts,
-barring, steady running and telemetry spikes (seed 000 §6) at ``--speed`` × real time, and the
+barring, steady running and telemetry spikes (Diering 2011 §6) at ``--speed`` × real time, and the
 REST API. It prints where to look and runs until Ctrl-C (or ``--minutes``). The data is
 SIMULATED and says so everywhere it is shown.
 """

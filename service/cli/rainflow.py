@@ -3,7 +3,7 @@
 The signal is read in large chunks (a ``.npy`` file memory-mapped, never loaded whole) and goes
 through the same exact counter and damage per cycle as live data, compiled or vectorised per
 chunk (:mod:`analytics.fatigue.record_count`), so the result of any ``--block-size`` is the batch
-result (ASTM E1049-85; seed 000 §8.2 and App. D). The residue is closed at the end: ``half``
+result (ASTM E1049-85; Diering 2011 §8.2 and App. D). The residue is closed at the end: ``half``
 (ASTM, the default) or ``repeat`` (the record followed by itself, full cycles only; see
 ``--residue``).
 
@@ -95,7 +95,7 @@ def _add_sn_options(p: argparse.ArgumentParser) -> None:
         "--sn-model",
         choices=SN_MODEL_NAMES,
         default="shigley",
-        help="S-N model (default: shigley, seed 000 App. D section 1)",
+        help="S-N model (default: shigley, Diering 2011 App. D section 1)",
     )
     g.add_argument(
         "--s-ut",

@@ -1,6 +1,6 @@
 """``millwatch simulate``: a simulated mill with ground truth, written to MCAP or published live.
 
-A scene is a mill configuration plus a timeline of operating events (seed 000 §6.1 Figure 20:
+A scene is a mill configuration plus a timeline of operating events (Diering 2011 §6.1 Figure 20:
 switch-on, acceleration, short-circuit peak, steady oscillations, switch-off, rocking, barring,
 failed starts, trips, telemetry spikes and dropouts). Catalogue scenes are named; a scene TOML
 file can define its own timeline. The output is exactly what a plant gateway would send: wire

@@ -7,12 +7,13 @@ speed-band test, :func:`analytics.spectra.settings.is_running`, not the analyzer
 machine, whose run edges differ), feeds them to
 :class:`analytics.spectra.tracker.HarmonicTracker`
 (order-tracked Welch PSD, see that module) and renders one PSD panel per torque/bending channel
-with the drivetrain's expected excitation lines marked and labelled — seed 000 §6.2.7, Figures
-35–36, with the seed's colours (mill speed orange, pinion speed blue, liner passing green, motor
+with the drivetrain's expected excitation lines marked and labelled — Diering 2011 §6.2.7, Figures
+35–36, with Diering 2011's colours (mill speed orange, pinion speed blue, liner passing green, motor
 speed magenta, pinion/girth mesh red, reducer mesh cyan). Peaks that match no expected line are
 marked as possible torsional resonance. ``--report`` writes the harmonic table as JSON.
 
-The samples pass the telemetry fault stage first, as in the analyzer (seed 000 §5.2.2): a flagged
+The samples pass the telemetry fault stage first, as in the analyzer (Diering 2011 §5.2.2): a
+flagged
 spike is held at the channel's last good value, so it neither ends a running period nor enters
 the speed estimate; a missing (NaN) sample stays missing and cuts its segment. The output says
 how many spectral segments were used and dropped, and why, and what was flagged per channel.
@@ -54,7 +55,7 @@ __all__ = ["TrackedRecording", "add_parser", "plot_spectrum", "track_recording"]
 
 log = logging.getLogger(__name__)
 
-#: Seed 000 §6.2.7 colours by line family; others get grey.
+#: Diering 2011 §6.2.7 colours by line family; others get grey.
 COLOURS = {
     "mill_speed": "tab:orange",
     "pinion_speed": "tab:blue",

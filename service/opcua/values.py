@@ -29,7 +29,7 @@ Channels/<channel>/MissingBlocks, Stale   –        ``missing_blocks``, ``stale
 Channels/MissingBlocksTotal               –        ``health.missing_blocks_total``
 ========================================  =======  ===============================================
 
-The oscillation range of seed 000 §6.2.4 (Tables 14–15) is ``RangePct`` of the torque channels,
+The oscillation range of Diering 2011 §6.2.4 (Tables 14–15) is ``RangePct`` of the torque channels,
 the bending range of §6.2.6 (Tables 16–17) ``RangePerRev`` of the bending channel (MPa). A value
 the answer does not have (no steady window yet, no projection) is ``None``: the variable then
 reads with a bad status, never a made-up number.

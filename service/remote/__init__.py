@@ -1,6 +1,6 @@
 """Both ends of the zenoh query protocol between the API and the workers.
 
-Both ends of the zenoh query protocol between the API and the workers (DESIGN.md "Scale").
+Both ends of the zenoh query protocol between the API and the workers (README "Scale").
 
 What is here:
 

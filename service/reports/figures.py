@@ -228,7 +228,7 @@ def steady_figure(r: MonthlyReport) -> Figure | None:
 
 def cumulative_figure(r: MonthlyReport) -> Figure | None:
     """Cumulative Miner damage per component (prior included) against the design line
-    D(t) = years since commissioning / design life, by local day (seed 000 §8.2)."""
+    D(t) = years since commissioning / design life, by local day (Diering 2011 §8.2)."""
     c = r.cumulative
     if not c.days or not c.damage:
         return None

@@ -1,6 +1,6 @@
 """The fleet: every mill of a site side by side, and which one to visit first.
 
-Seed 000 §10.6 asks for long-term trending across the plant; §8.3 says bending and starts per
+Diering 2011 §10.6 asks for long-term trending across the plant; §8.3 says bending and starts per
 month drive fatigue. Per mill (:class:`FleetMill`, built where the mill's store is —
 :func:`fleet_entry`, by the worker that analyses it): life consumed and the remaining-life range
 of the governing component (the one life computation, :mod:`service.reports.life`), starts per

@@ -3,7 +3,7 @@ as a :class:`~service.reports.render.document.Document` rendered like the monthl
 
 Built from the plain answer of ``GET /sites/{site}/fleet`` (:func:`service.reports.fleet.
 fleet_to_dict`), so it reads the same in process and under ``millwatch api``. Sections: the
-visit order with its reasons, life consumed and the remaining range per mill (seed 000 §8.2),
+visit order with its reasons, life consumed and the remaining range per mill (Diering 2011 §8.2),
 and month by month per mill: starts (norm 3–5, §6.1.3), steady-state oscillation range
 (Tables 14–15) and pinion bending amplitude (§8.1) — §10.6 "long term trending".
 """
@@ -63,7 +63,7 @@ def _life(view: Mapping[str, Any]) -> Section:
         caption="Life consumed and remaining range per mill (its governing component)",
     )  # fmt: skip
     notes = tuple(Paragraph(f"{m['mill']}: {m['life_note']}", "meta") for m in mills)
-    return Section("life", "Remaining life (seed 000 §8.2)", (table, *notes))
+    return Section("life", "Remaining life (Diering 2011 §8.2)", (table, *notes))
 
 
 def _trend(view: Mapping[str, Any]) -> Section:
@@ -79,7 +79,7 @@ def _trend(view: Mapping[str, Any]) -> Section:
         caption="Month by month per mill (steady figures: worst channel's monthly mean)",
         key_columns=2,
     )  # fmt: skip
-    return Section("trend", "Trend per mill (seed 000 §10.6)", (table,))
+    return Section("trend", "Trend per mill (Diering 2011 §10.6)", (table,))
 
 
 def fleet_document(view: Mapping[str, Any]) -> Document:

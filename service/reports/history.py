@@ -11,7 +11,7 @@ index, the fields extracted by SQLite). Call inside
   (now for ``GET /mills/{id}/life``, a month's end for the report): the one life computation;
   :class:`LifeLedger` — the same history held in memory by the worker for its alarm.
 * :func:`monthly_trend` — starts, damage per component, oscillation range and bending amplitude
-  per local calendar month (seed 000 §10.6 "long term trending").
+  per local calendar month (Diering 2011 §10.6 "long term trending").
 Monitored time is :func:`service.reports.life.monitored_seconds` of the store's coverage
 everywhere (page 1 of the report, the trend, remaining life). Seconds per operating phase are
 the analyzer's own, stored per day (:meth:`~service.store.database.Store.phase_seconds`), not

@@ -3,7 +3,7 @@
 (the worker computes it with :func:`compute_life` from the same history,
 :class:`~service.reports.history.LifeLedger`) and the ``millwatch_remaining_life_years`` gauge.
 
-Basis (seed 000 §8.2: rainflow + Palmgren–Miner on the configured S-N curve, failure at the
+Basis (Diering 2011 §8.2: rainflow + Palmgren–Miner on the configured S-N curve, failure at the
 Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
 
 * **damage before monitoring** (``[life]`` of the mill file, :class:`~analytics.drivetrain.
@@ -614,7 +614,7 @@ def _basis(config: MillConfig) -> LifeBasis:
             "m2": curve.m2,
             "stress": str(curve.kind),
             "stress_concentration": config.shafts.stress_model().summary(),
-            "source": "seed 000 §8.1–8.2, App. D",
+            "source": "Diering 2011 §8.1–8.2, App. D",
         },
         damage="prior (see prior) + stored daily damage of attributed rainflow cycles, or the "
         "worker's live committed damage when larger, + the open rainflow residue closed now "

@@ -67,7 +67,7 @@ def report_message(
         "",
         "It covers starts against the norm, fatigue damage by phase and component, "
         "steady-state oscillation and bending trends, harmonics, alarms and data quality "
-        "(seed 000 §10.6).",
+        "(Diering 2011 §10.6).",
     ]
     if paths:
         lines += ["", "Files kept by the service:"] + [f"  {p}" for p in paths.values()]

@@ -1,6 +1,6 @@
 """The month-end job: every mill's report of each finished local month, written and mailed.
 
-Seed 000 §10.6 asks that "reports should be automatically generated and distributed to site
+Diering 2011 §10.6 asks that "reports should be automatically generated and distributed to site
 management". :class:`MonthEndJob` runs in its own thread in ``millwatch serve`` and the demo
 (started by :class:`~service.worker.runtime.ServiceRuntime`), never in the worker thread:
 

@@ -3,7 +3,7 @@ cumulative damage against design life, built from the month's sections, the life
 (:mod:`service.reports.life`, evaluated at the month's end) and the monthly trend
 (:mod:`service.reports.history`).
 
-Plain, typed, JSON-ready data (seed 000 §10.6: "automatic reports … long term trending"):
+Plain, typed, JSON-ready data (Diering 2011 §10.6: "automatic reports … long term trending"):
 
 * :class:`ReportSummary` — life consumed to date and remaining range per component, starts this
   month against the supplier norm of 3–5 (§6.1.3), the worst start (highest switch-on peak,

@@ -1,7 +1,7 @@
 """The monthly damage report as a :class:`~service.reports.render.document.Document`: what it
 says, once.
 
-Seed 000 §10.6 asks for "automatic reports"; issue 17 for one content in three renderings. Every
+Diering 2011 §10.6 asks for "automatic reports"; issue 17 for one content in three renderings. Every
 format shows what :func:`monthly_document` puts here, in this order (:data:`SECTIONS`):
 
 1. **Summary** (page 1 of the PDF, top of the HTML): life consumed to date and the remaining
@@ -157,7 +157,7 @@ def _summary_life(r: MonthlyReport) -> Table:
                c.remaining_life_years_min, c.remaining_life_years_max,
                c.end_date_earliest or "–", c.end_date_latest or "–", c.life_reason or "–"]
               for c in r.summary.components]),
-        caption="Life consumed and remaining life per component (Miner, seed 000 §8.2)",
+        caption="Life consumed and remaining life per component (Miner, Diering 2011 §8.2)",
         empty_text="No component analysed yet.",
     )  # fmt: skip
 
@@ -259,7 +259,7 @@ def _life(r: MonthlyReport) -> Section:
         printed=False,
     )  # fmt: skip
     return Section(
-        "life", "Remaining life and cumulative damage (seed 000 §8.2, App. D)",
+        "life", "Remaining life and cumulative damage (Diering 2011 §8.2, App. D)",
         (Paragraph(life.note, "meta"), basis, prior,
          _figure("cumulative", cumulative_figure, r), projections, drivers, what_if, cumulative),
     )  # fmt: skip
@@ -283,7 +283,8 @@ def _trend(r: MonthlyReport) -> Section:
         caption="Month by month (steady figures: worst channel, a window per 3 hours)",
         key_columns=1,
     )  # fmt: skip
-    about = Paragraph("Long-term trending (seed 000 §10.6): starts, Miner damage per component, "
+    about = Paragraph("Long-term trending (Diering 2011 §10.6): starts, Miner damage per "
+                      "component, "
                       "steady-state oscillation range and pinion bending amplitude per local "
                       "calendar month, the 12 months ending with this one.", "meta")  # fmt: skip
     return Section("trend", "12-month trend", (about, _figure("trend", trend_figure, r), table))
@@ -326,7 +327,8 @@ def _starts(r: MonthlyReport) -> Section:
         "meta",
     )
     figure = _figure("starts", starts_figure, r)
-    return Section("starts", "Starts (seed 000 §6.1.3, §6.2.8)", (levels, figure, table, per_day))
+    title = "Starts (Diering 2011 §6.1.3, §6.2.8)"
+    return Section("starts", title, (levels, figure, table, per_day))
 
 
 # ----------------------------------------------------------------------------- damage
@@ -355,7 +357,7 @@ def _damage(r: MonthlyReport) -> Section:
     secs = ", ".join(f"{p} {fmt(v / 3600.0)} h" for p, v in r.phase_seconds.items())
     note = Paragraph(f"Time in phases: {secs}. The cost of a start is (start + stop damage) / "
                      "starts, expressed as hours of steady running (§8.3).", "meta")  # fmt: skip
-    return Section("damage", "Fatigue damage (Miner, seed 000 §8.2, App. D)",
+    return Section("damage", "Fatigue damage (Miner, Diering 2011 §8.2, App. D)",
                    (_figure("damage", damage_figure, r), table, note, daily))  # fmt: skip
 
 
@@ -383,7 +385,7 @@ def _what_if(r: MonthlyReport) -> Section:
         f"{fmt(r.design_life_years)} years. 'observed' is this month's start rate.",
         "meta",
     )
-    return Section("what_if", "What if: life against starts per month (seed 000 App. D)",
+    return Section("what_if", "What if: life against starts per month (Diering 2011 App. D)",
                    (life, damage, note))  # fmt: skip
 
 
@@ -456,7 +458,7 @@ def _harmonics(r: MonthlyReport) -> Section:
         "unexplained peak also raises an alarm, listed below).",
         "meta",
     )
-    return Section("harmonics", "Harmonics (seed 000 §6.1.2, §6.2.7)", (about, lines, peaks))
+    return Section("harmonics", "Harmonics (Diering 2011 §6.1.2, §6.2.7)", (about, lines, peaks))
 
 
 # ----------------------------------------------------------------------------- alarms, quality
@@ -493,7 +495,7 @@ def _quality(r: MonthlyReport) -> Section:
     )  # fmt: skip
     about = Paragraph(f"{q.events} data-quality events this month (telemetry gaps, stale "
                       "channels, …).", "meta")  # fmt: skip
-    return Section("data_quality", "Data quality (seed 000 §5.2.2)", (about, counts))
+    return Section("data_quality", "Data quality (Diering 2011 §5.2.2)", (about, counts))
 
 
 SECTIONS: tuple[Callable[[MonthlyReport], Section], ...] = (

@@ -1,5 +1,6 @@
 """Calendar months of a site and the starts of one month, with peaks against their limits and the
-count against the supplier norm and the configured warning/alarm levels (seed 000 §6.1.3, §6.2.8,
+count against the supplier norm and the configured warning/alarm levels (Diering 2011 §6.1.3,
+§6.2.8,
 §7.2). The one place that owns both: ``GET /mills/{id}/starts`` and the monthly report
 (:mod:`service.reports.monthly`) use the same month bounds, the same norm and the same statuses.
 

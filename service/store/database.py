@@ -1,6 +1,6 @@
 """The embedded store: SQLite in WAL mode, schema versioned with forward migrations.
 
-What the worker keeps (DESIGN.md "Persistence and recovery"): events (starts, stops, barring,
+What the worker keeps (README "Persistence and recovery"): events (starts, stops, barring,
 data quality, alarms' transitions later), damage per mill, component, phase and day, per-day
 rainflow matrices, steady-state metrics and harmonic tables as timestamped records, and
 checkpoints: analyzer snapshots with the archive position they correspond to, one per part

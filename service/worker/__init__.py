@@ -1,6 +1,6 @@
 """The worker: each block archived first, then analysed per mill and stored.
 
-Block path (``millwatch serve``; DESIGN.md "Data flow")::
+Block path (``millwatch serve``; README "Data flow")::
 
     zenoh callback ─▶ block_queue ─▶ worker.Worker.step: for each block
         archive (raw bytes, first) ─▶ admission (route, decode, health) ─▶ mill_job.MillJob (queued)

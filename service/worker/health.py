@@ -5,7 +5,7 @@ clock), lag between the two, blocks and samples received, sequence gaps (missing
 repeated blocks by kind, clock faults, non-finite samples, decode errors by kind. Per worker:
 queue depth, high-water mark and drops, keys that belong to no configured mill, archive status.
 
-**What is new** (issue 16, DESIGN.md "Persistence and recovery"): a block is new only if its
+**What is new** (issue 16, README "Persistence and recovery"): a block is new only if its
 sequence number is beyond every one accepted on its channel (:meth:`ChannelHealth.admit`, constant
 time). Anything else is a *repeat* — a ``duplicate`` (the last sequence number again: a recovery
 overlap or a resend) or a ``replay`` (an older one) — counted by kind and dropped; it never moves

@@ -1,4 +1,4 @@
-"""Which mills a worker analyses when several workers share a zenoh router (DESIGN.md "Scale").
+"""Which mills a worker analyses when several workers share a zenoh router (README "Scale").
 
 A worker's ``[worker] partition`` is a list of zenoh key expressions. The worker analyses exactly
 the configured mills whose live key expression (``millwatch/v1/<site>/<mill>/*``, see

@@ -1,6 +1,6 @@
 """Crash recovery: restore the mills' newest checkpoints, then replay the archive tail after them.
 
-DESIGN.md "Persistence and recovery". :func:`recover` runs once, before the worker goes live,
+README "Persistence and recovery". :func:`recover` runs once, before the worker goes live,
 and uses only the worker's public methods:
 
 1. find each mill's newest checkpoint in the store and restore it

@@ -1,6 +1,6 @@
 """The per-process worker: archive first, decode, route to the mill's pipeline, store, checkpoint.
 
-Data path for every received block (DESIGN.md "Data flow")::
+Data path for every received block (README "Data flow")::
 
     queue → archive (raw bytes, before anything can fail) → decode + validate → health
           → the mill's pipeline (aligner) → … end of the batch: each mill's analyzer over
@@ -11,7 +11,7 @@ A replay of the archive reads it in batches of messages held in arrays and hands
 :class:`~service.worker.batch_lane.BatchLane`, which gives each mill's regular blocks to
 :meth:`Worker.accept_regular` as arrays and anything irregular to :meth:`Worker.handle`.
 
-Recovery (DESIGN.md "Persistence and recovery"): every ``checkpoint_seconds`` each mill is
+Recovery (README "Persistence and recovery"): every ``checkpoint_seconds`` each mill is
 checkpointed — the mills' turns spread over the interval (:mod:`service.worker.checkpoints`), so no
 step stalls for all of them at once: the worker flushes the archive, takes the archive position
 and snapshots the mill's pipeline *in the same thread that processes blocks*, so the snapshot

@@ -111,7 +111,7 @@ def test_message_reads_like_an_engineer_wrote_it():
     (t,) = feed(eng, "start_peak_pct", [312], start_s=t_s)
     assert t.message == (
         "Start at 2026-11-02T02:14:07.000+02:00 with the liquid resistance starter (LRS) reached "
-        "312 % of rated motor torque (alarm above 300 %, seed 000 §6.2.1, §10.2, §10.4): LRS "
+        "312 % of rated motor torque (alarm above 300 %, Diering 2011 §6.2.1, §10.2, §10.4): LRS "
         "starts average 233 % switch-on and 197 % short-circuit peaks (Table 6): check the "
         "liquid resistance starter (electrolyte density, verify with the strain gauges) and the "
         "start sequence (§10.2)"
@@ -126,7 +126,7 @@ def _starter_mill(starter: Starter) -> MillConfig:
 
 @pytest.mark.parametrize("starter", list(Starter))
 def test_start_peak_advice_is_the_mills_starters(starter):
-    """Seed 000 §6.2.1 Table 6, §10.2, §10.4: Grid, LRS and E-LRS starts need different advice;
+    """Diering 2011 §6.2.1 Table 6, §10.2, §10.4: Grid, LRS and E-LRS starts need different advice;
     the liquid-starter advice only for a liquid resistance starter."""
     from alarms.engine import AlarmEngine
 
@@ -197,7 +197,7 @@ def test_resonance_margin_and_life_factors_come_from_the_mill_file():
 def test_every_message_cites_a_source(quantity):
     book = build_rules(mill("ball-dual-lrs"))
     rule = book.rules[quantity]
-    assert "seed 000" in rule.source or "seed 001" in rule.source
+    assert "Diering 2011" in rule.source or "Fedin & Vinogradov 2018" in rule.source
     bad = 1e9 if rule.direction == "above" else -1.0
     eng = engine("ball-dual-lrs", raise_delay_s=0)
     (t,) = feed(eng, quantity, [bad], mill_id="ball-dual-lrs", channel="c")

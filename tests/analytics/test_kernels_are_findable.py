@@ -1,5 +1,5 @@
 """Compiled code is findable: numba lives only in analytics modules named ``*_kernels.py``,
-beside the plain-Python API that uses them (DESIGN.md "Shape of the analytics code")."""
+beside the plain-Python API that uses them (README "Shape of the analytics code")."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Benchmark: ``millwatch rainflow FILE`` as a whole process against the ``rainflow`` package
 in-process, on the same 12 M-sample file (target: ≥ 10× faster).
 
-The signal is bench_rainflow's ``mill-torque`` (pinion-shaft stress of the seed 000 §6.2.1 mill
+The signal is bench_rainflow's ``mill-torque`` (pinion-shaft stress of the Diering 2011 §6.2.1 mill
 running at 70 % rated with its drivetrain harmonics and 0.2 MPa sensor noise), ``--samples`` long
 at 1 kHz (12 M samples = 3 h 20 min), saved as ``.npy``. Timed:
 

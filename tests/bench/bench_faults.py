@@ -4,7 +4,7 @@
     .venv/bin/python tests/bench/bench_faults.py --json     # the same as one JSON object
     .venv/bin/python tests/bench/bench_faults.py --full     # every sample of the month, ~1 h
 
-The ``month`` scene (seed 000 §6.2.8: ~90 switch-ons, trips, barring; 300 interference bursts
+The ``month`` scene (Diering 2011 §6.2.8: ~90 switch-ons, trips, barring; 300 interference bursts
 and 6 dropouts, §5.2.2) of ``deploy/mills/ball-dual-lrs.toml``, rendered chunk by chunk (1 s),
 never a month in memory. Default: one detector per channel streams a window around every event —
 each injected burst, each switch-on (through the short-circuit peak) and each stop, with 2 s of

@@ -4,7 +4,7 @@
     .venv/bin/python tests/bench/bench_pipeline.py --mills 50 --seconds 20 --json
 
 Feeds pre-encoded wire blocks of simulated mills (100-sample float32 blocks, 4 channels per
-mill, the 5.2 MW single-drive mill of seed 000 §6.2.1) straight into the worker the way its
+mill, the 5.2 MW single-drive mill of Diering 2011 §6.2.1) straight into the worker the way its
 thread runs when it is loaded: batches of ``BATCH_BLOCKS`` (2000) blocks in arrival order, each
 block through `Worker.handle` (archive to MCAP, decode, health, the mill's aligner), then
 `Worker.commit` (each mill's queued blocks analysed as one chunk — 2.5 blocks per channel at

@@ -4,11 +4,11 @@
     .venv/bin/python tests/bench/bench_rainflow.py --json    # the same as one JSON object
     .venv/bin/python tests/bench/bench_rainflow.py --quick   # 10 minutes of signal: smoke run
 
-Three one-hour 1 kHz stress signals (MPa, pinion shaft of the seed 000 §6.2.1 mill, d = 0.31 m,
+Three one-hour 1 kHz stress signals (MPa, pinion shaft of the Diering 2011 §6.2.1 mill, d = 0.31 m,
 rated pinion torque 282 kN·m → 48.2 MPa shear):
 
 * ``mill-torque``: steady running at 70 % rated with oscillations at pinion speed, 3× pinion
-  speed, liner passing and pinion/girth mesh (16.4 % rated peak-to-peak, seed 000 Table 14) and
+  speed, liner passing and pinion/girth mesh (16.4 % rated peak-to-peak, Diering 2011 Table 14) and
   0.2 MPa sensor noise;
 * ``white-noise``: N(30, 10²) MPa: the worst case, a turning point at two samples in three;
 * ``start-stop``: six 10-minute start/run/stop records: LRS switch-on peak 233 % rated with a

@@ -7,7 +7,7 @@
 
 1. Writes an archive the way the live worker does (``ArchiveWriter``, every block of every mill
    in time order, log time = the block's end), into a temporary directory: ``--mills`` mills
-   (the 5.2 MW single-drive mill of seed 000 §6.2.1, four channels, 100-sample float32 blocks),
+   (the 5.2 MW single-drive mill of Diering 2011 §6.2.1, four channels, 100-sample float32 blocks),
    ``--seconds`` of the ``--scene`` (``steady``: running throughout, spectra on — the costly case;
    ``stopped``; ``month``: the first ``--seconds`` of the month scene — rest, a start, running).
    ``--distinct`` mills are simulated (seeds 0..k−1); the others carry the same samples under

@@ -6,7 +6,7 @@ Simulating and analysing a whole month takes long, so the store is filled in two
    stop) is simulated and analysed through the real pipeline (``Worker.handle``, in process),
    giving real start/stop events, steady windows, harmonic tables and daily damage rows;
 2. those rows are tiled over the local calendar month on the schedule of the ``month`` scene
-   (:func:`ingest.sim.scenes.month_events`: ~84 cycles, failed starts, trips; seed 000 §6.2.8):
+   (:func:`ingest.sim.scenes.month_events`: ~84 cycles, failed starts, trips; Diering 2011 §6.2.8):
    each cycle copies the events, fills its running time with the steady windows and harmonic
    tables at their measured cadence, and adds the measured start/stop damage plus the run damage
    rate × running hours to its day. A handful of data-quality events are added, and each day is

@@ -4,7 +4,7 @@ Run::
 
     .venv/bin/python tests/bench/bench_states.py [--days 30] [--mill sag-5200-lrs] [--json]
 
-Simulates the ``month`` scene (seed 000 §6.2.8: ~90 switch-ons a month, failed starts, trips,
+Simulates the ``month`` scene (Diering 2011 §6.2.8: ~90 switch-ons a month, failed starts, trips,
 barring after long stops, telemetry spikes and dropouts) for ``--days`` days, feeds it through
 :class:`analytics.mill.loads.LoadAnalysis` in 1 s frames and compares with the simulator's
 truth: missed and false starts, stops and barring sessions (matched within 1 s), switch-on and

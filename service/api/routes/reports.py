@@ -1,4 +1,4 @@
-"""REST route of the monthly damage report (seed 000 §10.6 "automatic reports").
+"""REST route of the monthly damage report (Diering 2011 §10.6 "automatic reports").
 
 ``GET /mills/{mill_id}/reports/monthly?month=YYYY-MM&format=json|html|csv|pdf[&table=NAME]``
 
@@ -22,7 +22,8 @@ next try with their cause, each mill's newest complete month.
   names the value and, for a table, the valid names), 404 for an unknown mill, 503 while the
   store is not open.
 
-Layering (STYLE.md): the route only parses and dispatches; :mod:`service.reports.monthly` reads
+Layering (README "Design"): the route only parses and dispatches; :mod:`service.reports.monthly`
+reads
 the store and the renderers turn the plain report into bytes. :func:`reports_router` is included
 by :func:`service.api.router.api_router`.
 """

@@ -1,6 +1,6 @@
 """The monthly damage report of one mill: plain data built from the store, rendered elsewhere.
 
-Seed 000 (Diering 2011) §10.6 asks for "automatic reports" from on-line monitoring; this is the
+Diering 2011 §10.6 asks for "automatic reports" from on-line monitoring; this is the
 one the maintenance team reads each month. Its sections and their sources:
 
 * starts in the local calendar month against the supplier norm of 3–5 (§6.1.3) and the
@@ -87,7 +87,7 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Months of the long-term trend (seed 000 §10.6), the report's month the last.
+#: Months of the long-term trend (Diering 2011 §10.6), the report's month the last.
 TREND_MONTHS = 12
 
 

@@ -1,5 +1,5 @@
 """The monthly report's trend sections: steady-state oscillation range and bending amplitude
-(seed 000 Tables 14–15, §8.1), harmonic line trends and unexplained spectral peaks (§6.1.2,
+(Diering 2011 Tables 14–15, §8.1), harmonic line trends and unexplained spectral peaks (§6.1.2,
 §6.2.7), from the rows :class:`~service.reports.monthly.reader.MonthReader` reads.
 
 :func:`steady_section` gives one point per steady window and daily means and maxima per

@@ -1,4 +1,5 @@
-"""A report document's tables as tidy CSV: one table per file (seed 000 §10.6 "automatic reports").
+"""A report document's tables as tidy CSV: one table per file (Diering 2011 §10.6 "automatic
+reports").
 
 Every table of the :class:`~service.reports.render.document.Document` — the printed ones and the
 data behind the figures (``printed=False``: starts per day, damage per day, component and phase) —

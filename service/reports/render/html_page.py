@@ -1,4 +1,4 @@
-"""A report document as one self-contained HTML page (seed 000 §10.6 "automatic reports").
+"""A report document as one self-contained HTML page (Diering 2011 §10.6 "automatic reports").
 
 Generic over :class:`~service.reports.render.document.Document`: sections, tables and figures
 are the document's, numbers as :meth:`~service.reports.render.document.Table.text_rows`

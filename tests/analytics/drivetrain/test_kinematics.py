@@ -1,4 +1,5 @@
-"""Expected drivetrain lines (seed 000 §6.1.2, seed 001 eq. 12, seed 003 App. E)."""
+"""Expected drivetrain lines (Diering 2011 §6.1.2, Fedin & Vinogradov 2018 eq. 12, Toram 2005 App.
+E)."""
 
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ def test_fundamentals_reuse_the_config_orders(sag: MillConfig) -> None:
     for name, f in sag.excitation_frequencies_hz().items():
         assert lines[name].frequency_hz == pytest.approx(f, rel=1e-12)
         assert lines[name].kind == "fundamental"
-    # seed 000 §6.2.1 mill: 176.1 rpm pinion, 22 teeth → 64.57 Hz mesh; liner = 30 × mill speed
+    # Diering 2011 §6.2.1 mill: 176.1 rpm pinion, 22 teeth → 64.57 Hz mesh; liner = 30 × mill speed
     assert lines["girth_mesh"].frequency_hz == pytest.approx(176.106 / 60 * 22, rel=1e-4)
     assert lines["liner_passing"].frequency_hz == pytest.approx(
         30 * lines["mill_speed"].frequency_hz
@@ -97,7 +98,7 @@ def test_media_line_is_fixed_and_listed(sag: MillConfig) -> None:
 
 
 def test_media_pendulum_seed_003_appendix_e() -> None:
-    # eq. E.4: ω = √(mge/I); seed 003 gets 8.208 rad/s = 78.4 cpm for the 15 % fill lab mill
+    # eq. E.4: ω = √(mge/I); Toram 2005 gets 8.208 rad/s = 78.4 cpm for the 15 % fill lab mill
     f = media_oscillation_hz(8.208**2 / 9.80665, 1.0, 1.0)
     assert f * 60 == pytest.approx(78.4, abs=0.05)
     assert media_oscillation_hz(2.0, 0.1, 0.02) == pytest.approx(

@@ -30,7 +30,7 @@ def _errors(data: dict) -> list[str]:
 
 
 def test_seed_621_worked_example() -> None:
-    """Seed 000 §6.2.1: 5200 kW, 995 rpm, 113/20 → 49.91 kN·m, 281.97 kN·m, 176 rpm."""
+    """Diering 2011 §6.2.1: 5200 kW, 995 rpm, 113/20 → 49.91 kN·m, 281.97 kN·m, 176 rpm."""
     cfg = MillConfig.from_toml_text((MILLS / "sag-5200-lrs.toml").read_text(encoding="utf-8"))
     assert cfg.motor_rated_torque_knm == pytest.approx(49.91, abs=0.005)
     assert cfg.pinion_rated_torque_knm == pytest.approx(281.97, abs=0.05)
@@ -66,7 +66,7 @@ def test_barring_limit_defaults_by_layout() -> None:
 def test_excitation_orders_and_bandwidth() -> None:
     cfg = MillConfig.model_validate(_data())
     orders = cfg.excitation_orders()
-    assert orders["pinion_3x"] == 3.0  # seed 001 eq. 12
+    assert orders["pinion_3x"] == 3.0  # Fedin & Vinogradov 2018 eq. 12
     assert orders["girth_mesh"] == 22.0
     assert orders["liner_passing"] == pytest.approx(30 * 22 / 286)
     freqs = cfg.excitation_frequencies_hz()
@@ -156,6 +156,6 @@ def test_material_sn_curve_uses_the_material_marin_limit():
 
     material = MaterialConfig()
     curve = material.sn_curve()
-    assert curve.S_D == pytest.approx(0.4575 * 490.0, rel=1e-3)  # seed 000 §8.1 eq. 4
+    assert curve.S_D == pytest.approx(0.4575 * 490.0, rel=1e-3)  # Diering 2011 §8.1 eq. 4
     fat = MaterialConfig.model_validate({"sn": {"name": "fat-shear", "params": {"fat": 90}}})
     assert fat.sn_curve().S_D == 90

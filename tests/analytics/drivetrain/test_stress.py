@@ -1,4 +1,4 @@
-"""Stress model: golden values from seed 000 §5.2 and §8.1–8.2, identities with hypothesis."""
+"""Stress model: golden values from Diering 2011 §5.2 and §8.1–8.2, identities with hypothesis."""
 
 from __future__ import annotations
 
@@ -34,13 +34,13 @@ from analytics.fatigue.sn_curves import marin_endurance_limit
 stress = st.floats(-1e3, 1e3, allow_nan=False)
 diameter = st.floats(0.05, 1.0)
 
-# seed 000 §5.2.1, §5.2.3
+# Diering 2011 §5.2.1, §5.2.3
 SEED_SHUNT = ShuntCalibration(
     gauge_factor=2.11, gauge_resistance=350.9, shunt_resistance=350e3, shunt_voltage=1.2
 )
 E_GPA, NU = 207.0, 0.3
 
-# seed 000 §8.1 (eqs. 1–5) and §6.2 (pinion rated torque of the 5.2 MW example mill)
+# Diering 2011 §8.1 (eqs. 1–5) and §6.2 (pinion rated torque of the 5.2 MW example mill)
 S_UT = 980.0
 S_E = 0.4575 * 0.5 * S_UT  # eq. 4 as printed
 K_F = 2.2

@@ -1,4 +1,5 @@
-"""Seed 001 lumped torsional model: Table 2 frequencies, modes, warnings, dynamic factor."""
+"""Fedin & Vinogradov 2018 lumped torsional model: Table 2 frequencies, modes, warnings, dynamic
+factor."""
 
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ def chain(p: TorsionalParams) -> TorsionalParams:
 
 
 def eq10_matrices(p: TorsionalParams) -> tuple[np.ndarray, np.ndarray]:
-    """K and M written out row by row from seed 001 eq. 10 (conservative signs), 4 DOF."""
+    """K and M written out row by row from Fedin & Vinogradov 2018 eq. 10 (conservative signs), 4
+    DOF."""
     g = p.c23 / p.r
     k = np.array(
         [
@@ -114,7 +116,7 @@ def test_partial_transverse_parameters_are_refused() -> None:
 
 
 def test_resonance_warning_for_3x_drive_gear_near_the_second_mode() -> None:
-    # seed 001 §2.1: MRG pinion at 150 rpm, 3× rotation = 7.5 Hz; mode 2 at 8.40 Hz
+    # Fedin & Vinogradov 2018 §2.1: MRG pinion at 150 rpm, 3× rotation = 7.5 Hz; mode 2 at 8.40 Hz
     freqs = TorsionalModel(chain(MRG)).natural_frequencies_hz()
     lines = [
         ExpectedLine("pinion_3x", "pinion_3x", "fundamental", 3.0, 7.5, True),
@@ -131,7 +133,7 @@ def test_resonance_warning_for_3x_drive_gear_near_the_second_mode() -> None:
 def test_forced_response_peaks_at_a_natural_frequency() -> None:
     model = TorsionalModel(chain(MRG))
     f2 = model.natural_frequencies_hz()[1]
-    delta = 0.2e-3 / MRG.r  # seed 001: r·δφ = 0.2 mm
+    delta = 0.2e-3 / MRG.r  # Fedin & Vinogradov 2018: r·δφ = 0.2 mm
     shaft = [model.forced_response(f, delta)["shaft_torque_nm"] for f in (5.0, 7.5, f2)]
     assert shaft[0] < shaft[1] < shaft[2]
     lightly = TorsionalModel(chain(MRG).model_copy(update={"psi": 0.3}))
@@ -140,7 +142,8 @@ def test_forced_response_peaks_at_a_natural_frequency() -> None:
 
 def test_dynamic_factor_eq13() -> None:
     t = np.linspace(0.0, 10.0, 10_001)
-    torque = 200.0 + 116.0 * np.sin(2 * math.pi * 7.5 * t)  # K_H = 1.58 of seed 001 Fig. 1a
+    # K_H = 1.58 of Fedin & Vinogradov 2018 Fig. 1a
+    torque = 200.0 + 116.0 * np.sin(2 * math.pi * 7.5 * t)
     assert dynamic_factor(torque, nominal=200.0) == pytest.approx(1.58, abs=1e-4)
     assert dynamic_factor(torque) == pytest.approx(1.58, abs=1e-3)
     assert math.isnan(dynamic_factor(np.array([])))

@@ -1,4 +1,5 @@
-"""S-N curves: seed 000 §8.1–8.2 and App. D, EN 1993-1-9, seed 002 eq. 4; identities, numerics."""
+"""S-N curves: Diering 2011 §8.1–8.2 and App. D, EN 1993-1-9, Fotopoulos 1983 eq. 4; identities,
+numerics."""
 
 from __future__ import annotations
 
@@ -248,7 +249,8 @@ def test_goodman_needs_means() -> None:
         SHIGLEY.damage_per_cycle([10.0], None, GoodmanCorrection(850.0))
 
 
-# ---------------------------------------------------------------- equivalent range, seed 002 eq. 4
+# ---------------------------------------------------------------- equivalent range, Fotopoulos
+# 1983 eq. 4
 def test_eq_4_single_range() -> None:
     # n1 = n2 (S2/S1)^m: 1000 cycles of 10 are 8000 cycles of 5 on slope 3
     assert equivalent_cycles([10.0], [1000.0], 3.0, 5.0) == pytest.approx(8000.0, rel=1e-14)

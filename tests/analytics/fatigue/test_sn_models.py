@@ -1,4 +1,4 @@
-"""Named S-N models: the defaults are seed 000 App. D's pinion-shaft curves."""
+"""Named S-N models: the defaults are Diering 2011 App. D's pinion-shaft curves."""
 
 from __future__ import annotations
 

@@ -223,7 +223,7 @@ def test_flagged_samples_are_not_peaks():
 
 
 def test_a_flagged_speed_spike_is_ignored_but_a_speed_dropout_is_unknown():
-    """Seed 000 §5.2.2 spikes on the speed channel say nothing about the state (issue 18: they
+    """Diering 2011 §5.2.2 spikes on the speed channel say nothing about the state (issue 18: they
     used to show 'unknown' and end the running period); a NaN dropout leaves it unknown."""
     sc = scene("steady", seed=1, duration_s=20.0)
     data = sc.render(0, sc.n_samples)
@@ -257,7 +257,7 @@ def test_starts_status_is_strictly_above_the_levels_like_the_alarm_rules():
     from analytics.drivetrain.mill_config import AlarmThresholds
     from analytics.mill.report import starts_status
 
-    levels = AlarmThresholds()  # warning above 5, alarm above 20 (seed 000 §6.1.3, §10.3)
+    levels = AlarmThresholds()  # warning above 5, alarm above 20 (Diering 2011 §6.1.3, §10.3)
     assert [starts_status(n, levels) for n in (4, 5, 6, 20, 21)] == [
         "ok",
         "ok",
@@ -269,7 +269,7 @@ def test_starts_status_is_strictly_above_the_levels_like_the_alarm_rules():
 
 def test_start_level_is_strictly_above_the_peaks_like_the_alarm_rules():
     a = LoadAnalysis(mill("sag-5200-lrs"))
-    levels = a.config.alarms  # warning above 250 %, alarm above 300 % (seed 000 §7.2)
+    levels = a.config.alarms  # warning above 250 %, alarm above 300 % (Diering 2011 §7.2)
     warn, alarm = levels.start_peak_warn_pct, levels.start_peak_alarm_pct
     got = [a._start_alarm(p) for p in (None, warn, warn + 0.1, alarm, alarm + 0.1)]
     assert got == [None, None, "warning", "warning", "alarm"]

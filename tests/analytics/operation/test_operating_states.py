@@ -62,7 +62,7 @@ def test_dropouts_are_unknown_and_running_resumes():
 def test_short_spikes_on_a_stopped_mill_do_not_energise():
     m = OperatingStateMachine(FS)
     q = np.zeros(5000)
-    q[1000:1020] = 6.0  # a 20-sample telemetry spike of 600 % (seed 000 §5.2.2)
+    q[1000:1020] = 6.0  # a 20-sample telemetry spike of 600 % (Diering 2011 §5.2.2)
     tr = m.feed(np.zeros(5000), q)
     assert [t.state for t in tr] == [S.STOPPED]
 

@@ -16,7 +16,7 @@ FS = 1000.0
 
 @pytest.mark.parametrize("front_ms", [17.0, 34.0, 68.0])
 def test_rise_time_of_a_raised_cosine_front(front_ms):
-    """10–90 % of ½(1 − cos πt/F) is RC_10_90·F (seed 000 §6.1.1 norms), to < 0.1 ms."""
+    """10–90 % of ½(1 − cos πt/F) is RC_10_90·F (Diering 2011 §6.1.1 norms), to < 0.1 ms."""
     t = np.arange(-50, 200) / FS
     x = 3.0 + 2.0 * (0.5 - 0.5 * np.cos(np.pi * np.clip(t / (front_ms / 1e3), 0.0, 1.0)))
     k = int(np.argmax(x))

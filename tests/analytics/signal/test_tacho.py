@@ -1,4 +1,4 @@
-"""Tacho pulse train → rpm against the simulator's true pinion speed (seed 000 §5.1.1, App. C
+"""Tacho pulse train → rpm against the simulator's true pinion speed (Diering 2011 §5.1.1, App. C
 routine 5), and the streaming contract."""
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ def test_snapshot_restore_continues_exactly(cut: int) -> None:
 
 
 def test_sloped_edges_are_timed_below_one_sample() -> None:
-    """A sine-like pickup signal (seed 003 ch. IV, magnetic transducer on a 70-link chain) at a
+    """A sine-like pickup signal (Toram 2005 ch. IV, magnetic transducer on a 70-link chain) at a
     speed whose pulse period is not a whole number of samples."""
     fs, links, rpm_true = 1000.0, 70, 15.42
     t = np.arange(60_000) / fs

@@ -1,4 +1,4 @@
-"""Telemetry-fault detector: split-anywhere invariance, snapshots, fault kinds, and the seed 000
+"""Telemetry-fault detector: split-anywhere invariance, snapshots, fault kinds, and the Diering 2011
 §5.2.2 promise on simulator scenes — spikes flagged, real §6.1.1 transients never."""
 
 from __future__ import annotations
@@ -144,7 +144,8 @@ def test_zeros_reached_smoothly_are_not_a_fault() -> None:
 @pytest.mark.parametrize("rise_ms", [10.0, 20.0, 40.0])
 @pytest.mark.parametrize("height", [0.25, 1.0])
 def test_full_scale_front_with_ringing_is_never_flagged(rise_ms: float, height: float) -> None:
-    """Seed 000 §6.1.1: a shock front of up to the full span rising in 10–40 ms, then ringing."""
+    """Diering 2011 §6.1.1: a shock front of up to the full span rising in 10–40 ms, then
+    ringing."""
     span = FS[1] - FS[0]
     t = np.arange(1500) / 1000.0 - 0.5
     d = rise_ms / 1000.0 / RC_10_90

@@ -56,7 +56,7 @@ def test_month_is_a_month_of_operations(config) -> None:
     scene = get_scene("month", config, seed=0)
     truth = scene.truth
     assert scene.n_samples == 30 * 86_400_000
-    assert 80 <= len(truth.starts) <= 100  # seed 000 §6.2.8: peak of 90 a month
+    assert 80 <= len(truth.starts) <= 100  # Diering 2011 §6.2.8: peak of 90 a month
     assert any(s.failed for s in truth.starts)
     assert any(s.kind == "trip" for s in truth.stops)
     assert truth.barrings and len([f for f in truth.faults if f.kind == "spike"]) >= 100

@@ -74,7 +74,7 @@ def test_starts_of_this_month_with_peaks_against_limits(client):
     assert body["count"] == 1 and body["failed"] == 0
     assert body["norm_per_month"] == [3, 5] and body["count_status"] == "ok"
     start = body["starts"][0]
-    assert start["switch_on_peak_pct"] > body["peak_limits_pct"]["warn"]  # seed 000 §7.2
+    assert start["switch_on_peak_pct"] > body["peak_limits_pct"]["warn"]  # Diering 2011 §7.2
     assert start["peak_status"] in ("warning", "alarm")
     other = client.get(f"/mills/{MILL}/starts", params={"month": "2001-02"}).json()
     assert other["count"] == 0 and other["starts"] == [] and other["month"] == "2001-02"

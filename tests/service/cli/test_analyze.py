@@ -43,7 +43,7 @@ def test_analyze_json_end_to_end(recording, capsys):
     assert ("motor_torque", "girth_mesh") in lines and r["unexplained_peaks"] == []
     peak = max(start["switch_on_peak_pct"], start["short_circuit_peak_pct"])
     raised = [a for a in r["alarms"] if a["rule"] == "start_peak"]
-    assert bool(raised) == (peak > 250.0)  # seed 000 §7.2: warning above 250 % of rated
+    assert bool(raised) == (peak > 250.0)  # Diering 2011 §7.2: warning above 250 % of rated
     assert r["data_quality"]["faults"]["motor_torque"]["spikes"] == 0
 
 

@@ -331,7 +331,7 @@ def _check_fleet_report(client: TestClient, fleet: dict, simulated: bool) -> Non
     assert pdf.status_code == 200 and pdf.content.startswith(b"%PDF")
     text = " ".join(p.extract_text() for p in PdfReader(io.BytesIO(pdf.content)).pages)
     text = " ".join(text.split())
-    for heading in ("Visit order", "Remaining life (seed 000 §8.2)", "Trend per mill"):
+    for heading in ("Visit order", "Remaining life (Diering 2011 §8.2)", "Trend per mill"):
         assert heading in html.text and heading in text
     first = fleet["visit_order"][0]
     assert first["mill"] in text and first["mill"] in html.text

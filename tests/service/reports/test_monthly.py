@@ -1,4 +1,4 @@
-"""The monthly damage report (seed 000 §10.6) from a real SQLite store filled by the worker with
+"""The monthly damage report (Diering 2011 §10.6) from a real SQLite store filled by the worker with
 a simulated scene of three LRS starts, and its HTML, PDF, CSV and JSON renderings and route."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Calendar months of a site and the starts-norm statuses: one place for the starts endpoint and
-the monthly report (seed 000 §6.1.3, §7.2)."""
+the monthly report (Diering 2011 §6.1.3, §7.2)."""
 
 from __future__ import annotations
 

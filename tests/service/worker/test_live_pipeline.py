@@ -87,7 +87,7 @@ def test_live_results_equal_offline_analysis_of_the_archive(tmp_path):
     assert live_damage["pinion_combined"]["committed"] > 0
     assert len(starts) == 1 == len(offline.report()["starts"])
     peak = starts[0].data["switch_on_peak_pct"]
-    assert peak > 250.0 and any(a.rule == "start_peak" for a in alarms)  # seed 000 §7.2
+    assert peak > 250.0 and any(a.rule == "start_peak" for a in alarms)  # Diering 2011 §7.2
     with Store(settings.store.path) as store:
         stored = {(t.alarm_id, t.seq) for a in alarms for t in store.alarm_transitions(a.alarm_id)}
     published = {(m["alarm"]["alarm_id"], m["transition"]["seq"]) for m in heard}
