@@ -20,7 +20,8 @@ Modules (each imports only the ones listed before it)::
     load_days        StreamClock (stream sample → time, local day), PhaseDays: phase samples
                      in total and per local day, cut at the site's midnights
     load_events      EventBook: start/stop/barring events measured as their phases close
-                     (Diering 2011 §6.1.1, §6.2.3, §6.2.5), starts per day/month/total
+                     (Diering 2011 §6.1.1, §6.2.3, §6.2.5), starts per day/month/total;
+                     keep (a bounded list of plain JSON records)
     load_steady      SteadyProgress: decided running samples → the steady-state meter → windows
     load_damage      FatigueCounting: stress per component (Diering 2011 §8.1–8.2), the NaN
                      hold, rainflow counters and damage recorders

@@ -11,6 +11,7 @@ import pytest
 
 from analytics.contracts import SnapshotMismatch
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.load_snapshot import assemble
 from analytics.mill.loads import (
     KEEP_START_DAYS,
     KEEP_START_MONTHS,
@@ -338,6 +339,18 @@ def test_snapshot_keys_and_order_are_those_of_stored_checkpoints():
     assert (snap["kind"], snap["version"]) == ("mill_analyzer", 3)
     with pytest.raises(ValueError, match="not a mill_analyzer snapshot of version 3"):
         LoadAnalysis.restore(mill("sag-5200-lrs"), snap | {"version": 1})
+
+
+def test_a_snapshot_key_outside_the_stored_format_is_refused():
+    """A part that writes a key the stored format lacks (or stops writing one) fails loudly
+    instead of changing the checkpoints: the key has to be added to ``load_snapshot.KEYS``."""
+    cfg = mill("sag-5200-lrs")
+    snap = LoadAnalysis(cfg).snapshot()
+    with pytest.raises(ValueError, match=r"snapshot keys differ in \['extra'\]"):
+        assemble(cfg, snap | {"extra": 1})
+    with pytest.raises(ValueError, match=r"snapshot keys differ in \['phase_days'\]"):
+        assemble(cfg, {k: v for k, v in snap.items() if k != "phase_days"})
+    assert json.dumps(assemble(cfg, dict(reversed(snap.items())))) == json.dumps(snap)
 
 
 def test_a_snapshot_with_other_fatigue_factors_is_refused_in_words():
