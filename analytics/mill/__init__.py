@@ -14,15 +14,30 @@ Modules (each imports only the ones listed before it)::
                      because it joins fatigue (cycles, Miner) with operation (states)
     report           the tables of the load report (starts per month, phase seconds, damage,
                      start cost, projections), from plain pieces
-    loads            LoadAnalysis: the load stage — states, events, steady state, rainflow and
-                     damage per component, phase and day; owns its snapshot/restore
+    load_roles       LoadRoles: which mill-file channels are the speed, each side's motor
+                     torque, pinion torque and bending (the ring's rows), the damage
+                     components; steady_channels, component_names
+    load_days        StreamClock (stream sample → time, local day), PhaseDays: phase samples
+                     in total and per local day, cut at the site's midnights
+    load_events      EventBook: start/stop/barring events measured as their phases close
+                     (Diering 2011 §6.1.1, §6.2.3, §6.2.5), starts per day/month/total;
+                     keep (a bounded list of plain JSON records)
+    load_steady      SteadyProgress: decided running samples → the steady-state meter → windows
+    load_damage      FatigueCounting: stress per component (Diering 2011 §8.1–8.2), the NaN
+                     hold, rainflow counters and damage recorders
+    load_snapshot    the load stage's checkpoint format (kind, version 3, keys in order) and the
+                     renaming of a version-2 checkpoint
+    loads            LoadAnalysis: the load stage — feeds the state machine and the ring, hands
+                     frames and transitions to the load_* parts (each owns its state and its
+                     keys of the snapshot), the report; snapshot/restore
     analyzer         MillAnalyzer: THE per-mill analyzer — calibration, aligner, faults, tacho,
                      LoadAnalysis, harmonic tracker; its public reading API is what callers use
 
 Data flow: block → MillAnalyzer (calibrate, align, flag, tacho) → LoadAnalysis.feed(frame)
 → events, windows, damage; → HarmonicTracker on the running samples. A new per-mill output
 is read through a public method/property on MillAnalyzer (callers never reach into its
-stages); a new piece of LoadAnalysis state goes in its ``snapshot``/``_load`` (a test fails
-otherwise); a new report table is a function in ``report``. Every per-channel result is keyed by
-the channel's name in the mill file (``loads.steady_channels``), never by a side index.
+stages); a new piece of LoadAnalysis state goes in the ``snapshot``/``load`` of the part that
+owns it, and its key in ``load_snapshot.KEYS`` (a test fails otherwise); a new report table is
+a function in ``report``. Every per-channel result is keyed by the channel's name in the mill
+file (``load_roles.steady_channels``), never by a side index.
 """

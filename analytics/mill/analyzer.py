@@ -376,8 +376,7 @@ class MillAnalyzer:
         """Keep only the last ``windows`` steady windows and ``events`` events of each kind in
         memory (and in snapshots), for a caller that stores each as it comes; the default
         keeps what an offline report shows (a day of windows, 2000 events)."""
-        self._loads.keep_windows = windows
-        self._loads.keep_events = events
+        self._loads.keep_recent(windows, events)
 
     def starts_in_month(self, month: str) -> int:
         """Starts counted in the local calendar month ``month`` (``"YYYY-MM"``, site time

@@ -11,6 +11,7 @@ import pytest
 
 from analytics.contracts import SnapshotMismatch
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.load_snapshot import assemble
 from analytics.mill.loads import (
     KEEP_START_DAYS,
     KEEP_START_MONTHS,
@@ -216,10 +217,13 @@ def test_flagged_samples_are_not_peaks():
     b = LoadAnalysis(sc.config)
     b.feed(Frame(sc.t0_ns, sc.fs, data))
     truth = sc.truth.starts[0].switch_on[0].pct
-    w = a._window(sc.truth.starts[0].sample, n_spike + 300)
+    w = a.events.window(a.ring, sc.truth.starts[0].sample, n_spike + 300)
     assert np.nanmax(w.motor[0]) == pytest.approx(truth * sc.config.motor_rated_torque_knm / 100,
                                                   rel=0.01)  # fmt: skip
-    assert np.nanmax(b._window(sc.truth.starts[0].sample, n_spike + 300).motor[0]) == 340.0
+    assert (
+        np.nanmax(b.events.window(b.ring, sc.truth.starts[0].sample, n_spike + 300).motor[0])
+        == 340.0
+    )
 
 
 def test_a_flagged_speed_spike_is_ignored_but_a_speed_dropout_is_unknown():
@@ -271,7 +275,7 @@ def test_start_level_is_strictly_above_the_peaks_like_the_alarm_rules():
     a = LoadAnalysis(mill("sag-5200-lrs"))
     levels = a.config.alarms  # warning above 250 %, alarm above 300 % (Diering 2011 §7.2)
     warn, alarm = levels.start_peak_warn_pct, levels.start_peak_alarm_pct
-    got = [a._start_alarm(p) for p in (None, warn, warn + 0.1, alarm, alarm + 0.1)]
+    got = [a.events.start_alarm(p) for p in (None, warn, warn + 0.1, alarm, alarm + 0.1)]
     assert got == [None, None, "warning", "warning", "alarm"]
 
 
@@ -280,10 +284,10 @@ def test_start_counts_are_bounded_and_the_total_is_kept():
     total (the report's observed start rate) counts every start, and survives a restore —
     also of a snapshot taken before the total was kept."""
     a = LoadAnalysis(mill("sag-5200-lrs"))
-    a.t0_ns = 1_704_067_200_000_000_000  # 2024-01-01T00:00:00Z
+    a.clock.t0_ns = 1_704_067_200_000_000_000  # 2024-01-01T00:00:00Z
     day = round(86_400 * a.fs)
     for k in range(3 * 365):  # one start a day for three years
-        a._count_start(k * day + day // 2)
+        a.events.count_start(k * day + day // 2)
     assert len(a.starts_per_day) == KEEP_START_DAYS
     assert len(a.starts_per_month) == KEEP_START_MONTHS
     assert min(a.starts_per_month) == "2025-11" and max(a.starts_per_month) == "2026-12"
@@ -298,15 +302,26 @@ def test_start_counts_are_bounded_and_the_total_is_kept():
 
 def test_every_attribute_is_configured_or_in_the_snapshot():
     """A new state attribute must go into snapshot() and restore(), or be declared as derived
-    from the configuration: else a restored analysis would silently miss it."""
+    from the configuration: else a restored analysis would silently miss it. So for the stage
+    and each of its parts (which write their own keys of the snapshot)."""
     a = run(scene("start-lrs", seed=1, duration_s=20.0))
     snap = a.snapshot()
+    parts = {name: getattr(a, name) for name in LoadAnalysis.PARTS}
+    by_parts: set[str] = set()
+    for name, part in parts.items():
+        state = set(part.snapshot())
+        assert not state & part.CONFIGURED, name
+        assert set(vars(part)) == part.CONFIGURED | state, name
+        assert not state & by_parts, name  # (each key written by one part)
+        by_parts |= state
     # ("stress": the fatigue factors the state was computed with, checked on restore)
-    state = set(snap) - {"kind", "version", "mill", "stress"}
-    assert not state & LoadAnalysis.CONFIGURED
+    state = set(snap) - {"kind", "version", "mill", "stress"} - by_parts
+    assert not state & LoadAnalysis.CONFIGURED and by_parts < set(snap)
     assert set(vars(a)) == LoadAnalysis.CONFIGURED | state
     b = LoadAnalysis.restore(a.config, json.loads(json.dumps(snap)))
     assert set(vars(b)) == set(vars(a))
+    for name in LoadAnalysis.PARTS:
+        assert set(vars(getattr(b, name))) == set(vars(parts[name])), name
     assert json.dumps(b.snapshot(), sort_keys=True) == json.dumps(snap, sort_keys=True)
 
 
@@ -324,6 +339,18 @@ def test_snapshot_keys_and_order_are_those_of_stored_checkpoints():
     assert (snap["kind"], snap["version"]) == ("mill_analyzer", 3)
     with pytest.raises(ValueError, match="not a mill_analyzer snapshot of version 3"):
         LoadAnalysis.restore(mill("sag-5200-lrs"), snap | {"version": 1})
+
+
+def test_a_snapshot_key_outside_the_stored_format_is_refused():
+    """A part that writes a key the stored format lacks (or stops writing one) fails loudly
+    instead of changing the checkpoints: the key has to be added to ``load_snapshot.KEYS``."""
+    cfg = mill("sag-5200-lrs")
+    snap = LoadAnalysis(cfg).snapshot()
+    with pytest.raises(ValueError, match=r"snapshot keys differ in \['extra'\]"):
+        assemble(cfg, snap | {"extra": 1})
+    with pytest.raises(ValueError, match=r"snapshot keys differ in \['phase_days'\]"):
+        assemble(cfg, {k: v for k, v in snap.items() if k != "phase_days"})
+    assert json.dumps(assemble(cfg, dict(reversed(snap.items())))) == json.dumps(snap)
 
 
 def test_a_snapshot_with_other_fatigue_factors_is_refused_in_words():
