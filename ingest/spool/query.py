@@ -13,8 +13,7 @@ selector parameters ``first=<seq>;last=<seq>[;max=<n>]`` by
   retention removed (exact; :attr:`ingest.spool.store.Spool.dropped_blocks`).
 
 Numbers in the range that are neither returned nor dropped were never spooled: the gateway was
-down when they fell due (or never sent them). Replies travel BLOCK + reliable, and a query uses
-no consolidation (every reply shares one key; zenoh's default would keep only the latest).
+down when they fell due (or never sent them). A query uses no consolidation (every reply shares one key; zenoh's default would keep only the latest).
 
 :func:`fetch_spooled` is the client: it pages through a range and returns the blocks in order
 with the dropped count; no spool for the key means an empty answer at once, never a hang.
@@ -98,8 +97,7 @@ class SpoolServer:
                 through = last if cut is None else cut
             encoding = block_encoding()
             for payload in found.blocks:
-                query.reply(str(query.key_expr), payload, encoding=encoding,
-                            congestion_control=zenoh.CongestionControl.BLOCK)  # fmt: skip
+                query.reply(str(query.key_expr), payload, encoding=encoding)
             dropped = self._spool.dropped(key, first, through)
             summary = {"first": first, "last": last, "through": through,
                        "blocks": len(found.blocks), "dropped": dropped}  # fmt: skip

@@ -31,7 +31,7 @@ opening a spool of many hours reads only small JSON files.
 
 Retention
 ---------
-After every rotation, and at open: the oldest files go first while the spool holds more than
+At open, at every rotation and every minute: the oldest files go first while the spool holds more than
 ``max_bytes`` or their newest block was spooled more than ``hours`` ago (never the file being
 written). What a dropped file held is added to the ledger (``dropped.json``: per key the
 sequence numbers dropped, as runs, and the total), written *before* the file is removed, so a
@@ -95,6 +95,7 @@ MAX_ROTATE_S = 600.0
 MAX_ROTATE_BYTES = 32 * 2**20
 _MIN_ROTATE_BYTES = 64 * 2**10
 _NS_PER_H = 3_600_000_000_000
+_CHECK_NS = 60_000_000_000  # retention is looked at every minute (and at every rotation)
 _LEDGER = "dropped.json"
 _META = "gateway.json"
 _LOCK = "spool.lock"
@@ -278,6 +279,7 @@ class Spool:
             _MIN_ROTATE_BYTES, min(MAX_ROTATE_BYTES, max_bytes // 10)
         )
         self._mutex = threading.RLock()
+        self._next_check = 0
         self._ledger = _Ledger(self.directory / _LEDGER)
         self._files: list[_FileIndex] = self._load_files()
         self._open: _OpenFile | None = None
@@ -324,6 +326,8 @@ class Spool:
             now = self._clock()
             current = self._current(now)
             current.append(key, bytes(payload), seq, now)
+            if now >= self._next_check:
+                self._apply_retention()
             new_key = key not in self._last
             if seq is not None and seq > self._last.get(key, -1):
                 self._last[key] = seq
@@ -359,7 +363,9 @@ class Spool:
         """Drop the oldest files (never the open one) while over ``max_bytes`` or older than
         ``hours`` (see the module docstring)."""
         with self._mutex:
-            cutoff = self._clock() - round(self.hours * _NS_PER_H)
+            now = self._clock()
+            self._next_check = now + min(self._rotate_ns, _CHECK_NS)
+            cutoff = now - round(self.hours * _NS_PER_H)
             total = sum(f.size() for f in self._files)
             open_index = None if self._open is None else self._open.index
             while self._files and self._files[0] is not open_index:
