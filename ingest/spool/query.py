@@ -13,7 +13,8 @@ selector parameters ``first=<seq>;last=<seq>[;max=<n>]`` by
   retention removed (exact; :attr:`ingest.spool.store.Spool.dropped_blocks`).
 
 Numbers in the range that are neither returned nor dropped were never spooled: the gateway was
-down when they fell due (or never sent them). A query uses no consolidation (every reply shares one key; zenoh's default would keep only the latest).
+down when they fell due (or never sent them). A query uses no consolidation (every reply shares
+one key; zenoh's default would keep only the latest).
 
 :func:`fetch_spooled` is the client: it pages through a range and returns the blocks in order
 with the dropped count; no spool for the key means an empty answer at once, never a hang.
@@ -178,8 +179,10 @@ def _page(
 ) -> tuple[dict[int, bytes], int | None, int]:
     """One query: blocks by seq, the lowest ``through`` of the spools that answered (None:
     none), the smallest dropped count."""
-    selector = spool_key(key) + "?" + ";".join(
-        ("first=" + str(first), "last=" + str(last), "max=" + str(page))
+    selector = (
+        spool_key(key)
+        + "?"
+        + ";".join(("first=" + str(first), "last=" + str(last), "max=" + str(page)))
     )
     blocks: dict[int, bytes] = {}
     throughs: list[int] = []

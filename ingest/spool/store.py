@@ -31,9 +31,9 @@ opening a spool of many hours reads only small JSON files.
 
 Retention
 ---------
-At open, at every rotation and every minute: the oldest files go first while the spool holds more than
-``max_bytes`` or their newest block was spooled more than ``hours`` ago (never the file being
-written). What a dropped file held is added to the ledger (``dropped.json``: per key the
+At open, at every rotation and every minute: the oldest files go first while the spool holds
+more than ``max_bytes`` or their newest block was spooled more than ``hours`` ago (never the file
+being written). What a dropped file held is added to the ledger (``dropped.json``: per key the
 sequence numbers dropped, as runs, and the total), written *before* the file is removed, so a
 recovery query for a range the spool no longer holds is answered with the exact count, and
 :attr:`Spool.dropped_blocks` counts every block retention dropped over the spool's life.
@@ -485,4 +485,3 @@ def _file_blocks(path: Path, key: str, first: int, last: int) -> Iterator[tuple[
 
 def _unlink(path: Path) -> None:
     path.unlink(missing_ok=True)
-
