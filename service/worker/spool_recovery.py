@@ -114,9 +114,9 @@ class SpoolRecovery:
             self._handle(QueuedBlock(key, payload, item.recv_ns))
         self.recovered += len(answer.blocks)
         self.dropped += answer.dropped
-        if answer.answered:
+        if answer.answered:  # (WARNING: an outage the caches did not cover, bridged or not)
             wanted = last - first + 1
-            log.info(
+            log.warning(
                 "%s: seq %d..%d (%d blocks) missing; %d recovered from the gateway's spool, %d "
                 "dropped by its retention, %d never spooled (its gateway was down)",
                 key, first, last, wanted, len(answer.blocks), answer.dropped,
