@@ -87,8 +87,9 @@ PREFIX = "spool"
 #: Default retention (h of wall time): a day covers a weekend link outage's first day, a
 #: gateway PC's reboot, a worker upgrade.
 DEFAULT_HOURS = 24.0
-#: Default size bound (MB = 10^6 bytes): ~26 channel-days of 1 kHz float32 blocks (README).
-DEFAULT_MAX_MB = 2000.0
+#: Default size bound (MB = 10^6 bytes): a day of an 8-channel dual-drive mill at 1 kHz,
+#: 100-sample float32 blocks (17 MB per channel-hour measured, README "Benchmarks").
+DEFAULT_MAX_MB = 4000.0
 #: Longest a spool file stays open (s of wall time) and its largest size (bytes); smaller
 #: bounds follow from the retention (a tenth of it), so retention drops a tenth at a time.
 MAX_ROTATE_S = 600.0

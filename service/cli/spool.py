@@ -7,7 +7,7 @@ every block to a spool directory and answers the worker's recovery queries from 
 blocks. It publishes nothing: live blocks go from the gateway to the worker as before; what the
 worker missed (a link outage longer than the gateway's cache, a worker restart) comes from here.
 
-Retention: ``--spool-hours`` (wall time, default 24 h) and ``--spool-max-mb`` (default 2000 MB);
+Retention: ``--spool-hours`` (wall time, default 24 h) and ``--spool-max-mb`` (default 4000 MB);
 the oldest files go first, and what they held is counted so that recovery can say exactly how
 many blocks the spool no longer has.
 
@@ -61,7 +61,7 @@ def add_spool_arguments(parser: argparse.ArgumentParser, *, required: bool = Fal
         default=DEFAULT_MAX_MB,
         metavar="MB",
         help=f"keep at most this many MB on disk, oldest dropped first (default "
-        f"{DEFAULT_MAX_MB:g}; ~77 MB per 1 kHz float32 channel-day, README)",
+        f"{DEFAULT_MAX_MB:g}; 17 MB per channel-hour of 1 kHz float32 blocks, README)",
     )
 
 
