@@ -75,7 +75,7 @@ COMMANDS = (
     ),
     Command(
         "spool",
-        "service.cli.spool",
+        "service.cli.edge.spool",
         "edge forwarder: spool a third-party gateway's blocks on disk and serve recovery",
     ),
     Command(

@@ -67,7 +67,7 @@ from ingest.spool.resume import unspooled
 from ingest.spool.store import Spool, payload_seq
 from ingest.zenoh_session import build_config, open_session
 from service.cli.args import duration_seconds, non_negative_float, positive_float, utc_time_ns
-from service.cli.spool import add_spool_arguments, open_spool
+from service.cli.edge.spool import add_spool_arguments, open_spool
 
 __all__ = ["add_parser", "default_run_name", "key_pattern", "utc_time_ns"]
 

@@ -66,7 +66,7 @@ from ingest.spool.query import SpoolServer
 from ingest.spool.store import Spool, SpoolError
 from ingest.zenoh_session import build_config, open_session
 from service.cli.args import duration_seconds, positive_float, positive_int, utc_time_ns
-from service.cli.spool import add_spool_arguments, open_spool
+from service.cli.edge.spool import add_spool_arguments, open_spool
 
 __all__ = ["add_parser", "build_scene", "simulate_to_archive"]
 

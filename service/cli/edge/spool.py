@@ -27,7 +27,6 @@ from ingest.spool.forwarder import SpoolForwarder
 from ingest.spool.store import DEFAULT_HOURS, DEFAULT_MAX_MB, Spool
 from ingest.zenoh_session import build_config, open_session
 from service.cli.args import positive_float
-from service.cli.serve import wait_for_signal
 
 __all__ = ["add_parser", "add_spool_arguments", "open_spool"]
 
@@ -110,6 +109,8 @@ def _patterns(args: argparse.Namespace) -> list[str]:
 
 
 def _main(args: argparse.Namespace) -> int:
+    from service.cli.serve import wait_for_signal  # (not for simulate's and replay's options)
+
     patterns = _patterns(args)
     spool = open_spool(args)
     assert spool is not None  # (--spool is required)
