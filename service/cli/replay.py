@@ -248,7 +248,7 @@ def _main(args: argparse.Namespace) -> int:
         n = sum(resumed.values())
         sys.stderr.write(f"millwatch replay: {n} blocks were in --spool already (published "
                          "before a restart) and were not sent again\n")  # fmt: skip
-    if report.blocks == 0:
+    if report.blocks == 0 and not resumed:
         sys.stderr.write("millwatch replay: no archived block matched --keys/--from/--to\n")
         return 1
     return 0
