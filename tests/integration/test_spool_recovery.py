@@ -3,11 +3,11 @@ real processes on 127.0.0.1 — a gateway with a spool (``millwatch simulate --p
 ``millwatch serve``, and (c) a ``millwatch router`` between them.
 
 (b) ``serve`` SIGKILLed; 10 s later the gateway SIGKILLed and restarted with the same ``--spool``
-    (no ``--anchor-ns``: the spool keeps the scene's anchor); ``serve`` restarted: every block
-    the gateway spooled (hence published) is archived, and the only blocks missing are those
-    that fell due while the gateway itself was down — reported once per channel with their
-    exact count. What the gateway published and when it was down are read from its spool,
-    observed, not assumed.
+    (no ``--anchor-ns``: the spool keeps the scene's anchor), publishing again within 2 s of its
+    port opening; ``serve`` restarted: every block the gateway spooled (hence published) is
+    archived, and the only blocks missing are those that fell due while the gateway itself was
+    down — reported once per channel with their exact count. What the gateway published and
+    when it was down are read from its spool, observed, not assumed.
 (c) The link (the router) down longer than the gateway's cache retention (2 s of sample time,
     shortened for the test): every block comes back, from the spool.
 
@@ -26,8 +26,10 @@ from typing import Any
 
 import pytest
 
+from ingest.archive.files import list_archive_files
+from ingest.archive.reader import TailTolerantReader
 from ingest.mill_files import load_mill_config
-from ingest.spool.store import Spool
+from ingest.spool.store import PREFIX, Spool, payload_seq
 from ingest.zenoh_session import free_loopback_port, tcp_endpoint
 from tests.integration.live import (
     MILL_FILE,
@@ -68,6 +70,17 @@ def spooled_seqs(spool_dir: Path) -> dict[str, set[int]]:
             channel_of(k): {s for a, b in spool.held(k).runs() for s in range(a, b + 1)}
             for k in spool.spooled_keys()
         }
+
+
+def first_spooled_ns(spool_dir: Path, before: dict[str, set[int]]) -> int | None:
+    """When the first block not in ``before`` was spooled (ns, UTC; spooled = published)."""
+    times = [
+        msg.log_time_ns
+        for path in list_archive_files(spool_dir, PREFIX)
+        for msg in TailTolerantReader(path).messages()
+        if payload_seq(msg.payload) not in before.get(channel_of(msg.key), set())
+    ]
+    return min(times, default=None)
 
 
 class Site:
@@ -162,12 +175,15 @@ def test_a_gateway_restarted_on_its_spool_during_a_worker_outage_loses_only_its_
         site.procs.kill("gateway")
         before = spooled_seqs(site.spool)  # everything it published (spooled first)
         site.start_gateway()  # the same --spool, no anchor: it resumes its scene
+        port_open_ns = time.time_ns()
         site.start_serve()
         site.archived_more(max(len(s) for s in before.values()) + 20)
         site.stop_gateway()
         spooled = spooled_seqs(site.spool)
         assert site.caught_up(spooled), site.procs.logs()
         archived = archived_seqs(tmp_path)
+        resumed_ns = first_spooled_ns(site.spool, before)
+        assert resumed_ns is not None and resumed_ns - port_open_ns < 2e9, "resumed late"
         down: dict[str, tuple[int, int, int]] = {}
         for c in CHANNELS:
             assert before[c] <= archived[c], f"{c}: published before the kill, not archived"
