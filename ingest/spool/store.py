@@ -51,7 +51,7 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -419,18 +419,28 @@ class Spool:
 
     def read(self, key: str, first: int, last: int, limit: int | None = None) -> SpoolRead:
         """The blocks of ``key`` with ``first <= seq <= last`` it holds, in ``seq`` order (at
-        most ``limit``: the lowest), and how many of the range retention dropped."""
-        found: dict[int, bytes] = {}
+        most ``limit``: the lowest), and how many of the range retention dropped.
+
+        Files are read without holding the spool, so a long read does not hold up the gateway's
+        appends; a file that retention drops meanwhile makes it read again holding the spool
+        (the answer stays exact: each number either returned or counted as dropped)."""
         with self._mutex:
-            files = [f for f in self._files if key in f.runs]
-            for index in (f for f in files if f.runs[key].intersects(first, last)):
-                for seq, payload in _file_blocks(index.path, key, first, last):
-                    found.setdefault(seq, payload)
-                if limit is not None and len(found) >= limit:
-                    break  # (files are in spooling order, which is seq order per key)
+            paths = self._paths(key, first, last)
             dropped = self.dropped(key, first, last)
+        found = _read_files(paths, key, first, last, limit)
+        if found is None:
+            with self._mutex:
+                paths = self._paths(key, first, last)
+                dropped = self.dropped(key, first, last)
+                found = _read_files(paths, key, first, last, limit) or {}
         seqs = sorted(found)[:limit]
         return SpoolRead([found[s] for s in seqs], dropped)
+
+    def _paths(self, key: str, first: int, last: int) -> list[Path]:
+        """The files holding blocks of ``key`` in ``first..last``, in spooling order."""
+        return [
+            f.path for f in self._files if key in f.runs and f.runs[key].intersects(first, last)
+        ]
 
     def stats(self) -> dict[str, int]:
         """Files, bytes on disk, blocks held and blocks dropped by retention."""
@@ -472,16 +482,23 @@ class Spool:
         self.close()
 
 
-def _file_blocks(path: Path, key: str, first: int, last: int) -> Iterator[tuple[int, bytes]]:
-    """(seq, payload) of the blocks of ``key`` in ``first..last`` in one spool file."""
-    try:
-        for msg in TailTolerantReader(path).messages():
-            if msg.key == key:
-                seq = payload_seq(msg.payload)
+def _read_files(
+    paths: list[Path], key: str, first: int, last: int, limit: int | None
+) -> dict[int, bytes] | None:
+    """Blocks of ``key`` in ``first..last`` by seq from ``paths`` (in spooling order, which is
+    seq order per key: stops once ``limit`` are found); None when a file has vanished."""
+    found: dict[int, bytes] = {}
+    for path in paths:
+        try:
+            for msg in TailTolerantReader(path).messages():
+                seq = payload_seq(msg.payload) if msg.key == key else None
                 if seq is not None and first <= seq <= last:
-                    yield seq, msg.payload
-    except FileNotFoundError:  # dropped by retention meanwhile
-        return
+                    found.setdefault(seq, msg.payload)
+        except FileNotFoundError:  # dropped by retention meanwhile
+            return None
+        if limit is not None and len(found) >= limit:
+            break
+    return found
 
 
 def _unlink(path: Path) -> None:
