@@ -31,10 +31,11 @@ blocks that fell due while it was down. The number skipped is printed at start.
 worker's recovery queries from it (README "Wire format"), for ``--spool-hours`` and at most
 ``--spool-max-mb``. The spool also remembers the scene's anchor: restarted with the same
 ``--spool`` (and the same scene, mill, seed, duration and block size), the gateway resumes the
-scene where its wall clock is now, without ``--anchor-ns``. What fell due while it was down is
-known from the scene clock — the blocks due between its last spooled block and now — and is
-not published (a DAQ that was off has nothing of it); every block it published before it was
-killed is in the spool, and its sequence numbers continue from the spool's.
+scene where its wall clock is now, without ``--anchor-ns`` (a finished scene stays finished:
+a new run needs a new spool directory). What fell due while it was down is known from the scene
+clock — the blocks due between its last spooled block and now — and is not published (a DAQ
+that was off has nothing of it); every block it published before it was killed is in the
+spool, and its sequence numbers continue from the spool's.
 """
 
 from __future__ import annotations
@@ -314,25 +315,30 @@ def _scene_identity(scene: Scene, args: argparse.Namespace) -> dict[str, object]
 
 def _anchor(spool: Spool | None, scene: Scene, args: argparse.Namespace) -> int | None:
     """The scene's anchor: ``--anchor-ns``, else the one the spool kept (a restart), else now
-    (None); recorded in the spool. A spool of another scene is refused: its sequence numbers
-    would not continue."""
+    (None); recorded in the spool. A spool of another scene or anchor is refused: its sequence
+    numbers would not continue (the blocks it holds would hide the new run's)."""
     if spool is None:
         return cast(int | None, args.anchor_ns)
     identity = _scene_identity(scene, args)
     kept = spool.meta()
-    if kept and kept.get("scene_identity") != identity:
+    given = None if args.anchor_ns is None else _whole_ms(args.anchor_ns)
+    if kept and (kept.get("scene_identity") != identity or given not in (None, kept["anchor_ns"])):
         raise SpoolError(
-            f"--spool {spool.directory} holds the blocks of another scene "
-            f"({kept.get('scene_identity')}); give this scene its own spool directory"
+            f"--spool {spool.directory} holds the blocks of another run ({kept}); give this "
+            "scene its own spool directory (the same directory resumes the run it holds)"
         )
-    anchor = args.anchor_ns if args.anchor_ns is not None else kept.get("anchor_ns")
+    anchor = given if given is not None else kept.get("anchor_ns")
     if anchor is None:
-        anchor = time.time_ns() // 1_000_000 * 1_000_000
-    elif args.anchor_ns is None:
+        anchor = _whole_ms(time.time_ns())
+    elif given is None:
         log.info("resuming the spooled scene anchored at %d ns", anchor)
-    anchor = int(anchor) // 1_000_000 * 1_000_000  # (as starting_now places it: whole ms)
     spool.set_meta(scene_identity=identity, anchor_ns=anchor)
-    return anchor
+    return int(anchor)
+
+
+def _whole_ms(t_ns: int) -> int:
+    """``t_ns`` down to whole ms (where :func:`starting_now` places a scene's t0)."""
+    return int(t_ns) // 1_000_000 * 1_000_000
 
 
 def _report(config: MillConfig, scene: Scene, files: list[Path], truth: Path | None) -> None:
