@@ -67,7 +67,7 @@ from ingest.spool.resume import unspooled
 from ingest.spool.store import Spool, payload_seq
 from ingest.zenoh_session import build_config, open_session
 from service.cli.args import duration_seconds, non_negative_float, positive_float, utc_time_ns
-from service.cli.edge.spool import add_spool_arguments, open_spool
+from service.cli.edge.spool import add_spool_arguments, open_spool, spool_summary
 
 __all__ = ["add_parser", "default_run_name", "key_pattern", "utc_time_ns"]
 
@@ -244,6 +244,8 @@ def _main(args: argparse.Namespace) -> int:
             spool=spool,
         ).run()
     _print_report(report, remap, as_json=args.json)
+    if spool is not None:
+        sys.stderr.write("millwatch replay: " + spool_summary(spool) + "\n")
     if resumed:
         n = sum(resumed.values())
         sys.stderr.write(f"millwatch replay: {n} blocks were in --spool already (published "

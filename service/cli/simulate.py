@@ -67,7 +67,7 @@ from ingest.spool.query import SpoolServer
 from ingest.spool.store import Spool, SpoolError
 from ingest.zenoh_session import build_config, open_session
 from service.cli.args import duration_seconds, positive_float, positive_int, utc_time_ns
-from service.cli.edge.spool import add_spool_arguments, open_spool
+from service.cli.edge.spool import add_spool_arguments, open_spool, spool_summary
 
 __all__ = ["add_parser", "build_scene", "simulate_to_archive"]
 
@@ -304,6 +304,8 @@ def _publish(scene: Scene, args: argparse.Namespace, dtype: wire.DType) -> int:
         f"published {report.blocks} blocks in {report.wall_s:.1f} s; {report.skipped} blocks "
         f"fell due before start and were skipped; first sequence {report.first_seq}\n"
     )
+    if spool is not None:
+        sys.stdout.write(spool_summary(spool) + "\n")
     return 0
 
 

@@ -28,7 +28,7 @@ from ingest.spool.store import DEFAULT_HOURS, DEFAULT_MAX_MB, Spool
 from ingest.zenoh_session import build_config, open_session
 from service.cli.args import positive_float
 
-__all__ = ["add_parser", "add_spool_arguments", "open_spool"]
+__all__ = ["add_parser", "add_spool_arguments", "open_spool", "spool_summary"]
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +69,15 @@ def open_spool(args: argparse.Namespace) -> Spool | None:
     if args.spool is None:
         return None
     return Spool(args.spool, hours=args.spool_hours, max_bytes=round(args.spool_max_mb * 1e6))
+
+
+def spool_summary(spool: Spool) -> str:
+    """One line on what ``spool`` holds and what its retention dropped (ever)."""
+    stats = spool.stats()
+    return (
+        f"spool {spool.directory}: {stats['blocks']} blocks in {stats['files']} files "
+        f"({stats['bytes'] / 1e6:.1f} MB), {stats['dropped_blocks']} dropped by retention"
+    )
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -127,9 +136,5 @@ def _main(args: argparse.Namespace) -> int:
             wait_for_signal()
         finally:
             forwarder.close()
-    stats = spool.stats()
-    sys.stdout.write(
-        f"spooled {forwarder.spooled} blocks; spool holds {stats['blocks']} in {stats['files']} "
-        f"files ({stats['bytes'] / 1e6:.1f} MB), {stats['dropped_blocks']} dropped by retention\n"
-    )
+    sys.stdout.write(f"spooled {forwarder.spooled} blocks; {spool_summary(spool)}\n")
     return 0
