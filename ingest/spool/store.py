@@ -65,6 +65,7 @@ from ingest.archive.files import (
     PROFILE,
     SCHEMA_ENCODING,
     SCHEMA_NAME,
+    ArchiveError,
     archive_file_name,
     list_archive_files,
 )
@@ -314,7 +315,12 @@ class Spool:
             if path.name in dropped:  # dropped, ledger written, then killed before unlinking
                 _unlink(path)
                 continue
-            files.append(_FileIndex.load_or_scan(path))
+            try:
+                files.append(_FileIndex.load_or_scan(path))
+            except ArchiveError as exc:  # e.g. empty: killed before its header was written
+                aside = path.with_name(path.name + ".unreadable")
+                os.replace(path, aside)
+                log.warning("spool: %s set aside as %s: %s", path.name, aside.name, exc)
         return files
 
     # ------------------------------------------------------------------ writing

@@ -247,3 +247,14 @@ def test_replayed_keys_have_their_own_spool_keys():
     assert not keys.key_matches("millwatch/v1/**", keys.spool_key(live))
     with pytest.raises(keys.KeyFormatError):
         keys.parse_spool_key(live)
+
+
+def test_a_file_killed_before_its_header_is_set_aside_not_fatal(tmp_path):
+    clock = Clock()
+    with Spool(tmp_path, clock=clock) as spool:
+        _fill(spool, BLOCKS[:8])
+    (tmp_path / "spool_20991231T000000Z.mcap").write_bytes(b"")  # killed right after open()
+    with Spool(tmp_path, clock=clock) as spool:
+        assert spool.stats()["blocks"] == 8
+        _fill(spool, BLOCKS[8:16])
+    assert (tmp_path / "spool_20991231T000000Z.mcap.unreadable").exists()
