@@ -54,7 +54,7 @@ class SpoolForwarder:
         self._queue.put((str(sample.key_expr), sample.payload.to_bytes()))
 
     def _drain(self) -> None:
-        for _ in iter(int, 1):  # until the stop marker (bounded by close())
+        while True:  # until close() queues the stop marker
             key, payload = self._queue.get()
             if (key, payload) == _STOP:
                 return
