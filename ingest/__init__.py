@@ -2,9 +2,10 @@
 
 Data path::
 
-    sensor gateway / sim.publisher / replay ──gateway publisher (cache)──▶ zenoh
-        ──▶ (recovering) subscriber ──▶ worker (service.worker)
+    sensor gateway / sim.publisher / replay ──(spool.store, first)──gateway publisher (cache)
+        ──▶ zenoh ──▶ (recovering) subscriber ──▶ worker (service.worker)
         ──▶ archive.writer (raw, first) ──▶ analytics
+    worker gap ──spool.query──▶ the gateway's spool (or a ``spool.forwarder`` beside it)
 
 What is here (lower lines never import higher ones):
 
@@ -17,6 +18,8 @@ What is here (lower lines never import higher ones):
 - ``pacing``         when a timestamped block is due on the wall clock at ``speed`` × real time
 - ``mill_files``     reading mill configuration files (the model is in ``analytics.drivetrain``)
 - ``archive/``       the MCAP log: writer with rotation, tail-tolerant reader, recovery, batches
+- ``spool/``         a gateway's spool on disk (blocks kept before they are published, for
+  hours), recovery served from it by a zenoh queryable, the edge forwarder
 - ``replay``         archived blocks back onto zenoh, byte-identical, paced, on replay keys
 - ``sim/``           the scene simulator: synthetic telemetry with ground truth, published live
 

@@ -20,6 +20,10 @@ every use of it lives in this module; the rest of millwatch sees:
   there (see "History only through the initial query" below).
 - :class:`RecoveringSubscriber` — the history phase, then the recovery phase (same place).
 
+A gateway given a spool (:mod:`ingest.spool`) writes each block to it in
+:meth:`GatewayPublisher.put` *before* publishing it: the cache above serves short gaps, the
+spool on disk what outlives the cache or the gateway process (``--spool DIR``).
+
 Measured facts this module relies on (tests/ingest/test_gateway.py):
 
 - a subscriber declared after N puts receives the cache as history, in publish order, then
@@ -56,12 +60,15 @@ import threading
 from collections.abc import Callable
 from datetime import timedelta
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 from zenoh import ext
 
 from ingest.zenoh_session import block_encoding, wait_for_subscribers
+
+if TYPE_CHECKING:  # (the spool imports nothing of this module; only the annotation here)
+    from ingest.spool.store import Spool
 
 __all__ = [
     "DEFAULT_RETENTION_S",
@@ -107,16 +114,23 @@ def cache_samples(retention_s: float, blocks_per_s: float) -> int:
 
 
 class GatewayPublisher:
-    """A cached advanced publisher of wire blocks on one channel key (see module docstring)."""
+    """A cached advanced publisher of wire blocks on one channel key (see module docstring);
+    with a ``spool``, each block is spooled (on disk, with the OS) before it is published."""
 
-    def __init__(self, session: zenoh.Session, publisher: Any, max_samples: int) -> None:
+    def __init__(
+        self, session: zenoh.Session, publisher: Any, max_samples: int, spool: Spool | None = None
+    ) -> None:
         self._session = session
         self._publisher = publisher
         self.max_samples = max_samples
         self.key = str(publisher.key_expr)
+        self._spool = spool
 
     def put(self, payload: bytes) -> None:
-        """Publish ``payload`` stamped with the session's clock (so history ``max_age`` works)."""
+        """Spool ``payload`` (if a spool is given), then publish it stamped with the session's
+        clock (so history ``max_age`` works)."""
+        if self._spool is not None:
+            self._spool.append(self.key, payload)
         self._publisher.put(payload, timestamp=self._session.new_timestamp())
 
     def wait_for_subscribers(self, timeout_s: float) -> bool:
@@ -156,6 +170,7 @@ def declare_gateway_publisher(
     blocks_per_s: float,
     retention_s: float = DEFAULT_RETENTION_S,
     archived: bool = True,
+    spool: Spool | None = None,
 ) -> GatewayPublisher:
     """An advanced publisher for wire blocks on ``key`` keeping ``retention_s`` of sample time.
 
@@ -163,6 +178,7 @@ def declare_gateway_publisher(
     ``archived=True``: congestion control BLOCK, reliable (as
     :func:`ingest.zenoh_session.declare_block_publisher`); ``False``: DROP for live views.
     Replies to history and recovery queries always use BLOCK: a recovery must not be lossy.
+    ``spool``: every block is written to it before it is published (:mod:`ingest.spool`).
     """
     max_samples = cache_samples(retention_s, blocks_per_s)
     congestion = zenoh.CongestionControl.BLOCK if archived else zenoh.CongestionControl.DROP
@@ -181,7 +197,7 @@ def declare_gateway_publisher(
         ),
         publisher_detection=True,
     )
-    return GatewayPublisher(session, publisher, max_samples)
+    return GatewayPublisher(session, publisher, max_samples, spool)
 
 
 class RecoveringSubscriber:

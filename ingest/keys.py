@@ -7,6 +7,7 @@ Layout, version 1 (``/``-separated chunks)::
     alarms:  millwatch/v1/<site>/<mill>/@alarms
     query:   millwatch/v1/<site>/<mill>/@query/<what>     (a worker's queryable)
     worker:  millwatch/v1/<site>/<mill>/@worker/<worker>  (liveliness token)
+    spool:   <channel key>/@spool                  (a gateway spool's queryable)
 
 - ``v1`` is the key-layout version; a new layout gets ``v2`` and both can coexist
   on one router.
@@ -32,6 +33,11 @@ Layout, version 1 (``/``-separated chunks)::
 - Scale-out (:func:`query_key`, :func:`worker_token_key`): a worker answers ``get`` about
   each of its mills on ``…/@query/<what>`` and holds a liveliness token
   ``…/@worker/<worker>`` per mill while it runs; ``*``/``**`` never match either chunk.
+
+- Gateway spools (:func:`spool_key`, :mod:`ingest.spool`): a spool answers ``get`` for the
+  blocks it holds of one channel on that channel's key followed by the verbatim chunk
+  ``@spool`` (live and replay keys alike); ``*``/``**`` never match it, so no telemetry
+  subscriber sees recovery traffic and a query reaches only the spools of that channel.
 
 No other module formats keys: use :func:`build_key`, :func:`parse_key` and the
 pattern helpers. The map between a mill file's channels and their keys is built here too:
@@ -420,3 +426,23 @@ def worker_name(text: str) -> str:
     characters replaced by ``-``, at most 64 characters; ``worker`` when nothing is left."""
     name = re.sub(r"[^a-z0-9_-]", "-", text.lower()).strip("-_")[:64]
     return name if name else "worker"
+
+
+# ----------------------------------------------------------------------------- gateway spools
+SPOOL_TAG = "@spool"
+
+
+def spool_key(channel: str) -> str:
+    """The key a gateway spool answers recovery queries for channel key ``channel`` on:
+    ``<channel>/@spool`` (e.g. ``millwatch/v1/plant/m1/speed/@spool``); raises
+    :class:`KeyFormatError` when ``channel`` is not a channel key."""
+    return "/".join([parse_key(channel).expr, SPOOL_TAG])
+
+
+def parse_spool_key(expr: str) -> str:
+    """The channel key of a spool key (inverse of :func:`spool_key`); raises
+    :class:`KeyFormatError`."""
+    channel, _, tag = expr.rpartition("/")
+    if tag != SPOOL_TAG:
+        raise KeyFormatError("key", expr, "spool keys end with " + SPOOL_TAG)
+    return parse_key(channel).expr

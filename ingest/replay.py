@@ -39,6 +39,7 @@ from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import zenoh
 
@@ -47,6 +48,9 @@ from ingest.archive.files import MCAP_MAGIC, ArchivePosition, list_archive_files
 from ingest.archive.reader import ArchivedBlock, ArchiveReader, TailTolerantReader
 from ingest.gateway import DEFAULT_RETENTION_S, GatewayPublisher, declare_gateway_publisher
 from ingest.pacing import DEFAULT_LATE_THRESHOLD_S, PacingClock
+
+if TYPE_CHECKING:
+    from ingest.spool.store import Spool
 
 __all__ = [
     "KeyRemap",
@@ -388,6 +392,7 @@ class Replayer:
     ``wait_subscribers_s`` s at most are spent waiting for a subscriber to match (then the
     replay goes on regardless, with a warning). ``retention_s``: sample time each output key
     keeps for recovery (its cache is sized from the key's first block: fs / samples).
+    ``spool``: every block is written to it before it is published (:mod:`ingest.spool`).
 
     :meth:`pause`, :meth:`resume`, :meth:`set_speed` and :meth:`stop` may be called from any
     thread (or from ``on_progress``). One :meth:`run` per instance.
@@ -407,8 +412,10 @@ class Replayer:
         retention_s: float = DEFAULT_RETENTION_S,
         publisher_factory: PublisherFactory | None = None,
         clock: Callable[[], float] = time.monotonic,
+        spool: Spool | None = None,
     ) -> None:
         self._session = session
+        self._spool = spool
         self._retention_s = retention_s
         self._declare = publisher_factory or self._declare_gateway_publisher
         self._blocks = blocks
@@ -505,8 +512,9 @@ class Replayer:
 
     def _declare_gateway_publisher(self, key: str, blocks_per_s: float) -> GatewayPublisher:
         return declare_gateway_publisher(
-            self._session, key, blocks_per_s=blocks_per_s, retention_s=self._retention_s
-        )
+            self._session, key, blocks_per_s=blocks_per_s, retention_s=self._retention_s,
+            spool=self._spool,
+        )  # fmt: skip
 
     def _await_subscriber(self, publisher: GatewayPublisher, key: str) -> None:
         if not publisher.wait_for_subscribers(self._wait_subscribers_s):

@@ -15,6 +15,10 @@ scene sequence number and timestamps. Sequence numbers are per channel and count
 scene's start (:func:`ingest.sim.blocks.scene_blocks`), so a gateway restarted with the same
 anchor and seed continues the numbering and the lost span is exactly the blocks that fell due
 while it was down.
+
+**With a spool** (``spool=``, :mod:`ingest.spool`): each block is spooled before it is
+published, and blocks the spool already holds (published before a restart) are not published
+again, so the numbering continues from the spool's last ``seq`` per channel.
 """
 
 from __future__ import annotations
@@ -22,8 +26,10 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import zenoh
 
@@ -33,6 +39,10 @@ from ingest.pacing import PacingClock
 from ingest.sim.blocks import SceneBlock, scene_blocks
 from ingest.sim.renderer import Scene
 from ingest.sim.spec import SceneSpec
+from ingest.spool.resume import unspooled
+
+if TYPE_CHECKING:
+    from ingest.spool.store import Spool
 
 __all__ = ["PublishReport", "ScenePublisher", "starting_now"]
 
@@ -76,12 +86,14 @@ class ScenePublisher:
         wait_subscribers_s: float = 0.0,
         retention_s: float = DEFAULT_RETENTION_S,
         anchored: bool = False,
+        spool: Spool | None = None,
     ) -> None:
         """``wait_subscribers_s``: before its first block, wait up to this long for someone to
         subscribe (a gateway publishes regardless; a test wants every block delivered).
         ``retention_s``: sample time kept per channel for recovery. ``anchored``: the scene's
         ``t0`` is its wall-clock start; blocks already due are skipped (see module docstring);
-        needs a finite ``speed``."""
+        needs a finite ``speed``. ``spool``: blocks are spooled before they are published, and
+        those it holds already are not published again (module docstring)."""
         if anchored and speed is None:
             raise ValueError("anchored publishing needs a finite speed")
         self.scene = scene
@@ -92,6 +104,9 @@ class ScenePublisher:
         self._dtype = dtype
         self._retention_s = retention_s
         self._anchored = anchored
+        self._spool = spool
+        #: Blocks not published because the spool holds them (published before a restart).
+        self.spooled_before: Counter[str] = Counter()
         self._publishers: dict[str, GatewayPublisher] = {}
         self.published = 0
         self.skipped = 0
@@ -104,6 +119,8 @@ class ScenePublisher:
         blocks = scene_blocks(self.scene, block_samples=self._block_samples, dtype=self._dtype)
         if self._anchored:
             blocks = self._skip_due(blocks)
+        if self._spool is not None:
+            blocks = unspooled(blocks, self._spool, _block_key, _block_seq, self.spooled_before)
         try:
             for block in blocks:
                 if not self._publishers:  # once the first block is known (anchored: skips)
@@ -171,6 +188,7 @@ class ScenePublisher:
                 key,
                 blocks_per_s=self.scene.fs / self._block_samples,
                 retention_s=self._retention_s,
+                spool=self._spool,
             )
             self._publishers[key] = publisher
         return publisher
@@ -182,3 +200,11 @@ class ScenePublisher:
             except zenoh.ZError as exc:  # a closed session already undeclared it
                 log.debug("undeclare failed: %s", exc)
         self._publishers.clear()
+
+
+def _block_key(block: SceneBlock) -> str:
+    return block.key
+
+
+def _block_seq(block: SceneBlock) -> int:
+    return block.seq

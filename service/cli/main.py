@@ -34,6 +34,7 @@ USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError)
 MODULE_ERRORS = (
     ("ingest.archive.files", "ArchiveError"),
     ("service.store.migrations", "StoreError"),
+    ("ingest.spool.store", "SpoolError"),
 )
 
 
@@ -73,6 +74,11 @@ COMMANDS = (
         "replay",
         "service.cli.replay",
         "re-publish archived MCAP blocks to zenoh with their original pacing",
+    ),
+    Command(
+        "spool",
+        "service.cli.edge.spool",
+        "edge forwarder: spool a third-party gateway's blocks on disk and serve recovery",
     ),
     Command(
         "archive",

@@ -24,6 +24,11 @@ endpoint that is not up yet is retried in the background (peer mode) or waited f
 Like a plant gateway, the replayer keeps the last --retention of every output key (sample time,
 default 10m) in zenoh's advanced-publisher cache: a worker restarted during the replay recovers
 the blocks it missed from there (README "Wire format").
+
+``--spool DIR`` keeps every block in a spool on disk before publishing it, for ``--spool-hours``
+and at most ``--spool-max-mb``, and answers the worker's recovery queries from it while the
+replay runs. Restarted with the same DIR, the replay resumes after the last block the spool
+holds per output key (nothing falls due while a replay is down: it continues where it was).
 """
 
 from __future__ import annotations
@@ -32,8 +37,9 @@ import argparse
 import json
 import logging
 import sys
-from collections.abc import Callable, Iterator
-from contextlib import ExitStack, contextmanager
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import ExitStack, contextmanager, nullcontext
 from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
@@ -44,7 +50,9 @@ from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type info
 from alarms.times import iso_utc
 from ingest import keys
 from ingest.archive.files import ArchiveError
+from ingest.archive.reader import ArchivedBlock
 from ingest.gateway import DEFAULT_RETENTION_S
+from ingest.keys import KeyFormatError
 from ingest.replay import (
     KeyRemap,
     Replayer,
@@ -54,8 +62,12 @@ from ingest.replay import (
     archive_blocks,
     collect_archive_files,
 )
+from ingest.spool.query import SpoolServer
+from ingest.spool.resume import unspooled
+from ingest.spool.store import Spool, payload_seq
 from ingest.zenoh_session import build_config, open_session
 from service.cli.args import duration_seconds, non_negative_float, positive_float, utc_time_ns
+from service.cli.edge.spool import add_spool_arguments, open_spool, spool_summary
 
 __all__ = ["add_parser", "default_run_name", "key_pattern", "utc_time_ns"]
 
@@ -121,6 +133,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pace.add_argument("--max", action="store_true", help="as fast as possible (no pacing)")
     _add_selection_options(p)
     _add_zenoh_options(p)
+    add_spool_arguments(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     p.set_defaults(handler=_main)
@@ -207,10 +220,16 @@ def _main(args: argparse.Namespace) -> int:
         raise ReplayError(f"--from ({args.start} ns) must be before --to ({args.end} ns)")
     files = collect_archive_files(args.files)
     remap = args.remap or KeyRemap(run=args.run or default_run_name())
-    blocks = archive_blocks(files, args.keys, args.start, args.end)
+    blocks: Iterable[ArchivedBlock] = archive_blocks(files, args.keys, args.start, args.end)
     sys.stderr.write(f"millwatch replay: {len(files)} files -> {remap.subscription()}\n")
+    spool = open_spool(args)
+    resumed: Counter[str] = Counter()
+    if spool is not None:
+        blocks = unspooled(blocks, spool, _out_key(remap), _seq, resumed)
     with (
+        spool if spool is not None else nullcontext(),
         _session(args) as session,
+        _spool_server(session, spool),
         _progress(_show_progress(args)) as on_progress,
         _archive_errors(),
     ):
@@ -222,9 +241,16 @@ def _main(args: argparse.Namespace) -> int:
             on_progress=on_progress,
             wait_subscribers_s=args.wait_subscribers,
             retention_s=args.retention,
+            spool=spool,
         ).run()
     _print_report(report, remap, as_json=args.json)
-    if report.blocks == 0:
+    if spool is not None:
+        sys.stderr.write("millwatch replay: " + spool_summary(spool) + "\n")
+    if resumed:
+        n = sum(resumed.values())
+        sys.stderr.write(f"millwatch replay: {n} blocks were in --spool already (published "
+                         "before a restart) and were not sent again\n")  # fmt: skip
+    if report.blocks == 0 and not resumed:
         sys.stderr.write("millwatch replay: no archived block matched --keys/--from/--to\n")
         return 1
     return 0
@@ -242,6 +268,35 @@ def _session(args: argparse.Namespace) -> Iterator[zenoh.Session]:
                 f"cannot open a zenoh session (--listen {args.listen}, --connect {connect}): {exc}"
             ) from exc
         yield session
+
+
+def _out_key(remap: KeyRemap) -> Callable[[ArchivedBlock], str | None]:
+    """The output key of an archived block (None: not a channel key, skipped by the replay)."""
+
+    def out_key(block: ArchivedBlock) -> str | None:
+        try:
+            return remap.apply(block.key)
+        except (KeyFormatError, ReplayError):
+            return None
+
+    return out_key
+
+
+def _seq(block: ArchivedBlock) -> int | None:
+    return payload_seq(block.payload)
+
+
+@contextmanager
+def _spool_server(session: zenoh.Session, spool: Spool | None) -> Iterator[None]:
+    """Answer recovery queries from ``spool`` while the replay runs."""
+    if spool is None:
+        yield
+        return
+    server = SpoolServer(session, spool)
+    try:
+        yield
+    finally:
+        server.close()
 
 
 @contextmanager

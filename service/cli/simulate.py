@@ -26,6 +26,16 @@ before this process started are not published — they are lost, as for a DAQ th
 the next block keeps its scene sequence number and timestamps. Kill a gateway and restart it with
 the same --anchor-ns and --seed: sequence numbers continue, and the lost span is exactly the
 blocks that fell due while it was down. The number skipped is printed at start.
+
+``--spool DIR`` keeps every block in a spool on disk before publishing it and answers the
+worker's recovery queries from it (README "Wire format"), for ``--spool-hours`` and at most
+``--spool-max-mb``. The spool also remembers the scene's anchor: restarted with the same
+``--spool`` (and the same scene, mill, seed, duration and block size), the gateway resumes the
+scene where its wall clock is now, without ``--anchor-ns`` (a finished scene stays finished:
+a new run needs a new spool directory). What fell due while it was down is known from the scene
+clock — the blocks due between its last spooled block and now — and is not published (a DAQ
+that was off has nothing of it); every block it published before it was killed is in the
+spool, and its sequence numbers continue from the spool's.
 """
 
 from __future__ import annotations
@@ -35,8 +45,11 @@ import json
 import logging
 import os
 import sys
+import time
 from collections.abc import Iterator
+from contextlib import ExitStack
 from pathlib import Path
+from typing import cast
 
 from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
@@ -50,8 +63,11 @@ from ingest.sim.publisher import ScenePublisher, starting_now
 from ingest.sim.renderer import Scene
 from ingest.sim.scenes import get_scene, list_scenes, load_scene_file
 from ingest.sim.spec import SceneSpec
+from ingest.spool.query import SpoolServer
+from ingest.spool.store import Spool, SpoolError
 from ingest.zenoh_session import build_config, open_session
 from service.cli.args import duration_seconds, positive_float, positive_int, utc_time_ns
+from service.cli.edge.spool import add_spool_arguments, open_spool, spool_summary
 
 __all__ = ["add_parser", "build_scene", "simulate_to_archive"]
 
@@ -149,7 +165,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "it was down and continues the sequence numbers):\n"
             "  T=$(date +%s%N)\n"
             "  millwatch simulate --scene month --seed 3 --publish --anchor-ns $T   # Ctrl-C\n"
-            "  millwatch simulate --scene month --seed 3 --publish --anchor-ns $T"
+            "  millwatch simulate --scene month --seed 3 --publish --anchor-ns $T\n\n"
+            "the same with a spool on disk (the anchor is kept in the spool):\n"
+            "  millwatch simulate --scene month --seed 3 --publish --spool /var/spool/mw   # kill\n"
+            "  millwatch simulate --scene month --seed 3 --publish --spool /var/spool/mw"
         ),
     )
     p.add_argument("--scene", required=True, help="catalogue scene name or scene .toml file")
@@ -220,8 +239,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=utc_time_ns,
         metavar="T",
         help="wall time (ns since the epoch, UTC, or ISO-8601 with zone) at which the scene's "
-        "first sample is/was due (default: now); blocks already due are skipped, as lost",
+        "first sample is/was due (default: now, or the anchor kept in --spool); blocks already "
+        "due are skipped, as lost",
     )
+    add_spool_arguments(p)
     p.set_defaults(handler=_main)
 
 
@@ -244,7 +265,8 @@ def _publish(scene: Scene, args: argparse.Namespace, dtype: wire.DType) -> int:
     listen = (
         args.listen if args.listen is not None else ([] if args.connect else ["tcp/127.0.0.1:7447"])
     )
-    scene = starting_now(scene, args.anchor_ns)
+    spool = open_spool(args)
+    scene = starting_now(scene, _anchor(spool, scene, args))
     if args.truth is not None:
         args.truth.write_text(json.dumps(scene.truth.to_dict(), indent=2) + "\n")
     config = build_config(listen=listen, connect=args.connect)
@@ -254,7 +276,12 @@ def _publish(scene: Scene, args: argparse.Namespace, dtype: wire.DType) -> int:
         f"connect {args.connect or '-'}; retention {args.retention:g} s; anchor "
         f"{scene.t_ns(0)} ns; Ctrl-C stops\n"
     )
-    with open_session(config) as session:
+    with ExitStack() as stack:
+        if spool is not None:
+            stack.enter_context(spool)
+        session = stack.enter_context(open_session(config))
+        if spool is not None:
+            stack.callback(SpoolServer(session, spool).close)
         publisher = ScenePublisher(
             session,
             scene,
@@ -263,6 +290,7 @@ def _publish(scene: Scene, args: argparse.Namespace, dtype: wire.DType) -> int:
             dtype=dtype,
             retention_s=args.retention,
             anchored=True,
+            spool=spool,
         )
         try:
             report = publisher.run()
@@ -276,7 +304,43 @@ def _publish(scene: Scene, args: argparse.Namespace, dtype: wire.DType) -> int:
         f"published {report.blocks} blocks in {report.wall_s:.1f} s; {report.skipped} blocks "
         f"fell due before start and were skipped; first sequence {report.first_seq}\n"
     )
+    if spool is not None:
+        sys.stdout.write(spool_summary(spool) + "\n")
     return 0
+
+
+def _scene_identity(scene: Scene, args: argparse.Namespace) -> dict[str, object]:
+    """What must be the same for a restarted gateway to continue a spooled scene."""
+    return {"scene": scene.spec.name, "mill": scene.config.id, "seed": args.seed,
+            "samples": scene.n_samples, "block_size": args.block_size}  # fmt: skip
+
+
+def _anchor(spool: Spool | None, scene: Scene, args: argparse.Namespace) -> int | None:
+    """The scene's anchor: ``--anchor-ns``, else the one the spool kept (a restart), else now
+    (None); recorded in the spool. A spool of another scene or anchor is refused: its sequence
+    numbers would not continue (the blocks it holds would hide the new run's)."""
+    if spool is None:
+        return cast(int | None, args.anchor_ns)
+    identity = _scene_identity(scene, args)
+    kept = spool.meta()
+    given = None if args.anchor_ns is None else _whole_ms(args.anchor_ns)
+    if kept and (kept.get("scene_identity") != identity or given not in (None, kept["anchor_ns"])):
+        raise SpoolError(
+            f"--spool {spool.directory} holds the blocks of another run ({kept}); give this "
+            "scene its own spool directory (the same directory resumes the run it holds)"
+        )
+    anchor = given if given is not None else kept.get("anchor_ns")
+    if anchor is None:
+        anchor = _whole_ms(time.time_ns())
+    elif given is None:
+        log.info("resuming the spooled scene anchored at %d ns", anchor)
+    spool.set_meta(scene_identity=identity, anchor_ns=anchor)
+    return int(anchor)
+
+
+def _whole_ms(t_ns: int) -> int:
+    """``t_ns`` down to whole ms (where :func:`starting_now` places a scene's t0)."""
+    return int(t_ns) // 1_000_000 * 1_000_000
 
 
 def _report(config: MillConfig, scene: Scene, files: list[Path], truth: Path | None) -> None:

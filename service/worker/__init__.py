@@ -29,6 +29,9 @@ Modules, low to high (a module imports only those above it):
   the same way into a Foxglove export (``millwatch archive export``).
 * ``recovery`` — :func:`~service.worker.recovery.recover`: restore checkpoints, replay the
   archive tail (one process or several), then go live.
+* ``spool_recovery`` — :class:`~service.worker.spool_recovery.SpoolRecovery`: a gap a live
+  block reveals is first fetched from the gateways' spools (:mod:`ingest.spool`) and handled in
+  sequence order before that block (the worker's ``before_live`` hook).
 * ``drain_watch`` — whether each mill's blocks are still being analysed (``/ready``).
 * ``runtime`` — :class:`~service.worker.runtime.ServiceRuntime` owns the resources (store,
   archive, zenoh session, worker thread), starts them in order and closes them in reverse.

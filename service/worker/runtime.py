@@ -6,7 +6,8 @@ order of start-up matters:
 1. note when the archive was last written, then open the store and the archive writer;
 2. open the zenoh session (it connects while the next step runs);
 3. recover: restore the newest checkpoint and replay the archive after it;
-4. subscribe (callbacks only enqueue) with the recovering subscriber
+4. subscribe (callbacks only enqueue; a gap a live block reveals is first asked of the
+   gateways' spools, :mod:`service.worker.spool_recovery`) with the recovering subscriber
    (:func:`ingest.gateway.declare_recovering_subscriber`), one per mill, declared as soon as a
    gateway publisher of each of the mill's channels is up (:class:`ingest.gateway.PublisherWatch`;
    at most ``[worker] gateway_wait_s`` later with whatever is up, in a background thread): its
@@ -58,6 +59,7 @@ from service.worker.block_queue import BlockQueue
 from service.worker.drain_watch import DrainWatch
 from service.worker.health import MillHealth
 from service.worker.recovery import recover
+from service.worker.spool_recovery import SpoolRecovery, attach_spool_recovery
 from service.worker.worker import AckRequest, MillPipeline, Worker
 
 __all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
@@ -108,6 +110,8 @@ class ServiceRuntime:
         #: API's alarm board), before they are published on zenoh; must be quick.
         self.alarm_listeners: list[Callable[[list[Transition]], None]] = []
         self.recovered_blocks = 0
+        #: Gaps filled from the gateways' spools (set at start).
+        self.spool_recovery: SpoolRecovery | None = None
         self.started_ns: int | None = None
         self.drain_watch = DrainWatch(2 * settings.worker.stale_after_s)
         #: The month-end report job (None until started, or when ``[reports] enabled`` is off).
@@ -140,6 +144,7 @@ class ServiceRuntime:
         z = s.zenoh
         self.session = open_retrying(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
         self.worker.on_alarms = self._on_alarms
+        self.spool_recovery = attach_spool_recovery(self.worker, self.session)
         self.recovered_blocks = recover(
             self.worker,
             ArchiveReader(s.archive.directory, ARCHIVE_PREFIX),

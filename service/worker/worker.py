@@ -194,11 +194,16 @@ class Worker:
         self.losses = {m: deque(store.losses(m, LOSSES_SHOWN), LOSSES_SHOWN) for m in mills}
         for pipeline in pipelines.values():
             pipeline.read_history(store)
+        #: Called with each live block before it is archived: fills its channel's gap first
+        #: (:class:`~service.worker.spool_recovery.SpoolRecovery`, the gateways' spools).
+        self.before_live: Callable[[QueuedBlock], None] | None = None
 
     # ------------------------------------------------------------------ one block
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
         """Archive (unless replaying the archive), decode, route, analyse one block (a held
         mill's: all but analyse)."""
+        if archive and self.before_live is not None:
+            self.before_live(item)
         if archive and self.archive is not None:
             self._archive(self.archive, item)
         self.blocks_handled += 1

@@ -138,3 +138,26 @@ def test_bad_options_are_argparse_errors(
         main(["replay", str(tmp_path), *args])
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_replay_restarted_on_its_spool_resumes_after_its_last_spooled_block(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Nothing falls due while a replay is down: restarted with the same ``--spool``, it goes
+    on after the last block its spool holds per key, each block published once."""
+    written = write_archive(tmp_path / "a", 120)
+    spool = str(tmp_path / "spool")
+    with loopback() as net:
+        subscriber = net.subscribe(keys.replay_pattern("c1"))
+        common = [str(tmp_path / "a"), "--max", "--run", "c1", "--spool", spool, "--json"]
+        assert main(_replay([*common, "--to", str(T0 + 100 * MS)], net.endpoint)) == 0
+        first = json.loads(capsys.readouterr().out)["blocks"]
+        assert main(_replay(common, net.endpoint)) == 0
+        out = capsys.readouterr()
+        received = net.drain(len(written))
+        extra = leftovers(net.inbox)
+        subscriber.undeclare()
+    assert first == 50 and json.loads(out.out)["blocks"] == len(written) - first
+    assert "50 blocks were in --spool already" in out.err
+    assert by_key(received) == by_key([(keys.to_replay(k, "c1"), p) for k, _, p in written])
+    assert extra == []

@@ -11,7 +11,9 @@ import pytest
 from mcap.reader import make_reader
 
 from ingest.archive.reader import ArchiveReader, TailTolerantReader
+from ingest.spool.store import Spool
 from ingest.wire import decode_block
+from ingest.zenoh_session import free_loopback_port
 from service.cli.main import main
 from service.cli.simulate import DEFAULT_MILL, build_scene
 from tests.ingest.sim.scene_samples import channel_samples
@@ -102,3 +104,16 @@ def test_errors_name_the_bad_option(tmp_path, capsys, argv, message):
         code = exc.code
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_spool_of_another_run_is_refused_naming_it(tmp_path, capsys):
+    """The same --spool resumes the run it holds; another scene or anchor would hide its own
+    blocks behind the spool's sequence numbers, so it is refused before anything is published."""
+    spool = tmp_path / "spool"
+    with Spool(spool) as kept:
+        kept.set_meta(scene_identity={"scene": "steady"}, anchor_ns=1_000_000)
+    argv = ["simulate", "--scene", "start-lrs", "--publish", "--spool", str(spool),
+            "--listen", "tcp/127.0.0.1:" + str(free_loopback_port())]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert str(spool) in err and "its own spool directory" in err

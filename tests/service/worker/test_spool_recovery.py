@@ -1,0 +1,132 @@
+"""A worker fills a gap from the gateway's spool before the block that reveals it
+(service.worker.spool_recovery): archive in sequence order, the same results as a worker that
+missed nothing, and what the spool does not hold counted as before, with its exact count."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from ingest.archive.reader import ArchiveReader
+from ingest.archive.writer import ArchiveWriter
+from ingest.mill_files import load_mill_config
+from ingest.sim.blocks import scene_blocks
+from ingest.sim.publisher import starting_now
+from ingest.sim.scenes import get_scene
+from ingest.spool.query import SpoolAnswer
+from ingest.spool.store import Spool, payload_seq
+from service.store.database import Store
+from service.worker.block_queue import QueuedBlock
+from service.worker.mill_job import MillJob
+from service.worker.spool_recovery import SpoolRecovery
+from service.worker.worker import Worker
+
+MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
+CONFIG = load_mill_config(MILL)
+OUTAGE = range(50, 121)  # sequence numbers the worker does not receive live (7.1 s)
+
+
+def _blocks() -> list[QueuedBlock]:
+    scene = starting_now(get_scene("start-lrs", CONFIG, seed=11, duration_s=20.0))
+    return [QueuedBlock(b.key, b.payload, b.t_end_ns) for b in scene_blocks(scene)]
+
+
+BLOCKS = _blocks()
+
+
+def _worker(directory: Path) -> Worker:
+    store = Store(directory / "mw.db")
+    archive = ArchiveWriter(directory / "archive", "millwatch")
+    return Worker({CONFIG.id: CONFIG}, {CONFIG.id: MillJob(CONFIG)}, store, archive,
+                  checkpoint_seconds=3600.0)  # type: ignore[dict-item]  # fmt: skip
+
+
+def _run(worker: Worker, blocks: list[QueuedBlock]) -> dict[str, object]:
+    """Handle ``blocks`` live (received now); the results a worker that stops cleanly keeps."""
+    for item in blocks:
+        worker.handle(QueuedBlock(item.key, item.payload, time.time_ns()))
+    worker.commit()
+    assert worker.archive is not None
+    worker.archive.close()
+    analyzer = worker.pipelines[CONFIG.id].analyzer  # type: ignore[attr-defined]
+    analyzer.flush()
+    channels = worker.health[CONFIG.id].channels
+    return {
+        "damage": json.dumps(analyzer.report()["damage"], sort_keys=True),
+        "missing": {c: h.missing_blocks for c, h in channels.items()},
+    }
+
+
+def _archived(directory: Path) -> dict[str, list[int]]:
+    out: dict[str, list[int]] = {}
+    for b in ArchiveReader(directory / "archive", "millwatch").blocks():
+        seq = payload_seq(b.payload)
+        out.setdefault(b.key, []).append(-1 if seq is None else seq)
+    return out
+
+
+def _spool_fetch(spool: Spool, asked: list[tuple[str, int, int]]):  # type: ignore[no-untyped-def]
+    def fetch(key: str, first: int, last: int) -> SpoolAnswer:
+        asked.append((key, first, last))
+        got = spool.read(key, first, last)
+        return SpoolAnswer(got.blocks, got.dropped, True)
+
+    return fetch
+
+
+def _attach(worker: Worker, spool: Spool, asked: list[tuple[str, int, int]]) -> SpoolRecovery:
+    recovery = SpoolRecovery(_spool_fetch(spool, asked), worker.route, worker.health,
+                             worker.handle)  # fmt: skip
+    worker.before_live = recovery
+    return recovery
+
+
+def test_a_gap_is_filled_from_the_spool_in_order_and_results_equal_an_uninterrupted_run(
+    tmp_path,
+) -> None:
+    clean = _run(_worker(tmp_path / "clean"), BLOCKS)
+    live = [b for b in BLOCKS if payload_seq(b.payload) not in OUTAGE]
+    asked: list[tuple[str, int, int]] = []
+    with Spool(tmp_path / "spool") as spool:
+        for b in BLOCKS:
+            spool.append(b.key, b.payload)
+        worker = _worker(tmp_path / "live")
+        recovery = _attach(worker, spool, asked)
+        got = _run(worker, live)
+    assert got == clean
+    assert recovery.recovered == len(BLOCKS) - len(live)
+    assert sorted(asked) == sorted((k, OUTAGE[0], OUTAGE[-1]) for k in _archived(tmp_path / "live"))
+    n = len(BLOCKS) // len(CONFIG.channels)
+    assert all(seqs == list(range(n)) for seqs in _archived(tmp_path / "live").values())
+
+
+def test_what_the_spool_never_held_stays_a_loss_with_its_exact_count(tmp_path) -> None:
+    down = range(70, 91)  # the gateway was down: never spooled, never published
+    live = [b for b in BLOCKS if payload_seq(b.payload) not in OUTAGE]
+    with Spool(tmp_path / "spool") as spool:
+        for b in BLOCKS:
+            if payload_seq(b.payload) not in down:
+                spool.append(b.key, b.payload)
+        worker = _worker(tmp_path / "live")
+        _attach(worker, spool, [])
+        got = _run(worker, live)
+    assert got["missing"] == dict.fromkeys(CONFIG.channels, len(down))
+    assert worker.store is not None
+    losses = worker.store.losses(CONFIG.id, 20)
+    assert sorted((e["channel"], e["first_seq"], e["missing_blocks"]) for e in losses) == sorted(
+        (c, down[0], len(down)) for c in CONFIG.channels
+    )
+    archived = _archived(tmp_path / "live")
+    want = [s for s in range(len(BLOCKS) // len(CONFIG.channels)) if s not in down]
+    assert all(seqs == want for seqs in archived.values())
+
+
+def test_the_replay_of_the_archive_asks_no_spool(tmp_path) -> None:
+    asked: list[tuple[str, int, int]] = []
+    with Spool(tmp_path / "spool") as spool:
+        worker = _worker(tmp_path / "w")
+        _attach(worker, spool, asked)
+        for item in BLOCKS[:40] + BLOCKS[200:240]:
+            worker.handle(item, archive=False)
+    assert asked == []
