@@ -14,7 +14,9 @@ What is here:
 * :mod:`service.api.mill_views`, :mod:`service.api.alarm_views` — what the per-mill and alarm
   endpoints answer, from the store and the worker's status snapshot.
 * :mod:`service.api.alarm_board` — every alarm's current state in memory (cheap ``/alarms``).
-* :mod:`service.api.models` — the request and response bodies (OpenAPI schema).
+* :mod:`service.api.models` — the request and response bodies (OpenAPI schema); the typed
+  results of the analysis (``MillStatus``, ``LifeReport``, ``MonthStarts``, ``FleetView``) are
+  defined once by their producers and are the backend's return types and the response models.
 * :mod:`service.api.errors` — domain errors and their ``application/problem+json`` answers.
 * :mod:`service.api.metrics` — the Prometheus collector of a runtime;
   :mod:`service.api.domain_metrics` — its domain gauges (damage, remaining life, oscillation,

@@ -23,7 +23,9 @@ from prometheus_client import CollectorRegistry
 
 from analytics.drivetrain.mill_config import MillConfig
 from service.api.alarm_board import AlarmBoard
+from service.reports.life import LifeReport
 from service.reports.monthly import MonthlyReport
+from service.reports.starts import MonthStarts
 from service.status import MillStatus
 
 __all__ = ["Backend"]
@@ -50,9 +52,14 @@ class Backend(Protocol):
         OPC UA server), which need no worker details."""
         ...
 
-    def life(self, mill_id: str) -> dict[str, Any]: ...
+    def life(self, mill_id: str) -> LifeReport:
+        """Damage so far and remaining life per component (``GET /mills/{id}/life``)."""
+        ...
 
-    def starts(self, mill_id: str, month: str | None) -> dict[str, Any]: ...
+    def starts(self, mill_id: str, month: str | None) -> MonthStarts:
+        """The starts of ``month`` (default: the mill's current month) against norm and
+        levels (``GET /mills/{id}/starts``)."""
+        ...
 
     def spectrum(self, mill_id: str) -> dict[str, Any]: ...
 

@@ -37,6 +37,7 @@ from prometheus_client.core import GaugeMetricFamily, Metric
 
 from analytics.mill.results import SteadyWindowResult
 from analytics.operation.operating_states import OperatingState
+from service.reports.life import LifeReport
 from service.status import NO_STATUS, MillStatus
 
 __all__ = ["MILL_STATES", "LifeCache", "domain_families"]
@@ -48,17 +49,17 @@ MILL_STATES = (*(s.label for s in OperatingState), "held", "unreachable")
 
 
 class LifeCache:
-    """Each mill's life answer (``fetch(mill)``, a :func:`~service.reports.life.life_to_dict`
-    dict), kept ``ttl_s`` seconds; ``None`` while it cannot be computed (logged once per mill)."""
+    """Each mill's life answer (``fetch(mill)``, a :class:`~service.reports.life.LifeReport`),
+    kept ``ttl_s`` seconds; ``None`` while it cannot be computed (logged once per mill)."""
 
-    def __init__(self, fetch: Callable[[str], dict[str, Any]], ttl_s: float = 60.0) -> None:
+    def __init__(self, fetch: Callable[[str], LifeReport], ttl_s: float = 60.0) -> None:
         self._fetch = fetch
         self._ttl_s = ttl_s
-        self._kept: dict[str, tuple[float, dict[str, Any] | None]] = {}
+        self._kept: dict[str, tuple[float, LifeReport | None]] = {}
         self._failed: set[str] = set()
         self._lock = threading.Lock()
 
-    def get(self, mill: str) -> dict[str, Any] | None:
+    def get(self, mill: str) -> LifeReport | None:
         now = time.monotonic()
         with self._lock:
             kept = self._kept.get(mill)
@@ -69,7 +70,7 @@ class LifeCache:
             self._kept[mill] = (now, life)
         return life
 
-    def _compute(self, mill: str) -> dict[str, Any] | None:
+    def _compute(self, mill: str) -> LifeReport | None:
         try:
             return self._fetch(mill)
         except Exception as exc:
@@ -86,7 +87,7 @@ def _gauge(name: str, doc: str, *labels: str) -> GaugeMetricFamily:
 def domain_families(
     mills: Iterable[str],
     status: Mapping[str, MillStatus],
-    life: Callable[[str], dict[str, Any] | None],
+    life: Callable[[str], LifeReport | None],
 ) -> Iterator[Metric]:
     """The domain gauges of the module docstring for ``mills``."""
     damage = _gauge("millwatch_damage_ratio", "Miner damage so far incl. the estimated prior "
@@ -119,14 +120,14 @@ def domain_families(
 
 
 def _life(
-    damage: GaugeMetricFamily, remaining: GaugeMetricFamily, mill: str, life: dict[str, Any] | None
+    damage: GaugeMetricFamily, remaining: GaugeMetricFamily, mill: str, life: LifeReport | None
 ) -> None:
     if life is None:
         return
-    for comp, c in sorted(life.get("components", {}).items()):
-        damage.add_metric([mill, comp], c["damage"])
-        if life.get("status") == "ok" and c.get("remaining_life_years_min") is not None:
-            remaining.add_metric([mill, comp], c["remaining_life_years_min"])
+    for comp, c in sorted(life.components.items()):
+        damage.add_metric([mill, comp], c.damage)
+        if life.status == "ok" and c.remaining_life_years_min is not None:
+            remaining.add_metric([mill, comp], c.remaining_life_years_min)
 
 
 def _steady(

@@ -32,7 +32,9 @@ from service.api.mill_views import (
     store_of,
 )
 from service.reports.fleet import FleetMill, build_fleet, fleet_entry, fleet_to_dict
+from service.reports.life import LifeReport
 from service.reports.monthly import MonthlyReport
+from service.reports.starts import MonthStarts
 from service.status import NO_STATUS, MillStatus
 from service.worker.partition import worker_identity
 from service.worker.runtime import MILL_CHECKS, ServiceRuntime
@@ -121,10 +123,10 @@ class LocalBackend:
         config = config_of(self.mills, mill_id)
         return mill_detail(config, self.runtime.status.get(mill_id, NO_STATUS), self.worker_info())
 
-    def life(self, mill_id: str) -> dict[str, Any]:
+    def life(self, mill_id: str) -> LifeReport:
         return mill_life(self.runtime, mill_id)
 
-    def starts(self, mill_id: str, month: str | None) -> dict[str, Any]:
+    def starts(self, mill_id: str, month: str | None) -> MonthStarts:
         return mill_starts(self.runtime, mill_id, month)
 
     def spectrum(self, mill_id: str) -> dict[str, Any]:

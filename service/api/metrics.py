@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from typing import Any
 
 from prometheus_client import CollectorRegistry
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
@@ -28,14 +27,15 @@ from prometheus_client.registry import Collector
 from alarms.lifecycle import Alarm
 from service.api.domain_metrics import LifeCache, domain_families
 from service.api.mill_views import mill_life
+from service.reports.life import LifeReport
 from service.status import NO_STATUS, MillStatus
 from service.worker.runtime import ServiceRuntime
 
 __all__ = ["RuntimeCollector", "metrics_registry", "mill_families", "open_alarms"]
 
 _OPEN = ("raised", "acknowledged")
-LifeSource = Callable[[str], dict[str, Any] | None]
-"""A mill's life answer (``GET /mills/{id}/life`` as a dict), ``None`` when not available."""
+LifeSource = Callable[[str], LifeReport | None]
+"""A mill's life answer (``GET /mills/{id}/life``), ``None`` when not available."""
 
 
 class RuntimeCollector(Collector):

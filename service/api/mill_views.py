@@ -16,9 +16,9 @@ from typing import Any
 from analytics.drivetrain.mill_config import MillConfig
 from service.errors import NotFound, Unavailable
 from service.reports.history import life_inputs
-from service.reports.life import compute_life, life_to_dict
+from service.reports.life import LifeReport, compute_life
 from service.reports.monthly import MonthlyReport, build_monthly_report
-from service.reports.starts import current_month, starts_in_month
+from service.reports.starts import MonthStarts, current_month, starts_in_month
 from service.status import NO_STATUS, MillStatus
 from service.store.database import Store
 from service.worker.runtime import ServiceRuntime
@@ -119,7 +119,7 @@ def store_of(runtime: ServiceRuntime) -> Store:
     return store
 
 
-def mill_life(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
+def mill_life(runtime: ServiceRuntime, mill_id: str) -> LifeReport:
     """Damage so far and remaining life per component (:mod:`service.reports.life`), with the
     worker's live damage (closed cycles not yet stored, the open residue)."""
     config = mill_config(runtime, mill_id)
@@ -129,7 +129,7 @@ def mill_life(runtime: ServiceRuntime, mill_id: str) -> dict[str, Any]:
         report = compute_life(life_inputs(store, config, time.time_ns(),
                                           live=status.live_damage(),
                                           last_sample_ns=status.last_sample_ns))  # fmt: skip
-    return life_to_dict(report)
+    return report
 
 
 def mill_month(runtime: ServiceRuntime, config: MillConfig) -> str:
@@ -140,7 +140,7 @@ def mill_month(runtime: ServiceRuntime, config: MillConfig) -> str:
     return current_month(config, time.time_ns() if last is None else last)
 
 
-def mill_starts(runtime: ServiceRuntime, mill_id: str, month: str | None) -> dict[str, Any]:
+def mill_starts(runtime: ServiceRuntime, mill_id: str, month: str | None) -> MonthStarts:
     """The starts of ``month`` (default: the mill's current month, :func:`mill_month`)."""
     config = mill_config(runtime, mill_id)
     month = month or mill_month(runtime, config)

@@ -1,7 +1,9 @@
-"""Response and request bodies of the mill, starts, spectrum and alarm endpoints, for the
-OpenAPI schema (with examples) and for validating what the API sends. Units are in the field
-names. ``/life`` and ``/sites/{site}/fleet`` answer their report dataclasses
-(:class:`service.reports.life.LifeReport`, :class:`service.reports.fleet.FleetView`)."""
+"""Response and request bodies of the mill, spectrum and alarm endpoints, for the OpenAPI schema
+(with examples) and for validating what the API sends. Units are in the field names. ``/life``,
+``/starts`` and ``/sites/{site}/fleet`` answer the typed results of their producers, defined
+once there (:class:`service.reports.life.LifeReport`, :class:`service.reports.starts.MonthStarts`
+— re-exported here with its :class:`~service.reports.starts.StartOut` —,
+:class:`service.reports.fleet.FleetView`)."""
 
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic.config import JsonDict
 
+from service.reports.starts import MonthStarts, StartOut
 from service.status import MillStatus
 
 __all__ = [
@@ -93,70 +96,6 @@ class MillDetail(MillSummary):
         description="The worker: name, partition, counters, its own readiness checks; live "
         "false when it is gone."
     )
-
-
-class StartOut(BaseModel):
-    t_ns: int
-    t: str = Field(description="Start time, ISO-8601 UTC (= t_ns).")
-    local_time: str
-    end_t_ns: int | None
-    end_t: str | None = Field(description="End of the start, ISO-8601 UTC (= end_t_ns).")
-    failed: bool
-    switch_on_peak_pct: float | None = Field(description="% of motor rated torque.")
-    short_circuit_peak_pct: float | None
-    rise_time_10_90_ms: float | None
-    shock_load: bool
-    peak_status: str = Field(description="ok, warning or alarm against peak_limits_pct.")
-
-
-class MonthStarts(BaseModel):
-    model_config = ConfigDict(
-        json_schema_extra={
-            "examples": [
-                {
-                    "mill": "sag-5200-lrs",
-                    "simulated": False,
-                    "month": "2024-05",
-                    "time_zone": "America/Santiago",
-                    "count": 21,
-                    "failed": 2,
-                    "norm_per_month": [3, 5],
-                    "count_warn": 5,
-                    "count_alarm": 20,
-                    "count_status": "alarm",
-                    "peak_limits_pct": {"warn": 250.0, "alarm": 300.0},
-                    "starts": [
-                        {
-                            "t_ns": 1714560000000000000,
-                            "t": "2024-05-01T10:40:00Z",
-                            "local_time": "2024-05-01T06:40:00-04:00",
-                            "end_t_ns": 1714560030000000000,
-                            "end_t": "2024-05-01T10:40:30Z",
-                            "failed": False,
-                            "switch_on_peak_pct": 262.0,
-                            "short_circuit_peak_pct": None,
-                            "rise_time_10_90_ms": 41.0,
-                            "shock_load": False,
-                            "peak_status": "warning",
-                        }
-                    ],
-                }
-            ]
-        }
-    )
-
-    mill: str
-    simulated: bool
-    month: str
-    time_zone: str
-    count: int
-    failed: int
-    norm_per_month: list[int] = Field(description="Supplier norm, starts per month (3–5).")
-    count_warn: int
-    count_alarm: int
-    count_status: str = Field(description="ok, above norm, warning or alarm.")
-    peak_limits_pct: dict[str, float]
-    starts: list[StartOut]
 
 
 class Spectrum(BaseModel):

@@ -1,8 +1,10 @@
 """What the OPC UA server shows of a mill: the backend's answers flattened to named points.
 
 Pure: the backend's answers in — the mill's line of ``GET /mills`` and its status
-(:class:`~service.status.MillStatus`, read by attribute), ``/mills/{id}/life`` and
-``/mills/{id}/starts`` (the same :class:`~service.api.backend.Backend` answers as REST) —
+(:class:`~service.status.MillStatus`), ``/mills/{id}/life``
+(:class:`~service.reports.life.LifeReport`) and ``/mills/{id}/starts``
+(:class:`~service.reports.starts.MonthStarts`), all read by attribute (the same
+:class:`~service.api.backend.Backend` answers as REST) —
 ``{path: Point}`` out. A path is the browse
 path under the mill's node (``SteadyState/motor_torque/RangePct``); it is also the string part of
 the variable's NodeId, so a SCADA tag list can be written from this table:
@@ -37,7 +39,6 @@ reads with a bad status, never a made-up number.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from enum import Enum
@@ -46,6 +47,8 @@ from typing import Any
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.mill.results import SteadyWindowResult
 from service.api.models import MillSummary
+from service.reports.life import ComponentLife, LifeReport, Projection
+from service.reports.starts import MonthStarts
 from service.status import NO_STATUS, MillHealthStatus, MillStatus
 
 __all__ = ["Kind", "Point", "mill_points", "ns_to_datetime"]
@@ -85,16 +88,12 @@ def _num(value: Any) -> float | None:
     return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
 
 
-def _count(value: Any) -> int | None:
-    return int(value) if isinstance(value, int) and not isinstance(value, bool) else None
-
-
 def mill_points(
     config: MillConfig,
     summary: MillSummary | None,
     status: MillStatus | None,
-    life: Mapping[str, Any] | None,
-    starts: Mapping[str, Any] | None,
+    life: LifeReport | None,
+    starts: MonthStarts | None,
 ) -> dict[str, Point]:
     """Every point of one mill (module docstring): ``summary`` its line of ``GET /mills``
     (state, hold, stale channels), ``status`` the worker's (None: its worker is gone);
@@ -108,18 +107,18 @@ def mill_points(
         "LastSampleTime": Point(ns_to_datetime(status.last_sample_ns), Kind.TIME),
         "OpenAlarms": Point(status.open_alarms, Kind.UINT),
     }
-    points.update(_starts_points(starts or {}))
+    points.update(_starts_points(starts))
     points.update(_steady_points(config, status.latest_steady))
-    points.update(_life_points(config, life or {}))
+    points.update(_life_points(config, life))
     points.update(_channel_points(config, status.health))
     return points
 
 
-def _starts_points(starts: Mapping[str, Any]) -> dict[str, Point]:
+def _starts_points(starts: MonthStarts | None) -> dict[str, Point]:
     return {
-        "StartsThisMonth": Point(_count(starts.get("count")), Kind.UINT),
-        "FailedStartsThisMonth": Point(_count(starts.get("failed")), Kind.UINT),
-        "StartsStatus": Point(starts.get("count_status"), Kind.STRING),
+        "StartsThisMonth": Point(None if starts is None else starts.count, Kind.UINT),
+        "FailedStartsThisMonth": Point(None if starts is None else starts.failed, Kind.UINT),
+        "StartsStatus": Point(None if starts is None else starts.count_status, Kind.STRING),
     }
 
 
@@ -144,22 +143,24 @@ def _steady_points(config: MillConfig, w: SteadyWindowResult | None) -> dict[str
     return out
 
 
-def _life_points(config: MillConfig, life: Mapping[str, Any]) -> dict[str, Point]:
-    comps = life.get("components") or {}
+def _life_points(config: MillConfig, life: LifeReport | None) -> dict[str, Point]:
+    comps = {} if life is None else life.components
     out = {}
     for comp in config.components:
-        c = comps.get(comp) or {}
+        c = comps.get(comp)
         base = f"Components/{comp}/"
-        projections = c.get("projections") or ()
-        recent: Mapping[str, Any] = next(
-            (p for p in projections if str(p.get("basis", "")).startswith("last_")), {}
-        )
-        out[base + "Damage"] = Point(_num(c.get("damage")), Kind.DOUBLE, "1")
-        out[base + "DamageRatePerYear"] = Point(_num(recent.get("rate_per_year")), Kind.DOUBLE)
+        recent = None if c is None else _recent(c)
+        out[base + "Damage"] = Point(None if c is None else _num(c.damage), Kind.DOUBLE, "1")
+        out[base + "DamageRatePerYear"] = Point(
+            None if recent is None else _num(recent.rate_per_year), Kind.DOUBLE)  # fmt: skip
         out[base + "RemainingLifeYears"] = Point(
-            _num(c.get("remaining_life_years_min")), Kind.DOUBLE, "a"
-        )
+            None if c is None else _num(c.remaining_life_years_min), Kind.DOUBLE, "a")  # fmt: skip
     return out
+
+
+def _recent(c: ComponentLife) -> Projection | None:
+    """The component's projection at the recent rate (``last_<N>_days``)."""
+    return next((p for p in c.projections if p.basis.startswith("last_")), None)
 
 
 def _channel_points(config: MillConfig, health: MillHealthStatus | None) -> dict[str, Point]:

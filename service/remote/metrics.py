@@ -9,7 +9,7 @@ board), the worker counters with a ``worker`` label, and ``millwatch_mill_reacha
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
-from typing import Any, Protocol
+from typing import Protocol
 
 from prometheus_client import CollectorRegistry
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
@@ -21,6 +21,7 @@ from service.api.domain_metrics import LifeCache
 from service.api.metrics import mill_families, open_alarms
 from service.api.mill_views import UNREACHABLE
 from service.remote.protocol import StatusAnswer
+from service.reports.life import LifeReport
 from service.status import MillStatus
 
 __all__ = ["RemoteCollector", "StatusSource", "remote_registry"]
@@ -36,7 +37,7 @@ class StatusSource(Protocol):
 
     def alarm_board(self) -> AlarmBoard: ...
 
-    def life(self, mill_id: str) -> dict[str, Any]: ...
+    def life(self, mill_id: str) -> LifeReport: ...
 
 
 _WORKER_COUNTERS = (
@@ -80,7 +81,7 @@ class RemoteCollector(Collector):
                   for m in self.backend.mills}  # fmt: skip
 
         # life only of mills whose worker answers (an unreachable one would cost a timeout)
-        def life(mill: str) -> dict[str, Any] | None:
+        def life(mill: str) -> LifeReport | None:
             return self.life.get(mill) if mill in gathered else None
 
         yield from mill_families(self.backend.mills, status, life)

@@ -10,8 +10,9 @@ what       arguments               answer
 =========  ======================  ==============================================
 status     —                       :class:`StatusAnswer`: ``{"status": MillStatus,
                                    "worker": <info>}``
-life       —                       ``GET /mills/{id}/life`` body
-starts     ``month`` (optional)    ``GET /mills/{id}/starts`` body
+life       —                       :class:`~service.reports.life.LifeReport`
+                                   (``life_to_dict``, ``life_from_dict``)
+starts     ``month`` (optional)    :class:`~service.reports.starts.MonthStarts`
 spectrum   —                       ``GET /mills/{id}/spectrum`` body
 report     ``month`` (optional)    the monthly report as JSON (``report_to_dict``)
 alarms     —                       the mill's alarms (rows, most recent first)
@@ -20,10 +21,12 @@ ack        ``alarm_id``, ``by``    the alarm after acknowledgement
 =========  ======================  ==============================================
 
 Answers are UTF-8 JSON (:data:`JSON`); a typed answer is sent as its model's JSON data and
-read back with ``model_validate`` (:class:`StatusAnswer`). Errors are ``reply_err`` with problem
-JSON (``status``, ``title``, ``detail``): :func:`problem_of` on the worker,
-:func:`problem_from` on the API, which raises the same :mod:`service.api.errors` exception, so
-the remote API answers what an in-process one would. A new question is a member of
+read back with ``model_validate`` (:class:`StatusAnswer`, ``MonthStarts``; the life report, a
+dataclass, through its ``TypeAdapter``: :func:`~service.reports.life.life_from_dict`), so a
+field renamed on one end is a validation error naming it, not a silent null. Errors are
+``reply_err`` with problem JSON (``status``, ``title``, ``detail``): :func:`problem_of` on the
+worker, :func:`problem_from` on the API, which raises the same :mod:`service.api.errors`
+exception, so the remote API answers what an in-process one would. A new question is a member of
 :class:`Question`, an entry in the worker's ``ANSWERS`` and a method of the backend that asks it.
 """
 

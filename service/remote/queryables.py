@@ -50,6 +50,7 @@ from service.remote.protocol import (
     problem_of,
 )
 from service.reports.fleet import fleet_mill_to_dict
+from service.reports.life import life_to_dict
 from service.reports.monthly import report_to_dict
 
 __all__ = ["ANSWERS", "WorkerQueryables"]
@@ -82,8 +83,8 @@ ANSWERS: dict[Question, Answer] = {
     Question.STATUS: lambda b, m, _: StatusAnswer(
         status=b.status(m), worker=b.worker_info()
     ).to_json(),
-    Question.LIFE: lambda b, m, _: b.life(m),
-    Question.STARTS: lambda b, m, a: b.starts(m, month_of(a)),
+    Question.LIFE: lambda b, m, _: life_to_dict(b.life(m)),
+    Question.STARTS: lambda b, m, a: b.starts(m, month_of(a)).model_dump(mode="json"),
     Question.SPECTRUM: lambda b, m, _: b.spectrum(m),
     Question.REPORT: lambda b, m, a: report_to_dict(b.monthly_report(m, month_of(a))),
     Question.ALARMS: lambda b, m, _: [row_to_dict(r) for r in b.alarm_board().rows(m)],

@@ -25,10 +25,11 @@ one would. ``GET /mills`` and ``/ready`` gather every mill's status with one ``g
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -63,7 +64,9 @@ from service.remote.protocol import (
 )
 from service.remote.report_codec import ReportDecodeError, report_from_dict
 from service.reports.fleet import build_fleet, fleet_mill_from_dict, fleet_to_dict
+from service.reports.life import LifeReport, life_from_dict
 from service.reports.monthly import MonthlyReport
+from service.reports.starts import MonthStarts
 from service.status import MillStatus
 
 __all__ = ["DEFAULT_TIMEOUT_S", "ZenohBackend"]
@@ -71,6 +74,17 @@ __all__ = ["DEFAULT_TIMEOUT_S", "ZenohBackend"]
 log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT_S = 10.0
+
+
+@contextlib.contextmanager
+def _unfit(mill_id: str, what: str) -> Iterator[None]:
+    """A worker's typed answer that does not validate is :class:`Unavailable` naming the field
+    (a worker of another version), not a body the API would send half-empty."""
+    try:
+        yield
+    except ValidationError as exc:
+        raise Unavailable("Answer unreadable", f"The worker's {what} about {mill_id!r} does not "
+                          f"fit this API's version: {exc}.") from exc  # fmt: skip
 
 
 class ZenohBackend:
@@ -275,11 +289,15 @@ class ZenohBackend:
         self._remember(answer.worker)
         return mill_detail(config, answer.status, answer.worker)
 
-    def life(self, mill_id: str) -> dict[str, Any]:
-        return self._ask(mill_id, Question.LIFE)
+    def life(self, mill_id: str) -> LifeReport:
+        data = self._ask(mill_id, Question.LIFE)
+        with _unfit(mill_id, "life answer"):
+            return life_from_dict(data)
 
-    def starts(self, mill_id: str, month: str | None) -> dict[str, Any]:
-        return self._ask(mill_id, Question.STARTS, month_args(month))
+    def starts(self, mill_id: str, month: str | None) -> MonthStarts:
+        data = self._ask(mill_id, Question.STARTS, month_args(month))
+        with _unfit(mill_id, "starts answer"):
+            return MonthStarts.model_validate(data)
 
     def spectrum(self, mill_id: str) -> dict[str, Any]:
         return self._ask(mill_id, Question.SPECTRUM)

@@ -6,10 +6,14 @@ mills of a site side by side.
 What is here:
 
 * :mod:`service.reports.starts` — calendar months of a site and the starts of one month against
-  the norm and the limits (``GET /mills/{id}/starts`` and the report share it).
+  the norm and the limits (``GET /mills/{id}/starts`` and the report share it); the answer is
+  the typed ``MonthStarts`` (pydantic, every field described), as REST, the remote protocol and
+  OPC UA take it.
 * :mod:`service.reports.life` — remaining life per component (pure): damage before monitoring,
   minimum history, a range of rates, what drives it; one computation for ``/life``, the report
-  and the fleet.
+  and the fleet. The answer is the typed ``LifeReport`` (dataclasses whose field docstrings
+  describe them in OpenAPI; ``life_to_dict`` / ``life_from_dict`` across the remote protocol),
+  read by attribute by OPC UA, ``/metrics`` and the fleet view.
 * :mod:`service.reports.history` — a mill's history read from the store (bounded, indexed):
   the life inputs as of a time, the per-month trend, phase seconds.
 * :mod:`service.reports.monthly` — the monthly report as plain data, built from the store (a

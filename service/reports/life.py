@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta
 from typing import Any
 
-from pydantic import ConfigDict, with_config
+from pydantic import ConfigDict, TypeAdapter, with_config
 
 from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig
@@ -63,6 +63,7 @@ from service.reports.plain import plain
 from service.store.records import DamageRow
 
 __all__ = [
+    "LIFE_ADAPTER",
     "WORST_MONTH_MIN_DAYS",
     "ComponentLife",
     "LifeBasis",
@@ -73,6 +74,7 @@ __all__ = [
     "Projection",
     "WhatIfLife",
     "compute_life",
+    "life_from_dict",
     "life_to_dict",
     "local_iso",
     "midnight_ns",
@@ -110,91 +112,156 @@ class LifeInputs:
     live: Mapping[str, Mapping[str, float]] | None = None
 
 
+_DESCRIBED = ConfigDict(use_attribute_docstrings=True)
+"""Each field's docstring is its description in the OpenAPI schema of ``GET /mills/{id}/life``."""
+
+
+@with_config(_DESCRIBED)
 @dataclass(frozen=True, slots=True)
 class LifeHistory:
     """How much monitoring the answer rests on, against the configured minimum."""
 
     monitored_since_ns: int | None
+    """First analysed sample, ns since the Unix epoch, UTC; null before any."""
     monitored_since: str | None
+    """The same instant, ISO-8601 in the site's time zone."""
     last_sample_ns: int | None
+    """Just past the last analysed sample, ns since the Unix epoch, UTC; null before any."""
     last_sample: str | None
+    """The same instant, ISO-8601 in the site's time zone."""
     monitored_days: float
+    """Monitored time, days (per local day from its first to its last analysed sample)."""
     days_with_data: int
+    """Local days with stored damage rows, count."""
     starts: int
+    """Starts since monitoring began, count."""
     min_days: float
+    """Monitored days needed before a projection (``[life] min_monitoring_days``), days."""
     min_starts: int
+    """Starts needed before a projection (``[life] min_starts``), count."""
 
 
+@with_config(_DESCRIBED)
 @dataclass(frozen=True, slots=True)
 class PriorDamage:
     """Damage before monitoring began and how it was taken (``method``: ``none``,
     ``estimated`` or ``first_<N>_days``)."""
 
     method: str
+    """How: ``none`` (shafts taken as new when monitoring began), ``estimated`` (configured)
+    or ``first_<N>_days`` (the first N days' rate applied from commissioning)."""
     commissioned: str | None
+    """Commissioning date, YYYY-MM-DD (local); null when not configured."""
     years_before_monitoring: float | None
+    """Years from commissioning to the start of monitoring, years (365.25 days)."""
     rate_days: float | None
+    """Monitored days the ``first_<N>_days`` rate was taken over, days."""
     per_component: dict[str, float]
+    """Prior Miner damage per component (dimensionless, 1 = S-N limit)."""
     note: str
+    """How the prior was taken, in words."""
 
 
+@with_config(_DESCRIBED)
 @dataclass(frozen=True, slots=True)
 class Projection:
     """Remaining life at one rate (``basis``: ``last_<N>_days``, ``since_monitoring`` or
     ``worst_month`` with its ``month``); ``reason`` says why the life is null."""
 
     basis: str
+    """The rate's period: ``last_<N>_days``, ``since_monitoring`` or ``worst_month``."""
     rate_per_year: float | None
+    """Miner damage per year of monitored time in the period, 1/year; null without
+    monitored time."""
     remaining_life_years: float | None
+    """(1 − D) / rate, years from the last analysed sample; null with ``reason``."""
     end_date: str | None
+    """Local date the Miner limit is reached, YYYY-MM-DD; present exactly when the life is."""
     end_date_capped: bool
+    """True when the end date lies beyond 9999-12-31 and is given as 9999-12-31."""
     reason: str | None
+    """Why the remaining life is null, in words; null when it is given."""
     month: str | None = None
+    """The worst local calendar month, YYYY-MM (``worst_month`` only)."""
 
 
+@with_config(_DESCRIBED)
 @dataclass(frozen=True, slots=True)
 class WhatIfLife:
     """App. D scenario: starts per 4-week month → damage per month and remaining life."""
 
     scenario: str
+    """The Diering 2011 App. D start rate: ``5/day``, ``1/day``, ``1/week``, ``1/month``."""
     starts_per_month: float
+    """Starts per 4-week month of the scenario, count."""
     damage_per_month: float | None
+    """Miner damage per 4-week month at that start rate (dimensionless); null while the
+    history is insufficient."""
     remaining_life_years: float | None
+    """Remaining life at that damage rate, years; null without a rate."""
     end_date: str | None
+    """Local date the Miner limit is reached, YYYY-MM-DD; present exactly when the life is."""
     end_date_capped: bool
+    """True when the end date lies beyond 9999-12-31 and is given as 9999-12-31."""
 
 
+@with_config(_DESCRIBED)
 @dataclass(frozen=True, slots=True)
 class ComponentLife:
     """Damage and remaining life of one component (Miner sums, dimensionless)."""
 
     component: str
+    """The component, by the mill file's name (e.g. ``pinion_combined``)."""
     damage_prior: float
+    """Miner damage before monitoring (dimensionless, 1 = S-N limit)."""
     damage_monitored: float
+    """Miner damage counted since monitoring began (stored, or the worker's live committed
+    damage when larger), dimensionless."""
     damage_pending_residue: float
+    """The open rainflow residue closed now as half cycles, Miner damage (dimensionless)."""
     damage: float
+    """Damage so far: prior + monitored + pending residue (dimensionless, 1 = S-N limit)."""
     design_line: float | None
+    """Damage a shaft on course for its design life would have now (dimensionless)."""
     damage_by_phase: dict[str, float]
+    """Monitored Miner damage per operating phase (``start``, ``run``, ``stop``, …),
+    dimensionless."""
     share_by_phase: dict[str, float]
+    """Each phase's share of the monitored damage, fraction 0–1."""
     share_of_mill: float | None
+    """This component's share of the mill's monitored damage, fraction 0–1."""
     projections: list[Projection]
+    """Remaining life at each rate (recent, since monitoring, worst month)."""
     remaining_life_years_min: float | None
+    """Least remaining life of the projections, years; null without any."""
     remaining_life_years_max: float | None
+    """Greatest remaining life of the projections, years; null without any."""
     what_if: list[WhatIfLife]
+    """Remaining life at the App. D start rates."""
     live: bool
+    """True when the worker's live damage (not yet stored) is included."""
 
 
+@with_config(_DESCRIBED)
 @dataclass(frozen=True, slots=True)
 class LifeBasis:
     """What the numbers rest on: the Miner limit, the S-N curve, the rules (plain words)."""
 
     miner_limit: float
+    """Miner damage at failure (dimensionless, 1)."""
     sn_curve: dict[str, Any]
+    """The S-N curve: model, parameters, material, S_ut_mpa (MPa), m1, S_D_mpa (MPa), N_D
+    (cycles), m2, stress kind, stress concentration, source."""
     damage: str
+    """How damage so far is counted, in words."""
     rates: str
+    """How the damage rates are taken, in words."""
     remaining_life: str
+    """How remaining life follows from damage and rate, in words."""
     end_date: str
+    """How the end date is given, in words."""
     design_line: str
+    """What the design line is, in words."""
 
 
 #: An answer of ``GET /mills/{id}/life`` (abridged), the OpenAPI example.
@@ -226,35 +293,68 @@ LIFE_EXAMPLE: dict[str, Any] = {
 }  # fmt: skip
 
 
-@with_config(ConfigDict(json_schema_extra={"examples": [LIFE_EXAMPLE]}))
+@with_config(ConfigDict(use_attribute_docstrings=True,
+                         json_schema_extra={"examples": [LIFE_EXAMPLE]}))  # fmt: skip
 @dataclass(frozen=True, slots=True)
 class LifeReport:
     """Remaining life of every component of one mill (module docstring); times ns UTC with
-    ISO-8601 local times beside them."""
+    ISO-8601 local times beside them. The answer of ``GET /mills/{id}/life``, of the ``life``
+    question of the remote protocol (:data:`LIFE_ADAPTER`), read by OPC UA, ``/metrics``, the
+    fleet view and the monthly report."""
 
     mill: str
+    """The mill's id (its mill file)."""
     site: str
+    """The mill's site."""
     simulated: bool
+    """True when the mill's data come from the simulator."""
     time_zone: str
+    """The site's IANA time zone (local days, months, dates)."""
     evaluated_at_ns: int
+    """When the answer was computed, ns since the Unix epoch, UTC."""
     evaluated_at: str
+    """The same instant, ISO-8601 in the site's time zone."""
     status: str
+    """``ok``, or ``insufficient_history`` (every remaining life null, ``missing`` says why)."""
     missing: list[str]
+    """What is lacking before a projection is made, in words; empty when enough."""
     design_life_years: float
+    """The mill file's design life, years."""
     history: LifeHistory
+    """How much monitoring the answer rests on."""
     prior: PriorDamage
+    """Damage before monitoring began."""
     basis: LifeBasis
+    """What the numbers rest on."""
     components: dict[str, ComponentLife]
+    """Damage and remaining life per component, by the mill file's names."""
     governing_component: str | None
+    """The component with the shortest remaining life (else the most damage); null without
+    damage."""
     note: str
+    """The answer in one sentence."""
     rate_window_days: int = 30
+    """Length of the recent-rate window, local days."""
     notes: list[str] = field(default_factory=list)
+    """Further remarks, in words."""
+
+
+LIFE_ADAPTER: TypeAdapter[LifeReport] = TypeAdapter(LifeReport)
+"""Validates a :class:`LifeReport` from its JSON data (:func:`life_to_dict`): how the API reads
+a remote worker's ``life`` answer."""
 
 
 def life_to_dict(report: LifeReport) -> dict[str, Any]:
-    """JSON-ready plain data (non-finite floats as None)."""
+    """JSON-ready plain data (non-finite floats as None), in field order: the body of
+    ``GET /mills/{id}/life`` and of the remote ``life`` answer."""
     out: dict[str, Any] = plain(report)
     return out
+
+
+def life_from_dict(data: Any) -> LifeReport:
+    """A :class:`LifeReport` back from :func:`life_to_dict`'s data (a remote worker's answer);
+    :class:`pydantic.ValidationError` naming the field when it does not fit."""
+    return LIFE_ADAPTER.validate_python(data)
 
 
 def local_iso(t_ns: int | None, tz: zoneinfo.ZoneInfo) -> str | None:

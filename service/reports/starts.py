@@ -19,7 +19,9 @@ from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 from typing import Any
 
-from alarms.times import iso_local
+from pydantic import BaseModel, ConfigDict, Field
+
+from alarms.times import iso_local, iso_utc
 from analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
 from analytics.mill.report import STARTS_NORM_PER_MONTH, starts_status
 from analytics.operation.transients import start_peak_level, start_peaks
@@ -31,7 +33,10 @@ __all__ = [
     "MONTH_PATTERN",
     "STARTS_NORM_PER_MONTH",
     "MonthError",
+    "MonthStarts",
+    "PeakLimits",
     "StartCount",
+    "StartOut",
     "count_starts",
     "current_month",
     "day_starts_ns",
@@ -102,6 +107,20 @@ def peak_status(start: Mapping[str, Any], alarms: AlarmThresholds) -> str:
     return start_peak_level(peak, alarms.start_peak_warn_pct, alarms.start_peak_alarm_pct)
 
 
+STARTS_EXAMPLE: dict[str, Any] = {
+    "mill": "sag-5200-lrs", "simulated": False, "month": "2024-05",
+    "time_zone": "America/Santiago", "count": 21, "failed": 2, "norm_per_month": [3, 5],
+    "count_warn": 5, "count_alarm": 20, "count_status": "alarm",
+    "peak_limits_pct": {"warn": 250.0, "alarm": 300.0},
+    "starts": [{"t_ns": 1714560000000000000, "t": "2024-05-01T10:40:00Z",
+                "local_time": "2024-05-01T06:40:00-04:00", "end_t_ns": 1714560030000000000,
+                "end_t": "2024-05-01T10:40:30Z", "failed": False, "switch_on_peak_pct": 262.0,
+                "short_circuit_peak_pct": None, "rise_time_10_90_ms": 41.0,
+                "shock_load": False, "peak_status": "warning"}],
+}  # fmt: skip
+"""An answer of ``GET /mills/{id}/starts``, the OpenAPI example."""
+
+
 @dataclass(frozen=True, slots=True)
 class StartCount:
     """A month's starts against the norm (3–5, §6.1.3) and the configured levels."""
@@ -131,39 +150,97 @@ def count_starts(failed: Sequence[bool], alarms: AlarmThresholds) -> StartCount:
     )
 
 
-def _start(event: EventRow, tz: zoneinfo.ZoneInfo, alarms: AlarmThresholds) -> dict[str, Any]:
+class StartOut(BaseModel):
+    """One start of the month (``starts`` of :class:`MonthStarts`)."""
+
+    model_config = ConfigDict(frozen=True)
+
+    t_ns: int = Field(description="Start time, ns since the Unix epoch, UTC.")
+    t: str = Field(description="Start time, ISO-8601 UTC (= t_ns).")
+    local_time: str = Field(description="Start time, ISO-8601 in the site's time zone.")
+    end_t_ns: int | None = Field(
+        description="End of the start, ns since the Unix epoch, UTC; null while it lasts."
+    )
+    end_t: str | None = Field(description="End of the start, ISO-8601 UTC (= end_t_ns).")
+    failed: bool = Field(description="True when the mill did not reach running speed.")
+    switch_on_peak_pct: float | None = Field(
+        description="Switch-on torque peak, % of motor rated torque; null when not measured."
+    )
+    short_circuit_peak_pct: float | None = Field(
+        description="Short-circuit (LRS) torque peak, % of motor rated torque; null when none."
+    )
+    rise_time_10_90_ms: float | None = Field(
+        description="Torque rise time from 10 % to 90 % of the peak, ms; null when not measured."
+    )
+    shock_load: bool = Field(description="True when the start was a shock load.")
+    peak_status: str = Field(description="ok, warning or alarm against peak_limits_pct.")
+
+
+class PeakLimits(BaseModel):
+    """The start-peak levels of the mill file (``[alarms]``)."""
+
+    model_config = ConfigDict(frozen=True)
+
+    warn: float = Field(description="Start-peak warning level, % of motor rated torque.")
+    alarm: float = Field(description="Start-peak alarm level, % of motor rated torque.")
+
+
+class MonthStarts(BaseModel):
+    """The starts of one local calendar month against norm and levels: the answer of
+    ``GET /mills/{id}/starts``, of the remote ``starts`` question (``model_dump`` /
+    ``model_validate``) and of the OPC UA start points."""
+
+    model_config = ConfigDict(frozen=True, json_schema_extra={"examples": [STARTS_EXAMPLE]})
+
+    mill: str = Field(description="The mill's id (its mill file).")
+    simulated: bool = Field(description="True when the mill's data come from the simulator.")
+    month: str = Field(description="The local calendar month, YYYY-MM.")
+    time_zone: str = Field(description="The site's IANA time zone (the month's bounds).")
+    count: int = Field(description="Starts in the month, count.")
+    failed: int = Field(description="Failed starts in the month, count.")
+    norm_per_month: list[int] = Field(description="Supplier norm, starts per month (3–5).")
+    count_warn: int = Field(description="Warning above this many starts per month, count.")
+    count_alarm: int = Field(description="Alarm above this many starts per month, count.")
+    count_status: str = Field(description="ok, above norm, warning or alarm.")
+    peak_limits_pct: PeakLimits = Field(description="Start-peak levels, % of motor rated torque.")
+    starts: list[StartOut] = Field(description="The month's starts, oldest first.")
+
+
+def _start(event: EventRow, tz: zoneinfo.ZoneInfo, alarms: AlarmThresholds) -> StartOut:
     d = event.data
-    peak = d.get("switch_on_peak_pct")
-    return {
-        "t_ns": event.t_ns,
-        "local_time": iso_local(event.t_ns, tz),
-        "end_t_ns": event.t_end_ns,
-        "failed": bool(d.get("failed", False)),
-        "switch_on_peak_pct": peak,
-        "short_circuit_peak_pct": d.get("short_circuit_peak_pct"),
-        "rise_time_10_90_ms": d.get("rise_time_10_90_ms"),
-        "shock_load": bool(d.get("shock_load", False)),
-        "peak_status": peak_status(d, alarms).replace("n/a", "ok"),  # API: ok|warning|alarm
-    }
+    end = event.t_end_ns
+    return StartOut(
+        t_ns=event.t_ns,
+        t=iso_utc(event.t_ns),
+        local_time=iso_local(event.t_ns, tz),
+        end_t_ns=end,
+        end_t=None if end is None else iso_utc(end),
+        failed=bool(d.get("failed", False)),
+        switch_on_peak_pct=d.get("switch_on_peak_pct"),
+        short_circuit_peak_pct=d.get("short_circuit_peak_pct"),
+        rise_time_10_90_ms=d.get("rise_time_10_90_ms"),
+        shock_load=bool(d.get("shock_load", False)),
+        peak_status=peak_status(d, alarms).replace("n/a", "ok"),  # API: ok|warning|alarm
+    )
 
 
-def starts_in_month(store: Store, config: MillConfig, month: str) -> dict[str, Any]:
+def starts_in_month(store: Store, config: MillConfig, month: str) -> MonthStarts:
     """The month's starts (oldest first) and their count against norm and levels."""
     since, until = month_bounds_ns(month, config.time_zone)
     tz, a = zoneinfo.ZoneInfo(config.time_zone), config.alarms
     starts = [_start(e, tz, a) for e in store.events(config.id, "start", since, until)]
-    c = count_starts([s["failed"] for s in starts], a)
-    return {
-        "mill": config.id,
-        "simulated": config.simulated,
-        "month": month,
-        "time_zone": config.time_zone,
-        "count": c.count,
-        "failed": c.failed,
-        "norm_per_month": list(c.norm),
-        "count_warn": c.warn_above,
-        "count_alarm": c.alarm_above,
-        "count_status": c.status,
-        "peak_limits_pct": {"warn": c.peak_warn_pct, "alarm": c.peak_alarm_pct},
-        "starts": starts,
-    }
+    c = count_starts([s.failed for s in starts], a)
+    return MonthStarts(
+        mill=config.id,
+        simulated=config.simulated,
+        month=month,
+        time_zone=config.time_zone,
+        count=c.count,
+        failed=c.failed,
+        norm_per_month=list(c.norm),
+        count_warn=c.warn_above,
+        count_alarm=c.alarm_above,
+        count_status=c.status,
+        peak_limits_pct=PeakLimits(warn=c.peak_warn_pct, alarm=c.peak_alarm_pct),
+        starts=starts,
+    )

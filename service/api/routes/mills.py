@@ -12,11 +12,12 @@ from fastapi import APIRouter
 
 from service.api.backend import Backend
 from service.api.errors import problem_responses
-from service.api.models import MillDetail, MillSummary, MonthStarts, Spectrum
+from service.api.models import MillDetail, MillSummary, Spectrum
 from service.api.routes.params import MillId, Month, Site
 from service.api.times import with_iso
 from service.reports.fleet import FleetView
-from service.reports.life import LifeReport
+from service.reports.life import LifeReport, life_to_dict
+from service.reports.starts import MonthStarts
 
 __all__ = ["mills_router"]
 
@@ -50,7 +51,7 @@ def mills_router(backend: Backend) -> APIRouter:
         responses=problem_responses(404, 422, 503),
     )
     def life(mill_id: MillId) -> dict[str, Any]:
-        return backend.life(mill_id)
+        return life_to_dict(backend.life(mill_id))  # non-finite floats as null
 
     @router.get(
         "/mills/{mill_id}/starts",
@@ -58,8 +59,8 @@ def mills_router(backend: Backend) -> APIRouter:
         response_model=MonthStarts,
         responses=problem_responses(404, 422, 503),
     )
-    def starts(mill_id: MillId, month: Month = None) -> dict[str, Any]:
-        return with_iso(backend.starts(mill_id, month))
+    def starts(mill_id: MillId, month: Month = None) -> MonthStarts:
+        return backend.starts(mill_id, month)  # t, end_t: the ISO-8601 UTC of t_ns, end_t_ns
 
     @router.get(
         "/mills/{mill_id}/spectrum",

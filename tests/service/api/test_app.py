@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 import time
+from typing import Any
 
 import httpx
 import pytest
@@ -308,6 +309,41 @@ def test_openapi_documents_problems_examples_and_the_api_key(client):
         status["properties"]
     )
     assert all(p.get("description") for n, p in status["properties"].items() if n != "health")
+
+
+def _undescribed(schemas: dict[str, Any], name: str, seen: set[str]) -> list[str]:
+    """Fields of schema ``name`` and of every schema it refers to without a description."""
+    if name in seen:
+        return []
+    seen.add(name)
+    out = []
+    for field, prop in schemas[name].get("properties", {}).items():
+        if not prop.get("description"):
+            out.append(f"{name}.{field}")
+        refs = re.findall(r"#/components/schemas/([\w-]+)", json.dumps(prop))
+        for ref in refs:
+            out += _undescribed(schemas, ref, seen)
+    return out
+
+
+@pytest.mark.parametrize(
+    ("path", "schema", "fields"),
+    [
+        ("/mills/{mill_id}/life", "LifeReport",
+         {"components", "history", "prior", "governing_component", "status"}),
+        ("/mills/{mill_id}/starts", "MonthStarts",
+         {"count", "failed", "count_status", "peak_limits_pct", "starts"}),
+    ],
+)  # fmt: skip
+def test_openapi_documents_life_and_starts_field_by_field(client, path, schema, fields):
+    """The life and starts answers are typed models: OpenAPI names their schema and describes
+    every field, nested ones too (units in the descriptions)."""
+    spec = client.get("/openapi.json").json()
+    schemas = spec["components"]["schemas"]
+    ok = spec["paths"][path]["get"]["responses"]["200"]["content"]["application/json"]
+    assert ok["schema"]["$ref"].split("/")[-1] == schema
+    assert fields <= set(schemas[schema]["properties"])
+    assert _undescribed(schemas, schema, set()) == []
 
 
 # ---------------------------------------------------------------------- docs offline

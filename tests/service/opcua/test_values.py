@@ -9,6 +9,7 @@ ever, keyed by names the analyzer never used)."""
 
 from __future__ import annotations
 
+import json
 import math
 from datetime import UTC, datetime
 from pathlib import Path
@@ -16,18 +17,21 @@ from typing import Any
 
 import pytest
 from asyncua import ua
+from pydantic import ValidationError
 
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene
 from ingest.sim.spec import StartEvent
+from service.api.domain_metrics import domain_families
 from service.api.mill_views import mill_detail
 from service.api.models import MillSummary
 from service.opcua.address_space import datavalue
 from service.opcua.values import Kind, Point, mill_points
+from service.remote.protocol import encode
 from service.reports.history import life_inputs
-from service.reports.life import compute_life, life_to_dict
-from service.reports.starts import current_month, starts_in_month
+from service.reports.life import compute_life, life_from_dict, life_to_dict
+from service.reports.starts import MonthStarts, current_month, starts_in_month
 from service.store.database import Store
 from service.worker.block_queue import QueuedBlock
 from service.worker.mill_job import MillJob
@@ -55,12 +59,15 @@ def answers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         life = compute_life(life_inputs(store, MILL, now, live=status.live_damage(),
                                         last_sample_ns=now))  # fmt: skip
         detail = mill_detail(MILL, status, {"name": "w1"})
+        starts = starts_in_month(store, MILL, current_month(MILL, now))
         return {
             "summary": MillSummary.model_validate(detail),
             "status": status,
             "detail": detail,
-            "life": life_to_dict(life),
-            "starts": starts_in_month(store, MILL, current_month(MILL, now)),
+            "life": life,
+            "starts": starts,
+            "life_body": life_to_dict(life),  # as REST and the remote protocol send them
+            "starts_body": starts.model_dump(mode="json"),
         }
 
 
@@ -97,7 +104,7 @@ def test_steady_state_of_every_channel_is_good_and_as_the_worker_reported_it(ans
 
 
 def test_values_are_as_answered(answers, points):
-    detail, life, starts = answers["detail"], answers["life"], answers["starts"]
+    detail, life, starts = answers["detail"], answers["life_body"], answers["starts_body"]
     status = detail["status"]
     assert points["State"].value == detail["state"] == "running"
     assert points["LastSampleTime"].value == datetime.fromtimestamp(
@@ -124,3 +131,41 @@ def test_every_channel_and_component_has_its_points_with_units():
             assert unit == {"torque": "kN·m", "bending": "MPa"}[channel.kind]
     assert all(v.value is None or v.kind is Kind.STRINGS for v in p.values())
     assert p["StaleChannels"].value == []
+
+
+# ----------------------------------------------------------------------------- typed answers
+def test_life_and_starts_cross_the_remote_protocol_unchanged(answers):
+    """The worker sends the typed answers as their JSON data, the API reads them back with the
+    same models (:mod:`service.remote.protocol`): nothing lost, nothing renamed on the way."""
+    life, starts = answers["life"], answers["starts"]
+    back = life_from_dict(json.loads(encode(answers["life_body"])))
+    assert life_to_dict(back) == answers["life_body"]
+    assert back.components.keys() == life.components.keys() == set(MILL.components)
+    assert MonthStarts.model_validate(json.loads(encode(answers["starts_body"]))) == starts
+
+
+def test_a_renamed_field_is_refused_not_read_as_null(answers):
+    """A worker whose answer names a field differently (one end renamed) is a validation error
+    naming the field, where a dict read by string key gave a silent None."""
+    body = json.loads(encode(answers["life_body"]))
+    comp = next(iter(body["components"].values()))
+    comp["damage_total"] = comp.pop("damage")
+    with pytest.raises(ValidationError, match="damage"):
+        life_from_dict(body)
+    starts = dict(answers["starts_body"])
+    starts["starts_count"] = starts.pop("count")
+    with pytest.raises(ValidationError, match="count"):
+        MonthStarts.model_validate(starts)
+
+
+def test_metrics_read_the_life_answer_by_attribute(answers):
+    """``/metrics``' damage gauge is the life answer's damage per component, from the real
+    producer (an attribute renamed on one side only fails here and in mypy)."""
+    life = answers["life"]
+    status = {MILL.id: answers["status"]}
+    families = {m.name: m for m in domain_families([MILL.id], status, lambda _: life)}
+    damage = {s.labels["component"]: s.value for s in families["millwatch_damage_ratio"].samples}
+    assert damage == {c: x.damage for c, x in life.components.items()}
+    assert all(v > 0 for v in damage.values()) and set(damage) == set(MILL.components)
+    assert life.status == "insufficient_history"  # minutes of data: no remaining-life gauge
+    assert families["millwatch_remaining_life_years"].samples == []

@@ -19,11 +19,13 @@ import pytest
 import zenoh
 
 from ingest.keys import query_key, worker_token_key
+from ingest.mill_files import load_mill_config
 from ingest.sim.publisher import ScenePublisher, starting_now
 from ingest.sim.scenes import get_scene
 from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
+from service.errors import Unavailable
 from service.remote.queryables import WorkerQueryables
 from service.remote.report_codec import report_from_dict
 from service.remote.zenoh_backend import ZenohBackend
@@ -365,3 +367,27 @@ def test_opcua_over_zenoh_shows_what_the_remote_api_answers(pair, tmp_path):
     open_ids = {a["alarm_id"] for a in pair.remote.get("/alarms?state=open").json()["alarms"]}
     assert open_ids and {e.NodeId.Identifier.rsplit("/", 1)[-1] for e in events} == open_ids
     assert all(e.Retain for e in events)
+
+
+@pytest.mark.parametrize(
+    ("question", "body", "field"),
+    [
+        ("life", {"mill": MILL}, "evaluated_at_ns"),
+        ("starts", {"mill": MILL, "count": "many"}, "count"),
+    ],
+)
+def test_a_typed_answer_that_does_not_fit_is_unavailable_naming_the_field(
+    monkeypatch, question, body, field
+):
+    """A worker whose life or starts answer does not validate (another version, a field
+    renamed on its end) is a 503 naming the field, never a half-empty body."""
+    config = load_mill_config(MILLS / f"{MILL}.toml")
+    backend = ZenohBackend(None, {MILL: config})  # no session: _ask is replaced
+    monkeypatch.setattr(backend, "_ask", lambda *_: body)
+    try:
+        ask = backend.life if question == "life" else lambda m: backend.starts(m, None)
+        with pytest.raises(Unavailable, match=field) as caught:
+            ask(MILL)
+        assert "does not fit this API's version" in caught.value.detail
+    finally:
+        backend.close()

@@ -28,7 +28,7 @@ from ingest.sim.spec import StartEvent, StopEvent
 from ingest.wire import decode_block
 from service.api.domain_metrics import domain_families
 from service.reports.history import life_inputs
-from service.reports.life import compute_life, life_to_dict
+from service.reports.life import compute_life
 from service.reports.monthly import build_monthly_report
 from service.store.database import Store
 from service.worker.block_queue import QueuedBlock
@@ -228,7 +228,7 @@ def test_the_alarm_life_and_the_gauge_are_one_computation(tmp_path):
     now = {c: x.remaining_life_years_min for c, x in life.components.items()}
     assert alarm == now and all(v is not None and v > 0 for v in alarm.values())
     gauge = next(m for m in domain_families([config.id], {config.id: status},
-                                            lambda _: life_to_dict(life))
+                                            lambda _: life)
                  if m.name == "millwatch_remaining_life_years")  # fmt: skip
     assert {s.labels["component"]: s.value for s in gauge.samples} == now
     for comp, c in life.components.items():
