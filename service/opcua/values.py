@@ -22,6 +22,7 @@ SteadyState/Time                          –        latest steady window: ``t_n
 SteadyState/SpeedPct, ImbalancePct        %        ``speed_pct``, ``imbalance_pct``
 SteadyState/<channel>/Mean, RangePerRev   channel  ``mean``, ``range_per_rev`` (App. C routine 4)
 SteadyState/<channel>/MeanPct, RangePct   %        of motor rated torque (torque channels)
+SteadyState/<channel>/Amplitude           MPa      ``bending_amplitude_mpa`` (bending channels)
 Components/<component>/Damage             1        life: ``damage`` (Miner sum incl. residue)
 Components/<component>/DamageRatePerYear  1/a      life: the ``last_30_days`` projection's rate
 Components/<component>/RemainingLifeYears a        life: ``remaining_life_years_min`` (least of
@@ -45,6 +46,7 @@ from enum import Enum
 from typing import Any
 
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.loads import steady_channels
 from analytics.mill.results import SteadyWindowResult
 from service.api.models import MillSummary
 from service.reports.life import ComponentLife, LifeReport, Projection
@@ -55,7 +57,12 @@ __all__ = ["Kind", "Point", "mill_points", "ns_to_datetime"]
 
 _UNIT_OF_KIND = {"torque": "kN·m", "bending": "MPa", "rpm": "rpm"}
 #: The per-channel points of a steady window: mean, range_per_rev, mean_pct, range_pct.
-_STEADY_FIELDS = ("Mean", "RangePerRev", "MeanPct", "RangePct")
+_STEADY_FIELDS = ("Mean", "RangePerRev", "MeanPct", "RangePct", "Amplitude")
+#: The points of a torque channel (% of the motor's rated torque) and of a bending channel
+#: (MPa only: bending has no % of rated torque; its amplitude is half the range, Diering 2011
+#: §8.1, the bending_amplitude_mpa of REST and /metrics).
+_TORQUE_FIELDS = frozenset(("Mean", "RangePerRev", "MeanPct", "RangePct"))
+_BENDING_FIELDS = frozenset(("Mean", "RangePerRev", "Amplitude"))
 
 
 class Kind(Enum):
@@ -122,11 +129,6 @@ def _starts_points(starts: MonthStarts | None) -> dict[str, Point]:
     }
 
 
-def steady_channels(config: MillConfig) -> list[str]:
-    """Channels a steady window reports (torque and bending ones)."""
-    return [n for n, c in config.channels.items() if c.kind in ("torque", "bending")]
-
-
 def _steady_points(config: MillConfig, w: SteadyWindowResult | None) -> dict[str, Point]:
     out = {
         "SteadyState/Time": Point(None if w is None else ns_to_datetime(w.t_ns), Kind.TIME),
@@ -135,11 +137,16 @@ def _steady_points(config: MillConfig, w: SteadyWindowResult | None) -> dict[str
                                           "%"),
     }  # fmt: skip
     none: dict[str, float] = {}
-    tables = (none,) * 4 if w is None else (w.mean, w.range_per_rev, w.mean_pct, w.range_pct)
-    for name in steady_channels(config):
+    tables = (none,) * 5 if w is None else (
+        w.mean, w.range_per_rev, w.mean_pct, w.range_pct, w.bending_amplitude_mpa)  # fmt: skip
+    for name, pct_scale in steady_channels(config).items():
         unit = _UNIT_OF_KIND[config.channels[name].kind]
-        for table, label, u in zip(tables, _STEADY_FIELDS, (unit, unit, "%", "%"), strict=True):
-            out[f"SteadyState/{name}/{label}"] = Point(table.get(name), Kind.DOUBLE, u)
+        # torque channels in % of rated torque; bending (no %) with its amplitude instead
+        fields = _TORQUE_FIELDS if pct_scale is not None else _BENDING_FIELDS
+        for table, label, u in zip(tables, _STEADY_FIELDS, (unit, unit, "%", "%", unit),
+                                   strict=True):  # fmt: skip
+            if label in fields:
+                out[f"SteadyState/{name}/{label}"] = Point(table.get(name), Kind.DOUBLE, u)
     return out
 
 

@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua import ua
 from pydantic import ValidationError
 
 from ingest.mill_files import load_mill_config
@@ -95,10 +94,15 @@ def test_steady_state_of_every_channel_is_good_and_as_the_worker_reported_it(ans
         if MILL.channels[name].kind == "torque":
             assert good_number(points[base + "MeanPct"]) == window["mean_pct"][name] > 50
             assert good_number(points[base + "RangePct"]) == window["range_pct"][name]
-        else:  # bending: MPa only, no % of rated torque
-            assert points[base + "RangePct"].value is None
-            assert datavalue(points[base + "RangePct"]).StatusCode.value == (
-                ua.StatusCodes.BadWaitingForInitialData)  # fmt: skip
+            assert base + "Amplitude" not in points
+        else:  # bending: MPa only (no % of rated torque, so no such variable), its amplitude
+            assert base + "RangePct" not in points and base + "MeanPct" not in points
+            amplitude = good_number(points[base + "Amplitude"])
+            assert amplitude == window["bending_amplitude_mpa"][name] > 0
+            assert points[base + "Amplitude"].unit == "MPa"
+    # every SteadyState variable of the mill reads Good once a window closed: none is Bad for ever
+    steady = [p for path, p in points.items() if path.startswith("SteadyState/")]
+    assert all(datavalue(p).StatusCode.is_good() for p in steady)
     assert good_number(points["SteadyState/ImbalancePct"]) == window["imbalance_pct"]
     assert good_number(points["SteadyState/SpeedPct"]) > 90
 
