@@ -42,7 +42,7 @@ import logging
 import queue
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -55,6 +55,7 @@ from alarms.observations import Observation
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.files import ArchivePosition
 from ingest.archive.writer import ArchiveWriter
+from ingest.keys import mill_channel_keys
 from ingest.wire import Block
 from service.store.database import Store
 from service.store.records import DamageRow, EventRow
@@ -173,6 +174,10 @@ class Worker:
         self.checkpoint_bytes = 0
         self._stale: dict[str, set[str]] = {}
         self._started_ns = clock()
+        #: Per mill: when this worker subscribed to its gateways (None: not yet); see
+        #: :meth:`silence_ns`.
+        self._listening: dict[str, int | None] = {}
+        self._keys = {m: mill_channel_keys(c) for m, c in mills.items()}
         self._rate_meters: dict[tuple[str, str, str], PerMinute] = {}
         self.latency = LatencyReservoir()
         self._archive_errors_reported = 0
@@ -268,25 +273,31 @@ class Worker:
                        subject=f"{channel}:{problem}")  # fmt: skip
         self._pending.add(mill_id, MillUpdate(events=[row]))
 
-    def check_staleness(self, stale_after_s: float) -> None:
+    def check_staleness(
+        self, stale_after_s: float, received: Mapping[str, int] | None = None
+    ) -> None:
         """Data-quality events when a channel goes stale or comes back, and the data-quality
         alarm observations (silence, spike rate, lost blocks, archive write failures); call
-        about once a second. These are wall-clock facts: they are not replayed from the archive."""
+        about once a second. These are wall-clock facts: they are not replayed from the archive.
+
+        ``received``: the newest receive time (ns) per zenoh key of blocks received, analysed
+        yet or not (:attr:`BlockQueue.received <service.worker.block_queue.BlockQueue.received>`);
+        silence is judged on those and on what this worker handled, see :meth:`silence_ns`."""
         now = self._clock()
         archive_failures = self.archive_errors - self._archive_errors_reported
-        for mill_id, mh in self.health.items():
-            stale = set(mh.stale_channels(now, stale_after_s))
+        for mill_id in self.health:
+            quiet = self.silence_ns(mill_id, now, received or {})
+            stale = {c for c, q in quiet.items() if q > stale_after_s * 1e9}
             was = self._stale.get(mill_id, set())
             for channel in sorted(stale - was):
                 self._quality(mill_id, channel, now, "stale", stale_after_s=stale_after_s)
             for channel in sorted(was - stale):
                 self._quality(mill_id, channel, now, "fresh")
             self._stale[mill_id] = stale
-            silent = self._silent(mill_id, now, stale_after_s)
-            if silent and mill_id not in self.held:
+            if stale and mill_id not in self.held:
                 # the others are not held back for a silent channel (its late blocks, if any
                 # ever come, are dropped and counted by the aligner)
-                self.pipelines[mill_id].release_absent(silent)
+                self.pipelines[mill_id].release_absent(stale)
                 self._unfinished[mill_id] = None
             if mill_id in self.held:
                 # Its pipeline's alarm engine was not restored: a fresh one knows nothing of the
@@ -295,20 +306,53 @@ class Worker:
                 # would never clear them after the revert. The stale/fresh events above stay:
                 # they are about the data arriving, which is archived.
                 continue
-            observations = self._silence(mill_id, now) + self._rates(mill_id, now)
+            observations = self._silence(mill_id, now, quiet) + self._rates(mill_id, now)
             observations.append(Observation(mill_id, "archive_write_failures",
                                             float(archive_failures), now))  # fmt: skip
             self._pending.add(mill_id, self.pipelines[mill_id].observe(observations))
         self._archive_errors_reported = self.archive_errors
 
-    def _silent(self, mill_id: str, now: int, after_s: float) -> set[str]:
-        """Channels that sent nothing for ``after_s`` s of wall time — counted from this
-        worker's start for a channel not heard from since (at start-up its missed blocks are
-        still being recovered: the others wait for them)."""
-        limit = now - after_s * 1e9
-        start = self._started_ns
-        channels = self.health[mill_id].channels.items()
-        return {c for c, h in channels if (h.last_recv_ns or start) < limit}
+    def awaiting_gateways(self, mill_ids: Iterable[str]) -> None:
+        """This worker is not subscribed to ``mill_ids``' gateways yet: none of their channels
+        is silent (nothing can arrive) until :meth:`listening`."""
+        for mill_id in mill_ids:
+            self._listening[mill_id] = None
+
+    def listening(self, mill_id: str) -> None:
+        """This worker has just subscribed to ``mill_id``'s gateways (their caches now deliver
+        what it missed): its channels' silence counts from now (:meth:`silence_ns`)."""
+        self._listening[mill_id] = self._clock()
+
+    def silence_ns(
+        self, mill_id: str, now_ns: int, received: Mapping[str, int] | None = None
+    ) -> dict[str, int]:
+        """Per channel of ``mill_id``: wall time (ns) it has sent nothing *while this worker
+        listened* — since the newest of its blocks received (``received``, by zenoh key: also
+        blocks still queued) or handled, and at most since this worker subscribed to the mill's
+        gateways (:meth:`listening`; by default since this worker started; 0 before it
+        subscribed).
+
+        Why not simply since the last block handled (issue 25): a restarted worker restores
+        receive times from before its outage, so after an outage longer than ``stale_after_s``
+        every channel looked silent at once while the gateways' caches were still delivering
+        each channel's history (one channel after another, up to 0.7 s apart; behind a queue of
+        other mills' history, seconds later); declared absent, the late channels reached the
+        analysis as NaN and the recovered span was analysed unlike an uninterrupted run's (a
+        start booked as ``unknown``, its alarm lost). The caches answer the history query that
+        the subscription itself sends, so counting from the subscription waits for them; and
+        a block counts when it is received, not when the analysis gets to it, so a backlog in
+        the queue never makes its channels look silent."""
+        floor = self._listening.get(mill_id, self._started_ns)
+        channels = self.health[mill_id].channels
+        if floor is None:
+            return dict.fromkeys(channels, 0)
+        received = received or {}
+        keys = self._keys[mill_id]
+        out = {}
+        for channel, h in channels.items():
+            last = max(h.last_recv_ns or 0, received.get(keys[channel], 0), floor)
+            out[channel] = max(0, now_ns - last)
+        return out
 
     def _rates(self, mill_id: str, now: int) -> list[Observation]:
         """``spike_rate`` and ``sequence_gaps`` per channel, per minute of wall time."""
@@ -324,14 +368,11 @@ class Worker:
                                        {"channel": channel}))  # fmt: skip
         return out
 
-    def _silence(self, mill_id: str, now: int) -> list[Observation]:
-        """``stale_channel`` observations: seconds since each channel last delivered data."""
-        out = []
-        for channel, h in self.health[mill_id].channels.items():
-            since = h.last_recv_ns if h.last_recv_ns is not None else self._started_ns
-            out.append(Observation(mill_id, "stale_channel", max(0, now - since) / 1e9, now,
-                                   {"channel": channel}))  # fmt: skip
-        return out
+    def _silence(self, mill_id: str, now: int, quiet: dict[str, int]) -> list[Observation]:
+        """``stale_channel`` observations: seconds each channel has been silent
+        (:meth:`silence_ns`)."""
+        return [Observation(mill_id, "stale_channel", q / 1e9, now, {"channel": channel})
+                for channel, q in quiet.items()]  # fmt: skip
 
     def _archive(self, archive: ArchiveWriter, item: QueuedBlock) -> None:
         try:
