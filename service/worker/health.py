@@ -19,7 +19,10 @@ The counters are lifetime totals: the worker checkpoints them with the mill
 (:meth:`ChannelHealth.counters` / :meth:`ChannelHealth.restore_counters`) and the archive tail
 replayed after the checkpoint counts the rest, so a restart neither forgets nor double-counts.
 
-A channel is *stale* when nothing arrived for ``stale_after_s`` seconds of wall time.
+A channel is *stale* when nothing arrived for ``stale_after_s`` seconds of wall time
+(:meth:`ChannelHealth.stale`, for the status). The worker's own judgement — data-quality events,
+the ``stale_channel`` alarm, releasing the other channels — also counts blocks still queued and
+never the time it was not listening (:meth:`service.worker.worker.Worker.silence_ns`).
 """
 
 from __future__ import annotations
