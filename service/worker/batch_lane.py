@@ -128,10 +128,15 @@ class BatchLane:
     """Hands message batches to a :class:`BlockSink`, the worker (see the module docstring).
     ``regular_blocks`` / ``slow_blocks`` count what took which path; ``commit_every``: blocks
     :meth:`replay` handles between the worker's commits (default: for all the worker's mills;
-    a process that replays only some of them passes its own)."""
+    a process that replays only some of them passes its own); ``min_run``: a mill with fewer
+    blocks in a batch goes block by block (the array path's work per mill and batch pays only
+    for runs of some length)."""
 
-    def __init__(self, worker: BlockSink, commit_every: int | None = None) -> None:
+    def __init__(
+        self, worker: BlockSink, commit_every: int | None = None, min_run: int = 1
+    ) -> None:
         self.worker = worker
+        self.min_run = min_run
         self.mills = list(worker.mills)
         self._channels = {m: list(c.channels) for m, c in worker.mills.items()}
         self.regular_blocks = 0
@@ -186,7 +191,9 @@ class BatchLane:
             self._slow(batch, k)
         for m in np.unique(mill[keep & (mill >= 0)]).tolist():
             idx = np.flatnonzero(keep & (mill == m))
-            if not self._regular(self.mills[m], batch, idx, chan[idx], head[idx], ok[idx]):
+            if len(idx) < self.min_run or not self._regular(
+                self.mills[m], batch, idx, chan[idx], head[idx], ok[idx]
+            ):
                 for k in idx.tolist():
                     self._slow(batch, k)
         handled = int(np.count_nonzero(keep))

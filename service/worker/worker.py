@@ -11,8 +11,9 @@ A replay of the archive reads it in batches of messages held in arrays and hands
 :class:`~service.worker.batch_lane.BatchLane`, which gives each mill's regular blocks to
 :meth:`Worker.accept_regular` as arrays (their repeats counted through :meth:`Worker.repeated`)
 and anything irregular to :meth:`Worker.handle`. A live backlog takes the same lane: a step
-that drains at least :data:`LANE_MIN_BLOCKS` (the gateways' caches delivering an outage after a
-restart, a burst) archives them all, then hands them over as one batch.
+whose batch holds runs of :data:`LANE_MIN_RUN` blocks of a mill (the gateways' caches
+delivering an outage after a restart, a burst) archives them all, then hands them over as one
+batch.
 
 Silence (:meth:`Worker.check_staleness`): a channel is declared stale — a data-quality event,
 the ``stale_channel`` alarm, and the mill's other channels no longer held back for it — when
@@ -83,12 +84,14 @@ __all__ = ["HELD", "AckRequest", "MillPipeline", "MillUpdate", "Worker"]
 log = logging.getLogger(__name__)
 
 BATCH_BLOCKS = 2000
-#: Queued blocks from which a step takes the batch lane (:meth:`Worker._handle_items`): a full
-#: batch, i.e. the queue is behind. Measured (50 mills in live order, 4 channels, 100-sample
-#: blocks, with each batch's analysis and commit; µs a block, by block / lane): 200 blocks
-#: 87 / 259, 800 37 / 46, 2000 23 / 18 — the lane's work per mill and batch pays only for long
-#: runs; a recovery's history (each channel's blocks in a run) 15 µs a block through the lane.
-LANE_MIN_BLOCKS = BATCH_BLOCKS
+#: Blocks of one mill in a step's batch from which they take the batch lane's array path
+#: (:meth:`Worker._handle_items`; fewer go block by block). Measured (50 mills, 4 channels,
+#: 100-sample blocks in live order — a block of each channel and mill in turn —, with each
+#: batch's analysis and commit; µs a block, block by block / all through the lane / this
+#: rule): 200-block batches 86 / 259 / 60 (block by block: 61), 800 37 / 46 / 29 (30), 2000
+#: 23 / 18 / 19 (22) — the lane's work per mill and batch pays only for runs; a recovery's
+#: history (each channel's blocks in a run) 15 µs a block all in.
+LANE_MIN_RUN = 32
 #: Unrecoverable losses listed in a mill's status (``GET /mills/{id}``), newest first.
 LOSSES_SHOWN = 20
 #: The ``state`` in the status of a mill that is held (not analysed; see the module docstring).
@@ -199,7 +202,7 @@ class Worker:
         #: Each mill's newest unrecoverable losses (stored; newest first), for its status.
         self.losses = {m: deque(store.losses(m, LOSSES_SHOWN), LOSSES_SHOWN) for m in mills}
         #: The batch lane a backlog takes (its counters: blocks by path).
-        self.lane = BatchLane(self)
+        self.lane = BatchLane(self, min_run=LANE_MIN_RUN)
 
     # ------------------------------------------------------------------ one block
     def handle(self, item: QueuedBlock, *, archive: bool = True) -> None:
@@ -423,13 +426,14 @@ class Worker:
         return len(items)
 
     def _handle_items(self, items: list[QueuedBlock]) -> None:
-        """:meth:`handle` of each queued block, in arrival order — a batch of at least
-        :data:`LANE_MIN_BLOCKS` (a backlog: the gateways' caches delivering an outage, a burst)
-        archived first, then through the batch lane's array path
+        """:meth:`handle` of each queued block, in arrival order. A batch that holds runs of
+        :data:`LANE_MIN_RUN` blocks of a mill (a backlog: the gateways' caches delivering an
+        outage, a burst) is archived first, then handed to the batch lane
         (:meth:`~service.worker.batch_lane.BatchLane.handle_queued`: the same admission, counts
-        and analysis, a few µs a block instead of ~25); live batches of a few blocks per mill
-        stay block by block, where the lane's per-mill work costs more than it saves."""
-        if len(items) < LANE_MIN_BLOCKS:
+        and analysis), which takes those mills' runs as arrays and the others block by block;
+        a live batch of a few blocks per mill stays block by block, where the lane's work per
+        mill costs more than it saves."""
+        if not self._has_runs(items):
             for item in items:
                 self.handle(item)
             return
@@ -437,6 +441,18 @@ class Worker:
             for item in items:
                 self._archive(self.archive, item)
         self.lane.handle_queued(items)
+
+    def _has_runs(self, items: list[QueuedBlock]) -> bool:
+        """Whether a mill has :data:`LANE_MIN_RUN` blocks or more among ``items`` (counted by
+        key in C, then routed once a key)."""
+        if len(items) < LANE_MIN_RUN:
+            return False
+        per_mill: Counter[str] = Counter()
+        for key, count in Counter(item.key for item in items).items():
+            route = self.admission.route(key)
+            if route is not None:
+                per_mill[route[0]] += count
+        return max(per_mill.values(), default=0) >= LANE_MIN_RUN
 
     # ------------------------------------------------------------------ acknowledgements
     def request_ack(self, mill_id: str, alarm_id: str, by: str) -> AckRequest:

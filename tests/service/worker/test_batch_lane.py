@@ -21,7 +21,6 @@ from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene
 from ingest.wire import DType, decode_block, encode_block
 from service.store.database import Store
-from service.worker import worker as worker_module
 from service.worker.batch_lane import BatchLane
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.mill_job import MillJob
@@ -194,10 +193,10 @@ def test_a_recovered_history_with_its_overlap_takes_the_array_path(tmp_path: Pat
         assert sum(h.duplicates for h in channels) + sum(h.replays for h in channels) == 40
 
 
-def test_a_worker_step_takes_a_backlog_through_the_lane(tmp_path: Path, monkeypatch) -> None:
-    """A step that drains a full batch (the queue is behind) archives every block first,
-    then hands them to the lane: the same archive, counts and analysis as block by block."""
-    monkeypatch.setattr(worker_module, "LANE_MIN_BLOCKS", 100)
+def test_a_worker_step_takes_a_backlog_through_the_lane(tmp_path: Path) -> None:
+    """A step whose batch holds long runs of a mill (the queue is behind) archives every block
+    first, then hands them to the lane: the same archive, counts and analysis as block by
+    block."""
     queue = BlockQueue(10_000)
     history = _BLOCKS[:200] + _BLOCKS[160:]  # an overlap of 10 blocks per channel
     for item in history:
