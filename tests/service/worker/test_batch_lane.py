@@ -21,7 +21,7 @@ from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene
 from ingest.wire import DType, decode_block, encode_block
 from service.store.database import Store
-from service.worker.batch_lane import BatchLane
+from service.worker.batch_lane import BatchLane, queued_batch
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.mill_job import MillJob
 from service.worker.recovery import recover
@@ -215,3 +215,12 @@ def test_a_worker_step_takes_a_backlog_through_the_lane(tmp_path: Path) -> None:
             assert _state(bulk, s2) == _state(one, s1)
     archived = [b.payload for b in ArchiveReader(tmp_path / "a", "w").blocks()]
     assert archived == [item.payload for item in history]
+
+
+def test_queued_blocks_make_a_batch_of_the_archive_batches_types() -> None:
+    """The lane's compiled kernels see the same array types live as in a replay (a read-only
+    buffer would be compiled anew in the middle of a recovery)."""
+    batch = queued_batch(_BLOCKS[:50])
+    assert batch.buf.flags.writeable and batch.buf.dtype == np.uint8
+    assert [batch.payload(k) for k in range(len(batch))] == [b.payload for b in _BLOCKS[:50]]
+    assert batch.log_time.tolist() == [b.recv_ns for b in _BLOCKS[:50]]
