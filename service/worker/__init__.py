@@ -4,6 +4,7 @@ Block path (``millwatch serve``; README "Data flow")::
 
     zenoh callback ─▶ block_queue ─▶ worker.Worker.step: for each block
         archive (raw bytes, first) ─▶ admission (route, decode, health) ─▶ mill_job.MillJob (queued)
+        (a backlog — a recovery's history, a burst — archived, then the batch lane's arrays)
     end of the batch: each mill's analysis ─▶ one store transaction ─▶ alarms to ``on_alarms``
     every checkpoint interval, one mill at a time: snapshot + archive position ─▶ store
 
@@ -17,12 +18,14 @@ Modules, low to high (a module imports only those above it):
   replay and offline analysis alike.
 * ``checkpoints`` — when each mill is checkpointed; which archived blocks a checkpoint covers.
 * ``partition`` — which configured mills this worker analyses when several share a router.
+* ``batch_lane`` — many blocks as arrays (archive replay, a live backlog): repeats dropped and
+  counted, regular runs admitted at once, the rest block by block — through the worker's public
+  methods (``BlockSink``).
 * ``worker`` — :class:`~service.worker.worker.Worker`: routing, the block path above, commits,
   checkpoints, restoring them (held mills), acknowledgements, status; the ``MillPipeline``
   Protocol a mill's analysis meets.
 * ``mill_job`` — :class:`~service.worker.mill_job.MillJob`, the worker's unit per mill: the
   analyzer plus alarms, turned into store rows.
-* ``batch_lane`` — archived blocks as arrays (replay), through the worker's public methods.
 * ``parallel_replay`` — a long archive tail replayed by several processes, mills split.
 * ``offline_analysis`` — ``millwatch analyze``: archive files through the batch lane into the
   mills' analyzers, with no store (the replay path's cost per sample); ``export_files`` reads
@@ -37,8 +40,8 @@ Modules, low to high (a module imports only those above it):
   archive, zenoh session, worker thread), starts them in order and closes them in reverse.
 
 Where things go: a new per-block check or counter → ``health`` and ``admission`` (and
-``ChannelHealth.follows_on`` / ``observe_run`` for the batch lane's array path, which must count
-the same); a new per-mill result or store row
+``ChannelHealth.repeats_in`` / ``follows_on`` / ``observe_run`` for the batch lane's array path,
+which must count the same); a new per-mill result or store row
 → ``mill_job``; a new start-up or shutdown step → ``runtime``; a new recovery step →
 ``recovery``, calling only public ``Worker`` methods.
 """

@@ -14,7 +14,9 @@ For each message (a zenoh key and a payload)::
 key. What a caller does with an admission is its own: the worker stores a gap or a clock fault
 as a data-quality event and holds back a held mill's blocks; offline analysis only analyses.
 The batch lane's regular runs (:mod:`service.worker.batch_lane`) are admitted by the same rule
-at once: :meth:`~service.worker.health.ChannelHealth.follows_on` then
+at once: repeats found by :meth:`~service.worker.health.ChannelHealth.repeats_in` are dropped and
+counted (:meth:`BlockAdmission.count_repeats`), the rest tested with
+:meth:`~service.worker.health.ChannelHealth.follows_on` then counted with
 :meth:`~service.worker.health.ChannelHealth.observe_run`.
 """
 
@@ -89,6 +91,21 @@ class BlockAdmission:
         """Count ``blocks`` blocks on ``key``, a key of no given mill (read in bulk by offline
         analysis, which skips them without decoding)."""
         self.foreign[key] += blocks
+
+    def count_repeats(self, key: str, duplicates: int, replays: int, recv_ns: int) -> None:
+        """Count repeats of ``key``'s channel dropped at once by the batch lane (what
+        :meth:`admit` of each counts, the last received at ``recv_ns``), logged as
+        :meth:`admit` logs them: once per key and kind, at INFO."""
+        route = self._route(key)
+        if route is None or duplicates + replays == 0:
+            return
+        mill_id, channel = route
+        self.health[mill_id].channels[channel].repeat_run(duplicates, replays, recv_ns)
+        for verdict, count in (("duplicate", duplicates), ("replay", replays)):
+            if count:
+                self._log_once(key, verdict, "%s: %d %s block(s) dropped (sequence numbers not "
+                               "new; counted, further ones not logged)", key, count, verdict,
+                               level=logging.INFO)  # fmt: skip
 
     def admit(self, key: str, payload: bytes, recv_ns: int) -> Admitted | None:
         """The admitted block of message (``key``, ``payload``) received at ``recv_ns`` (ns

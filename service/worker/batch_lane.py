@@ -1,17 +1,22 @@
-"""The worker's fast lane for many archived blocks at once (replay after a crash).
+"""The worker's fast lane for many blocks at once: archive replay after a crash, and a live
+backlog (the gateways' caches delivering an outage, :meth:`BatchLane.handle_queued`).
 
 :meth:`service.worker.worker.Worker.handle` costs ~25 µs a block in Python (decode, health, routing,
 alignment); replaying an hour of 50 mills is 7.2 million blocks. :class:`BatchLane` takes a
 :class:`~ingest.archive.batches.MessageBatch` and, per mill, treats the blocks as arrays when
-they are *regular* — every block well-formed at the mill's rate, all of one length and dtype, and
-each channel's sequence numbers following on from the last one seen (no gap, no repeat). Then the
-health counters move in one step per channel, the samples are gathered in one step, and the
+they are *regular* once their repeats are dropped — every block well-formed at the mill's rate,
+all of one length and dtype, and each channel's new blocks following on from the last one seen
+(no gap, no clock fault). Repeats (a sequence number not beyond the highest one before it: the
+overlap every recovery brings, of its history with the archive) are found per channel at once
+(:meth:`~service.worker.health.ChannelHealth.repeats_in`), counted by kind exactly as the
+admission counts them one by one (``BlockSink.repeated``) and dropped. Then the health counters
+move in one step per channel, the samples are gathered in one step, and the
 mill's aligner takes them all at once (``Worker.accept_regular`` →
 :meth:`analytics.mill.analyzer.MillAnalyzer.add_blocks`, which itself falls back block by block
 when the timing is not regular). A mill with anything irregular in the batch — a malformed or
-foreign block, a gap, a repeat — goes block by block through ``Worker.handle`` in arrival order
-instead, so every count, data-quality event and sample is exactly what block-by-block handling
-gives: a run is regular by the admission rule itself
+foreign block, a gap, a clock fault — goes block by block through ``Worker.handle`` in arrival
+order instead, so every count, data-quality event and sample is exactly what block-by-block
+handling gives: a run is regular by the admission rule itself
 (:meth:`~service.worker.health.ChannelHealth.follows_on`, see :mod:`service.worker.admission`).
 Blocks on keys of no configured mill go through ``Worker.handle`` too (they are only counted).
 A held mill's blocks move its health counters either way but never reach its pipeline (the
@@ -19,13 +24,13 @@ worker's ``accept_regular`` and ``handle`` see to that).
 
 The lane talks to the worker only through :class:`BlockSink`, the worker's public methods it
 needs, so it does not import the worker. Its Python work is per batch and per mill, never per
-block.
+block (but for listing queued blocks as a batch, :func:`queued_batch`).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -38,9 +43,15 @@ from ingest.archive.files import ArchivePosition
 from ingest.wire import DType, decode_headers
 from service.worker.block_queue import QueuedBlock
 from service.worker.checkpoints import covers
-from service.worker.health import ChannelHealth, MillHealth
+from service.worker.health import DUPLICATE, ChannelHealth, MillHealth
 
-__all__ = ["REPLAY_BLOCKS_PER_MILL", "BatchLane", "BlockSink", "replay_batch_blocks"]
+__all__ = [
+    "REPLAY_BLOCKS_PER_MILL",
+    "BatchLane",
+    "BlockSink",
+    "queued_batch",
+    "replay_batch_blocks",
+]
 
 log = logging.getLogger(__name__)
 
@@ -80,7 +91,31 @@ class BlockSink(Protocol):
         self, mill_id: str, chan: np.ndarray, t0_ns: np.ndarray, raw: np.ndarray
     ) -> None: ...
 
+    def repeated(self, key: str, duplicates: int, replays: int, recv_ns: int) -> None: ...
+
     def commit(self) -> None: ...
+
+
+def queued_batch(items: Sequence[QueuedBlock]) -> MessageBatch:
+    """Queued blocks as one :class:`~ingest.archive.batches.MessageBatch` (payloads back to back,
+    receive times as log times; no archive file: nothing in it is covered by a checkpoint).
+    Per block only list building: a few hundred ns a block, against ~25 µs of
+    ``Worker.handle``."""
+    topics: dict[str, int] = {}
+    count = len(items)
+    channel = np.fromiter((topics.setdefault(it.key, len(topics)) for it in items), np.int64,
+                          count)  # fmt: skip
+    length = np.fromiter((len(it.payload) for it in items), np.int64, count)
+    offset = np.zeros(count, dtype=np.int64)
+    if count > 1:
+        np.cumsum(length[:-1], out=offset[1:])
+    # writable, as an archive batch's: numba's kernels (``_gather``) are compiled and cached
+    # per signature, and a read-only buffer is another one, compiled in the middle of the first
+    # recovery after each fresh install (seen as a stall of 6-13 s at 10-50 mills)
+    buf = np.frombuffer(bytearray().join(it.payload for it in items), dtype=np.uint8)
+    log_time = np.fromiter((it.recv_ns for it in items), np.int64, count)
+    return MessageBatch("", buf, np.arange(count, dtype=np.int64), channel, log_time, offset,
+                        length, {i: k for k, i in topics.items()})  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
@@ -96,14 +131,21 @@ class BatchLane:
     """Hands message batches to a :class:`BlockSink`, the worker (see the module docstring).
     ``regular_blocks`` / ``slow_blocks`` count what took which path; ``commit_every``: blocks
     :meth:`replay` handles between the worker's commits (default: for all the worker's mills;
-    a process that replays only some of them passes its own)."""
+    a process that replays only some of them passes its own); ``min_run``: a mill with fewer
+    blocks in a batch goes block by block (the array path's work per mill and batch pays only
+    for runs of some length)."""
 
-    def __init__(self, worker: BlockSink, commit_every: int | None = None) -> None:
+    def __init__(
+        self, worker: BlockSink, commit_every: int | None = None, min_run: int = 1
+    ) -> None:
         self.worker = worker
+        self.min_run = min_run
         self.mills = list(worker.mills)
         self._channels = {m: list(c.channels) for m, c in worker.mills.items()}
         self.regular_blocks = 0
         self.slow_blocks = 0
+        #: Repeats dropped from otherwise regular runs (counted as the admission counts them).
+        self.repeat_blocks = 0
         self.commit_every = commit_every or replay_batch_blocks(len(self.mills))
         self._since_commit = 0
 
@@ -152,11 +194,19 @@ class BatchLane:
             self._slow(batch, k)
         for m in np.unique(mill[keep & (mill >= 0)]).tolist():
             idx = np.flatnonzero(keep & (mill == m))
-            if not self._regular(self.mills[m], batch, idx, chan[idx], head[idx], ok[idx]):
+            if len(idx) < self.min_run or not self._regular(
+                self.mills[m], batch, idx, chan[idx], head[idx], ok[idx]
+            ):
                 for k in idx.tolist():
                     self._slow(batch, k)
         handled = int(np.count_nonzero(keep))
         return handled, len(batch) - handled
+
+    def handle_queued(self, items: Sequence[QueuedBlock]) -> None:
+        """:meth:`handle` of blocks taken from the worker's queue (archived already), in
+        arrival order: a live backlog, e.g. the gateways' caches delivering an outage after a
+        restart, takes the same array path as an archive replay."""
+        self.handle(queued_batch(items))
 
     def _not_covered(
         self, batch: MessageBatch, mill: np.ndarray, covered: dict[str, ArchivePosition | None]
@@ -178,46 +228,79 @@ class BatchLane:
         self, mill_id: str, batch: MessageBatch, idx: np.ndarray, chan: np.ndarray,
         head: np.ndarray, ok: np.ndarray,
     ) -> bool:  # fmt: skip
-        """Handle a mill's blocks as arrays if they are regular; False (nothing done) if not."""
+        """Handle a mill's blocks as arrays if they are regular once their repeats are dropped;
+        False (nothing done) if not."""
         fs = float(self.worker.mills[mill_id].sample_rate_hz)
         n, code = int(head["n"][0]), int(head["dtype"][0])
         if not (ok.all() and n > 0 and np.all(head["fs"] == fs) and np.all(head["n"] == n)
                 and np.all(head["dtype"] == code)):  # fmt: skip
             return False
-        health = self.worker.health[mill_id].channels
-        names = self._channels[mill_id]
-        per_channel: dict[int, np.ndarray] = {}
-        step = round(n * 1e9 / fs)
-        for ci in np.unique(chan).tolist():
-            sel = np.flatnonzero(chan == ci)
-            if not health[names[ci]].follows_on(head["seq"][sel], head["t0_ns"][sel], step):
-                return False
-            per_channel[ci] = sel
-        start = batch.offset[idx] + head["header_len"].astype(np.int64)
+        runs = self._runs(mill_id, chan, head, round(n * 1e9 / fs))
+        if runs is None:
+            return False
+        recv = batch.log_time[idx]
+        for sel, repeat in runs.values():
+            if repeat.any():  # counted first: observe_run then sets the same receive time
+                key = batch.topics[int(batch.channel[idx[sel[-1]]])]
+                dup = int(np.count_nonzero(repeat == DUPLICATE))
+                self.worker.repeated(key, dup, int(np.count_nonzero(repeat)) - dup,
+                                     int(recv[sel[-1]]))  # fmt: skip
+        self.repeat_blocks += sum(int(np.count_nonzero(r)) for _, r in runs.values())
+        new = np.sort(np.concatenate([sel[r == 0] for sel, r in runs.values()]))
+        if new.size == 0:
+            return True
+        per_channel = {ci: np.searchsorted(new, sel[r == 0]) for ci, (sel, r) in runs.items()}
+        last_recv = {ci: int(recv[sel[-1]]) for ci, (sel, _) in runs.items()}
+        head, chan, kept = head[new], chan[new], idx[new]
+        start = batch.offset[kept] + head["header_len"].astype(np.int64)
         width = n * _NUMPY[code].itemsize
-        raw = _gather(batch.buf, start, width).view(_NUMPY[code]).reshape(len(idx), n)
+        raw = _gather(batch.buf, start, width).view(_NUMPY[code]).reshape(len(kept), n)
         t0 = head["t0_ns"].astype(np.int64)
-        _observe(health, names, per_channel, head, raw, batch.log_time[idx], n, fs)
-        self.regular_blocks += len(idx)
+        names = self._channels[mill_id]
+        health = self.worker.health[mill_id].channels
+        _observe(health, names, per_channel, head, raw, last_recv, n, fs)
+        self.regular_blocks += len(kept)
         self.worker.accept_regular(mill_id, chan, t0, raw)
         return True
+
+    def _runs(
+        self, mill_id: str, chan: np.ndarray, head: np.ndarray, step: int
+    ) -> dict[int, tuple[np.ndarray, np.ndarray]] | None:
+        """Per channel index: its blocks' positions and their repeat codes
+        (:meth:`~service.worker.health.ChannelHealth.repeats_in`) — or None when a channel's
+        new blocks do not follow on (:meth:`~service.worker.health.ChannelHealth.follows_on`)."""
+        health = self.worker.health[mill_id].channels
+        names = self._channels[mill_id]
+        runs = {}
+        for ci in np.unique(chan).tolist():
+            sel = np.flatnonzero(chan == ci)
+            h = health[names[ci]]
+            repeat = h.repeats_in(head["seq"][sel])
+            new = sel[repeat == 0]
+            if new.size and not h.follows_on(head["seq"][new], head["t0_ns"][new], step):
+                return None
+            runs[ci] = (sel, repeat)
+        return runs
 
 
 def _observe(
     health: dict[str, ChannelHealth], names: list[str], per_channel: dict[int, np.ndarray],
-    head: np.ndarray, raw: np.ndarray, recv: np.ndarray, n: int, fs: float,
+    head: np.ndarray, raw: np.ndarray, last_recv: dict[int, int], n: int, fs: float,
 ) -> None:  # fmt: skip
     """:meth:`~service.worker.health.ChannelHealth.observe` of each block, per channel at once
-    (:meth:`~service.worker.health.ChannelHealth.observe_run`)."""
+    (:meth:`~service.worker.health.ChannelHealth.observe_run`); ``last_recv``: each channel's
+    last receive time in the batch (ns; its last block, a repeat or not)."""
     # a finite sum proves every sample finite (one pass, no copies); otherwise count exactly
     count = raw.dtype.kind == "f" and not np.isfinite(raw.sum())
     duration = round(n * 1e9 / fs)
     for ci, sel in per_channel.items():
+        if not sel.size:  # (only repeats of this channel: counted already)
+            continue
         samples = sel.size * n
         nonfinite = samples - int(np.count_nonzero(np.isfinite(raw[sel]))) if count else 0
         last = sel[-1]
         t0_last = int(head["t0_ns"][last])
         health[names[ci]].observe_run(
             sel.size, samples, nonfinite, int(head["seq"][last]), t0_last,
-            t0_last + duration, int(recv[last]),
+            t0_last + duration, last_recv[ci],
         )  # fmt: skip

@@ -40,6 +40,9 @@ class BlockQueue:
         self.dropped = 0
         self.offered = 0
         self.high_water = 0
+        #: The newest receive time (ns) per key, of every block offered (queued or dropped:
+        #: either way its channel is not silent; the worker's staleness reads it).
+        self.received: dict[str, int] = {}
 
     def offer(self, key: str, payload: bytes, recv_ns: int | None = None) -> bool:
         """Enqueue a block (from any thread); returns False and counts a drop when full."""
@@ -48,6 +51,7 @@ class BlockQueue:
             # even when zenoh delivers from several threads (the archive's log times follow).
             item = QueuedBlock(key, payload, time.time_ns() if recv_ns is None else recv_ns)
             self.offered += 1
+            self.received[key] = item.recv_ns
             if len(self._items) >= self.capacity:
                 self.dropped += 1
                 self._warn_full()

@@ -19,7 +19,10 @@ The counters are lifetime totals: the worker checkpoints them with the mill
 (:meth:`ChannelHealth.counters` / :meth:`ChannelHealth.restore_counters`) and the archive tail
 replayed after the checkpoint counts the rest, so a restart neither forgets nor double-counts.
 
-A channel is *stale* when nothing arrived for ``stale_after_s`` seconds of wall time.
+A channel is *stale* when nothing arrived for ``stale_after_s`` seconds of wall time
+(:meth:`ChannelHealth.stale`, for the status). The worker's own judgement — data-quality events,
+the ``stale_channel`` alarm, releasing the other channels — also counts blocks still queued and
+never the time it was not listening (:meth:`service.worker.worker.Worker.silence_ns`).
 """
 
 from __future__ import annotations
@@ -34,7 +37,9 @@ import numpy as np
 from ingest.wire import Block
 
 __all__ = [
+    "DUPLICATE",
     "REPEATS",
+    "REPLAY",
     "Admission",
     "ChannelHealth",
     "LatencyReservoir",
@@ -47,6 +52,8 @@ __all__ = [
 SeqVerdict = Literal["first", "next", "gap", "duplicate", "replay"]
 #: The verdicts of blocks that are not new (dropped after counting).
 REPEATS = frozenset({"duplicate", "replay"})
+#: :meth:`ChannelHealth.repeats_in` codes of a repeated block (0: new).
+DUPLICATE, REPLAY = 1, 2
 #: Counters a checkpoint carries (lifetime totals).
 _COUNTERS = ("blocks", "samples", "nonfinite_samples", "missing_blocks", "gaps", "duplicates",
              "replays", "clock_faults")  # fmt: skip
@@ -202,6 +209,37 @@ class ChannelHealth:
             return False
         # each block where its predecessor's t0 and duration put it (as accept checks)
         return not np.any(np.abs(np.diff(t0_ns.astype(np.int64)) - step_ns) > tolerance)
+
+    def repeats_in(self, seq: np.ndarray) -> np.ndarray:
+        """What :meth:`accept` would make of blocks with sequence numbers ``seq`` taken in turn,
+        as far as repeats go: per block 0 (new), :data:`DUPLICATE` or :data:`REPLAY`. A repeat
+        never moves the channel's position, so each block is judged against the highest
+        sequence number before it (this channel's last one, then the run's). Changes nothing;
+        the batch lane drops the repeats (:meth:`repeat_run`) before it tests the rest with
+        :meth:`follows_on`."""
+        s = seq.astype(np.uint64)
+        out = np.zeros(s.shape, dtype=np.int8)
+        if s.size == 0:
+            return out
+        prev = np.empty_like(s)
+        prev[1:] = np.maximum.accumulate(s)[:-1]
+        if self.last_seq is None:  # the first block is new whatever it is (set below)
+            prev[0] = s[0]
+        else:
+            prev[0] = np.uint64(self.last_seq)
+            np.maximum(prev, np.uint64(self.last_seq), out=prev)
+        out[s == prev] = DUPLICATE
+        out[s < prev] = REPLAY
+        if self.last_seq is None:
+            out[0] = 0
+        return out
+
+    def repeat_run(self, duplicates: int, replays: int, recv_ns: int) -> None:
+        """Count ``duplicates`` and ``replays`` dropped at once (:meth:`repeat` of each; the
+        last of them received at ``recv_ns``)."""
+        self.duplicates += duplicates
+        self.replays += replays
+        self.last_recv_ns = recv_ns
 
     def observe_run(
         self, blocks: int, samples: int, nonfinite: int, last_seq: int, last_t0_ns: int,

@@ -160,6 +160,10 @@ class _AdmittingSink:
         """(mill id, channel name) of a live or replay key; None for no given mill."""
         return self.admission.route(key)
 
+    def repeated(self, key: str, duplicates: int, replays: int, recv_ns: int) -> None:
+        """Repeats the lane dropped at once, counted as :meth:`BlockAdmission.admit` would."""
+        self.admission.count_repeats(key, duplicates, replays, recv_ns)
+
 
 class OfflineSink(_AdmittingSink):
     """The :class:`~service.worker.batch_lane.BlockSink` of an offline analysis: the

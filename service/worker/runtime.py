@@ -179,6 +179,7 @@ class ServiceRuntime:
         assert self.session is not None
         self._watch = PublisherWatch(self.session, live_pattern())
         self._unsubscribed = {m: set(mill_channel_keys(c).values()) for m, c in self.mills.items()}
+        worker.awaiting_gateways(self._unsubscribed)
         wait_s = self.settings.worker.gateway_wait_s
         self._subscribe_ready(worker, final=wait_s == 0)
         if self._unsubscribed:
@@ -221,6 +222,7 @@ class ServiceRuntime:
                     log.error("%s: could not subscribe to its gateways: %s", mill_id, err)
                     continue
                 self._subscribers.append(subscriber)
+                worker.listening(mill_id)  # its channels' silence counts from now
                 del self._unsubscribed[mill_id]
                 back = "all they hold" if age is None else f"the last {age:.1f} s"
                 if missing:
@@ -277,7 +279,8 @@ class ServiceRuntime:
             except Exception:
                 log.exception("worker step failed; continuing with the next batch")
             if time.monotonic() - last_status >= STATUS_EVERY_S:
-                self.worker.check_staleness(self.settings.worker.stale_after_s)
+                self.worker.check_staleness(self.settings.worker.stale_after_s,
+                                            self.queue.received)  # fmt: skip
                 self._refresh_status()
                 last_status = time.monotonic()
 

@@ -127,16 +127,18 @@ def write_settings(
     stale_after_s: float = 60.0,
     checkpoint_seconds: float = 1.0,
     gateway_wait_s: float = 10.0,
+    mill_file: Path = MILL_FILE,
 ) -> Path:
     """A ``serve`` settings file: archive and store in ``directory``, the one test mill
-    (``gateway_wait_s`` 0 for plain publishers, which are never seen as gateways up)."""
+    (``mill_file``; ``gateway_wait_s`` 0 for plain publishers, which are never seen as
+    gateways up)."""
     path = directory / "plant.toml"
     path.write_text(
         f"[zenoh]\nlisten = {json.dumps(list(listen))}\nconnect = {json.dumps(list(connect))}\n"
         f'[archive]\ndirectory = "archive"\n[store]\npath = "mw.db"\n'
         f"[worker]\nstale_after_s = {stale_after_s}\ncheckpoint_seconds = {checkpoint_seconds}\n"
         f"gateway_wait_s = {gateway_wait_s}\n"
-        f'[api]\nport = {api_port}\n[mills]\nfiles = ["{MILL_FILE}"]\n',
+        f'[api]\nport = {api_port}\n[mills]\nfiles = ["{mill_file}"]\n',
         encoding="utf-8",
     )
     return path
@@ -254,13 +256,14 @@ def data_quality(directory: Path) -> list[dict[str, Any]]:
     return [json.loads(r[0]) for r in rows]
 
 
-def clean_report(directory: Path) -> dict[str, Any]:
+def clean_report(directory: Path, scene_args: tuple[str, ...] = SCENE_ARGS) -> dict[str, Any]:
     """``millwatch analyze --json`` of the scene written by ``millwatch simulate --out``."""
     recording = directory / "clean.mcap"
     run = [sys.executable, "-m", "service.cli.main"]
-    subprocess.run([*run, "simulate", *SCENE_ARGS, "--out", str(recording)], cwd=ROOT,
+    subprocess.run([*run, "simulate", *scene_args, "--out", str(recording)], cwd=ROOT,
                    check=True, capture_output=True, timeout=120)  # fmt: skip
-    out = subprocess.run([*run, "analyze", str(recording), "--mill", str(MILL_FILE), "--json",
+    mill = scene_args[scene_args.index("--mill") + 1]
+    out = subprocess.run([*run, "analyze", str(recording), "--mill", mill, "--json",
                           "--no-progress"], cwd=ROOT, check=True, capture_output=True,
                          timeout=120)  # fmt: skip
     report: dict[str, Any] = json.loads(out.stdout)

@@ -1,12 +1,17 @@
 """No block lost across a restart (issue 16), end to end on 127.0.0.1 with real processes: a
 gateway (``millwatch simulate --publish --anchor-ns``) and ``millwatch serve`` connected to it.
 
-(a) ``serve`` SIGKILLed at random moments (five times, the first during the start, 1–3 s down
-    each): the archive then holds every published block and the stored results equal
-    ``millwatch analyze`` of the same scene written with ``simulate --out``.
+(a) ``serve`` SIGKILLed at random moments (up to five times as the scene has room for them,
+    the first during the start, 1–3 s down each): the archive then holds every published block
+    and the stored results equal ``millwatch analyze`` of the same scene written with
+    ``simulate --out``.
 (b) The gateway SIGKILLed mid-scene and restarted with the same anchor: the blocks that fell due
     meanwhile are reported lost once per channel with their exact count, also after ``serve``
     is restarted (lifetime totals in ``/metrics`` and ``/mills/{id}``).
+
+Every bound comes from what is observed — when a process really stopped, restarted and
+answered, what the gateway says it published, when the worker received a block — never from an
+assumed start-up time (they failed on a busy 2-core machine, issue 25).
 (c) ``serve`` started before its gateway: ``/ready`` says what is missing, then it becomes
     ready when the gateway appears."""
 
@@ -14,6 +19,7 @@ from __future__ import annotations
 
 import json
 import random
+import re
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -22,8 +28,11 @@ from typing import Any
 import pytest
 
 from analytics.signal.telemetry_faults import LOOKAHEAD
+from ingest.archive.reader import ArchiveReader
 from ingest.mill_files import load_mill_config
+from ingest.wire import WireError, decode_block
 from ingest.zenoh_session import free_loopback_port, tcp_endpoint
+from service.worker.runtime import ARCHIVE_PREFIX
 from tests.integration.live import (
     BLOCK_NS,
     BLOCKS_PER_CHANNEL,
@@ -65,6 +74,7 @@ class Plant:
         self.api = Api(api_port)
         self.anchor_ns = (time.time_ns() // 10**9 + round(LEAD_S)) * 10**9
         self.anchor_mono = time.monotonic() + (self.anchor_ns - time.time_ns()) / 1e9
+        self._seen_last: int | None = None
 
     def start_gateway(self) -> None:
         self.procs.start("gateway", "simulate", *SCENE_ARGS, "--publish",
@@ -74,6 +84,7 @@ class Plant:
         assert not self.gone("gateway"), self.procs.logs()
 
     def start_serve(self) -> None:
+        self._seen_last = None
         self.procs.start("serve", "serve", "--config", str(self.settings))
         assert wait(lambda: self.api.up() or self.gone("serve"), 30.0)
         assert not self.gone("serve"), self.procs.logs()
@@ -99,6 +110,17 @@ class Plant:
         end = round(DURATION_S * 1e9) - LOOKAHEAD * step_ns
         return first is not None and last == first + end
 
+    def analysing_again(self) -> bool:
+        """The (restarted) worker analyses: its analysed time is past the scene's first 1 s
+        and moved since it was first asked (observed progress, not an assumed start time)."""
+        status = self.api.mill().get("status", {})
+        first, last = status.get("monitored_since_ns"), status.get("last_sample_ns")
+        if first is None or last is None or last < first + 10**9:
+            return False
+        seen = self._seen_last
+        self._seen_last = last
+        return seen is not None and last > seen
+
     def sleep_until(self, t_mono: float) -> None:
         time.sleep(max(0.0, min(t_mono - time.monotonic(), 60.0)))
 
@@ -112,24 +134,34 @@ def archived_seqs(directory: Path) -> dict[str, set[int]]:
 
 
 def test_sigkilled_worker_recovers_every_block_and_equals_offline_analysis(tmp_path, clean):
+    """Outages driven by what is observed, not by assumed timings: each kill waits until the
+    restarted worker analyses again, and a kill happens only while the scene has room for it
+    (1.5 times the longest restart seen, plus the outage), so the gateway — whose cache ends
+    with it — never finishes its scene while the worker is down, however busy the machine."""
     rng = random.Random(20261124)
     plant = Plant(tmp_path, speed=1.0)  # 70 s of wall time: five restarts took 17-33 s
     outages: list[float] = []
+    restarts: list[float] = []  # observed: from launching serve until its API answered
     try:
         plant.start_gateway()
         plant.start_serve()
         # the first kill during the start (scene 5–21 s), the others at random moments after
         kill_at = plant.anchor_mono + rng.uniform(5.0, 12.0) / plant.speed
         for _ in range(KILLS):
+            down = rng.uniform(1.0, 3.0)
+            room = 1.5 * max(restarts, default=LEAD_S) + down + 2.0
+            if plant.scene_end_mono() - max(kill_at, time.monotonic()) < room:
+                break
             plant.sleep_until(kill_at)
             plant.procs.kill("serve")
-            down = rng.uniform(1.0, 3.0)
             time.sleep(down)
             outages.append(down)
+            launched = time.monotonic()
             plant.start_serve()
-            assert not plant.gone("gateway"), "the scene ended before the last outage"
+            restarts.append(time.monotonic() - launched)
+            assert not plant.gone("gateway"), f"the scene ended during an outage: {restarts=}"
+            assert wait(plant.analysing_again, 30.0), plant.procs.logs()
             kill_at = time.monotonic() + rng.uniform(0.5, 1.5)
-        assert plant.scene_end_mono() - time.monotonic() > 1.0, "kills ran past the scene"
         plant.wait_gateway_done()
         caught_up = wait(plant.analysed_to_the_end, 30.0)  # if not, the checks below say why
         assert plant.procs.stop("serve") == 0, plant.procs.logs()
@@ -139,7 +171,12 @@ def test_sigkilled_worker_recovers_every_block_and_equals_offline_analysis(tmp_p
     missing = {c: BLOCKS_PER_CHANNEL - len(seqs.get(c, ())) for c in CHANNELS}
     stored = stored_results(tmp_path, CONFIG)
     diff = differences(stored, offline_results(clean))
-    assert (missing, diff) == (dict.fromkeys(CHANNELS, 0), []), f"outages {outages}, {caught_up=}"
+    assert (missing, diff) == (dict.fromkeys(CHANNELS, 0), []), (
+        f"outages {outages}, restarts {restarts}, {caught_up=}"
+    )
+    # the first kill comes in the start, whatever the machine's load (a restart took 19 s at a
+    # load average of 7: then it is the only one the scene has room for)
+    assert outages, f"no room for an outage: {restarts=}"
 
 
 def losses(events: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
@@ -167,24 +204,37 @@ def test_a_restarted_gateway_loses_a_span_reported_once_with_its_exact_count(tmp
         plant.start_serve()
         plant.sleep_until(plant.anchor_mono + 7.0)  # scene 28 s: running
         plant.procs.kill("gateway")
-        killed = time.monotonic()
+        killed_ns = time.time_ns()  # (the process is gone: kill waits for it)
         time.sleep(2.0)
         plant.start_gateway()  # the same anchor: it skips what fell due while it was down
-        down_s = time.monotonic() - killed  # until its port is open again
+        reopened_ns = time.time_ns()  # its port is open again
         plant.wait_gateway_done()
         last = BLOCKS_PER_CHANNEL - 1
         complete = lambda: all(last in s for s in archived_seqs(tmp_path).values())  # noqa: E731
         assert wait(complete, 10.0, every_s=0.5), "the restarted gateway's last blocks"
+        resumed = resumed_at(plant.procs.log_lines("gateway"))
         seqs = archived_seqs(tmp_path)
         span = {}
         for c in CHANNELS:
             lost = sorted(set(range(BLOCKS_PER_CHANNEL)) - seqs[c])
             assert lost and lost == list(range(lost[0], lost[-1] + 1)), (c, lost)
             span[c] = (lost[0], lost[-1], len(lost))
-        # 2 s down plus the gateway's own restart (2-7 s on a busy machine), at 4x: what fell
-        # due until its port opened, and at most 2 s more (its scene is set up after that)
-        most = (down_s + 2.0) * plant.speed * 1e9 / BLOCK_NS
-        assert all(10 <= n <= most for _, _, n in span.values()), (span, down_s)
+        # Bounds from observed events only, not from an assumed restart time: the span starts
+        # with the first block that fell due around the kill; everything that fell due between
+        # the kill and the gateway's port opening again is in it; it ends no earlier than the
+        # restarted gateway's own log says it resumed, and no later than what it published
+        # before the worker's link to it was up again (its first block the worker received).
+        # (Today the restarted gateway's first blocks, published before the worker's session
+        # reconnected, are lost with the span — issue 25's "first blocks lost"; once recovered,
+        # the span ends exactly where the gateway resumed.)
+        due = lambda seq: plant.anchor_ns + seq * BLOCK_NS / plant.speed  # noqa: E731
+        block_wall_ns = BLOCK_NS / plant.speed
+        received = received_ns(tmp_path)
+        for c, (first, final, n) in span.items():
+            assert killed_ns - 1e9 <= due(first) <= killed_ns + block_wall_ns, (c, span[c])
+            assert n >= (reopened_ns - killed_ns) / block_wall_ns - 2, (c, span[c])
+            assert resumed <= final + 1, (c, span[c], resumed)
+            assert due(final) <= received[(c, final + 1)], (c, span[c])
         expected = {c: float(n) for c, (_, _, n) in span.items()}
         want = {"metrics": expected, "mill": expected}
 
@@ -204,6 +254,26 @@ def test_a_restarted_gateway_loses_a_span_reported_once_with_its_exact_count(tmp
         assert plant.procs.stop("serve") == 0, plant.procs.logs()
     finally:
         plant.procs.stop_all()
+
+
+def received_ns(directory: Path) -> dict[tuple[str, int], int]:
+    """When the worker received each archived block (the archive's log time), by (channel,
+    sequence number)."""
+    out = {}
+    for b in ArchiveReader(directory / "archive", ARCHIVE_PREFIX).blocks():
+        try:
+            out[(b.key.rsplit("/", 1)[1], decode_block(b.payload).seq)] = b.log_time_ns
+        except WireError:
+            continue
+    return out
+
+
+def resumed_at(gateway_log: list[str]) -> int:
+    """The first sequence number a restarted gateway published, from its own log (``ingest.sim
+    .publisher``: "… are not published (lost); next sequence N")."""
+    found = [m.group(1) for line in gateway_log if (m := re.search(r"next sequence (\d+)", line))]
+    assert found, gateway_log[-20:]  # (the restart logs it as a warning: it skipped blocks)
+    return int(found[-1])
 
 
 def _names_what_is_missing(body: dict[str, Any], endpoint: str) -> bool:

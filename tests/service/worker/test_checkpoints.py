@@ -367,9 +367,9 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         first.archive.close()  # type: ignore[union-attr]
         kept = _checkpoint_rows(store, "mill-a")
 
-        an_hour_later = blocks[-1].recv_ns + 3600 * 10**9  # every channel stale by then
+        now = [blocks[-1].recv_ns + 3600 * 10**9]  # an hour later
         second = _two_mills(store, ArchiveWriter(archive, "w"), WITHOUT_BENDING,
-                            clock=lambda: an_hour_later)  # fmt: skip
+                            clock=lambda: now[0])  # fmt: skip
         with caplog.at_level(logging.ERROR, logger="service.worker.worker"):
             replayed = recover(second, ArchiveReader(archive, "w"))
         assert list(second.held) == ["mill-a"] and len(caplog.records) == 1
@@ -377,6 +377,7 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         assert replayed == crash - cut_b
         for item in blocks[crash:stop]:  # live
             second.handle(item)
+        now[0] += 11 * 10**9  # silent for 11 s since the restart: every channel stale
         second.check_staleness(10.0)
         second.checkpoint()
         second.archive.close()  # type: ignore[union-attr]
