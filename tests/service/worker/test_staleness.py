@@ -97,7 +97,7 @@ def test_received_blocks_keep_their_channel_fresh_and_a_silent_one_goes_stale(
         worker.commit()
         assert _problems(store) == [("speed", "stale")]
         analyzer = worker.pipelines[CONFIG.id].analyzer  # type: ignore[attr-defined]
-        assert analyzer.aligner.missing_blocks == 300 // 3  # released: speed as NaN
+        assert analyzer.missing_blocks == 300 // 3  # released: speed as NaN
         alarms = {a.subject for a in worker.pipelines[CONFIG.id].alarms.open_alarms(CONFIG.id)
                   if a.rule == "stale_channel"}  # fmt: skip
         assert alarms == {"speed"}
