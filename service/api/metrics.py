@@ -91,6 +91,11 @@ class RuntimeCollector(Collector):
             value=ingest.archived if ingest is not None else 0,
         )
         yield CounterMetricFamily(
+            "millwatch_blocks_read_back",
+            "Blocks the analysis read back from the archive because it had fallen behind.",
+            value=ingest.read_back if ingest is not None else 0,
+        )
+        yield CounterMetricFamily(
             "millwatch_queue_dropped_blocks",
             "Blocks dropped because the callbacks' queue stayed full (the archiving thread "
             "stalled for 30 s); the analysis lagging drops nothing.",

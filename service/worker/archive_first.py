@@ -59,6 +59,8 @@ log = logging.getLogger(__name__)
 PUT_WAIT_S = 30.0
 #: Messages per batch read back from the archive (about one commit's worth).
 ARCHIVE_BATCH_MESSAGES = 4 * BATCH_BLOCKS
+#: The analysis falling behind is logged as a WARNING at most this often (s).
+LOG_EVERY_S = 60.0
 
 
 class SharedArchive:
@@ -172,6 +174,8 @@ class ArchiveFirst:
         self._newest_ns = 0  # receive time of the newest archived block
         self._analysed_ns = 0  # … of the last analysed one
         self.passes = 0  # reads of the archive started (each time it fell behind, and after)
+        self.read_back = 0  # blocks the analysis read back from the archive
+        self._logged_at = -float("inf")
 
     # ------------------------------------------------------------------ archiving thread
     def run_archiving(self, stop: threading.Event, timeout_s: float = 0.1) -> None:
@@ -213,8 +217,17 @@ class ArchiveFirst:
                 return
             self._behind = True
             self._behind_from = _just_before(before, after)
-            log.info("analysis behind the archive: %d blocks waiting in memory; reading the "
-                     "archive from %s", len(self._feed), self._behind_from)  # fmt: skip
+            self._log_behind()
+
+    def _log_behind(self) -> None:
+        """A WARNING at most once per :data:`LOG_EVERY_S` (a load near capacity may fall
+        behind and catch up again and again)."""
+        now = time.monotonic()
+        level = logging.WARNING if now - self._logged_at >= LOG_EVERY_S else logging.DEBUG
+        if level == logging.WARNING:
+            self._logged_at = now
+        log.log(level, "analysis behind the archive (%d blocks waiting in memory): reading the "
+                "blocks from the archive, nothing is lost", len(self._feed))  # fmt: skip
 
     # ------------------------------------------------------------------ analysis thread
     def step(self, worker: Worker, timeout_s: float = 0.1) -> int:
@@ -254,6 +267,7 @@ class ArchiveFirst:
         if self._lane is None:
             self._lane = BatchLane(worker)
         self._lane.replay(batch)
+        self.read_back += len(batch)
         end = ArchivePosition(batch.file, int(batch.index[-1]) + 1, int(batch.log_time[-1]))
         self._analysed(worker, end, int(batch.log_time[-1]), len(batch))
         return len(batch)
