@@ -268,8 +268,11 @@ class ArchiveFirst:
             self._lane = BatchLane(worker)
         self._lane.replay(batch)
         self.read_back += len(batch)
-        end = ArchivePosition(batch.file, int(batch.index[-1]) + 1, int(batch.log_time[-1]))
-        self._analysed(worker, end, int(batch.log_time[-1]), len(batch))
+        at = ArchivePosition(batch.file, int(batch.index[-1]) + 1, int(batch.log_time[-1]))
+        self._analysed(worker, at, int(batch.log_time[-1]), len(batch))
+        end = self._pass.end
+        if end is not None and (at.file, at.index) == (end.file, end.index):
+            self._end_pass(worker)  # (at once: the feed is taken at the next step)
         return len(batch)
 
     def _start_pass(self) -> _Pass:
