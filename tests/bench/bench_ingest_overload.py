@@ -10,7 +10,9 @@ the analysis catches up (not a test; issue 25).
 2. End to end, real processes on 127.0.0.1: ``millwatch simulate --out`` of the scene, then one
    ``millwatch serve`` (``[worker] queue_blocks`` as given) fed by ``millwatch replay --max``:
    blocks sent (messages in the recording), archived (messages in serve's archive after a clean
-   stop), analysed (``millwatch_blocks_handled_total``), the replay's wall time, and the catch-up
+   stop), handled (``millwatch_blocks_handled_total``: analysed, or dropped by the admission as
+   a repeat — the gateway cache's answer to the recovering subscriber brings a few again:
+   ``millwatch_repeated_blocks_total``), the replay's wall time, and the catch-up
    time from the replay's end until ``millwatch_queue_depth_blocks`` is 0 and every mill's
    ``status.samples`` stopped moving (bounded by ``--catch-up-s``).
 
@@ -135,12 +137,14 @@ def end_to_end(args: argparse.Namespace, d: Path) -> dict[str, float | int]:
         catch_up_s = caught - done
         analysed = int(metric(url, "millwatch_blocks_handled_total") or 0)
         dropped = int(metric(url, "millwatch_queue_dropped_blocks_total") or 0)
+        repeats = int(metric(url, "millwatch_repeated_blocks_total") or 0)
     finally:
         serve.terminate()
         serve.wait(timeout=120)
     archived = sum(sum(1 for _ in TailTolerantReader(p).messages())
                    for p in sorted((d / "archive").glob("*.mcap")))  # fmt: skip
     return {"sent": sent, "archived": archived, "analysed": analysed, "dropped": dropped,
+            "repeats": repeats,
             "replay_s": replay_s, "catch_up_s": catch_up_s}  # fmt: skip
 
 
@@ -169,8 +173,8 @@ def main() -> None:
     print(f"replay --max of {args.hours:g} h of {args.mill} into serve "
           f"(queue_blocks {args.queue_blocks}{where}):")  # fmt: skip
     print(
-        f"  sent {r['sent']}  archived {r['archived']}  analysed {r['analysed']}  "
-        f"dropped {r['dropped']}  replay {r['replay_s']:.1f} s "
+        f"  sent {r['sent']}  archived {r['archived']}  handled {r['analysed']}  "
+        f"dropped {r['dropped']}  repeats {r['repeats']}  replay {r['replay_s']:.1f} s "
         f"({r['sent'] / r['replay_s']:,.0f} blocks/s)  catch-up after it {r['catch_up_s']:.1f} s"
     )
 
