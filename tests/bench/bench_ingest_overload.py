@@ -38,6 +38,7 @@ from ingest.archive.writer import ArchiveWriter
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene
+from ingest.spool.store import payload_seq
 from ingest.wire import DType
 from ingest.zenoh_session import free_loopback_port, tcp_endpoint
 from service.worker.archive_first import ArchivedSeqs, ArchiveFirst, SharedArchive
@@ -138,13 +139,15 @@ def end_to_end(args: argparse.Namespace, d: Path) -> dict[str, float | int]:
         analysed = int(metric(url, "millwatch_blocks_handled_total") or 0)
         dropped = int(metric(url, "millwatch_queue_dropped_blocks_total") or 0)
         repeats = int(metric(url, "millwatch_repeated_blocks_total") or 0)
+        missing = int(metric(url, "millwatch_missing_blocks_total") or 0)
     finally:
         serve.terminate()
         serve.wait(timeout=120)
-    archived = sum(sum(1 for _ in TailTolerantReader(p).messages())
-                   for p in sorted((d / "archive").glob("*.mcap")))  # fmt: skip
+    messages = [(m.key, payload_seq(m.payload)) for p in sorted((d / "archive").glob("*.mcap"))
+                for m in TailTolerantReader(p).messages()]  # fmt: skip
+    archived, distinct = len(messages), len(set(messages))
     return {"sent": sent, "archived": archived, "analysed": analysed, "dropped": dropped,
-            "repeats": repeats,
+            "repeats": repeats, "missing": missing, "distinct": distinct,
             "replay_s": replay_s, "catch_up_s": catch_up_s}  # fmt: skip
 
 
@@ -174,7 +177,8 @@ def main() -> None:
           f"(queue_blocks {args.queue_blocks}{where}):")  # fmt: skip
     print(
         f"  sent {r['sent']}  archived {r['archived']}  handled {r['analysed']}  "
-        f"dropped {r['dropped']}  repeats {r['repeats']}  replay {r['replay_s']:.1f} s "
+        f"(distinct {r['distinct']})  dropped {r['dropped']}  missing {r['missing']}  "
+        f"repeats {r['repeats']}  replay {r['replay_s']:.1f} s "
         f"({r['sent'] / r['replay_s']:,.0f} blocks/s)  catch-up after it {r['catch_up_s']:.1f} s"
     )
 
