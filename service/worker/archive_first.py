@@ -215,6 +215,8 @@ class ArchiveFirst:
             if len(self._feed) < self.capacity:
                 self._feed.append((item, after))
                 return
+            if after is None:  # (every write failed so far: nothing to read back; alarmed)
+                return
             self._behind = True
             self._behind_from = _just_before(before, after)
             self._log_behind()
@@ -260,7 +262,11 @@ class ArchiveFirst:
         """The next batch of the current pass over the archive (starting one if needed)."""
         if self._pass is None:
             self._pass = self._start_pass()
-        batch = next(self._pass.batches, None)
+        try:
+            batch = next(self._pass.batches, None)
+        except Exception:
+            self._pass_failed(worker)
+            raise
         if batch is None:
             self._end_pass(worker)
             return 0
@@ -299,6 +305,19 @@ class ArchiveFirst:
             self._behind_from = self._pass.end
         self._pass = None
 
+    def _pass_failed(self, worker: Worker) -> None:
+        """Reading the archive failed (logged by the caller): the next pass starts again just
+        after the last block analysed; a final pass's feed is given up (its blocks lie after
+        that pass's end, so the next passes read them from the archive)."""
+        assert self._pass is not None
+        if worker.analysed_position is not None:
+            self._behind_from = worker.analysed_position
+        if self._pass.final:
+            with self.archive.lock:
+                self._behind = True
+                self._feed.clear()
+        self._pass = None
+
     def _analysed(self, worker: Worker, at: ArchivePosition | None, recv_ns: int, n: int) -> None:
         if at is not None:
             worker.analysed_position = at
@@ -333,9 +352,8 @@ class ArchiveFirst:
         return max(0.0, (self._newest_ns - self._analysed_ns) / 1e9)
 
 
-def _just_before(before: ArchivePosition | None, after: ArchivePosition | None) -> ArchivePosition:
+def _just_before(before: ArchivePosition | None, after: ArchivePosition) -> ArchivePosition:
     """The position just before the block written last (``after`` is just past it)."""
-    assert after is not None  # (a block was just written)
     if before is not None and before.file == after.file:
         return before
     return ArchivePosition(after.file, after.index - 1, 0)

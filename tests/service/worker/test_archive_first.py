@@ -7,10 +7,14 @@ the analysis's position; the lag shows and goes."""
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import pytest
 
+from ingest.archive.batches import MessageBatch
 from ingest.archive.reader import ArchiveReader, TailTolerantReader
 from ingest.archive.writer import ArchiveWriter
 from ingest.mill_files import load_mill_config
@@ -18,6 +22,7 @@ from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene
 from ingest.wire import Block, decode_block
 from service.store.database import Store
+from service.worker import archive_first
 from service.worker.archive_first import ArchivedSeqs, ArchiveFirst, SharedArchive
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.mill_job import MillJob
@@ -140,3 +145,37 @@ def test_a_checkpoint_stores_the_analysis_position_not_the_writers(tmp_path: Pat
 
 def _count(path: Path) -> int:
     return sum(1 for _ in TailTolerantReader(path).messages())
+
+
+def test_a_failed_read_of_the_archive_loses_and_repeats_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A pass over the archive that fails part-way (e.g. a disk error) starts again just after
+    the last block analysed: still every block once, in order."""
+    real = archive_first.archive_batches
+    calls = []
+
+    def failing(*args: Any, **kw: Any) -> Iterator[MessageBatch]:
+        calls.append(1)
+        for k, batch in enumerate(real(*args, **kw)):
+            if len(calls) == 1 and k == 1:
+                raise OSError("disk read error")
+            yield batch
+
+    monkeypatch.setattr(archive_first, "archive_batches", failing)
+    monkeypatch.setattr(archive_first, "ARCHIVE_BATCH_MESSAGES", 50)
+    worker, ingest, job = _tail(tmp_path)
+    failures = 0
+    for item in BLOCKS:
+        ingest.take(item)
+    for _ in range(len(BLOCKS)):  # bounded: at least one block (or a pass's end) per step
+        if not ingest.backlog and not ingest.behind:
+            break
+        try:
+            ingest.step(worker, timeout_s=0.0)
+        except OSError:
+            failures += 1
+    worker.commit()
+    assert failures == 1 and len(calls) > 1 and ingest.backlog == 0
+    assert job.fed == _expected_fed()
+    assert sum(h.repeats for h in worker.health[CONFIG.id].channels.values()) == 0
