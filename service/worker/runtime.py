@@ -331,10 +331,11 @@ class ServiceRuntime:
         assert self.worker is not None
         status = self.worker.status(self.settings.worker.stale_after_s)
         self.drain_watch.update(status)
-        lag = self.ingest.lag_s() if self.ingest is not None else 0.0
-        self.status = {
+        lag = {"analysis_lag_s": self.ingest.lag_s() if self.ingest is not None else 0.0}
+        self.status = {  # (a held mill's status is its health and why only: it is not analysed)
             m: s.model_copy(
-                update={"stalled_reason": self.drain_watch.stalled.get(m), "analysis_lag_s": lag}
+                update={"stalled_reason": self.drain_watch.stalled.get(m)}
+                | ({} if s.held_reason else lag)
             )
             for m, s in status.items()
         }
