@@ -161,6 +161,7 @@ class ArchiveFirst:
         self.seqs = seqs
         self.before_live: Callable[[QueuedBlock], None] | None = None
         self._feed: deque[tuple[QueuedBlock, ArchivePosition | None]] = deque()
+        self._fed = threading.Condition(archive.lock)  # (the analysis waits on an empty feed)
         self._last: ArchivePosition | None = None  # just past the last archived block
         #: Where the analysis must read the archive from (the first block the feed refused).
         self._behind_from: ArchivePosition | None = None
@@ -214,6 +215,8 @@ class ArchiveFirst:
                 return
             if len(self._feed) < self.capacity:
                 self._feed.append((item, after))
+                if len(self._feed) == 1:
+                    self._fed.notify()
                 return
             if after is None:  # (every write failed so far: nothing to read back; alarmed)
                 return
@@ -236,7 +239,7 @@ class ArchiveFirst:
         """One batch for the analysis: from the feed, or else the next batch of the archive
         when behind; then the worker's end of batch (commit, acks, checkpoints). Returns the
         blocks taken."""
-        items = self._take_feed()
+        items = self._take_feed(timeout_s)
         taken = len(items)
         for item, _ in items:
             worker.handle(item, archive=False)
@@ -244,17 +247,18 @@ class ArchiveFirst:
             self._analysed(worker, items[-1][1], items[-1][0].recv_ns, len(items))
         elif self._behind or self._pass is not None:
             taken = self._from_archive(worker)
-        elif timeout_s > 0:
-            time.sleep(min(timeout_s, 0.01))
         worker.end_batch([item for item, _ in items])
         return taken
 
-    def _take_feed(self) -> list[tuple[QueuedBlock, ArchivePosition | None]]:
-        """Up to a batch of the feed, unless a pass over the archive is under way (the feed
-        then holds blocks after that pass's end)."""
+    def _take_feed(self, timeout_s: float) -> list[tuple[QueuedBlock, ArchivePosition | None]]:
+        """Up to a batch of the feed, waiting at most ``timeout_s`` for one when it is empty
+        and the analysis is not behind; none while a pass over the archive is under way (the
+        feed then holds blocks after that pass's end)."""
         if self._pass is not None:
             return []
         with self.archive.lock:
+            if not self._feed and not self._behind and timeout_s > 0:
+                self._fed.wait(timeout_s)
             n = min(BATCH_BLOCKS, len(self._feed))
             return [self._feed.popleft() for _ in range(n)]
 
