@@ -111,6 +111,11 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
     "sequence_gaps": QuantitySpec(
         "blocks/min", Kind.LEVEL, "channel", "blocks missing from the sequence, per minute"
     ),
+    "analysis_lag": QuantitySpec(
+        "s", Kind.LEVEL, None,
+        "how far the worker's analysis is behind its archive (receive time of the newest "
+        "archived block minus that of the last analysed one; 0 when caught up)",
+    ),
     "archive_write_failures": QuantitySpec(
         "writes", Kind.EVENT, None,
         "archive writes that failed since the previous report (0 reports a clean interval)",

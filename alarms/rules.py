@@ -45,6 +45,7 @@ spike_rate (level)          warning > 6/min (*option*)            ≤ 3/min for 
 sequence_gaps (level)       warning > 0/min (*option*)            0 for 5 min            §5.1
 archive_write_failures      alarm > 0 (*option*)                  3 clean reports;       DESIGN
 (event)                                                           latched
+analysis_lag (level)        warning > 120 s (*option*)            ≤ 60 s                 §10.6
 load_sharing (level)        warning > 10 %, alarm > 20 %          ≤ 8 % for 5 min        §6.2.2
                             (*option*)
 report_delivery (event)     alarm > 0 failed attempts             1 delivery; latched    §10.6
@@ -453,6 +454,21 @@ def _archive(config: MillConfig) -> Rule:
     )  # fmt: skip
 
 
+def _analysis_lag(config: MillConfig) -> Rule:
+    """The analysis behind the archive (a burst, a CPU spike, a backlog): nothing is lost — the
+    blocks are archived and read back — but results and alarms come late. The value is already
+    a duration, so no delays; clears once the lag is back under half the threshold."""
+    a = config.alarms
+    return Rule(
+        "analysis_lag", "analysis_lag", _levels((Severity.WARNING, a.analysis_lag_warn_s)),
+        headline="Analysis {value} behind the received data (at {time})",
+        advice="nothing is lost (every block is archived); if the lag keeps growing the "
+        "worker is short of CPU: give it more, or move mills to another worker",
+        source="Diering 2011 §10.6", value_format="{:.0f} s",
+        deadband=a.analysis_lag_warn_s * 0.5,
+    )  # fmt: skip
+
+
 def _report_delivery(config: MillConfig) -> Rule:
     """A monthly report that could not be made or mailed after its retries (Diering 2011 §10.6:
     reports "automatically generated and distributed to site management"). Event per stage
@@ -486,7 +502,7 @@ def _load_sharing(config: MillConfig) -> Rule:
 _BUILDERS = (
     _start_peak, _starts_per_month, _oscillation, _bending, _barring, _unexplained_peak,
     _resonance, _remaining_life, _stale, _spike_rate, _sequence_gaps, _archive, _load_sharing,
-    _report_delivery,
+    _report_delivery, _analysis_lag,
 )  # fmt: skip
 
 

@@ -133,6 +133,11 @@ class WorkerSettings(_Strict):
     """Queue between zenoh callbacks and the worker, how often to checkpoint, and which mills
     this worker analyses when several share a zenoh router (scale-out):
 
+    * ``queue_blocks``: bounds memory, never what is kept: the callbacks' queue before the
+      archiving thread and the analysis's queue after it each hold at most this many blocks; a
+      full callbacks' queue slows the zenoh link down, and an analysis that falls behind reads
+      the blocks it has no room for back from the archive (:mod:`service.worker.archive_first`).
+
     * ``partition``: zenoh key expressions; the worker analyses exactly the configured mills
       whose live keys (``millwatch/v1/<site>/<mill>/*``) intersect one of them, e.g.
       ``["millwatch/v1/rustenburg/**"]``. Empty (default): every configured mill.

@@ -112,6 +112,11 @@ class MillStatus(_Reported):
     stalled_reason: str | None = Field(
         default=None, description="Why the analysis seems stuck; null: it is not."
     )
+    analysis_lag_s: float | None = Field(
+        default=None,
+        description="How far the analysis is behind the archive, s of receive time (0: caught "
+        "up); it reads the blocks not yet analysed back from the archive, so none is lost.",
+    )
 
     def to_json(self) -> dict[str, Any]:
         """What was set, as JSON data (the REST body's ``status``; the remote answer)."""

@@ -321,6 +321,7 @@ class AlarmThresholds(_Frozen):
     spike_rate_deadband_per_min: NonNegative = 3.0
     sequence_gaps_warn_per_min: NonNegative = 0.0
     archive_clean_reports_to_clear: Annotated[int, Field(ge=1)] = 3
+    analysis_lag_warn_s: Positive = 120.0         # analysis behind the archive this long
     imbalance_warn_pct: Positive = 10.0           # dual drives: load-sharing imbalance, %
     imbalance_alarm_pct: Positive = 20.0
     imbalance_deadband_pct: NonNegative = 2.0

@@ -72,12 +72,33 @@ class RuntimeCollector(Collector):
 
     def _queue(self) -> Iterator[Metric]:
         q = self.runtime.queue
+        ingest = self.runtime.ingest
+        backlog = ingest.backlog if ingest is not None else 0
         yield GaugeMetricFamily(
-            "millwatch_queue_depth_blocks", "Blocks waiting for the worker.", value=q.depth
+            "millwatch_queue_depth_blocks",
+            "Blocks received but not analysed yet: waiting to be archived, or archived and "
+            "waiting for the analysis (in memory or, when it fell behind, in the archive).",
+            value=q.depth + backlog,
+        )
+        yield GaugeMetricFamily(
+            "millwatch_analysis_lag_seconds",
+            "How far the analysis is behind the archive (receive time; 0: caught up).",
+            value=ingest.lag_s() if ingest is not None else 0.0,
+        )
+        yield CounterMetricFamily(
+            "millwatch_archived_blocks",
+            "Blocks written to the archive by the archiving thread.",
+            value=ingest.archived if ingest is not None else 0,
+        )
+        yield CounterMetricFamily(
+            "millwatch_blocks_read_back",
+            "Blocks the analysis read back from the archive because it had fallen behind.",
+            value=ingest.read_back if ingest is not None else 0,
         )
         yield CounterMetricFamily(
             "millwatch_queue_dropped_blocks",
-            "Blocks dropped because the queue was full.",
+            "Blocks dropped because the callbacks' queue stayed full (the archiving thread "
+            "stalled for 30 s); the analysis lagging drops nothing.",
             value=q.dropped,
         )
 

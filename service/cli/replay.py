@@ -2,9 +2,12 @@
 
 Every archived payload goes out byte-identical, paced by its archived log time at ``--speed`` ×
 real time (``--max``: as fast as the subscribers take them; publishers use congestion control
-BLOCK, so nothing is dropped). FILES are ``.mcap`` archive files or directories of rotated
-files; rotated files of one writer are read in rotation order, different writers are merged by
-log time.
+BLOCK, so zenoh drops nothing: a subscriber that cannot keep up slows the replay down). A
+``millwatch serve`` archives every block it receives first and its analysis, when it falls
+behind, reads the blocks back from its archive: it loses none, and catches up after the
+replay ends (its ``/ready`` and ``/metrics`` show the lag). FILES are ``.mcap`` archive files
+or directories of rotated files; rotated files of one writer are read in rotation order,
+different writers are merged by log time.
 
 Where the blocks go: by default to the replay keys of replay run ``--run``,
 ``millwatch/v1/@replay/<run>/<site>/<mill>/<signal>``, which live subscribers
@@ -130,7 +133,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("files", nargs="+", type=Path, metavar="FILE", help=".mcap file or directory")
     pace = p.add_mutually_exclusive_group()
     pace.add_argument("--speed", type=positive_float, default=1.0, help="x real time (default 1)")
-    pace.add_argument("--max", action="store_true", help="as fast as possible (no pacing)")
+    pace.add_argument(
+        "--max",
+        action="store_true",
+        help="as fast as the subscribers take them (no pacing; a serve archives all at once and "
+        "its analysis catches up afterwards)",
+    )
     _add_selection_options(p)
     _add_zenoh_options(p)
     add_spool_arguments(p)

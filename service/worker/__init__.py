@@ -2,11 +2,13 @@
 
 Block path (``millwatch serve``; README "Data flow")::
 
-    zenoh callback ─▶ block_queue ─▶ worker.Worker.step: for each block
-        archive (raw bytes, first) ─▶ admission (route, decode, health) ─▶ mill_job.MillJob (queued)
-        (a backlog — a recovery's history, a burst — archived, then the batch lane's arrays)
+    zenoh callback ─▶ block_queue ─▶ archive_first (archiving thread): spool gap, archive (raw
+        bytes, every block) ─▶ its feed in memory, or — behind — the archive itself
+    archive_first.ArchiveFirst.step (worker thread): for each block (a backlog's runs through
+        the batch lane's arrays)
+        admission (route, decode, health) ─▶ mill_job.MillJob (queued)
     end of the batch: each mill's analysis ─▶ one store transaction ─▶ alarms to ``on_alarms``
-    every checkpoint interval, one mill at a time: snapshot + archive position ─▶ store
+    every checkpoint interval, one mill at a time: snapshot + the analysis's archive position
 
 Modules, low to high (a module imports only those above it):
 
@@ -35,9 +37,13 @@ Modules, low to high (a module imports only those above it):
 * ``spool_recovery`` — :class:`~service.worker.spool_recovery.SpoolRecovery`: a gap a live
   block reveals is first fetched from the gateways' spools (:mod:`ingest.spool`) and handled in
   sequence order before that block (the worker's ``before_live`` hook).
+* ``archive_first`` — the archive is the log and the analysis tails it: an archiving thread
+  writes every block first; the analysis takes them from a bounded feed and, behind, reads
+  them back from the archive (batch lane) until caught up; lag and backlog.
 * ``drain_watch`` — whether each mill's blocks are still being analysed (``/ready``).
 * ``runtime`` — :class:`~service.worker.runtime.ServiceRuntime` owns the resources (store,
-  archive, zenoh session, worker thread), starts them in order and closes them in reverse.
+  archive, zenoh session, archiving and worker threads), starts them in order and closes them
+  in reverse.
 
 Where things go: a new per-block check or counter → ``health`` and ``admission`` (and
 ``ChannelHealth.repeats_in`` / ``follows_on`` / ``observe_run`` for the batch lane's array path,

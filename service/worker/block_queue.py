@@ -1,9 +1,13 @@
 """The bounded queue between zenoh callbacks and the worker (keelson's recorder pattern).
 
-A zenoh subscriber callback runs on a zenoh thread and must return at once: it only *offers*
-``(key, payload, receive time)`` here. The worker drains the queue in batches. When the queue is
-full the block is dropped and counted — never silently — and a warning is logged at most once
-per ``warn_every_s``; queue depth and drops are exported through the health model.
+A zenoh subscriber callback runs on a zenoh thread: it only *offers* ``(key, payload, receive
+time)`` here, and the worker drains the queue in batches. :meth:`BlockQueue.offer` never
+blocks: when the queue is full the block is dropped and counted. :meth:`BlockQueue.put` (the
+service's archiving thread, :mod:`service.worker.archive_first`) waits for room instead — up to
+``wait_s``, so a full queue pushes back on the zenoh link (publishers use congestion control
+BLOCK) rather than losing blocks — and only then drops and counts. A drop is never silent: a
+warning is logged at most once per ``warn_every_s``; queue depth and drops are exported through
+the health model.
 """
 
 from __future__ import annotations
@@ -61,13 +65,24 @@ class BlockQueue:
             self._cond.notify()
         return True
 
+    def put(self, key: str, payload: bytes, wait_s: float) -> bool:
+        """Enqueue a block (from any thread), waiting up to ``wait_s`` (s) for room; returns
+        False and counts a drop when there was none by then."""
+        with self._cond:
+            if len(self._items) >= self.capacity:
+                self._cond.wait_for(lambda: len(self._items) < self.capacity, wait_s)
+        return self.offer(key, payload)
+
     def drain(self, max_items: int, timeout_s: float) -> list[QueuedBlock]:
         """Up to ``max_items`` blocks in arrival order, waiting at most ``timeout_s`` for one."""
         with self._cond:
             if not self._items:
                 self._cond.wait(timeout_s)
             n = min(max_items, len(self._items))
-            return [self._items.popleft() for _ in range(n)]
+            items = [self._items.popleft() for _ in range(n)]
+            if n:
+                self._cond.notify_all()  # (room for a waiting put)
+            return items
 
     @property
     def depth(self) -> int:

@@ -6,8 +6,11 @@ order of start-up matters:
 1. note when the archive was last written, then open the store and the archive writer;
 2. open the zenoh session (it connects while the next step runs);
 3. recover: restore the newest checkpoint and replay the archive after it;
-4. subscribe (callbacks only enqueue; a gap a live block reveals is first asked of the
-   gateways' spools, :mod:`service.worker.spool_recovery`) with the recovering subscriber
+4. start the archiving thread and subscribe (callbacks only enqueue — waiting for room when the
+   queue is full, so the zenoh link pushes back, never dropping while the analysis lags; the
+   archiving thread asks the gateways' spools for a gap a live block reveals,
+   :mod:`service.worker.spool_recovery`, then archives every block at once,
+   :mod:`service.worker.archive_first`) with the recovering subscriber
    (:func:`ingest.gateway.declare_recovering_subscriber`), one per mill, declared as soon as a
    gateway publisher of each of the mill's channels is up (:class:`ingest.gateway.PublisherWatch`;
    at most ``[worker] gateway_wait_s`` later with whatever is up, in a background thread): its
@@ -17,7 +20,8 @@ order of start-up matters:
    and is dropped as a repeat (its sequence number is not new). Declaring before the gateways
    are up would leave their caches to zenoh's late-publisher detection, whose replies race the
    live blocks and were lost whole (issue 16, :mod:`ingest.gateway`);
-5. start the worker thread, which drains the queue (archive first, then analysis);
+5. start the worker thread, which analyses the archived blocks (from memory while it keeps
+   up, read back from the archive when it fell behind: :mod:`service.worker.archive_first`);
 6. start the month-end report job in its own thread (``[reports]``,
    :mod:`service.reports.month_end`): it catches up on finished months without reports, and
    raises its failures as alarms through the worker thread.
@@ -25,11 +29,12 @@ order of start-up matters:
 A connect endpoint that is down does not stop the start (peer mode: zenoh retries it in the
 background, see :mod:`ingest.zenoh_session`); ``/ready`` says which endpoints are not connected.
 
-Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the report job (between reports), stop the
-worker thread after its current batch,
-write a final checkpoint (which books every mill's analysis up to its last analysed sample),
-finish the archive file (footer and index), undeclare the subscribers,
-close the zenoh session and the store.
+Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the report job (between reports), undeclare
+the subscribers, let the archiving thread archive what they queued, stop the worker thread after
+its current batch (what it has not analysed yet is replayed from the archive at the next start),
+write a final checkpoint at the analysis's archive position (which books every mill's
+analysis up to its last analysed sample), finish the archive file (footer and index), close the
+zenoh session and the store.
 """
 
 from __future__ import annotations
@@ -39,27 +44,31 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import zenoh
 
 from alarms.lifecycle import Transition
+from alarms.observations import Observation
 from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.reader import ArchiveReader
 from ingest.archive.writer import ArchiveWriter
 from ingest.gateway import PublisherWatch, RecoveringSubscriber, declare_recovering_subscriber
 from ingest.keys import alarm_key, live_pattern, mill_channel_keys, mill_pattern
+from ingest.spool.query import fetch_spooled
 from ingest.zenoh_session import build_config, connected_peers, open_retrying
 from service.reports.month_end import MonthEndJob
 from service.settings import ServiceSettings
 from service.status import MillStatus
 from service.store.database import Store
+from service.worker.archive_first import PUT_WAIT_S, ArchivedSeqs, ArchiveFirst, SharedArchive
 from service.worker.block_queue import BlockQueue
 from service.worker.drain_watch import DrainWatch
 from service.worker.health import MillHealth
 from service.worker.recovery import recover
-from service.worker.spool_recovery import SpoolRecovery, attach_spool_recovery
+from service.worker.spool_recovery import QUERY_TIMEOUT_S, SpoolRecovery
 from service.worker.worker import AckRequest, MillPipeline, Worker
 
 __all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
@@ -105,6 +114,10 @@ class ServiceRuntime:
         self._alarm_publishers: dict[str, zenoh.Publisher] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        #: The archiving thread and the analysis's tail of the archive (set at start).
+        self.ingest: ArchiveFirst | None = None
+        self._archiving: threading.Thread | None = None
+        self._stop_archiving = threading.Event()
         self.status: dict[str, MillStatus] = {}
         #: Called in the worker thread with each batch of stored alarm transitions (e.g. the
         #: API's alarm board), before they are published on zenoh; must be quick.
@@ -133,24 +146,25 @@ class ServiceRuntime:
             s.archive.chunk_size,
             max_latency_s=s.archive.max_latency_s,
         )
+        shared = SharedArchive(self.archive)
         pipelines = {m: self._pipeline_factory(c) for m, c in self.mills.items()}
         self.worker = Worker(
             self.mills,
             pipelines,
             self.store,
-            self.archive,
+            shared,
             checkpoint_seconds=s.worker.checkpoint_seconds,
         )
         z = s.zenoh
         self.session = open_retrying(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
         self.worker.on_alarms = self._on_alarms
-        self.spool_recovery = attach_spool_recovery(self.worker, self.session)
         self.recovered_blocks = recover(
             self.worker,
             ArchiveReader(s.archive.directory, ARCHIVE_PREFIX),
             jobs=s.worker.recovery_jobs,
             factory=self._pipeline_factory,
         )
+        self._start_archiving(shared)
         self._subscribe(self.worker)
         self._refresh_status()
         # What start-up built (modules, compiled kernels, configurations, pipelines) lives as
@@ -172,6 +186,23 @@ class ServiceRuntime:
             s.archive.directory,
             s.store.path,
         )
+
+    def _start_archiving(self, shared: SharedArchive) -> None:
+        """The archiving thread, with the spool recovery of live blocks' gaps before it archives
+        them (after the recovery: the sequence positions it starts from are the recovered ones)."""
+        assert self.worker is not None and self.session is not None
+        seqs = ArchivedSeqs.of(self.worker.health)
+        self.ingest = ArchiveFirst(shared, self.queue, self.settings.worker.queue_blocks,
+                                   self.worker.route, seqs)  # fmt: skip
+        fetch = partial(fetch_spooled, self.session, timeout=QUERY_TIMEOUT_S)
+        self.spool_recovery = SpoolRecovery(fetch, self.worker.route, seqs,
+                                            self.ingest.archive_block)  # fmt: skip
+        self.ingest.before_live = self.spool_recovery
+        self._archiving = threading.Thread(
+            target=self.ingest.run_archiving, args=(self._stop_archiving,),
+            name="millwatch-archive", daemon=True,
+        )  # fmt: skip
+        self._archiving.start()
 
     def _subscribe(self, worker: Worker) -> None:
         """Subscribe each mill once its gateways are up (see the module docstring, step 4):
@@ -268,28 +299,46 @@ class ServiceRuntime:
             publisher.put(encode_transition(t, config.site))
 
     def _on_block(self, key: str, payload: bytes) -> None:
-        self.queue.offer(key, payload)
+        self.queue.put(key, payload, PUT_WAIT_S)
 
     def _run(self) -> None:
-        assert self.worker is not None
+        assert self.worker is not None and self.ingest is not None
         last_status = 0.0
         while not self._stop.is_set():
             try:
-                self.worker.step(self.queue, timeout_s=0.1)
+                self.ingest.step(self.worker, timeout_s=0.1)
             except Exception:
                 log.exception("worker step failed; continuing with the next batch")
             if time.monotonic() - last_status >= STATUS_EVERY_S:
-                self.worker.check_staleness(self.settings.worker.stale_after_s,
-                                            self.queue.received)  # fmt: skip
+                self._wall_clock_checks(self.worker, self.ingest)
                 self._refresh_status()
                 last_status = time.monotonic()
+
+    def _wall_clock_checks(self, worker: Worker, ingest: ArchiveFirst) -> None:
+        """About twice a second: the analysis lag as an alarm observation of every analysed
+        mill, and — while the analysis is within half ``stale_after_s`` of the archive — the
+        channels' staleness (behind, the analysed blocks' receive times are old, and every
+        channel would look silent)."""
+        worker.archive_errors = ingest.archive_errors
+        lag = ingest.lag_s()
+        now = time.time_ns()
+        worker.request_observations(
+            Observation(m, "analysis_lag", lag, now) for m in self.mills if m not in worker.held
+        )
+        stale_after_s = self.settings.worker.stale_after_s
+        if lag < stale_after_s / 2:
+            worker.check_staleness(stale_after_s, self.queue.received)
 
     def _refresh_status(self) -> None:
         assert self.worker is not None
         status = self.worker.status(self.settings.worker.stale_after_s)
         self.drain_watch.update(status)
-        self.status = {
-            m: s.model_copy(update={"stalled_reason": self.drain_watch.stalled.get(m)})
+        lag = {"analysis_lag_s": self.ingest.lag_s() if self.ingest is not None else 0.0}
+        self.status = {  # (a held mill's status is its health and why only: it is not analysed)
+            m: s.model_copy(
+                update={"stalled_reason": self.drain_watch.stalled.get(m)}
+                | ({} if s.held_reason else lag)
+            )
             for m, s in status.items()
         }
 
@@ -299,6 +348,10 @@ class ServiceRuntime:
         if self.reports is not None:
             self.reports.stop()
         self._unsubscribe()
+        self._stop_archiving.set()
+        if self._archiving is not None:
+            self._archiving.join(timeout=PUT_WAIT_S)
+            self._archiving = None
         if self._thread is not None:
             self._thread.join(timeout=30)
             self._thread = None
@@ -333,8 +386,8 @@ class ServiceRuntime:
 
     def _drain_and_checkpoint(self) -> None:
         assert self.worker is not None
-        while self.queue.depth:
-            self.worker.step(self.queue, timeout_s=0.0)
+        if self.ingest is not None:
+            self.ingest.drain_feed(self.worker)
         self.worker.checkpoint(final=True)
         self._refresh_status()
         self.worker = None
@@ -378,6 +431,9 @@ class ServiceRuntime:
         checks: dict[str, Any] = {**flags, **per_mill}
         report = {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
                   "stalled_mills": stalled}  # fmt: skip
+        if self.ingest is not None:  # (visible, not a failure: the lag shrinks by itself)
+            report["analysis_lag_s"] = self.ingest.lag_s()
+            report["analysis_backlog_blocks"] = self.ingest.backlog
         if not flags["zenoh"]:
             report["zenoh_waiting_for"] = list(self.settings.zenoh.connect)
         return report

@@ -7,8 +7,9 @@ shows as a sequence gap on the channel: a live block whose wire ``seq`` is beyon
 accepted one plus one (:class:`~service.worker.health.ChannelHealth`; at start, the last one is
 the checkpoint's, so the span between it and the first live block is such a gap too).
 
-:class:`SpoolRecovery` is called by :meth:`~service.worker.worker.Worker.handle` for each live
-block *before* that block is archived. When the block would open a gap, it asks the spools of
+:class:`SpoolRecovery` is called for each live block *before* that block is archived (by
+:meth:`~service.worker.worker.Worker.handle`, or in ``millwatch serve`` by the archiving thread,
+:mod:`service.worker.archive_first`). When the block would open a gap, it asks the spools of
 the channel (:func:`ingest.spool.query.fetch_spooled`) for the missing range and hands what they
 hold to the worker's own block path (archive first, then admission and analysis), in ``seq``
 order; then the block itself goes on as usual. So recovered blocks come before newer ones, the
@@ -28,16 +29,15 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from functools import partial
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import zenoh
 
 from ingest.spool.query import SpoolAnswer, fetch_spooled
 from ingest.spool.store import payload_seq
 from service.worker.block_queue import QueuedBlock
-from service.worker.health import MillHealth
 
 if TYPE_CHECKING:
     from service.worker.worker import Worker
@@ -54,9 +54,21 @@ QUERY_TIMEOUT_S = 10.0
 Fetch = Callable[[str, int, int], SpoolAnswer]
 
 
+class _Seq(Protocol):
+    @property
+    def last_seq(self) -> int | None: ...
+
+
+class _Channels(Protocol):
+    @property
+    def channels(self) -> Mapping[str, _Seq]: ...
+
+
 class SpoolRecovery:
     """Fills sequence gaps from spools (module docstring). ``route``: key → (mill, channel) or
-    None; ``health``: the worker's channel health by mill; ``handle``: the worker's block path
+    None; ``health``: the last sequence number of each mill's channels (the worker's channel
+    health, or in ``millwatch serve`` what was archived:
+    :class:`~service.worker.archive_first.ArchivedSeqs`); ``handle``: the worker's block path
     for a block to archive and analyse. Counters: ``recovered`` blocks, ``dropped`` (what spools
     said retention removed), ``queries`` per channel key."""
 
@@ -64,7 +76,7 @@ class SpoolRecovery:
         self,
         fetch: Fetch,
         route: Callable[[str], tuple[str, str] | None],
-        health: dict[str, MillHealth],
+        health: Mapping[str, _Channels],
         handle: Callable[[QueuedBlock], None],
     ) -> None:
         self._fetch = fetch

@@ -7,6 +7,12 @@ Data path for every received block (README "Data flow")::
           everything its blocks brought (long chunks: far cheaper per sample, same results)
           → store (one transaction per batch)
 
+In ``millwatch serve`` the archive is written first by a thread of its own and the analysis
+tails it (:mod:`service.worker.archive_first`): the worker then gets blocks already archived
+(``handle(…, archive=False)``), from memory while it keeps up and from the archive when it fell
+behind, and a checkpoint stores the analysis's position (:attr:`Worker.analysed_position`), not
+the writer's.
+
 A replay of the archive reads it in batches of messages held in arrays and hands them to
 :class:`~service.worker.batch_lane.BatchLane`, which gives each mill's regular blocks to
 :meth:`Worker.accept_regular` as arrays (their repeats counted through :meth:`Worker.repeated`)
@@ -66,7 +72,6 @@ from alarms.lifecycle import Transition
 from alarms.observations import Observation
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.files import ArchivePosition
-from ingest.archive.writer import ArchiveWriter
 from ingest.keys import mill_channel_keys
 from ingest.wire import Block
 from service.status import MillHealthStatus, MillStatus
@@ -83,13 +88,13 @@ from service.worker.checkpoints import (
 )
 from service.worker.health import LatencyReservoir, MillHealth, PerMinute
 
-__all__ = ["HELD", "AckRequest", "MillPipeline", "MillUpdate", "Worker"]
+__all__ = ["HELD", "AckRequest", "ArchiveLog", "MillPipeline", "MillUpdate", "Worker"]
 
 log = logging.getLogger(__name__)
 
 BATCH_BLOCKS = 2000
 #: Blocks of one mill in a step's batch from which they take the batch lane's array path
-#: (:meth:`Worker._handle_items`; fewer go block by block). Measured (50 mills, 4 channels,
+#: (:meth:`Worker.handle_items`; fewer go block by block). Measured (50 mills, 4 channels,
 #: 100-sample blocks in live order — a block of each channel and mill in turn —, with each
 #: batch's analysis and commit; µs a block, block by block / all through the lane / this
 #: rule): 200-block batches 86 / 259 / 60 (block by block: 61), 800 37 / 46 / 29 (30), 2000
@@ -130,6 +135,17 @@ class AckRequest:
     alarm_id: str
     by: str
     done: Future[list[Transition]] = field(default_factory=Future)
+
+
+class ArchiveLog(Protocol):
+    """Where blocks are archived: an :class:`~ingest.archive.writer.ArchiveWriter`, or the one
+    the service's archiving thread shares (:class:`~service.worker.archive_first.SharedArchive`)."""
+
+    def write(self, key: str, payload: bytes, log_time_ns: int) -> None: ...
+
+    def flush(self) -> ArchivePosition | None: ...
+
+    def flush_if_due(self) -> bool: ...
 
 
 class MillPipeline(Protocol):
@@ -176,7 +192,7 @@ class Worker:
         mills: dict[str, MillConfig],
         pipelines: dict[str, MillPipeline],
         store: Store,
-        archive: ArchiveWriter | None,
+        archive: ArchiveLog | None,
         *,
         checkpoint_seconds: float = 60.0,
         clock: Callable[[], int] = time.time_ns,
@@ -217,6 +233,10 @@ class Worker:
         self.losses = {m: deque(store.losses(m, LOSSES_SHOWN), LOSSES_SHOWN) for m in mills}
         for pipeline in pipelines.values():
             pipeline.read_history(store)
+        #: Just past the last block analysed, when the analysis tails the archive
+        #: (:mod:`service.worker.archive_first`): what a checkpoint stores; None: the archive's
+        #: flushed position (this thread writes the archive, so the analysis is there too).
+        self.analysed_position: ArchivePosition | None = None
         #: Called with each live block before it is archived: fills its channel's gap first
         #: (:class:`~service.worker.spool_recovery.SpoolRecovery`, the gateways' spools).
         self.before_live: Callable[[QueuedBlock], None] | None = None
@@ -411,7 +431,7 @@ class Worker:
         return [Observation(mill_id, "stale_channel", q / 1e9, now, {"channel": channel})
                 for channel, q in quiet.items()]  # fmt: skip
 
-    def _archive(self, archive: ArchiveWriter, item: QueuedBlock) -> None:
+    def _archive(self, archive: ArchiveLog, item: QueuedBlock) -> None:
         try:
             archive.write(item.key, item.payload, item.recv_ns)
         except OSError as exc:
@@ -427,7 +447,14 @@ class Worker:
     def step(self, queue: BlockQueue, timeout_s: float = 0.1) -> int:
         """Drain and handle one batch, store its results, checkpoint when due."""
         items = queue.drain(BATCH_BLOCKS, timeout_s)
-        self._handle_items(items)
+        self.handle_items(items)
+        self.end_batch(items)
+        return len(items)
+
+    def end_batch(self, items: list[QueuedBlock]) -> None:
+        """After a batch of blocks was handled (``items``: the live ones, for the latency):
+        acknowledgements and outside observations, store, flush the archive when due,
+        checkpoint when due."""
         acked = self._apply_acks()
         observed = self._apply_outside()
         try:
@@ -444,10 +471,10 @@ class Worker:
         if self.archive is not None:
             self.archive.flush_if_due()
         self._checkpoint_due()
-        return len(items)
 
-    def _handle_items(self, items: list[QueuedBlock]) -> None:
-        """:meth:`handle` of each queued block, in arrival order. A batch that holds runs of
+    def handle_items(self, items: list[QueuedBlock], *, archive: bool = True) -> None:
+        """:meth:`handle` of each queued block, in arrival order (``archive``: as there; False
+        for blocks the archiving thread already wrote). A batch that holds runs of
         :data:`LANE_MIN_RUN` blocks of a mill (a backlog: the gateways' caches delivering an
         outage, a burst) is archived first, then handed to the batch lane
         (:meth:`~service.worker.batch_lane.BatchLane.handle_queued`: the same admission, counts
@@ -456,9 +483,9 @@ class Worker:
         mill costs more than it saves."""
         if not self._has_runs(items):
             for item in items:
-                self.handle(item)
+                self.handle(item, archive=archive)
             return
-        if self.archive is not None:
+        if archive and self.archive is not None:
             for item in items:
                 self._archive(self.archive, item)
         self.lane.handle_queued(items)
@@ -571,6 +598,8 @@ class Worker:
         checkpoint stays the unflushed one, so a restart continues exactly."""
         self.commit()
         position = self.archive.flush() if self.archive is not None else None
+        if self.analysed_position is not None:
+            position = self.analysed_position
         for mill_id in self.pipelines if mills is None else mills:
             self._checkpoint_mill(mill_id, position)
             if final and mill_id not in self.held:

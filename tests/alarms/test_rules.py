@@ -56,6 +56,7 @@ CASES = [
     ("load_sharing_imbalance_pct", "ball-dual-lrs", {}, [12, 12], "load_sharing", "warning",
      [3, 10]),
     ("load_sharing_imbalance_pct", "ball-dual-lrs", {}, [25, 25], "load_sharing", "alarm", [3]),
+    ("analysis_lag", "sag-5200-lrs", {}, [130], "analysis_lag", "warning", [0, 30, 120]),
 ]  # fmt: skip
 
 

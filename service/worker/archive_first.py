@@ -1,0 +1,378 @@
+"""The archive is the log, and the analysis tails it: no block is lost to an analysis lag.
+
+Two threads share the work ``millwatch serve`` does with each received block:
+
+* the **archiving thread** (:meth:`ArchiveFirst.run_archiving`) drains the subscriber
+  callbacks' queue, fills a sequence gap a live block reveals from the gateways' spools first
+  (:mod:`service.worker.spool_recovery`, which so stays before the archive write), and writes
+  every block to the archive at once — nothing it does depends on the analysis;
+* the **analysis thread** (:meth:`ArchiveFirst.step`) takes the blocks in archive order: from a
+  bounded queue in memory (the *feed*) while it keeps up, and — when it falls behind, i.e. the
+  feed is full when the archiving thread offers the next block — from the archive itself, the
+  way crash recovery replays it (:class:`~service.worker.batch_lane.BatchLane` over
+  :func:`~ingest.archive.batches.archive_batches`), from the position of the first block the
+  feed refused.
+
+Switching back: each pass over the archive ends at a position the archiving thread flushed; when
+what was archived after it fits comfortably in the feed, the analysis asks the archiving thread,
+under the lock its writes hold, for the position of its last write and to feed it the blocks
+after it again; it reads the archive up to that position and then takes the feed. Every block
+so reaches the analysis exactly once and in archive order (the per-channel sequence admission,
+:mod:`service.worker.admission`, would drop a repeat anyway). Memory stays bounded by the two
+queues (``[worker] queue_blocks`` each) and one archive batch.
+
+The analysis's position in the archive — just past the last block it took — is what a
+checkpoint must store (:attr:`Worker.analysed_position
+<service.worker.worker.Worker.analysed_position>`), not the writer's: after a crash the archive
+is replayed from there, the blocks archived but not yet analysed included.
+
+The lag (receive time of the newest archived block minus that of the last analysed one; 0 when
+nothing waits) is in each mill's status (``analysis_lag_s``), ``/ready``, the metrics and the
+``analysis_lag`` data-quality alarm (``[alarms] analysis_lag_warn_s``); it shrinks by itself
+once a burst ends, because the analysis is faster than real time.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+
+from ingest.archive.batches import MessageBatch, archive_batches
+from ingest.archive.files import ArchivePosition, archive_file_order
+from ingest.archive.writer import ArchiveWriter
+from ingest.spool.store import payload_seq
+from service.worker.batch_lane import BatchLane
+from service.worker.block_queue import BlockQueue, QueuedBlock
+from service.worker.health import MillHealth
+from service.worker.worker import BATCH_BLOCKS, Worker
+
+__all__ = ["ArchiveFirst", "ArchivedSeqs", "SharedArchive"]
+
+log = logging.getLogger(__name__)
+
+#: How long the archiving thread waits for room in the callbacks' queue is the callbacks' wait:
+#: a zenoh callback waits this long (s) for room before a block is dropped and counted.
+PUT_WAIT_S = 30.0
+#: Messages per batch read back from the archive (about one commit's worth).
+ARCHIVE_BATCH_MESSAGES = 4 * BATCH_BLOCKS
+#: The analysis falling behind is logged as a WARNING at most this often (s).
+LOG_EVERY_S = 60.0
+
+
+class SharedArchive:
+    """An :class:`~ingest.archive.writer.ArchiveWriter` behind a lock, so the archiving thread
+    writes while the analysis thread flushes it for a checkpoint. ``write`` returns the positions
+    just before and just after the block."""
+
+    def __init__(self, writer: ArchiveWriter) -> None:
+        self.writer = writer
+        self.lock = threading.RLock()
+        self.directory = writer.directory
+        self.prefix = writer.prefix
+
+    def write(self, key: str, payload: bytes, log_time_ns: int) -> None:
+        """Archive one block (see :meth:`ArchiveWriter.write`)."""
+        with self.lock:
+            self.writer.write(key, payload, log_time_ns)
+
+    def flush(self) -> ArchivePosition | None:
+        """Write the open chunk; the now-durable position."""
+        with self.lock:
+            return self.writer.flush()
+
+    def flush_if_due(self) -> bool:
+        """Flush if the oldest unwritten message is older than the writer's latency bound."""
+        with self.lock:
+            return self.writer.flush_if_due()
+
+    def close(self) -> None:
+        with self.lock:
+            self.writer.close()
+
+
+@dataclass
+class _Seq:
+    last_seq: int | None = None
+
+
+@dataclass
+class _Channels:
+    channels: dict[str, _Seq] = field(default_factory=dict)
+
+
+class ArchivedSeqs(dict[str, _Channels]):
+    """The last *archived* sequence number per mill and channel, shaped like the worker's
+    health (``[mill].channels[channel].last_seq``): what the spool recovery asks about a live
+    block, since the analysis's own health lags the archive while it is behind."""
+
+    @classmethod
+    def of(cls, health: dict[str, MillHealth]) -> ArchivedSeqs:
+        """Start from the worker's health (its checkpoints' and the recovery's positions)."""
+        out = cls()
+        for mill_id, mh in health.items():
+            out[mill_id] = _Channels({c: _Seq(h.last_seq) for c, h in mh.channels.items()})
+        return out
+
+    def note(self, route: tuple[str, str] | None, payload: bytes) -> None:
+        """A block of ``route`` (mill, channel) was archived."""
+        seq = payload_seq(payload) if route is not None else None
+        if route is None or seq is None:
+            return
+        got = self[route[0]].channels[route[1]]
+        if got.last_seq is None or seq > got.last_seq:
+            got.last_seq = seq
+
+
+@dataclass
+class _Pass:
+    """One read of the archive by the analysis: the batches after ``start`` up to ``end``;
+    ``final``: the feed takes the blocks after ``end``."""
+
+    batches: Iterator[MessageBatch]
+    end: ArchivePosition | None
+    final: bool
+
+
+class ArchiveFirst:
+    """The archiving thread's and the analysis thread's shared state; see the module docstring.
+
+    ``incoming``: the subscriber callbacks' queue; ``capacity``: the feed's bound (blocks);
+    ``before_live``: called with each live block before it is archived (the spool recovery,
+    whose recovered blocks come back through :meth:`archive_block`); ``route``: key → (mill,
+    channel).
+    """
+
+    def __init__(
+        self,
+        archive: SharedArchive,
+        incoming: BlockQueue,
+        capacity: int,
+        route: Callable[[str], tuple[str, str] | None],
+        seqs: ArchivedSeqs,
+    ) -> None:
+        self.archive = archive
+        self.incoming = incoming
+        self.capacity = capacity
+        self._route = route
+        self.seqs = seqs
+        self.before_live: Callable[[QueuedBlock], None] | None = None
+        self._feed: deque[tuple[QueuedBlock, ArchivePosition | None]] = deque()
+        self._fed = threading.Condition(archive.lock)  # (the analysis waits on an empty feed)
+        self._last: ArchivePosition | None = None  # just past the last archived block
+        #: Where the analysis must read the archive from (the first block the feed refused).
+        self._behind_from: ArchivePosition | None = None
+        self._behind = False
+        self._pass: _Pass | None = None
+        self._lane: BatchLane | None = None
+        #: Blocks archived, and taken by the analysis (from the feed or the archive).
+        self.archived = 0
+        self.analysed = 0
+        self.archive_errors = 0
+        self._newest_ns = 0  # receive time of the newest archived block
+        self._analysed_ns = 0  # … of the last analysed one
+        self.passes = 0  # reads of the archive started (each time it fell behind, and after)
+        self.read_back = 0  # blocks the analysis read back from the archive
+        self._logged_at = -float("inf")
+
+    # ------------------------------------------------------------------ archiving thread
+    def run_archiving(self, stop: threading.Event, timeout_s: float = 0.1) -> None:
+        """The archiving thread's loop, until ``stop`` is set and the callbacks' queue is empty."""
+        while True:
+            items = self.incoming.drain(BATCH_BLOCKS, timeout_s)
+            for item in items:
+                self.take(item)
+            self.archive.flush_if_due()
+            if not items and stop.is_set():
+                return
+
+    def take(self, item: QueuedBlock) -> None:
+        """A received block: its channel's gap first (``before_live``), then
+        :meth:`archive_block`."""
+        if self.before_live is not None:
+            self.before_live(item)
+        self.archive_block(item)
+
+    def archive_block(self, item: QueuedBlock) -> None:
+        """Write ``item`` to the archive and offer it to the analysis (see the module
+        docstring); a block the feed has no room for is read back from the archive."""
+        with self.archive.lock:
+            try:
+                self.archive.write(item.key, item.payload, item.recv_ns)
+            except OSError as exc:  # counted, and raised as the archive_write_failures alarm;
+                # the block is still analysed if the feed has room (it cannot be read back)
+                self.archive_errors += 1
+                log.warning("archive write failed: %s", exc)
+            before, after = self._last, self.archive.writer.position
+            self._last = after
+            self.archived += 1
+            self._newest_ns = max(self._newest_ns, item.recv_ns)
+            self.seqs.note(self._route(item.key), item.payload)
+            if self._behind:
+                return
+            if len(self._feed) < self.capacity:
+                self._feed.append((item, after))
+                if len(self._feed) == 1:
+                    self._fed.notify()
+                return
+            if after is None:  # (every write failed so far: nothing to read back; alarmed)
+                return
+            self._behind = True
+            self._behind_from = _just_before(before, after)
+            self._log_behind()
+
+    def _log_behind(self) -> None:
+        """A WARNING at most once per :data:`LOG_EVERY_S` (a load near capacity may fall
+        behind and catch up again and again)."""
+        now = time.monotonic()
+        level = logging.WARNING if now - self._logged_at >= LOG_EVERY_S else logging.DEBUG
+        if level == logging.WARNING:
+            self._logged_at = now
+        log.log(level, "analysis behind the archive (%d blocks waiting in memory): reading the "
+                "blocks from the archive, nothing is lost", len(self._feed))  # fmt: skip
+
+    # ------------------------------------------------------------------ analysis thread
+    def step(self, worker: Worker, timeout_s: float = 0.1) -> int:
+        """One batch for the analysis: from the feed, or else the next batch of the archive
+        when behind; then the worker's end of batch (commit, acks, checkpoints). Returns the
+        blocks taken."""
+        items = self._take_feed(timeout_s)
+        taken = len(items)
+        worker.handle_items([item for item, _ in items], archive=False)
+        if items:
+            self._analysed(worker, items[-1][1], items[-1][0].recv_ns, len(items))
+        elif self._behind or self._pass is not None:
+            taken = self._from_archive(worker)
+        worker.end_batch([item for item, _ in items])
+        return taken
+
+    def _take_feed(self, timeout_s: float) -> list[tuple[QueuedBlock, ArchivePosition | None]]:
+        """Up to a batch of the feed, waiting at most ``timeout_s`` for one when it is empty
+        and the analysis is not behind; none while a pass over the archive is under way (the
+        feed then holds blocks after that pass's end)."""
+        if self._pass is not None:
+            return []
+        with self.archive.lock:
+            if not self._feed and not self._behind and timeout_s > 0:
+                self._fed.wait(timeout_s)
+            n = min(BATCH_BLOCKS, len(self._feed))
+            return [self._feed.popleft() for _ in range(n)]
+
+    def _from_archive(self, worker: Worker) -> int:
+        """The next batch of the current pass over the archive (starting one if needed)."""
+        if self._pass is None:
+            self._pass = self._start_pass()
+        try:
+            batch = next(self._pass.batches, None)
+        except Exception:
+            self._pass_failed(worker)
+            raise
+        if batch is None:
+            self._end_pass(worker)
+            return 0
+        if self._lane is None:
+            self._lane = BatchLane(worker)
+        self._lane.replay(batch)
+        self.read_back += len(batch)
+        at = ArchivePosition(batch.file, int(batch.index[-1]) + 1, int(batch.log_time[-1]))
+        self._analysed(worker, at, int(batch.log_time[-1]), len(batch))
+        end = self._pass.end
+        if end is not None and (at.file, at.index) == (end.file, end.index):
+            self._end_pass(worker)  # (at once: the feed is taken at the next step)
+        return len(batch)
+
+    def _start_pass(self) -> _Pass:
+        """A pass from where the analysis is to the archive's flushed end; the final one
+        (the feed takes over after it) when what waits fits in half the feed."""
+        start = self._behind_from
+        self.passes += 1
+        with self.archive.lock:
+            end = self.archive.flush()
+            final = self.archived - self.analysed <= self.capacity // 2
+            if final:
+                self._behind = False
+        batches = archive_batches(self.archive.directory, self.archive.prefix, after=start,
+                                  min_messages=ARCHIVE_BATCH_MESSAGES)  # fmt: skip
+        return _Pass(_until(batches, end), end, final)
+
+    def _end_pass(self, worker: Worker) -> None:
+        """The pass read everything up to its end: go on from there (or take the feed)."""
+        assert self._pass is not None
+        worker.commit()
+        if self._pass.final:  # (a new fall behind sets where to read from)
+            log.info("analysis caught up with the archive (%d passes so far)", self.passes)
+        else:
+            self._behind_from = self._pass.end
+        self._pass = None
+
+    def _pass_failed(self, worker: Worker) -> None:
+        """Reading the archive failed (logged by the caller): the next pass starts again just
+        after the last block analysed; a final pass's feed is given up (its blocks lie after
+        that pass's end, so the next passes read them from the archive)."""
+        assert self._pass is not None
+        if worker.analysed_position is not None:
+            self._behind_from = worker.analysed_position
+        if self._pass.final:
+            with self.archive.lock:
+                self._behind = True
+                self._feed.clear()
+        self._pass = None
+
+    def _analysed(self, worker: Worker, at: ArchivePosition | None, recv_ns: int, n: int) -> None:
+        if at is not None:
+            worker.analysed_position = at
+        self._analysed_ns = recv_ns
+        with self.archive.lock:
+            self.analysed += n
+
+    def drain_feed(self, worker: Worker) -> None:
+        """At a clean stop: analyse what the feed holds (when not behind; the rest is read
+        back from the archive at the next start, after the final checkpoint's position)."""
+        if self._pass is not None or self._behind:
+            return
+        for _ in range(self.capacity // BATCH_BLOCKS + 2):
+            if not self.step(worker, timeout_s=0.0):
+                return
+
+    # ------------------------------------------------------------------ reading
+    @property
+    def backlog(self) -> int:
+        """Blocks archived but not yet analysed."""
+        return max(0, self.archived - self.analysed)
+
+    @property
+    def behind(self) -> bool:
+        """The analysis reads (or must read) the archive: the feed was full."""
+        return self._behind or self._pass is not None
+
+    def lag_s(self) -> float:
+        """How far the analysis is behind the archive (s of receive time); 0 when caught up."""
+        if self.backlog == 0:
+            return 0.0
+        return max(0.0, (self._newest_ns - self._analysed_ns) / 1e9)
+
+
+def _just_before(before: ArchivePosition | None, after: ArchivePosition) -> ArchivePosition:
+    """The position just before the block written last (``after`` is just past it)."""
+    if before is not None and before.file == after.file:
+        return before
+    return ArchivePosition(after.file, after.index - 1, 0)
+
+
+def _until(batches: Iterator[MessageBatch], end: ArchivePosition | None) -> Iterator[MessageBatch]:
+    """The messages of ``batches`` before ``end`` (none when ``end`` is None: nothing archived)."""
+    if end is None:
+        return
+    last = archive_file_order(end.file)
+    for batch in batches:
+        order = archive_file_order(batch.file)
+        if order > last:
+            return
+        if order == last:
+            batch = batch.select(batch.index < end.index)
+            if not len(batch):
+                return
+        yield batch
