@@ -286,5 +286,7 @@ def test_two_workers_partition_the_mills_and_a_killed_workers_mills_go_unreachab
     stored = {w: _store_mills(tmp_path / w / "millwatch.db") for w in WORKERS}
     for worker, tables in stored.items():
         own = {m for m, w in owner.items() if w == worker}
-        assert tables["mills"] == own and tables["events"] == own, stored
+        # (a steady scene stores no events of its own: the stale/fresh pair a worker started
+        # before its gateways used to store is gone since silence counts only while listening)
+        assert tables["mills"] == own, stored
         assert all(found <= own for found in tables.values()), stored
