@@ -56,6 +56,23 @@ def wait(predicate: Callable[[], Any], timeout_s: float, every_s: float = 0.1) -
     return predicate()
 
 
+def millwatch(*args: str | Path) -> subprocess.Popen[bytes]:
+    """``millwatch ARGS`` started (its output in the caller's hands)."""
+    return subprocess.Popen([sys.executable, "-m", "service.cli.main", *map(str, args)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+
+
+def finish(proc: subprocess.Popen[bytes], timeout: float = 120.0) -> bytes:
+    """Its stdout once it exited with status 0 (else the assertion shows its stderr)."""
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate(timeout=10)
+    assert proc.returncode == 0, f"{proc.args}: {err.decode(errors='replace')[-3000:]}"
+    return out
+
+
 def port_open(port: int) -> bool:
     with socket.socket() as sock:
         sock.settimeout(0.2)

@@ -17,8 +17,6 @@ Real processes on 127.0.0.1; every wait is bounded and ends on an observed event
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +29,7 @@ from ingest.zenoh_session import free_loopback_port, tcp_endpoint
 from service.reports.history import life_inputs
 from service.store.database import Store
 from service.worker.runtime import ARCHIVE_PREFIX
-from tests.integration.live import ROOT, Api, Processes, wait
+from tests.integration.live import ROOT, Api, Processes, finish, millwatch, wait
 from tests.integration.parity import (
     analyze_figures,
     mismatches,
@@ -62,21 +60,6 @@ at_s = 100
 kind = "stop"
 at_s = 250
 """
-
-
-def millwatch(*args: str | Path) -> subprocess.Popen[bytes]:
-    return subprocess.Popen([sys.executable, "-m", "service.cli.main", *map(str, args)], cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
-
-
-def finish(proc: subprocess.Popen[bytes], timeout: float = 120.0) -> bytes:
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, err = proc.communicate(timeout=10)
-    assert proc.returncode == 0, f"{proc.args}: {err.decode(errors='replace')[-3000:]}"
-    return out
 
 
 def record(d: Path, mill: str) -> tuple[Path, Path]:

@@ -34,8 +34,6 @@ from __future__ import annotations
 import asyncio
 import json
 import sqlite3
-import subprocess
-import sys
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -48,7 +46,7 @@ from ingest.mill_files import load_mill_config
 from ingest.zenoh_session import free_loopback_port, tcp_endpoint
 from service.reports.history import life_inputs
 from service.store.database import Store
-from tests.integration.live import ROOT, Api, Processes, wait
+from tests.integration.live import ROOT, Api, Processes, finish, millwatch, wait
 from tests.integration.parity import (
     PHASE_OF_STATE,
     Figures,
@@ -115,23 +113,6 @@ class Parity:
 
 def bending(mill: str) -> set[str]:
     return {n for n, c in CONFIGS[mill].channels.items() if c.kind == "bending"}
-
-
-def millwatch(*args: str | Path) -> subprocess.Popen[bytes]:
-    """``millwatch ARGS`` started (its output in the caller's hands)."""
-    return subprocess.Popen([sys.executable, "-m", "service.cli.main", *map(str, args)], cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
-
-
-def finish(proc: subprocess.Popen[bytes], timeout: float = 120.0) -> bytes:
-    """Its stdout once it exited with status 0 (else the assertion shows its stderr)."""
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, err = proc.communicate(timeout=10)
-    assert proc.returncode == 0, f"{proc.args}: {err.decode(errors='replace')[-3000:]}"
-    return out
 
 
 def write_plant(d: Path, zenoh_port: int, api_port: int, opcua_port: int) -> Path:
