@@ -68,10 +68,11 @@ class BlockQueue:
     def put(self, key: str, payload: bytes, wait_s: float) -> bool:
         """Enqueue a block (from any thread), waiting up to ``wait_s`` (s) for room; returns
         False and counts a drop when there was none by then."""
-        with self._cond:
+        with self._cond:  # (re-entrant: the wait and the enqueue are one step, so another
+            # callback thread cannot take the room between them and make this block a drop)
             if len(self._items) >= self.capacity:
                 self._cond.wait_for(lambda: len(self._items) < self.capacity, wait_s)
-        return self.offer(key, payload)
+            return self.offer(key, payload)
 
     def drain(self, max_items: int, timeout_s: float) -> list[QueuedBlock]:
         """Up to ``max_items`` blocks in arrival order, waiting at most ``timeout_s`` for one."""
