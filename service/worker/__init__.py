@@ -2,8 +2,9 @@
 
 Block path (``millwatch serve``; README "Data flow")::
 
-    zenoh callback ─▶ block_queue ─▶ archive_first (archiving thread): spool gap, archive (raw
-        bytes, every block) ─▶ its feed in memory, or — behind — the archive itself
+    zenoh callback ─▶ block_queue ─▶ archive_first (archiving thread): a gap ─▶ catch_up
+        thread (spooled span, then the mill's held blocks); archive (raw bytes, every block)
+        ─▶ its feed in memory, or — behind — the archive itself
     archive_first.ArchiveFirst.step (worker thread): for each block (a backlog's runs through
         the batch lane's arrays)
         admission (route, decode, health) ─▶ mill_job.MillJob (queued)
@@ -37,6 +38,9 @@ Modules, low to high (a module imports only those above it):
 * ``spool_recovery`` — :class:`~service.worker.spool_recovery.SpoolRecovery`: a gap a live
   block reveals is first fetched from the gateways' spools (:mod:`ingest.spool`) and handled in
   sequence order before that block (the worker's ``before_live`` hook).
+* ``catch_up`` — :class:`~service.worker.catch_up.CatchUp`: in ``millwatch serve``, a mill
+  whose live block reveals a gap is caught up from the spools on a thread of its own, its
+  channels page by page together, its live blocks held meanwhile; the other mills flow.
 * ``archive_first`` — the archive is the log and the analysis tails it: an archiving thread
   writes every block first; the analysis takes them from a bounded feed and, behind, reads
   them back from the archive (batch lane) until caught up; lag and backlog.

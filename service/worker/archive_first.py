@@ -3,9 +3,10 @@
 Two threads share the work ``millwatch serve`` does with each received block:
 
 * the **archiving thread** (:meth:`ArchiveFirst.run_archiving`) drains the subscriber
-  callbacks' queue, fills a sequence gap a live block reveals from the gateways' spools first
-  (:mod:`service.worker.spool_recovery`, which so stays before the archive write), and writes
-  every block to the archive at once — nothing it does depends on the analysis;
+  callbacks' queue, hands a mill whose live block reveals a sequence gap to a catch-up thread
+  (:mod:`service.worker.catch_up`: the span from the gateways' spools first, then the mill's
+  held live blocks), and writes every other block to the archive at once — nothing it does
+  depends on the analysis;
 * the **analysis thread** (:meth:`ArchiveFirst.step`) takes the blocks in archive order: from a
   bounded queue in memory (the *feed*) while it keeps up, and — when it falls behind, i.e. the
   feed is full when the archiving thread offers the next block — from the archive itself, the
@@ -141,9 +142,9 @@ class ArchiveFirst:
     """The archiving thread's and the analysis thread's shared state; see the module docstring.
 
     ``incoming``: the subscriber callbacks' queue; ``capacity``: the feed's bound (blocks);
-    ``before_live``: called with each live block before it is archived (the spool recovery,
-    whose recovered blocks come back through :meth:`archive_block`); ``route``: key → (mill,
-    channel).
+    ``before_live``: called with each live block before it is archived; False means it took
+    the block (the catch-up of a gap, :mod:`service.worker.catch_up`, whose recovered and held
+    blocks come back through :meth:`archive_block`); ``route``: key → (mill, channel).
     """
 
     def __init__(
@@ -159,7 +160,7 @@ class ArchiveFirst:
         self.capacity = capacity
         self._route = route
         self.seqs = seqs
-        self.before_live: Callable[[QueuedBlock], None] | None = None
+        self.before_live: Callable[[QueuedBlock], bool] | None = None
         self._feed: deque[tuple[QueuedBlock, ArchivePosition | None]] = deque()
         self._fed = threading.Condition(archive.lock)  # (the analysis waits on an empty feed)
         self._last: ArchivePosition | None = None  # just past the last archived block
@@ -192,8 +193,8 @@ class ArchiveFirst:
     def take(self, item: QueuedBlock) -> None:
         """A received block: its channel's gap first (``before_live``), then
         :meth:`archive_block`."""
-        if self.before_live is not None:
-            self.before_live(item)
+        if self.before_live is not None and not self.before_live(item):
+            return  # (taken: held while its mill catches up, archived after the spooled ones)
         self.archive_block(item)
 
     def archive_block(self, item: QueuedBlock) -> None:

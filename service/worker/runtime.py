@@ -8,8 +8,9 @@ order of start-up matters:
 3. recover: restore the newest checkpoint and replay the archive after it;
 4. start the archiving thread and subscribe (callbacks only enqueue — waiting for room when the
    queue is full, so the zenoh link pushes back, never dropping while the analysis lags; the
-   archiving thread asks the gateways' spools for a gap a live block reveals,
-   :mod:`service.worker.spool_recovery`, then archives every block at once,
+   archiving thread hands a mill whose live block reveals a gap to a catch-up thread that
+   fetches the span from the gateways' spools while the other mills flow,
+   :mod:`service.worker.catch_up`, and archives every other block at once,
    :mod:`service.worker.archive_first`) with the recovering subscriber
    (:func:`ingest.gateway.declare_recovering_subscriber`), one per mill, declared as soon as a
    gateway publisher of each of the mill's channels is up (:class:`ingest.gateway.PublisherWatch`;
@@ -65,10 +66,11 @@ from service.status import MillStatus
 from service.store.database import Store
 from service.worker.archive_first import PUT_WAIT_S, ArchivedSeqs, ArchiveFirst, SharedArchive
 from service.worker.block_queue import BlockQueue
+from service.worker.catch_up import CatchUp
 from service.worker.drain_watch import DrainWatch
 from service.worker.health import MillHealth
 from service.worker.recovery import recover
-from service.worker.spool_recovery import QUERY_TIMEOUT_S, SpoolRecovery
+from service.worker.spool_recovery import QUERY_TIMEOUT_S
 from service.worker.worker import AckRequest, MillPipeline, Worker
 
 __all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
@@ -124,7 +126,7 @@ class ServiceRuntime:
         self.alarm_listeners: list[Callable[[list[Transition]], None]] = []
         self.recovered_blocks = 0
         #: Gaps filled from the gateways' spools (set at start).
-        self.spool_recovery: SpoolRecovery | None = None
+        self.catch_up: CatchUp | None = None
         self.started_ns: int | None = None
         self.drain_watch = DrainWatch(2 * settings.worker.stale_after_s)
         #: The month-end report job (None until started, or when ``[reports] enabled`` is off).
@@ -195,9 +197,9 @@ class ServiceRuntime:
         self.ingest = ArchiveFirst(shared, self.queue, self.settings.worker.queue_blocks,
                                    self.worker.route, seqs)  # fmt: skip
         fetch = partial(fetch_spooled, self.session, timeout=QUERY_TIMEOUT_S)
-        self.spool_recovery = SpoolRecovery(fetch, self.worker.route, seqs,
-                                            self.ingest.archive_block)  # fmt: skip
-        self.ingest.before_live = self.spool_recovery
+        keys = {m: list(mill_channel_keys(c).values()) for m, c in self.mills.items()}
+        self.catch_up = CatchUp(fetch, self.worker.route, seqs, self.ingest.archive_block, keys)
+        self.ingest.before_live = self.catch_up
         self._archiving = threading.Thread(
             target=self.ingest.run_archiving, args=(self._stop_archiving,),
             name="millwatch-archive", daemon=True,
@@ -349,6 +351,8 @@ class ServiceRuntime:
             self.reports.stop()
         self._unsubscribe()
         self._stop_archiving.set()
+        if self.catch_up is not None:  # (before the archive closes: its threads write to it)
+            self.catch_up.close()
         if self._archiving is not None:
             self._archiving.join(timeout=PUT_WAIT_S)
             self._archiving = None

@@ -42,7 +42,7 @@ from service.worker.block_queue import QueuedBlock
 if TYPE_CHECKING:
     from service.worker.worker import Worker
 
-__all__ = ["QUERY_TIMEOUT_S", "SpoolRecovery", "attach_spool_recovery"]
+__all__ = ["QUERY_TIMEOUT_S", "Fetch", "SeqsByMill", "SpoolRecovery", "attach_spool_recovery"]
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +64,10 @@ class _Channels(Protocol):
     def channels(self) -> Mapping[str, _Seq]: ...
 
 
+#: The last sequence number of each mill's channels (``[mill].channels[channel].last_seq``).
+SeqsByMill = Mapping[str, _Channels]
+
+
 class SpoolRecovery:
     """Fills sequence gaps from spools (module docstring). ``route``: key → (mill, channel) or
     None; ``health``: the last sequence number of each mill's channels (the worker's channel
@@ -76,7 +80,7 @@ class SpoolRecovery:
         self,
         fetch: Fetch,
         route: Callable[[str], tuple[str, str] | None],
-        health: Mapping[str, _Channels],
+        health: SeqsByMill,
         handle: Callable[[QueuedBlock], None],
     ) -> None:
         self._fetch = fetch
@@ -92,7 +96,7 @@ class SpoolRecovery:
         """Before ``item`` is handled: fetch and handle what its channel is missing, if any."""
         if self._busy:  # (a recovered block itself never asks again)
             return
-        missing = self._gap(item)
+        missing = self.gap(item)
         if missing is None:
             return
         self._busy = True
@@ -101,7 +105,7 @@ class SpoolRecovery:
         finally:
             self._busy = False
 
-    def _gap(self, item: QueuedBlock) -> tuple[int, int] | None:
+    def gap(self, item: QueuedBlock) -> tuple[int, int] | None:
         """(first, last) seq the channel of ``item`` misses before it; None for no gap."""
         route = self._route(item.key)
         seq = payload_seq(item.payload) if route is not None else None
