@@ -281,6 +281,7 @@ class Spool:
             _MIN_ROTATE_BYTES, min(MAX_ROTATE_BYTES, max_bytes // 10)
         )
         self._mutex = threading.RLock()
+        self._decoded = _DecodedFile()
         self._next_check = 0
         self._ledger = _Ledger(self.directory / _LEDGER)
         self._files: list[_FileIndex] = self._load_files()
@@ -433,12 +434,12 @@ class Spool:
         with self._mutex:
             paths = self._paths(key, first, last)
             dropped = self.dropped(key, first, last)
-        found = _read_files(paths, key, first, last, limit)
+        found = _read_files(paths, key, first, last, limit, self._decoded)
         if found is None:
             with self._mutex:
                 paths = self._paths(key, first, last)
                 dropped = self.dropped(key, first, last)
-                found = _read_files(paths, key, first, last, limit) or {}
+                found = _read_files(paths, key, first, last, limit, self._decoded) or {}
         seqs = sorted(found)[:limit]
         return SpoolRead([found[s] for s in seqs], dropped)
 
@@ -489,22 +490,52 @@ class Spool:
 
 
 def _read_files(
-    paths: list[Path], key: str, first: int, last: int, limit: int | None
+    paths: list[Path], key: str, first: int, last: int, limit: int | None, cache: _DecodedFile
 ) -> dict[int, bytes] | None:
     """Blocks of ``key`` in ``first..last`` by seq from ``paths`` (in spooling order, which is
     seq order per key: stops once ``limit`` are found); None when a file has vanished."""
     found: dict[int, bytes] = {}
     for path in paths:
         try:
-            for msg in TailTolerantReader(path).messages():
-                seq = payload_seq(msg.payload) if msg.key == key else None
-                if seq is not None and first <= seq <= last:
-                    found.setdefault(seq, msg.payload)
+            blocks = cache.blocks(path, key)
         except FileNotFoundError:  # dropped by retention meanwhile
             return None
+        if last - first < len(blocks):  # (a page of a long file: look the numbers up)
+            for seq in range(first, last + 1):
+                if seq in blocks:
+                    found.setdefault(seq, blocks[seq])
+        else:
+            for seq, payload in blocks.items():
+                if first <= seq <= last:
+                    found.setdefault(seq, payload)
         if limit is not None and len(found) >= limit:
             break
     return found
+
+
+class _DecodedFile:
+    """The last spool file read, decoded by key and seq: a catch-up asks each channel for
+    page after page of the same file, and each answer then costs its own blocks, not a scan
+    of the whole file (``tests/bench/bench_catch_up.py``). A file that grew (the open one) is
+    read again. Memory: one file's blocks (at most ``MAX_ROTATE_BYTES``)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._at: tuple[Path, int] | None = None
+        self._by_key: dict[str, dict[int, bytes]] = {}
+
+    def blocks(self, path: Path, key: str) -> dict[int, bytes]:
+        """``key``'s blocks in ``path`` by seq (FileNotFoundError: the file is gone)."""
+        at = (path, path.stat().st_size)
+        with self._lock:
+            if at != self._at:
+                by_key: dict[str, dict[int, bytes]] = {}
+                for msg in TailTolerantReader(path).messages():
+                    seq = payload_seq(msg.payload)
+                    if seq is not None:
+                        by_key.setdefault(msg.key, {}).setdefault(seq, msg.payload)
+                self._at, self._by_key = at, by_key
+            return self._by_key.get(key, {})
 
 
 def _unlink(path: Path) -> None:

@@ -95,6 +95,19 @@ class RuntimeCollector(Collector):
             "Blocks the analysis read back from the archive because it had fallen behind.",
             value=ingest.read_back if ingest is not None else 0,
         )
+        catch_up = self.runtime.catch_up
+        yield CounterMetricFamily(
+            "millwatch_blocks_caught_up",
+            "Blocks fetched from the gateways' spools to fill a sequence gap (a link or worker "
+            "outage longer than the gateways' caches).",
+            value=catch_up.recovered if catch_up is not None else 0,
+        )
+        yield GaugeMetricFamily(
+            "millwatch_mills_catching_up",
+            "Mills whose missed span is being fetched from the spools now (their live blocks "
+            "wait in memory meanwhile).",
+            value=len(catch_up.catching_up) if catch_up is not None else 0,
+        )
         yield CounterMetricFamily(
             "millwatch_queue_dropped_blocks",
             "Blocks dropped because the callbacks' queue stayed full (the archiving thread "
