@@ -22,7 +22,10 @@ every use of it lives in this module; the rest of millwatch sees:
 
 A gateway given a spool (:mod:`ingest.spool`) writes each block to it in
 :meth:`GatewayPublisher.put` *before* publishing it: the cache above serves short gaps, the
-spool on disk what outlives the cache or the gateway process (``--spool DIR``).
+spool on disk what outlives the cache or the gateway process (``--spool DIR``). Without a
+spool it keeps its last minute in memory (:class:`ingest.spool.recent.RecentBlocks`), served
+by wire sequence number the same way: the blocks a restarted gateway published before the
+worker's link to it was up again come back from there.
 
 Measured facts this module relies on (tests/ingest/test_gateway.py):
 
@@ -65,6 +68,8 @@ from typing import TYPE_CHECKING, Any
 import zenoh
 from zenoh import ext
 
+from ingest.spool.query import SpoolServer
+from ingest.spool.recent import RECENT_S, RecentBlocks
 from ingest.zenoh_session import block_encoding, wait_for_subscribers
 
 if TYPE_CHECKING:  # (the spool imports nothing of this module; only the annotation here)
@@ -118,19 +123,29 @@ class GatewayPublisher:
     with a ``spool``, each block is spooled (on disk, with the OS) before it is published."""
 
     def __init__(
-        self, session: zenoh.Session, publisher: Any, max_samples: int, spool: Spool | None = None
+        self,
+        session: zenoh.Session,
+        publisher: Any,
+        max_samples: int,
+        spool: Spool | None = None,
+        recent_blocks: int | None = None,
     ) -> None:
         self._session = session
         self._publisher = publisher
         self.max_samples = max_samples
         self.key = str(publisher.key_expr)
-        self._spool = spool
+        self._server: SpoolServer | None = None
+        self._keep: Spool | RecentBlocks
+        if spool is not None:
+            self._keep = spool
+        else:  # (no spool: the last minute in memory, served by wire seq like a spool)
+            self._keep = RecentBlocks(recent_blocks or max_samples)
+            self._server = SpoolServer(session, self._keep)
 
     def put(self, payload: bytes) -> None:
-        """Spool ``payload`` (if a spool is given), then publish it stamped with the session's
-        clock (so history ``max_age`` works)."""
-        if self._spool is not None:
-            self._spool.append(self.key, payload)
+        """Keep ``payload`` (in the spool, or the recent blocks in memory), then publish it
+        stamped with the session's clock (so history ``max_age`` works)."""
+        self._keep.append(self.key, payload)
         self._publisher.put(payload, timestamp=self._session.new_timestamp())
 
     def wait_for_subscribers(self, timeout_s: float) -> bool:
@@ -146,6 +161,9 @@ class GatewayPublisher:
 
     def undeclare(self) -> None:
         """Withdraw the publisher; its cache is gone (subscribers see the publisher leave)."""
+        if self._server is not None:
+            self._server.close()
+            self._server = None
         self._publisher.undeclare()
 
     def __enter__(self) -> GatewayPublisher:
@@ -197,7 +215,8 @@ def declare_gateway_publisher(
         ),
         publisher_detection=True,
     )
-    return GatewayPublisher(session, publisher, max_samples, spool)
+    recent = cache_samples(min(retention_s, RECENT_S), blocks_per_s)
+    return GatewayPublisher(session, publisher, max_samples, spool, recent)
 
 
 class RecoveringSubscriber:

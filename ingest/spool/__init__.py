@@ -11,6 +11,8 @@ What is here:
 - ``query``      ``SpoolServer``: a zenoh queryable per spooled key (``ingest.keys.spool_key``)
                  answering a seq range with the blocks in order and the dropped count;
                  ``fetch_spooled``: the client the worker calls
+- ``recent``     ``RecentBlocks``: a gateway without a spool keeps its last minute in memory,
+                 served by the same queryable (a restarted gateway's first blocks)
 - ``resume``     ``unspooled``: a restarted gateway skips what its spool shows it published
 - ``forwarder``  ``SpoolForwarder``: the edge forwarder for third-party gateways
                  (``millwatch spool``): subscribe locally, spool, serve recovery

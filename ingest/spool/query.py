@@ -25,17 +25,18 @@ from __future__ import annotations
 import json
 import logging
 import threading
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import zenoh
 
 from ingest.keys import parse_spool_key, spool_key
-from ingest.spool.store import Spool, payload_seq
+from ingest.spool.store import SpoolRead, payload_seq
 from ingest.zenoh_session import block_encoding
 
-__all__ = ["PAGE_BLOCKS", "SpoolAnswer", "SpoolServer", "fetch_spooled"]
+__all__ = ["PAGE_BLOCKS", "SpoolAnswer", "SpoolServer", "SpoolSource", "fetch_spooled"]
 
 log = logging.getLogger(__name__)
 
@@ -56,12 +57,25 @@ class SpoolAnswer:
     answered: bool
 
 
+class SpoolSource(Protocol):
+    """What a :class:`SpoolServer` answers from: a :class:`~ingest.spool.store.Spool` on disk
+    or a gateway's :class:`~ingest.spool.recent.RecentBlocks` in memory."""
+
+    on_new_key: Callable[[str], None] | None
+
+    def spooled_keys(self) -> list[str]: ...
+
+    def read(self, key: str, first: int, last: int, limit: int | None = None) -> SpoolRead: ...
+
+    def dropped(self, key: str, first: int | None = None, last: int | None = None) -> int: ...
+
+
 class SpoolServer:
     """Answers recovery queries from ``spool`` on ``session`` (module docstring): a queryable
     per key the spool holds, declared for new keys as they are spooled. Queries are answered
     on one worker thread of its own (reading files must not hold a zenoh thread)."""
 
-    def __init__(self, session: zenoh.Session, spool: Spool) -> None:
+    def __init__(self, session: zenoh.Session, spool: SpoolSource) -> None:
         self._session = session
         self._spool = spool
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="millwatch-spool")
