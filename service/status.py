@@ -62,6 +62,16 @@ class DataLoss(_Reported):
     last_t_ns: int
     missing_blocks: int
     seq: int | None = Field(default=None, description="The block that revealed the gap.")
+    dropped_by_retention: int | None = Field(
+        default=None,
+        description="Of missing_blocks, how many the gateway's spool had held but dropped by "
+        "its retention (hours or size) before the worker asked; null when no spool answered.",
+    )
+    never_spooled: int | None = Field(
+        default=None,
+        description="Of missing_blocks, how many no spool ever held: the gateway was down when "
+        "they fell due (never published); null when no spool answered.",
+    )
 
 
 class MillHealthStatus(_Reported):

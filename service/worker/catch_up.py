@@ -88,6 +88,8 @@ class CatchUp:
         self._hold_blocks = hold_blocks
         #: What the release finds still missing (a gap no round covered) is filled as before.
         self._gaps = SpoolRecovery(fetch, route, seqs, handle)
+        #: Why each span the spools could not fill is missing (the worker's loss reads it).
+        self.causes = self._gaps.causes
         self._pool = ThreadPoolExecutor(threads, thread_name_prefix="millwatch-catch-up")
         self._lock = threading.Lock()
         self._held: dict[str, deque[QueuedBlock]] = {}
@@ -165,6 +167,8 @@ class CatchUp:
         at = self._start_seqs(mill)
         span = end - at.get(key, end + 1)
         ends = {k: end if k == key else first + span for k, first in at.items()}
+        hole_from = dict(at)  # per channel: just past the last block it got back
+        dropped = dict.fromkeys(at, 0)  # … and what the spools dropped since
         got = 0
         for _ in range(MAX_ROUNDS):
             if not at or self._stop.is_set():
@@ -173,16 +177,28 @@ class CatchUp:
                 first = at[k]
                 last = min(first + self._page - 1, ends[k])
                 answer = self._fetch(k, first, last) if first <= last else _NOTHING
+                seqs = [s for p in answer.blocks if (s := payload_seq(p)) is not None]
+                dropped[k] += answer.dropped
+                self._record_causes(k, hole_from[k], seqs, dropped[k])
+                if seqs:
+                    hole_from[k], dropped[k] = seqs[-1] + 1, 0
                 now = time.time_ns()
                 for payload in answer.blocks:
                     self._handle(QueuedBlock(k, payload, now))
                 got += len(answer.blocks)
-                self.recovered += len(answer.blocks)
                 if last >= ends[k] or not (answer.blocks or answer.dropped):
                     del at[k]
                 else:
                     at[k] = last + 1
+        self.recovered += got
         return got
+
+    def _record_causes(self, key: str, first: int, seqs: list[int], dropped: int) -> None:
+        """The holes before the blocks a page got back, with their causes, before the blocks
+        are archived (a hole after the last one is the release's gap fill's to explain)."""
+        route = self._route(key)
+        if route is not None and seqs:
+            self.causes.record_page(self._fetch, route, key, first, seqs, ask=dropped > 0)
 
     def _release(self, mill: str) -> None:
         """The held blocks in order (repeats dropped, a remaining gap filled or counted as

@@ -199,6 +199,7 @@ class ServiceRuntime:
         fetch = partial(fetch_spooled, self.session, timeout=QUERY_TIMEOUT_S)
         keys = {m: list(mill_channel_keys(c).values()) for m, c in self.mills.items()}
         self.catch_up = CatchUp(fetch, self.worker.route, seqs, self.ingest.archive_block, keys)
+        self.worker.loss_causes = self.catch_up.causes
         self.ingest.before_live = self.catch_up
         self._archiving = threading.Thread(
             target=self.ingest.run_archiving, args=(self._stop_archiving,),

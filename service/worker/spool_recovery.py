@@ -42,12 +42,21 @@ from service.worker.block_queue import QueuedBlock
 if TYPE_CHECKING:
     from service.worker.worker import Worker
 
-__all__ = ["QUERY_TIMEOUT_S", "Fetch", "SeqsByMill", "SpoolRecovery", "attach_spool_recovery"]
+__all__ = [
+    "QUERY_TIMEOUT_S",
+    "Fetch",
+    "LossCauses",
+    "SeqsByMill",
+    "SpoolRecovery",
+    "attach_spool_recovery",
+]
 
 log = logging.getLogger(__name__)
 
 #: How long a page of a spool query may take (s) before the gap is left to loss accounting.
 QUERY_TIMEOUT_S = 10.0
+#: Holes of one fill whose causes are asked one by one (more: left without a cause split).
+MAX_HOLES = 100
 
 #: ``(channel key, first seq, last seq) -> answer``: :func:`ingest.spool.query.fetch_spooled`
 #: on the worker's session.
@@ -68,6 +77,54 @@ class _Channels(Protocol):
 SeqsByMill = Mapping[str, _Channels]
 
 
+class LossCauses(dict[tuple[str, str, int, int], int]):
+    """Why each span the spools could not fill is missing: ``(mill, channel, first seq, last
+    seq)`` → how many of those sequence numbers the spools' retention dropped (the rest were
+    never spooled: the gateway was down). Written by the gap fills, read once by the worker's
+    loss accounting (:meth:`~service.worker.worker.Worker.handle`), which stores the split in
+    the ``sequence_gap`` event."""
+
+    def record(
+        self,
+        fetch: Fetch,
+        route: tuple[str, str],
+        key: str,
+        first: int,
+        got: list[int],
+        dropped: int,
+    ) -> None:
+        """The holes of ``first..max(got)`` not in ``got`` (sorted seqs returned), given the
+        ``dropped`` count the spools reported for exactly that range: one hole takes it all;
+        with several, each is asked (an answer without blocks); none dropped: all never
+        spooled. Recorded before the blocks are handled (the loss is found while they are).
+        """
+        holes = _holes(first, got)
+        if len(holes) > MAX_HOLES:
+            return
+        for a, b in holes:
+            n = fetch(key, a, b).dropped if dropped and len(holes) > 1 else dropped
+            self[(route[0], route[1], a, b)] = n
+
+    def record_page(
+        self, fetch: Fetch, route: tuple[str, str], key: str, first: int, got: list[int], ask: bool
+    ) -> None:
+        """:meth:`record` for one page of a longer fill: the spools' dropped count covered
+        more than the holes, so each hole is asked when any was dropped (``ask``)."""
+        holes = _holes(first, got)
+        for a, b in holes[:MAX_HOLES]:
+            self[(route[0], route[1], a, b)] = fetch(key, a, b).dropped if ask else 0
+
+
+def _holes(first: int, got: list[int]) -> list[tuple[int, int]]:
+    """Runs of sequence numbers from ``first`` up to the last of ``got`` that ``got`` lacks."""
+    out, at = [], first
+    for seq in got:
+        if seq > at:
+            out.append((at, seq - 1))
+        at = max(at, seq + 1)
+    return out
+
+
 class SpoolRecovery:
     """Fills sequence gaps from spools (module docstring). ``route``: key → (mill, channel) or
     None; ``health``: the last sequence number of each mill's channels (the worker's channel
@@ -82,11 +139,13 @@ class SpoolRecovery:
         route: Callable[[str], tuple[str, str] | None],
         health: SeqsByMill,
         handle: Callable[[QueuedBlock], None],
+        causes: LossCauses | None = None,
     ) -> None:
         self._fetch = fetch
         self._route = route
         self._health = health
         self._handle = handle
+        self.causes = LossCauses() if causes is None else causes
         self._busy = False
         self.recovered = 0
         self.dropped = 0
@@ -126,6 +185,10 @@ class SpoolRecovery:
         except Exception:  # a failed query must not lose the block that revealed the gap
             log.exception("%s: spool query for seq %d..%d failed", key, first, last)
             return
+        route = self._route(key)
+        if answer.answered and route is not None:  # (the span up to ``item``: a hole too)
+            got = [s for p in answer.blocks if (s := payload_seq(p)) is not None]
+            self.causes.record(self._fetch, route, key, first, [*got, last + 1], answer.dropped)
         for payload in answer.blocks:
             self._handle(QueuedBlock(key, payload, item.recv_ns))
         self.recovered += len(answer.blocks)
@@ -144,5 +207,6 @@ def attach_spool_recovery(worker: Worker, session: zenoh.Session) -> SpoolRecove
     """Have ``worker`` fill the gaps of its live blocks from the spools on ``session``."""
     fetch = partial(fetch_spooled, session, timeout=QUERY_TIMEOUT_S)
     recovery = SpoolRecovery(fetch, worker.route, worker.health, worker.handle)
+    worker.loss_causes = recovery.causes
     worker.before_live = recovery
     return recovery

@@ -240,6 +240,10 @@ class Worker:
         #: Called with each live block before it is archived: fills its channel's gap first
         #: (:class:`~service.worker.spool_recovery.SpoolRecovery`, the gateways' spools).
         self.before_live: Callable[[QueuedBlock], None] | None = None
+        #: ``(mill, channel, first seq, last seq)`` → blocks of that span the spools' retention
+        #: dropped (the rest never spooled), from the gap fills
+        #: (:class:`~service.worker.spool_recovery.LossCauses`); read once by the loss.
+        self.loss_causes: dict[tuple[str, str, int, int], int] = {}
         #: The batch lane a backlog takes (its counters: blocks by path).
         self.lane = BatchLane(self, min_run=LANE_MIN_RUN)
 
@@ -268,7 +272,13 @@ class Worker:
 
     def _lost(self, mill_id: str, channel: str, loss: dict[str, int]) -> None:
         """An unrecoverable loss: a data-quality event (stored once: the archive replay after
-        a restart finds it again under the same key) and the mill's list of recent losses."""
+        a restart finds it again under the same key) and the mill's list of recent losses;
+        with its causes when a spool answered for the span (:attr:`loss_causes`)."""
+        dropped = self.loss_causes.pop((mill_id, channel, loss["first_seq"], loss["last_seq"]),
+                                       None)  # fmt: skip
+        if dropped is not None:
+            loss = loss | {"dropped_by_retention": dropped,
+                           "never_spooled": loss["missing_blocks"] - dropped}  # fmt: skip
         self._quality(mill_id, channel, loss["first_t_ns"], "sequence_gap", **loss)
         shown = self.losses[mill_id]
         entry = {"channel": channel, "problem": "sequence_gap", **loss}

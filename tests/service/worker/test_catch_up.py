@@ -136,3 +136,28 @@ def test_caught_up_results_equal_a_worker_that_never_lost_the_link(tmp_path) -> 
         catch_up.close()
         got = _run(worker, [])
     assert got == clean
+
+
+def test_a_span_no_spool_held_is_one_loss_with_its_cause(tmp_path) -> None:
+    never = range(60, 80)  # the gateway was down: never spooled, never published
+    live = [b for b in BLOCKS if payload_seq(b.payload) not in OUTAGE]
+    with Spool(tmp_path / "spool") as spool:
+        for b in BLOCKS:
+            if payload_seq(b.payload) not in never:
+                spool.append(b.key, b.payload)
+        worker = _worker(tmp_path / "live")
+        fetch = _Fetch(spool)
+        fetch.release.set()
+        catch_up, _ = _catch_up(worker, fetch, {CONFIG.id: CONFIG})
+        worker.loss_causes = catch_up.causes
+        for item in live:
+            if catch_up(item):
+                catch_up._handle(item)
+        _wait_done(catch_up)
+        catch_up.close()
+        _run(worker, [])
+    assert worker.store is not None
+    losses = worker.store.losses(CONFIG.id, 20)
+    got = sorted((e["channel"], e["first_seq"], e["missing_blocks"], e["never_spooled"],
+                  e["dropped_by_retention"]) for e in losses)  # fmt: skip
+    assert got == sorted((c, 60, 20, 20, 0) for c in CONFIG.channels)

@@ -78,6 +78,7 @@ def _spool_fetch(spool: Spool, asked: list[tuple[str, int, int]]):  # type: igno
 def _attach(worker: Worker, spool: Spool, asked: list[tuple[str, int, int]]) -> SpoolRecovery:
     recovery = SpoolRecovery(_spool_fetch(spool, asked), worker.route, worker.health,
                              worker.handle)  # fmt: skip
+    worker.loss_causes = recovery.causes
     worker.before_live = recovery
     return recovery
 
@@ -117,6 +118,8 @@ def test_what_the_spool_never_held_stays_a_loss_with_its_exact_count(tmp_path) -
     assert sorted((e["channel"], e["first_seq"], e["missing_blocks"]) for e in losses) == sorted(
         (c, down[0], len(down)) for c in CONFIG.channels
     )
+    # the cause: the spool answered and never held them (the gateway was down)
+    assert all((e["never_spooled"], e["dropped_by_retention"]) == (len(down), 0) for e in losses)
     archived = _archived(tmp_path / "live")
     want = [s for s in range(len(BLOCKS) // len(CONFIG.channels)) if s not in down]
     assert all(seqs == want for seqs in archived.values())
@@ -130,3 +133,30 @@ def test_the_replay_of_the_archive_asks_no_spool(tmp_path) -> None:
         for item in BLOCKS[:40] + BLOCKS[200:240]:
             worker.handle(item, archive=False)
     assert asked == []
+
+
+def test_a_loss_the_spools_retention_caused_is_stored_with_that_cause(tmp_path) -> None:
+    """Blocks the spool held but dropped by retention before the worker asked: the stored loss
+    says so, exactly (issue 25 deliverable 6), split from those never spooled."""
+    dropped = range(60, 80)  # retention removed these; 80..90 the gateway never published
+    never = range(80, 91)
+    live = [b for b in BLOCKS if payload_seq(b.payload) not in OUTAGE]
+    with Spool(tmp_path / "spool") as spool:
+        for b in BLOCKS:
+            if payload_seq(b.payload) not in (*dropped, *never):
+                spool.append(b.key, b.payload)
+
+        def fetch(key: str, first: int, last: int) -> SpoolAnswer:
+            got = spool.read(key, first, last)
+            return SpoolAnswer(got.blocks, sum(1 for s in dropped if first <= s <= last), True)
+
+        worker = _worker(tmp_path / "live")
+        recovery = SpoolRecovery(fetch, worker.route, worker.health, worker.handle)
+        worker.loss_causes = recovery.causes
+        worker.before_live = recovery
+        _run(worker, live)
+    assert worker.store is not None
+    losses = worker.store.losses(CONFIG.id, 20)
+    got = sorted((e["channel"], e["first_seq"], e["missing_blocks"], e["dropped_by_retention"],
+                  e["never_spooled"]) for e in losses)  # fmt: skip
+    assert got == sorted((c, 60, 31, 20, 11) for c in CONFIG.channels)
