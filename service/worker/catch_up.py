@@ -141,8 +141,10 @@ class CatchUp:
         try:
             n = self._rounds(mill, key, last)
             self.catch_ups += 1
-            log.info("%s: %d blocks caught up from the spools in %.1f s", mill, n,
-                     time.monotonic() - started)  # fmt: skip
+            # (WARNING when anything came: an outage the caches did not cover)
+            log.log(logging.WARNING if n else logging.INFO,
+                    "%s: %d blocks caught up from the gateway's spools in %.1f s", mill, n,
+                    time.monotonic() - started)  # fmt: skip
         except Exception:
             log.exception("%s: catching up from the spools failed; the gaps stay losses", mill)
         finally:
