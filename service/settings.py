@@ -177,12 +177,17 @@ class WorkerSettings(_Strict):
 
 class ApiSettings(_Strict):
     """The REST API; ``query_timeout_s``: how long the API waits for a worker's answer over
-    zenoh (``millwatch api``) before it answers 504."""
+    zenoh (``millwatch api``) before it answers 504. ``api_key``: needed to acknowledge alarms,
+    and shared with the workers, which check the acks the API signs with it.
+    ``max_body_bytes``: the largest request body (413 beyond, before it is read);
+    ``report_renders``: reports built and rendered at once (one more: 503 with Retry-After)."""
 
     host: str = "127.0.0.1"
     port: Annotated[int, Field(ge=0, le=65535)] = 8080
     api_key: str | None = None
     query_timeout_s: Annotated[float, Field(gt=0, le=600)] = 10.0
+    max_body_bytes: Annotated[int, Field(ge=1024, le=64 * 2**20)] = 64 * 1024
+    report_renders: Annotated[int, Field(ge=1, le=64)] = 2
 
 
 class MillSettings(_Strict):

@@ -21,6 +21,7 @@ import uvicorn
 
 from ingest.zenoh_session import build_config, open_session
 from service.api.app import create_app
+from service.api.limits import limits_of
 from service.cli.serve import run_until_signal
 from service.opcua.launch import start_opcua
 from service.remote.zenoh_backend import ZenohBackend
@@ -46,8 +47,9 @@ def serve_api(settings: ServiceSettings) -> int:
         opcua = None
         try:
             opcua = start_opcua(backend, settings)
-            config = uvicorn.Config(create_app(backend), host=settings.api.host,
-                                    port=settings.api.port, log_level="warning")  # fmt: skip
+            app = create_app(backend, limits_of(settings.api))
+            config = uvicorn.Config(app, host=settings.api.host, port=settings.api.port,
+                                    log_level="warning")  # fmt: skip
             run_until_signal(uvicorn.Server(config))
         finally:
             if opcua is not None:

@@ -23,6 +23,7 @@ import uvicorn
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, try_open
 from service.api.app import create_app
+from service.api.limits import limits_of
 from service.api.local_backend import LocalBackend
 from service.opcua.launch import start_opcua
 from service.remote.queryables import WorkerQueryables
@@ -71,7 +72,7 @@ def serve(settings: ServiceSettings, *, api: bool = True) -> int:
         if api:
             server = uvicorn.Server(
                 uvicorn.Config(
-                    create_app(backend),
+                    create_app(backend, limits_of(settings.api)),
                     host=settings.api.host,
                     port=settings.api.port,
                     log_level="warning",
