@@ -347,6 +347,9 @@ class OpcUaSettings(_Strict):
       ``Basic256Sha256_SignAndEncrypt``); the server's self-signed certificate is made at first
       start in ``certificate_dir`` (default: ``opcua/`` beside the store).
     * ``update_s``: how often values are read from the backend (≤ 1 s; default 0.25 s).
+    * ``login_free_failures``, ``login_lockout_s``: after this many failed logins from one
+      client host, every login from it is refused for ``login_lockout_s`` (default 1 s),
+      doubled at each further failure, at most 300 s (:class:`service.opcua.access.LoginThrottle`).
     """
 
     enabled: bool = False
@@ -363,6 +366,8 @@ class OpcUaSettings(_Strict):
     )
     certificate_dir: Path | None = None
     update_s: Annotated[float, Field(gt=0, le=1.0)] = 0.25
+    login_free_failures: Annotated[int, Field(ge=1, le=100)] = 5
+    login_lockout_s: Annotated[float, Field(gt=0, le=300)] = 1.0
 
     @field_validator("users")
     @classmethod

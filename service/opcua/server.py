@@ -39,7 +39,16 @@ from service.api.backend import Backend
 from service.api.mill_views import mill_summary
 from service.api.models import MillSummary
 from service.errors import ApiError
-from service.opcua.access import CALLER, OPERATOR, AccessRules, Login, Logins, certificate_names
+from service.opcua.access import (
+    CALLER,
+    OPERATOR,
+    AccessRules,
+    Login,
+    Logins,
+    LoginThrottle,
+    certificate_names,
+    record_client_address,
+)
 from service.opcua.address_space import NAMESPACE_URI, MillNodes, root_folder
 from service.opcua.certificate import APPLICATION_URI, ensure_certificate
 from service.opcua.conditions import Conditions
@@ -154,8 +163,10 @@ class OpcUaServer:
         s = self.settings
         logins = [Login(u.name, _password(u), u.role) for u in s.users]
         certs = await certificate_names(s.user_certificates)
-        self._logins = Logins(logins, certs, anonymous=s.anonymous)
+        throttle = LoginThrottle(free=s.login_free_failures, lockout_s=s.login_lockout_s)
+        self._logins = Logins(logins, certs, anonymous=s.anonymous, throttle=throttle)
         server = Server(user_manager=self._logins)
+        record_client_address(server.iserver)  # (the throttle counts per client host)
         server.iserver.bind_condition_methods = True  # ConditionRefresh
         await server.init()
         server.set_endpoint(s.endpoint)
