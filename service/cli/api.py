@@ -36,7 +36,9 @@ def serve_api(settings: ServiceSettings) -> int:
     """Serve the API over zenoh until SIGINT/SIGTERM; returns the exit status."""
     z = settings.zenoh
     listen = z.listen if z.mode == "peer" else ()
-    with open_session(build_config(mode=z.mode, listen=listen, connect=z.connect)) as session:
+    tls = None if z.tls is None else z.tls.files()
+    zconfig = build_config(mode=z.mode, listen=listen, connect=z.connect, tls=tls)
+    with open_session(zconfig) as session:
         backend = ZenohBackend(
             session,
             settings.load_mills(),

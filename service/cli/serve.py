@@ -43,7 +43,8 @@ def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
     mills = partition_mills(settings.load_mills(), settings.worker.partition)
     z = settings.zenoh
     if z.connect:
-        session = try_open(build_config(mode="client", connect=z.connect))
+        tls = None if z.tls is None else z.tls.files()
+        session = try_open(build_config(mode="client", connect=z.connect, tls=tls))
         if session is None:
             log.warning(
                 "no zenoh router at %s yet: the check that no other live worker analyses these "
