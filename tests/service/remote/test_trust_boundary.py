@@ -33,12 +33,15 @@ from ingest.keys import (
     worker_token_pattern,
 )
 from ingest.zenoh_session import build_config, free_loopback_port, try_open
-from ingest.zenoh_tls import TlsFiles, gateway_name, make_ca, make_certificate, tls_settings
+from ingest.zenoh_tls import TlsFiles, gateway_name, make_certificate, tls_settings
+from service.cli.main import main
 from service.cli.router import router_config
 
 pytestmark = pytest.mark.slow
 
-ROUTER_JSON5 = Path(__file__).resolve().parents[3] / "deploy" / "zenoh" / "router.json5"
+DEPLOY = Path(__file__).resolve().parents[3] / "deploy"
+ROUTER_JSON5 = DEPLOY / "zenoh" / "router.json5"
+MILLS = DEPLOY / "mills"
 ROD = ("carletonville", "rod-1100-grid")
 SAG = ("rustenburg", "sag-5200-lrs")
 
@@ -95,10 +98,8 @@ def _files(net: Net, role: str) -> TlsFiles:
 @pytest.fixture(scope="module")
 def net(tmp_path_factory) -> Iterator[Net]:
     certs = tmp_path_factory.mktemp("tls")
-    make_ca(certs)
-    make_certificate(certs, "router", hosts=("localhost", "127.0.0.1"))
-    for role in ("worker", "api", "intruder", gateway_name(*ROD), gateway_name(*SAG)):
-        make_certificate(certs, role)
+    assert main(["zenoh-certs", str(certs), "--mills", str(MILLS)]) == 0  # as a plant would
+    make_certificate(certs, "intruder")  # signed by the CA, but no role of the router's
     port = free_loopback_port()
     config = router_config([], ROUTER_JSON5)  # the shipped file, access control as shipped
     config.insert_json5("listen/endpoints", json.dumps([f"tls/127.0.0.1:{port}"]))
