@@ -97,7 +97,7 @@ COMMANDS = (
     ),
     Command(
         "zenoh-certs",
-        "service.cli.zenoh_certs",
+        "service.cli.edge.zenoh_certs",
         "make a CA and the certificates of the router, workers, API and gateways (mTLS)",
     ),
     Command(
