@@ -106,6 +106,7 @@ async def _login(endpoint: str, password: str) -> ua.StatusCode | None:
         return exc.code
 
 
+@pytest.mark.slow
 def test_failed_logins_over_opcua_are_throttled_and_logged_with_the_address(
     tmp_path, monkeypatch, caplog
 ):
