@@ -68,6 +68,8 @@ _POLICIES = {
     "Basic256Sha256_SignAndEncrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
 }
 T = TypeVar("T")
+#: The longest Acknowledge comment (printable characters) passed on in the condition's event.
+COMMENT_MAX_CHARS = 256
 
 
 class OpcUaError(OSError):
@@ -284,6 +286,8 @@ class OpcUaServer:
         event_id = args[0].Value if isinstance(args[0], ua.Variant) else args[0]
         comment = args[1].Value if isinstance(args[1], ua.Variant) else args[1]
         text = comment.Text if isinstance(comment, ua.LocalizedText) else str(comment or "")
+        if text and (len(text) > COMMENT_MAX_CHARS or not text.isprintable()):
+            return status(ua.StatusCodes.BadInvalidArgument)  # (sent on to every subscriber)
 
         async def ack(alarm_id: str, by: str) -> dict[str, Any]:
             return await self._call(self.backend.ack, alarm_id, by)
