@@ -32,6 +32,7 @@ from ingest.keys import (
     worker_token_key,
     worker_token_pattern,
 )
+from ingest.mill_files import load_mill_configs
 from ingest.zenoh_session import build_config, free_loopback_port, try_open
 from ingest.zenoh_tls import TlsFiles, gateway_name, make_certificate, tls_settings
 from service.cli.main import main
@@ -119,6 +120,21 @@ def test_the_shipped_router_listens_only_with_tls_and_checks_client_certificates
     assert tls["enable_mtls"] is True
     acl = json.loads(router_config([], ROUTER_JSON5).get_json("access_control"))
     assert acl["enabled"] is True and acl["default_permission"] == "deny"
+
+
+def test_the_shipped_router_has_a_gateway_role_for_every_shipped_mill_and_only_those():
+    acl = json.loads(router_config([], ROUTER_JSON5).get_json("access_control"))
+    names = {n for s in acl["subjects"] for n in s.get("cert_common_names", [])}
+    gateways = {gateway_name(c.site, c.id) for c in load_mill_configs(MILLS).values()}
+    assert names == gateways | {"worker", "api"}
+    rules = {r["id"]: r for r in acl["rules"]}
+    for config in load_mill_configs(MILLS).values():
+        rule = rules[f"gateway {config.site}/{config.id}"]
+        assert all(
+            k.startswith(f"millwatch/v1/{config.site}/{config.id}/") for k in rule["key_exprs"]
+        )
+    policies = {p_s: p["rules"] for p in acl["policies"] for p_s in p["subjects"]}
+    assert set(policies) == {s["id"] for s in acl["subjects"]}
 
 
 def test_a_client_without_a_certificate_cannot_connect(net):
