@@ -29,6 +29,7 @@ from ingest.keys import (
     mill_pattern,
     query_key,
     query_pattern,
+    spool_key,
     worker_token_key,
     worker_token_pattern,
 )
@@ -191,6 +192,15 @@ def test_each_role_does_its_part_and_nothing_else(net):
         payloads = [p for _, p in worker.blocks.items]
         assert payloads[:3] == [b"cached-0", b"cached-1", b"cached-2"]
         assert not [p for p in payloads if p.startswith(b"forged")], payloads
+
+        # the worker asks a gateway's spool; another mill's gateway cannot pose as it
+        spool = spool_key(speed)
+        own = gateway.declare_queryable(spool, lambda q: q.reply(spool, b"from-rod-spool"))
+        fake = other_gateway.declare_queryable(spool, lambda q: q.reply(spool, b"fake-spool"))
+        assert _wait(lambda: _ask(worker_s, spool) == [b"from-rod-spool"], 5.0)
+        assert _ask(api, spool) == []  # (nor does the API read telemetry)
+        own.undeclare()
+        fake.undeclare()
 
         # only the API reaches the worker's queries, the ack among them
         ack = query_key(*ROD, "ack")
