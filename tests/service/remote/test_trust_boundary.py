@@ -121,6 +121,8 @@ def test_the_shipped_router_listens_only_with_tls_and_checks_client_certificates
     assert tls["enable_mtls"] is True
     acl = json.loads(router_config([], ROUTER_JSON5).get_json("access_control"))
     assert acl["enabled"] is True and acl["default_permission"] == "deny"
+    rx = json.loads(router_config([], ROUTER_JSON5).get_json("transport/link/rx"))
+    assert rx["max_message_size"] == 16 * 2**20
 
 
 def test_the_shipped_router_has_a_gateway_role_for_every_shipped_mill_and_only_those():
@@ -181,6 +183,8 @@ def test_each_role_does_its_part_and_nothing_else(net):
         assert _wait(lambda: speed in worker.watch.up(), 5.0), "publisher token not seen"
         subscribers = worker.subscribe()
         assert _wait(lambda: len(worker.blocks.keys()) >= 3, 5.0), worker.blocks.items
+        gateway.put(channel_key(*ROD, "speed"), b"huge" * (5 * 2**20))  # 20 MB: over the limit
+        gateway.put(channel_key(*ROD, "speed"), b"plain-small")  # the same way, small: passes
         publisher.put(b"live")
         # a gateway may not publish another mill's channel, nor may a worker or a stranger
         gateway.put(channel_key(*SAG, "speed"), b"forged-by-rod-gateway")
@@ -188,10 +192,11 @@ def test_each_role_does_its_part_and_nothing_else(net):
         intruder.put(channel_key(*ROD, "pinion_torque"), b"forged-by-intruder")
         other_gateway.put(channel_key(*SAG, "speed"), b"sag-own")
         assert _wait(lambda: (speed, b"live") in worker.blocks.items, 5.0)
+        assert (speed, b"plain-small") in worker.blocks.items
         assert _wait(lambda: (channel_key(*SAG, "speed"), b"sag-own") in worker.blocks.items, 5)
         payloads = [p for _, p in worker.blocks.items]
         assert payloads[:3] == [b"cached-0", b"cached-1", b"cached-2"]
-        assert not [p for p in payloads if p.startswith(b"forged")], payloads
+        assert not [p for p in payloads if p.startswith((b"forged", b"huge"))], payloads[:8]
 
         # the worker asks a gateway's spool; another mill's gateway cannot pose as it
         spool = spool_key(speed)
