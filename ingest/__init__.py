@@ -13,6 +13,8 @@ What is here (lower lines never import higher ones):
 - ``keys``           the one owner of zenoh key expressions (build/parse pairs, patterns, matching)
 - ``zenoh_session``  explicit zenoh configs (connect retried, never fatal), always-closed
   sessions, BLOCK publishers/subscribers, connected-peer count
+- ``zenoh_tls``      zenoh over mutual TLS: the files of a session, a CA and per-role
+  certificates (the router's access control knows the roles by common name)
 - ``gateway``        the only user of the unstable ``zenoh.ext``: the gateway publisher that
   keeps the last ``retention`` of a channel, the worker's recovering subscriber
 - ``pacing``         when a timestamped block is due on the wall clock at ``speed`` × real time

@@ -43,6 +43,7 @@ from collections.abc import Callable, Iterator, Sequence
 import zenoh
 
 from ingest.wire import FORMAT_VERSION
+from ingest.zenoh_tls import TlsFiles, tls_settings
 
 log = logging.getLogger(__name__)
 
@@ -102,11 +103,14 @@ def build_config(
     connect: Sequence[str] = (),
     gossip: bool = False,
     loopback_only: bool = False,
+    tls: TlsFiles | None = None,
 ) -> zenoh.Config:
     """An explicit zenoh config: given endpoints only, multicast scouting OFF.
 
     ``listen``/``connect`` are zenoh endpoints such as ``tcp/127.0.0.1:7447``;
     ``loopback_only`` rejects any non-loopback endpoint (tests, single-host setups).
+    ``tls``: mutual TLS with these files (:mod:`ingest.zenoh_tls`; endpoints ``tls/…``);
+    :class:`ZenohConfigError` naming a file that cannot be read.
     """
     if mode not in _MODES:
         raise ZenohConfigError(f"mode {mode!r}: expected one of {', '.join(_MODES)}")
@@ -123,6 +127,13 @@ def build_config(
     config.insert_json5("connect/timeout_ms", "-1")  # retry until connected ...
     config.insert_json5("connect/exit_on_failure", "false")  # ... in the background (peer)
     config.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
+    if tls is not None:
+        for what, path in (("CA", tls.ca), ("certificate", tls.certificate),
+                           ("private key", tls.private_key)):  # fmt: skip
+            if not path.is_file():
+                raise ZenohConfigError(f"zenoh TLS {what} {path} does not exist (make it with "
+                                       "'millwatch zenoh-certs')")  # fmt: skip
+        config.insert_json5("transport/link/tls", json.dumps(tls_settings(tls)))
     return config
 
 

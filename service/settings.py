@@ -43,6 +43,7 @@ Scale-out (``deploy/worker-*.toml``, ``deploy/api.toml``): ``[zenoh] mode = "cli
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import tomllib
 from collections.abc import Iterable
@@ -62,6 +63,7 @@ from pydantic import (
 from analytics.drivetrain.mill_config import MillConfig, describe_validation_error
 from ingest.keys import LAYOUT_VERSION, ROOT
 from ingest.mill_files import load_mill_config, load_mill_configs
+from ingest.zenoh_tls import TlsFiles
 
 __all__ = [
     "REPORT_FORMATS",
@@ -71,6 +73,8 @@ __all__ = [
     "ReportSettings",
     "ServiceSettings",
     "SettingsError",
+    "ZenohSettings",
+    "ZenohTls",
     "load_service_settings",
     "parse_formats",
 ]
@@ -107,12 +111,64 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+class ZenohTls(_Strict):
+    """Mutual TLS of the zenoh session (:mod:`ingest.zenoh_tls`): the files made by
+    ``millwatch zenoh-certs`` in ``directory`` — ``ca.pem``, ``<name>.pem``, ``<name>-key.pem``
+    — where ``name`` is this process's role, the certificate's common name the router's access
+    control knows (``worker``, ``api``)."""
+
+    directory: Path = Path("/etc/millwatch/tls")
+    name: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_.-]{0,127}$")]
+
+    def files(self) -> TlsFiles:
+        d = self.directory
+        return TlsFiles(d / "ca.pem", d / f"{self.name}.pem", d / f"{self.name}-key.pem")
+
+
+def _host_of(endpoint: str) -> str:
+    address = endpoint.partition("/")[2].split("#")[0].split("?")[0]
+    return address.rsplit(":", 1)[0].strip("[]")
+
+
+def _plain_beyond_loopback(endpoint: str) -> bool:
+    """A plain (``tcp``, ``udp``, ``ws``) endpoint that other hosts can reach: no TLS."""
+    if not endpoint.startswith(("tcp/", "udp/", "ws/")):
+        return False
+    host = _host_of(endpoint)
+    if host == "localhost":
+        return False
+    try:
+        return not ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return True  # a host name: another host
+
+
 class ZenohSettings(_Strict):
-    """Zenoh session: loopback peer by default; ``connect`` to a router in a plant."""
+    """Zenoh session: loopback peer by default; ``connect`` to a router in a plant.
+
+    ``tls``: mutual TLS (``[zenoh.tls]``; endpoints ``tls/<host>:<port>``). Closed by default:
+    an endpoint other hosts can reach without TLS (``tcp/10.0.0.5:7447``, ``tcp/0.0.0.0:…``) is
+    refused unless ``plain_beyond_loopback = true`` says so on purpose."""
 
     mode: Literal["peer", "client"] = "peer"
     listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
     connect: tuple[str, ...] = ()
+    tls: ZenohTls | None = None
+    plain_beyond_loopback: bool = False
+
+    @model_validator(mode="after")
+    def _closed_by_default(self) -> ZenohSettings:
+        for kind, endpoints in (("listen", self.listen), ("connect", self.connect)):
+            for endpoint in endpoints:
+                if endpoint.startswith("tls/") and self.tls is None:
+                    raise ValueError(f"{kind}: {endpoint!r} needs [zenoh.tls] (directory, name)")
+                if _plain_beyond_loopback(endpoint) and not self.plain_beyond_loopback:
+                    raise ValueError(
+                        f"{kind}: {endpoint!r} is reachable from other hosts without TLS; use "
+                        "tls/<host>:<port> with [zenoh.tls], or set plain_beyond_loopback = "
+                        "true on a network you trust"
+                    )
+        return self
 
 
 class ArchiveSettings(_Strict):
@@ -177,12 +233,17 @@ class WorkerSettings(_Strict):
 
 class ApiSettings(_Strict):
     """The REST API; ``query_timeout_s``: how long the API waits for a worker's answer over
-    zenoh (``millwatch api``) before it answers 504."""
+    zenoh (``millwatch api``) before it answers 504. ``api_key``: needed to acknowledge alarms,
+    and shared with the workers, which check the acks the API signs with it.
+    ``max_body_bytes``: the largest request body (413 beyond, before it is read);
+    ``report_renders``: reports built and rendered at once (one more: 503 with Retry-After)."""
 
     host: str = "127.0.0.1"
     port: Annotated[int, Field(ge=0, le=65535)] = 8080
     api_key: str | None = None
     query_timeout_s: Annotated[float, Field(gt=0, le=600)] = 10.0
+    max_body_bytes: Annotated[int, Field(ge=1024, le=64 * 2**20)] = 64 * 1024
+    report_renders: Annotated[int, Field(ge=1, le=64)] = 2
 
 
 class MillSettings(_Strict):
@@ -342,6 +403,9 @@ class OpcUaSettings(_Strict):
       ``Basic256Sha256_SignAndEncrypt``); the server's self-signed certificate is made at first
       start in ``certificate_dir`` (default: ``opcua/`` beside the store).
     * ``update_s``: how often values are read from the backend (≤ 1 s; default 0.25 s).
+    * ``login_free_failures``, ``login_lockout_s``: after this many failed logins from one
+      client host, every login from it is refused for ``login_lockout_s`` (default 1 s),
+      doubled at each further failure, at most 300 s (:class:`service.opcua.access.LoginThrottle`).
     """
 
     enabled: bool = False
@@ -358,6 +422,8 @@ class OpcUaSettings(_Strict):
     )
     certificate_dir: Path | None = None
     update_s: Annotated[float, Field(gt=0, le=1.0)] = 0.25
+    login_free_failures: Annotated[int, Field(ge=1, le=100)] = 5
+    login_lockout_s: Annotated[float, Field(gt=0, le=300)] = 1.0
 
     @field_validator("users")
     @classmethod
@@ -411,12 +477,21 @@ class ServiceSettings(_Strict):
                     update={"directory": at(self.archive.directory)}
                 ),
                 "store": StoreSettings(path=at(self.store.path)),
+                "zenoh": self._resolved_zenoh(at),
                 "mills": mills,
                 "reports": self.reports.model_copy(
                     update={"directory": at(self.reports.directory), "mail": mail}
                 ),
                 "opcua": self._resolved_opcua(at),
             }
+        )
+
+    def _resolved_zenoh(self, at: Any) -> ZenohSettings:
+        tls = self.zenoh.tls
+        if tls is None:
+            return self.zenoh
+        return self.zenoh.model_copy(
+            update={"tls": tls.model_copy(update={"directory": at(tls.directory)})}
         )
 
     def _resolved_opcua(self, at: Any) -> OpcUaSettings:

@@ -18,6 +18,8 @@ What is here:
   results of the analysis (``MillStatus``, ``LifeReport``, ``MonthStarts``, ``FleetView``) are
   defined once by their producers and are the backend's return types and the response models.
 * :mod:`service.api.errors` — domain errors and their ``application/problem+json`` answers.
+* :mod:`service.api.limits` — what one client can cost: body size (413 before reading), the
+  API key before an ack's body, concurrent report renders (503 + Retry-After).
 * :mod:`service.api.metrics` — the Prometheus collector of a runtime;
   :mod:`service.api.domain_metrics` — its domain gauges (damage, remaining life, oscillation,
   bending, starts, lag, state) and the cache of the life computation they need.

@@ -74,6 +74,7 @@ _TITLES = {
     403: "Forbidden",
     404: "Not found",
     409: "Conflict",
+    413: "Request body too large",
     422: "Invalid request",
     503: "Service unavailable",
     504: "Worker did not answer",
@@ -155,6 +156,9 @@ def install_problem_handlers(app: FastAPI) -> None:
     async def api_error(request: Request, exc: ApiError) -> JSONResponse:
         status = _status_of(exc)
         headers = {"WWW-Authenticate": 'APIKey header="X-API-Key"'} if status == 401 else None
+        retry = getattr(exc, "retry_after_s", None)
+        if retry is not None:
+            headers = {"Retry-After": str(retry)}
         return problem(status, exc.title, exc.detail, request.url.path, headers)
 
     @app.exception_handler(RequestValidationError)

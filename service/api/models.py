@@ -231,4 +231,10 @@ class AlarmDetail(AlarmOut):
 class AckBody(BaseModel):
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"by": "j.perez"}]})
 
-    by: str = Field("api", min_length=1, max_length=100, description="Who acknowledges.")
+    by: str = Field(
+        "api",
+        min_length=1,
+        max_length=64,
+        pattern=r"^[^\x00-\x1f\x7f-\x9f]+$",
+        description="Who acknowledges: at most 64 characters, no control characters.",
+    )

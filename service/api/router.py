@@ -6,6 +6,7 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from service.api.backend import Backend
+from service.api.limits import RenderSlots
 from service.api.routes.alarms import alarms_router
 from service.api.routes.health import health_router
 from service.api.routes.metrics import metrics_router
@@ -15,12 +16,13 @@ from service.api.routes.reports import reports_router
 __all__ = ["api_router"]
 
 
-def api_router(backend: Backend) -> APIRouter:
-    """All routes over ``backend``: health, mills, reports, alarms, metrics."""
+def api_router(backend: Backend, renders: RenderSlots) -> APIRouter:
+    """All routes over ``backend``: health, mills, reports (at most ``renders`` at once),
+    alarms, metrics."""
     router = APIRouter()
     router.include_router(health_router(backend))
     router.include_router(mills_router(backend))
-    router.include_router(reports_router(backend))
+    router.include_router(reports_router(backend, renders))
     router.include_router(alarms_router(backend))
     router.include_router(metrics_router(backend.registry()))
     return router

@@ -9,7 +9,7 @@ The ``millwatch`` command line: one module per sub-command, composed by ``main``
   ``serve`` (a worker, and the API with it), ``router``, ``api`` (the API alone, over zenoh),
   ``analyze``, ``report`` (one monthly report from a store file, on demand).
 * ``edge/`` — commands run beside the gateways: ``spool`` (the edge forwarder, and the
-  ``--spool`` options of ``simulate`` and ``replay``).
+  ``--spool`` options of ``simulate`` and ``replay``); ``zenoh-certs`` (mTLS certificates).
 * ``args`` — argument types that name the rule a value broke; ``signal_files`` — ``.npy`` /
   ``.csv`` signals read in blocks, for the offline commands.
 

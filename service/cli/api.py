@@ -21,6 +21,7 @@ import uvicorn
 
 from ingest.zenoh_session import build_config, open_session
 from service.api.app import create_app
+from service.api.limits import limits_of
 from service.cli.serve import run_until_signal
 from service.opcua.launch import start_opcua
 from service.remote.zenoh_backend import ZenohBackend
@@ -35,7 +36,9 @@ def serve_api(settings: ServiceSettings) -> int:
     """Serve the API over zenoh until SIGINT/SIGTERM; returns the exit status."""
     z = settings.zenoh
     listen = z.listen if z.mode == "peer" else ()
-    with open_session(build_config(mode=z.mode, listen=listen, connect=z.connect)) as session:
+    tls = None if z.tls is None else z.tls.files()
+    zconfig = build_config(mode=z.mode, listen=listen, connect=z.connect, tls=tls)
+    with open_session(zconfig) as session:
         backend = ZenohBackend(
             session,
             settings.load_mills(),
@@ -46,8 +49,9 @@ def serve_api(settings: ServiceSettings) -> int:
         opcua = None
         try:
             opcua = start_opcua(backend, settings)
-            config = uvicorn.Config(create_app(backend), host=settings.api.host,
-                                    port=settings.api.port, log_level="warning")  # fmt: skip
+            app = create_app(backend, limits_of(settings.api))
+            config = uvicorn.Config(app, host=settings.api.host, port=settings.api.port,
+                                    log_level="warning")  # fmt: skip
             run_until_signal(uvicorn.Server(config))
         finally:
             if opcua is not None:

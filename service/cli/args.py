@@ -5,12 +5,19 @@ from __future__ import annotations
 import argparse
 import math
 from datetime import UTC, datetime
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # (imported when used: the TLS module loads cryptography)
+    from ingest.zenoh_tls import TlsFiles
 
 __all__ = [
+    "add_tls_arguments",
     "duration_seconds",
     "non_negative_float",
     "positive_float",
     "positive_int",
+    "tls_files",
     "utc_time_ns",
 ]
 
@@ -91,3 +98,30 @@ def utc_time_ns(text: str) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} has no time zone; add Z for UTC")
     delta = moment - _EPOCH  # exact: days, seconds, microseconds
     return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1_000
+
+
+def add_tls_arguments(group: argparse._ActionsContainer, name_help: str) -> None:
+    """``--tls-dir`` and ``--tls-name``: mutual TLS to a plant router (``deploy/zenoh``)."""
+    group.add_argument(
+        "--tls-dir",
+        type=Path,
+        metavar="DIR",
+        help="connect over mutual TLS with the certificates in DIR (ca.pem, NAME.pem, "
+        "NAME-key.pem; made by 'millwatch zenoh-certs')",
+    )
+    group.add_argument("--tls-name", metavar="NAME", help=name_help)
+
+
+def tls_files(args: argparse.Namespace, default_name: str | None) -> TlsFiles | None:
+    """The TLS files ``--tls-dir``/``--tls-name`` name (None without ``--tls-dir``);
+    :class:`ValueError` when no name is given and there is no default."""
+    from ingest.zenoh_tls import TlsFiles
+
+    if args.tls_dir is None:
+        return None
+    name = args.tls_name or default_name
+    if not name:
+        raise ValueError("--tls-dir needs --tls-name: the certificate's name (e.g. "
+                         "gateway.rustenburg.sag-5200-lrs)")  # fmt: skip
+    d = args.tls_dir
+    return TlsFiles(d / "ca.pem", d / f"{name}.pem", d / f"{name}-key.pem")

@@ -96,6 +96,11 @@ COMMANDS = (
         "run a zenoh router (for workers, gateways and the API) where zenohd is absent",
     ),
     Command(
+        "zenoh-certs",
+        "service.cli.edge.zenoh_certs",
+        "make a CA and the certificates of the router, workers, API and gateways (mTLS)",
+    ),
+    Command(
         "api",
         "service.cli.api",
         "run the REST API alone; it asks the workers over zenoh (scale-out)",

@@ -23,6 +23,7 @@ import uvicorn
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, try_open
 from service.api.app import create_app
+from service.api.limits import limits_of
 from service.api.local_backend import LocalBackend
 from service.opcua.launch import start_opcua
 from service.remote.queryables import WorkerQueryables
@@ -42,7 +43,8 @@ def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
     mills = partition_mills(settings.load_mills(), settings.worker.partition)
     z = settings.zenoh
     if z.connect:
-        session = try_open(build_config(mode="client", connect=z.connect))
+        tls = None if z.tls is None else z.tls.files()
+        session = try_open(build_config(mode="client", connect=z.connect, tls=tls))
         if session is None:
             log.warning(
                 "no zenoh router at %s yet: the check that no other live worker analyses these "
@@ -71,7 +73,7 @@ def serve(settings: ServiceSettings, *, api: bool = True) -> int:
         if api:
             server = uvicorn.Server(
                 uvicorn.Config(
-                    create_app(backend),
+                    create_app(backend, limits_of(settings.api)),
                     host=settings.api.host,
                     port=settings.api.port,
                     log_level="warning",

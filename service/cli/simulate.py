@@ -66,7 +66,15 @@ from ingest.sim.spec import SceneSpec
 from ingest.spool.query import SpoolServer
 from ingest.spool.store import Spool, SpoolError
 from ingest.zenoh_session import build_config, open_session
-from service.cli.args import duration_seconds, positive_float, positive_int, utc_time_ns
+from ingest.zenoh_tls import gateway_name
+from service.cli.args import (
+    add_tls_arguments,
+    duration_seconds,
+    positive_float,
+    positive_int,
+    tls_files,
+    utc_time_ns,
+)
 from service.cli.edge.spool import add_spool_arguments, open_spool, spool_summary
 
 __all__ = ["add_parser", "build_scene", "simulate_to_archive"]
@@ -226,6 +234,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="ENDPOINT",
         help="zenoh endpoint to connect to (e.g. a router)",
     )
+    add_tls_arguments(live, "the certificate's name in --tls-dir (default: "
+                      "gateway.<site>.<mill> of the mill simulated)")  # fmt: skip
     live.add_argument(
         "--retention",
         type=duration_seconds,
@@ -269,7 +279,8 @@ def _publish(scene: Scene, args: argparse.Namespace, dtype: wire.DType) -> int:
     scene = starting_now(scene, _anchor(spool, scene, args))
     if args.truth is not None:
         args.truth.write_text(json.dumps(scene.truth.to_dict(), indent=2) + "\n")
-    config = build_config(listen=listen, connect=args.connect)
+    tls = tls_files(args, gateway_name(scene.config.site, scene.config.id))
+    config = build_config(listen=listen, connect=args.connect, tls=tls)
     sys.stderr.write(
         f"publishing {scene.spec.name!r} for mill {scene.config.id} at {args.speed:g}× real time "
         f"({scene.n_samples / scene.fs / args.speed:.0f} s); listen {listen or '-'}, "

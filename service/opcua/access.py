@@ -11,6 +11,15 @@
 * The rule check runs in the task that then serves the request, so it records the session's user
   in :data:`CALLER`; a method (Acknowledge) reads who called it from there — asyncua passes a
   method only its arguments.
+* :class:`LoginThrottle`: failed logins are counted per client host (measured before: 200 wrong
+  passwords in 0.9 s, nothing throttled, no address logged). After ``free`` failures the host is
+  locked out — every login from it refused unchecked, right ones too — for ``lockout_s``,
+  doubled at each further failure after a lockout (at most ``max_lockout_s``). An episode ends
+  with a password or certificate login that succeeds, or ``quiet_s`` without a failure. The log
+  says, with the client's address: the first failure, each lockout, and a summary at the end —
+  a few lines per episode, whatever the rate. asyncua's user manager is not told who connects:
+  :func:`record_client_address` makes each session set :data:`CLIENT` (its peer's host) while
+  it is activated.
 """
 
 from __future__ import annotations
@@ -18,8 +27,9 @@ from __future__ import annotations
 import contextvars
 import hmac
 import logging
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 from asyncua import ua
@@ -29,7 +39,17 @@ from asyncua.server.user_managers import UserManager
 
 from service.opcua.ua_types import nid
 
-__all__ = ["CALLER", "OPERATOR", "VIEWER", "AccessRules", "Login", "Logins"]
+__all__ = [
+    "CALLER",
+    "CLIENT",
+    "OPERATOR",
+    "VIEWER",
+    "AccessRules",
+    "Login",
+    "LoginThrottle",
+    "Logins",
+    "record_client_address",
+]
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +58,9 @@ VIEWER = "viewer"
 
 CALLER: contextvars.ContextVar[User | None] = contextvars.ContextVar("opcua_caller", default=None)
 """The user of the request being served (set by :class:`AccessRules`)."""
+
+CLIENT: contextvars.ContextVar[str] = contextvars.ContextVar("opcua_client", default="unknown")
+"""The host of the client whose session is being activated (:func:`record_client_address`)."""
 
 _NOT_ANONYMOUS = frozenset(
     nid(i)
@@ -55,16 +78,130 @@ class Login:
     role: str
 
 
+@dataclass
+class _Episode:
+    """Failed logins of one host since its last success or quiet period."""
+
+    first_s: float
+    last_s: float
+    failures: int = 0
+    refused: int = 0
+    locked_until_s: float = 0.0
+    lockout_s: float = 0.0
+
+
+@dataclass
+class LoginThrottle:
+    """Failed logins per client host (module docstring). ``clock``: monotonic seconds."""
+
+    free: int = 5
+    lockout_s: float = 1.0
+    max_lockout_s: float = 300.0
+    quiet_s: float = 600.0
+    max_hosts: int = 10_000
+    clock: Callable[[], float] = time.monotonic
+    _episodes: dict[str, _Episode] = field(default_factory=dict)
+
+    def locked(self, host: str) -> bool:
+        """Whether logins from ``host`` are refused unchecked right now (counted)."""
+        episode = self._current(host)
+        if episode is None or self.clock() >= episode.locked_until_s:
+            return False
+        episode.refused += 1
+        return True
+
+    def failed(self, host: str, who: str) -> None:
+        """A login from ``host`` as ``who`` was refused; lock the host out after ``free``."""
+        now = self.clock()
+        episode = self._current(host)
+        if episode is None:
+            episode = self._episodes[host] = _Episode(first_s=now, last_s=now)
+            self._bound()
+            log.warning("OPC UA login refused for %s from %s", who, host)
+        episode.failures += 1
+        episode.last_s = now
+        if episode.failures >= self.free:
+            episode.lockout_s = min(self.max_lockout_s, max(self.lockout_s, 2 * episode.lockout_s))
+            episode.locked_until_s = now + episode.lockout_s
+            log.warning(
+                "OPC UA logins from %s locked out for %g s after %d failed logins (the last "
+                "as %s)", host, episode.lockout_s, episode.failures, who,
+            )  # fmt: skip
+
+    def succeeded(self, host: str) -> None:
+        """A password or certificate login from ``host`` succeeded: its episode ends."""
+        episode = self._episodes.pop(host, None)
+        if episode is not None:
+            self._summary(host, episode)
+
+    def _current(self, host: str) -> _Episode | None:
+        episode = self._episodes.get(host)
+        now = self.clock()
+        if (
+            episode is not None
+            and now - episode.last_s > self.quiet_s >= 0
+            and (now >= episode.locked_until_s)
+        ):
+            del self._episodes[host]
+            self._summary(host, episode)
+            return None
+        return episode
+
+    def _summary(self, host: str, episode: _Episode) -> None:
+        log.warning("OPC UA failed logins from %s ended: %d failed, %d refused while locked "
+                    "out, over %.0f s", host, episode.failures, episode.refused,
+                    episode.last_s - episode.first_s)  # fmt: skip
+
+    def _bound(self) -> None:
+        while len(self._episodes) > self.max_hosts:  # forget the oldest host (dict order)
+            del self._episodes[next(iter(self._episodes))]
+
+
+def _host(peer: Any) -> str:
+    """The host of an asyncio ``peername`` (``(host, port)`` or ``(host, port, flow, scope)``)."""
+    return str(peer[0]) if isinstance(peer, tuple) and peer else str(peer)
+
+
+def record_client_address(iserver: Any) -> None:
+    """Make every session of ``iserver`` (an asyncua ``InternalServer``) set :data:`CLIENT` to
+    its peer's host while it is activated, which is when asyncua asks the user manager: the
+    wrapper is set on this server's sessions only, asyncua itself is unchanged."""
+    create = iserver.create_session
+
+    def create_session(name: Any, *args: Any, **kwargs: Any) -> Any:
+        session = create(name, *args, **kwargs)
+        activate = session.activate_session
+
+        def activate_session(*a: Any, **k: Any) -> Any:
+            token = CLIENT.set(_host(name))
+            try:
+                return activate(*a, **k)
+            finally:
+                CLIENT.reset(token)
+
+        session.activate_session = activate_session
+        return session
+
+    iserver.create_session = create_session
+
+
 class Logins(UserManager):
     """asyncua user manager over the configured logins and user certificates (module
-    docstring). ``certificates``: DER bytes of each trusted user certificate → user name."""
+    docstring). ``certificates``: DER bytes of each trusted user certificate → user name;
+    ``throttle``: failed logins per client host (:class:`LoginThrottle`)."""
 
     def __init__(
-        self, logins: Iterable[Login], certificates: Mapping[bytes, str], *, anonymous: bool
+        self,
+        logins: Iterable[Login],
+        certificates: Mapping[bytes, str],
+        *,
+        anonymous: bool,
+        throttle: LoginThrottle | None = None,
     ) -> None:
         self._logins = {login.name: login for login in logins}
         self._certificates = dict(certificates)
         self.anonymous = anonymous
+        self.throttle = LoginThrottle() if throttle is None else throttle
 
     def get_user(
         self,
@@ -73,17 +210,27 @@ class Logins(UserManager):
         password: str | None = None,
         certificate: Any = None,
     ) -> User | None:
+        host = CLIENT.get()
+        if self.throttle.locked(host):
+            return None
         if username:
-            return self._by_password(username, password or "")
+            user = self._by_password(username, password or "")
+        else:
+            user = self._by_certificate(certificate)
+        if user is None:
+            self.throttle.failed(host, f"user {username!r}" if username else "no credentials "
+                                 "(or an unknown user certificate)")  # fmt: skip
+        elif user.role is not UserRole.Anonymous:
+            self.throttle.succeeded(host)
+        return user
+
+    def _by_certificate(self, certificate: Any) -> User | None:
         # asyncua passes the X.509 user token's certificate, or for an anonymous token the
         # secure channel's client certificate (possession of its key proven by the channel)
         name = self._certificates.get(bytes(certificate)) if certificate else None
         if name is not None:
             return User(role=UserRole.User, name=name)
-        if not self.anonymous:
-            log.warning("OPC UA login refused: no credentials (or an unknown user certificate)")
-            return None
-        return User(role=UserRole.Anonymous, name=None)
+        return User(role=UserRole.Anonymous, name=None) if self.anonymous else None
 
     def _by_password(self, username: str, password: str) -> User | None:
         login = self._logins.get(username)
@@ -92,10 +239,7 @@ class Logins(UserManager):
             and login.password is not None
             and hmac.compare_digest(password.encode(), login.password.encode())
         )
-        if not ok or login is None:
-            log.warning("OPC UA login refused for user %r", username)
-            return None
-        return User(role=UserRole.User, name=username)
+        return User(role=UserRole.User, name=username) if ok else None
 
     def role_of(self, user: User | None) -> str | None:
         """``operator``, ``viewer`` or None (anonymous or unknown)."""

@@ -39,7 +39,16 @@ from service.api.backend import Backend
 from service.api.mill_views import mill_summary
 from service.api.models import MillSummary
 from service.errors import ApiError
-from service.opcua.access import CALLER, OPERATOR, AccessRules, Login, Logins, certificate_names
+from service.opcua.access import (
+    CALLER,
+    OPERATOR,
+    AccessRules,
+    Login,
+    Logins,
+    LoginThrottle,
+    certificate_names,
+    record_client_address,
+)
 from service.opcua.address_space import NAMESPACE_URI, MillNodes, root_folder
 from service.opcua.certificate import APPLICATION_URI, ensure_certificate
 from service.opcua.conditions import Conditions
@@ -59,6 +68,8 @@ _POLICIES = {
     "Basic256Sha256_SignAndEncrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
 }
 T = TypeVar("T")
+#: The longest Acknowledge comment (printable characters) passed on in the condition's event.
+COMMENT_MAX_CHARS = 256
 
 
 class OpcUaError(OSError):
@@ -154,8 +165,10 @@ class OpcUaServer:
         s = self.settings
         logins = [Login(u.name, _password(u), u.role) for u in s.users]
         certs = await certificate_names(s.user_certificates)
-        self._logins = Logins(logins, certs, anonymous=s.anonymous)
+        throttle = LoginThrottle(free=s.login_free_failures, lockout_s=s.login_lockout_s)
+        self._logins = Logins(logins, certs, anonymous=s.anonymous, throttle=throttle)
         server = Server(user_manager=self._logins)
+        record_client_address(server.iserver)  # (the throttle counts per client host)
         server.iserver.bind_condition_methods = True  # ConditionRefresh
         await server.init()
         server.set_endpoint(s.endpoint)
@@ -273,6 +286,8 @@ class OpcUaServer:
         event_id = args[0].Value if isinstance(args[0], ua.Variant) else args[0]
         comment = args[1].Value if isinstance(args[1], ua.Variant) else args[1]
         text = comment.Text if isinstance(comment, ua.LocalizedText) else str(comment or "")
+        if text and (len(text) > COMMENT_MAX_CHARS or not text.isprintable()):
+            return status(ua.StatusCodes.BadInvalidArgument)  # (sent on to every subscriber)
 
         async def ack(alarm_id: str, by: str) -> dict[str, Any]:
             return await self._call(self.backend.ack, alarm_id, by)

@@ -17,8 +17,19 @@ spectrum   —                       ``GET /mills/{id}/spectrum`` body
 report     ``month`` (optional)    the monthly report as JSON (``report_to_dict``)
 alarms     —                       the mill's alarms (rows, most recent first)
 alarm      ``alarm_id``            ``GET /alarms/{id}`` body
-ack        ``alarm_id``, ``by``    the alarm after acknowledgement
+ack        ``alarm_id``, ``by``,   the alarm after acknowledgement
+           ``t_ns``, ``mac``
 =========  ======================  ==============================================
+
+An ``ack`` changes state, so it is signed (:func:`ack_args`, checked by :func:`checked_ack`): the
+API and the worker share ``[api] api_key``; the API sends ``mac`` = HMAC-SHA256 under that key of
+the alarm id, who acknowledges (``by``, at most :data:`BY_MAX_CHARS` printable characters: the
+REST caller's ``by`` or the OPC UA user) and the wall-clock time ``t_ns``; the worker recomputes
+it, compares in constant time (``hmac.compare_digest``) and refuses a time more than
+:data:`ACK_WINDOW_S` away from its own clock. An unsigned or forged ``get`` on ``…/@query/ack``
+is answered 401 and changes nothing; a worker without ``api_key`` refuses every ack (403). The
+key itself never travels. Within the window a captured ack can be replayed only as itself (the
+same alarm, the same person), which acknowledging again does not change.
 
 Answers are UTF-8 JSON (:data:`JSON`); a typed answer is sent as its model's JSON data and
 read back with ``model_validate`` (:class:`StatusAnswer`, ``MonthStarts``; the life report, a
@@ -32,23 +43,31 @@ exception, so the remote API answers what an in-process one would. A new questio
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import json
+import re
+import time
 from enum import StrEnum
 from typing import Any
 
 from pydantic import BaseModel, Field
 
 from service.api.errors import error_for_status, status_of
-from service.errors import ApiError, BadRequest
+from service.errors import ApiError, BadRequest, Forbidden, Unauthorized
 from service.status import MillStatus
 
 __all__ = [
+    "ACK_WINDOW_S",
+    "BY_MAX_CHARS",
     "JSON",
     "Question",
     "StatusAnswer",
+    "ack_args",
     "alarm_args",
     "alarm_id_of",
     "by_of",
+    "checked_ack",
     "decode",
     "decode_args",
     "encode",
@@ -57,6 +76,8 @@ __all__ = [
     "problem_from",
     "problem_of",
 ]
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 
 JSON = "application/json"
 """The encoding of payloads, answers and errors."""
@@ -93,9 +114,9 @@ def month_args(month: str | None) -> dict[str, Any]:
     return {"month": month}
 
 
-def alarm_args(alarm_id: str, by: str | None = None) -> dict[str, Any]:
-    """Arguments of ``alarm`` (and of ``ack``, with who acknowledges)."""
-    return {"alarm_id": alarm_id} if by is None else {"alarm_id": alarm_id, "by": by}
+def alarm_args(alarm_id: str) -> dict[str, Any]:
+    """Arguments of ``alarm``."""
+    return {"alarm_id": alarm_id}
 
 
 def month_of(args: dict[str, Any]) -> str | None:
@@ -115,9 +136,63 @@ def alarm_id_of(args: dict[str, Any]) -> str:
 
 
 def by_of(args: dict[str, Any]) -> str:
-    """Who acknowledges (``"api"`` when not given)."""
+    """Who acknowledges (``"api"`` when not given); :class:`BadRequest` for a name longer than
+    :data:`BY_MAX_CHARS` or with control characters (the REST ``AckBody`` rule)."""
     by = args.get("by")
-    return by if isinstance(by, str) and by else "api"
+    if by is None or by == "":
+        return "api"
+    if not isinstance(by, str) or len(by) > BY_MAX_CHARS or _CONTROL.search(by):
+        shown = repr(by)[:40]
+        raise BadRequest("Malformed acknowledger", f"by must be at most {BY_MAX_CHARS} characters "
+                         f"without control characters, got {shown}.")  # fmt: skip
+    return by
+
+
+# ---------------------------------------------------------------------- signed acks
+ACK_WINDOW_S = 120.0
+"""How far (s) a signed ack's time may be from the worker's clock (either way)."""
+BY_MAX_CHARS = 64
+"""The longest ``by`` (who acknowledges) an ack may carry."""
+_ACK_DOMAIN = b"millwatch-ack-v1"
+
+
+def _ack_mac(key: str, alarm_id: str, by: str, t_ns: int) -> str:
+    message = json.dumps([alarm_id, by, t_ns], ensure_ascii=True).encode("ascii")
+    return hmac.new(key.encode("utf-8"), _ACK_DOMAIN + message, hashlib.sha256).hexdigest()
+
+
+def ack_args(alarm_id: str, by: str, key: str, t_ns: int | None = None) -> dict[str, Any]:
+    """Arguments of ``ack``, signed with the shared ``key`` at ``t_ns`` (default: now)."""
+    t = time.time_ns() if t_ns is None else t_ns
+    return {"alarm_id": alarm_id, "by": by, "t_ns": t, "mac": _ack_mac(key, alarm_id, by, t)}
+
+
+def checked_ack(
+    key: str | None, args: dict[str, Any], now_ns: int | None = None
+) -> tuple[str, str]:
+    """``(alarm_id, by)`` of an ack signed with ``key`` within :data:`ACK_WINDOW_S` of
+    ``now_ns``; :class:`Forbidden` when this worker has no key, :class:`Unauthorized` for an
+    unsigned, forged or stale one, :class:`BadRequest` for a malformed ``by``."""
+    if not key:
+        raise Forbidden("Acknowledgement disabled", "This worker has no api.api_key configured, "
+                        "so it refuses acknowledgements over zenoh.")  # fmt: skip
+    alarm_id, by = alarm_id_of(args), by_of(args)
+    t_ns, mac = args.get("t_ns"), args.get("mac")
+    if type(t_ns) is not int or not isinstance(mac, str):
+        raise Unauthorized("Unsigned acknowledgement", "An ack over zenoh must be signed with "
+                           "the API key (t_ns and mac); ask the API instead.")  # fmt: skip
+    if not hmac.compare_digest(mac.encode(), _ack_mac(key, alarm_id, by, t_ns).encode()):
+        raise Unauthorized(
+            "Wrong acknowledgement signature",
+            "The ack is not signed with this worker's api.api_key (the API and the worker must "
+            "share it).",
+        )
+    now = time.time_ns() if now_ns is None else now_ns
+    if abs(now - t_ns) > ACK_WINDOW_S * 1e9:
+        raise Unauthorized("Stale acknowledgement", f"The ack was signed {(now - t_ns) / 1e9:.0f} "
+                           f"s from this worker's clock (at most {ACK_WINDOW_S:.0f} s): the "
+                           "clocks differ or the ack was replayed.")  # fmt: skip
+    return alarm_id, by
 
 
 # ---------------------------------------------------------------------- encodings

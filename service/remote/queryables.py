@@ -15,9 +15,10 @@ What can be asked, with which arguments, and how answers and errors are encoded:
 :mod:`service.remote.protocol` (the API's end, :mod:`service.remote.zenoh_backend`, reads the
 same module). :data:`ANSWERS` says how this worker answers each question.
 
-Trust: ``ack`` changes state and carries no API key — the API checks the key before it asks.
-The zenoh router network is the trust boundary: only the API, workers and gateways may connect
-to it (bind it to a private network, or use zenoh's TLS and access control).
+Trust: ``ack`` changes state, so the worker answers it only when it is signed with the shared
+``[api] api_key`` (:func:`service.remote.protocol.checked_ack`); an unsigned ``get`` on
+``…/@query/ack`` is a 401 and changes nothing. The router's access control
+(``deploy/zenoh/router.json5``) also lets only the ``api`` certificate ask ``…/@query/*``.
 
 Queryable callbacks run on zenoh's threads, which also deliver telemetry: they only hand the
 query to a small thread pool, which answers (a monthly report takes a second or two).
@@ -43,7 +44,7 @@ from service.remote.protocol import (
     Question,
     StatusAnswer,
     alarm_id_of,
-    by_of,
+    checked_ack,
     decode_args,
     encode,
     month_of,
@@ -74,9 +75,9 @@ def _alarm(backend: LocalBackend, mill_id: str, args: dict[str, Any]) -> Any:
 
 
 def _ack(backend: LocalBackend, mill_id: str, args: dict[str, Any]) -> Any:
-    alarm_id = alarm_id_of(args)
+    alarm_id, by = checked_ack(backend.api_key, args)
     _own_alarm(backend, mill_id, alarm_id)
-    return backend.ack(alarm_id, by_of(args))
+    return backend.ack(alarm_id, by)
 
 
 ANSWERS: dict[Question, Answer] = {

@@ -51,11 +51,12 @@ from ingest.keys import (
 )
 from service.api.alarm_board import AlarmBoard, row_from_dict
 from service.api.mill_views import config_of, mill_detail, mill_summary, site_mills
-from service.errors import GatewayTimeout, NotFound, Unavailable
+from service.errors import Forbidden, GatewayTimeout, NotFound, Unavailable
 from service.remote.metrics import remote_registry
 from service.remote.protocol import (
     Question,
     StatusAnswer,
+    ack_args,
     alarm_args,
     decode,
     encode,
@@ -338,9 +339,14 @@ class ZenohBackend:
         return self._ask(self._alarm_row_mill(alarm_id), Question.ALARM, alarm_args(alarm_id))
 
     def ack(self, alarm_id: str, by: str) -> dict[str, Any]:
-        """Ask the alarm's worker to acknowledge it (the route checked the API key)."""
+        """Ask the alarm's worker to acknowledge it (the route checked the API key), signed
+        with the key (:func:`~service.remote.protocol.ack_args`); :class:`Forbidden` without
+        one."""
+        if not self.api_key:
+            raise Forbidden("Acknowledgement disabled", "This API has no api.api_key configured, "
+                            "so it cannot sign acknowledgements for the workers.")  # fmt: skip
         mill_id = self._alarm_row_mill(alarm_id)
-        detail = self._ask(mill_id, Question.ACK, alarm_args(alarm_id, by))
+        detail = self._ask(mill_id, Question.ACK, ack_args(alarm_id, by, self.api_key))
         self._board.merge([row_from_dict(detail)])
         return detail
 

@@ -158,7 +158,9 @@ class ServiceRuntime:
             checkpoint_seconds=s.worker.checkpoint_seconds,
         )
         z = s.zenoh
-        self.session = open_retrying(build_config(mode=z.mode, listen=z.listen, connect=z.connect))
+        tls = None if z.tls is None else z.tls.files()
+        zconfig = build_config(mode=z.mode, listen=z.listen, connect=z.connect, tls=tls)
+        self.session = open_retrying(zconfig)
         self.worker.on_alarms = self._on_alarms
         self.recovered_blocks = recover(
             self.worker,

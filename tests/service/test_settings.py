@@ -135,3 +135,37 @@ def test_opcua_endpoint_must_be_opc_tcp(tmp_path):
     path.write_text('[opcua]\nendpoint = "http://127.0.0.1:4840"\n')
     with pytest.raises(SettingsError, match=r"opcua\.endpoint"):
         load_service_settings(path)
+
+
+@pytest.mark.parametrize(
+    ("zenoh", "message"),
+    [
+        ('listen = ["tcp/0.0.0.0:7447"]', "reachable from other hosts without TLS"),
+        ('mode = "client"\nconnect = ["tcp/10.1.2.3:7447"]', "'tcp/10.1.2.3:7447'"),
+        ('mode = "client"\nconnect = ["tcp/router.plant:7447"]', "plain_beyond_loopback"),
+        ('mode = "client"\nconnect = ["tls/router.plant:7447"]', "needs [zenoh.tls]"),
+    ],
+)
+def test_zenoh_endpoints_beyond_loopback_need_tls_unless_said_otherwise(tmp_path, zenoh, message):
+    path = tmp_path / "s.toml"
+    path.write_text(f"[zenoh]\n{zenoh}\n")
+    with pytest.raises(SettingsError, match="zenoh") as err:
+        load_service_settings(path)
+    assert message in str(err.value) and str(path) in str(err.value)
+
+
+def test_zenoh_tls_files_are_relative_to_the_settings_file_and_plain_is_a_choice(tmp_path):
+    path = tmp_path / "plant" / "s.toml"
+    path.parent.mkdir()
+    path.write_text(
+        '[zenoh]\nmode = "client"\nconnect = ["tls/router.plant:7447"]\n'
+        '[zenoh.tls]\ndirectory = "tls"\nname = "worker"\n'
+    )
+    tls = load_service_settings(path).zenoh.tls
+    assert tls is not None
+    files = tls.files()
+    assert files.ca == path.parent / "tls" / "ca.pem"
+    assert files.certificate == path.parent / "tls" / "worker.pem"
+    assert files.private_key == path.parent / "tls" / "worker-key.pem"
+    path.write_text('[zenoh]\nlisten = ["tcp/0.0.0.0:7447"]\nplain_beyond_loopback = true\n')
+    assert load_service_settings(path).zenoh.listen == ("tcp/0.0.0.0:7447",)

@@ -23,9 +23,13 @@ from service.api.models import AckBody, AlarmDetail, AlarmList
 from service.api.routes.params import AlarmId
 from service.api.times import IsoTime, ns_of, with_iso
 
-__all__ = ["alarms_router"]
+__all__ = ["API_KEY", "KEYED_ROUTES", "alarms_router"]
 
 API_KEY = APIKeyHeader(name="X-API-Key", auto_error=False, description="The service's api_key.")
+ACK_PATH = "/alarms/{alarm_id}/ack"
+#: The routes that take :data:`API_KEY`: :class:`~service.api.limits.RequestGuard` checks the key
+#: for them before their body is read (the route's own check documents it in OpenAPI).
+KEYED_ROUTES = (("POST", ACK_PATH),)
 INT64_MAX = 2**63 - 1
 
 _STATE_HELP = (
@@ -83,7 +87,7 @@ def alarms_router(backend: Backend) -> APIRouter:
         return with_iso(backend.alarm(alarm_id))
 
     @router.post(
-        "/alarms/{alarm_id}/ack",
+        ACK_PATH,
         summary="Acknowledge an alarm (needs X-API-Key); returns it as stored afterwards",
         response_model=AlarmDetail,
         responses=problem_responses(401, 403, 404, 409, 422, 503),

@@ -20,7 +20,7 @@ def health_router(backend: Backend) -> APIRouter:
     router = APIRouter(tags=["operations"])
 
     @router.get("/health", summary="Liveness: the process answers")
-    def health() -> dict[str, Any]:
+    async def health() -> dict[str, Any]:  # (async: answered without a worker thread)
         return with_iso({"status": "ok", "time_ns": time.time_ns()})
 
     @router.get(

@@ -39,6 +39,7 @@ from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 
 from service.api.errors import problem_responses
+from service.api.limits import ApiLimits, RenderSlots
 from service.api.routes.params import MillId, Month, Site
 from service.errors import BadRequest
 from service.reports.fleet_document import render_fleet
@@ -95,10 +96,12 @@ def negotiate(fmt: str | None, accept: str | None) -> str:
     return "json"
 
 
-def reports_router(backend: ReportSource) -> APIRouter:
+def reports_router(backend: ReportSource, renders: RenderSlots | None = None) -> APIRouter:
     """The monthly report route; ``backend`` builds the report (a
-    :class:`~service.api.backend.Backend`: in process, or a worker over zenoh)."""
+    :class:`~service.api.backend.Backend`: in process, or a worker over zenoh); at most
+    ``renders`` reports are built and rendered at once, one more is a 503 with Retry-After."""
     router = APIRouter(tags=["reports"])
+    slots = RenderSlots(ApiLimits()) if renders is None else renders
 
     @router.get(
         "/mills/{mill_id}/reports/monthly",
@@ -115,19 +118,8 @@ def reports_router(backend: ReportSource) -> APIRouter:
         format: Literal["json", "html", "csv", "pdf"] | None = None,
         table: TableName = None,
     ) -> Response:
-        kind = negotiate(format, request.headers.get("accept")) if table is None else "csv"
-        report = backend.monthly_report(mill_id, month)  # an unknown mill is a 404 first
-        if table is not None and format not in (None, "csv"):
-            raise BadRequest("A table is CSV only",
-                             f"table {table!r} comes as format=csv, not {format!r}.")  # fmt: skip
-        stem = f"{report.mill}-{report.month}"
-        if table is not None:
-            return _download(render_csv_table(report, table), "text/csv; charset=utf-8",
-                             f"{stem}-{table}.csv")  # fmt: skip
-        media, render = FORMATS[kind]
-        if kind in SUFFIX:
-            return _download(render(report), media, f"{stem}-damage.{SUFFIX[kind]}")
-        return Response(render(report), media_type=media)
+        with slots.slot():
+            return _monthly(backend, request, mill_id, month, format, table)
 
     @router.get(
         "/sites/{site}/reports/fleet",
@@ -142,14 +134,8 @@ def reports_router(backend: ReportSource) -> APIRouter:
         site: Site,
         format: Literal["json", "html", "csv", "pdf"] | None = None,
     ) -> Response:
-        kind = negotiate(format, request.headers.get("accept"))
-        view = backend.fleet(site)
-        if kind == "json":
-            return Response(json.dumps(view), media_type="application/json")
-        media, body = FORMATS[kind][0], render_fleet(view, kind)
-        if kind in SUFFIX:
-            return _download(body, media, f"{site}-fleet.{SUFFIX[kind]}")
-        return Response(body, media_type=media)
+        with slots.slot():
+            return _fleet(backend, request, site, format)
 
     @router.get(
         "/reports/status",
@@ -160,6 +146,40 @@ def reports_router(backend: ReportSource) -> APIRouter:
         return backend.reports_status()
 
     return router
+
+
+def _monthly(
+    backend: ReportSource,
+    request: Request,
+    mill_id: str,
+    month: str | None,
+    format: str | None,
+    table: str | None,
+) -> Response:
+    kind = negotiate(format, request.headers.get("accept")) if table is None else "csv"
+    report = backend.monthly_report(mill_id, month)  # an unknown mill is a 404 first
+    if table is not None and format not in (None, "csv"):
+        raise BadRequest("A table is CSV only",
+                         f"table {table!r} comes as format=csv, not {format!r}.")  # fmt: skip
+    stem = f"{report.mill}-{report.month}"
+    if table is not None:
+        return _download(render_csv_table(report, table), "text/csv; charset=utf-8",
+                         f"{stem}-{table}.csv")  # fmt: skip
+    media, render = FORMATS[kind]
+    if kind in SUFFIX:
+        return _download(render(report), media, f"{stem}-damage.{SUFFIX[kind]}")
+    return Response(render(report), media_type=media)
+
+
+def _fleet(backend: ReportSource, request: Request, site: str, format: str | None) -> Response:
+    kind = negotiate(format, request.headers.get("accept"))
+    view = backend.fleet(site)
+    if kind == "json":
+        return Response(json.dumps(view), media_type="application/json")
+    media, body = FORMATS[kind][0], render_fleet(view, kind)
+    if kind in SUFFIX:
+        return _download(body, media, f"{site}-fleet.{SUFFIX[kind]}")
+    return Response(body, media_type=media)
 
 
 def _download(body: str | bytes, media: str, name: str) -> Response:

@@ -26,7 +26,8 @@ from ingest.mill_files import load_mill_config
 from ingest.spool.forwarder import SpoolForwarder
 from ingest.spool.store import DEFAULT_HOURS, DEFAULT_MAX_MB, Spool
 from ingest.zenoh_session import build_config, open_session
-from service.cli.args import positive_float
+from ingest.zenoh_tls import gateway_name
+from service.cli.args import add_tls_arguments, positive_float, tls_files
 
 __all__ = ["add_parser", "add_spool_arguments", "open_spool", "spool_summary"]
 
@@ -105,6 +106,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"the gateway's endpoint (default {DEFAULT_CONNECT})")  # fmt: skip
     z.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="endpoint to listen on (default none)")  # fmt: skip
+    add_tls_arguments(z, "the certificate's name in --tls-dir (default: gateway.<site>.<mill> "
+                      "of the one --mill)")  # fmt: skip
     p.set_defaults(handler=_main)
 
 
@@ -117,6 +120,14 @@ def _patterns(args: argparse.Namespace) -> list[str]:
     return [live_pattern()]
 
 
+def _one_mill(args: argparse.Namespace) -> str | None:
+    """The gateway certificate name of the one ``--mill`` (None for none or several)."""
+    if not args.mill or len(args.mill) != 1:
+        return None
+    config = load_mill_config(args.mill[0])
+    return gateway_name(config.site, config.id)
+
+
 def _main(args: argparse.Namespace) -> int:
     from service.cli.serve import wait_for_signal  # (not for simulate's and replay's options)
 
@@ -124,7 +135,7 @@ def _main(args: argparse.Namespace) -> int:
     spool = open_spool(args)
     assert spool is not None  # (--spool is required)
     connect = args.connect if args.connect is not None else [DEFAULT_CONNECT]
-    config = build_config(listen=args.listen, connect=connect)
+    config = build_config(listen=args.listen, connect=connect, tls=tls_files(args, _one_mill(args)))
     with spool, open_session(config) as session:
         forwarder = SpoolForwarder(session, spool, patterns)
         sys.stderr.write(

@@ -182,6 +182,24 @@ def test_alarm_event_arrives_within_2_s_of_its_rest_appearance(plant: Plant) -> 
     assert event.ConditionName == "start_peak"
 
 
+def test_an_overlong_acknowledge_comment_is_refused_and_changes_nothing(plant: Plant) -> None:
+    alarm = raised_alarm(plant, MILL)
+    _, event = [(t, e) for t, e in alarm_events(plant, MILL)
+                if alarm["alarm_id"] in e.NodeId.Identifier][-1]  # fmt: skip
+
+    async def acknowledge(comment: str) -> None:
+        async with client(plant, OPERATOR, OPERATOR_PW) as c:
+            await c.get_node(event.NodeId).call_method(
+                ACK, ua.Variant(event.EventId, ua.VariantType.ByteString), ua.LocalizedText(comment)
+            )
+
+    for comment in ("x" * 257, "seen\x1b[2J"):
+        with pytest.raises(ua.UaStatusCodeError) as refused:
+            asyncio.run(acknowledge(comment))
+        assert _status_of(refused.value) == ua.StatusCodes.BadInvalidArgument
+    assert rest(plant, f"/alarms/{alarm['alarm_id']}")["state"] == "raised"
+
+
 def test_acknowledge_over_opcua_with_credentials_shows_on_rest(
     plant: Plant, tmp_path: Path
 ) -> None:

@@ -26,6 +26,7 @@ from ingest.zenoh_session import build_config, free_loopback_port, open_session,
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
 from service.errors import Unavailable
+from service.remote.protocol import ack_args
 from service.remote.queryables import WorkerQueryables
 from service.remote.report_codec import report_from_dict
 from service.remote.zenoh_backend import ZenohBackend
@@ -181,6 +182,49 @@ def test_remote_alarm_detail_mill_detail_and_report(pair):
 def test_report_json_round_trips_through_the_codec(pair):
     data = pair.local.get(f"/mills/{MILL}/reports/monthly", params={"format": "json"}).json()
     assert report_to_dict(report_from_dict(data)) == data
+
+
+def _ack_over_zenoh(port: int, mill: str, args: dict) -> tuple[bool, dict]:
+    """A zenoh ``get`` on the mill's ``…/@query/ack`` from a session of our own (not the API):
+    (ok, answer or problem JSON) of the one reply."""
+    with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
+        config = load_mill_config(MILLS / f"{mill}.toml")
+        key = query_key(config.site, config.id, "ack")
+        replies = list(session.get(key, payload=json.dumps(args).encode(), timeout=5.0))
+    assert len(replies) == 1
+    reply = replies[0]
+    if reply.ok is not None:
+        return True, json.loads(reply.ok.payload.to_bytes())
+    return False, json.loads(reply.err.payload.to_bytes())
+
+
+def test_an_unsigned_or_forged_ack_over_zenoh_is_refused_and_changes_nothing(pair):
+    row = next(r for r in pair.runtime.store.alarms() if r.state == "raised")
+    before = pair.runtime.store.alarm(row.alarm_id)
+    forged = ack_args(row.alarm_id, "intruder", "not-the-key")
+    late = ack_args(row.alarm_id, "op", API_KEY, t_ns=time.time_ns() - int(300e9))
+    for args, title in (
+        ({"alarm_id": row.alarm_id, "by": "x" * 5015}, "Malformed acknowledger"),
+        ({"alarm_id": row.alarm_id}, "Unsigned acknowledgement"),
+        (forged, "Wrong acknowledgement signature"),
+        (late, "Stale acknowledgement"),
+        (
+            {**ack_args(row.alarm_id, "op", API_KEY), "by": "someone-else"},
+            "Wrong acknowledgement signature",
+        ),
+    ):
+        ok, answer = _ack_over_zenoh(pair.port, MILL, args)
+        status = 422 if title == "Malformed acknowledger" else 401
+        assert not ok and answer["status"] == status and answer["title"] == title, answer
+    ok, answer = _ack_over_zenoh(pair.port, MILL, ack_args(row.alarm_id, "x" * 65, API_KEY))
+    assert not ok and answer["status"] == 422 and "at most 64" in answer["detail"]
+    assert pair.runtime.store.alarm(row.alarm_id) == before  # (the next test acks it, signed)
+
+
+def test_the_remote_api_refuses_a_long_acknowledger_before_asking(pair):
+    url = "/alarms/any/ack"
+    r = pair.remote.post(url, headers={"X-API-Key": API_KEY}, json={"by": "z" * 65})
+    assert r.status_code == 422 and "by" in r.text
 
 
 def test_remote_ack_checks_the_key_in_the_api_and_the_worker_applies_it(pair):
