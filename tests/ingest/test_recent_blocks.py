@@ -19,7 +19,9 @@ KEY = "millwatch/v1/lab/m1/motor_torque"
 
 
 def _block(seq: int) -> bytes:
-    return wire.encode_block(np.zeros(4), 10**18 + seq * 4_000_000, 1000.0, seq, wire.Unit.from_symbol("MPa"))
+    return wire.encode_block(
+        np.zeros(4), 10**18 + seq * 4_000_000, 1000.0, seq, wire.Unit.from_symbol("MPa")
+    )
 
 
 @given(start=st.integers(0, 50), n=st.integers(1, 80), keep=st.integers(1, 30),
