@@ -4,6 +4,8 @@ zenoh on 127.0.0.1 through the gateway publisher's own queryable."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
@@ -51,7 +53,11 @@ def test_a_gateway_without_a_spool_answers_a_gap_from_memory() -> None:
         with publisher:
             for seq in range(100, 150):
                 publisher.put(_block(seq))
-            answer = fetch_spooled(worker, KEY, 90, 140, timeout=5.0)
+            for _ in range(50):  # (until the link is up and the queryable known: ≤ 5 s)
+                answer = fetch_spooled(worker, KEY, 90, 140, timeout=5.0)
+                if answer.answered:
+                    break
+                time.sleep(0.1)
     assert answer.answered
     assert [payload_seq(p) for p in answer.blocks] == list(range(130, 141))  # 2 s: 20 held
     assert answer.dropped == 30  # 100..129 published by this gateway, no longer held
