@@ -102,7 +102,7 @@ def test_a_part_with_no_intact_checkpoint_has_none(tmp_path: Path) -> None:
         for i in range(2):
             _put(store, "m1", i, {"n": i})
         for row_id, text in _rows(store, "m1"):
-            _set_state(store, row_id, text.replace('"n": ', '"n":9')  # same length)
+            _set_state(store, row_id, text.replace('"n": ', '"n":9'))  # same length
         _put(store, "m2", 0, {"n": 5})
         choice = store.choose_checkpoints()
         assert list(choice.parts) == ["m2"]
