@@ -71,6 +71,7 @@ __all__ = [
     "ReportSettings",
     "ServiceSettings",
     "SettingsError",
+    "check_writable",
     "load_service_settings",
     "parse_formats",
 ]
@@ -459,3 +460,31 @@ def load_service_settings(path: str | Path) -> ServiceSettings:
     except ValidationError as exc:
         raise SettingsError(f"{path}: " + "; ".join(describe_validation_error(exc))) from exc
     return settings.resolved(path.parent.resolve())
+
+
+def check_writable(settings: ServiceSettings, source: str | Path) -> None:
+    """The places a worker writes — ``archive.directory``, the directory of ``store.path``,
+    ``reports.directory`` (when reports are on) — exist or can be made, and are writable;
+    else :class:`SettingsError` naming ``source`` (the settings file), the field, its value and
+    what is wrong. (Run before a worker starts, so the error comes before its banner.)"""
+    places = [("archive.directory", settings.archive.directory, settings.archive.directory),
+              ("store.path", settings.store.path, settings.store.path.parent)]  # fmt: skip
+    if settings.reports.enabled:
+        places.append(("reports.directory", settings.reports.directory, settings.reports.directory))
+    for field, value, directory in places:
+        problem = _not_writable(directory)
+        if problem is None and field == "store.path" and value.is_dir():
+            problem = "it is a directory; give the store's file name, e.g. millwatch.db"
+        if problem is not None:
+            raise SettingsError(f"{source}: {field} = '{value}': {problem}")
+
+
+def _not_writable(directory: Path) -> str | None:
+    """Why this process cannot write in ``directory`` (made if missing), or None."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return f"cannot create the directory {directory} ({exc.strerror or exc})"
+    if not os.access(directory, os.W_OK | os.X_OK):
+        return f"the directory {directory} is not writable by this user"
+    return None

@@ -540,8 +540,10 @@ def _unique_keys(channels: dict[str, ChannelConfig]) -> None:
         owners.setdefault(ch.key, []).append(f"channels.{name}.key")
     shared = {k: names for k, names in owners.items() if len(names) > 1}
     if shared:
-        said = "; ".join(f"{' and '.join(n)} are all {k!r}" if len(n) > 2
-                         else f"{' and '.join(n)} are both {k!r}" for k, n in shared.items())  # fmt: skip
+        said = "; ".join(
+            f"{' and '.join(n)} are {'all' if len(n) > 2 else 'both'} {k!r}"
+            for k, n in shared.items()
+        )
         raise ValueError(f"{said}: each channel needs a key of its own")
 
 

@@ -7,6 +7,11 @@ zenoh (``…/@query/<what>``) while holding a liveliness token per mill, so ``mi
 elsewhere can serve them too. SIGTERM or SIGINT (Ctrl-C) stops it cleanly: tokens withdrawn,
 final checkpoint, archive file finished, zenoh session closed. With ``[opcua] enabled`` it also
 serves the mills' values and alarms over OPC UA (:mod:`service.opcua`).
+
+Start-up: the settings, every mill file, the archive/store/report directories and the API's
+port are checked before the banner (an error is one line naming file, field and value, exit 2);
+then the recovery runs, and ``millwatch serve: ready …`` is printed once the worker runs and the
+API listens (:mod:`service.cli.startup`).
 """
 
 from __future__ import annotations
@@ -24,14 +29,22 @@ from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, try_open
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
+from service.cli.startup import AnnouncingServer, announce, check_api_port
 from service.opcua.launch import start_opcua
 from service.remote.queryables import WorkerQueryables
-from service.settings import ServiceSettings, load_service_settings
+from service.settings import ServiceSettings, check_writable, load_service_settings
 from service.worker.mill_job import MillJob
 from service.worker.partition import check_exclusive, partition_mills, worker_identity
 from service.worker.runtime import ServiceRuntime
 
-__all__ = ["add_parser", "run_until_signal", "serve", "wait_for_signal", "worker_mills"]
+__all__ = [
+    "add_parser",
+    "ready_line",
+    "run_until_signal",
+    "serve",
+    "wait_for_signal",
+    "worker_mills",
+]
 
 log = logging.getLogger(__name__)
 
@@ -57,9 +70,12 @@ def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
     return mills
 
 
-def serve(settings: ServiceSettings, *, api: bool = True) -> int:
-    """Run until SIGTERM/SIGINT; returns the exit status."""
-    runtime = ServiceRuntime(settings, worker_mills(settings), MillJob)
+def serve(
+    settings: ServiceSettings, mills: dict[str, MillConfig] | None = None, *, api: bool = True
+) -> int:
+    """Run ``mills`` (default: :func:`worker_mills`) until SIGTERM/SIGINT; returns the exit
+    status. Prints the ready line once serving."""
+    runtime = ServiceRuntime(settings, worker_mills(settings) if mills is None else mills, MillJob)
     runtime.start()
     backend = LocalBackend(runtime)
     assert runtime.session is not None
@@ -68,17 +84,13 @@ def serve(settings: ServiceSettings, *, api: bool = True) -> int:
     try:
         queryables.start()
         opcua = start_opcua(backend, settings)
+        ready = ready_line(runtime, settings, api=api)
         if api:
-            server = uvicorn.Server(
-                uvicorn.Config(
-                    create_app(backend),
-                    host=settings.api.host,
-                    port=settings.api.port,
-                    log_level="warning",
-                )
-            )
-            run_until_signal(server)
+            config = uvicorn.Config(create_app(backend), host=settings.api.host,
+                                    port=settings.api.port, log_level="warning")  # fmt: skip
+            run_until_signal(AnnouncingServer(config, ready))
         else:
+            announce(ready)
             wait_for_signal()
     finally:
         if opcua is not None:
@@ -86,6 +98,22 @@ def serve(settings: ServiceSettings, *, api: bool = True) -> int:
         queryables.close()
         runtime.stop()
     return 0
+
+
+def ready_line(runtime: ServiceRuntime, settings: ServiceSettings, *, api: bool) -> str:
+    """``millwatch serve: ready; …``: mills analysed (and held ones, by name), damaged
+    checkpoints refused at this start, where the API listens."""
+    w = runtime.worker
+    held = sorted(w.held) if w is not None else []
+    refused = sum(w.checkpoints_refused.values()) if w is not None else 0
+    n = len(runtime.mills)
+    line = f"millwatch serve: ready; {n - len(held)} of {n} mill(s) analysed"
+    if held:
+        line += f" (held: {', '.join(held)}; see GET /ready)"
+    if refused:
+        line += f"; {refused} damaged checkpoint(s) refused, see the log above"
+    where = f"API on http://{settings.api.host}:{settings.api.port}" if api else "no API"
+    return f"{line}; {where}"
 
 
 def run_until_signal(server: uvicorn.Server) -> None:
@@ -136,6 +164,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     settings = load_service_settings(args.config)
+    mills = worker_mills(settings)  # (every mill file validated)
+    check_writable(settings, args.config)
+    if not args.no_api:
+        check_api_port(settings.api.host, settings.api.port, f"{args.config}: api.port")
     where = "no API" if args.no_api else f"API on http://{settings.api.host}:{settings.api.port}"
     if settings.opcua.enabled:
         where += f", OPC UA on {settings.opcua.endpoint}"
@@ -143,4 +175,4 @@ def _main(args: argparse.Namespace) -> int:
         f"millwatch serve: worker {worker_identity(settings)!r}, {where}; "
         f"archive {settings.archive.directory}; Ctrl-C stops\n"
     )
-    return serve(settings, api=not args.no_api)
+    return serve(settings, mills, api=not args.no_api)

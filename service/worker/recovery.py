@@ -53,9 +53,9 @@ def recover(
     (at the archive's start when no mill has one). A held mill (its checkpoint could not be
     restored) does not pull the start back to its old position, and no replay is needed when
     every mill is held. A mill whose kept checkpoints are all damaged replays the archive from
-    its start (so the replay starts there). With ``factory`` (how the pipelines were built) a long tail is replayed
-    by up to ``jobs`` processes (0: one per core), the analysed mills split between them; same
-    results."""
+    its start (so the replay starts there). With ``factory`` (how the pipelines were built) a
+    long tail is replayed by up to ``jobs`` processes (0: one per core), the analysed mills
+    split between them; same results."""
     choice = worker.store.choose_checkpoints()
     covered = worker.restore_checkpoints(choice.parts)
     covered |= worker.refuse_checkpoints(choice)  # (from the archive's start: none intact)

@@ -458,7 +458,9 @@ def test_a_damaged_checkpoint_is_refused_and_the_mill_falls_back_losing_nothing(
         with caplog.at_level(logging.ERROR, logger="service.worker.worker"):
             replayed = recover(second, ArchiveReader(tmp_path / "archive", "w"))
         start = min(cuts) if len(how) == 1 else 0
-        of_b = sum(1 for b in blocks[start:len(blocks) // 3] if _mill_of(second, b.key) == "mill-b")
+        of_b = sum(
+            1 for b in blocks[start : len(blocks) // 3] if _mill_of(second, b.key) == "mill-b"
+        )
         assert replayed == crash - start - of_b
         for item in blocks[crash:]:
             second.handle(item)
