@@ -157,7 +157,7 @@ def fallback(choice: CheckpointChoice, mill_id: str) -> str:
     """What mill ``mill_id`` starts from once its damaged newer checkpoints are refused."""
     if mill_id in choice.chosen:
         return f"its previous checkpoint, written {iso_utc(choice.chosen[mill_id][1])}"
-    return "no checkpoint: it replays the archive from its start"
+    return "the start of the archive (none of its kept checkpoints is intact)"
 
 
 def refusal_message(refused: RefusedCheckpoint, store: str, choice: CheckpointChoice) -> str:

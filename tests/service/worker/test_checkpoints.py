@@ -426,7 +426,7 @@ def _damage_rows(store: Store, mill_id: str, how: list[str]) -> None:
     [
         (["truncate"], "its previous checkpoint, written 20"),
         (["flip"], "its previous checkpoint, written 20"),
-        (["flip", "truncate"], "no checkpoint: it replays the archive from its start"),
+        (["flip", "truncate"], "the start of the archive (none of its kept checkpoints is intact)"),
     ],
 )
 def test_a_damaged_checkpoint_is_refused_and_the_mill_falls_back_losing_nothing(
