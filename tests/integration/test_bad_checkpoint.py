@@ -111,7 +111,8 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Path]
         for n, (mill, gw_port) in enumerate(zip(mills, ports, strict=True)):
             args = [a if a != str(MILL_FILE) else str(mill) for a in SCENE_ARGS]
             procs.start(f"gateway{n}", "simulate", *args, "--publish", "--speed", f"{SPEED:g}",
-                        "--listen", tcp_endpoint(gw_port), "--anchor-ns", str(anchor_ns))  # fmt: skip
+                        "--listen", tcp_endpoint(gw_port),
+                        "--anchor-ns", str(anchor_ns))  # fmt: skip
             assert wait(lambda p=gw_port: port_open(p), 30.0), procs.logs()
         for n in range(len(mills)):
             assert procs.procs[f"gateway{n}"].wait(timeout=120) == 0, procs.logs()
