@@ -481,6 +481,9 @@ def check_writable(settings: ServiceSettings, source: str | Path) -> None:
 
 def _not_writable(directory: Path) -> str | None:
     """Why this process cannot write in ``directory`` (made if missing), or None."""
+    for d in (directory, *directory.parents):
+        if d.exists() and not d.is_dir():
+            return f"{d} is a file, not a directory"
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
