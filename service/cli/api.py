@@ -22,8 +22,7 @@ import uvicorn
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, open_session
 from service.api.app import create_app
-from service.cli.serve import run_until_signal
-from service.cli.startup import AnnouncingServer, check_api_port
+from service.cli.serve import AnnouncingServer, check_api_port, run_until_signal
 from service.opcua.launch import start_opcua
 from service.remote.zenoh_backend import ZenohBackend
 from service.settings import ServiceSettings, load_service_settings

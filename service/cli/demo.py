@@ -26,8 +26,7 @@ from ingest.zenoh_session import build_config, free_loopback_port, open_session,
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
 from service.cli.args import positive_float, positive_int
-from service.cli.serve import run_until_signal
-from service.cli.startup import AnnouncingServer, check_api_port
+from service.cli.serve import AnnouncingServer, check_api_port, run_until_signal
 from service.opcua.launch import start_opcua
 from service.settings import ServiceSettings
 from service.worker.mill_job import MillJob

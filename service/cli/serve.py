@@ -11,7 +11,9 @@ serves the mills' values and alarms over OPC UA (:mod:`service.opcua`).
 Start-up: the settings, every mill file, the archive/store/report directories and the API's
 port are checked before the banner (an error is one line naming file, field and value, exit 2);
 then the recovery runs, and ``millwatch serve: ready …`` is printed once the worker runs and the
-API listens (:mod:`service.cli.startup`).
+API listens (:class:`AnnouncingServer`; ``api`` and ``demo`` do the same). A supervisor or a
+person reads, in order: the banner (what was validated and will run), the start's warnings (e.g.
+a refused checkpoint), and the ready line. ``GET /ready`` stays the answer to "is data flowing".
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import socket
 import sys
 import threading
 from pathlib import Path
@@ -29,16 +32,18 @@ from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, try_open
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
-from service.cli.startup import AnnouncingServer, announce, check_api_port
 from service.opcua.launch import start_opcua
 from service.remote.queryables import WorkerQueryables
-from service.settings import ServiceSettings, check_writable, load_service_settings
+from service.settings import ServiceSettings, SettingsError, check_writable, load_service_settings
 from service.worker.mill_job import MillJob
 from service.worker.partition import check_exclusive, partition_mills, worker_identity
 from service.worker.runtime import ServiceRuntime
 
 __all__ = [
+    "AnnouncingServer",
     "add_parser",
+    "announce",
+    "check_api_port",
     "ready_line",
     "run_until_signal",
     "serve",
@@ -114,6 +119,42 @@ def ready_line(runtime: ServiceRuntime, settings: ServiceSettings, *, api: bool)
         line += f"; {refused} damaged checkpoint(s) refused, see the log above"
     where = f"API on http://{settings.api.host}:{settings.api.port}" if api else "no API"
     return f"{line}; {where}"
+
+
+def check_api_port(host: str, port: int, named: str) -> None:
+    """:class:`SettingsError` naming where the port was given (``named``: the settings file and
+    field, e.g. ``plant.toml: api.port``, or an option) and its value when ``host:port`` cannot
+    be listened on now (in use, or an address not on this machine)."""
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # (as uvicorn binds)
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            raise SettingsError(
+                f"{named} = {port} (on {host}): cannot listen there "
+                f"({exc.strerror or exc}); is another millwatch running? Stop it or choose "
+                "another port"
+            ) from None
+
+
+def announce(line: str) -> None:
+    """Write one start-up line to stderr at once (a supervisor's log shows it as it happens)."""
+    sys.stderr.write(line + "\n")
+    sys.stderr.flush()
+
+
+class AnnouncingServer(uvicorn.Server):
+    """A uvicorn server that announces ``ready_line`` once it listens (not when it could not
+    bind: uvicorn then logs why and exits)."""
+
+    def __init__(self, config: uvicorn.Config, ready_line: str) -> None:
+        super().__init__(config)
+        self.ready_line = ready_line
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        await super().startup(sockets=sockets)
+        if self.started:
+            announce(self.ready_line)
 
 
 def run_until_signal(server: uvicorn.Server) -> None:
