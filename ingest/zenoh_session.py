@@ -111,6 +111,17 @@ def _is_loopback(endpoint: str) -> bool:
         return False
 
 
+def _check_port(kind: str, endpoint: str) -> None:
+    """A network endpoint (``tcp/host:port``, udp, tls, quic, ws) ends with a port 1..65535."""
+    proto, _, address = endpoint.partition("/")
+    if proto not in ("tcp", "udp", "tls", "quic", "ws"):
+        return
+    port = address.split("#")[0].split("?")[0].rpartition(":")[2]
+    if not port.isdigit() or not 0 < int(port) < 65536:
+        raise ZenohConfigError(f"{kind} endpoint {endpoint!r}: the port must be a number "
+                               f"1..65535, got {port!r}")  # fmt: skip
+
+
 def _check_endpoints(kind: str, endpoints: Sequence[str], loopback_only: bool) -> list[str]:
     checked = []
     for endpoint in endpoints:
@@ -118,6 +129,7 @@ def _check_endpoints(kind: str, endpoints: Sequence[str], loopback_only: bool) -
             raise ZenohConfigError(f"{kind} endpoint {endpoint!r}: expected '<proto>/<address>'")
         if loopback_only and not _is_loopback(endpoint):
             raise ZenohConfigError(f"{kind} endpoint {endpoint!r} is not a loopback address")
+        _check_port(kind, endpoint)
         checked.append(endpoint)
     return checked
 

@@ -62,6 +62,7 @@ from pydantic import (
 from analytics.drivetrain.mill_config import MillConfig, describe_validation_error
 from ingest.keys import LAYOUT_VERSION, ROOT
 from ingest.mill_files import load_mill_config, load_mill_configs
+from ingest.zenoh_session import build_config
 
 __all__ = [
     "REPORT_FORMATS",
@@ -114,6 +115,11 @@ class ZenohSettings(_Strict):
     mode: Literal["peer", "client"] = "peer"
     listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
     connect: tuple[str, ...] = ()
+
+    @model_validator(mode="after")
+    def _endpoints(self) -> ZenohSettings:
+        build_config(mode=self.mode, listen=self.listen, connect=self.connect)  # (checks them)
+        return self
 
 
 class ArchiveSettings(_Strict):
@@ -433,8 +439,9 @@ class ServiceSettings(_Strict):
             "certificate_dir": None if o.certificate_dir is None else at(o.certificate_dir),
         })  # fmt: skip
 
-    def load_mills(self) -> dict[str, MillConfig]:
-        """The configured mills by id; raises naming the file and field of a bad one."""
+    def load_mills(self, source: str | Path = "") -> dict[str, MillConfig]:
+        """The configured mills by id; raises naming the file and field of a bad one (with
+        ``source``, the settings file, when none is configured)."""
         mills = load_mill_configs(self.mills.directory) if self.mills.directory else {}
         for path in self.mills.files:
             config = load_mill_config(path)
@@ -442,7 +449,9 @@ class ServiceSettings(_Strict):
                 raise SettingsError(f"{path}: mill id {config.id!r} is configured twice")
             mills[config.id] = config
         if not mills:
-            raise SettingsError("mills: no mill configured (set mills.files or mills.directory)")
+            where = f"{source}: " if source else ""
+            raise SettingsError(f"{where}mills: no mill configured (set mills.files or "
+                                "mills.directory)")  # fmt: skip
         return mills
 
 

@@ -82,7 +82,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     settings = load_service_settings(args.config)
-    mills = settings.load_mills()  # (every mill file validated before the banner)
+    mills = settings.load_mills(args.config)  # (every mill file validated before the banner)
     check_api_port(settings.api.host, settings.api.port, f"{args.config}: api.port")
     api = settings.api
     sys.stderr.write(

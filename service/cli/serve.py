@@ -54,10 +54,11 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
-    """The configured mills this worker's partition covers; when the zenoh settings connect
-    somewhere, also checks that no other live worker analyses one of them."""
-    mills = partition_mills(settings.load_mills(), settings.worker.partition)
+def worker_mills(settings: ServiceSettings, source: str | Path = "") -> dict[str, MillConfig]:
+    """The configured mills this worker's partition covers (``source``: the settings file, for
+    errors); when the zenoh settings connect somewhere, also checks that no other live worker
+    analyses one of them."""
+    mills = partition_mills(settings.load_mills(source), settings.worker.partition)
     z = settings.zenoh
     if z.connect:
         session = try_open(build_config(mode="client", connect=z.connect))
@@ -205,7 +206,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     settings = load_service_settings(args.config)
-    mills = worker_mills(settings)  # (every mill file validated)
+    mills = worker_mills(settings, args.config)  # (every mill file validated)
     check_writable(settings, args.config)
     if not args.no_api:
         check_api_port(settings.api.host, settings.api.port, f"{args.config}: api.port")

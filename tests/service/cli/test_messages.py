@@ -84,6 +84,23 @@ def test_serve_names_a_store_path_it_cannot_create(tmp_path: Path) -> None:
     )
 
 
+def test_serve_names_a_bad_zenoh_endpoint_and_a_settings_file_without_mills(
+    tmp_path: Path,
+) -> None:
+    settings = _settings(tmp_path, MILL_FILE)
+    settings.write_text(
+        settings.read_text().replace("listen = []", 'listen = ["tcp/127.0.0.1:99999"]')
+    )
+    line = _one_line_error(_run("serve", "--config", str(settings)))
+    assert line == (f"millwatch: error: {settings}: zenoh: listen endpoint 'tcp/127.0.0.1:99999': "
+                    "the port must be a number 1..65535, got '99999'")  # fmt: skip
+    empty = tmp_path / "empty.toml"
+    empty.write_text("[worker]\ncheckpoint_seconds = 30\n")
+    line = _one_line_error(_run("serve", "--config", str(empty)))
+    assert line == (f"millwatch: error: {empty}: mills: no mill configured (set mills.files or "
+                    "mills.directory)")  # fmt: skip
+
+
 def test_serve_names_an_api_port_in_use(tmp_path: Path) -> None:
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
