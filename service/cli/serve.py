@@ -35,6 +35,8 @@ from service.api.local_backend import LocalBackend
 from service.opcua.launch import start_opcua
 from service.remote.queryables import WorkerQueryables
 from service.settings import ServiceSettings, SettingsError, check_writable, load_service_settings
+from service.store.database import Store
+from service.store.migrations import StoreError
 from service.worker.mill_job import MillJob
 from service.worker.partition import check_exclusive, partition_mills, worker_identity
 from service.worker.runtime import ServiceRuntime
@@ -44,6 +46,7 @@ __all__ = [
     "add_parser",
     "announce",
     "check_api_port",
+    "check_store",
     "ready_line",
     "run_until_signal",
     "serve",
@@ -138,6 +141,15 @@ def check_api_port(host: str, port: int, named: str) -> None:
             ) from None
 
 
+def check_store(settings: ServiceSettings, source: str | Path) -> None:
+    """The store opens (and is migrated, as the worker would): a file that is not a millwatch
+    store is named with its settings file and field before anything starts."""
+    try:
+        Store(settings.store.path).close()
+    except StoreError as exc:
+        raise SettingsError(f"{source}: store.path: {exc}") from None
+
+
 def announce(line: str) -> None:
     """Write one start-up line to stderr at once (a supervisor's log shows it as it happens)."""
     sys.stderr.write(line + "\n")
@@ -208,6 +220,7 @@ def _main(args: argparse.Namespace) -> int:
     settings = load_service_settings(args.config)
     mills = worker_mills(settings, args.config)  # (every mill file validated)
     check_writable(settings, args.config)
+    check_store(settings, args.config)
     if not args.no_api:
         check_api_port(settings.api.host, settings.api.port, f"{args.config}: api.port")
     where = "no API" if args.no_api else f"API on http://{settings.api.host}:{settings.api.port}"

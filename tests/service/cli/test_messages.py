@@ -101,6 +101,14 @@ def test_serve_names_a_bad_zenoh_endpoint_and_a_settings_file_without_mills(
                     "mills.directory)")  # fmt: skip
 
 
+def test_serve_names_a_store_file_that_is_not_a_store(tmp_path: Path) -> None:
+    (tmp_path / "mw.db").write_text("minutes of the shift meeting")
+    settings = _settings(tmp_path, MILL_FILE)
+    line = _one_line_error(_run("serve", "--config", str(settings)))
+    assert line == (f"millwatch: error: {settings}: store.path: {tmp_path / 'mw.db'}: cannot open "
+                    "the store (file is not a database)")  # fmt: skip
+
+
 def test_serve_names_an_api_port_in_use(tmp_path: Path) -> None:
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
