@@ -46,6 +46,7 @@ __all__ = [
     "add_parser",
     "announce",
     "check_api_port",
+    "check_secrets",
     "check_store",
     "ready_line",
     "run_until_signal",
@@ -150,6 +151,20 @@ def check_store(settings: ServiceSettings, source: str | Path) -> None:
         raise SettingsError(f"{source}: store.path: {exc}") from None
 
 
+def check_secrets(settings: ServiceSettings, source: str | Path) -> None:
+    """The secret files the settings name (OPC UA users' passwords when OPC UA is on, the
+    report mail's password) can be read now, not only once the worker has recovered."""
+    try:
+        if settings.opcua.enabled:
+            for user in settings.opcua.users:
+                user.password()
+        mail = settings.reports.mail
+        if settings.reports.enabled and mail is not None and mail.password_file is not None:
+            mail.password()
+    except SettingsError as exc:
+        raise SettingsError(f"{source}: {exc}") from None
+
+
 def announce(line: str) -> None:
     """Write one start-up line to stderr at once (a supervisor's log shows it as it happens)."""
     sys.stderr.write(line + "\n")
@@ -221,6 +236,7 @@ def _main(args: argparse.Namespace) -> int:
     mills = worker_mills(settings, args.config)  # (every mill file validated)
     check_writable(settings, args.config)
     check_store(settings, args.config)
+    check_secrets(settings, args.config)
     if not args.no_api:
         check_api_port(settings.api.host, settings.api.port, f"{args.config}: api.port")
     where = "no API" if args.no_api else f"API on http://{settings.api.host}:{settings.api.port}"

@@ -109,6 +109,16 @@ def test_serve_names_a_store_file_that_is_not_a_store(tmp_path: Path) -> None:
                     "the store (file is not a database)")  # fmt: skip
 
 
+def test_serve_names_an_unreadable_secret_file_before_its_banner(tmp_path: Path) -> None:
+    settings = _settings(tmp_path, MILL_FILE)
+    with settings.open("a") as f:
+        f.write('[opcua]\nenabled = true\n[[opcua.users]]\nname = "operator"\n'
+                f'password_file = "{tmp_path / "no-such-secret"}"\n')  # fmt: skip
+    line = _one_line_error(_run("serve", "--config", str(settings)))
+    assert line == (f"millwatch: error: {settings}: opcua.users.operator: cannot read "
+                    f"{tmp_path / 'no-such-secret'} (No such file or directory)")  # fmt: skip
+
+
 def test_serve_names_an_api_port_in_use(tmp_path: Path) -> None:
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
