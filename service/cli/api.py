@@ -22,7 +22,7 @@ import uvicorn
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, open_session
 from service.api.app import create_app
-from service.cli.serve import AnnouncingServer, check_api_port, run_until_signal
+from service.cli.serve import AnnouncingServer, check_api_port, check_secrets, run_until_signal
 from service.opcua.launch import start_opcua
 from service.remote.zenoh_backend import ZenohBackend
 from service.settings import ServiceSettings, load_service_settings
@@ -84,6 +84,7 @@ def _main(args: argparse.Namespace) -> int:
     settings = load_service_settings(args.config)
     mills = settings.load_mills(args.config)  # (every mill file validated before the banner)
     check_api_port(settings.api.host, settings.api.port, f"{args.config}: api.port")
+    check_secrets(settings, args.config)
     api = settings.api
     sys.stderr.write(
         f"millwatch api: http://{api.host}:{api.port} (GET /mills, /ready); asking the workers "
