@@ -117,3 +117,20 @@ def test_an_unsealed_checkpoint_of_an_older_millwatch_is_taken_and_said_so(tmp_p
         _set_state(store, row_id, json.dumps({"n": 0}))
         choice = store.choose_checkpoints()
         assert choice.parts["m1"][1] == {"n": 0} and choice.unsealed == ["m1"]
+
+
+def test_a_row_that_is_no_longer_utf8_is_refused_not_raised(tmp_path: Path) -> None:
+    """The high bit of one byte flipped on disk: SQLite hands back text Python cannot decode."""
+    with Store(tmp_path / "mw.db") as store:
+        for i in range(2):
+            _put(store, "m1", i, {"n": i})
+        (newest, text), _ = _rows(store, "m1")
+        raw = bytearray(text.encode())
+        raw[len(raw) // 2] ^= 0x80
+        with store.transaction() as db:
+            db.execute("UPDATE checkpoint_parts SET state_json = CAST(? AS TEXT) WHERE id = ?",
+                       (bytes(raw), newest))  # fmt: skip
+        choice = store.choose_checkpoints()
+        assert choice.parts["m1"][1] == {"n": 0}
+        [refused] = choice.refused
+        assert refused.reason.startswith("it cannot be read (")
