@@ -36,6 +36,7 @@ import contextlib
 import ipaddress
 import json
 import logging
+import re
 import socket
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -58,6 +59,32 @@ CONNECT_RETRY = {"period_init_ms": 250, "period_max_ms": 4000, "period_increase_
 
 class ZenohConfigError(ValueError):
     """An endpoint or option of the zenoh config is invalid."""
+
+
+class ZenohListenError(OSError):
+    """A listen endpoint cannot be bound (e.g. its port is in use); the message names the
+    endpoint, the reason and what to do."""
+
+
+#: zenoh's words for a listener it could not bind: the endpoint, then the OS's reason.
+_LISTENER = re.compile(r"listener bound to (\S+?):? \[[^:]*:\d+: ([^(\]]+)")
+
+
+def _open(config: zenoh.Config) -> zenoh.Session:
+    """``zenoh.open``, a listen endpoint that cannot be bound turned into a
+    :class:`ZenohListenError` naming it (zenoh's own text is three lines of Rust paths)."""
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        found = _LISTENER.search(str(exc))
+        if found is None:
+            raise
+        endpoint, reason = found[1], found[2].strip()
+        raise ZenohListenError(
+            f"cannot listen on {endpoint}: {reason}. Another millwatch or zenoh process may "
+            "be using it: stop that one, or listen on another port (--listen, or [zenoh] "
+            "listen in the settings)"
+        ) from None
 
 
 def free_loopback_port() -> int:
@@ -85,6 +112,17 @@ def _is_loopback(endpoint: str) -> bool:
         return False
 
 
+def _check_port(kind: str, endpoint: str) -> None:
+    """A network endpoint (``tcp/host:port``, udp, tls, quic, ws) ends with a port 1..65535."""
+    proto, _, address = endpoint.partition("/")
+    if proto not in ("tcp", "udp", "tls", "quic", "ws"):
+        return
+    port = address.split("#")[0].split("?")[0].rpartition(":")[2]
+    if not port.isdigit() or not 0 < int(port) < 65536:
+        raise ZenohConfigError(f"{kind} endpoint {endpoint!r}: the port must be a number "
+                               f"1..65535, got {port!r}")  # fmt: skip
+
+
 def _check_endpoints(kind: str, endpoints: Sequence[str], loopback_only: bool) -> list[str]:
     checked = []
     for endpoint in endpoints:
@@ -92,6 +130,7 @@ def _check_endpoints(kind: str, endpoints: Sequence[str], loopback_only: bool) -
             raise ZenohConfigError(f"{kind} endpoint {endpoint!r}: expected '<proto>/<address>'")
         if loopback_only and not _is_loopback(endpoint):
             raise ZenohConfigError(f"{kind} endpoint {endpoint!r} is not a loopback address")
+        _check_port(kind, endpoint)
         checked.append(endpoint)
     return checked
 
@@ -157,9 +196,9 @@ def open_retrying(config: zenoh.Config) -> zenoh.Session:
     also closes it); the caller closes it."""
     endpoints = json.loads(config.get_json("connect/endpoints")) or []
     if not endpoints:
-        return zenoh.open(config)
+        return _open(config)
     if json.loads(config.get_json("mode")) != "client":
-        session = zenoh.open(config)
+        session = _open(config)
         if connected_peers(session) == 0:
             log.warning(
                 "zenoh: none of %s is up yet; connecting in the background (retry every <= %d ms)",
@@ -169,7 +208,7 @@ def open_retrying(config: zenoh.Config) -> zenoh.Session:
         return session
     config.insert_json5("connect/timeout_ms", "0")  # one attempt first, to log a wait once
     try:
-        return zenoh.open(config)
+        return _open(config)
     except zenoh.ZError:
         log.warning(
             "zenoh client: no router at %s yet; waiting for one (retry every <= %d ms)",
@@ -178,7 +217,7 @@ def open_retrying(config: zenoh.Config) -> zenoh.Session:
         )
     finally:
         config.insert_json5("connect/timeout_ms", "-1")
-    return zenoh.open(config)
+    return _open(config)
 
 
 def try_open(config: zenoh.Config) -> zenoh.Session | None:
@@ -186,7 +225,7 @@ def try_open(config: zenoh.Config) -> zenoh.Session | None:
     with no router up); the caller closes the session."""
     config.insert_json5("connect/timeout_ms", "0")
     try:
-        return zenoh.open(config)
+        return _open(config)
     except zenoh.ZError:
         return None
     finally:

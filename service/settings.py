@@ -63,6 +63,7 @@ from pydantic import (
 from analytics.drivetrain.mill_config import MillConfig, describe_validation_error
 from ingest.keys import LAYOUT_VERSION, ROOT
 from ingest.mill_files import load_mill_config, load_mill_configs
+from ingest.zenoh_session import build_config
 from ingest.zenoh_tls import TlsFiles
 
 __all__ = [
@@ -75,6 +76,7 @@ __all__ = [
     "SettingsError",
     "ZenohSettings",
     "ZenohTls",
+    "check_writable",
     "load_service_settings",
     "parse_formats",
 ]
@@ -169,6 +171,16 @@ class ZenohSettings(_Strict):
                         "true on a network you trust"
                     )
         return self
+
+    @model_validator(mode="after")
+    def _endpoints(self) -> ZenohSettings:
+        # (checks them; TLS endpoints are checked with their certificates when the session opens)
+        build_config(mode=self.mode, listen=_plain(self.listen), connect=_plain(self.connect))
+        return self
+
+
+def _plain(endpoints: tuple[str, ...]) -> list[str]:
+    return [e for e in endpoints if not e.startswith("tls/")]
 
 
 class ArchiveSettings(_Strict):
@@ -507,8 +519,9 @@ class ServiceSettings(_Strict):
             "certificate_dir": None if o.certificate_dir is None else at(o.certificate_dir),
         })  # fmt: skip
 
-    def load_mills(self) -> dict[str, MillConfig]:
-        """The configured mills by id; raises naming the file and field of a bad one."""
+    def load_mills(self, source: str | Path = "") -> dict[str, MillConfig]:
+        """The configured mills by id; raises naming the file and field of a bad one (with
+        ``source``, the settings file, when none is configured)."""
         mills = load_mill_configs(self.mills.directory) if self.mills.directory else {}
         for path in self.mills.files:
             config = load_mill_config(path)
@@ -516,7 +529,9 @@ class ServiceSettings(_Strict):
                 raise SettingsError(f"{path}: mill id {config.id!r} is configured twice")
             mills[config.id] = config
         if not mills:
-            raise SettingsError("mills: no mill configured (set mills.files or mills.directory)")
+            where = f"{source}: " if source else ""
+            raise SettingsError(f"{where}mills: no mill configured (set mills.files or "
+                                "mills.directory)")  # fmt: skip
         return mills
 
 
@@ -534,3 +549,34 @@ def load_service_settings(path: str | Path) -> ServiceSettings:
     except ValidationError as exc:
         raise SettingsError(f"{path}: " + "; ".join(describe_validation_error(exc))) from exc
     return settings.resolved(path.parent.resolve())
+
+
+def check_writable(settings: ServiceSettings, source: str | Path) -> None:
+    """The places a worker writes — ``archive.directory``, the directory of ``store.path``,
+    ``reports.directory`` (when reports are on) — exist or can be made, and are writable;
+    else :class:`SettingsError` naming ``source`` (the settings file), the field, its value and
+    what is wrong. (Run before a worker starts, so the error comes before its banner.)"""
+    places = [("archive.directory", settings.archive.directory, settings.archive.directory),
+              ("store.path", settings.store.path, settings.store.path.parent)]  # fmt: skip
+    if settings.reports.enabled:
+        places.append(("reports.directory", settings.reports.directory, settings.reports.directory))
+    for field, value, directory in places:
+        problem = _not_writable(directory)
+        if problem is None and field == "store.path" and value.is_dir():
+            problem = "it is a directory; give the store's file name, e.g. millwatch.db"
+        if problem is not None:
+            raise SettingsError(f"{source}: {field} = '{value}': {problem}")
+
+
+def _not_writable(directory: Path) -> str | None:
+    """Why this process cannot write in ``directory`` (made if missing), or None."""
+    for d in (directory, *directory.parents):
+        if d.exists() and not d.is_dir():
+            return f"{d} is a file, not a directory"
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return f"cannot create the directory {directory} ({exc.strerror or exc})"
+    if not os.access(directory, os.W_OK | os.X_OK):
+        return f"the directory {directory} is not writable by this user"
+    return None

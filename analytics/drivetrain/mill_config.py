@@ -445,9 +445,7 @@ class MillConfig(_Frozen):
     def _consistent(self) -> MillConfig:
         if self.telemetry_bandwidth_hz > self.sample_rate_hz / 2:
             raise ValueError("telemetry_bandwidth_hz must not exceed sample_rate_hz / 2")
-        keys = [ch.key for ch in self.channels.values()]
-        if len(set(keys)) != len(keys):
-            raise ValueError("channel keys must be unique")
+        _unique_keys(self.channels)
         dual = self.drive.layout is DriveLayout.DUAL
         for name, ch in self.channels.items():
             if ch.kind in ("torque", "bending") and dual != (ch.side is not None):
@@ -535,6 +533,32 @@ class MillConfig(_Frozen):
         return 0.0 <= frequency_hz <= min(self.telemetry_bandwidth_hz, self.sample_rate_hz / 2)
 
 
+def _unique_keys(channels: dict[str, ChannelConfig]) -> None:
+    """``ValueError`` naming the channels that share a key (each key is one zenoh key)."""
+    owners: dict[str, list[str]] = {}
+    for name, ch in channels.items():
+        owners.setdefault(ch.key, []).append(f"channels.{name}.key")
+    shared = {k: names for k, names in owners.items() if len(names) > 1}
+    if shared:
+        said = "; ".join(
+            f"{' and '.join(n)} are {'all' if len(n) > 2 else 'both'} {k!r}"
+            for k, n in shared.items()
+        )
+        raise ValueError(f"{said}: each channel needs a key of its own")
+
+
+#: Patterns of the mill file's names, in words.
+_PATTERN_WORDS = {
+    _KEY_PATTERN: "lower-case letters, digits, '_' and '-', in segments separated by '/', "
+    "each starting with a letter or digit",
+    r"^[a-z0-9][a-z0-9_\-]*$": "lower-case letters, digits, '_' and '-', starting with a letter "
+    "or digit",
+    r"^[a-z][a-z0-9_]*$": "lower-case letters, digits and '_', starting with a letter",
+}
+
+#: Errors whose value says nothing more (the field's name is the point, or there is none).
+_NO_VALUE = ("missing", "extra_forbidden")
+
 _MESSAGES = {
     "greater_than": "must be > {gt}",
     "greater_than_equal": "must be >= {ge}",
@@ -547,16 +571,26 @@ _MESSAGES = {
 
 
 def _message(error: Any) -> str:
+    ctx = error.get("ctx", {})
+    words = _PATTERN_WORDS.get(str(ctx.get("pattern")))
+    if error["type"] == "string_pattern_mismatch" and words:
+        return f"must be {words}"
     template = _MESSAGES.get(error["type"])
     if template is not None:
-        return template.format(**error.get("ctx", {}))
+        return template.format(**ctx)
     return str(error["msg"]).removeprefix("Value error, ")
 
 
 def describe_validation_error(exc: ValidationError) -> list[str]:
-    """One ``dotted.loc: message`` line per error, e.g. ``drive.reducer_ratio: must be > 0``."""
+    """One line per error: the dotted field, what is wrong and the value given (a plain value,
+    not a table), e.g. ``drive.reducer_ratio: must be > 0.0, got -5.65``; an error about
+    several fields (e.g. two channels with one key) names them in its message."""
     lines = []
     for error in exc.errors():
-        loc = ".".join(str(part) for part in error["loc"]) or "(top level)"
-        lines.append(f"{loc}: {_message(error)}")
+        loc = ".".join(str(part) for part in error["loc"])
+        line = f"{loc}: {_message(error)}" if loc else _message(error)
+        value = error.get("input")
+        if loc and error["type"] not in _NO_VALUE and not isinstance(value, dict | list):
+            line += f", got {value!r}"
+        lines.append(line)
     return lines

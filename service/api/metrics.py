@@ -69,6 +69,15 @@ class RuntimeCollector(Collector):
             "Blocks on keys of no configured mill.",
             value=sum(w.unrouted.values()) if w else 0,
         )
+        refused = CounterMetricFamily(
+            "millwatch_checkpoints_refused",
+            "Damaged checkpoints (truncated, changed, not JSON: their checksum failed) refused "
+            "at start, per mill; the mill started from its previous checkpoint or the archive.",
+            labels=["mill"],
+        )
+        for mill, n in sorted((w.checkpoints_refused if w else Counter()).items()):
+            refused.add_metric([mill], n)
+        yield refused
 
     def _queue(self) -> Iterator[Metric]:
         q = self.runtime.queue

@@ -6,7 +6,8 @@ The ``millwatch`` command line: one module per sub-command, composed by ``main``
   builds the parser from ``COMMANDS``, sets up logging, turns user errors into one line, exit 2.
 * one module per sub-command, each with ``add_parser(subparsers)`` that registers it and sets
   its handler: ``demo``, ``rainflow``, ``simulate``, ``spectrum``, ``replay``, ``archive``,
-  ``serve`` (a worker, and the API with it), ``router``, ``api`` (the API alone, over zenoh),
+  ``serve`` (a worker, and the API with it; also the start-up checks made before a banner and
+  the ready line, shared by ``api`` and ``demo``), ``router``, ``api`` (the API alone, over zenoh),
   ``analyze``, ``report`` (one monthly report from a store file, on demand).
 * ``edge/`` — commands run beside the gateways: ``spool`` (the edge forwarder, and the
   ``--spool`` options of ``simulate`` and ``replay``); ``zenoh-certs`` (mTLS certificates).

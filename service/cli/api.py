@@ -19,10 +19,11 @@ from pathlib import Path
 
 import uvicorn
 
+from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, open_session
 from service.api.app import create_app
 from service.api.limits import limits_of
-from service.cli.serve import run_until_signal
+from service.cli.serve import AnnouncingServer, check_api_port, check_secrets, run_until_signal
 from service.opcua.launch import start_opcua
 from service.remote.zenoh_backend import ZenohBackend
 from service.settings import ServiceSettings, load_service_settings
@@ -32,8 +33,10 @@ __all__ = ["add_parser", "serve_api"]
 log = logging.getLogger(__name__)
 
 
-def serve_api(settings: ServiceSettings) -> int:
-    """Serve the API over zenoh until SIGINT/SIGTERM; returns the exit status."""
+def serve_api(settings: ServiceSettings, mills: dict[str, MillConfig] | None = None) -> int:
+    """Serve the API of ``mills`` (default: the configured ones) over zenoh until
+    SIGINT/SIGTERM; prints the ready line once it listens; returns the exit status."""
+    mills = settings.load_mills() if mills is None else mills
     z = settings.zenoh
     listen = z.listen if z.mode == "peer" else ()
     tls = None if z.tls is None else z.tls.files()
@@ -41,7 +44,7 @@ def serve_api(settings: ServiceSettings) -> int:
     with open_session(zconfig) as session:
         backend = ZenohBackend(
             session,
-            settings.load_mills(),
+            mills,
             api_key=settings.api.api_key,
             timeout_s=settings.api.query_timeout_s,
         )
@@ -52,7 +55,9 @@ def serve_api(settings: ServiceSettings) -> int:
             app = create_app(backend, limits_of(settings.api))
             config = uvicorn.Config(app, host=settings.api.host, port=settings.api.port,
                                     log_level="warning")  # fmt: skip
-            run_until_signal(uvicorn.Server(config))
+            ready = (f"millwatch api: ready; {len(mills)} mill(s), http://{settings.api.host}:"
+                     f"{settings.api.port}")  # fmt: skip
+            run_until_signal(AnnouncingServer(config, ready))
         finally:
             if opcua is not None:
                 opcua.stop()
@@ -81,9 +86,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     settings = load_service_settings(args.config)
+    mills = settings.load_mills(args.config)  # (every mill file validated before the banner)
+    check_api_port(settings.api.host, settings.api.port, f"{args.config}: api.port")
+    check_secrets(settings, args.config)
     api = settings.api
     sys.stderr.write(
         f"millwatch api: http://{api.host}:{api.port} (GET /mills, /ready); asking the workers "
         f"over zenoh {', '.join(settings.zenoh.connect) or '(peer)'}; Ctrl-C stops\n"
     )
-    return serve_api(settings)
+    return serve_api(settings, mills)

@@ -26,7 +26,7 @@ from ingest.zenoh_session import build_config, free_loopback_port, open_session,
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
 from service.cli.args import positive_float, positive_int
-from service.cli.serve import run_until_signal
+from service.cli.serve import AnnouncingServer, check_api_port, run_until_signal
 from service.opcua.launch import start_opcua
 from service.settings import ServiceSettings
 from service.worker.mill_job import MillJob
@@ -160,6 +160,7 @@ def _main(args: argparse.Namespace) -> int:
             "%d — expect a growing queue, dropped blocks and stale-channel alarms",
             mills, args.speed, mills * args.speed, KEEPS_UP_WITH,
         )  # fmt: skip
+    check_api_port("127.0.0.1", args.port, "--port")
     directory = args.dir or Path(tempfile.mkdtemp(prefix="millwatch-demo-"))
     zenoh_port = free_loopback_port()
     directory.mkdir(parents=True, exist_ok=True)
@@ -169,8 +170,10 @@ def _main(args: argparse.Namespace) -> int:
     runtime.start()
     backend = LocalBackend(runtime)
     gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene)
-    server = uvicorn.Server(uvicorn.Config(create_app(backend), host="127.0.0.1",
-                                           port=args.port, log_level="warning"))  # fmt: skip
+    config = uvicorn.Config(create_app(backend), host="127.0.0.1", port=args.port,
+                            log_level="warning")  # fmt: skip
+    ready = f"millwatch demo: ready; {len(runtime.mills)} simulated mill(s), http://127.0.0.1:{args.port}"
+    server = AnnouncingServer(config, ready)
     timer = _stop_after(server, args.minutes)
     opcua = None
     try:

@@ -7,6 +7,13 @@ zenoh (``…/@query/<what>``) while holding a liveliness token per mill, so ``mi
 elsewhere can serve them too. SIGTERM or SIGINT (Ctrl-C) stops it cleanly: tokens withdrawn,
 final checkpoint, archive file finished, zenoh session closed. With ``[opcua] enabled`` it also
 serves the mills' values and alarms over OPC UA (:mod:`service.opcua`).
+
+Start-up: the settings, every mill file, the archive/store/report directories and the API's
+port are checked before the banner (an error is one line naming file, field and value, exit 2);
+then the recovery runs, and ``millwatch serve: ready …`` is printed once the worker runs and the
+API listens (:class:`AnnouncingServer`; ``api`` and ``demo`` do the same). A supervisor or a
+person reads, in order: the banner (what was validated and will run), the start's warnings (e.g.
+a refused checkpoint), and the ready line. ``GET /ready`` stays the answer to "is data flowing".
 """
 
 from __future__ import annotations
@@ -14,6 +21,7 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import socket
 import sys
 import threading
 from pathlib import Path
@@ -27,20 +35,35 @@ from service.api.limits import limits_of
 from service.api.local_backend import LocalBackend
 from service.opcua.launch import start_opcua
 from service.remote.queryables import WorkerQueryables
-from service.settings import ServiceSettings, load_service_settings
+from service.settings import ServiceSettings, SettingsError, check_writable, load_service_settings
+from service.store.database import Store
+from service.store.migrations import StoreError
 from service.worker.mill_job import MillJob
 from service.worker.partition import check_exclusive, partition_mills, worker_identity
 from service.worker.runtime import ServiceRuntime
 
-__all__ = ["add_parser", "run_until_signal", "serve", "wait_for_signal", "worker_mills"]
+__all__ = [
+    "AnnouncingServer",
+    "add_parser",
+    "announce",
+    "check_api_port",
+    "check_secrets",
+    "check_store",
+    "ready_line",
+    "run_until_signal",
+    "serve",
+    "wait_for_signal",
+    "worker_mills",
+]
 
 log = logging.getLogger(__name__)
 
 
-def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
-    """The configured mills this worker's partition covers; when the zenoh settings connect
-    somewhere, also checks that no other live worker analyses one of them."""
-    mills = partition_mills(settings.load_mills(), settings.worker.partition)
+def worker_mills(settings: ServiceSettings, source: str | Path = "") -> dict[str, MillConfig]:
+    """The configured mills this worker's partition covers (``source``: the settings file, for
+    errors); when the zenoh settings connect somewhere, also checks that no other live worker
+    analyses one of them."""
+    mills = partition_mills(settings.load_mills(source), settings.worker.partition)
     z = settings.zenoh
     if z.connect:
         tls = None if z.tls is None else z.tls.files()
@@ -59,9 +82,12 @@ def worker_mills(settings: ServiceSettings) -> dict[str, MillConfig]:
     return mills
 
 
-def serve(settings: ServiceSettings, *, api: bool = True) -> int:
-    """Run until SIGTERM/SIGINT; returns the exit status."""
-    runtime = ServiceRuntime(settings, worker_mills(settings), MillJob)
+def serve(
+    settings: ServiceSettings, mills: dict[str, MillConfig] | None = None, *, api: bool = True
+) -> int:
+    """Run ``mills`` (default: :func:`worker_mills`) until SIGTERM/SIGINT; returns the exit
+    status. Prints the ready line once serving."""
+    runtime = ServiceRuntime(settings, worker_mills(settings) if mills is None else mills, MillJob)
     runtime.start()
     backend = LocalBackend(runtime)
     assert runtime.session is not None
@@ -70,17 +96,14 @@ def serve(settings: ServiceSettings, *, api: bool = True) -> int:
     try:
         queryables.start()
         opcua = start_opcua(backend, settings)
+        ready = ready_line(runtime, settings, api=api)
         if api:
-            server = uvicorn.Server(
-                uvicorn.Config(
-                    create_app(backend, limits_of(settings.api)),
-                    host=settings.api.host,
-                    port=settings.api.port,
-                    log_level="warning",
-                )
-            )
-            run_until_signal(server)
+            config = uvicorn.Config(create_app(backend, limits_of(settings.api)),
+                                    host=settings.api.host, port=settings.api.port,
+                                    log_level="warning")  # fmt: skip
+            run_until_signal(AnnouncingServer(config, ready))
         else:
+            announce(ready)
             wait_for_signal()
     finally:
         if opcua is not None:
@@ -88,6 +111,81 @@ def serve(settings: ServiceSettings, *, api: bool = True) -> int:
         queryables.close()
         runtime.stop()
     return 0
+
+
+def ready_line(runtime: ServiceRuntime, settings: ServiceSettings, *, api: bool) -> str:
+    """``millwatch serve: ready; …``: mills analysed (and held ones, by name), damaged
+    checkpoints refused at this start, where the API listens."""
+    w = runtime.worker
+    held = sorted(w.held) if w is not None else []
+    refused = sum(w.checkpoints_refused.values()) if w is not None else 0
+    n = len(runtime.mills)
+    line = f"millwatch serve: ready; {n - len(held)} of {n} mill(s) analysed"
+    if held:
+        line += f" (held: {', '.join(held)}; see GET /ready)"
+    if refused:
+        line += f"; {refused} damaged checkpoint(s) refused, see the log above"
+    where = f"API on http://{settings.api.host}:{settings.api.port}" if api else "no API"
+    return f"{line}; {where}"
+
+
+def check_api_port(host: str, port: int, named: str) -> None:
+    """:class:`SettingsError` naming where the port was given (``named``: the settings file and
+    field, e.g. ``plant.toml: api.port``, or an option) and its value when ``host:port`` cannot
+    be listened on now (in use, or an address not on this machine)."""
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # (as uvicorn binds)
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            raise SettingsError(
+                f"{named} = {port} (on {host}): cannot listen there "
+                f"({exc.strerror or exc}); is another millwatch running? Stop it or choose "
+                "another port"
+            ) from None
+
+
+def check_store(settings: ServiceSettings, source: str | Path) -> None:
+    """The store opens (and is migrated, as the worker would): a file that is not a millwatch
+    store is named with its settings file and field before anything starts."""
+    try:
+        Store(settings.store.path).close()
+    except StoreError as exc:
+        raise SettingsError(f"{source}: store.path: {exc}") from None
+
+
+def check_secrets(settings: ServiceSettings, source: str | Path) -> None:
+    """The secret files the settings name (OPC UA users' passwords when OPC UA is on, the
+    report mail's password) can be read now, not only once the worker has recovered."""
+    try:
+        if settings.opcua.enabled:
+            for user in settings.opcua.users:
+                user.password()
+        mail = settings.reports.mail
+        if settings.reports.enabled and mail is not None and mail.password_file is not None:
+            mail.password()
+    except SettingsError as exc:
+        raise SettingsError(f"{source}: {exc}") from None
+
+
+def announce(line: str) -> None:
+    """Write one start-up line to stderr at once (a supervisor's log shows it as it happens)."""
+    sys.stderr.write(line + "\n")
+    sys.stderr.flush()
+
+
+class AnnouncingServer(uvicorn.Server):
+    """A uvicorn server that announces ``ready_line`` once it listens (not when it could not
+    bind: uvicorn then logs why and exits)."""
+
+    def __init__(self, config: uvicorn.Config, ready_line: str) -> None:
+        super().__init__(config)
+        self.ready_line = ready_line
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        await super().startup(sockets=sockets)
+        if self.started:
+            announce(self.ready_line)
 
 
 def run_until_signal(server: uvicorn.Server) -> None:
@@ -138,6 +236,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     settings = load_service_settings(args.config)
+    mills = worker_mills(settings, args.config)  # (every mill file validated)
+    check_writable(settings, args.config)
+    check_store(settings, args.config)
+    check_secrets(settings, args.config)
+    if not args.no_api:
+        check_api_port(settings.api.host, settings.api.port, f"{args.config}: api.port")
     where = "no API" if args.no_api else f"API on http://{settings.api.host}:{settings.api.port}"
     if settings.opcua.enabled:
         where += f", OPC UA on {settings.opcua.endpoint}"
@@ -145,4 +249,4 @@ def _main(args: argparse.Namespace) -> int:
         f"millwatch serve: worker {worker_identity(settings)!r}, {where}; "
         f"archive {settings.archive.directory}; Ctrl-C stops\n"
     )
-    return serve(settings, api=not args.no_api)
+    return serve(settings, mills, api=not args.no_api)

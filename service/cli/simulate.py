@@ -281,16 +281,17 @@ def _publish(scene: Scene, args: argparse.Namespace, dtype: wire.DType) -> int:
         args.truth.write_text(json.dumps(scene.truth.to_dict(), indent=2) + "\n")
     tls = tls_files(args, gateway_name(scene.config.site, scene.config.id))
     config = build_config(listen=listen, connect=args.connect, tls=tls)
-    sys.stderr.write(
-        f"publishing {scene.spec.name!r} for mill {scene.config.id} at {args.speed:g}× real time "
-        f"({scene.n_samples / scene.fs / args.speed:.0f} s); listen {listen or '-'}, "
-        f"connect {args.connect or '-'}; retention {args.retention:g} s; anchor "
-        f"{scene.t_ns(0)} ns; Ctrl-C stops\n"
-    )
     with ExitStack() as stack:
         if spool is not None:
             stack.enter_context(spool)
-        session = stack.enter_context(open_session(config))
+        session = stack.enter_context(open_session(config))  # (a busy port: one line, exit 2)
+        sys.stderr.write(
+            f"publishing {scene.spec.name!r} for mill {scene.config.id} at {args.speed:g}× "
+            "real time "
+            f"({scene.n_samples / scene.fs / args.speed:.0f} s); listen {listen or '-'}, "
+            f"connect {args.connect or '-'}; retention {args.retention:g} s; anchor "
+            f"{scene.t_ns(0)} ns; Ctrl-C stops\n"
+        )
         if spool is not None:
             stack.callback(SpoolServer(session, spool).close)
         publisher = ScenePublisher(

@@ -8,6 +8,9 @@ What is here:
   transactions, the worker's writes (events, daily damage and cycles, daily phase seconds,
   monitored days, records, alarms, checkpoints) and
   the reads of the API and the reports.
+* :mod:`service.store.checkpoint_seal` — checkpoints sealed with a SHA-256 checksum and
+  verified before use; ``Store.choose_checkpoints`` takes each mill's newest intact one and
+  says which it refused.
 * :mod:`service.store.migrations` — the schema as forward migrations, applied on open.
 * :mod:`service.store.records` — the row types (``EventRow``, ``DamageRow``, ``PhaseRow``; the
   alarm records

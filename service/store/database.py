@@ -30,12 +30,14 @@ import sqlite3
 import threading
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from alarms.lifecycle import Alarm, TransitionRecord
 from analytics.mill.phase_damage import phase_totals
 from service.store import migrations, sampler
+from service.store.checkpoint_seal import CheckpointDamaged, Opened, seal, unseal
 from service.store.migrations import StoreError
 from service.store.records import (
     DamageRow,
@@ -47,7 +49,7 @@ from service.store.records import (
     to_params,
 )
 
-__all__ = ["CHECKPOINTS_KEPT", "Store"]
+__all__ = ["CHECKPOINTS_KEPT", "CheckpointChoice", "RefusedCheckpoint", "Store"]
 
 #: Checkpoints kept per part (older ones of the part are deleted when a new one is written).
 CHECKPOINTS_KEPT = 2
@@ -62,6 +64,30 @@ _TRANSITION_INSERT = (
     f"INSERT OR REPLACE INTO alarm_transitions ({column_list(TransitionRecord)}) "
     f"VALUES ({', '.join('?' * len(columns(TransitionRecord)))})"
 )
+
+
+@dataclass(frozen=True)
+class RefusedCheckpoint:
+    """A kept checkpoint that is not intact (:mod:`service.store.checkpoint_seal`): its part
+    (mill), row id, when it was written (ns UTC) and what is wrong with it."""
+
+    part: str
+    checkpoint_id: int
+    created_ns: int
+    reason: str
+
+
+@dataclass
+class CheckpointChoice:
+    """Per part, the newest intact kept checkpoint (``parts``: ``part → (position, state)``),
+    the newer ones refused on the way (``refused``, newest first per part), the row id and
+    write time of each chosen one (``chosen``), and the parts whose chosen checkpoint was
+    written by an older millwatch without a checksum (``unsealed``: taken unverified)."""
+
+    parts: dict[str, tuple[dict[str, Any], dict[str, Any]]] = field(default_factory=dict)
+    refused: list[RefusedCheckpoint] = field(default_factory=list)
+    chosen: dict[str, tuple[int, int]] = field(default_factory=dict)
+    unsealed: list[str] = field(default_factory=list)
 
 
 class Store:
@@ -189,12 +215,14 @@ class Store:
         """Store the checkpoint of one ``part`` (e.g. a mill: its analyzer's snapshot) with the
         archive ``position`` it covers (inside :meth:`transaction`), and drop all but the newest
         :data:`CHECKPOINTS_KEPT` of that part. Parts are written one by one, each in a small
-        transaction, so no write holds the store for long. Returns the state's size in bytes."""
-        text = json.dumps(state)
+        transaction, so no write holds the store for long. The state is sealed with its
+        checksum (:func:`~service.store.checkpoint_seal.seal`). Returns the state's size in
+        bytes."""
+        text, where = json.dumps(state), json.dumps(position)
         db.execute(
             "INSERT INTO checkpoint_parts (part, created_ns, position_json, state_json) "
             "VALUES (?, ?, ?, ?)",
-            (part, created_ns, json.dumps(position), text),
+            (part, created_ns, where, seal(where, text)),
         )
         db.execute(
             "DELETE FROM checkpoint_parts WHERE part = ? AND id NOT IN "
@@ -253,13 +281,44 @@ class Store:
         return [from_row(TransitionRecord, r) for r in self._query_rows(sql, (alarm_id,))]
 
     def latest_checkpoints(self) -> dict[str, tuple[dict[str, Any], dict[str, Any]]]:
-        """The newest checkpoint of every part: ``part → (position, state)``."""
+        """The newest intact checkpoint of every part: ``part → (position, state)`` (see
+        :meth:`choose_checkpoints`, which also says what it refused)."""
+        return self.choose_checkpoints().parts
+
+    def choose_checkpoints(self) -> CheckpointChoice:
+        """Per part, the newest kept checkpoint that is intact (its checksum verified), the
+        newer ones refused; a part none of whose checkpoints is intact has none. Each row is
+        read only when the newer ones were refused (a snapshot is ~2 MB)."""
+        choice = CheckpointChoice()
         rows = self._query(
-            "SELECT part, position_json, state_json FROM checkpoint_parts WHERE id IN "
-            "(SELECT MAX(id) FROM checkpoint_parts GROUP BY part) ORDER BY part",
-            (),
+            "SELECT part, id, created_ns FROM checkpoint_parts ORDER BY part, id DESC", ()
         )
-        return {part: (json.loads(p), json.loads(s)) for part, p, s in rows}
+        for part, row_id, created_ns in rows:
+            if part in choice.parts:
+                continue
+            try:
+                opened = self._open_checkpoint(row_id)
+            except CheckpointDamaged as exc:
+                choice.refused.append(RefusedCheckpoint(part, row_id, created_ns, str(exc)))
+                continue
+            choice.parts[part] = (opened.position, opened.state)
+            choice.chosen[part] = (row_id, created_ns)
+            if not opened.sealed:
+                choice.unsealed.append(part)
+        return choice
+
+    def _open_checkpoint(self, row_id: int) -> Opened:
+        """One checkpoint row verified and parsed; :class:`CheckpointDamaged` if it is not
+        intact (also when SQLite cannot read its text back)."""
+        try:
+            row = self._query_one(
+                "SELECT position_json, state_json FROM checkpoint_parts WHERE id = ?", (row_id,)
+            )
+        except sqlite3.Error as exc:  # e.g. text that is no longer UTF-8
+            raise CheckpointDamaged(f"it cannot be read ({exc})") from exc
+        if row is None or not all(isinstance(v, str) for v in row):
+            raise CheckpointDamaged("its position or snapshot is missing or not text")
+        return unseal(row[0], row[1])
 
     def mills(self) -> list[dict[str, Any]]:
         rows = self._query("SELECT mill_id, site, config_json, updated_ns FROM mills", ())

@@ -19,7 +19,8 @@ Modules, low to high (a module imports only those above it):
 * ``admission`` — :class:`~service.worker.admission.BlockAdmission`, the one decision whether a
   block is analysed (route by key, decode, sequence) and its counters, for the live worker, its
   replay and offline analysis alike.
-* ``checkpoints`` — when each mill is checkpointed; which archived blocks a checkpoint covers.
+* ``checkpoints`` — when each mill is checkpointed; which archived blocks a checkpoint covers;
+  what a mill whose checkpoints are damaged (refused: their checksum) starts from instead.
 * ``partition`` — which configured mills this worker analyses when several share a router.
 * ``batch_lane`` — many blocks as arrays (archive replay, a live backlog): repeats dropped and
   counted, regular runs admitted at once, the rest block by block — through the worker's public

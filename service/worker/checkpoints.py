@@ -16,6 +16,13 @@ uninterrupted run.
 A mill whose checkpoint cannot be restored (:class:`CheckpointRestoreError`) is *held* by the
 worker: left out of the positions the replay starts from and out of the schedule, and never
 checkpointed, so its last good checkpoint stays as it is until the configuration is reverted.
+
+A *damaged* checkpoint is another matter: every checkpoint is stored with a SHA-256 checksum
+(:mod:`service.store.checkpoint_seal`) and verified before it is parsed, and one that is
+truncated, changed or not JSON is refused (:func:`refusal_message` names the mill, the
+checkpoint and the store file). The mill then starts from its previous kept checkpoint, or — if
+none of its kept checkpoints is intact — from nothing, replaying the archive from its start
+(:func:`fallback`); the other mills start as usual, and the worker never stops for it.
 """
 
 from __future__ import annotations
@@ -28,8 +35,17 @@ import numpy.typing as npt
 
 from alarms.times import iso_utc
 from ingest.archive.files import ArchivePosition, archive_file_order
+from service.store.database import CheckpointChoice, RefusedCheckpoint
 
-__all__ = ["CheckpointRestoreError", "CheckpointSchedule", "MillHeldError", "covers", "earliest"]
+__all__ = [
+    "CheckpointRestoreError",
+    "CheckpointSchedule",
+    "MillHeldError",
+    "covers",
+    "earliest",
+    "fallback",
+    "refusal_message",
+]
 
 #: Checkpoint work allowed per worker step (s) once the first due mill is done; mills left over
 #: are checkpointed at the next steps (they wait at most a few steps).
@@ -135,3 +151,21 @@ def earliest(positions: Iterable[ArchivePosition | None]) -> ArchivePosition | N
     if not items or len(known) < len(items):
         return None
     return min(known, key=lambda p: (archive_file_order(p.file), p.index))
+
+
+def fallback(choice: CheckpointChoice, mill_id: str) -> str:
+    """What mill ``mill_id`` starts from once its damaged newer checkpoints are refused."""
+    if mill_id in choice.chosen:
+        return f"its previous checkpoint, written {iso_utc(choice.chosen[mill_id][1])}"
+    return "the start of the archive (none of its kept checkpoints is intact)"
+
+
+def refusal_message(refused: RefusedCheckpoint, store: str, choice: CheckpointChoice) -> str:
+    """The log line of a refused checkpoint: mill, checkpoint, store file, what is wrong, what
+    the mill starts from instead."""
+    return (
+        f"mill {refused.part}: its checkpoint #{refused.checkpoint_id} written "
+        f"{iso_utc(refused.created_ns)} in store {store} is refused: {refused.reason}. "
+        f"The mill starts from {fallback(choice, refused.part)}; the other mills are not "
+        "affected"
+    )

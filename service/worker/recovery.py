@@ -3,9 +3,12 @@
 README "Persistence and recovery". :func:`recover` runs once, before the worker goes live,
 and uses only the worker's public methods:
 
-1. find each mill's newest checkpoint in the store and restore it
+1. find each mill's newest intact checkpoint in the store and restore it
    (:meth:`~service.worker.worker.Worker.restore_checkpoints`; a mill whose checkpoint cannot be
-   restored is *held* by the worker, see :mod:`service.worker.worker`);
+   restored is *held* by the worker, see :mod:`service.worker.worker`); damaged ones (their
+   checksum, :mod:`service.store.checkpoint_seal`) are refused, logged and stored as
+   data-quality events (:meth:`~service.worker.worker.Worker.refuse_checkpoints`): the mill
+   starts from its previous kept checkpoint, or replays the archive from its start;
 2. read the archive from the earliest restored position (:func:`~.checkpoints.earliest`; from the
    archive's start when a mill has none) in batches of messages held in arrays;
 3. replay them through :class:`~service.worker.batch_lane.BatchLane` in this process, or — for a
@@ -49,10 +52,13 @@ def recover(
     own position. A configured mill without a checkpoint starts fresh at that earliest position
     (at the archive's start when no mill has one). A held mill (its checkpoint could not be
     restored) does not pull the start back to its old position, and no replay is needed when
-    every mill is held. With ``factory`` (how the pipelines were built) a long tail is replayed
-    by up to ``jobs`` processes (0: one per core), the analysed mills split between them; same
-    results."""
-    covered = worker.restore_checkpoints(worker.store.latest_checkpoints())
+    every mill is held. A mill whose kept checkpoints are all damaged replays the archive from
+    its start (so the replay starts there). With ``factory`` (how the pipelines were built) a
+    long tail is replayed by up to ``jobs`` processes (0: one per core), the analysed mills
+    split between them; same results."""
+    choice = worker.store.choose_checkpoints()
+    covered = worker.restore_checkpoints(choice.parts)
+    covered |= worker.refuse_checkpoints(choice)  # (from the archive's start: none intact)
     analysed = [m for m in worker.mills if m not in worker.held]
     after = earliest(covered.values())
     batches: Iterable[MessageBatch] = []

@@ -75,7 +75,7 @@ from ingest.archive.files import ArchivePosition
 from ingest.keys import mill_channel_keys
 from ingest.wire import Block
 from service.status import MillHealthStatus, MillStatus
-from service.store.database import Store
+from service.store.database import CheckpointChoice, Store
 from service.store.records import DamageRow, EventRow, PhaseRow
 from service.worker.admission import BlockAdmission
 from service.worker.batch_lane import BatchLane
@@ -85,6 +85,8 @@ from service.worker.checkpoints import (
     CheckpointRestoreError,
     CheckpointSchedule,
     MillHeldError,
+    fallback,
+    refusal_message,
 )
 from service.worker.health import LatencyReservoir, MillHealth, PerMinute
 
@@ -217,6 +219,8 @@ class Worker:
         self._schedule = CheckpointSchedule(pipelines, checkpoint_seconds)
         self.checkpoints_written = 0
         self.checkpoint_bytes = 0
+        #: Damaged checkpoints refused at start, per mill (:meth:`refuse_checkpoints`).
+        self.checkpoints_refused: Counter[str] = Counter()
         self._stale: dict[str, set[str]] = {}
         self._started_ns = clock()
         #: Per mill: when this worker subscribed to its gateways (None: not yet); see
@@ -670,6 +674,32 @@ class Worker:
                     covered[mill_id] = at
             self._restore_seqs(state.get("last_seq", {}), state.get("health", {}))
         return covered
+
+    def refuse_checkpoints(self, choice: CheckpointChoice) -> dict[str, ArchivePosition | None]:
+        """Log (naming mill, checkpoint and store file), count and store as a data-quality event
+        of the mill each damaged checkpoint the store refused in ``choice``
+        (:meth:`Store.choose_checkpoints`), and warn of checkpoints taken unverified (written
+        without a checksum). Returns the configured mills none of whose checkpoints is intact,
+        each at position None: they replay the archive from its start."""
+        store = str(self.store.path)
+        for refused in choice.refused:
+            log.error("%s", refusal_message(refused, store, choice))
+            mill_id = refused.part
+            if mill_id not in self.pipelines:
+                continue
+            self.checkpoints_refused[mill_id] += 1
+            data = {"channel": "all channels", "problem": "checkpoint_refused",
+                    "checkpoint_id": refused.checkpoint_id, "store": store,
+                    "reason": refused.reason, "fallback": fallback(choice, mill_id)}  # fmt: skip
+            row = EventRow(mill_id, "data_quality", refused.created_ns, data,
+                           subject=f"checkpoint:{refused.checkpoint_id}")  # fmt: skip
+            self._pending.add(mill_id, MillUpdate(events=[row]))
+        for mill_id in choice.unsealed:
+            log.warning("mill %s: its checkpoint in store %s has no checksum (written by an older "
+                        "millwatch): restored unverified; the next one is sealed", mill_id,
+                        store)  # fmt: skip
+        return {r.part: None for r in choice.refused
+                if r.part in self.pipelines and r.part not in choice.parts}  # fmt: skip
 
     def adopt_replayed(
         self,

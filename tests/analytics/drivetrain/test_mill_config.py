@@ -118,8 +118,26 @@ def test_bad_top_level_and_channel_values() -> None:
     assert any(x.startswith("time_zone: unknown IANA time zone") for x in lines)
     assert "tz: unknown field (typo?)" in lines
     assert any(x.startswith("channels.speed: pulses_per_rev is required") for x in lines)
-    assert "channels.motor_torque.gain: must be non-zero" in lines
+    assert "channels.motor_torque.gain: must be non-zero, got 0.0" in lines
     assert any(x.startswith("channels.pinion_torque: full_scale") for x in lines)
+
+
+def test_a_bad_key_is_named_with_its_value_in_words() -> None:
+    data = _data()
+    data["channels"]["speed"]["key"] = "Speed rpm"
+    assert _errors(data) == [
+        "channels.speed.key: must be lower-case letters, digits, '_' and '-', in segments "
+        "separated by '/', each starting with a letter or digit, got 'Speed rpm'"
+    ]
+
+
+def test_channels_sharing_a_key_are_named_with_the_key() -> None:
+    data = _data()
+    data["channels"]["speed"]["key"] = "motor_torque"
+    assert _errors(data) == [
+        "channels.motor_torque.key and channels.speed.key are both 'motor_torque': each "
+        "channel needs a key of its own"
+    ]
 
 
 def test_dual_drive_channels_need_a_side() -> None:

@@ -404,3 +404,78 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         third.commit()
         third.archive.close()  # type: ignore[union-attr]
         assert _results(store) == uninterrupted
+
+
+# ---------------------------------------------------------------- a damaged checkpoint
+def _damage_rows(store: Store, mill_id: str, how: list[str]) -> None:
+    """Damage mill's kept checkpoints, newest first: "truncate" cuts the stored text,
+    "flip" flips one bit of a digit (a number changed, the JSON still valid), "" leaves it."""
+    sql = "SELECT id, state_json FROM checkpoint_parts WHERE part = ? ORDER BY id DESC"
+    for (row_id, text), kind in zip(store._query(sql, (mill_id,)), how, strict=False):
+        if kind == "truncate":
+            text = text[: len(text) // 2]
+        elif kind == "flip":
+            at = text.index('": 1', len(text) // 2) + 3  # a number's digit 1 → 0
+            text = text[:at] + chr(ord(text[at]) ^ 1) + text[at + 1 :]
+        with store.transaction() as db:
+            db.execute("UPDATE checkpoint_parts SET state_json = ? WHERE id = ?", (text, row_id))
+
+
+@pytest.mark.parametrize(
+    ("how", "starts_from"),
+    [
+        (["truncate"], "its previous checkpoint, written 20"),
+        (["flip"], "its previous checkpoint, written 20"),
+        (["flip", "truncate"], "the start of the archive (none of its kept checkpoints is intact)"),
+    ],
+)
+def test_a_damaged_checkpoint_is_refused_and_the_mill_falls_back_losing_nothing(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, how: list[str], starts_from: str
+) -> None:
+    """mill-a's newest checkpoint (or both kept) damaged: the recovery refuses it naming the
+    mill, the checkpoint and the store, mill-a starts from its previous checkpoint (or the
+    archive's start), mill-b from its own, and the results are the uninterrupted run's."""
+    blocks = _blocks()
+    cuts = {len(blocks) // 4: "mill-a", len(blocks) // 3: "mill-b", len(blocks) // 2: "mill-a"}
+    crash = 3 * len(blocks) // 4
+    with Store(tmp_path / "ref.db") as store:
+        reference = _worker(store, None)
+        for item in blocks:
+            reference.handle(item)
+        reference.commit()
+        expected = _damage(reference)
+
+    with Store(tmp_path / "mw.db") as store:
+        first = _worker(store, ArchiveWriter(tmp_path / "archive", "w"))
+        for i, item in enumerate(blocks[:crash]):
+            if i in cuts:
+                first.checkpoint([cuts[i]])
+            first.handle(item)
+        first.archive.close()  # type: ignore[union-attr]
+        _damage_rows(store, "mill-a", how)
+
+        second = _worker(store, ArchiveWriter(tmp_path / "archive", "w"))
+        with caplog.at_level(logging.ERROR, logger="service.worker.worker"):
+            replayed = recover(second, ArchiveReader(tmp_path / "archive", "w"))
+        start = min(cuts) if len(how) == 1 else 0
+        of_b = sum(
+            1 for b in blocks[start : len(blocks) // 3] if _mill_of(second, b.key) == "mill-b"
+        )
+        assert replayed == crash - start - of_b
+        for item in blocks[crash:]:
+            second.handle(item)
+        second.commit()
+        assert _damage(second) == expected
+        assert second.held == {} and second.checkpoints_refused == {"mill-a": len(how)}
+        events = [e.data for e in store.events("mill-a", "data_quality")]
+        second.archive.close()  # type: ignore[union-attr]
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == len(how)
+    reasons = {"flip": "its SHA-256 checksum does not match", "truncate": "it is truncated: "}
+    for text, kind in zip(messages, how, strict=True):  # newest first
+        assert text.startswith("mill mill-a: its checkpoint #")
+        assert f"is refused: {reasons[kind]}" in text
+        assert f"in store {tmp_path / 'mw.db'} is refused: " in text
+        assert f"The mill starts from {starts_from}" in text
+    assert [e["problem"] for e in events] == ["checkpoint_refused"] * len(how)
+    assert all(e["store"] == str(tmp_path / "mw.db") for e in events)

@@ -24,6 +24,7 @@ from service.worker.parallel_replay import ReplayJobError, replay_jobs, split_mi
 from service.worker.recovery import recover
 from service.worker.worker import Worker
 from tests.service.worker.test_batch_lane import BASE, CONFIGS, _items, _state
+from tests.service.worker.test_checkpoints import _damage_rows
 
 
 class FailingPipeline(MillJob):
@@ -226,3 +227,23 @@ def test_configs_pickle_for_the_job_processes() -> None:
 
     assert pickle.loads(pickle.dumps(CONFIGS[0])) == CONFIGS[0]
     assert isinstance(CONFIGS[0], MillConfig)
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("always_parallel")
+def test_damaged_checkpoints_are_refused_alike_by_the_jobs(tmp_path: Path) -> None:
+    """mill-1's newest checkpoint truncated (it falls back to its previous one) and both of
+    mill-2's damaged (it replays the archive from its start): the jobs choose the same
+    checkpoints as the worker, and the results equal one process's."""
+    reader = _checkpointed_archive(tmp_path, {1500: None, 4000: None})
+    for db in ("one.db", "two.db"):
+        with Store(tmp_path / db) as store:
+            _damage_rows(store, "mill-1", ["truncate"])
+            _damage_rows(store, "mill-2", ["flip", "truncate"])
+    with Store(tmp_path / "one.db") as s1, Store(tmp_path / "two.db") as s2:
+        one, two = _worker(s1), _worker(s2)
+        recover(one, reader)
+        recover(two, reader, jobs=3, factory=MillJob)
+        assert two.checkpoints_refused == one.checkpoints_refused == {"mill-1": 1, "mill-2": 2}
+        here = [_state(w, s).replace(str(s.path), "<store>") for w, s in ((one, s1), (two, s2))]
+        assert here[1] == here[0]
