@@ -6,8 +6,8 @@ gateway process restarts, its new publisher is a stranger to the worker's subscr
 blocks it published before the worker's link to it was up again were never recovered (about 2 s
 of every gateway restart, issue 26). :class:`RecentBlocks` keeps each channel's last blocks by
 their wire ``seq`` and is served by the same :class:`~ingest.spool.query.SpoolServer`
-queryable as a spool on disk, so the worker's gap fill (``service.worker.catch_up``) asks it by
-wire sequence number like any spool. Bounded: ``blocks`` per channel (a minute by default,
+queryable as a spool on disk, so the worker's gap fill (``service.worker.spool_recovery``) asks it
+by wire sequence number like any spool. Bounded: ``blocks`` per channel (a minute by default,
 :data:`RECENT_S`); what it evicted counts as dropped, exactly, for numbers this process
 published.
 """

@@ -2,7 +2,7 @@
 
 Block path (``millwatch serve``; README "Data flow")::
 
-    zenoh callback ─▶ block_queue ─▶ archive_first (archiving thread): a gap ─▶ catch_up
+    zenoh callback ─▶ block_queue ─▶ archive_first (archiving thread): a gap ─▶ catch-up
         thread (spooled span, then the mill's held blocks); archive (raw bytes, every block)
         ─▶ its feed in memory, or — behind — the archive itself
     archive_first.ArchiveFirst.step (worker thread): for each block (a backlog's runs through
@@ -39,7 +39,7 @@ Modules, low to high (a module imports only those above it):
 * ``spool_recovery`` — :class:`~service.worker.spool_recovery.SpoolRecovery`: a gap a live
   block reveals is first fetched from the gateways' spools (:mod:`ingest.spool`) and handled in
   sequence order before that block (the worker's ``before_live`` hook).
-* ``catch_up`` — :class:`~service.worker.catch_up.CatchUp`: in ``millwatch serve``, a mill
+  :class:`~service.worker.spool_recovery.CatchUp`: in ``millwatch serve``, a mill
   whose live block reveals a gap is caught up from the spools on a thread of its own, its
   channels page by page together, its live blocks held meanwhile; the other mills flow.
 * ``archive_first`` — the archive is the log and the analysis tails it: an archiving thread

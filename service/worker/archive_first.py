@@ -4,7 +4,7 @@ Two threads share the work ``millwatch serve`` does with each received block:
 
 * the **archiving thread** (:meth:`ArchiveFirst.run_archiving`) drains the subscriber
   callbacks' queue, hands a mill whose live block reveals a sequence gap to a catch-up thread
-  (:mod:`service.worker.catch_up`: the span from the gateways' spools first, then the mill's
+  (:mod:`service.worker.spool_recovery`: the span from the gateways' spools first, then the mill's
   held live blocks), and writes every other block to the archive at once — nothing it does
   depends on the analysis;
 * the **analysis thread** (:meth:`ArchiveFirst.step`) takes the blocks in archive order: from a
@@ -143,7 +143,7 @@ class ArchiveFirst:
 
     ``incoming``: the subscriber callbacks' queue; ``capacity``: the feed's bound (blocks);
     ``before_live``: called with each live block before it is archived; False means it took
-    the block (the catch-up of a gap, :mod:`service.worker.catch_up`, whose recovered and held
+    the block (the catch-up of a gap, :mod:`service.worker.spool_recovery`, whose recovered and held
     blocks come back through :meth:`archive_block`); ``route``: key → (mill, channel).
     """
 

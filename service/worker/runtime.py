@@ -10,7 +10,7 @@ order of start-up matters:
    queue is full, so the zenoh link pushes back, never dropping while the analysis lags; the
    archiving thread hands a mill whose live block reveals a gap to a catch-up thread that
    fetches the span from the gateways' spools while the other mills flow,
-   :mod:`service.worker.catch_up`, and archives every other block at once,
+   :mod:`service.worker.spool_recovery`, and archives every other block at once,
    :mod:`service.worker.archive_first`) with the recovering subscriber
    (:func:`ingest.gateway.declare_recovering_subscriber`), one per mill, declared as soon as a
    gateway publisher of each of the mill's channels is up (:class:`ingest.gateway.PublisherWatch`;
@@ -66,11 +66,10 @@ from service.status import MillStatus
 from service.store.database import Store
 from service.worker.archive_first import PUT_WAIT_S, ArchivedSeqs, ArchiveFirst, SharedArchive
 from service.worker.block_queue import BlockQueue
-from service.worker.catch_up import CatchUp
 from service.worker.drain_watch import DrainWatch
 from service.worker.health import MillHealth
 from service.worker.recovery import recover
-from service.worker.spool_recovery import QUERY_TIMEOUT_S
+from service.worker.spool_recovery import QUERY_TIMEOUT_S, CatchUp
 from service.worker.worker import AckRequest, MillPipeline, Worker
 
 __all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]

@@ -7,7 +7,7 @@ their gateways: ``ball-dual-lrs`` (mill B, 8 channels) publishes live in real ti
 is down for ``--hours`` of sample time — the gateway spools those blocks without publishing
 them (written here as fast as the disk takes them, as a gateway would have over the outage) —
 then publishes live again. The first live block after the outage reveals the gap; the worker
-catches mill A up from the spool (``service.worker.catch_up``). Measured:
+catches mill A up from the spool (``service.worker.spool_recovery``). Measured:
 
 - **arrival**: the seconds the worker's catch-up took (its own log line) and the outage's
   sample time over it (× real time per mill); every block of A in the archive, in sequence

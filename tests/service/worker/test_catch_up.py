@@ -19,8 +19,8 @@ from ingest.spool.query import SpoolAnswer
 from ingest.spool.store import Spool, payload_seq
 from service.store.database import Store
 from service.worker.block_queue import QueuedBlock
-from service.worker.catch_up import CatchUp
 from service.worker.mill_job import MillJob
+from service.worker.spool_recovery import CatchUp
 from service.worker.worker import Worker
 from tests.service.worker.test_spool_recovery import BLOCKS, CONFIG, _run, _worker
 
