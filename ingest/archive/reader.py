@@ -153,7 +153,12 @@ class TailTolerantReader(TailTolerantBase):
     def messages(self) -> Iterator[RawMessage]:
         """All messages in file order (single pass)."""
         with open(self.path, "rb") as stream:
-            if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            magic = stream.read(len(MCAP_MAGIC))
+            if magic != MCAP_MAGIC and MCAP_MAGIC.startswith(magic):
+                self.error = "torn magic (nothing written yet)"  # (e.g. a full disk at its start)
+                self.torn_bytes = len(magic)
+                return
+            if magic != MCAP_MAGIC:
                 raise ArchiveError(f"{self.path}: not an MCAP file (bad magic)")
             self.valid_bytes = len(MCAP_MAGIC)
             size = os.fstat(stream.fileno()).st_size  # a live file may grow: read a snapshot
