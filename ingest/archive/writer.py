@@ -189,7 +189,7 @@ class ArchiveWriter:
         self._max_latency_s = max_latency_s
         self._fsync = fsync
         self._clock = clock
-        self._max_unwritten = max_unwritten_bytes
+        self.max_unwritten_bytes = max_unwritten_bytes
         self._retry_s = retry_s
         self._file: _OpenFile | None = None
         #: A finished file whose last bytes (summary, footer) are not on disk yet.
@@ -322,7 +322,7 @@ class ArchiveWriter:
         if self.failure is None:
             return
         unwritten = self.unwritten_bytes
-        if self._closing is not None or unwritten >= self._max_unwritten:
+        if self._closing is not None or unwritten >= self.max_unwritten_bytes:
             self.refused += 1
             path = (self._closing or self._file or _NoFile).path
             raise ArchiveFullError(path, self.failure, unwritten)

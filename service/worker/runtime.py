@@ -145,6 +145,7 @@ class ServiceRuntime:
             s.archive.rotate_bytes,
             s.archive.chunk_size,
             max_latency_s=s.archive.max_latency_s,
+            max_unwritten_bytes=round(s.archive.max_unwritten_mb * 2**20),
         )
         shared = SharedArchive(self.archive)
         pipelines = {m: self._pipeline_factory(c) for m, c in self.mills.items()}
@@ -320,6 +321,7 @@ class ServiceRuntime:
         channels' staleness (behind, the analysed blocks' receive times are old, and every
         channel would look silent)."""
         worker.archive_errors = ingest.archive_errors
+        worker.check_store()
         lag = ingest.lag_s()
         now = time.time_ns()
         worker.request_observations(
@@ -408,8 +410,10 @@ class ServiceRuntime:
 
     # ------------------------------------------------------------------ readiness
     def readiness(self) -> dict[str, Any]:
-        """What ``GET /ready`` reports: zenoh up, archive writable, store reachable, fresh data,
-        every mill analysed (``held_mills``: why a held mill is not; see
+        """What ``GET /ready`` reports: zenoh up, archive and store writable *now* (their last
+        write succeeded: a full disk turns them false, and the first write that succeeds once
+        space returns turns them true again; ``write_faults`` says since when and why), fresh
+        data, every mill analysed (``held_mills``: why a held mill is not; see
         :mod:`service.worker.worker`)."""
         stale = {m: s.stale_channels for m, s in self.status.items()}
         held = {m: s.held_reason for m, s in self.status.items() if s.held_reason}
@@ -418,7 +422,7 @@ class ServiceRuntime:
             and (not self.settings.zenoh.connect or connected_peers(self.session) > 0),
             "worker": self._thread is not None and self._thread.is_alive(),
             "archive": self.archive is not None
-            and (self.worker is None or self.worker.archive_errors == 0),
+            and (self.ingest is None or self.ingest.archive.health.ok),
             "store": self._store_ok(),
         }
         stalled = {m: s.stalled_reason for m, s in self.status.items() if s.stalled_reason}
@@ -436,10 +440,22 @@ class ServiceRuntime:
             report["analysis_backlog_blocks"] = self.ingest.backlog
         if not flags["zenoh"]:
             report["zenoh_waiting_for"] = list(self.settings.zenoh.connect)
+        report["write_faults"] = self.write_faults()
         return report
 
+    def write_faults(self) -> dict[str, dict[str, Any]]:
+        """The archive's and the store's write episodes
+        (:class:`~service.worker.health.WriteEpisodes`): per target, since when writes fail
+        (None: they succeed), why, failed attempts."""
+        out = {}
+        if self.ingest is not None:
+            out["archive"] = self.ingest.archive.health.state()
+        if self.worker is not None:
+            out["store"] = self.worker.store_health.state()
+        return out
+
     def _store_ok(self) -> bool:
-        if self.store is None:
+        if self.store is None or (self.worker is not None and not self.worker.store_writable):
             return False
         try:
             self.store.mills()
