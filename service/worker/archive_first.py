@@ -103,7 +103,7 @@ class SharedArchive:
                 self._refused_in_episode += 1
                 self._note(exc)
                 return False
-            if not self.health.ok or self.writer.failure is not None:
+            if self.health.in_episode or self.writer.failure is not None:
                 self._late += 1
             self._note()
             return True
@@ -149,16 +149,17 @@ class SharedArchive:
         if error is not None:
             self.health.failed(error, _KEPT.format(mb=w.max_unwritten_bytes / 2**20),
                                max(attempts, 0))  # fmt: skip
-        elif not self.health.ok:
-            self.health.healed(f"{self._late} blocks written late from memory, "
-                               f"{self._refused_in_episode} refused (fetched again from their "
-                               "gateways' spools)")  # fmt: skip
+        elif self.health.in_episode and self.health.healed(self._summary):
             self._late = self._refused_in_episode = 0
+
+    def _summary(self) -> str:
+        return (f"{self._late} blocks written late from memory, {self._refused_in_episode} "
+                "refused (fetched again from their gateways' spools)")  # fmt: skip
 
 
 #: What the archive does while it cannot be written (the line that opens an episode).
 _KEPT = (
-    "received blocks wait in memory (up to {mb:.0f} MB) and are archived in order when it "
+    "received blocks wait in memory (up to {mb:.3g} MiB) and are archived in order when it "
     "can be written; blocks beyond that are fetched again from their gateways' spools"
 )
 

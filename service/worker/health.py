@@ -393,6 +393,12 @@ class LatencyReservoir:
                 "max_s": float(kept.max())}  # fmt: skip
 
 
+#: An episode of write failures ends once writes succeeded this long without a failure (s):
+#: a nearly full disk, where small writes succeed and larger ones fail, stays one episode (one
+#: line when it starts, one when it ends) however often it flaps.
+EPISODE_SETTLE_S = 10.0
+
+
 class WriteEpisodes:
     """Failure episodes of one write ``target`` (``"archive"``, ``"store"``); see the module
     docstring. ``clock``: monotonic seconds."""
@@ -404,43 +410,59 @@ class WriteEpisodes:
         self.failures = 0
         #: Episodes started (lifetime).
         self.episodes = 0
-        #: When the current episode started (monotonic s); None while writes succeed.
+        #: When the current episode started (monotonic s); None outside one.
         self.since: float | None = None
-        #: The current episode's last error, in words.
+        #: The last error while the last attempt failed, in words.
         self.error: str | None = None
+        self._failing = False
+        self._last_failure = -float("inf")
         self._failures_before = 0
 
     @property
     def ok(self) -> bool:
-        """The target could be written at the last attempt."""
-        return self.since is None
+        """The target could be written at the last attempt (``/ready``)."""
+        return not self._failing
+
+    @property
+    def in_episode(self) -> bool:
+        """An episode is open: writes failed, and have not yet succeeded for
+        :data:`EPISODE_SETTLE_S` since."""
+        return self.since is not None
 
     def failed(self, exc: BaseException, kept: str, attempts: int = 1) -> None:
         """``attempts`` failed with ``exc``; ``kept``: what the service does meanwhile (said
         once, in the line that opens the episode)."""
         self.failures += attempts
         self.error = str(exc) or type(exc).__name__
+        self._failing = True
+        self._last_failure = self._clock()
         if self.since is not None:
             return
-        self.since = self._clock()
+        self.since = self._last_failure
         self.episodes += 1
         self._failures_before = self.failures - attempts
         log.error("%s not writable (%s): %s; retrying by itself", self.target, self.error, kept)
 
-    def healed(self, summary: str = "") -> None:
-        """A write succeeded: ends the current episode, if any, with one line (``summary``:
-        what was written late, what is fetched again)."""
-        if self.since is None:
-            return
-        lasted = self._clock() - self.since
+    def healed(self, summary: Callable[[], str] = str) -> bool:
+        """A write succeeded. Ends the current episode once writes succeeded for
+        :data:`EPISODE_SETTLE_S`, with one line (``summary()``: what was written late, what
+        is fetched again); True when it ended one."""
+        self._failing = False
+        self.error = None
+        if self.since is None or self._clock() - self._last_failure < EPISODE_SETTLE_S:
+            return False
+        lasted = self._last_failure - self.since
         attempts = self.failures - self._failures_before
         self.since = None
-        self.error = None
-        log.warning("%s writable again after %.1f s (%d failed attempts)%s", self.target, lasted,
-                    attempts, f": {summary}" if summary else "")  # fmt: skip
+        said = summary()
+        log.warning("%s writable again (failures over %.1f s, %d failed attempts)%s",
+                    self.target, lasted, attempts, f": {said}" if said else "")  # fmt: skip
+        return True
 
     def state(self) -> dict[str, Any]:
-        """For ``/ready``: ``failing_s`` (None while writes succeed), ``error``,
-        ``failures_total``."""
-        failing = None if self.since is None else round(self._clock() - self.since, 1)
+        """For ``/ready``: ``failing_s`` (how long the current episode has lasted while the
+        last attempt failed; None while writes succeed), ``error``, ``failures_total``."""
+        failing = None
+        if self._failing and self.since is not None:
+            failing = round(self._clock() - self.since, 1)
         return {"failing_s": failing, "error": self.error, "failures_total": self.failures}

@@ -217,6 +217,7 @@ class Worker:
         self.store_health = WriteEpisodes("store")
         self._store_tried = -float("inf")
         self._store_problem: str | None = None
+        self._stored_late: Counter[str] = Counter()  # (during a store episode, for its last line)
         self._store_failures_reported = 0
         #: Acknowledgements applied whose transitions are not stored yet (the store failed).
         self._acked: list[tuple[AckRequest, list[Transition]]] = []
@@ -614,7 +615,9 @@ class Worker:
             self._store_failed(exc)
             return
         pending, self._pending = self._pending, PendingResults()
-        self.store_health.healed(pending.summary() + " stored late")
+        if self.store_health.in_episode:
+            self._stored_late.update(pending.counts())
+        self._store_written()
         if pending.transitions and self.on_alarms is not None:
             self.on_alarms(pending.transitions)
 
@@ -685,8 +688,18 @@ class Worker:
             self._store_failed(exc)
             self._pending.add(mill_id, update)
             return False
-        self.store_health.healed()
+        self._store_written()
         return True
+
+    def _store_written(self) -> None:
+        """A store write succeeded (the end of an episode, once settled)."""
+        if self.store_health.healed(self._late_summary):
+            self._stored_late.clear()
+
+    def _late_summary(self) -> str:
+        late = self._stored_late
+        return (f"{late['events']} events, {late['records']} records, {late['damage']} damage "
+                f"rows and {late['transitions']} alarm transitions stored late")  # fmt: skip
 
     def _store_due(self) -> bool:
         """Whether to write the store now: always while it can be written; while it cannot,
@@ -718,8 +731,9 @@ class Worker:
                 self._store_problem = f"{path} was deleted and cannot be written anew ({exc})"
             else:
                 self._store_problem = None
-                self.store_health.failed(StoreError(f"{path} was deleted"), "written anew")
-                self.store_health.healed("written anew from the open connection; nothing lost")
+                log.warning("store: %s was deleted while the service runs; written anew from "
+                            "the open connection, nothing lost", path)  # fmt: skip
+                self._store_written()
                 return
         else:
             self._store_problem = (f"{path} was replaced by another file while the service "
@@ -759,7 +773,7 @@ class Worker:
             self._store_failed(exc)
             self._pending.add(mill_id, update)
             return False
-        self.store_health.healed()
+        self._store_written()
         self.checkpoints_written += 1
         self.checkpoint_bytes += size
         self._schedule.done(mill_id)
@@ -904,10 +918,10 @@ class PendingResults:
         return bool(self.events or self.records or self.damage or self.transitions or self.days
                     or self.phases)  # fmt: skip
 
-    def summary(self) -> str:
-        """What is pending, in words (for the log)."""
-        return (f"{len(self.events)} events, {len(self.records)} records, {len(self.damage)} "
-                f"damage rows and {len(self.transitions)} alarm transitions")  # fmt: skip
+    def counts(self) -> Counter[str]:
+        """How many rows are pending, by kind (for the log)."""
+        return Counter(events=len(self.events), records=len(self.records),
+                       damage=len(self.damage), transitions=len(self.transitions))  # fmt: skip
 
     def write(self, db: Any) -> None:
         Store.extend_days(db, self.days)
