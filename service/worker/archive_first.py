@@ -103,7 +103,7 @@ class SharedArchive:
                 self._refused_in_episode += 1
                 self._note(exc)
                 return False
-            if self.health.in_episode or self.writer.failure is not None:
+            if self.writer.failure is not None:  # (waits in memory)
                 self._late += 1
             self._note()
             return True
@@ -136,9 +136,11 @@ class SharedArchive:
             return self.health.ok
 
     def close(self) -> None:
+        """Finish the archive; the open failure episode's last line."""
         with self.lock:
             self.writer.close()
             self._note()
+            self.health.close(self._summary)
 
     def _note(self, refusal: OSError | None = None) -> None:
         """The writer's failed attempts since the last look as the episode's, or its end."""

@@ -396,7 +396,7 @@ class LatencyReservoir:
 #: An episode of write failures ends once writes succeeded this long without a failure (s):
 #: a nearly full disk, where small writes succeed and larger ones fail, stays one episode (one
 #: line when it starts, one when it ends) however often it flaps.
-EPISODE_SETTLE_S = 10.0
+EPISODE_SETTLE_S = 5.0
 
 
 class WriteEpisodes:
@@ -451,13 +451,22 @@ class WriteEpisodes:
         self.error = None
         if self.since is None or self._clock() - self._last_failure < EPISODE_SETTLE_S:
             return False
-        lasted = self._last_failure - self.since
+        self._end(summary)
+        return True
+
+    def close(self, summary: Callable[[], str] = str) -> None:
+        """At a stop: the open episode's last line now (settled or not)."""
+        if self.since is not None:
+            self._end(summary)
+
+    def _end(self, summary: Callable[[], str]) -> None:
+        lasted = self._last_failure - self.since if self.since is not None else 0.0
         attempts = self.failures - self._failures_before
         self.since = None
         said = summary()
-        log.warning("%s writable again (failures over %.1f s, %d failed attempts)%s",
-                    self.target, lasted, attempts, f": {said}" if said else "")  # fmt: skip
-        return True
+        state = "still not writable at the stop" if self._failing else "writable again"
+        log.warning("%s %s (failures over %.1f s, %d failed attempts)%s", self.target, state,
+                    lasted, attempts, f": {said}" if said else "")  # fmt: skip
 
     def state(self) -> dict[str, Any]:
         """For ``/ready``: ``failing_s`` (how long the current episode has lasted while the

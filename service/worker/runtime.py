@@ -359,9 +359,11 @@ class ServiceRuntime:
             self._thread = None
         if self.worker is not None:
             self._drain_and_checkpoint()
-        if self.archive is not None:
+        if self.ingest is not None:  # (the archive, and its failure episode's last line)
+            self.ingest.archive.close()
+        elif self.archive is not None:
             self.archive.close()
-            self.archive = None
+        self.archive = None
         for publisher in self._alarm_publishers.values():
             publisher.undeclare()
         self._alarm_publishers.clear()
@@ -391,6 +393,7 @@ class ServiceRuntime:
         if self.ingest is not None:
             self.ingest.drain_feed(self.worker)
         self.worker.checkpoint(final=True)
+        self.worker.store_health.close(self.worker.late_summary)
         self._refresh_status()
         self.worker = None
 

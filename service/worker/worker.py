@@ -693,10 +693,11 @@ class Worker:
 
     def _store_written(self) -> None:
         """A store write succeeded (the end of an episode, once settled)."""
-        if self.store_health.healed(self._late_summary):
+        if self.store_health.healed(self.late_summary):
             self._stored_late.clear()
 
-    def _late_summary(self) -> str:
+    def late_summary(self) -> str:
+        """What a store episode wrote late (for its last line)."""
         late = self._stored_late
         return (f"{late['events']} events, {late['records']} records, {late['damage']} damage "
                 f"rows and {late['transitions']} alarm transitions stored late")  # fmt: skip

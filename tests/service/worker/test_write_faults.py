@@ -250,3 +250,28 @@ def test_another_file_at_the_store_path_stops_writes_until_it_is_removed(tmp_pat
     Path(store.path).unlink()
     worker.check_store()
     assert worker.store_writable and store.file_state() == "ok"
+
+
+def test_an_episode_is_one_line_when_it_starts_and_one_when_it_ends(monkeypatch, caplog):
+    """However often a nearly full disk flaps, one line opens the episode and one closes it,
+    once writes succeeded for ``EPISODE_SETTLE_S``; ``ok`` (``/ready``) follows every attempt."""
+    monkeypatch.setattr(health, "EPISODE_SETTLE_S", 5.0)
+    caplog.set_level(logging.INFO)
+    now = [0.0]
+    episodes = health.WriteEpisodes("store", clock=lambda: now[0])
+    oks = []
+    for step in range(200):  # 20 s: failing every third attempt for 10 s, then succeeding
+        now[0] = step * 0.1
+        if step < 100 and step % 3 == 0:
+            episodes.failed(sqlite3.OperationalError("database or disk is full"), "kept")
+        else:
+            episodes.healed(lambda: "3 events stored late")
+        oks.append(episodes.ok)
+    assert oks[0] is False and oks[1] is True and all(oks[100:])
+    assert episodes.failures == 34 and episodes.episodes == 1 and not episodes.in_episode
+    assert episodes.state() == {"failing_s": None, "error": None, "failures_total": 34}
+    lines = _episode_lines(caplog)
+    assert lines == [
+        "store not writable (database or disk is full): kept; retrying by itself",
+        "store writable again (failures over 9.9 s, 34 failed attempts): 3 events stored late",
+    ]
