@@ -41,6 +41,7 @@ from service.worker import worker as worker_module
 from service.worker.archive_first import ArchivedSeqs, ArchiveFirst, SharedArchive
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.mill_job import MillJob
+from service.worker.recovery import recover
 from service.worker.spool_recovery import SpoolRecovery
 from service.worker.worker import Worker
 from tests.ingest.archive.test_writer_faults import Disk
@@ -138,6 +139,60 @@ class FullStore(Store):
             yield db
             if self.full:
                 raise sqlite3.OperationalError("database or disk is full")
+
+
+def _serve(tmp_path: Path, store: Store) -> tuple[Worker, ArchiveFirst, SharedArchive]:
+    """A worker tailing its archive as ``millwatch serve`` does, recovered from ``store`` and
+    the archive, filling gaps from the scene's spool."""
+    writer = ArchiveWriter(tmp_path / "archive", "millwatch", chunk_size=8 * 2**10,
+                           max_unwritten_bytes=20 * 2**10, retry_s=0.0)  # fmt: skip
+    shared = SharedArchive(writer)
+    worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: MillJob(CONFIG)}, store, shared,
+                    checkpoint_seconds=3600.0)  # type: ignore[dict-item]  # fmt: skip
+    recover(worker, ArchiveReader(tmp_path / "archive", "millwatch"))
+    ingest = ArchiveFirst(shared, BlockQueue(10_000), 100_000, worker.route,
+                          ArchivedSeqs.of(worker.health))  # fmt: skip
+    ingest.before_live = SpoolRecovery(_spool_fetch, worker.route, ingest.seqs,
+                                       ingest.archive_block)  # fmt: skip
+    return worker, ingest, shared
+
+
+def test_a_crash_while_the_disk_is_full_skips_nothing_at_the_restart(tmp_path, disk):
+    """The issue's measured failure: a writer whose position counted failed writes made the
+    restart skip archived blocks and store a false ``sequence_gap``. Here no checkpoint covers
+    what is not on disk, and the restart re-fetches what the crash lost from the spool."""
+    store = Store(tmp_path / "mw.db")
+    worker, ingest, shared = _serve(tmp_path, store)
+    third = len(BLOCKS) // 3
+    for item in BLOCKS[:third]:
+        ingest.take(item)
+        ingest.step(worker, timeout_s=0.0)
+    assert worker.checkpoint() is not None
+    disk.free = 0
+    for item in BLOCKS[third : 2 * third]:
+        ingest.take(item)
+        ingest.step(worker, timeout_s=0.0)
+        assert worker.checkpoint() is None  # (nothing after the durable position is on disk)
+    assert shared.refused > 0 and shared.writer.unwritten_bytes > 0
+    disk.free = None  # … and the process is killed: what waited in memory is lost
+    store.close()
+    store = Store(tmp_path / "mw.db")
+    worker, ingest, shared = _serve(tmp_path, store)
+    for item in BLOCKS[2 * third :]:
+        ingest.take(item)
+        ingest.step(worker, timeout_s=0.0)
+    ingest.drain_feed(worker)
+    worker.checkpoint(final=True)
+    shared.close()
+    archived: dict[str, set[int]] = defaultdict(set)
+    for b in ArchiveReader(tmp_path / "archive", "millwatch").blocks():
+        archived[b.key].add(decode_block(b.payload).seq)
+    sent: dict[str, set[int]] = defaultdict(set)
+    for b in BLOCKS:
+        sent[b.key].add(decode_block(b.payload).seq)
+    assert dict(archived) == dict(sent)
+    assert all(h.missing_blocks == 0 for h in worker.health[CONFIG.id].channels.values())
+    assert store.losses(CONFIG.id) == []
 
 
 def _run(tmp_path: Path, fault: bool) -> tuple[Store, Worker]:
