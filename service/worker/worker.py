@@ -48,6 +48,14 @@ good checkpoint stays as it is. ``status`` (hence ``/mills`` and ``/ready``) say
 configuration change is reverted, the next start restores that checkpoint and replays the archive
 from it: nothing is lost.
 
+A store that cannot be written (a full disk; its file deleted) loses no result: a commit that
+fails keeps its batch for the next one, tried every :data:`STORE_RETRY_S`; no checkpoint is
+written meanwhile (it must not cover results the store does not hold, nor blocks the archive
+has not written: :meth:`Worker.checkpoint`) and acknowledgements wait; a deleted store file is
+written anew from the open connection (:meth:`Worker.check_store`). The episodes are
+:attr:`Worker.store_health` (``/ready``, metrics, the ``store_write_failures`` alarm, one log
+line at each end: :class:`~service.worker.health.WriteEpisodes`).
+
 Bad input never stops the worker: an undecodable block is archived, counted per channel and kind
 and logged once per kind; a block whose key belongs to no configured mill is archived and counted.
 Which blocks are analysed — routing, decoding, sequence numbers, clock faults — is decided by
@@ -635,6 +643,8 @@ class Worker:
         No checkpoint while the store or the archive cannot be written (returns None): a
         checkpoint must cover neither results the store does not hold nor blocks that are not
         on disk; the mills' turns come again once both can be."""
+        if final:  # (a stop tries the store once more, however recent the last attempt)
+            self._store_tried = -float("inf")
         writable, position = self._checkpoint_position()
         if not writable:
             return None
