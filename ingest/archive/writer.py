@@ -285,12 +285,12 @@ class ArchiveWriter:
 
     def close(self) -> None:
         """Finish the current file (summary, indexes, footer). Idempotent. When writes still
-        fail, the file is left cut at its last good chunk and the messages not written are
-        counted (:attr:`lost_at_close`) and logged."""
+        fail, the file is left readable to its last good chunk, the messages not written are
+        counted (:attr:`lost_at_close`) and the :class:`OSError` is raised, saying so."""
         if self._file is not None:
             self._start_finish(self._file)
         if self._closing is not None:  # (still failing)
-            self._abandon(self._closing)
+            raise self._abandon(self._closing)
 
     def __enter__(self) -> ArchiveWriter:
         return self
@@ -435,19 +435,21 @@ class ArchiveWriter:
         self.files_written.append(current.path)
         log.info("archive: closed %s (%d messages)", current.path, current.count)
 
-    def _abandon(self, current: _OpenFile) -> None:
+    def _abandon(self, current: _OpenFile) -> OSError:
         """Close a file whose last bytes cannot be written: unfinished, readable up to its last
-        good chunk."""
+        good chunk; the error saying so."""
         readable = current.durable_count
         self.lost_at_close += current.count - readable
         current.stream.close()
         self._closing = None
         self._last_position = ArchivePosition(current.path.name, readable, 0)
-        log.error(
-            "archive: closed %s unfinished (writes fail: %s): %d of its %d messages were never "
-            "written; it is readable up to its last good chunk ('millwatch archive recover' "
-            "finishes it)", current.path, self.failure, current.count - readable, current.count,
-        )  # fmt: skip
+        cause = self.failure
+        return OSError(
+            cause.errno if cause is not None else errno.EIO,
+            f"archive {current.path}: closed unfinished, writes fail ({cause}): "
+            f"{current.count - readable} of its {current.count} messages were never written; "
+            "it is readable up to its last good chunk ('millwatch archive recover' finishes it)",
+        )
 
 
 class _NoFile:

@@ -138,7 +138,10 @@ class SharedArchive:
     def close(self) -> None:
         """Finish the archive; the open failure episode's last line."""
         with self.lock:
-            self.writer.close()
+            try:
+                self.writer.close()
+            except OSError as exc:  # (what waited is fetched again from the spools at the start)
+                log.error("%s", exc)
             self._note()
             self.health.close(self._summary)
 

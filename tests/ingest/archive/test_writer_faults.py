@@ -168,7 +168,8 @@ def test_a_close_while_the_disk_is_full_leaves_the_good_chunks_readable(tmp_path
     disk.free = 1000
     for i in range(50, 120):
         _put(w, clock, i)
-    w.close()
+    with pytest.raises(OSError, match="70 of its 120 messages were never written"):
+        w.close()
     assert w.lost_at_close == 70
     (path,) = list_archive_files(tmp_path, "m1")
     for reader in (TailTolerantReader(path), BatchReader(path)):
