@@ -64,9 +64,9 @@ FULL_FROM_S, FULL_UNTIL_S = 3.0, 35.0
 #: ``/ready`` may take this long to follow the disk (s): a failed write is tried again every
 #: second, and ``/ready`` reads a status refreshed every 0.5 s.
 READY_FOLLOWS_S = 3.0
-#: Lines ``serve`` logs in a clean run of the scene (start-up, subscription, shutdown),
-#: measured 20; besides them: two per episode and one per channel for the spool's re-fetch.
-BASELINE_LOG_LINES = 30
+#: Lines ``serve`` may log besides two per episode and one per channel for the spool's re-fetch
+#: (its banner; room for a few start-up warnings): the run logged 9 lines in all.
+BASELINE_LOG_LINES = 10
 
 
 class SmallDisk:
