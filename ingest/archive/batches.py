@@ -162,7 +162,7 @@ class BatchReader(TailTolerantBase):
             size = os.fstat(stream.fileno()).st_size
             data = mmap.mmap(stream.fileno(), size, access=mmap.ACCESS_READ) if size else b""
         magic = bytes(data[: len(MCAP_MAGIC)])
-        if magic != MCAP_MAGIC and MCAP_MAGIC.startswith(magic):
+        if self.empty_ok and magic != MCAP_MAGIC and MCAP_MAGIC.startswith(magic):
             self.error = "torn magic (nothing written yet)"  # (e.g. a full disk at its start)
             self.torn_bytes = size
             return
@@ -283,7 +283,7 @@ def archive_batches(
         skip = after.index if after is not None and path.name == after.file else 0
         group: list[MessageBatch] = []
         size = 0
-        for batch in BatchReader(path).messages():
+        for batch in BatchReader(path, empty_ok=True).messages():
             if skip and batch.index[0] < skip:
                 batch = batch.select(batch.index >= skip)
                 if not len(batch):
