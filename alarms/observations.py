@@ -120,6 +120,12 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
         "writes", Kind.EVENT, None,
         "archive writes that failed since the previous report (0 reports a clean interval)",
     ),
+    "store_write_failures": QuantitySpec(
+        "writes", Kind.EVENT, None,
+        "store writes (commits, checkpoints) that failed since the previous report (0 reports "
+        "a clean interval); what failed waits in memory and is stored once the store can be "
+        "written",
+    ),
     "report_failures": QuantitySpec(
         "attempts", Kind.EVENT, "stage",
         "failed attempts to make (stage 'files') or mail (stage 'mail') a monthly report, "

@@ -45,6 +45,8 @@ spike_rate (level)          warning > 6/min (*option*)            ≤ 3/min for 
 sequence_gaps (level)       warning > 0/min (*option*)            0 for 5 min            §5.1
 archive_write_failures      alarm > 0 (*option*)                  3 clean reports;       DESIGN
 (event)                                                           latched
+store_write_failures        warning > 0 (*option*)                3 clean reports;       DESIGN
+(event)                                                           latched
 analysis_lag (level)        warning > 120 s (*option*)            ≤ 60 s                 §10.6
 load_sharing (level)        warning > 10 %, alarm > 20 %          ≤ 8 % for 5 min        §6.2.2
                             (*option*)
@@ -454,6 +456,25 @@ def _archive(config: MillConfig) -> Rule:
     )  # fmt: skip
 
 
+def _store(config: MillConfig) -> Rule:
+    """Store writes failing (a full disk, the file gone): nothing is lost while the process
+    runs — results wait in memory and are stored once it can be written, and the archive
+    rebuilds them after a restart — but no checkpoint is written meanwhile, so a warning. The
+    alarm itself is stored (and published) once the store takes writes again; ``/ready`` and
+    ``millwatch_write_failing`` tell it live. Event, latched; clears after clean reports (as
+    ``archive_write_failures``: ``archive_clean_reports_to_clear``)."""
+    a = config.alarms
+    return Rule(
+        "store_write_failures", "store_write_failures", _levels((Severity.WARNING, 0.0)),
+        headline="{value} failed at {time}: results wait in memory until the store can be "
+        "written",
+        advice="check the store's disk (space, permissions) and that its file is in place; "
+        "millwatch writes what waits by itself once it can",
+        source="Diering 2011 §10.6", value_format="{:.0f} store writes",
+        clean_events_to_clear=a.archive_clean_reports_to_clear, latched=True,
+    )  # fmt: skip
+
+
 def _analysis_lag(config: MillConfig) -> Rule:
     """The analysis behind the archive (a burst, a CPU spike, a backlog): nothing is lost — the
     blocks are archived and read back — but results and alarms come late. The value is already
@@ -501,8 +522,8 @@ def _load_sharing(config: MillConfig) -> Rule:
 
 _BUILDERS = (
     _start_peak, _starts_per_month, _oscillation, _bending, _barring, _unexplained_peak,
-    _resonance, _remaining_life, _stale, _spike_rate, _sequence_gaps, _archive, _load_sharing,
-    _report_delivery, _analysis_lag,
+    _resonance, _remaining_life, _stale, _spike_rate, _sequence_gaps, _archive, _store,
+    _load_sharing, _report_delivery, _analysis_lag,
 )  # fmt: skip
 
 

@@ -184,13 +184,18 @@ def _plain(endpoints: tuple[str, ...]) -> list[str]:
 
 
 class ArchiveSettings(_Strict):
-    """MCAP archive: hourly, 256 MiB files, 64 KiB chunks flushed at least every 0.1 s."""
+    """MCAP archive: hourly, 256 MiB files, 64 KiB chunks flushed at least every 0.1 s.
+    ``max_unwritten_mb``: while the archive cannot be written (a full disk), received blocks
+    wait in memory up to this many MiB (compressed) and are archived in order once it can; the
+    blocks beyond are fetched again from the gateways' spools
+    (:class:`service.worker.health.WriteEpisodes`)."""
 
     directory: Path = Path("var/archive")
     rotate_seconds: Annotated[float, Field(gt=0)] = 3600.0
     rotate_bytes: Annotated[int, Field(gt=0)] = 256 * 2**20
     chunk_size: Annotated[int, Field(gt=0)] = 64 * 2**10
     max_latency_s: Annotated[float, Field(gt=0)] = 0.1
+    max_unwritten_mb: Annotated[float, Field(gt=0)] = 64.0
 
 
 class StoreSettings(_Strict):

@@ -4,7 +4,9 @@ What is here:
 
 - ``files``          the encoding (one channel per key, payload = wire block), file names and
                      their order, ``ArchivePosition`` (checkpoints), ``ArchiveError``
-- ``writer``         ``ArchiveWriter``: rotating, standalone, zstd-chunked files, bounded data loss
+- ``writer``         ``ArchiveWriter``: rotating, standalone, zstd-chunked files, bounded data loss;
+                     failed writes (a full disk) kept in memory (bounded) and written again in
+                     order, the file readable to its last good chunk meanwhile
 - ``mcap_append``    fast appends into the ``mcap`` writer's open chunk (used by ``writer``)
 - ``reader``         ``TailTolerantReader`` (one file, survives a torn tail) and ``ArchiveReader``
                      (a prefix's files in order, filtered by key, time and position)

@@ -161,7 +161,12 @@ class BatchReader(TailTolerantBase):
         with open(self.path, "rb") as stream:
             size = os.fstat(stream.fileno()).st_size
             data = mmap.mmap(stream.fileno(), size, access=mmap.ACCESS_READ) if size else b""
-        if data[: len(MCAP_MAGIC)] != MCAP_MAGIC:
+        magic = bytes(data[: len(MCAP_MAGIC)])
+        if self.empty_ok and magic != MCAP_MAGIC and MCAP_MAGIC.startswith(magic):
+            self.error = "torn magic (nothing written yet)"  # (e.g. a full disk at its start)
+            self.torn_bytes = size
+            return
+        if magic != MCAP_MAGIC:
             raise ArchiveError(f"{self.path}: not an MCAP file (bad magic)")
         self.valid_bytes = len(MCAP_MAGIC)
         yield from self._records(np.frombuffer(data, dtype=np.uint8))
@@ -278,7 +283,7 @@ def archive_batches(
         skip = after.index if after is not None and path.name == after.file else 0
         group: list[MessageBatch] = []
         size = 0
-        for batch in BatchReader(path).messages():
+        for batch in BatchReader(path, empty_ok=True).messages():
             if skip and batch.index[0] < skip:
                 batch = batch.select(batch.index >= skip)
                 if not len(batch):

@@ -118,15 +118,18 @@ class TailTolerantBase:
     """What a front-to-back read of one MCAP file learns, and the rules it stops by.
 
     Reading stops at the first record that is incomplete (a torn tail) or corrupt
-    (bad chunk CRC or decompression error); everything before it is returned. After
+    (bad chunk CRC or decompression error); everything before it is returned. With
+    ``empty_ok`` a file that ends within the magic (an archive file made while the disk was
+    full: nothing written yet) is torn and empty, not an error. After
     iteration: ``finished`` (data-end record seen), ``torn_bytes`` (bytes after the
     last complete record of an unfinished file, 0 for a finished one), ``error``
     (why reading stopped early, or ``None``), ``schemas``/``channels`` (by id) and
     ``message_count``. Subclasses say what they yield per message.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, empty_ok: bool = False) -> None:
         self.path = Path(path)
+        self.empty_ok = empty_ok
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.finished = False
@@ -153,7 +156,12 @@ class TailTolerantReader(TailTolerantBase):
     def messages(self) -> Iterator[RawMessage]:
         """All messages in file order (single pass)."""
         with open(self.path, "rb") as stream:
-            if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            magic = stream.read(len(MCAP_MAGIC))
+            if self.empty_ok and magic != MCAP_MAGIC and MCAP_MAGIC.startswith(magic):
+                self.error = "torn magic (nothing written yet)"  # (e.g. a full disk at its start)
+                self.torn_bytes = len(magic)
+                return
+            if magic != MCAP_MAGIC:
                 raise ArchiveError(f"{self.path}: not an MCAP file (bad magic)")
             self.valid_bytes = len(MCAP_MAGIC)
             size = os.fstat(stream.fileno()).st_size  # a live file may grow: read a snapshot
@@ -255,7 +263,7 @@ class ArchiveReader:
             skip = after.index if after is not None and path.name == after.file else 0
             if skip == 0 and not self._may_overlap(path, start_ns, end_ns):
                 continue
-            for msg in TailTolerantReader(path).messages():
+            for msg in TailTolerantReader(path, empty_ok=True).messages():
                 if msg.index < skip or not _wanted(msg, pattern, start_ns, end_ns):
                     continue
                 yield ArchivedBlock(msg.key, msg.log_time_ns, msg.payload, path.name, msg.index)

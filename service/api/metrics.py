@@ -64,6 +64,7 @@ class RuntimeCollector(Collector):
             "Failed MCAP archive writes.",
             value=w.archive_errors if w else 0,
         )
+        yield from self._write_faults()
         yield CounterMetricFamily(
             "millwatch_unrouted_blocks",
             "Blocks on keys of no configured mill.",
@@ -78,6 +79,36 @@ class RuntimeCollector(Collector):
         for mill, n in sorted((w.checkpoints_refused if w else Counter()).items()):
             refused.add_metric([mill], n)
         yield refused
+
+    def _write_faults(self) -> Iterator[Metric]:
+        """Failed write attempts per target and whether each is writable now
+        (:class:`service.worker.health.WriteEpisodes`), and the blocks the archive refused
+        meanwhile."""
+        faults = self.runtime.write_faults()
+        failures = CounterMetricFamily(
+            "millwatch_write_failures",
+            "Failed attempts to write the archive or the store (a full disk, a file gone); "
+            "what failed is kept and written again (the write_failures alarms).",
+            labels=["target"],
+        )
+        failing = GaugeMetricFamily(
+            "millwatch_write_failing",
+            "1 while the target cannot be written (since its last attempt failed).",
+            labels=["target"],
+        )
+        for target in ("archive", "store"):
+            state = faults.get(target, {})
+            failures.add_metric([target], state.get("failures_total", 0))
+            failing.add_metric([target], 0 if state.get("failing_s") is None else 1)
+        yield failures
+        yield failing
+        ingest = self.runtime.ingest
+        yield CounterMetricFamily(
+            "millwatch_archive_refused_blocks",
+            "Blocks the archive could not keep while it could not be written (beyond "
+            "[archive] max_unwritten_mb); fetched again from the gateways' spools.",
+            value=ingest.archive.refused if ingest is not None else 0,
+        )
 
     def _queue(self) -> Iterator[Metric]:
         q = self.runtime.queue

@@ -2,8 +2,11 @@
 
 ``archive info FILE...`` prints, per file: finished (summary and footer written) or not,
 channels with message counts, the log-time range (UTC) and, for an unfinished file, the torn
-bytes after the last complete record. Finished files are described from their summary (fast);
-unfinished ones are read front to back. Exit status 1 if any file is unfinished.
+bytes after the last complete record. The counts are of the messages actually readable: every
+file is read front to back (every chunk decompressed and CRC-checked, ~1 s per 100 MB), and a
+finished file's summary is only compared with them — a file whose summary claims messages it
+does not hold (a writer that counted writes a full disk refused) is reported with both
+numbers. Exit status 1 if any file is unfinished or its summary disagrees.
 
 ``archive recover FILE [--out FILE]`` rewrites a file whose writer died into a finished,
 indexed file: every complete message is kept byte-identical, the torn tail is dropped. Without
@@ -21,6 +24,7 @@ README "Open the archive in Foxglove" lists the topics and suggests Plot panel p
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -56,6 +60,13 @@ class FileInfo:
     last_log_time_ns: int | None = None
     torn_bytes: int = 0
     error: str | None = None
+    #: The message count the file's summary states (None: no summary).
+    summary_messages: int | None = None
+
+    @property
+    def truthful(self) -> bool:
+        """Finished, and its summary states the messages it holds."""
+        return self.finished and self.summary_messages in (None, self.messages)
 
 
 def _check_file(path: Path) -> None:
@@ -109,13 +120,23 @@ def _from_scan(path: Path) -> FileInfo:
 
 
 def file_info(path: str | Path) -> FileInfo:
-    """Describe one archive file; raises :class:`ArchiveCommandError` naming a bad file."""
+    """Describe one archive file from what is readable in it (and what its summary states);
+    raises :class:`ArchiveCommandError` naming a bad file."""
     path = Path(path)
     _check_file(path)
     try:
-        return _from_summary(path) or _from_scan(path)
+        summary = _from_summary(path)
+        scanned = _from_scan(path)
     except (ArchiveError, OSError) as exc:
         raise ArchiveCommandError(f"{path}: {exc}") from exc
+    if summary is None:
+        return scanned
+    error = scanned.error
+    if summary.messages != scanned.messages:
+        error = (f"its summary states {summary.messages} messages, {scanned.messages} are "
+                 f"readable ({scanned.error or 'the others are missing'})")  # fmt: skip
+    return dataclasses.replace(scanned, finished=True, torn_bytes=0, error=error,
+                               summary_messages=summary.messages)  # fmt: skip
 
 
 # ---------------------------------------------------------------- command line
@@ -277,7 +298,7 @@ def _info(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         sys.stdout.write("".join(_describe(i) for i in infos))
-    return 0 if all(i.finished for i in infos) else 1
+    return 0 if all(i.truthful for i in infos) else 1
 
 
 def _iso(t_ns: int | None) -> str:
@@ -288,6 +309,9 @@ def _describe(info: FileInfo) -> str:
     state = "finished" if info.finished else f"UNFINISHED, {info.torn_bytes} torn bytes"
     if info.error and not info.finished:
         state += f" ({info.error}); repair with 'millwatch archive recover {info.path}'"
+    elif not info.truthful:
+        state += (f", BUT {info.error}; 'millwatch archive recover {info.path} --out FILE' "
+                  "writes what is readable as a new file")  # fmt: skip
     span = 0.0
     if info.first_log_time_ns is not None and info.last_log_time_ns is not None:
         span = (info.last_log_time_ns - info.first_log_time_ns) / 1e9

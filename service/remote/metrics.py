@@ -63,6 +63,15 @@ class RemoteCollector(Collector):
             for worker, info in sorted(workers.items()):
                 family.add_metric([worker], info.get(key, 0))
             yield family
+        failures = CounterMetricFamily(
+            "millwatch_write_failures",
+            "Failed attempts to write a worker's archive or store (kept and written again).",
+            labels=["worker", "target"],
+        )
+        for worker, info in sorted(workers.items()):
+            for target in ("archive", "store"):
+                failures.add_metric([worker, target], info.get("write_failures", {}).get(target, 0))
+        yield failures
         depth = GaugeMetricFamily(
             "millwatch_queue_depth_blocks", "Blocks waiting for the worker.", labels=["worker"]
         )

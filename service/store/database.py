@@ -18,6 +18,11 @@ Design notes:
 * Damage rows (with their cycle counts) and phase seconds are *set*, not added: the worker
   writes each day's running totals (kept in the analyzer), so replaying the archive tail after a
   crash is idempotent.
+* A failed write (a full disk: ``database or disk is full``) rolls its transaction back and
+  raises; the worker keeps what it wanted to write and tries again
+  (:meth:`service.worker.worker.Worker.commit`). A store file deleted while the service runs
+  is noticed (:meth:`Store.file_state`) and written again whole from the open connection
+  (:meth:`Store.restore_file`: SQLite's online backup), so nothing stored is lost with it.
 * Opening a file migrates it (:mod:`service.store.migrations`); rows are mapped by column name
   (:mod:`service.store.records`); the JSON ``records`` are read column-wise by
   :mod:`service.store.sampler`.
@@ -26,13 +31,14 @@ Design notes:
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 import threading
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from alarms.lifecycle import Alarm, TransitionRecord
 from analytics.mill.phase_damage import phase_totals
@@ -98,16 +104,16 @@ class Store:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
-            self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=NORMAL")
-            self._db.execute("PRAGMA busy_timeout=5000")
+            self._db = self._connect()
         except sqlite3.Error as exc:
             raise StoreError(f"{self.path}: cannot open the store ({exc})") from exc
         self._lock = threading.RLock()
         self._local = threading.local()
         self._readers: list[sqlite3.Connection] = []
         migrations.migrate(self._db, str(self.path))
+        self._identity = _identity(self.path)
+        #: Bumped when the file is written anew (:meth:`restore_file`): readers reconnect.
+        self._generation = 0
 
     # ------------------------------------------------------------------ schema
     @property
@@ -121,10 +127,51 @@ class Store:
             self._db.execute("BEGIN IMMEDIATE")
             try:
                 yield self._db
+                self._db.execute("COMMIT")
             except BaseException:
-                self._db.execute("ROLLBACK")
+                if self._db.in_transaction:  # (a failed COMMIT may leave it open, or not)
+                    self._db.execute("ROLLBACK")
                 raise
-            self._db.execute("COMMIT")
+
+    # ------------------------------------------------------------------ the file itself
+    def file_state(self) -> Literal["ok", "deleted", "replaced"]:
+        """Whether the store's file is still the one opened: ``deleted`` when no file is at its
+        path any more (the open connection still writes into the deleted one, which would be
+        gone at the next start), ``replaced`` when another file is there."""
+        now = _identity(self.path)
+        if now is None:
+            return "deleted"
+        return "ok" if now == self._identity else "replaced"
+
+    def restore_file(self) -> None:
+        """Write the store anew at its path from the open connection (SQLite's online backup:
+        everything committed, acknowledgements included), then write and read there; after
+        :meth:`file_state` said ``deleted``. Raises :class:`sqlite3.Error` or
+        :class:`OSError` when it cannot (tried again by the caller)."""
+        with self._lock:
+            if _identity(self.path) is not None:
+                raise StoreError(f"{self.path}: a file is there; not overwritten")
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = self.path.with_name(self.path.name + ".restoring")
+            tmp.unlink(missing_ok=True)
+            target = sqlite3.connect(tmp)
+            try:
+                self._db.backup(target)
+                target.execute("PRAGMA journal_mode=WAL")
+            finally:
+                target.close()
+            os.replace(tmp, self.path)
+            old, self._db = self._db, self._connect()
+            old.close()
+            self._identity = _identity(self.path)
+            self._generation += 1
+
+    def _connect(self) -> sqlite3.Connection:
+        db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+        db.execute("PRAGMA journal_mode=WAL")
+        db.execute("PRAGMA synchronous=NORMAL")
+        db.execute("PRAGMA busy_timeout=5000")
+        return db
 
     def close(self) -> None:
         with self._lock:
@@ -564,10 +611,12 @@ class Store:
         """This thread's own read-only connection: WAL lets readers see the last commit while
         the writer works, so API reads never wait for the worker's lock or transaction."""
         db = getattr(self._local, "db", None)
+        if db is not None and getattr(self._local, "generation", 0) != self._generation:
+            db = None  # (the file was written anew: the old connection reads the deleted one)
         if db is None:
             db = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, check_same_thread=False)
             db.execute("PRAGMA busy_timeout=5000")
-            self._local.db = db
+            self._local.db, self._local.generation = db, self._generation
             with self._lock:
                 self._readers.append(db)
         return db
@@ -583,3 +632,12 @@ class Store:
 
     def _query_one(self, sql: str, args: tuple[Any, ...]) -> tuple[Any, ...] | None:
         return self._reader().execute(sql, args).fetchone()
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """(device, inode) of the file at ``path``; None when there is none."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    return st.st_dev, st.st_ino

@@ -15,7 +15,9 @@ Modules, low to high (a module imports only those above it):
 
 * ``block_queue`` — the bounded queue between zenoh callbacks and the worker; drops counted.
 * ``health`` — per-channel sequencing (a block is new only if its sequence number is; repeats
-  and clock faults counted), lifetime counters (checkpointed), losses, staleness, rates, latency.
+  and clock faults counted), lifetime counters (checkpointed), losses, staleness, rates, latency;
+  the archive's and the store's write-failure episodes (``WriteEpisodes``: ``/ready``, metric,
+  alarms, one log line per episode).
 * ``admission`` — :class:`~service.worker.admission.BlockAdmission`, the one decision whether a
   block is analysed (route by key, decode, sequence) and its counters, for the live worker, its
   replay and offline analysis alike.

@@ -48,7 +48,7 @@ from ingest.archive.writer import ArchiveWriter
 from ingest.spool.store import payload_seq
 from service.worker.batch_lane import BatchLane
 from service.worker.block_queue import BlockQueue, QueuedBlock
-from service.worker.health import MillHealth
+from service.worker.health import MillHealth, WriteEpisodes
 from service.worker.worker import BATCH_BLOCKS, Worker
 
 __all__ = ["ArchiveFirst", "ArchivedSeqs", "SharedArchive"]
@@ -66,33 +66,108 @@ LOG_EVERY_S = 60.0
 
 class SharedArchive:
     """An :class:`~ingest.archive.writer.ArchiveWriter` behind a lock, so the archiving thread
-    writes while the analysis thread flushes it for a checkpoint. ``write`` returns the positions
-    just before and just after the block."""
+    writes while the analysis thread flushes it for a checkpoint; and the archive's write
+    failures as episodes (:attr:`health`, :class:`service.worker.health.WriteEpisodes`).
+
+    While the archive cannot be written, blocks wait in the writer's memory (bounded:
+    ``[archive] max_unwritten_mb``) and are written in order once it can; the blocks beyond that
+    bound are refused (:meth:`offer` returns False, :attr:`refused` counts them) and fetched
+    again from their gateways' spools once the archive takes blocks again
+    (:meth:`ArchiveFirst.take`)."""
 
     def __init__(self, writer: ArchiveWriter) -> None:
         self.writer = writer
         self.lock = threading.RLock()
         self.directory = writer.directory
         self.prefix = writer.prefix
+        self.health = WriteEpisodes("archive")
+        #: Blocks refused (not kept) while the archive could not be written (lifetime).
+        self.refused = 0
+        self._seen_failures = 0
+        self._late = 0  # blocks taken into memory during the current episode
+        self._refused_in_episode = 0
 
     def write(self, key: str, payload: bytes, log_time_ns: int) -> None:
-        """Archive one block (see :meth:`ArchiveWriter.write`)."""
+        """Archive one block (see :meth:`ArchiveWriter.write`); raises when it is refused."""
         with self.lock:
-            self.writer.write(key, payload, log_time_ns)
+            if not self.offer(key, payload, log_time_ns):
+                raise self.writer.failure or OSError("archive refused the block")
+
+    def offer(self, key: str, payload: bytes, log_time_ns: int) -> bool:
+        """Archive one block: True when taken (written, or waiting in memory while writes
+        fail), False when refused."""
+        with self.lock:
+            try:
+                self.writer.write(key, payload, log_time_ns)
+            except OSError as exc:
+                self.refused += 1
+                self._refused_in_episode += 1
+                self._note(exc)
+                return False
+            if self.writer.failure is not None:  # (waits in memory)
+                self._late += 1
+            self._note()
+            return True
 
     def flush(self) -> ArchivePosition | None:
-        """Write the open chunk; the now-durable position."""
+        """Write the open chunk and what waits; the now-durable position. Raises the
+        :class:`OSError` while the archive cannot be written (a checkpoint must not cover
+        blocks that are not on disk)."""
         with self.lock:
-            return self.writer.flush()
+            try:
+                return self.writer.flush()
+            finally:
+                self._note()
 
     def flush_if_due(self) -> bool:
-        """Flush if the oldest unwritten message is older than the writer's latency bound."""
+        """Flush if the oldest unwritten message is older than the writer's latency bound (or,
+        while writes fail, when the next attempt is due); never raises."""
         with self.lock:
-            return self.writer.flush_if_due()
+            done = self.writer.flush_if_due()
+            self._note()
+            return done
+
+    def writable(self) -> bool:
+        """Whether the archive takes blocks now (an attempt to write what waits first, when
+        one is due)."""
+        with self.lock:
+            if self.writer.failure is not None:
+                self.writer.flush_if_due()
+                self._note()
+            return self.health.ok
 
     def close(self) -> None:
+        """Finish the archive; the open failure episode's last line."""
         with self.lock:
-            self.writer.close()
+            try:
+                self.writer.close()
+            except OSError as exc:  # (what waited is fetched again from the spools at the start)
+                log.error("%s", exc)
+            self._note()
+            self.health.close(self._summary)
+
+    def _note(self, refusal: OSError | None = None) -> None:
+        """The writer's failed attempts since the last look as the episode's, or its end."""
+        w = self.writer
+        attempts = w.failed_writes - self._seen_failures
+        self._seen_failures = w.failed_writes
+        error = w.failure or refusal
+        if error is not None:
+            self.health.failed(error, _KEPT.format(mb=w.max_unwritten_bytes / 2**20),
+                               max(attempts, 0))  # fmt: skip
+        elif self.health.in_episode and self.health.healed(self._summary):
+            self._late = self._refused_in_episode = 0
+
+    def _summary(self) -> str:
+        return (f"{self._late} blocks written late from memory, {self._refused_in_episode} "
+                "refused (fetched again from their gateways' spools)")  # fmt: skip
+
+
+#: What the archive does while it cannot be written (the line that opens an episode).
+_KEPT = (
+    "received blocks wait in memory (up to {mb:.3g} MiB) and are archived in order when it "
+    "can be written; blocks beyond that are fetched again from their gateways' spools"
+)
 
 
 @dataclass
@@ -172,7 +247,6 @@ class ArchiveFirst:
         #: Blocks archived, and taken by the analysis (from the feed or the archive).
         self.archived = 0
         self.analysed = 0
-        self.archive_errors = 0
         self._newest_ns = 0  # receive time of the newest archived block
         self._analysed_ns = 0  # … of the last analysed one
         self.passes = 0  # reads of the archive started (each time it fell behind, and after)
@@ -191,8 +265,9 @@ class ArchiveFirst:
                 return
 
     def take(self, item: QueuedBlock) -> None:
-        """A received block: its channel's gap first (``before_live``), then
-        :meth:`archive_block`."""
+        """A received block: its channel's gap first (``before_live``, which starts no fill
+        while the archive cannot be written: the gap is filled by the channel's first block
+        after), then :meth:`archive_block`."""
         if self.before_live is not None and not self.before_live(item):
             return  # (taken: held while its mill catches up, archived after the spooled ones)
         self.archive_block(item)
@@ -201,12 +276,9 @@ class ArchiveFirst:
         """Write ``item`` to the archive and offer it to the analysis (see the module
         docstring); a block the feed has no room for is read back from the archive."""
         with self.archive.lock:
-            try:
-                self.archive.write(item.key, item.payload, item.recv_ns)
-            except OSError as exc:  # counted, and raised as the archive_write_failures alarm;
-                # the block is still analysed if the feed has room (it cannot be read back)
-                self.archive_errors += 1
-                log.warning("archive write failed: %s", exc)
+            if not self.archive.offer(item.key, item.payload, item.recv_ns):
+                return  # refused (counted; the archive_write_failures alarm): neither archived
+                # nor analysed, it is fetched again once the archive can be written (take)
             before, after = self._last, self.archive.writer.position
             self._last = after
             self.archived += 1
@@ -265,7 +337,10 @@ class ArchiveFirst:
     def _from_archive(self, worker: Worker) -> int:
         """The next batch of the current pass over the archive (starting one if needed)."""
         if self._pass is None:
-            self._pass = self._start_pass()
+            try:
+                self._pass = self._start_pass()
+            except OSError:  # the archive cannot be written now (an episode of SharedArchive's):
+                return 0  # what waits is read back once it is on disk
         try:
             batch = next(self._pass.batches, None)
         except Exception:
@@ -339,6 +414,11 @@ class ArchiveFirst:
                 return
 
     # ------------------------------------------------------------------ reading
+    @property
+    def archive_errors(self) -> int:
+        """Failed attempts to write the archive (lifetime)."""
+        return self.archive.health.failures
+
     @property
     def backlog(self) -> int:
         """Blocks archived but not yet analysed."""

@@ -23,12 +23,32 @@ A channel is *stale* when nothing arrived for ``stale_after_s`` seconds of wall 
 (:meth:`ChannelHealth.stale`, for the status). The worker's own judgement — data-quality events,
 the ``stale_channel`` alarm, releasing the other channels — also counts blocks still queued and
 never the time it was not listening (:meth:`service.worker.worker.Worker.silence_ns`).
+
+Writes that fail and heal by themselves (issue 26) — :class:`WriteEpisodes`, one per target
+(``archive``, ``store``). A full disk, a store file deleted: the service keeps what it could
+not write and writes it again, in order, once it can (the archive: :mod:`ingest.archive.writer`
+"Failed writes" and :class:`~service.worker.archive_first.SharedArchive`; the store:
+:meth:`service.worker.worker.Worker.commit` and :meth:`~service.worker.worker.Worker.check_store`).
+What the rest of the service sees of it:
+
+* whether the target could be written at its last attempt (:attr:`WriteEpisodes.ok`), for
+  ``/ready`` — which so turns 503 while a disk is full and 200 again, by itself, once the
+  first write after it succeeds;
+* the failed attempts (:attr:`WriteEpisodes.failures`, lifetime), for the metric
+  ``millwatch_write_failures_total{target}`` and the data-quality alarms
+  ``archive_write_failures`` and ``store_write_failures`` (:mod:`alarms.rules`);
+* the log: one ERROR line when an episode starts (what failed, what is kept meanwhile) and one
+  WARNING line when it ends (how long it lasted, the failed attempts, what was written late) —
+  never a line per attempt, however many thousand an episode has.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
+import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -47,7 +67,10 @@ __all__ = [
     "MillHealth",
     "PerMinute",
     "SeqVerdict",
+    "WriteEpisodes",
 ]
+
+log = logging.getLogger(__name__)
 
 SeqVerdict = Literal["first", "next", "gap", "duplicate", "replay"]
 #: The verdicts of blocks that are not new (dropped after counting).
@@ -368,3 +391,87 @@ class LatencyReservoir:
         p50, p99 = np.quantile(kept, [0.5, 0.99])
         return {"blocks": int(kept.size), "p50_s": float(p50), "p99_s": float(p99),
                 "max_s": float(kept.max())}  # fmt: skip
+
+
+#: An episode of write failures ends once writes succeeded this long without a failure (s):
+#: a nearly full disk, where small writes succeed and larger ones fail, stays one episode (one
+#: line when it starts, one when it ends) however often it flaps.
+EPISODE_SETTLE_S = 5.0
+
+
+class WriteEpisodes:
+    """Failure episodes of one write ``target`` (``"archive"``, ``"store"``); see the module
+    docstring. ``clock``: monotonic seconds."""
+
+    def __init__(self, target: str, clock: Callable[[], float] = time.monotonic) -> None:
+        self.target = target
+        self._clock = clock
+        #: Failed write attempts (lifetime).
+        self.failures = 0
+        #: Episodes started (lifetime).
+        self.episodes = 0
+        #: When the current episode started (monotonic s); None outside one.
+        self.since: float | None = None
+        #: The last error while the last attempt failed, in words.
+        self.error: str | None = None
+        self._failing = False
+        self._last_failure = -float("inf")
+        self._failures_before = 0
+
+    @property
+    def ok(self) -> bool:
+        """The target could be written at the last attempt (``/ready``)."""
+        return not self._failing
+
+    @property
+    def in_episode(self) -> bool:
+        """An episode is open: writes failed, and have not yet succeeded for
+        :data:`EPISODE_SETTLE_S` since."""
+        return self.since is not None
+
+    def failed(self, exc: BaseException, kept: str, attempts: int = 1) -> None:
+        """``attempts`` failed with ``exc``; ``kept``: what the service does meanwhile (said
+        once, in the line that opens the episode)."""
+        self.failures += attempts
+        self.error = str(exc) or type(exc).__name__
+        self._failing = True
+        self._last_failure = self._clock()
+        if self.since is not None:
+            return
+        self.since = self._last_failure
+        self.episodes += 1
+        self._failures_before = self.failures - attempts
+        log.error("%s not writable (%s): %s; retrying by itself", self.target, self.error, kept)
+
+    def healed(self, summary: Callable[[], str] = str) -> bool:
+        """A write succeeded. Ends the current episode once writes succeeded for
+        :data:`EPISODE_SETTLE_S`, with one line (``summary()``: what was written late, what
+        is fetched again); True when it ended one."""
+        self._failing = False
+        self.error = None
+        if self.since is None or self._clock() - self._last_failure < EPISODE_SETTLE_S:
+            return False
+        self._end(summary)
+        return True
+
+    def close(self, summary: Callable[[], str] = str) -> None:
+        """At a stop: the open episode's last line now (settled or not)."""
+        if self.since is not None:
+            self._end(summary)
+
+    def _end(self, summary: Callable[[], str]) -> None:
+        lasted = self._last_failure - self.since if self.since is not None else 0.0
+        attempts = self.failures - self._failures_before
+        self.since = None
+        said = summary()
+        state = "still not writable at the stop" if self._failing else "writable again"
+        log.warning("%s %s (failures over %.1f s, %d failed attempts)%s", self.target, state,
+                    lasted, attempts, f": {said}" if said else "")  # fmt: skip
+
+    def state(self) -> dict[str, Any]:
+        """For ``/ready``: ``failing_s`` (how long the current episode has lasted while the
+        last attempt failed; None while writes succeed), ``error``, ``failures_total``."""
+        failing = None
+        if self._failing and self.since is not None:
+            failing = round(self._clock() - self.since, 1)
+        return {"failing_s": failing, "error": self.error, "failures_total": self.failures}

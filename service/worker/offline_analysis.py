@@ -238,7 +238,7 @@ def _batches(
 ) -> Iterator[MessageBatch]:
     """The file's messages in batches of at least :data:`BATCH_MESSAGES`; ``advance(bytes)``
     as the reader moves through the file."""
-    reader = BatchReader(path)
+    reader = BatchReader(path, empty_ok=True)
     group: list[MessageBatch] = []
     size = done = 0
     try:

@@ -146,6 +146,7 @@ class ServiceRuntime:
             s.archive.rotate_bytes,
             s.archive.chunk_size,
             max_latency_s=s.archive.max_latency_s,
+            max_unwritten_bytes=round(s.archive.max_unwritten_mb * 2**20),
         )
         shared = SharedArchive(self.archive)
         pipelines = {m: self._pipeline_factory(c) for m, c in self.mills.items()}
@@ -199,7 +200,8 @@ class ServiceRuntime:
                                    self.worker.route, seqs)  # fmt: skip
         fetch = partial(fetch_spooled, self.session, timeout=QUERY_TIMEOUT_S)
         keys = {m: list(mill_channel_keys(c).values()) for m, c in self.mills.items()}
-        self.catch_up = CatchUp(fetch, self.worker.route, seqs, self.ingest.archive_block, keys)
+        self.catch_up = CatchUp(fetch, self.worker.route, seqs, self.ingest.archive_block, keys,
+                                can_fill=shared.writable)  # fmt: skip
         self.worker.loss_causes = self.catch_up.causes
         self.ingest.before_live = self.catch_up
         self._archiving = threading.Thread(
@@ -324,6 +326,7 @@ class ServiceRuntime:
         channels' staleness (behind, the analysed blocks' receive times are old, and every
         channel would look silent)."""
         worker.archive_errors = ingest.archive_errors
+        worker.check_store()
         lag = ingest.lag_s()
         now = time.time_ns()
         worker.request_observations(
@@ -352,20 +355,17 @@ class ServiceRuntime:
         if self.reports is not None:
             self.reports.stop()
         self._unsubscribe()
-        self._stop_archiving.set()
-        if self.catch_up is not None:  # (before the archive closes: its threads write to it)
-            self.catch_up.close()
-        if self._archiving is not None:
-            self._archiving.join(timeout=PUT_WAIT_S)
-            self._archiving = None
+        self._stop_ingest()
         if self._thread is not None:
             self._thread.join(timeout=30)
             self._thread = None
         if self.worker is not None:
             self._drain_and_checkpoint()
-        if self.archive is not None:
+        if self.ingest is not None:  # (the archive, and its failure episode's last line)
+            self.ingest.archive.close()
+        elif self.archive is not None:
             self.archive.close()
-            self.archive = None
+        self.archive = None
         for publisher in self._alarm_publishers.values():
             publisher.undeclare()
         self._alarm_publishers.clear()
@@ -376,6 +376,16 @@ class ServiceRuntime:
             self.store.close()
             self.store = None
         gc.unfreeze()  # (what start() froze is ordinary garbage again once the service is gone)
+
+    def _stop_ingest(self) -> None:
+        """Stop the catch-up threads (before the archive closes: they write to it) and the
+        archiving thread (once the callbacks' queue is empty)."""
+        self._stop_archiving.set()
+        if self.catch_up is not None:
+            self.catch_up.close()
+        if self._archiving is not None:
+            self._archiving.join(timeout=PUT_WAIT_S)
+            self._archiving = None
 
     def _unsubscribe(self) -> None:
         """Stop taking blocks: the subscribing thread, the subscribers, the publisher watch."""
@@ -395,6 +405,7 @@ class ServiceRuntime:
         if self.ingest is not None:
             self.ingest.drain_feed(self.worker)
         self.worker.checkpoint(final=True)
+        self.worker.store_health.close(self.worker.late_summary)
         self._refresh_status()
         self.worker = None
 
@@ -414,8 +425,10 @@ class ServiceRuntime:
 
     # ------------------------------------------------------------------ readiness
     def readiness(self) -> dict[str, Any]:
-        """What ``GET /ready`` reports: zenoh up, archive writable, store reachable, fresh data,
-        every mill analysed (``held_mills``: why a held mill is not; see
+        """What ``GET /ready`` reports: zenoh up, archive and store writable *now* (their last
+        write succeeded: a full disk turns them false, and the first write that succeeds once
+        space returns turns them true again; ``write_faults`` says since when and why), fresh
+        data, every mill analysed (``held_mills``: why a held mill is not; see
         :mod:`service.worker.worker`)."""
         stale = {m: s.stale_channels for m, s in self.status.items()}
         held = {m: s.held_reason for m, s in self.status.items() if s.held_reason}
@@ -424,7 +437,7 @@ class ServiceRuntime:
             and (not self.settings.zenoh.connect or connected_peers(self.session) > 0),
             "worker": self._thread is not None and self._thread.is_alive(),
             "archive": self.archive is not None
-            and (self.worker is None or self.worker.archive_errors == 0),
+            and (self.ingest is None or self.ingest.archive.health.ok),
             "store": self._store_ok(),
         }
         stalled = {m: s.stalled_reason for m, s in self.status.items() if s.stalled_reason}
@@ -442,10 +455,22 @@ class ServiceRuntime:
             report["analysis_backlog_blocks"] = self.ingest.backlog
         if not flags["zenoh"]:
             report["zenoh_waiting_for"] = list(self.settings.zenoh.connect)
+        report["write_faults"] = self.write_faults()
         return report
 
+    def write_faults(self) -> dict[str, dict[str, Any]]:
+        """The archive's and the store's write episodes
+        (:class:`~service.worker.health.WriteEpisodes`): per target, since when writes fail
+        (None: they succeed), why, failed attempts."""
+        out = {}
+        if self.ingest is not None:
+            out["archive"] = self.ingest.archive.health.state()
+        if self.worker is not None:
+            out["store"] = self.worker.store_health.state()
+        return out
+
     def _store_ok(self) -> bool:
-        if self.store is None:
+        if self.store is None or (self.worker is not None and not self.worker.store_writable):
             return False
         try:
             self.store.mills()

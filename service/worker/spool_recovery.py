@@ -260,7 +260,9 @@ class CatchUp:
     """See the module docstring. ``fetch``, ``route``, ``seqs`` (the last *archived* sequence
     number per mill and channel) and ``handle`` (archive and offer one block) as for
     :class:`~service.worker.spool_recovery.SpoolRecovery`; ``mill_keys``: each mill's live
-    channel keys. Call with each live block: True means "archive it now", False "taken".
+    channel keys; ``can_fill``: whether a fill may start now (not while the archive cannot be
+    written: the channel's first block after reveals the gap again). Call with each live
+    block: True means "archive it now", False "taken".
 
     Counters: ``recovered`` (blocks from spools), ``catch_ups`` (mills caught up),
     ``held_dropped`` (held blocks dropped past :data:`HOLD_BLOCKS`), ``repeats`` (held blocks
@@ -277,6 +279,7 @@ class CatchUp:
         page: int = PAGE_BLOCKS,
         hold_blocks: int = HOLD_BLOCKS,
         threads: int = CATCH_UP_THREADS,
+        can_fill: Callable[[], bool] = lambda: True,
     ) -> None:
         self._fetch = fetch
         self._route = route
@@ -285,6 +288,7 @@ class CatchUp:
         self._mill_keys = mill_keys
         self._page = page
         self._hold_blocks = hold_blocks
+        self._can_fill = can_fill  # (False: the archive cannot be written; no fill starts)
         #: What the release finds still missing (a gap no round covered) is filled as before.
         self._gaps = SpoolRecovery(fetch, route, seqs, handle)
         #: Why each span the spools could not fill is missing (the worker's loss reads it).
@@ -316,7 +320,7 @@ class CatchUp:
             if held is not None:
                 self._hold(mill, held, item)
                 return False
-            gap = self._gaps.gap(item)
+            gap = self._gaps.gap(item) if self._can_fill() else None
             if gap is None:
                 return True
             self._held[mill] = deque([item])

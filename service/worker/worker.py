@@ -48,6 +48,14 @@ good checkpoint stays as it is. ``status`` (hence ``/mills`` and ``/ready``) say
 configuration change is reverted, the next start restores that checkpoint and replays the archive
 from it: nothing is lost.
 
+A store that cannot be written (a full disk; its file deleted) loses no result: a commit that
+fails keeps its batch for the next one, tried every :data:`STORE_RETRY_S`; no checkpoint is
+written meanwhile (it must not cover results the store does not hold, nor blocks the archive
+has not written: :meth:`Worker.checkpoint`) and acknowledgements wait; a deleted store file is
+written anew from the open connection (:meth:`Worker.check_store`). The episodes are
+:attr:`Worker.store_health` (``/ready``, metrics, the ``store_write_failures`` alarm, one log
+line at each end: :class:`~service.worker.health.WriteEpisodes`).
+
 Bad input never stops the worker: an undecodable block is archived, counted per channel and kind
 and logged once per kind; a block whose key belongs to no configured mill is archived and counted.
 Which blocks are analysed — routing, decoding, sequence numbers, clock faults — is decided by
@@ -58,6 +66,7 @@ from __future__ import annotations
 
 import logging
 import queue
+import sqlite3
 import time
 from collections import Counter, deque
 from collections.abc import Callable, Iterable, Mapping
@@ -76,6 +85,7 @@ from ingest.keys import mill_channel_keys
 from ingest.wire import Block
 from service.status import MillHealthStatus, MillStatus
 from service.store.database import CheckpointChoice, Store
+from service.store.migrations import StoreError
 from service.store.records import DamageRow, EventRow, PhaseRow
 from service.worker.admission import BlockAdmission
 from service.worker.batch_lane import BatchLane
@@ -88,7 +98,7 @@ from service.worker.checkpoints import (
     fallback,
     refusal_message,
 )
-from service.worker.health import LatencyReservoir, MillHealth, PerMinute
+from service.worker.health import LatencyReservoir, MillHealth, PerMinute, WriteEpisodes
 
 __all__ = ["HELD", "AckRequest", "ArchiveLog", "MillPipeline", "MillUpdate", "Worker"]
 
@@ -107,6 +117,11 @@ LANE_MIN_RUN = 32
 LOSSES_SHOWN = 20
 #: The ``state`` in the status of a mill that is held (not analysed; see the module docstring).
 HELD = "held"
+#: While the store cannot be written, a commit is tried again at most this often (s).
+STORE_RETRY_S = 1.0
+#: What the worker does while the store cannot be written (the line that opens an episode).
+_STORE_KEPT = ("results and alarm transitions wait in memory and are stored in order when it "
+               "can be written; no checkpoint and no acknowledgement meanwhile")  # fmt: skip
 
 
 @dataclass
@@ -208,6 +223,14 @@ class Worker:
         #: Routing, decoding, sequencing and their counters (:mod:`service.worker.admission`).
         self.admission = BlockAdmission(mills.values())
         self.archive_errors = 0
+        #: Failure episodes of the store's writes (:class:`service.worker.health.WriteEpisodes`).
+        self.store_health = WriteEpisodes("store")
+        self._store_tried = -float("inf")
+        self._store_problem: str | None = None
+        self._stored_late: Counter[str] = Counter()  # (during a store episode, for its last line)
+        self._store_failures_reported = 0
+        #: Acknowledgements applied whose transitions are not stored yet (the store failed).
+        self._acked: list[tuple[AckRequest, list[Transition]]] = []
         self.blocks_handled = 0
         #: Held mills (see the module docstring): mill id → why (the restore error's message).
         self.held: dict[str, str] = {}
@@ -356,6 +379,7 @@ class Worker:
         silence is judged on those and on what this worker handled, see :meth:`silence_ns`."""
         now = self._clock()
         archive_failures = self.archive_errors - self._archive_errors_reported
+        store_failures = self.store_health.failures - self._store_failures_reported
         for mill_id in self.health:
             quiet = self.silence_ns(mill_id, now, received or {})
             stale = {c for c, q in quiet.items() if q > stale_after_s * 1e9}
@@ -380,8 +404,11 @@ class Worker:
             observations = self._silence(mill_id, now, quiet) + self._rates(mill_id, now)
             observations.append(Observation(mill_id, "archive_write_failures",
                                             float(archive_failures), now))  # fmt: skip
+            observations.append(Observation(mill_id, "store_write_failures",
+                                            float(store_failures), now))  # fmt: skip
             self._pending.add(mill_id, self.pipelines[mill_id].observe(observations))
         self._archive_errors_reported = self.archive_errors
+        self._store_failures_reported = self.store_health.failures
 
     def awaiting_gateways(self, mill_ids: Iterable[str]) -> None:
         """This worker is not subscribed to ``mill_ids``' gateways yet: none of their channels
@@ -478,7 +505,9 @@ class Worker:
             for request, _ in acked:
                 request.done.set_exception(exc)
             raise
-        if acked:
+        self._acked += acked
+        if self._acked and not self._pending:  # (answered once their transitions are stored)
+            acked, self._acked = self._acked, []
             self._finish_acks(acked)
         if observed:
             self.checkpoint(sorted(observed))  # wall-clock facts the archive cannot replay
@@ -556,9 +585,10 @@ class Worker:
             self._pending.add(obs.mill_id, update)
 
     def _apply_acks(self) -> list[tuple[AckRequest, list[Transition]]]:
-        """Apply the queued acknowledgements to the mills' alarm engines (worker thread)."""
+        """Apply the queued acknowledgements to the mills' alarm engines (worker thread); none
+        while the store cannot be written (they stay queued: the API answers that)."""
         applied: list[tuple[AckRequest, list[Transition]]] = []
-        while True:
+        while self.store_health.ok:  # (else they wait: an ack must be stored before it counts)
             try:
                 request = self._acks.get_nowait()
             except queue.Empty:
@@ -570,6 +600,7 @@ class Worker:
                 continue
             self._pending.add(request.mill_id, MillUpdate(alarm_transitions=transitions))
             applied.append((request, transitions))
+        return applied
 
     def _acknowledge(self, request: AckRequest) -> list[Transition]:
         """Apply one acknowledgement; :class:`MillHeldError` for a held mill (its alarm engine
@@ -590,13 +621,25 @@ class Worker:
 
     def commit(self) -> None:
         """Write the pending results in one transaction, then hand the alarm transitions to
-        ``on_alarms`` (e.g. to publish them on zenoh) — only once they are stored."""
+        ``on_alarms`` (e.g. to publish them on zenoh) — only once they are stored. A commit
+        that fails (the store's disk full, its file unwritable) drops nothing: the results
+        wait, with those of the next batches, for the next commit, tried at most every
+        :data:`STORE_RETRY_S` (an episode of :attr:`store_health`)."""
         self._finish_analysis()
         if not self._pending:
             return
+        if not self._store_due():
+            return
+        try:
+            with self.store.transaction() as db:
+                self._pending.write(db)
+        except sqlite3.Error as exc:
+            self._store_failed(exc)
+            return
         pending, self._pending = self._pending, PendingResults()
-        with self.store.transaction() as db:
-            pending.write(db)
+        if self.store_health.in_episode:
+            self._stored_late.update(pending.counts())
+        self._store_written()
         if pending.transitions and self.on_alarms is not None:
             self.on_alarms(pending.transitions)
 
@@ -609,19 +652,37 @@ class Worker:
         transaction per mill. ``final`` (a clean stop, the worker's last act): then also book
         each mill's totals as ``millwatch analyze`` ends a record, the samples the fault
         stage's look-ahead still holds included (:meth:`MillPipeline.book_final`); the
-        checkpoint stays the unflushed one, so a restart continues exactly."""
+        checkpoint stays the unflushed one, so a restart continues exactly.
+
+        No checkpoint while the store or the archive cannot be written (returns None): a
+        checkpoint must cover neither results the store does not hold nor blocks that are not
+        on disk; the mills' turns come again once both can be."""
+        if final:  # (a stop tries the store once more, however recent the last attempt)
+            self._store_tried = -float("inf")
+        writable, position = self._checkpoint_position()
+        if not writable:
+            return None
+        for mill_id in self.pipelines if mills is None else mills:
+            if not self._checkpoint_mill(mill_id, position):
+                return None
+            if final and mill_id not in self.held:
+                self._store_booked(mill_id, self.pipelines[mill_id].book_final())
+        return position
+
+    def _checkpoint_position(self) -> tuple[bool, ArchivePosition | None]:
+        """Store the results so far and flush the archive: ``(True, position)`` a checkpoint
+        now covers, or ``(False, None)`` when the store or the archive cannot be written
+        (their failures are counted and logged as episodes where they happen)."""
         self.commit()
-        position = self.archive.flush() if self.archive is not None else None
+        if self._pending or not self._store_due():
+            return False, None
+        try:
+            position = self.archive.flush() if self.archive is not None else None
+        except OSError:
+            return False, None
         if self.analysed_position is not None:
             position = self.analysed_position
-        for mill_id in self.pipelines if mills is None else mills:
-            self._checkpoint_mill(mill_id, position)
-            if final and mill_id not in self.held:
-                booked = PendingResults()
-                booked.add(mill_id, self.pipelines[mill_id].book_final())
-                with self.store.transaction() as db:
-                    booked.write(db)
-        return position
+        return True, position
 
     def _checkpoint_due(self) -> None:
         """Checkpoint the mills whose turn has come: at least one, then as many as fit in
@@ -630,35 +691,118 @@ class Worker:
         if not due:
             return
         started = time.monotonic()
-        position = self.checkpoint(due[:1])
-        for mill_id in due[1:]:
-            if time.monotonic() - started >= STEP_BUDGET_S:
+        writable, position = self._checkpoint_position()
+        if not writable:
+            return
+        for mill_id in due:
+            if mill_id != due[0] and time.monotonic() - started >= STEP_BUDGET_S:
                 return
-            self._checkpoint_mill(mill_id, position)
+            if not self._checkpoint_mill(mill_id, position):
+                return
 
-    def _checkpoint_mill(self, mill_id: str, position: ArchivePosition | None) -> None:
+    def _store_booked(self, mill_id: str, update: MillUpdate) -> bool:
+        """Store a booking of ``mill_id``'s running totals on its own; when the store cannot
+        be written it waits with the pending results (a booking is not made twice)."""
+        booked = PendingResults()
+        booked.add(mill_id, update)
+        try:
+            with self.store.transaction() as db:
+                booked.write(db)
+        except sqlite3.Error as exc:
+            self._store_failed(exc)
+            self._pending.add(mill_id, update)
+            return False
+        self._store_written()
+        return True
+
+    def _store_written(self) -> None:
+        """A store write succeeded (the end of an episode, once settled)."""
+        if self.store_health.healed(self.late_summary):
+            self._stored_late.clear()
+
+    def late_summary(self) -> str:
+        """What a store episode wrote late (for its last line)."""
+        late = self._stored_late
+        return (f"{late['events']} events, {late['records']} records, {late['damage']} damage "
+                f"rows and {late['transitions']} alarm transitions stored late")  # fmt: skip
+
+    def _store_due(self) -> bool:
+        """Whether to write the store now: always while it can be written; while it cannot,
+        once every :data:`STORE_RETRY_S`; never while its file is not the one opened
+        (:meth:`check_store`)."""
+        if self._store_problem is not None:
+            return False
+        return self.store_health.ok or time.monotonic() - self._store_tried >= STORE_RETRY_S
+
+    def _store_failed(self, exc: sqlite3.Error) -> None:
+        self._store_tried = time.monotonic()
+        self.store_health.failed(exc, _STORE_KEPT)
+
+    def check_store(self) -> None:
+        """About once a second: whether the store's file is still the one opened. A deleted one
+        is written anew from the open connection (:meth:`Store.restore_file`: nothing stored
+        is lost); while another file is at its path, or the deleted one cannot be written
+        anew, nothing is stored (results wait, an episode of :attr:`store_health`) — an
+        operator removes the other file, and the store is written there again."""
+        state = self.store.file_state()
+        if state == "ok":
+            self._store_problem = None
+            return
+        path = self.store.path
+        if state == "deleted":
+            try:
+                self.store.restore_file()
+            except (sqlite3.Error, OSError, StoreError) as exc:
+                self._store_problem = f"{path} was deleted and cannot be written anew ({exc})"
+            else:
+                self._store_problem = None
+                log.warning("store: %s was deleted while the service runs; written anew from "
+                            "the open connection, nothing lost", path)  # fmt: skip
+                self._store_written()
+                return
+        else:
+            self._store_problem = (f"{path} was replaced by another file while the service "
+                                   "runs; remove that file to have the store written there "
+                                   "again")  # fmt: skip
+        self.store_health.failed(StoreError(self._store_problem), _STORE_KEPT)
+
+    @property
+    def store_writable(self) -> bool:
+        """The store could be written at the last attempt and its file is the one opened."""
+        return self.store_health.ok and self._store_problem is None
+
+    def _checkpoint_mill(self, mill_id: str, position: ArchivePosition | None) -> bool:
         """One mill's snapshot (exact at ``position``: taken on this thread between blocks),
         serialised and stored at once, so it shares nothing mutable with the live pipeline,
         in the transaction that books the mill's running daily totals up to its last analysed
         sample (:meth:`MillPipeline.book`): the store lags the analysis by at most one
         checkpoint interval, and the checkpoint of a clean stop books every analysed sample.
-        Nothing for a held mill: its last good checkpoint must stay for the revert."""
+        Nothing for a held mill: its last good checkpoint must stay for the revert. False when
+        the store could not be written (the booking then waits with the pending results)."""
         if mill_id in self.held:
-            return
+            return True
+        update = self.pipelines[mill_id].book()
         booked = PendingResults()
-        booked.add(mill_id, self.pipelines[mill_id].book())
+        booked.add(mill_id, update)
         channels = self.health[mill_id].channels
         seqs = {c: h.last_seq for c, h in channels.items()}
         counters = {c: h.counters() for c, h in channels.items()}
         state = {"pipelines": {mill_id: self.pipelines[mill_id].snapshot()},
                  "last_seq": {mill_id: seqs}, "health": {mill_id: counters}}  # fmt: skip
         where = position.as_dict() if position else {}
-        with self.store.transaction() as db:
-            booked.write(db)
-            size = Store.put_checkpoint(db, mill_id, self._clock(), where, state)
+        try:
+            with self.store.transaction() as db:
+                booked.write(db)
+                size = Store.put_checkpoint(db, mill_id, self._clock(), where, state)
+        except sqlite3.Error as exc:
+            self._store_failed(exc)
+            self._pending.add(mill_id, update)
+            return False
+        self._store_written()
         self.checkpoints_written += 1
         self.checkpoint_bytes += size
         self._schedule.done(mill_id)
+        return True
 
     # ------------------------------------------------------------------ recovery
     def restore_checkpoints(
@@ -824,6 +968,11 @@ class PendingResults:
     def __bool__(self) -> bool:
         return bool(self.events or self.records or self.damage or self.transitions or self.days
                     or self.phases)  # fmt: skip
+
+    def counts(self) -> Counter[str]:
+        """How many rows are pending, by kind (for the log)."""
+        return Counter(events=len(self.events), records=len(self.records),
+                       damage=len(self.damage), transitions=len(self.transitions))  # fmt: skip
 
     def write(self, db: Any) -> None:
         Store.extend_days(db, self.days)

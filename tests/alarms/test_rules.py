@@ -51,6 +51,8 @@ CASES = [
      "warning", [0, 0]),
     ("archive_write_failures", "sag-5200-lrs", {}, [1], "archive_write_failures", "alarm",
      [0, 0, 0]),
+    ("store_write_failures", "sag-5200-lrs", {}, [3], "store_write_failures", "warning",
+     [0, 0, 0]),
     ("report_failures", "sag-5200-lrs", {"stage": "mail", "month": "2024-01", "error": "x"},
      [4], "report_delivery", "alarm", [0, 0]),
     ("load_sharing_imbalance_pct", "ball-dual-lrs", {}, [12, 12], "load_sharing", "warning",

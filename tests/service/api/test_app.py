@@ -268,6 +268,10 @@ def test_metrics_in_prometheus_text_format(client, live_api):
     assert samples[("millwatch_queue_dropped_blocks_total", ())] == 0
     assert ("millwatch_queue_depth_blocks", ()) in samples
     assert samples[("millwatch_archive_errors_total", ())] == 0
+    for target in ("archive", "store"):  # (a clean run: nothing failed, both writable)
+        assert samples[("millwatch_write_failures_total", (("target", target),))] == 0
+        assert samples[("millwatch_write_failing", (("target", target),))] == 0
+    assert samples[("millwatch_archive_refused_blocks_total", ())] == 0
     state = live_api.runtime.status[MILL].state
     assert samples[("millwatch_mill_state", (("mill", MILL), ("state", state)))] == 1
     states = {dict(k)["state"]: v for (n, k), v in samples.items() if n == "millwatch_mill_state"}

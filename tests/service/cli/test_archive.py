@@ -93,6 +93,32 @@ def test_info_of_a_file_truncated_mid_chunk(
     assert "archive recover" in capsys.readouterr().out
 
 
+def test_info_counts_what_is_readable_not_what_the_summary_claims(
+    archive_file: tuple[Path, list[tuple[str, int, bytes]]],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A finished file whose third chunk was never written whole (what a writer that counted
+    the writes a full disk refused left: issue 26 measured a summary of 6,000 messages over
+    3,957 readable ones): info reports the readable count and the summary's, exit 1."""
+    path, written = archive_file
+    data = bytearray(path.read_bytes())
+    start, end = chunk_spans(bytes(data))[2]
+    data[(start + end) // 2 : end] = bytes(end - (start + end) // 2)  # zeros where data was
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    assert main(["archive", "info", str(bad), "--json"]) == 1
+    (info,) = json.loads(capsys.readouterr().out)
+    assert info["finished"] and info["summary_messages"] == len(written) == 300
+    assert 0 < info["messages"] < 300 and sum(info["messages_by_channel"].values()) < 300
+    assert f"its summary states 300 messages, {info['messages']} are readable" in info["error"]
+    assert main(["archive", "info", str(bad)]) == 1
+    assert "BUT its summary states 300" in capsys.readouterr().out
+    assert main(["archive", "info", str(path), "--json"]) == 0  # (the intact file: no error)
+    (info,) = json.loads(capsys.readouterr().out)
+    assert info["messages"] == info["summary_messages"] == 300 and info["error"] is None
+
+
 def test_recover_keeps_every_complete_message_byte_identical(
     archive_file: tuple[Path, list[tuple[str, int, bytes]]],
     truncated: tuple[Path, int],

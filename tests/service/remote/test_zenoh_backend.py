@@ -262,6 +262,7 @@ def test_an_unknown_query_is_a_problem_reply(pair):
 def test_metrics_and_readiness_over_zenoh(pair):
     text = pair.remote.get("/metrics").text
     assert 'millwatch_blocks_handled_total{worker="w1"}' in text
+    assert 'millwatch_write_failures_total{target="store",worker="w1"} 0.0' in text
     assert f'millwatch_mill_reachable{{mill="{MILL}"}} 1.0' in text
     life = pair.remote.get(f"/mills/{MILL}/life").json()
     for component in life["components"]:  # domain gauges gathered from the worker
