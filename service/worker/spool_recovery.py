@@ -184,18 +184,20 @@ class SpoolRecovery:
         self.dropped = 0
         self.queries: Counter[str] = Counter()
 
-    def __call__(self, item: QueuedBlock) -> None:
-        """Before ``item`` is handled: fetch and handle what its channel is missing, if any."""
+    def __call__(self, item: QueuedBlock) -> bool:
+        """Before ``item`` is handled: fetch and handle what its channel is missing, if any;
+        True (``item`` goes on: the ``before_live`` contract of the archiving thread)."""
         if self._busy:  # (a recovered block itself never asks again)
-            return
+            return True
         missing = self.gap(item)
         if missing is None:
-            return
+            return True
         self._busy = True
         try:
             self._fill(item, *missing)
         finally:
             self._busy = False
+        return True
 
     def gap(self, item: QueuedBlock) -> tuple[int, int] | None:
         """(first, last) seq the channel of ``item`` misses before it; None for no gap."""

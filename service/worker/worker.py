@@ -266,7 +266,7 @@ class Worker:
         self.analysed_position: ArchivePosition | None = None
         #: Called with each live block before it is archived: fills its channel's gap first
         #: (:class:`~service.worker.spool_recovery.SpoolRecovery`, the gateways' spools).
-        self.before_live: Callable[[QueuedBlock], None] | None = None
+        self.before_live: Callable[[QueuedBlock], object] | None = None
         #: ``(mill, channel, first seq, last seq)`` → blocks of that span the spools' retention
         #: dropped (the rest never spooled), from the gap fills
         #: (:class:`~service.worker.spool_recovery.LossCauses`); read once by the loss.
