@@ -7,8 +7,11 @@ counters the worker thread only ever increments (plain ints, read atomically) an
 analyzer or iterates a dict the worker mutates. Open alarms are counted from the store.
 
 Names follow Prometheus conventions: ``millwatch_`` prefix, unit suffixes, ``_total`` counters.
-The domain gauges (damage, remaining life, oscillation range, bending amplitude, starts this
-month, channel lag, one 0/1 series per mill state) are :mod:`service.api.domain_metrics`.
+The domain gauges (damage and its rate, remaining life, oscillation range, bending amplitude,
+starts this month and today, the last start's peak, imbalance, stale channels, channel lag, one
+0/1 series per mill state) are :mod:`service.api.domain_metrics`. Known counters start at 0:
+each reporting channel has a decode-error series per kind, each mill an open-alarm series per
+severity, so sums and ``rate()`` over them read 0, never "no data".
 
 ``millwatch api`` (no worker in the process) exports the same per-mill families
 (:func:`mill_families`, :func:`open_alarms`) from what the workers answer over zenoh:
