@@ -116,6 +116,17 @@ class MillStatus(_Reported):
     starts_this_month: int | None = Field(
         default=None, description="Starts in the site's calendar month of the last sample."
     )
+    starts_today: int | None = Field(
+        default=None, description="Starts in the site's local day of the last sample."
+    )
+    last_start_peak_pct: float | None = Field(
+        default=None,
+        description="The latest start's peak (the larger of switch-on and short-circuit), % of "
+        "rated motor torque; null before the first start or when it had none.",
+    )
+    last_start_ns: int | None = Field(
+        default=None, description="When the latest start began, ns since the epoch."
+    )
     held_reason: str | None = Field(
         default=None, description="Why the mill is not analysed; null: it is."
     )

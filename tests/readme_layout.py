@@ -18,7 +18,7 @@ README = ROOT / "README.md"
 PACKAGES = ("analytics", "ingest", "alarms", "service")
 #: Top-level folders that are not Python packages, with their one line.
 OTHER = {
-    "deploy": "zenoh router configs, systemd units, plant and mill configs (TOML), Grafana",
+    "deploy": "zenoh router configs, systemd units, plant and mill configs, Grafana, Prometheus",
     "tests": "mirrors the packages; tests/integration/: real processes; tests/bench/: benchmarks",
 }
 HEADING = "## Layout"

@@ -383,6 +383,18 @@ class MillAnalyzer:
         zone); 0 for a month not (or no longer) kept."""
         return self._loads.starts_per_month.get(month, {}).get("starts", 0)
 
+    def starts_on_day(self, day: str) -> int:
+        """Starts counted on the local day ``day`` (``"YYYY-MM-DD"``, site time zone;
+        Diering 2011 §6.1.3); 0 for a day not (or no longer) kept."""
+        return self._loads.starts_per_day.get(day, 0)
+
+    @property
+    def last_start(self) -> dict[str, Any] | None:
+        """The latest start (a ``StartEvent`` as a plain dict: ``t_ns``, ``start_peak_pct`` in %
+        of rated motor torque, …), None before the first."""
+        starts = self._loads.starts
+        return starts[-1] if starts else None
+
     @property
     def starts_total(self) -> int:
         """Starts counted since the first sample analysed (every one, however old)."""

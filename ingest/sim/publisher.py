@@ -19,6 +19,10 @@ while it was down.
 **With a spool** (``spool=``, :mod:`ingest.spool`): each block is spooled before it is
 published, and blocks the spool already holds (published before a restart) are not published
 again, so the numbering continues from the spool's last ``seq`` per channel.
+
+**Never ahead of the wall clock** (``never_ahead=True``, the demo): a block waits until its last
+sample's time has passed on the wall clock, so a scene re-timed to start in the past replays at
+``speed`` until it meets the present and then runs live (1×); a receiver's lag stays ≥ 0.
 """
 
 from __future__ import annotations
@@ -87,13 +91,17 @@ class ScenePublisher:
         retention_s: float = DEFAULT_RETENTION_S,
         anchored: bool = False,
         spool: Spool | None = None,
+        never_ahead: bool = False,
     ) -> None:
         """``wait_subscribers_s``: before its first block, wait up to this long for someone to
         subscribe (a gateway publishes regardless; a test wants every block delivered).
         ``retention_s``: sample time kept per channel for recovery. ``anchored``: the scene's
         ``t0`` is its wall-clock start; blocks already due are skipped (see module docstring);
         needs a finite ``speed``. ``spool``: blocks are spooled before they are published, and
-        those it holds already are not published again (module docstring)."""
+        those it holds already are not published again (module docstring). ``never_ahead``: no
+        block goes out before its last sample's time on the wall clock (a replay started in
+        the past runs at ``speed`` until it catches up, then live), so a receiver's lag is
+        never negative and no event lies in the future (the demo)."""
         if anchored and speed is None:
             raise ValueError("anchored publishing needs a finite speed")
         self.scene = scene
@@ -105,6 +113,7 @@ class ScenePublisher:
         self._retention_s = retention_s
         self._anchored = anchored
         self._spool = spool
+        self._never_ahead = never_ahead
         #: Blocks not published because the spool holds them (published before a restart).
         self.spooled_before: Counter[str] = Counter()
         self._publishers: dict[str, GatewayPublisher] = {}
@@ -125,7 +134,7 @@ class ScenePublisher:
             for block in blocks:
                 if not self._publishers:  # once the first block is known (anchored: skips)
                     self._declare_all()
-                if stop.wait(self._pacer.wait_s(block.t_end_ns)):
+                if stop.wait(self._wait_s(block.t_end_ns)):
                     break
                 self._publisher(block.key).put(block.payload)
                 first_seq = block.seq if first_seq is None else first_seq
@@ -138,6 +147,14 @@ class ScenePublisher:
         return PublishReport(
             self.published, n, wall, stop.is_set(), self.skipped, first_seq
         )  # fmt: skip
+
+    def _wait_s(self, t_end_ns: int) -> float:
+        """Seconds until the block ending at ``t_end_ns`` is due: paced, and with
+        ``never_ahead`` not before that sample time on the wall clock."""
+        wait = self._pacer.wait_s(t_end_ns)
+        if self._never_ahead:
+            wait = max(wait, (t_end_ns - time.time_ns()) / _NS_PER_S)
+        return wait
 
     def _skip_due(self, blocks: Iterator[SceneBlock]) -> Iterator[SceneBlock]:
         """Anchor pacing on the wall clock at the scene's t0; drop blocks already due."""

@@ -18,7 +18,25 @@ remaining-life computation (:mod:`service.reports.life`):
                                                 latest block
 ``millwatch_mill_state``                        one 0/1 series per state (operating states,
                                                 ``held``, ``unreachable``, ``unknown``)
+``millwatch_damage_rate_per_year``              Miner damage per year of monitored time, per
+                                                component and ``basis`` (``last_<N>_days``,
+                                                ``since_monitoring``, ``worst_month``; Diering
+                                                2011 §8.2), as the remaining life uses it
+``millwatch_starts_today``                      starts in the site's local day of the last
+                                                sample (§6.1.3)
+``millwatch_last_start_peak_percent``           the latest start's peak, % of rated motor
+                                                torque (the larger of switch-on and
+                                                short-circuit, §6.2.1)
+``millwatch_last_start_timestamp_seconds``      when the latest start began (Unix time, s)
+``millwatch_imbalance_percent``                 dual drives: load-sharing imbalance of the
+                                                latest steady window, % (§6.2.2)
+``millwatch_stale_channels``                    channels of the mill with nothing received for
+                                                the worker's ``stale_after_s``
 =============================================== ===============================================
+
+Every value is read by attribute from what already computed it (:class:`~service.status.
+MillStatus`, the :class:`~service.reports.life.LifeReport`); a gauge whose value is not known
+(no start yet, a single drive, an unreachable mill) has no series rather than a made-up one.
 
 The life computation reads the store, so :class:`LifeCache` keeps each mill's answer for
 ``ttl_s`` (damage moves slowly; a scrape every 15 s must not recompute it).
@@ -103,9 +121,12 @@ def domain_families(
                  "channel's latest block.", "channel")  # fmt: skip
     state = _gauge("millwatch_mill_state", "1 for the mill's current state, 0 for the others.",
                    "state")  # fmt: skip
+    extra = _StatusGauges()
     for mill in sorted(mills):
         s = status.get(mill, NO_STATUS)
-        _life(damage, remaining, mill, life(mill))
+        report = life(mill)
+        extra.add(mill, s, report)
+        _life(damage, remaining, mill, report)
         if s.latest_steady is not None:
             _steady(osc, bending, mill, s.latest_steady)
         if s.starts_this_month is not None:
@@ -117,6 +138,45 @@ def domain_families(
         for name in MILL_STATES:
             state.add_metric([mill, name], 1 if name == current else 0)
     yield from (damage, remaining, osc, bending, starts, lag, state)
+    yield from extra.families()
+
+
+class _StatusGauges:
+    """The gauges of the module docstring's second half, filled per mill."""
+
+    def __init__(self) -> None:
+        self.rate = _gauge("millwatch_damage_rate_per_year", "Miner damage per year of "
+                           "monitored time, per rate basis.", "component", "basis")  # fmt: skip
+        self.today = _gauge("millwatch_starts_today", "Starts in the site's local day.")
+        self.peak = _gauge("millwatch_last_start_peak_percent", "The latest start's peak, % of "
+                           "rated motor torque.")  # fmt: skip
+        self.when = _gauge("millwatch_last_start_timestamp_seconds", "When the latest start "
+                           "began, Unix time, s.")  # fmt: skip
+        self.imbalance = _gauge("millwatch_imbalance_percent", "Dual drives: load-sharing "
+                                "imbalance of the latest steady window, %.")  # fmt: skip
+        self.stale = _gauge("millwatch_stale_channels", "Channels with nothing received for "
+                            "the worker's stale_after_s.")  # fmt: skip
+
+    def add(self, mill: str, s: MillStatus, life: LifeReport | None) -> None:
+        if life is not None:
+            for comp, c in sorted(life.components.items()):
+                for p in c.projections:
+                    if p.rate_per_year is not None and math.isfinite(p.rate_per_year):
+                        self.rate.add_metric([mill, comp, p.basis], p.rate_per_year)
+        if s.starts_today is not None:
+            self.today.add_metric([mill], s.starts_today)
+        if _finite(s.last_start_peak_pct):
+            self.peak.add_metric([mill], float(s.last_start_peak_pct or 0.0))
+        if s.last_start_ns is not None:
+            self.when.add_metric([mill], s.last_start_ns / 1e9)
+        w = s.latest_steady
+        if w is not None and _finite(w.imbalance_pct):
+            self.imbalance.add_metric([mill], float(w.imbalance_pct or 0.0))
+        if s.health is not None:
+            self.stale.add_metric([mill], len(s.health.stale_channels))
+
+    def families(self) -> Iterator[Metric]:
+        yield from (self.rate, self.today, self.peak, self.when, self.imbalance, self.stale)
 
 
 def _life(

@@ -7,8 +7,11 @@ counters the worker thread only ever increments (plain ints, read atomically) an
 analyzer or iterates a dict the worker mutates. Open alarms are counted from the store.
 
 Names follow Prometheus conventions: ``millwatch_`` prefix, unit suffixes, ``_total`` counters.
-The domain gauges (damage, remaining life, oscillation range, bending amplitude, starts this
-month, channel lag, one 0/1 series per mill state) are :mod:`service.api.domain_metrics`.
+The domain gauges (damage and its rate, remaining life, oscillation range, bending amplitude,
+starts this month and today, the last start's peak, imbalance, stale channels, channel lag, one
+0/1 series per mill state) are :mod:`service.api.domain_metrics`. Known counters start at 0:
+each reporting channel has a decode-error series per kind, each mill an open-alarm series per
+severity, so sums and ``rate()`` over them read 0, never "no data".
 
 ``millwatch api`` (no worker in the process) exports the same per-mill families
 (:func:`mill_families`, :func:`open_alarms`) from what the workers answer over zenoh:
@@ -25,6 +28,8 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 from prometheus_client.registry import Collector
 
 from alarms.lifecycle import Alarm
+from alarms.rules import Severity
+from ingest.wire import WireError
 from service.api.domain_metrics import LifeCache, domain_families
 from service.api.mill_views import mill_life
 from service.reports.life import LifeReport
@@ -34,6 +39,10 @@ from service.worker.runtime import ServiceRuntime
 __all__ = ["RuntimeCollector", "metrics_registry", "mill_families", "open_alarms"]
 
 _OPEN = ("raised", "acknowledged")
+#: Every ``kind`` of ``millwatch_decode_errors_total``: each channel of a reporting mill has a
+#: series per kind from the start (0 until a decode error), so ``rate()`` and sums over it
+#: answer 0, not "no data".
+DECODE_ERROR_KINDS = tuple(sorted({WireError.kind, *(c.kind for c in WireError.__subclasses__())}))
 LifeSource = Callable[[str], LifeReport | None]
 """A mill's life answer (``GET /mills/{id}/life``), ``None`` when not available."""
 
@@ -50,7 +59,7 @@ class RuntimeCollector(Collector):
         yield from self._queue()
         yield from mill_families(self.runtime.mills, self.runtime.status, self.life.get)
         store = self.runtime.store
-        yield open_alarms(store.alarms(_OPEN) if store else [])
+        yield open_alarms(store.alarms(_OPEN) if store else [], self.runtime.mills)
 
     def _worker(self) -> Iterator[Metric]:
         w = self.runtime.worker
@@ -200,8 +209,8 @@ def mill_families(
     for mill in sorted(mills):
         s = status.get(mill, NO_STATUS)
         for channel, ch in s.channel_health.items():
-            for kind, n in ch.decode_errors.items():
-                errors.add_metric([mill, channel, kind], n)
+            for kind in sorted({*DECODE_ERROR_KINDS, *ch.decode_errors}):
+                errors.add_metric([mill, channel, kind], ch.decode_errors.get(kind, 0))
             missing.add_metric([mill, channel], ch.missing_blocks)
             repeated.add_metric([mill, channel, "duplicate"], ch.duplicates)
             repeated.add_metric([mill, channel, "replay"], ch.replays)
@@ -211,14 +220,16 @@ def mill_families(
     yield from (errors, missing, repeated, clock, samples, held)
 
 
-def open_alarms(rows: Iterable[Alarm]) -> Metric:
-    """Open alarms (raised or acknowledged) per mill and severity."""
+def open_alarms(rows: Iterable[Alarm], mills: Iterable[str] = ()) -> Metric:
+    """Open alarms (raised or acknowledged) per mill and severity; every one of ``mills``
+    (the known mills) has a series per severity from the start (0 while none is open)."""
     g = GaugeMetricFamily(
         "millwatch_open_alarms",
         "Alarms raised or acknowledged, not yet cleared.",
         labels=["mill", "severity"],
     )
-    counts = Counter((a.mill_id, a.severity) for a in rows if a.state in _OPEN)
+    counts = Counter((a.mill_id, str(a.severity)) for a in rows if a.state in _OPEN)
+    counts.update({(mill, str(severity)): 0 for mill in mills for severity in Severity})
     for (mill, severity), n in sorted(counts.items()):
         g.add_metric([mill, severity], n)
     return g

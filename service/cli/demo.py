@@ -5,6 +5,16 @@ checkpoints), one simulated sensor gateway per mill publishing a month-long scen
 barring, steady running and telemetry spikes (Diering 2011 §6) at ``--speed`` × real time, and the
 REST API. It prints where to look and runs until Ctrl-C (or ``--minutes``). The data is
 SIMULATED and says so everywhere it is shown.
+
+**Plant time.** Sample time advances ``--speed`` times faster than the wall clock, so were the
+scene to start *now*, its samples would soon lie hours in the future: channel lags negative,
+alarms raised "later today", an acknowledgement (wall-clock time) listed before the raise it
+answers. The demo therefore replays the recent past: each scene starts early enough
+(:func:`replay_start_ns`) that it meets the wall clock when the run ends (``--minutes``, or the
+scene's end), and no block is published before its samples' time has passed
+(``never_ahead``). Lags read as what they are — how old the data replayed now are, falling to 0
+— and every alarm time lies in the past, before its acknowledgement. The start line prints the
+plant-time span.
 """
 
 from __future__ import annotations
@@ -15,6 +25,8 @@ import secrets
 import sys
 import tempfile
 import threading
+import time
+from datetime import UTC, datetime
 from pathlib import Path
 
 import uvicorn
@@ -77,13 +89,27 @@ def simulated_mills(mills: dict[str, MillConfig]) -> dict[str, MillConfig]:
     return {m: c.model_copy(update={"simulated": True}) for m, c in mills.items()}
 
 
-class Gateways:
-    """One simulated gateway thread per mill, each with its own zenoh session."""
+def replay_start_ns(now_ns: int, speed: float, scene_s: float, minutes: float | None) -> int:
+    """The scenes' first sample time (ns since the epoch) for a demo started at ``now_ns``:
+    ``(speed − 1) × run`` seconds back, ``run`` being the run's wall-clock length
+    (``minutes``, at most the scene's ``scene_s`` seconds played at ``speed``), so that sample
+    time reaches the wall clock when the run ends and is behind it until then (never ahead).
+    At ``speed`` ≤ 1 the scene starts now."""
+    run_s = scene_s / speed if minutes is None else min(minutes * 60.0, scene_s / speed)
+    behind_s = max(0.0, speed - 1.0) * run_s
+    return now_ns - round(behind_s * 1e9)
 
-    def __init__(self, runtime: ServiceRuntime, endpoint: str, speed: float, scene: str) -> None:
+
+class Gateways:
+    """One simulated gateway thread per mill, each with its own zenoh session, each replaying
+    its scene from ``t0_ns`` and never ahead of the wall clock (module docstring)."""
+
+    def __init__(
+        self, runtime: ServiceRuntime, endpoint: str, speed: float, scene: str, t0_ns: int
+    ) -> None:
         self._stop = threading.Event()
         self._threads = [
-            threading.Thread(target=self._run, args=(config, endpoint, speed, scene, seed),
+            threading.Thread(target=self._run, args=(config, endpoint, speed, scene, seed, t0_ns),
                              name=f"gateway-{mill_id}", daemon=True)
             for seed, (mill_id, config) in enumerate(runtime.mills.items())
         ]  # fmt: skip
@@ -92,10 +118,13 @@ class Gateways:
         for t in self._threads:
             t.start()
 
-    def _run(self, config: MillConfig, endpoint: str, speed: float, name: str, seed: int) -> None:
-        scene = starting_now(get_scene(name, config, seed=seed))
+    def _run(
+        self, config: MillConfig, endpoint: str, speed: float, name: str, seed: int, t0_ns: int
+    ) -> None:
+        scene = starting_now(get_scene(name, config, seed=seed), t0_ns)
         with open_session(build_config(connect=[endpoint])) as session:
-            ScenePublisher(session, scene, speed=speed, wait_subscribers_s=5.0).run(self._stop)
+            ScenePublisher(session, scene, speed=speed, wait_subscribers_s=5.0,
+                           never_ahead=True).run(self._stop)  # fmt: skip
 
     def stop(self) -> None:
         self._stop.set()
@@ -169,7 +198,9 @@ def _main(args: argparse.Namespace) -> int:
     runtime = ServiceRuntime(settings, simulated_mills(settings.load_mills()), MillJob)
     runtime.start()
     backend = LocalBackend(runtime)
-    gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene)
+    scene_s = _scene_seconds(args.scene, next(iter(runtime.mills.values())))
+    args.t0_ns = replay_start_ns(time.time_ns(), args.speed, scene_s, args.minutes)
+    gateways = Gateways(runtime, tcp_endpoint(zenoh_port), args.speed, args.scene, args.t0_ns)
     config = uvicorn.Config(create_app(backend), host="127.0.0.1", port=args.port,
                             log_level="warning")  # fmt: skip
     ready = f"millwatch demo: ready; {len(runtime.mills)} simulated mill(s), http://127.0.0.1:{args.port}"
@@ -192,6 +223,19 @@ def _main(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scene_seconds(name: str, config: MillConfig) -> float:
+    """The catalogue scene's length, s of sample time (the same for every mill)."""
+    return float(get_scene(name, config, seed=0).spec.duration_s)
+
+
+def plant_time_line(t0_ns: int, speed: float) -> str:
+    """The start line's plant-time span: from where the replay starts to when it meets the
+    wall clock (UTC, whole seconds)."""
+    start = datetime.fromtimestamp(t0_ns / 1e9, UTC).replace(microsecond=0)
+    return (f"  plant time replays from {start.isoformat()} at {speed:g}× until it meets the "
+            "wall clock (never ahead of it: lags ≥ 0, alarm times in the past)\n")  # fmt: skip
+
+
 def _stop_after(server: uvicorn.Server, minutes: float | None) -> threading.Timer | None:
     if minutes is None:
         return None
@@ -208,6 +252,7 @@ def _announce(settings: ServiceSettings, runtime: ServiceRuntime, directory: Pat
     sys.stdout.write(
         "millwatch demo — SIMULATED mills, nothing here comes from a plant\n"
         f"  mills      {mills} (scene '{args.scene}' at {args.speed:g}× real time)\n"
+        f"{plant_time_line(args.t0_ns, args.speed)}"
         f"  API        {base}/mills   {base}/mills/<id>   {base}/ready   {base}/docs\n"
         f"  archive    {settings.archive.directory}\n"
         f"  store      {settings.store.path}\n"

@@ -94,7 +94,7 @@ class RemoteCollector(Collector):
             return self.life.get(mill) if mill in gathered else None
 
         yield from mill_families(self.backend.mills, status, life)
-        yield open_alarms(self.backend.alarm_board().rows())
+        yield open_alarms(self.backend.alarm_board().rows(), self.backend.mills)
 
 
 def remote_registry(backend: StatusSource) -> CollectorRegistry:

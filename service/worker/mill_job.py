@@ -339,6 +339,7 @@ class MillJob:
             simulated=self.config.simulated,
             damage=self._damage_summary(),
             starts_this_month=self._starts_this_month(),
+            **self._starts_today(),
         )
 
     def _latest_steady(self) -> SteadyWindowResult | None:
@@ -356,6 +357,18 @@ class MillJob:
         if t_ns is None:
             return 0
         return self.analyzer.starts_in_month(local_month(int(t_ns), self.config.time_zone))
+
+    def _starts_today(self) -> dict[str, Any]:
+        """``starts_today`` (the site's local day of the last analysed sample) and the latest
+        start's peak and time, for :class:`~service.status.MillStatus`."""
+        a, out = self.analyzer, dict[str, Any]()
+        if a.next_sample_ns is not None:
+            out["starts_today"] = a.starts_on_day(local_day(int(a.next_sample_ns), self._tz))
+        last = a.last_start
+        if last is not None:
+            out["last_start_ns"] = int(last["t_ns"])
+            out["last_start_peak_pct"] = last.get("start_peak_pct")
+        return out
 
     def _damage_summary(self) -> dict[str, ComponentDamage]:
         """Miner damage per component so far: closed cycles (``committed``), what closing the
@@ -424,3 +437,8 @@ def split_local_days(lo: int, hi: int, tz: zoneinfo.ZoneInfo) -> list[tuple[str,
         out.append((day.isoformat(), lo, min(end, hi)))
         lo = min(end, hi)
     return out
+
+
+def local_day(t_ns: int, tz: zoneinfo.ZoneInfo) -> str:
+    """``YYYY-MM-DD`` of ``t_ns`` (ns since the epoch) in the site's time zone ``tz``."""
+    return datetime.fromtimestamp(t_ns / 1e9, tz).date().isoformat()

@@ -6,7 +6,9 @@ from __future__ import annotations
 import json
 import re
 import time
+from datetime import datetime
 from typing import Any
+from zoneinfo import ZoneInfo
 
 import httpx
 import pytest
@@ -444,3 +446,40 @@ def test_grafana_dashboard_queries_name_only_exported_metrics(client):
         "millwatch_remaining_life_years",
     ):
         assert needed in named
+
+
+def test_status_gauges_read_the_status_and_life_and_counters_start_at_zero(client, live_api):
+    """Starts today, last start peak, imbalance, stale channels and damage rates are the
+    status's and the life answer's values; every channel has a decode-error series per kind
+    from the start (0 here: the simulator sends none), so a dashboard's sum over it is 0."""
+    from service.api.metrics import DECODE_ERROR_KINDS
+
+    scraped = _scrape(client)
+    status = live_api.runtime.status[MILL]
+    stored = client.get(f"/mills/{MILL}/starts").json()["starts"]  # the store's, not the status
+    zone = ZoneInfo(live_api.runtime.mills[MILL].time_zone)
+    day = datetime.fromtimestamp(status.last_sample_ns / 1e9, zone).date().isoformat()
+    (today,) = scraped["millwatch_starts_today"]
+    assert today.value == sum(s["local_time"][:10] == day for s in stored) >= 1  # the fed start
+    (peak,) = scraped["millwatch_last_start_peak_percent"]
+    last = stored[-1]
+    sides = (last["switch_on_peak_pct"], last["short_circuit_peak_pct"])
+    assert peak.value == pytest.approx(max(p for p in sides if p is not None))
+    (when,) = scraped["millwatch_last_start_timestamp_seconds"]
+    assert when.value == pytest.approx(last["t_ns"] / 1e9)
+    (stale,) = scraped["millwatch_stale_channels"]
+    assert stale.value == len(status.stale_channels)
+    imbalance = scraped["millwatch_imbalance_percent"]
+    window = status.latest_steady
+    assert [s.value for s in imbalance] == ([] if window is None or window.imbalance_pct is None
+                                            else [pytest.approx(window.imbalance_pct)])  # fmt: skip
+    life = client.get(f"/mills/{MILL}/life").json()
+    rates = {(s.labels["component"], s.labels["basis"]): s.value
+             for s in scraped["millwatch_damage_rate_per_year"]}  # fmt: skip
+    assert rates and rates == pytest.approx({
+        (c, p["basis"]): p["rate_per_year"] for c, v in life["components"].items()
+        for p in v["projections"] if p["rate_per_year"] is not None})  # fmt: skip
+    errors = {(s.labels["channel"], s.labels["kind"]): s.value
+              for s in scraped["millwatch_decode_errors_total"]}  # fmt: skip
+    assert errors == {(c, k): 0 for c in status.channel_health for k in DECODE_ERROR_KINDS}
+    assert len(DECODE_ERROR_KINDS) >= 6

@@ -50,6 +50,9 @@ def test_demo_serves_simulated_mills_and_stops_by_itself(tmp_path):
                 mill = detail.json()
         assert mill is not None, "the demo never analysed a sample"
         assert mill["status"]["health"]["channels"]
+        lags = [c["lag_s"] for c in mill["status"]["health"]["channels"].values()]
+        assert all(lag >= 0 for lag in lags if lag is not None), lags  # replayed, never ahead
+        assert mill["status"]["last_sample_ns"] <= time.time_ns()
         assert mill["simulated"] is True and mill["status"]["simulated"] is True
         life = httpx.get(f"http://127.0.0.1:{port}/mills/{mill['id']}/life", timeout=5).json()
         assert life["simulated"] is True and life["status"] == "insufficient_history"
@@ -74,6 +77,7 @@ def test_demo_serves_simulated_mills_and_stops_by_itself(tmp_path):
     assert proc.returncode == 0, err
     printed = "\n".join(head) + out
     assert "SIMULATED" in printed
+    assert "  plant time replays from " in printed  # the demo says which past it replays
     assert f"opc.tcp://127.0.0.1:{opcua_port}/millwatch" in printed
     assert f"user 'operator', password {password!r}" in printed  # the demo prints its credentials
     assert list((tmp_path / "archive").glob("*.mcap")) and (tmp_path / "millwatch.db").exists()
