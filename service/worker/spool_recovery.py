@@ -19,6 +19,10 @@ exceeded: the spool's exact count is logged; the gateway down, so never publishe
 gap the block reveals: counted, stored and alarmed by the existing loss accounting, with its
 exact count.
 
+An implausible block (:func:`~service.worker.health.implausible_payload`: a forged sequence
+number, a jump beyond what its receive time allows) asks nothing: the admission drops it (a
+query for 2^63 blocks would be its damage).
+
 Only live blocks ask (not the archive replay of a restart: a gap in the archive was a loss
 when it was received). A channel never heard from asks nothing (its first block is no gap).
 The query runs on the worker thread, bounded by ``timeout_s`` per page; no spool for the
@@ -38,6 +42,7 @@ import zenoh
 from ingest.spool.query import SpoolAnswer, fetch_spooled
 from ingest.spool.store import payload_seq
 from service.worker.block_queue import QueuedBlock
+from service.worker.health import DEFAULT_LIMITS, AdmissionLimits, implausible_payload, last_block
 
 if TYPE_CHECKING:
     from service.worker.worker import Worker
@@ -57,6 +62,12 @@ Fetch = Callable[[str, int, int], SpoolAnswer]
 class _Seq(Protocol):
     @property
     def last_seq(self) -> int | None: ...
+
+    @property
+    def last_t0_ns(self) -> int | None: ...
+
+    @property
+    def last_sample_ns(self) -> int | None: ...
 
 
 class _Channels(Protocol):
@@ -78,8 +89,10 @@ class SpoolRecovery:
         route: Callable[[str], tuple[str, str] | None],
         health: Mapping[str, _Channels],
         handle: Callable[[QueuedBlock], None],
+        limits: AdmissionLimits = DEFAULT_LIMITS,
     ) -> None:
         self._fetch = fetch
+        self.limits = limits
         self._route = route
         self._health = health
         self._handle = handle
@@ -107,9 +120,12 @@ class SpoolRecovery:
         seq = payload_seq(item.payload) if route is not None else None
         if route is None or seq is None:
             return None
-        last = self._health[route[0]].channels[route[1]].last_seq
+        channel = self._health[route[0]].channels[route[1]]
+        last = channel.last_seq
         if last is None or seq <= last + 1:
             return None
+        if implausible_payload(last_block(channel), item.payload, item.recv_ns, self.limits):
+            return None  # (no query for a forged jump: the admission drops the block)
         return last + 1, seq - 1
 
     def _fill(self, item: QueuedBlock, first: int, last: int) -> None:
@@ -139,6 +155,7 @@ class SpoolRecovery:
 def attach_spool_recovery(worker: Worker, session: zenoh.Session) -> SpoolRecovery:
     """Have ``worker`` fill the gaps of its live blocks from the spools on ``session``."""
     fetch = partial(fetch_spooled, session, timeout=QUERY_TIMEOUT_S)
-    recovery = SpoolRecovery(fetch, worker.route, worker.health, worker.handle)
+    recovery = SpoolRecovery(fetch, worker.route, worker.health, worker.handle,
+                             worker.admission.limits)  # fmt: skip
     worker.before_live = recovery
     return recovery
