@@ -62,7 +62,6 @@ from pydantic import (
 from analytics.drivetrain.mill_config import MillConfig, describe_validation_error
 from ingest.keys import LAYOUT_VERSION, ROOT
 from ingest.mill_files import load_mill_config, load_mill_configs
-from service.worker.health import AdmissionLimits
 
 __all__ = [
     "REPORT_FORMATS",
@@ -157,8 +156,8 @@ class WorkerSettings(_Strict):
 
     * ``max_ahead_s``: how far ahead of its receive time a block may reach — its samples as
       sent, and where its sequence number puts them after its channel's last block (default
-      60 s: the gateways' clocks may run this far ahead of the worker's). Further is
-      implausible: archived as received, counted, alarmed, never analysed and never moving its
+      60 s: the gateways' clocks may run this far ahead of the worker's; a sender faster than
+      real time may run further ahead one block at a time). Further is implausible: archived as received, counted, alarmed, never analysed and never moving its
       channel's state (a forged sequence number 2^63, a +100,000 jump, a t0 in 2100).
     * ``max_block_bytes``: the largest block payload taken (default 1 MiB: 262,144 float32
       samples, over four minutes of a 1 kHz channel per block); larger ones are refused before
@@ -191,10 +190,6 @@ class WorkerSettings(_Strict):
                 f"float32 samples) to {2**31} bytes"
             )
         return value
-
-    def admission_limits(self) -> AdmissionLimits:
-        """The limits a block is judged by (:class:`~service.worker.health.AdmissionLimits`)."""
-        return AdmissionLimits(max_ahead_ns=round(self.max_ahead_s * 1e9))
 
     @field_validator("partition")
     @classmethod

@@ -69,6 +69,18 @@ class RuntimeCollector(Collector):
             "Blocks on keys of no configured mill.",
             value=sum(w.unrouted.values()) if w else 0,
         )
+        refused = CounterMetricFamily(
+            "millwatch_refused_blocks",
+            "Payloads refused before the queue and the archive, per key prefix (the mill): "
+            "reason oversize (longer than [worker] max_block_bytes) or unknown_key (a key under "
+            "the mill's prefix that is none of its configured channels).",
+            labels=["reason", "prefix"],
+        )
+        gate = self.runtime.gate
+        for reason, counts in (("oversize", gate.oversize), ("unknown_key", gate.unknown)):
+            for prefix, n in sorted(counts.copy().items()):
+                refused.add_metric([reason, prefix], n)
+        yield refused
 
     def _queue(self) -> Iterator[Metric]:
         q = self.runtime.queue
@@ -129,6 +141,13 @@ def mill_families(
         "(an older one).",
         labels=["mill", "channel", "kind"],
     )
+    implausible = CounterMetricFamily(
+        "millwatch_implausible_blocks",
+        "Blocks dropped as implausible at admission, per reason (README 'Admission': "
+        "seq_out_of_range, seq_ahead, t0_ahead, sample_rate, empty; lifetime): archived as "
+        "received, never analysed.",
+        labels=["mill", "channel", "reason"],
+    )
     clock = CounterMetricFamily(
         "millwatch_clock_fault_blocks",
         "Blocks whose t0 contradicted their sequence number (analysed at the sequence "
@@ -153,9 +172,11 @@ def mill_families(
             repeated.add_metric([mill, channel, "duplicate"], ch.duplicates)
             repeated.add_metric([mill, channel, "replay"], ch.replays)
             clock.add_metric([mill, channel], ch.clock_faults)
+            for reason, n in sorted(ch.implausible.items()):
+                implausible.add_metric([mill, channel, reason], n)
         samples.add_metric([mill], s.samples or 0)
         held.add_metric([mill], 1 if s.held_reason else 0)
-    yield from (errors, missing, repeated, clock, samples, held)
+    yield from (errors, missing, repeated, clock, implausible, samples, held)
 
 
 def open_alarms(rows: Iterable[Alarm]) -> Metric:

@@ -2,7 +2,7 @@
 
 Block path (``millwatch serve``; README "Data flow")::
 
-    zenoh callback ─▶ block_queue ─▶ archive_first (archiving thread): spool gap, archive (raw
+    zenoh callback ─▶ admission.IngressGate ─▶ block_queue ─▶ archive_first (archiving thread): spool gap, archive (raw
         bytes, every block) ─▶ its feed in memory, or — behind — the archive itself
     archive_first.ArchiveFirst.step (worker thread): for each block (a backlog's runs through
         the batch lane's arrays)
@@ -14,10 +14,13 @@ Modules, low to high (a module imports only those above it):
 
 * ``block_queue`` — the bounded queue between zenoh callbacks and the worker; drops counted.
 * ``health`` — per-channel sequencing (a block is new only if its sequence number is; repeats
-  and clock faults counted), lifetime counters (checkpointed), losses, staleness, rates, latency.
+  and clock faults counted), plausibility (a block judged against its channel's history and its
+  receive time: ``implausible_reason``), lifetime counters (checkpointed), losses, staleness,
+  rates, latency.
 * ``admission`` — :class:`~service.worker.admission.BlockAdmission`, the one decision whether a
-  block is analysed (route by key, decode, sequence) and its counters, for the live worker, its
-  replay and offline analysis alike.
+  block is analysed (route by key, decode, sequence, plausibility) and its counters, for the
+  live worker, its replay and offline analysis alike; ``IngressGate``, what a zenoh callback
+  may queue at all (no oversize payloads, no keys of no configured channel).
 * ``checkpoints`` — when each mill is checkpointed; which archived blocks a checkpoint covers.
 * ``partition`` — which configured mills this worker analyses when several share a router.
 * ``batch_lane`` — many blocks as arrays (archive replay, a live backlog): repeats dropped and

@@ -54,6 +54,7 @@ from service.worker.health import (
     MillHealth,
     implausible_payload,
     last_block,
+    lead_ns,
 )
 from service.worker.worker import BATCH_BLOCKS, Worker
 
@@ -106,6 +107,7 @@ class _Seq:
     last_seq: int | None = None
     last_t0_ns: int | None = None
     last_sample_ns: int | None = None
+    last_lead_ns: int = 0
 
 
 @dataclass
@@ -130,7 +132,8 @@ class ArchivedSeqs(dict[str, _Channels]):
         out.limits = limits
         for mill_id, mh in health.items():
             out[mill_id] = _Channels({
-                c: _Seq(h.last_seq, h.last_t0_ns, h.last_sample_ns) for c, h in mh.channels.items()
+                c: _Seq(h.last_seq, h.last_t0_ns, h.last_sample_ns, h.last_lead_ns)
+                for c, h in mh.channels.items()
             })  # fmt: skip
         return out
 
@@ -147,6 +150,7 @@ class ArchivedSeqs(dict[str, _Channels]):
             span = block_span_ns(payload)
             got.last_seq = seq
             got.last_t0_ns, got.last_sample_ns = span if span is not None else (None, None)
+            got.last_lead_ns = lead_ns(span[1], recv_ns) if span is not None else 0
 
 
 @dataclass

@@ -44,7 +44,7 @@ from ingest.archive.files import ArchivePosition
 from ingest.wire import DType, decode_headers
 from service.worker.block_queue import QueuedBlock
 from service.worker.checkpoints import covers
-from service.worker.health import DUPLICATE, ChannelHealth, MillHealth
+from service.worker.health import DUPLICATE, ChannelHealth, MillHealth, lead_ns
 
 __all__ = [
     "REPLAY_BLOCKS_PER_MILL",
@@ -259,7 +259,7 @@ class BatchLane:
         t0 = head["t0_ns"].astype(np.int64)
         names = self._channels[mill_id]
         health = self.worker.health[mill_id].channels
-        _observe(health, names, per_channel, head, raw, last_recv, n, fs)
+        _observe(health, names, per_channel, head, raw, (last_recv, recv[new]), n, fs)
         self.regular_blocks += len(kept)
         self.worker.accept_regular(mill_id, chan, t0, raw)
         return True
@@ -287,11 +287,14 @@ class BatchLane:
 
 def _observe(
     health: dict[str, ChannelHealth], names: list[str], per_channel: dict[int, np.ndarray],
-    head: np.ndarray, raw: np.ndarray, last_recv: dict[int, int], n: int, fs: float,
+    head: np.ndarray, raw: np.ndarray, recv: tuple[dict[int, int], np.ndarray], n: int,
+    fs: float,
 ) -> None:  # fmt: skip
     """:meth:`~service.worker.health.ChannelHealth.observe` of each block, per channel at once
-    (:meth:`~service.worker.health.ChannelHealth.observe_run`); ``last_recv``: each channel's
-    last receive time in the batch (ns; its last block, a repeat or not)."""
+    (:meth:`~service.worker.health.ChannelHealth.observe_run`); ``recv``: each channel's last
+    receive time in the batch (ns; its last block, a repeat or not), and each block's (as
+    ``head``)."""
+    last_recv, block_recv = recv
     # a finite sum proves every sample finite (one pass, no copies); otherwise count exactly
     count = raw.dtype.kind == "f" and not np.isfinite(raw.sum())
     duration = round(n * 1e9 / fs)
@@ -304,5 +307,5 @@ def _observe(
         t0_last = int(head["t0_ns"][last])
         health[names[ci]].observe_run(
             sel.size, samples, nonfinite, int(head["seq"][last]), t0_last,
-            t0_last + duration, last_recv[ci],
+            t0_last + duration, last_recv[ci], lead_ns(t0_last + duration, int(block_recv[last])),
         )  # fmt: skip

@@ -20,7 +20,10 @@ against the channel's history and its receive time before it may move anything
 (:func:`implausible_reason`, :class:`AdmissionLimits`): its sample rate must be the channel's
 configured one, it must hold samples, its sequence number must be at most :data:`MAX_SEQ`, and
 neither its samples as sent nor where its sequence number puts them (after the channel's last
-accepted block) may lie more than ``max_ahead_s`` after the time it was received. An
+accepted block) may end more than ``max_ahead_s`` after the time it was received — unless
+its channel already ran ahead and it adds at most its own length to that *lead* (how far the
+channel's last accepted block ended after its own receipt): a sender faster than real time
+(``simulate --publish --speed 10``) runs ahead one block at a time, a forged block jumps. An
 *implausible* block (a forged sequence number 2^63, a +100,000 jump, a t0 in the year 2100) is
 counted by reason and dropped: it never moves the channel's sequence position, times or loss
 counts, so one forged block cannot make every later real one a "replay" or a gap of 10^18
@@ -72,6 +75,7 @@ __all__ = [
     "implausible_payload",
     "implausible_reason",
     "last_block",
+    "lead_ns",
 ]
 
 SeqVerdict = Literal["first", "next", "gap", "duplicate", "replay", "implausible"]
@@ -93,9 +97,10 @@ _COUNTERS = ("blocks", "samples", "nonfinite_samples", "missing_blocks", "gaps",
 @dataclass(frozen=True)
 class AdmissionLimits:
     """How far a block may reach ahead of its receive time (``[worker] max_ahead_s``, ns
-    here): its samples as sent, and where its sequence number puts them. A gateway's clock may
-    run this far ahead of the worker's; the default 60 s allows generous NTP trouble while a
-    forged +100,000 jump (2.8 hours of 100-ms blocks) or a year-2100 t0 is far beyond it."""
+    here; further only one block at a time, see the module docstring): its samples as sent,
+    and where its sequence number puts them. A gateway's clock may run this far ahead of the worker's; the default 60 s allows
+    generous NTP trouble while a forged +100,000 jump (2.8 hours of 100-ms blocks) or a
+    year-2100 t0 is far beyond it."""
 
     max_ahead_ns: int = 60 * 10**9
 
@@ -104,22 +109,26 @@ DEFAULT_LIMITS = AdmissionLimits()
 
 
 def implausible_reason(
-    last: tuple[int, int, int] | None, seq: int, t0_ns: int, span_ns: float, recv_ns: int,
+    last: tuple[int, int, int, int] | None, seq: int, t0_ns: int, span_ns: float, recv_ns: int,
     limits: AdmissionLimits = DEFAULT_LIMITS,
 ) -> str | None:  # fmt: skip
     """Why a new block (sequence number ``seq``, first sample at ``t0_ns``, its samples
     spanning ``span_ns``) received at ``recv_ns`` is implausible after ``last`` = (last seq, its
-    t0, just past its last sample) of its channel (None: no history) — one of
-    :data:`IMPLAUSIBLE` but ``sample_rate``/``empty`` — or None when it is plausible. All
-    times ns since the Unix epoch (UTC); Python integers, so no value overflows."""
+    t0, just past its last sample, its lead) of its channel (None: no history; see
+    :func:`last_block`) — one of :data:`IMPLAUSIBLE` but ``sample_rate``/``empty`` — or None
+    when it is plausible. All times ns since the Unix epoch (UTC); Python integers, so no value
+    overflows."""
     if seq > MAX_SEQ:
         return "seq_out_of_range"
-    ahead = recv_ns + limits.max_ahead_ns
-    if not span_ns < 2**62 or t0_ns + round(span_ns) > ahead:
+    if not span_ns < 2**62:
+        return "t0_ahead"
+    span = round(span_ns)
+    ahead = recv_ns + max(limits.max_ahead_ns, span + (0 if last is None else last[3]))
+    if t0_ns + span > ahead:
         return "t0_ahead"
     if last is not None:
-        last_seq, last_t0, last_end = last
-        if last_t0 + (seq - last_seq) * (last_end - last_t0) + round(span_ns) > ahead:
+        last_seq, last_t0, last_end, _ = last
+        if last_t0 + (seq - last_seq) * (last_end - last_t0) + span > ahead:
             return "seq_ahead"
     return None
 
@@ -134,18 +143,28 @@ class _Position(Protocol):
     @property
     def last_sample_ns(self) -> int | None: ...
 
+    @property
+    def last_lead_ns(self) -> int: ...
 
-def last_block(channel: _Position) -> tuple[int, int, int] | None:
-    """(last seq, its t0, just past its last sample) of a channel's position (a
-    :class:`ChannelHealth`, or what the archiving thread keeps); None without one."""
+
+def last_block(channel: _Position) -> tuple[int, int, int, int] | None:
+    """(last seq, its t0, just past its last sample, its lead: how far that end lay after its
+    receipt, 0 when before) of a channel's position (a :class:`ChannelHealth`, or what the
+    archiving thread keeps); None without one."""
     seq, t0 = channel.last_seq, channel.last_t0_ns
     if seq is None or t0 is None:
         return None
-    return seq, t0, channel.last_sample_ns if channel.last_sample_ns is not None else t0
+    end = channel.last_sample_ns if channel.last_sample_ns is not None else t0
+    return seq, t0, end, channel.last_lead_ns
+
+
+def lead_ns(end_ns: int, recv_ns: int) -> int:
+    """How far a block ending at ``end_ns`` ran ahead of its receipt at ``recv_ns`` (0: not)."""
+    return max(0, end_ns - recv_ns)
 
 
 def implausible_payload(
-    last: tuple[int, int, int] | None, payload: bytes, recv_ns: int,
+    last: tuple[int, int, int, int] | None, payload: bytes, recv_ns: int,
     limits: AdmissionLimits = DEFAULT_LIMITS,
 ) -> str | None:  # fmt: skip
     """:func:`implausible_reason` of a payload, read from its header alone (for the archiving
@@ -214,6 +233,8 @@ class ChannelHealth:
     last_t0_ns: int | None = None
     last_sample_ns: int | None = None
     last_recv_ns: int | None = None
+    #: How far the last accepted block ended after it was received (ns; 0: it ended before).
+    last_lead_ns: int = 0
     #: Whether the last accepted block was a clock fault (a fault episode is reported once).
     in_clock_fault: bool = False
     fs_hz: float | None = None
@@ -297,6 +318,7 @@ class ChannelHealth:
         self.last_t0_ns = block.t0_ns
         self.last_sample_ns = block.t_end_ns
         self.last_recv_ns = recv_ns
+        self.last_lead_ns = lead_ns(self.last_sample_ns, recv_ns)
         return Admission(verdict, block, loss, fault)
 
     def implausible_reason(self, block: Block, recv_ns: int) -> str | None:
@@ -338,14 +360,18 @@ class ChannelHealth:
         return not np.any(np.abs(np.diff(t0_ns.astype(np.int64)) - step_ns) > tolerance)
 
     def _within_ahead(self, t0_ns: np.ndarray, step_ns: int, recv_ns: np.ndarray) -> bool:
-        """Whether no block of a run (each ``step_ns`` long) reaches more than ``max_ahead``
-        past its receive time, neither as sent nor where its predecessor puts it (the times
-        :meth:`accept` judges)."""
+        """Whether no block of a run (each ``step_ns`` long) ends further past its receive time
+        than ``max_ahead`` or its predecessor's lead plus its own length, neither as sent nor
+        where its predecessor puts it (the times :meth:`accept` judges)."""
         t0 = t0_ns.astype(np.int64)
+        recv = recv_ns.astype(np.int64)
         given = np.empty_like(t0)
         given[1:] = t0[:-1] + step_ns
         given[0] = t0[0] if self.last_sample_ns is None else self.last_sample_ns
-        latest = recv_ns.astype(np.int64) + (self.limits.max_ahead_ns - step_ns)
+        lead = np.empty_like(t0)
+        lead[1:] = np.maximum(0, t0[:-1] + step_ns - recv[:-1])
+        lead[0] = self.last_lead_ns if self.last_seq is not None else 0
+        latest = recv + np.maximum(self.limits.max_ahead_ns, lead + step_ns) - step_ns
         return not np.any(np.maximum(t0, given) > latest)
 
     def repeats_in(self, seq: np.ndarray) -> np.ndarray:
@@ -381,13 +407,14 @@ class ChannelHealth:
 
     def observe_run(
         self, blocks: int, samples: int, nonfinite: int, last_seq: int, last_t0_ns: int,
-        last_sample_ns: int, last_recv_ns: int,
+        last_sample_ns: int, last_recv_ns: int, last_lead_ns: int,
     ) -> None:  # fmt: skip
         """Account at once for a run of ``blocks`` decoded blocks (``samples`` in all,
         ``nonfinite`` of them not finite) whose sequence numbers follow on from
         :attr:`last_seq` up to ``last_seq`` and whose t0 agree with them, without gap, repeat or
         clock fault: what :meth:`observe` of each would count (the batch lane's regular
-        blocks)."""
+        blocks); ``last_lead_ns``: the lead of the last of them (:func:`lead_ns`)."""
+        self.last_lead_ns = last_lead_ns
         self.blocks += blocks
         self.samples += samples
         self.nonfinite_samples += nonfinite
@@ -408,6 +435,7 @@ class ChannelHealth:
         out["implausible"] = dict(self.implausible)
         out["last_seq"], out["last_t0_ns"] = self.last_seq, self.last_t0_ns
         out["last_sample_ns"], out["last_recv_ns"] = self.last_sample_ns, self.last_recv_ns
+        out["last_lead_ns"] = self.last_lead_ns
         return out
 
     def restore_counters(self, saved: dict[str, Any]) -> None:
@@ -420,6 +448,7 @@ class ChannelHealth:
         self.last_t0_ns = saved.get("last_t0_ns")
         self.last_sample_ns = saved.get("last_sample_ns")
         self.last_recv_ns = saved.get("last_recv_ns")
+        self.last_lead_ns = int(saved.get("last_lead_ns", 0))
 
     def stale(self, now_ns: int, stale_after_s: float) -> bool:
         return self.last_recv_ns is None or now_ns - self.last_recv_ns > stale_after_s * 1e9

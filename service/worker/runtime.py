@@ -63,11 +63,11 @@ from service.reports.month_end import MonthEndJob
 from service.settings import ServiceSettings
 from service.status import MillStatus
 from service.store.database import Store
+from service.worker.admission import IngressGate
 from service.worker.archive_first import PUT_WAIT_S, ArchivedSeqs, ArchiveFirst, SharedArchive
 from service.worker.block_queue import BlockQueue
 from service.worker.drain_watch import DrainWatch
-from service.worker.health import MillHealth
-from service.worker.ingress import IngressGate
+from service.worker.health import AdmissionLimits, MillHealth
 from service.worker.recovery import recover
 from service.worker.spool_recovery import QUERY_TIMEOUT_S, SpoolRecovery
 from service.worker.worker import AckRequest, MillPipeline, Worker
@@ -158,7 +158,7 @@ class ServiceRuntime:
             self.store,
             shared,
             checkpoint_seconds=s.worker.checkpoint_seconds,
-            limits=s.worker.admission_limits(),
+            limits=AdmissionLimits(max_ahead_ns=round(s.worker.max_ahead_s * 1e9)),
         )
         z = s.zenoh
         self.session = open_retrying(build_config(mode=z.mode, listen=z.listen, connect=z.connect))

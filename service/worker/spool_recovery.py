@@ -69,6 +69,9 @@ class _Seq(Protocol):
     @property
     def last_sample_ns(self) -> int | None: ...
 
+    @property
+    def last_lead_ns(self) -> int: ...
+
 
 class _Channels(Protocol):
     @property
