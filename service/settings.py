@@ -157,8 +157,9 @@ class WorkerSettings(_Strict):
     * ``max_ahead_s``: how far ahead of its receive time a block may reach — its samples as
       sent, and where its sequence number puts them after its channel's last block (default
       60 s: the gateways' clocks may run this far ahead of the worker's; a sender faster than
-      real time may run further ahead one block at a time). Further is implausible: archived as received, counted, alarmed, never analysed and never moving its
-      channel's state (a forged sequence number 2^63, a +100,000 jump, a t0 in 2100).
+      real time may run further ahead one block at a time). Further is implausible: archived
+      as received, counted, alarmed, never analysed and never moving its channel's state (a
+      forged sequence number 2^63, a +100,000 jump, a t0 in 2100).
     * ``max_block_bytes``: the largest block payload taken (default 1 MiB: 262,144 float32
       samples, over four minutes of a 1 kHz channel per block); larger ones are refused before
       the archive, counted per mill and logged once.

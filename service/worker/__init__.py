@@ -2,8 +2,9 @@
 
 Block path (``millwatch serve``; README "Data flow")::
 
-    zenoh callback ─▶ admission.IngressGate ─▶ block_queue ─▶ archive_first (archiving thread): spool gap, archive (raw
-        bytes, every block) ─▶ its feed in memory, or — behind — the archive itself
+    zenoh callback ─▶ admission.IngressGate (size, key) ─▶ block_queue
+    ─▶ archive_first (archiving thread): spool gap, archive (raw bytes, every block) ─▶ its
+        feed in memory, or — behind — the archive itself
     archive_first.ArchiveFirst.step (worker thread): for each block (a backlog's runs through
         the batch lane's arrays)
         admission (route, decode, health) ─▶ mill_job.MillJob (queued)

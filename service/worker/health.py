@@ -98,9 +98,9 @@ _COUNTERS = ("blocks", "samples", "nonfinite_samples", "missing_blocks", "gaps",
 class AdmissionLimits:
     """How far a block may reach ahead of its receive time (``[worker] max_ahead_s``, ns
     here; further only one block at a time, see the module docstring): its samples as sent,
-    and where its sequence number puts them. A gateway's clock may run this far ahead of the worker's; the default 60 s allows
-    generous NTP trouble while a forged +100,000 jump (2.8 hours of 100-ms blocks) or a
-    year-2100 t0 is far beyond it."""
+    and where its sequence number puts them. A gateway's clock may run this far ahead of the
+    worker's; the default 60 s allows generous NTP trouble while a forged +100,000 jump (2.8
+    hours of 100-ms blocks) or a year-2100 t0 is far beyond it."""
 
     max_ahead_ns: int = 60 * 10**9
 
