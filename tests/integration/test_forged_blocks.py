@@ -131,8 +131,13 @@ def _after_checks(
     )  # fmt: skip
     if out.returncode != 0:
         broken["analyze"] = out.stderr.decode(errors="replace")[-2000:]
-    elif (got := offline_results(json.loads(out.stdout))) != offline_results(clean):
-        broken["analyze"] = differences(got, offline_results(clean))
+    else:
+        report = json.loads(out.stdout)
+        if (got := offline_results(report)) != offline_results(clean):
+            broken["analyze"] = differences(got, offline_results(clean))
+        implausible = report["reading"]["implausible_blocks"]
+        if sum(implausible.values()) != sum(sent.values()) - sent["valid"]:
+            broken["analyze_implausible"] = implausible
     return broken
 
 
