@@ -450,6 +450,18 @@ class ChannelHealth:
         self.last_recv_ns = saved.get("last_recv_ns")
         self.last_lead_ns = int(saved.get("last_lead_ns", 0))
 
+    def drop_implausible_position(self) -> bool:
+        """Forget a sequence position no plausible block can have left (a checkpoint written
+        before issue 26 by a worker a forged block had poisoned: seq 2^63, times beyond int64),
+        so the real blocks are new again; the lifetime counters stay. Whether it was dropped."""
+        seq, end = self.last_seq, self.last_sample_ns
+        if (seq is None or seq <= MAX_SEQ) and (end is None or end < 2**63):
+            return False
+        self.last_seq = self.last_t0_ns = self.last_sample_ns = None
+        self.last_lead_ns = 0
+        self.in_clock_fault = False
+        return True
+
     def stale(self, now_ns: int, stale_after_s: float) -> bool:
         return self.last_recv_ns is None or now_ns - self.last_recv_ns > stale_after_s * 1e9
 

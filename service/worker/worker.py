@@ -779,6 +779,12 @@ class Worker:
                     channels[channel].restore_counters(saved[channel])
                 else:
                     channels[channel].last_seq = seq
+                if channels[channel].drop_implausible_position():
+                    log.warning(
+                        "%s/%s: the checkpoint's sequence position (seq %s) is implausible, "
+                        "left by a forged block before this version; its next block starts the "
+                        "channel afresh", mill_id, channel, seq,
+                    )  # fmt: skip
 
     def _restore_mill(self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None) -> None:
         """Restore one mill's pipeline; :class:`CheckpointRestoreError` (naming the mill, the

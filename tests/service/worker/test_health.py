@@ -213,3 +213,18 @@ def test_a_sender_faster_than_real_time_runs_ahead_one_block_at_a_time():
     assert h.accept(block(6610, t0=NOW + 6610 * STEP), recv).implausible == "t0_ahead"
     assert h.accept(block(6610, t0=NOW + 6000 * STEP), recv).implausible == "seq_ahead"
     assert h.accept(block(6000, t0=NOW + 6000 * STEP), recv).verdict == "next"
+
+
+def test_a_poisoned_checkpoint_position_is_forgotten_and_the_counters_kept():
+    """A checkpoint written before issue 26 after a forged seq 2^63: restored, the channel would
+    drop every real block as a replay; its position is forgotten instead."""
+    h = _history()
+    saved = h.counters() | {"last_seq": 2**63, "missing_blocks": 2**63 - 11}
+    again = ChannelHealth(fs_hz=1000.0)
+    again.restore_counters(saved)
+    assert again.drop_implausible_position()
+    assert (again.last_seq, again.last_t0_ns, again.missing_blocks) == (None, None, 2**63 - 11)
+    assert again.accept(block(10, t0=NOW), recv_ns=NOW + STEP).verdict == "first"
+    fine = ChannelHealth()
+    fine.restore_counters(h.counters())
+    assert not fine.drop_implausible_position() and fine.last_seq == 9
