@@ -103,6 +103,7 @@ class LocalBackend:
             "blocks_handled": w.blocks_handled if w else 0,
             "archive_errors": w.archive_errors if w else 0,
             "unrouted_blocks": sum(w.unrouted.values()) if w else 0,
+            "refused_blocks": rt.gate.refused,
             "queue_depth_blocks": rt.queue.depth,
             "queue_dropped_blocks": rt.queue.dropped,
             "checks": checks,
