@@ -76,9 +76,9 @@ class RuntimeCollector(Collector):
             "the mill's prefix that is none of its configured channels).",
             labels=["reason", "prefix"],
         )
-        gate = self.runtime.gate
-        for reason, counts in (("oversize", gate.oversize), ("unknown_key", gate.unknown)):
-            for prefix, n in sorted(counts.copy().items()):
+        oversize, unknown = self.runtime.gate.counts()
+        for reason, counts in (("oversize", oversize), ("unknown_key", unknown)):
+            for prefix, n in sorted(counts.items()):
                 refused.add_metric([reason, prefix], n)
         yield refused
 

@@ -255,7 +255,14 @@ class IngressGate:
     @property
     def refused(self) -> int:
         """Payloads refused, in all."""
-        return sum(self.oversize.values()) + sum(self.unknown.values())
+        oversize, unknown = self.counts()
+        return sum(oversize.values()) + sum(unknown.values())
+
+    def counts(self) -> tuple[dict[str, int], dict[str, int]]:
+        """Copies of the refusals per prefix (oversize, unknown key), taken under the lock the
+        callbacks count under (any thread may read)."""
+        with self._lock:
+            return dict(self.oversize), dict(self.unknown)
 
     def _refuse(self, counter: Counter[str], key: str, kind: str) -> bool:
         """Count a refusal under ``key``'s prefix; whether it is the first of its prefix and
