@@ -109,7 +109,15 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
         "telemetry interference spikes per minute (Diering 2011 §5.2.2)",
     ),
     "sequence_gaps": QuantitySpec(
-        "blocks/min", Kind.LEVEL, "channel", "blocks missing from the sequence, per minute"
+        "blocks", Kind.EVENT, "channel",
+        "blocks of one unrecoverable loss: a sequence gap that no gateway cache or spool "
+        "filled, observed when the block after it arrives; context: first_seq, last_seq",
+    ),
+    "implausible_blocks": QuantitySpec(
+        "blocks", Kind.EVENT, "channel",
+        "one block dropped as implausible (README 'Admission': a sequence number or t0 "
+        "beyond what its receive time allows, a foreign sample rate, no samples); context: "
+        "reason",
     ),
     "analysis_lag": QuantitySpec(
         "s", Kind.LEVEL, None,

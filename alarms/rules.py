@@ -42,7 +42,8 @@ remaining_life (level)      warning < 1.0×, alarm < 0.5× the      ≥ 1.05× f
                             remaining design life (*option*)
 stale_channel (level)       warning > 10 s (*option*)             data again             §5.1
 spike_rate (level)          warning > 6/min (*option*)            ≤ 3/min for 5 min      §5.2.2
-sequence_gaps (level)       warning > 0/min (*option*)            0 for 5 min            §5.1
+sequence_gaps (event)       warning > 0 blocks lost (*option*)    5 min without; latched §5.1
+implausible_blocks (event)  warning > 0 (*option*)                5 min without; latched §5.1
 archive_write_failures      alarm > 0 (*option*)                  3 clean reports;       DESIGN
 (event)                                                           latched
 store_write_failures        warning > 0 (*option*)                3 clean reports;       DESIGN
@@ -431,15 +432,36 @@ def _spike_rate(config: MillConfig) -> Rule:
 
 
 def _sequence_gaps(config: MillConfig) -> Rule:
-    """Blocks missing from a channel's sequence (Diering 2011 §5.1 telemetry path; the wire
-    format's sequence numbers)."""
+    """Blocks of a channel lost for good (Diering 2011 §5.1 telemetry path; the wire format's
+    sequence numbers): an event per unrecoverable loss, raised at the first one with its
+    count (gaps the gateways' caches or spools fill are no loss). Latched: the data is gone,
+    someone must see it; the condition clears after ``data_quality_quiet_s`` without a loss."""
     a = config.alarms
     return Rule(
-        "sequence_gaps", "sequence_gaps", _levels((Severity.WARNING, a.sequence_gaps_warn_per_min)),
-        headline="Data blocks missing{where}: {value} ({time})",
-        advice="check the sensor gateway and the network between gateway and service",
-        source="Diering 2011 §5.1", value_format="{:.0f} per minute",
-        raise_delay_s=a.raise_delay_s, clear_delay_s=a.clear_delay_s,
+        "sequence_gaps", "sequence_gaps", _levels((Severity.WARNING, a.sequence_gaps_warn_blocks)),
+        headline="Data lost{where}: {value}{seqs}, found at {time}",
+        advice="check the sensor gateway, its spool and the network between gateway and "
+        "service; the lost span is a data-quality event of the mill",
+        source="Diering 2011 §5.1", value_format="{:.0f} blocks",
+        clauses=(("seqs", " (seq {first_seq}–{last_seq})", ""),),
+        quiet_s_to_clear=a.data_quality_quiet_s, latched=True,
+    )  # fmt: skip
+
+
+def _implausible(config: MillConfig) -> Rule:
+    """Blocks dropped as implausible at admission (README "Admission"): a forged or broken
+    sender on the mill's keys. Event, latched; clears after ``data_quality_quiet_s`` without
+    one."""
+    a = config.alarms
+    return Rule(
+        "implausible_blocks", "implausible_blocks", _levels((Severity.WARNING, 0.0)),
+        headline="Implausible data block dropped{where} ({reason}) at {time}",
+        advice="a sender on this mill's keys publishes sequence numbers or times its history "
+        "and the clock rule out: check the gateway's clock and configuration, and who may "
+        "publish on the mill's keys (zenoh access control)",
+        source="Diering 2011 §5.1", value_format="{:.0f} blocks",
+        criterion="warning: any implausible block",
+        quiet_s_to_clear=a.data_quality_quiet_s, latched=True,
     )  # fmt: skip
 
 
@@ -522,7 +544,8 @@ def _load_sharing(config: MillConfig) -> Rule:
 
 _BUILDERS = (
     _start_peak, _starts_per_month, _oscillation, _bending, _barring, _unexplained_peak,
-    _resonance, _remaining_life, _stale, _spike_rate, _sequence_gaps, _archive, _store,
+    _resonance, _remaining_life, _stale, _spike_rate, _sequence_gaps, _implausible, _archive,
+    _store,
     _load_sharing, _report_delivery, _analysis_lag,
 )  # fmt: skip
 

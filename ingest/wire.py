@@ -304,9 +304,12 @@ def block_span_ns(payload: bytes | bytearray | memoryview) -> tuple[int, int] | 
     if len(payload) < HEADER_SIZE:
         return None
     magic, version, _, t0_ns, fs, _, _, _, _, n = HEADER.unpack_from(payload)
-    if magic != MAGIC or version != FORMAT_VERSION or not 0.0 < fs < _INF:
+    span = (
+        n * 1e9 / fs if magic == MAGIC and version == FORMAT_VERSION and 0.0 < fs < _INF else _INF
+    )
+    if not span < _INF:  # (a subnormal fs makes the span infinite: no int, no block)
         return None
-    return t0_ns, t0_ns + round(n * 1e9 / fs)
+    return t0_ns, t0_ns + round(span)
 
 
 #: The v1 header as a numpy record (same layout as :data:`HEADER`), for many blocks at once.

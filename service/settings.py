@@ -224,6 +224,18 @@ class WorkerSettings(_Strict):
       or after this many seconds with whatever is up (default 10 s: 2.5 times zenoh's longest
       connect retry period, 4 s). Gateways with plain publishers are never seen as up: their
       mills are subscribed after the wait (0: subscribe at once, no recovery wait).
+
+    Admission (README "Admission": what a block from any peer must be to be analysed):
+
+    * ``max_ahead_s``: how far ahead of its receive time a block may reach — its samples as
+      sent, and where its sequence number puts them after its channel's last block (default
+      60 s: the gateways' clocks may run this far ahead of the worker's; a sender faster than
+      real time may run further ahead one block at a time). Further is implausible: archived
+      as received, counted, alarmed, never analysed and never moving its channel's state (a
+      forged sequence number 2^63, a +100,000 jump, a t0 in 2100).
+    * ``max_block_bytes``: the largest block payload taken (default 1 MiB: 262,144 float32
+      samples, over four minutes of a 1 kHz channel per block); larger ones are refused before
+      the archive, counted per mill and logged once.
     """
 
     queue_blocks: Annotated[int, Field(gt=0)] = 200_000
@@ -233,6 +245,25 @@ class WorkerSettings(_Strict):
     partition: tuple[str, ...] = ()
     recovery_jobs: Annotated[int, Field(ge=0, le=256)] = 0
     gateway_wait_s: Annotated[float, Field(ge=0, le=600)] = 10.0
+    max_ahead_s: float = 60.0
+    max_block_bytes: int = 2**20
+
+    @field_validator("max_ahead_s")
+    @classmethod
+    def _ahead(cls, value: float) -> float:
+        if not 1.0 <= value <= 86_400.0:  # (NaN fails too)
+            raise ValueError(f"{value!r} s is out of range: give 1 to 86400 s (one day)")
+        return value
+
+    @field_validator("max_block_bytes")
+    @classmethod
+    def _block_bytes(cls, value: int) -> int:
+        if not 4096 <= value <= 2**31:
+            raise ValueError(
+                f"{value!r} bytes is out of range: give 4096 (a 40-byte header and 1,014 "
+                f"float32 samples) to {2**31} bytes"
+            )
+        return value
 
     @field_validator("partition")
     @classmethod

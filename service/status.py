@@ -44,6 +44,11 @@ class ChannelStatus(_Reported):
     replays: int
     clock_faults: int = Field(description="Blocks whose t0 contradicted their sequence number.")
     decode_errors: dict[str, int] = Field(description="Undecodable blocks by kind.")
+    implausible: dict[str, int] = Field(
+        default_factory=dict,
+        description="Implausible blocks dropped, by reason (sample_rate, empty, "
+        "seq_out_of_range, t0_ahead, seq_ahead; README 'Admission').",
+    )
     last_seq: int | None
     last_sample_ns: int | None = Field(description="End of the last block (sample clock), ns.")
     last_recv_ns: int | None = Field(description="When the last block arrived (wall clock), ns.")

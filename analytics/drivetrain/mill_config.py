@@ -319,7 +319,8 @@ class AlarmThresholds(_Frozen):
     stale_after_s: Positive = 10.0                # no data from a channel this long: warning
     spike_rate_warn_per_min: Positive = 6.0
     spike_rate_deadband_per_min: NonNegative = 3.0
-    sequence_gaps_warn_per_min: NonNegative = 0.0
+    sequence_gaps_warn_blocks: NonNegative = 0.0  # blocks lost in one unrecoverable loss
+    data_quality_quiet_s: Positive = 300.0        # no further loss / implausible block: clear
     archive_clean_reports_to_clear: Annotated[int, Field(ge=1)] = 3
     analysis_lag_warn_s: Positive = 120.0         # analysis behind the archive this long
     imbalance_warn_pct: Positive = 10.0           # dual drives: load-sharing imbalance, %

@@ -104,6 +104,7 @@ class LocalBackend:
             "archive_errors": w.archive_errors if w else 0,
             "write_failures": {t: f["failures_total"] for t, f in rt.write_faults().items()},
             "unrouted_blocks": sum(w.unrouted.values()) if w else 0,
+            "refused_blocks": rt.gate.refused,
             "queue_depth_blocks": rt.queue.depth,
             "queue_dropped_blocks": rt.queue.dropped,
             "checks": checks,

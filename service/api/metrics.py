@@ -80,14 +80,26 @@ class RuntimeCollector(Collector):
             value=sum(w.unrouted.values()) if w else 0,
         )
         refused = CounterMetricFamily(
+            "millwatch_refused_blocks",
+            "Payloads refused before the queue and the archive, per key prefix (the mill): "
+            "reason oversize (longer than [worker] max_block_bytes) or unknown_key (a key under "
+            "the mill's prefix that is none of its configured channels).",
+            labels=["reason", "prefix"],
+        )
+        oversize, unknown = self.runtime.gate.counts()
+        for reason, counts in (("oversize", oversize), ("unknown_key", unknown)):
+            for prefix, n in sorted(counts.items()):
+                refused.add_metric([reason, prefix], n)
+        yield refused
+        checkpoints = CounterMetricFamily(
             "millwatch_checkpoints_refused",
             "Damaged checkpoints (truncated, changed, not JSON: their checksum failed) refused "
             "at start, per mill; the mill started from its previous checkpoint or the archive.",
             labels=["mill"],
         )
         for mill, n in sorted((w.checkpoints_refused if w else Counter()).items()):
-            refused.add_metric([mill], n)
-        yield refused
+            checkpoints.add_metric([mill], n)
+        yield checkpoints
 
     def _write_faults(self) -> Iterator[Metric]:
         """Failed write attempts per target and whether each is writable now
@@ -191,6 +203,13 @@ def mill_families(
         "(an older one).",
         labels=["mill", "channel", "kind"],
     )
+    implausible = CounterMetricFamily(
+        "millwatch_implausible_blocks",
+        "Blocks dropped as implausible at admission, per reason (README 'Admission': "
+        "seq_out_of_range, seq_ahead, t0_ahead, sample_rate, empty; lifetime): archived as "
+        "received, never analysed.",
+        labels=["mill", "channel", "reason"],
+    )
     clock = CounterMetricFamily(
         "millwatch_clock_fault_blocks",
         "Blocks whose t0 contradicted their sequence number (analysed at the sequence "
@@ -215,9 +234,11 @@ def mill_families(
             repeated.add_metric([mill, channel, "duplicate"], ch.duplicates)
             repeated.add_metric([mill, channel, "replay"], ch.replays)
             clock.add_metric([mill, channel], ch.clock_faults)
+            for reason, n in sorted(ch.implausible.items()):
+                implausible.add_metric([mill, channel, reason], n)
         samples.add_metric([mill], s.samples or 0)
         held.add_metric([mill], 1 if s.held_reason else 0)
-    yield from (errors, missing, repeated, clock, samples, held)
+    yield from (errors, missing, repeated, clock, implausible, samples, held)
 
 
 def open_alarms(rows: Iterable[Alarm], mills: Iterable[str] = ()) -> Metric:

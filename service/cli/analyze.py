@@ -271,6 +271,7 @@ _READING = {
     "missing_blocks": "blocks missing (sequence gaps)",
     "repeated_blocks": "repeated blocks (dropped, as live)",
     "clock_fault_blocks": "blocks with a clock fault (placed by sequence number)",
+    "implausible_blocks": "implausible blocks (skipped, as live; README 'Admission')",
     "gap_samples": "samples of gaps (NaN)",
     "late_blocks": "blocks too late to align (dropped)",
 }

@@ -44,6 +44,11 @@ _WORKER_COUNTERS = (
     ("millwatch_blocks_handled", "blocks_handled", "Blocks taken off the queue and handled."),
     ("millwatch_archive_errors", "archive_errors", "Failed MCAP archive writes."),
     ("millwatch_unrouted_blocks", "unrouted_blocks", "Blocks on keys of no configured mill."),
+    (
+        "millwatch_refused_blocks",
+        "refused_blocks",
+        "Payloads refused before the queue: oversize, or on a key of no configured channel.",
+    ),
     ("millwatch_queue_dropped_blocks", "queue_dropped_blocks", "Blocks dropped: queue full."),
 )
 

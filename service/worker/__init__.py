@@ -2,9 +2,10 @@
 
 Block path (``millwatch serve``; README "Data flow")::
 
-    zenoh callback ─▶ block_queue ─▶ archive_first (archiving thread): a gap ─▶ catch-up
-        thread (spooled span, then the mill's held blocks); archive (raw bytes, every block)
-        ─▶ its feed in memory, or — behind — the archive itself
+    zenoh callback ─▶ admission.IngressGate (size, key) ─▶ block_queue
+    ─▶ archive_first (archiving thread): a gap ─▶ catch-up thread (spooled span, then the
+        mill's held blocks); archive (raw bytes, every block) ─▶ its feed in memory, or —
+        behind — the archive itself
     archive_first.ArchiveFirst.step (worker thread): for each block (a backlog's runs through
         the batch lane's arrays)
         admission (route, decode, health) ─▶ mill_job.MillJob (queued)
@@ -15,12 +16,14 @@ Modules, low to high (a module imports only those above it):
 
 * ``block_queue`` — the bounded queue between zenoh callbacks and the worker; drops counted.
 * ``health`` — per-channel sequencing (a block is new only if its sequence number is; repeats
-  and clock faults counted), lifetime counters (checkpointed), losses, staleness, rates, latency;
-  the archive's and the store's write-failure episodes (``WriteEpisodes``: ``/ready``, metric,
-  alarms, one log line per episode).
+  and clock faults counted), plausibility (a block judged against its channel's history and its
+  receive time: ``implausible_reason``), lifetime counters (checkpointed), losses, staleness,
+  rates, latency; the archive's and the store's write-failure episodes (``WriteEpisodes``:
+  ``/ready``, metric, alarms, one log line per episode).
 * ``admission`` — :class:`~service.worker.admission.BlockAdmission`, the one decision whether a
-  block is analysed (route by key, decode, sequence) and its counters, for the live worker, its
-  replay and offline analysis alike.
+  block is analysed (route by key, decode, sequence, plausibility) and its counters, for the
+  live worker, its replay and offline analysis alike; ``IngressGate``, what a zenoh callback
+  may queue at all (no oversize payloads, no keys of no configured channel).
 * ``checkpoints`` — when each mill is checkpointed; which archived blocks a checkpoint covers;
   what a mill whose checkpoints are damaged (refused: their checksum) starts from instead.
 * ``partition`` — which configured mills this worker analyses when several share a router.

@@ -46,9 +46,18 @@ from ingest.archive.batches import MessageBatch, archive_batches
 from ingest.archive.files import ArchivePosition, archive_file_order
 from ingest.archive.writer import ArchiveWriter
 from ingest.spool.store import payload_seq
+from ingest.wire import block_span_ns
 from service.worker.batch_lane import BatchLane
 from service.worker.block_queue import BlockQueue, QueuedBlock
-from service.worker.health import MillHealth, WriteEpisodes
+from service.worker.health import (
+    DEFAULT_LIMITS,
+    AdmissionLimits,
+    MillHealth,
+    WriteEpisodes,
+    implausible_payload,
+    last_block,
+    lead_ns,
+)
 from service.worker.worker import BATCH_BLOCKS, Worker
 
 __all__ = ["ArchiveFirst", "ArchivedSeqs", "SharedArchive"]
@@ -173,6 +182,9 @@ _KEPT = (
 @dataclass
 class _Seq:
     last_seq: int | None = None
+    last_t0_ns: int | None = None
+    last_sample_ns: int | None = None
+    last_lead_ns: int = 0
 
 
 @dataclass
@@ -185,22 +197,37 @@ class ArchivedSeqs(dict[str, _Channels]):
     health (``[mill].channels[channel].last_seq``): what the spool recovery asks about a live
     block, since the analysis's own health lags the archive while it is behind."""
 
+    limits: AdmissionLimits = DEFAULT_LIMITS
+
     @classmethod
-    def of(cls, health: dict[str, MillHealth]) -> ArchivedSeqs:
-        """Start from the worker's health (its checkpoints' and the recovery's positions)."""
+    def of(
+        cls, health: dict[str, MillHealth], limits: AdmissionLimits = DEFAULT_LIMITS
+    ) -> ArchivedSeqs:
+        """Start from the worker's health (its checkpoints' and the recovery's positions);
+        ``limits``: what is plausible (the worker's admission's)."""
         out = cls()
+        out.limits = limits
         for mill_id, mh in health.items():
-            out[mill_id] = _Channels({c: _Seq(h.last_seq) for c, h in mh.channels.items()})
+            out[mill_id] = _Channels({
+                c: _Seq(h.last_seq, h.last_t0_ns, h.last_sample_ns, h.last_lead_ns)
+                for c, h in mh.channels.items()
+            })  # fmt: skip
         return out
 
-    def note(self, route: tuple[str, str] | None, payload: bytes) -> None:
-        """A block of ``route`` (mill, channel) was archived."""
+    def note(self, route: tuple[str, str] | None, payload: bytes, recv_ns: int) -> None:
+        """A block of ``route`` (mill, channel) received at ``recv_ns`` was archived; an
+        implausible one (:func:`~service.worker.health.implausible_payload`) moves nothing."""
         seq = payload_seq(payload) if route is not None else None
         if route is None or seq is None:
             return
         got = self[route[0]].channels[route[1]]
-        if got.last_seq is None or seq > got.last_seq:
+        if got.last_seq is not None and seq <= got.last_seq:
+            return
+        if implausible_payload(last_block(got), payload, recv_ns, self.limits) is None:
+            span = block_span_ns(payload)
             got.last_seq = seq
+            got.last_t0_ns, got.last_sample_ns = span if span is not None else (None, None)
+            got.last_lead_ns = lead_ns(span[1], recv_ns) if span is not None else 0
 
 
 @dataclass
@@ -283,7 +310,7 @@ class ArchiveFirst:
             self._last = after
             self.archived += 1
             self._newest_ns = max(self._newest_ns, item.recv_ns)
-            self.seqs.note(self._route(item.key), item.payload)
+            self.seqs.note(self._route(item.key), item.payload, item.recv_ns)
             if self._behind:
                 return
             if len(self._feed) < self.capacity:

@@ -6,8 +6,9 @@ alignment); replaying an hour of 50 mills is 7.2 million blocks. :class:`BatchLa
 :class:`~ingest.archive.batches.MessageBatch` and, per mill, treats the blocks as arrays when
 they are *regular* once their repeats are dropped — every block well-formed at the mill's rate,
 all of one length and dtype, and each channel's new blocks following on from the last one seen
-(no gap, no clock fault). Repeats (a sequence number not beyond the highest one before it: the
-overlap every recovery brings, of its history with the archive) are found per channel at once
+(no gap, no clock fault, nothing implausible). Repeats (a sequence number not beyond the highest
+one before it: the overlap every recovery brings, of its history with the archive) are found
+per channel at once
 (:meth:`~service.worker.health.ChannelHealth.repeats_in`), counted by kind exactly as the
 admission counts them one by one (``BlockSink.repeated``) and dropped. Then the health counters
 move in one step per channel, the samples are gathered in one step, and the
@@ -43,7 +44,7 @@ from ingest.archive.files import ArchivePosition
 from ingest.wire import DType, decode_headers
 from service.worker.block_queue import QueuedBlock
 from service.worker.checkpoints import covers
-from service.worker.health import DUPLICATE, ChannelHealth, MillHealth
+from service.worker.health import DUPLICATE, ChannelHealth, MillHealth, lead_ns
 
 __all__ = [
     "REPLAY_BLOCKS_PER_MILL",
@@ -235,10 +236,10 @@ class BatchLane:
         if not (ok.all() and n > 0 and np.all(head["fs"] == fs) and np.all(head["n"] == n)
                 and np.all(head["dtype"] == code)):  # fmt: skip
             return False
-        runs = self._runs(mill_id, chan, head, round(n * 1e9 / fs))
+        recv = batch.log_time[idx]
+        runs = self._runs(mill_id, chan, head, round(n * 1e9 / fs), recv)
         if runs is None:
             return False
-        recv = batch.log_time[idx]
         for sel, repeat in runs.values():
             if repeat.any():  # counted first: observe_run then sets the same receive time
                 key = batch.topics[int(batch.channel[idx[sel[-1]]])]
@@ -258,13 +259,13 @@ class BatchLane:
         t0 = head["t0_ns"].astype(np.int64)
         names = self._channels[mill_id]
         health = self.worker.health[mill_id].channels
-        _observe(health, names, per_channel, head, raw, last_recv, n, fs)
+        _observe(health, names, per_channel, head, raw, (last_recv, recv[new]), n, fs)
         self.regular_blocks += len(kept)
         self.worker.accept_regular(mill_id, chan, t0, raw)
         return True
 
     def _runs(
-        self, mill_id: str, chan: np.ndarray, head: np.ndarray, step: int
+        self, mill_id: str, chan: np.ndarray, head: np.ndarray, step: int, recv: np.ndarray
     ) -> dict[int, tuple[np.ndarray, np.ndarray]] | None:
         """Per channel index: its blocks' positions and their repeat codes
         (:meth:`~service.worker.health.ChannelHealth.repeats_in`) — or None when a channel's
@@ -277,7 +278,8 @@ class BatchLane:
             h = health[names[ci]]
             repeat = h.repeats_in(head["seq"][sel])
             new = sel[repeat == 0]
-            if new.size and not h.follows_on(head["seq"][new], head["t0_ns"][new], step):
+            if new.size and not h.follows_on(head["seq"][new], head["t0_ns"][new], step,
+                                             recv[new]):  # fmt: skip
                 return None
             runs[ci] = (sel, repeat)
         return runs
@@ -285,11 +287,14 @@ class BatchLane:
 
 def _observe(
     health: dict[str, ChannelHealth], names: list[str], per_channel: dict[int, np.ndarray],
-    head: np.ndarray, raw: np.ndarray, last_recv: dict[int, int], n: int, fs: float,
+    head: np.ndarray, raw: np.ndarray, recv: tuple[dict[int, int], np.ndarray], n: int,
+    fs: float,
 ) -> None:  # fmt: skip
     """:meth:`~service.worker.health.ChannelHealth.observe` of each block, per channel at once
-    (:meth:`~service.worker.health.ChannelHealth.observe_run`); ``last_recv``: each channel's
-    last receive time in the batch (ns; its last block, a repeat or not)."""
+    (:meth:`~service.worker.health.ChannelHealth.observe_run`); ``recv``: each channel's last
+    receive time in the batch (ns; its last block, a repeat or not), and each block's (as
+    ``head``)."""
+    last_recv, block_recv = recv
     # a finite sum proves every sample finite (one pass, no copies); otherwise count exactly
     count = raw.dtype.kind == "f" and not np.isfinite(raw.sum())
     duration = round(n * 1e9 / fs)
@@ -302,5 +307,5 @@ def _observe(
         t0_last = int(head["t0_ns"][last])
         health[names[ci]].observe_run(
             sel.size, samples, nonfinite, int(head["seq"][last]), t0_last,
-            t0_last + duration, last_recv[ci],
+            t0_last + duration, last_recv[ci], lead_ns(t0_last + duration, int(block_recv[last])),
         )  # fmt: skip

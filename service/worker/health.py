@@ -15,6 +15,28 @@ accepted block's t0 and duration put it, :meth:`ChannelHealth.expected_t0`) is a
 counted, and its samples are placed at the sequence number's time — a gateway clock never becomes
 the mill's time base.
 
+**What is plausible** (issue 26, README "Admission"): a new block is judged by its content
+against the channel's history and its receive time before it may move anything
+(:func:`implausible_reason`, :class:`AdmissionLimits`): its sample rate must be the channel's
+configured one, it must hold samples, its sequence number must be at most :data:`MAX_SEQ`, and
+neither its samples as sent nor where its sequence number puts them (after the channel's last
+accepted block) may end more than ``max_ahead_s`` after the time it was received — unless
+its channel already ran ahead and it adds at most its own length to that *lead* (how far the
+channel's last accepted block ended after its own receipt): a sender faster than real time
+(``simulate --publish --speed 10``) runs ahead one block at a time, a forged block jumps. An
+*implausible* block (a forged sequence number 2^63, a +100,000 jump, a t0 in the year 2100) is
+counted by reason and dropped: it never moves the channel's sequence position, times or loss
+counts, so one forged block cannot make every later real one a "replay" or a gap of 10^18
+blocks. Every number the channel keeps so stays within int64 (SQLite, JSON checkpoints). The
+receive time is the archive's log time on a replay, so the live worker, a restart's replay and
+offline analysis judge an archived block alike. Blocks from the past are not implausible: a
+gateway's spool may deliver days late, and a t0 that contradicts the sequence number is a clock
+fault (below).
+
+Non-finite samples (NaN, ±inf) are telemetry faults, not data: counted here
+(``nonfinite_samples``) and flagged as dropouts by the analysis
+(:mod:`analytics.signal.telemetry_faults`), which never counts them as loads.
+
 The counters are lifetime totals: the worker checkpoints them with the mill
 (:meth:`ChannelHealth.counters` / :meth:`ChannelHealth.restore_counters`) and the archive tail
 replayed after the checkpoint counts the rest, so a restart neither forgets nor double-counts.
@@ -50,17 +72,20 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
-from ingest.wire import Block
+from ingest.wire import Block, block_span_ns
 
 __all__ = [
+    "DEFAULT_LIMITS",
     "DUPLICATE",
+    "MAX_SEQ",
     "REPEATS",
     "REPLAY",
     "Admission",
+    "AdmissionLimits",
     "ChannelHealth",
     "LatencyReservoir",
     "Loss",
@@ -68,18 +93,111 @@ __all__ = [
     "PerMinute",
     "SeqVerdict",
     "WriteEpisodes",
+    "implausible_payload",
+    "implausible_reason",
+    "last_block",
+    "lead_ns",
 ]
 
 log = logging.getLogger(__name__)
 
-SeqVerdict = Literal["first", "next", "gap", "duplicate", "replay"]
+SeqVerdict = Literal["first", "next", "gap", "duplicate", "replay", "implausible"]
 #: The verdicts of blocks that are not new (dropped after counting).
 REPEATS = frozenset({"duplicate", "replay"})
 #: :meth:`ChannelHealth.repeats_in` codes of a repeated block (0: new).
 DUPLICATE, REPLAY = 1, 2
 #: Counters a checkpoint carries (lifetime totals).
+#: The highest plausible sequence number, 2^53 − 1: ~28 million years of 10 blocks a second, and
+#: every count or position derived from one stays exact in int64 and in a float64 (JSON).
+MAX_SEQ = 2**53 - 1
+#: Why a block is implausible (:func:`implausible_reason`), as counted and reported.
+IMPLAUSIBLE = ("sample_rate", "empty", "seq_out_of_range", "t0_ahead", "seq_ahead")
+
 _COUNTERS = ("blocks", "samples", "nonfinite_samples", "missing_blocks", "gaps", "duplicates",
              "replays", "clock_faults")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class AdmissionLimits:
+    """How far a block may reach ahead of its receive time (``[worker] max_ahead_s``, ns
+    here; further only one block at a time, see the module docstring): its samples as sent,
+    and where its sequence number puts them. A gateway's clock may run this far ahead of the
+    worker's; the default 60 s allows generous NTP trouble while a forged +100,000 jump (2.8
+    hours of 100-ms blocks) or a year-2100 t0 is far beyond it."""
+
+    max_ahead_ns: int = 60 * 10**9
+
+
+DEFAULT_LIMITS = AdmissionLimits()
+
+
+def implausible_reason(
+    last: tuple[int, int, int, int] | None, seq: int, t0_ns: int, span_ns: float, recv_ns: int,
+    limits: AdmissionLimits = DEFAULT_LIMITS,
+) -> str | None:  # fmt: skip
+    """Why a new block (sequence number ``seq``, first sample at ``t0_ns``, its samples
+    spanning ``span_ns``) received at ``recv_ns`` is implausible after ``last`` = (last seq, its
+    t0, just past its last sample, its lead) of its channel (None: no history; see
+    :func:`last_block`) — one of :data:`IMPLAUSIBLE` but ``sample_rate``/``empty`` — or None
+    when it is plausible. All times ns since the Unix epoch (UTC); Python integers, so no value
+    overflows."""
+    if seq > MAX_SEQ:
+        return "seq_out_of_range"
+    if not span_ns < 2**62:
+        return "t0_ahead"
+    span = round(span_ns)
+    ahead = recv_ns + max(limits.max_ahead_ns, span + (0 if last is None else last[3]))
+    if t0_ns + span > ahead:
+        return "t0_ahead"
+    if last is not None:
+        last_seq, last_t0, last_end, _ = last
+        if last_t0 + (seq - last_seq) * (last_end - last_t0) + span > ahead:
+            return "seq_ahead"
+    return None
+
+
+class _Position(Protocol):
+    @property
+    def last_seq(self) -> int | None: ...
+
+    @property
+    def last_t0_ns(self) -> int | None: ...
+
+    @property
+    def last_sample_ns(self) -> int | None: ...
+
+    @property
+    def last_lead_ns(self) -> int: ...
+
+
+def last_block(channel: _Position) -> tuple[int, int, int, int] | None:
+    """(last seq, its t0, just past its last sample, its lead: how far that end lay after its
+    receipt, 0 when before) of a channel's position (a :class:`ChannelHealth`, or what the
+    archiving thread keeps); None without one."""
+    seq, t0 = channel.last_seq, channel.last_t0_ns
+    if seq is None or t0 is None:
+        return None
+    end = channel.last_sample_ns if channel.last_sample_ns is not None else t0
+    return seq, t0, end, channel.last_lead_ns
+
+
+def lead_ns(end_ns: int, recv_ns: int) -> int:
+    """How far a block ending at ``end_ns`` ran ahead of its receipt at ``recv_ns`` (0: not)."""
+    return max(0, end_ns - recv_ns)
+
+
+def implausible_payload(
+    last: tuple[int, int, int, int] | None, payload: bytes, recv_ns: int,
+    limits: AdmissionLimits = DEFAULT_LIMITS,
+) -> str | None:  # fmt: skip
+    """:func:`implausible_reason` of a payload, read from its header alone (for the archiving
+    thread and the spool recovery, before the admission decodes it); None for a payload without
+    a usable v1 header too (the admission counts it as malformed)."""
+    span = block_span_ns(payload)
+    if span is None:
+        return None
+    seq = int.from_bytes(payload[24:32], "little")
+    return implausible_reason(last, seq, span[0], span[1] - span[0], recv_ns, limits)
 
 
 @dataclass(frozen=True)
@@ -106,19 +224,22 @@ class Loss:
 @dataclass(frozen=True)
 class Admission:
     """What :meth:`ChannelHealth.accept` made of a block: its ``verdict``; the ``block`` to
-    analyse (None for a repeat; re-timed to its sequence number's time on a clock fault); the
-    ``loss`` it reveals; and ``clock_fault`` = (t0 sent, t0 given) when it *starts* a clock-fault
-    episode (later blocks of the same episode are counted, not reported again)."""
+    analyse (None for a repeat or an implausible block; re-timed to its sequence number's time
+    on a clock fault); the ``loss`` it reveals; ``clock_fault`` = (t0 sent, t0 given) when it
+    *starts* a clock-fault episode (later blocks of the same episode are counted, not reported
+    again); ``implausible``: why an implausible block is (:data:`IMPLAUSIBLE`)."""
 
     verdict: SeqVerdict
     block: Block | None
     loss: Loss | None = None
     clock_fault: tuple[int, int] | None = None
+    implausible: str | None = None
 
 
 @dataclass
 class ChannelHealth:
-    """Counters and times of one channel (times in ns since the Unix epoch, UTC)."""
+    """Counters and times of one channel (times in ns since the Unix epoch, UTC); ``fs_hz``:
+    its configured sample rate (None: any), ``limits``: what is plausible (module docstring)."""
 
     blocks: int = 0
     samples: int = 0
@@ -129,12 +250,18 @@ class ChannelHealth:
     replays: int = 0
     clock_faults: int = 0
     decode_errors: Counter[str] = field(default_factory=Counter)
+    #: Implausible blocks dropped, by reason (:data:`IMPLAUSIBLE`).
+    implausible: Counter[str] = field(default_factory=Counter)
     last_seq: int | None = None
     last_t0_ns: int | None = None
     last_sample_ns: int | None = None
     last_recv_ns: int | None = None
+    #: How far the last accepted block ended after it was received (ns; 0: it ended before).
+    last_lead_ns: int = 0
     #: Whether the last accepted block was a clock fault (a fault episode is reported once).
     in_clock_fault: bool = False
+    fs_hz: float | None = None
+    limits: AdmissionLimits = DEFAULT_LIMITS
 
     @property
     def repeats(self) -> int:
@@ -171,12 +298,17 @@ class ChannelHealth:
     def accept(self, block: Block, recv_ns: int) -> Admission:
         """The whole admission of a decoded block (see the module docstring): a repeat is
         counted and dropped; a new block is put at its sequence number's time when its t0
-        contradicts it, then observed. (One pass, no helper calls: it runs for every block.)"""
+        contradicts it, then observed; an implausible one is counted and dropped. (One pass: it
+        runs for every block.)"""
         seq, last = block.seq, self.last_seq
         if last is not None and seq <= last:
             verdict: SeqVerdict = "duplicate" if seq == last else "replay"
             self.repeat(verdict, recv_ns)
             return Admission(verdict, None)
+        why = self.implausible_reason(block, recv_ns)
+        if why is not None:
+            self.implausible[why] += 1
+            return Admission("implausible", None, implausible=why)
         fault = loss = None
         last_t0, last_end = self.last_t0_ns, self.last_sample_ns
         if last is None or last_t0 is None or last_end is None:  # (no times: first, old state)
@@ -209,20 +341,37 @@ class ChannelHealth:
         self.last_t0_ns = block.t0_ns
         self.last_sample_ns = block.t_end_ns
         self.last_recv_ns = recv_ns
+        self.last_lead_ns = lead_ns(self.last_sample_ns, recv_ns)
         return Admission(verdict, block, loss, fault)
+
+    def implausible_reason(self, block: Block, recv_ns: int) -> str | None:
+        """Why ``block``, new on this channel, received at ``recv_ns``, is implausible (see the
+        module docstring); None when it is plausible. Changes nothing."""
+        n = block.samples.shape[0]
+        if self.fs_hz is not None and abs(block.fs - self.fs_hz) > 1e-9 * self.fs_hz:
+            return "sample_rate"
+        if n == 0:
+            return "empty"
+        return implausible_reason(last_block(self), block.seq, block.t0_ns, n * 1e9 / block.fs,
+                                  recv_ns, self.limits)  # fmt: skip
 
     def observe(self, block: Block, recv_ns: int) -> SeqVerdict:
         """:meth:`accept`, for callers that need only the verdict."""
         return self.accept(block, recv_ns).verdict
 
-    def follows_on(self, seq: np.ndarray, t0_ns: np.ndarray, step_ns: int) -> bool:
+    def follows_on(
+        self, seq: np.ndarray, t0_ns: np.ndarray, step_ns: int, recv_ns: np.ndarray
+    ) -> bool:
         """Whether :meth:`accept` of blocks with sequence numbers ``seq`` and start times
-        ``t0_ns`` (ns), each ``step_ns`` long, one after the other, would admit each as new
-        with no gap, repeat or clock fault — the same rule for a run at once (the batch lane's
-        regular runs, then counted by :meth:`observe_run`). Changes nothing. (A channel in a
+        ``t0_ns`` (ns), each ``step_ns`` long, received at ``recv_ns``, one after the other,
+        would admit each as new with no gap, repeat, clock fault or implausible block — the
+        same rule for a run at once (the batch lane's regular runs, of the channel's own sample
+        rate, then counted by :meth:`observe_run`). Changes nothing. (A channel in a
         clock-fault episode is never such a run: its blocks go one by one.)"""
         first = int(seq[0])
         if self.in_clock_fault or (self.last_seq is not None and first != self.last_seq + 1):
+            return False
+        if first + seq.shape[0] - 1 > MAX_SEQ or not self._within_ahead(t0_ns, step_ns, recv_ns):
             return False
         if np.any(np.diff(seq.astype(np.int64)) != 1):
             return False
@@ -232,6 +381,21 @@ class ChannelHealth:
             return False
         # each block where its predecessor's t0 and duration put it (as accept checks)
         return not np.any(np.abs(np.diff(t0_ns.astype(np.int64)) - step_ns) > tolerance)
+
+    def _within_ahead(self, t0_ns: np.ndarray, step_ns: int, recv_ns: np.ndarray) -> bool:
+        """Whether no block of a run (each ``step_ns`` long) ends further past its receive time
+        than ``max_ahead`` or its predecessor's lead plus its own length, neither as sent nor
+        where its predecessor puts it (the times :meth:`accept` judges)."""
+        t0 = t0_ns.astype(np.int64)
+        recv = recv_ns.astype(np.int64)
+        given = np.empty_like(t0)
+        given[1:] = t0[:-1] + step_ns
+        given[0] = t0[0] if self.last_sample_ns is None else self.last_sample_ns
+        lead = np.empty_like(t0)
+        lead[1:] = np.maximum(0, t0[:-1] + step_ns - recv[:-1])
+        lead[0] = self.last_lead_ns if self.last_seq is not None else 0
+        latest = recv + np.maximum(self.limits.max_ahead_ns, lead + step_ns) - step_ns
+        return not np.any(np.maximum(t0, given) > latest)
 
     def repeats_in(self, seq: np.ndarray) -> np.ndarray:
         """What :meth:`accept` would make of blocks with sequence numbers ``seq`` taken in turn,
@@ -266,13 +430,14 @@ class ChannelHealth:
 
     def observe_run(
         self, blocks: int, samples: int, nonfinite: int, last_seq: int, last_t0_ns: int,
-        last_sample_ns: int, last_recv_ns: int,
+        last_sample_ns: int, last_recv_ns: int, last_lead_ns: int,
     ) -> None:  # fmt: skip
         """Account at once for a run of ``blocks`` decoded blocks (``samples`` in all,
         ``nonfinite`` of them not finite) whose sequence numbers follow on from
         :attr:`last_seq` up to ``last_seq`` and whose t0 agree with them, without gap, repeat or
         clock fault: what :meth:`observe` of each would count (the batch lane's regular
-        blocks)."""
+        blocks); ``last_lead_ns``: the lead of the last of them (:func:`lead_ns`)."""
+        self.last_lead_ns = last_lead_ns
         self.blocks += blocks
         self.samples += samples
         self.nonfinite_samples += nonfinite
@@ -290,8 +455,10 @@ class ChannelHealth:
         """The lifetime counters and the sequence position, for a checkpoint."""
         out: dict[str, Any] = {name: getattr(self, name) for name in _COUNTERS}
         out["decode_errors"] = dict(self.decode_errors)
+        out["implausible"] = dict(self.implausible)
         out["last_seq"], out["last_t0_ns"] = self.last_seq, self.last_t0_ns
         out["last_sample_ns"], out["last_recv_ns"] = self.last_sample_ns, self.last_recv_ns
+        out["last_lead_ns"] = self.last_lead_ns
         return out
 
     def restore_counters(self, saved: dict[str, Any]) -> None:
@@ -299,10 +466,24 @@ class ChannelHealth:
         for name in _COUNTERS:
             setattr(self, name, int(saved.get(name, 0)))
         self.decode_errors = Counter(saved.get("decode_errors", {}))
+        self.implausible = Counter(saved.get("implausible", {}))
         self.last_seq = saved.get("last_seq")
         self.last_t0_ns = saved.get("last_t0_ns")
         self.last_sample_ns = saved.get("last_sample_ns")
         self.last_recv_ns = saved.get("last_recv_ns")
+        self.last_lead_ns = int(saved.get("last_lead_ns", 0))
+
+    def drop_implausible_position(self) -> bool:
+        """Forget a sequence position no plausible block can have left (a checkpoint written
+        before issue 26 by a worker a forged block had poisoned: seq 2^63, times beyond int64),
+        so the real blocks are new again; the lifetime counters stay. Whether it was dropped."""
+        seq, end = self.last_seq, self.last_sample_ns
+        if (seq is None or seq <= MAX_SEQ) and (end is None or end < 2**63):
+            return False
+        self.last_seq = self.last_t0_ns = self.last_sample_ns = None
+        self.last_lead_ns = 0
+        self.in_clock_fault = False
+        return True
 
     def stale(self, now_ns: int, stale_after_s: float) -> bool:
         return self.last_recv_ns is None or now_ns - self.last_recv_ns > stale_after_s * 1e9
@@ -322,6 +503,7 @@ class ChannelHealth:
             "replays": self.replays,
             "clock_faults": self.clock_faults,
             "decode_errors": dict(self.decode_errors),
+            "implausible": dict(self.implausible),
             "last_seq": self.last_seq,
             "last_sample_ns": self.last_sample_ns,
             "last_recv_ns": self.last_recv_ns,
@@ -337,8 +519,12 @@ class MillHealth:
     channels: dict[str, ChannelHealth]
 
     @classmethod
-    def for_channels(cls, names: list[str]) -> MillHealth:
-        return cls({name: ChannelHealth() for name in names})
+    def for_channels(
+        cls, names: list[str], fs_hz: float | None = None,
+        limits: AdmissionLimits = DEFAULT_LIMITS,
+    ) -> MillHealth:  # fmt: skip
+        """Fresh channels ``names`` at sample rate ``fs_hz`` (None: any) judged by ``limits``."""
+        return cls({name: ChannelHealth(fs_hz=fs_hz, limits=limits) for name in names})
 
     def stale_channels(self, now_ns: int, stale_after_s: float) -> list[str]:
         return [n for n, c in self.channels.items() if c.stale(now_ns, stale_after_s)]

@@ -218,8 +218,8 @@ class OfflineSink(_AdmittingSink):
             spectra.close()
 
     def reading(self, mill_id: str) -> dict[str, Any]:
-        """One mill's reading counts: blocks, gaps, repeats, clock faults, decode errors and
-        what its aligner met (JSON-ready)."""
+        """One mill's reading counts: blocks, gaps, repeats, clock faults, implausible blocks by
+        reason, decode errors and what its aligner met (JSON-ready)."""
         channels = self.admission.health[mill_id].channels.values()
         analyzer = self.analyzers[mill_id]
         return {
@@ -227,6 +227,7 @@ class OfflineSink(_AdmittingSink):
             "missing_blocks": sum(h.missing_blocks for h in channels),
             "repeated_blocks": sum(h.repeats for h in channels),
             "clock_fault_blocks": sum(h.clock_faults for h in channels),
+            "implausible_blocks": dict(sum((h.implausible for h in channels), Counter())),
             "decode_errors": sum(sum(h.decode_errors.values()) for h in channels),
             "gap_samples": analyzer.gap_samples,
             "late_blocks": analyzer.late_blocks,

@@ -55,7 +55,7 @@ from ingest.archive.batches import MessageBatch
 from ingest.archive.files import ArchivePosition, archive_file_order, list_archive_files
 from service.store.database import Store
 from service.worker.batch_lane import BatchLane, replay_batch_blocks
-from service.worker.health import MillHealth
+from service.worker.health import DEFAULT_LIMITS, AdmissionLimits, MillHealth
 from service.worker.worker import MillPipeline, Worker
 
 __all__ = ["ParallelReplay", "ReplayJobError", "replay_jobs", "split_mills", "tail_bytes"]
@@ -130,13 +130,15 @@ def split_mills(mill_ids: Iterable[str], jobs: int) -> list[list[str]]:
 # ---------------------------------------------------------------------------- job process
 @dataclass(frozen=True)
 class ReplayJob:
-    """What a job process needs: its mills, how to build their pipelines, the store."""
+    """What a job process needs: its mills, how to build their pipelines, the store, and what
+    the admission finds plausible (as the worker's, so an archived block is judged alike)."""
 
     number: int
     configs: list[MillConfig]
     factory: Callable[[MillConfig], MillPipeline]
     store_path: Path
     log_level: int
+    limits: AdmissionLimits = DEFAULT_LIMITS
 
 
 @dataclass
@@ -179,7 +181,7 @@ def _replay(conn: Connection, job: ReplayJob) -> JobResult:
     mills = {c.id: c for c in job.configs}
     pipelines = {m: job.factory(c) for m, c in mills.items()}
     with Store(job.store_path) as store:
-        worker = Worker(mills, pipelines, store, None)
+        worker = Worker(mills, pipelines, store, None, limits=job.limits)
         parts = {m: p for m, p in store.latest_checkpoints().items() if m in mills}
         covered = worker.restore_checkpoints(parts)
         if worker.held:  # the worker restored these; sending back a fresh pipeline would be wrong
@@ -263,7 +265,8 @@ class ParallelReplay:
             for number, mills in enumerate(self.groups[1:], start=1):
                 ours, theirs = ctx.Pipe()
                 spec = ReplayJob(number, [self.worker.mills[m] for m in mills], self.factory,
-                                 self.worker.store.path, level)  # fmt: skip
+                                 self.worker.store.path, level,
+                                 self.worker.admission.limits)  # fmt: skip
                 process = ctx.Process(target=_job_main, args=(theirs, spec), daemon=True,
                                       name=f"millwatch-replay-{number}")  # fmt: skip
                 process.start()

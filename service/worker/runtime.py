@@ -57,17 +57,18 @@ from analytics.drivetrain.mill_config import MillConfig
 from ingest.archive.reader import ArchiveReader
 from ingest.archive.writer import ArchiveWriter
 from ingest.gateway import PublisherWatch, RecoveringSubscriber, declare_recovering_subscriber
-from ingest.keys import alarm_key, live_pattern, mill_channel_keys, mill_pattern
+from ingest.keys import ChannelRoutes, alarm_key, live_pattern, mill_channel_keys, mill_pattern
 from ingest.spool.query import fetch_spooled
 from ingest.zenoh_session import build_config, connected_peers, open_retrying
 from service.reports.month_end import MonthEndJob
 from service.settings import ServiceSettings
 from service.status import MillStatus
 from service.store.database import Store
+from service.worker.admission import IngressGate
 from service.worker.archive_first import PUT_WAIT_S, ArchivedSeqs, ArchiveFirst, SharedArchive
 from service.worker.block_queue import BlockQueue
 from service.worker.drain_watch import DrainWatch
-from service.worker.health import MillHealth
+from service.worker.health import AdmissionLimits, MillHealth
 from service.worker.recovery import recover
 from service.worker.spool_recovery import QUERY_TIMEOUT_S, CatchUp
 from service.worker.worker import AckRequest, MillPipeline, Worker
@@ -100,6 +101,9 @@ class ServiceRuntime:
         self.mills = mills
         self._pipeline_factory = pipeline_factory
         self.queue = BlockQueue(settings.worker.queue_blocks)
+        #: Oversize payloads and keys of no configured channel, refused before the queue.
+        self.gate = IngressGate(ChannelRoutes(mills.values()).route,
+                                settings.worker.max_block_bytes)  # fmt: skip
         self.store: Store | None = None
         self.archive: ArchiveWriter | None = None
         self.worker: Worker | None = None
@@ -156,6 +160,7 @@ class ServiceRuntime:
             self.store,
             shared,
             checkpoint_seconds=s.worker.checkpoint_seconds,
+            limits=AdmissionLimits(max_ahead_ns=round(s.worker.max_ahead_s * 1e9)),
         )
         z = s.zenoh
         tls = None if z.tls is None else z.tls.files()
@@ -195,13 +200,14 @@ class ServiceRuntime:
         """The archiving thread, with the spool recovery of live blocks' gaps before it archives
         them (after the recovery: the sequence positions it starts from are the recovered ones)."""
         assert self.worker is not None and self.session is not None
-        seqs = ArchivedSeqs.of(self.worker.health)
+        limits = self.worker.admission.limits
+        seqs = ArchivedSeqs.of(self.worker.health, limits)
         self.ingest = ArchiveFirst(shared, self.queue, self.settings.worker.queue_blocks,
                                    self.worker.route, seqs)  # fmt: skip
         fetch = partial(fetch_spooled, self.session, timeout=QUERY_TIMEOUT_S)
         keys = {m: list(mill_channel_keys(c).values()) for m, c in self.mills.items()}
         self.catch_up = CatchUp(fetch, self.worker.route, seqs, self.ingest.archive_block, keys,
-                                can_fill=shared.writable)  # fmt: skip
+                                can_fill=shared.writable, limits=limits)  # fmt: skip
         self.worker.loss_causes = self.catch_up.causes
         self.ingest.before_live = self.catch_up
         self._archiving = threading.Thread(
@@ -305,7 +311,8 @@ class ServiceRuntime:
             publisher.put(encode_transition(t, config.site))
 
     def _on_block(self, key: str, payload: bytes) -> None:
-        self.queue.put(key, payload, PUT_WAIT_S)
+        if self.gate.admit(key, payload):
+            self.queue.put(key, payload, PUT_WAIT_S)
 
     def _run(self) -> None:
         assert self.worker is not None and self.ingest is not None

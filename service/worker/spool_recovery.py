@@ -19,6 +19,10 @@ exceeded: the spool's exact count is logged; the gateway down, so never publishe
 gap the block reveals: counted, stored and alarmed by the existing loss accounting, with its
 exact count.
 
+An implausible block (:func:`~service.worker.health.implausible_payload`: a forged sequence
+number, a jump beyond what its receive time allows) asks nothing: the admission drops it (a
+query for 2^63 blocks would be its damage).
+
 Only live blocks ask (not the archive replay of a restart: a gap in the archive was a loss
 when it was received). A channel never heard from asks nothing (its first block is no gap).
 The query runs on the calling thread, bounded by ``timeout_s`` per page; no spool for the
@@ -67,6 +71,7 @@ import zenoh
 from ingest.spool.query import SpoolAnswer, fetch_spooled
 from ingest.spool.store import payload_seq
 from service.worker.block_queue import QueuedBlock
+from service.worker.health import DEFAULT_LIMITS, AdmissionLimits, implausible_payload, last_block
 
 if TYPE_CHECKING:
     from service.worker.worker import Worker
@@ -99,6 +104,15 @@ Fetch = Callable[[str, int, int], SpoolAnswer]
 class _Seq(Protocol):
     @property
     def last_seq(self) -> int | None: ...
+
+    @property
+    def last_t0_ns(self) -> int | None: ...
+
+    @property
+    def last_sample_ns(self) -> int | None: ...
+
+    @property
+    def last_lead_ns(self) -> int: ...
 
 
 class _Channels(Protocol):
@@ -172,9 +186,11 @@ class SpoolRecovery:
         route: Callable[[str], tuple[str, str] | None],
         health: SeqsByMill,
         handle: Callable[[QueuedBlock], None],
+        limits: AdmissionLimits = DEFAULT_LIMITS,
         causes: LossCauses | None = None,
     ) -> None:
         self._fetch = fetch
+        self.limits = limits
         self._route = route
         self._health = health
         self._handle = handle
@@ -205,9 +221,12 @@ class SpoolRecovery:
         seq = payload_seq(item.payload) if route is not None else None
         if route is None or seq is None:
             return None
-        last = self._health[route[0]].channels[route[1]].last_seq
+        channel = self._health[route[0]].channels[route[1]]
+        last = channel.last_seq
         if last is None or seq <= last + 1:
             return None
+        if implausible_payload(last_block(channel), item.payload, item.recv_ns, self.limits):
+            return None  # (no query for a forged jump: the admission drops the block)
         return last + 1, seq - 1
 
     def _fill(self, item: QueuedBlock, first: int, last: int) -> None:
@@ -241,7 +260,8 @@ class SpoolRecovery:
 def attach_spool_recovery(worker: Worker, session: zenoh.Session) -> SpoolRecovery:
     """Have ``worker`` fill the gaps of its live blocks from the spools on ``session``."""
     fetch = partial(fetch_spooled, session, timeout=QUERY_TIMEOUT_S)
-    recovery = SpoolRecovery(fetch, worker.route, worker.health, worker.handle)
+    recovery = SpoolRecovery(fetch, worker.route, worker.health, worker.handle,
+                             worker.admission.limits)  # fmt: skip
     worker.loss_causes = recovery.causes
     worker.before_live = recovery
     return recovery
@@ -282,6 +302,7 @@ class CatchUp:
         hold_blocks: int = HOLD_BLOCKS,
         threads: int = CATCH_UP_THREADS,
         can_fill: Callable[[], bool] = lambda: True,
+        limits: AdmissionLimits = DEFAULT_LIMITS,
     ) -> None:
         self._fetch = fetch
         self._route = route
@@ -292,7 +313,7 @@ class CatchUp:
         self._hold_blocks = hold_blocks
         self._can_fill = can_fill  # (False: the archive cannot be written; no fill starts)
         #: What the release finds still missing (a gap no round covered) is filled as before.
-        self._gaps = SpoolRecovery(fetch, route, seqs, handle)
+        self._gaps = SpoolRecovery(fetch, route, seqs, handle, limits)
         #: Why each span the spools could not fill is missing (the worker's loss reads it).
         self.causes = self._gaps.causes
         self._pool = ThreadPoolExecutor(threads, thread_name_prefix="millwatch-catch-up")

@@ -58,6 +58,13 @@ line at each end: :class:`~service.worker.health.WriteEpisodes`).
 
 Bad input never stops the worker: an undecodable block is archived, counted per channel and kind
 and logged once per kind; a block whose key belongs to no configured mill is archived and counted.
+An implausible block (README "Admission": a forged sequence number, a jump or a t0 beyond
+``[worker] max_ahead_s`` of its receive time, a foreign sample rate) is archived as received —
+the evidence — counted by reason, stored as an ``implausible_block`` data-quality event (the
+first of each channel and reason, then at most one a minute of receive time) and raises the
+``implausible_blocks`` alarm; it never reaches the analysis nor moves its channel's state.
+Every unrecoverable loss raises the ``sequence_gaps`` alarm at once with its count (gaps the
+gateways' caches or spools fill never reach the admission as gaps).
 Which blocks are analysed — routing, decoding, sequence numbers, clock faults — is decided by
 :class:`~service.worker.admission.BlockAdmission`, as for a replay and offline analysis.
 """
@@ -87,7 +94,7 @@ from service.status import MillHealthStatus, MillStatus
 from service.store.database import CheckpointChoice, Store
 from service.store.migrations import StoreError
 from service.store.records import DamageRow, EventRow, PhaseRow
-from service.worker.admission import BlockAdmission
+from service.worker.admission import BlockAdmission, Implausible
 from service.worker.batch_lane import BatchLane
 from service.worker.block_queue import BlockQueue, QueuedBlock
 from service.worker.checkpoints import (
@@ -98,7 +105,14 @@ from service.worker.checkpoints import (
     fallback,
     refusal_message,
 )
-from service.worker.health import LatencyReservoir, MillHealth, PerMinute, WriteEpisodes
+from service.worker.health import (
+    DEFAULT_LIMITS,
+    AdmissionLimits,
+    LatencyReservoir,
+    MillHealth,
+    PerMinute,
+    WriteEpisodes,
+)
 
 __all__ = ["HELD", "AckRequest", "ArchiveLog", "MillPipeline", "MillUpdate", "Worker"]
 
@@ -122,6 +136,10 @@ STORE_RETRY_S = 1.0
 #: What the worker does while the store cannot be written (the line that opens an episode).
 _STORE_KEPT = ("results and alarm transitions wait in memory and are stored in order when it "
                "can be written; no checkpoint and no acknowledgement meanwhile")  # fmt: skip
+#: A channel's implausible blocks of one reason are stored as a data-quality event at most this
+#: often (s of receive time; each event says how many were dropped since the previous one).
+IMPLAUSIBLE_EVENT_EVERY_S = 60.0
+_INT64_MAX = 2**63 - 1
 
 
 @dataclass
@@ -213,6 +231,7 @@ class Worker:
         *,
         checkpoint_seconds: float = 60.0,
         clock: Callable[[], int] = time.time_ns,
+        limits: AdmissionLimits = DEFAULT_LIMITS,
     ) -> None:
         self.mills = mills
         self.pipelines = pipelines
@@ -221,7 +240,11 @@ class Worker:
         self.checkpoint_seconds = checkpoint_seconds
         self._clock = clock
         #: Routing, decoding, sequencing and their counters (:mod:`service.worker.admission`).
-        self.admission = BlockAdmission(mills.values())
+        self.admission = BlockAdmission(mills.values(), limits=limits)
+        self.admission.on_implausible = self._implausible
+        #: Per (mill, channel, reason): receive time of the last implausible-block event and
+        #: the blocks dropped since (bounded: configured channels × reasons).
+        self._implausible_events: dict[tuple[str, str, str], tuple[int, int]] = {}
         self.archive_errors = 0
         #: Failure episodes of the store's writes (:class:`service.worker.health.WriteEpisodes`).
         self.store_health = WriteEpisodes("store")
@@ -290,16 +313,18 @@ class Worker:
         if got.clock_fault is not None:
             self._clock_fault(mill_id, channel, block.seq, *got.clock_fault)
         if got.loss is not None:
-            self._lost(mill_id, channel, got.loss.as_dict() | {"seq": block.seq})
+            self._lost(mill_id, channel, got.loss.as_dict() | {"seq": block.seq}, item.recv_ns)
         if mill_id in self.held:
             self.held_blocks[mill_id] += 1
             return
         self.pipelines[mill_id].add_block(channel, block)
         self._unfinished[mill_id] = None
 
-    def _lost(self, mill_id: str, channel: str, loss: dict[str, int]) -> None:
+    def _lost(self, mill_id: str, channel: str, loss: dict[str, int], recv_ns: int) -> None:
         """An unrecoverable loss: a data-quality event (stored once: the archive replay after
-        a restart finds it again under the same key) and the mill's list of recent losses;
+        a restart finds it again under the same key), the mill's list of recent losses and the
+        ``sequence_gaps`` alarm, raised at once with the count (observed at the receive time
+        of the block that revealed it: the archive's log time, so a replay observes the same);
         with its causes when a spool answered for the span (:attr:`loss_causes`)."""
         dropped = self.loss_causes.pop((mill_id, channel, loss["first_seq"], loss["last_seq"]),
                                        None)  # fmt: skip
@@ -307,11 +332,41 @@ class Worker:
             loss = loss | {"dropped_by_retention": dropped,
                            "never_spooled": loss["missing_blocks"] - dropped}  # fmt: skip
         self._quality(mill_id, channel, loss["first_t_ns"], "sequence_gap", **loss)
+        context = {"channel": channel, "first_seq": loss["first_seq"],
+                   "last_seq": loss["last_seq"]}  # fmt: skip
+        self._observe(mill_id, "sequence_gaps", loss["missing_blocks"], recv_ns, context)
         shown = self.losses[mill_id]
         entry = {"channel": channel, "problem": "sequence_gap", **loss}
         if not any(e.get("channel") == channel and e.get("first_seq") == loss["first_seq"]
                    for e in shown):  # fmt: skip
             shown.appendleft(entry)
+
+    def _implausible(self, got: Implausible) -> None:
+        """An implausible block (counted and logged by the admission): a data-quality event —
+        the first of its channel and reason, then at most one per
+        :data:`IMPLAUSIBLE_EVENT_EVERY_S` of receive time, with the count since the previous
+        one — and an ``implausible_blocks`` alarm observation."""
+        key = (got.mill_id, got.channel, got.reason)
+        last, since = self._implausible_events.get(key, (None, 0))
+        since += 1
+        if last is None or got.recv_ns - last >= IMPLAUSIBLE_EVENT_EVERY_S * 1e9:
+            seq: int | str = got.seq if got.seq <= _INT64_MAX else str(got.seq)
+            self._quality(got.mill_id, got.channel, got.recv_ns, "implausible_block",
+                          reason=got.reason, seq=seq, t0_ns=got.t0_ns, blocks=since)  # fmt: skip
+            last, since = got.recv_ns, 0
+        self._implausible_events[key] = (last, since)
+        self._observe(got.mill_id, "implausible_blocks", 1, got.recv_ns,
+                      {"channel": got.channel, "reason": got.reason})  # fmt: skip
+
+    def _observe(
+        self, mill_id: str, quantity: str, value: float, t_ns: int, context: dict[str, Any]
+    ) -> None:
+        """One alarm observation from the block path (none for a held mill: its alarm engine
+        was not restored, see :meth:`check_staleness`)."""
+        if mill_id in self.held:
+            return
+        obs = Observation(mill_id, quantity, float(value), t_ns, context)
+        self._pending.add(mill_id, self.pipelines[mill_id].observe([obs]))
 
     def _clock_fault(self, mill_id: str, channel: str, seq: int, sent: int, given: int) -> None:
         """The start of a clock-fault episode: a data-quality event (logged by admission)."""
@@ -371,7 +426,7 @@ class Worker:
         self, stale_after_s: float, received: Mapping[str, int] | None = None
     ) -> None:
         """Data-quality events when a channel goes stale or comes back, and the data-quality
-        alarm observations (silence, spike rate, lost blocks, archive write failures); call
+        alarm observations (silence, spike rate, archive write failures); call
         about once a second. These are wall-clock facts: they are not replayed from the archive.
 
         ``received``: the newest receive time (ns) per zenoh key of blocks received, analysed
@@ -453,17 +508,17 @@ class Worker:
         return out
 
     def _rates(self, mill_id: str, now: int) -> list[Observation]:
-        """``spike_rate`` and ``sequence_gaps`` per channel, per minute of wall time."""
+        """``spike_rate`` per channel, per minute of wall time (``sequence_gaps`` is observed
+        at each loss, :meth:`_lost`)."""
         out = []
         spikes = self.pipelines[mill_id].spike_counts()
-        for channel, h in self.health[mill_id].channels.items():
-            for quantity, total in (("spike_rate", spikes.get(channel)),
-                                    ("sequence_gaps", h.missing_blocks)):  # fmt: skip
-                if total is None:
-                    continue
-                meter = self._rate_meters.setdefault((mill_id, channel, quantity), PerMinute())
-                out.append(Observation(mill_id, quantity, meter.rate(now, total), now,
-                                       {"channel": channel}))  # fmt: skip
+        for channel in self.health[mill_id].channels:
+            total = spikes.get(channel)
+            if total is None:
+                continue
+            meter = self._rate_meters.setdefault((mill_id, channel, "spike_rate"), PerMinute())
+            out.append(Observation(mill_id, "spike_rate", meter.rate(now, total), now,
+                                   {"channel": channel}))  # fmt: skip
         return out
 
     def _silence(self, mill_id: str, now: int, quiet: dict[str, int]) -> list[Observation]:
@@ -909,6 +964,12 @@ class Worker:
                     channels[channel].restore_counters(saved[channel])
                 else:
                     channels[channel].last_seq = seq
+                if channels[channel].drop_implausible_position():
+                    log.warning(
+                        "%s/%s: the checkpoint's sequence position (seq %s) is implausible, "
+                        "left by a forged block before this version; its next block starts the "
+                        "channel afresh", mill_id, channel, seq,
+                    )  # fmt: skip
 
     def _restore_mill(self, mill_id: str, snap: dict[str, Any], at: ArchivePosition | None) -> None:
         """Restore one mill's pipeline; :class:`CheckpointRestoreError` (naming the mill, the

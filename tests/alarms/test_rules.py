@@ -47,8 +47,10 @@ CASES = [
      [0.5, 10]),
     ("spike_rate", "sag-5200-lrs", {"channel": "motor_torque"}, [10, 10], "spike_rate",
      "warning", [1, 6]),
-    ("sequence_gaps", "sag-5200-lrs", {"channel": "motor_torque"}, [2, 2], "sequence_gaps",
+    ("sequence_gaps", "sag-5200-lrs", {"channel": "motor_torque"}, [118], "sequence_gaps",
      "warning", [0, 0]),
+    ("implausible_blocks", "sag-5200-lrs", {"channel": "motor_torque", "reason": "seq_ahead"},
+     [1], "implausible_blocks", "warning", [0, 0]),
     ("archive_write_failures", "sag-5200-lrs", {}, [1], "archive_write_failures", "alarm",
      [0, 0, 0]),
     ("store_write_failures", "sag-5200-lrs", {}, [3], "store_write_failures", "warning",
@@ -100,6 +102,19 @@ def test_level_rules_wait_for_the_raise_delay():
     ]
     quick = engine(raise_delay_s=0)
     assert kinds(feed(quick, "oscillation_range_pct", [30], channel="motor_torque")) == ["raised"]
+
+
+def test_the_first_unrecoverable_loss_raises_at_once_with_its_count_and_stays_latched():
+    """Issue 26: a one-minute rate that had to persist 60 s never raised in four runs with 118
+    to 9.2e18 lost blocks; one loss is now one event, raised when it is found."""
+    eng = engine()
+    (t,) = feed(eng, "sequence_gaps", [118], channel="motor_torque", first_seq=402,
+                last_seq=519)  # fmt: skip
+    assert (t.kind, t.value) == ("raised", 118.0)
+    assert "118 blocks (seq 402–519)" in t.message and "motor_torque" in t.message
+    # no further loss for longer than data_quality_quiet_s: normal again, but latched
+    later = feed(eng, "sequence_gaps", [0], start_s=400, channel="motor_torque")
+    assert [a.rule for a in eng.open_alarms()] == ["sequence_gaps"], later
 
 
 def test_a_dip_restarts_the_raise_delay():

@@ -11,6 +11,11 @@ and t0) with its samples replaced by NaN/±inf; a worker must drop it as not new
 the last block's sequence number again with a t0 hours in the past or in the year 2100 (a
 clock fault). None of them may change what the worker analyses.
 
+*Forged* kinds (:data:`FORGED`, issue 26) decode cleanly with a sequence number the channel has
+not seen, and are implausible (README "Admission"): sequence number 2^63, the last one
++100,000 (t0 where the next block belongs), and the *next* sequence number with a t0 in the
+year 2100 — sent before the real block of that number, which must still be analysed.
+
 >>> import random
 >>> import numpy as np
 >>> from ingest.wire import Unit, decode_block, encode_block
@@ -45,7 +50,7 @@ from ingest.wire import (
     encode_block,
 )
 
-__all__ = ["KINDS", "MALFORMED", "WELL_FORMED", "HostileChannel", "kind_cycle"]
+__all__ = ["FORGED", "KINDS", "MALFORMED", "WELL_FORMED", "HostileChannel", "kind_cycle"]
 
 #: Malformed kind → the :class:`WireError` decoding it raises (None: decodes, see module doc).
 MALFORMED: dict[str, type[WireError] | None] = {
@@ -64,7 +69,9 @@ MALFORMED: dict[str, type[WireError] | None] = {
 }
 #: Well-formed kinds: they decode, with a sequence number already seen on the channel.
 WELL_FORMED = ("replay", "duplicate", "clock_past", "clock_future")
-KINDS = (*MALFORMED, *WELL_FORMED)
+#: Forged kinds: new sequence numbers, implausible (module docstring).
+FORGED = ("seq_2_63", "seq_jump_100000", "next_in_2100")
+KINDS = (*MALFORMED, *WELL_FORMED, *FORGED)
 
 #: 2100-01-01T00:00:00Z in ns since the Unix epoch.
 YEAR_2100_NS = 4_102_444_800 * 10**9
@@ -161,6 +168,26 @@ class HostileChannel:
     def _clock_future(self) -> bytes:
         block = decode_block(self.last)
         return self._retimed(YEAR_2100_NS + self.rng.randrange(0, _HOUR_NS) - block.t0_ns)
+
+    # ---------------------------------------------------------------- forged
+    def _seq_2_63(self) -> bytes:
+        return self._forged(2**63, 1)
+
+    def _seq_jump_100000(self) -> bytes:
+        return self._forged(decode_block(self.last).seq + 100_000, 1)
+
+    def _next_in_2100(self) -> bytes:
+        block = decode_block(self.last)
+        return self._forged(block.seq + 1, 0, YEAR_2100_NS + self.rng.randrange(0, _HOUR_NS))
+
+    def _forged(self, seq: int, steps: int, t0_ns: int | None = None) -> bytes:
+        """The last block's samples with sequence number ``seq`` and t0 ``t0_ns`` (default:
+        ``steps`` blocks after the last one's)."""
+        head = list(HEADER.unpack_from(self.last))
+        block = decode_block(self.last)
+        head[3] = block.t0_ns + steps * block.duration_ns if t0_ns is None else t0_ns
+        head[5] = seq
+        return HEADER.pack(*head) + self.last[HEADER_SIZE:]
 
     def _retimed(self, shift_ns: int) -> bytes:
         """The last block again (same sequence number and samples), its t0 moved by

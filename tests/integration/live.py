@@ -9,9 +9,11 @@ damage per component and phase, residues, start peaks and rise times — must be
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
+import resource
 import signal
 import socket
 import sqlite3
@@ -79,6 +81,11 @@ def port_open(port: int) -> bool:
         return sock.connect_ex(("127.0.0.1", port)) == 0
 
 
+def _cap_memory(limit: int) -> None:
+    """In the child, before ``exec``: cap its address space at ``limit`` bytes."""
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+
 class Processes:
     """``millwatch`` subprocesses of one test, each logged to ``<name>.log``; always stopped."""
 
@@ -87,15 +94,21 @@ class Processes:
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._runs: dict[str, int] = {}
 
-    def start(self, name: str, *args: str) -> subprocess.Popen[bytes]:
-        """Start ``millwatch ARGS``; a restarted ``name`` logs to a new file (``name.1.log``…)."""
+    def start(
+        self, name: str, *args: str, memory_bytes: int | None = None
+    ) -> subprocess.Popen[bytes]:
+        """Start ``millwatch ARGS``; a restarted ``name`` logs to a new file (``name.1.log``…).
+        ``memory_bytes``: its address space is capped there (``RLIMIT_AS``: a runaway
+        allocation fails in the process instead of taking the machine)."""
         run = self._runs.get(name, -1) + 1
         self._runs[name] = run
         path = self.directory / (f"{name}.log" if run == 0 else f"{name}.{run}.log")
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         with path.open("wb") as log:
+            cap = None if memory_bytes is None else functools.partial(_cap_memory, memory_bytes)
             proc = subprocess.Popen([sys.executable, "-m", "service.cli.main", *args], cwd=ROOT,
-                                    stdout=log, stderr=subprocess.STDOUT, env=env)  # fmt: skip
+                                    stdout=log, stderr=subprocess.STDOUT, env=env,
+                                    preexec_fn=cap)  # fmt: skip
         self.procs[name] = proc
         return proc
 

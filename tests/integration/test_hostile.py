@@ -13,7 +13,14 @@ import pytest
 
 from ingest.wire import DType, Unit, WireError, decode_block, encode_block
 from tests.integration import hostile
-from tests.integration.hostile import KINDS, MALFORMED, WELL_FORMED, HostileChannel, kind_cycle
+from tests.integration.hostile import (
+    FORGED,
+    KINDS,
+    MALFORMED,
+    WELL_FORMED,
+    HostileChannel,
+    kind_cycle,
+)
 
 T0 = 1_790_000_000 * 10**9
 STEP_NS = 100_000_000  # 100 samples at 1 kHz
@@ -76,6 +83,18 @@ def test_well_formed_kinds_decode_and_carry_a_sequence_number_already_sent(seed)
     assert future.t0_ns >= hostile.YEAR_2100_NS
 
 
+@pytest.mark.parametrize("seed", range(5))
+def test_forged_kinds_decode_with_a_new_sequence_number(seed):
+    ch = _channel(seed)
+    last = decode_block(ch.last)
+    assert decode_block(ch.make("seq_2_63")).seq == 2**63
+    jump = decode_block(ch.make("seq_jump_100000"))
+    assert (jump.seq, jump.t0_ns) == (last.seq + 100_000, last.t0_ns + STEP_NS)
+    future = decode_block(ch.make("next_in_2100"))
+    assert future.seq == last.seq + 1 and future.t0_ns >= hostile.YEAR_2100_NS
+    assert np.array_equal(future.samples, last.samples)
+
+
 def test_random_bytes_are_random_and_never_a_block():
     ch = _channel(3)
     payloads = [ch.make("random_bytes") for _ in range(200)]
@@ -86,7 +105,7 @@ def test_random_bytes_are_random_and_never_a_block():
 
 
 def test_kinds_are_complete_and_cycled_evenly():
-    assert set(KINDS) == set(MALFORMED) | set(WELL_FORMED)
+    assert set(KINDS) == set(MALFORMED) | set(WELL_FORMED) | set(FORGED)
     assert {"random_bytes", "huge_count", "bad_magic", "bad_version", "bad_header_length",
             "bad_fs", "bad_dtype", "bad_unit", "nonfinite"} <= set(MALFORMED)  # fmt: skip
     drawn = list(itertools.islice(kind_cycle(WELL_FORMED, random.Random(0)), 40))

@@ -31,6 +31,11 @@ def test_paths_are_relative_to_the_settings_file(tmp_path):
         ("[archive]\nrotate_seconds = -1\n", "archive.rotate_seconds"),
         ("[worker]\nqueue = 5\n", "worker.queue"),
         ("[zenoh\n", "TOML syntax error"),
+        ("[worker]\nmax_ahead_s = 0.5\n", r"worker\.max_ahead_s: 0\.5 s is out of range"),
+        ("[worker]\nmax_ahead_s = nan\n", r"worker\.max_ahead_s: nan s is out of range"),
+        ("[worker]\nmax_ahead_s = 1e6\n", r"worker\.max_ahead_s: 1000000\.0 s"),
+        ("[worker]\nmax_block_bytes = 100\n", r"worker\.max_block_bytes: 100 bytes is out"),
+        ("[worker]\nmax_block_bytes = 4294967296\n", r"worker\.max_block_bytes: 4294967296"),
     ],
 )
 def test_errors_name_the_file_and_field(tmp_path, text, message):
@@ -39,6 +44,17 @@ def test_errors_name_the_file_and_field(tmp_path, text, message):
     with pytest.raises(SettingsError, match=message) as err:
         load_service_settings(path)
     assert str(path) in str(err.value)
+
+
+def test_admission_limits_come_from_the_worker_section(tmp_path):
+    path = tmp_path / "ok.toml"
+    path.write_text("[worker]\nmax_ahead_s = 5\nmax_block_bytes = 65536\n")
+    worker = load_service_settings(path).worker
+    assert (worker.max_ahead_s, worker.max_block_bytes) == (5.0, 65536)
+    assert (ServiceSettings().worker.max_ahead_s, ServiceSettings().worker.max_block_bytes) == (
+        60.0,
+        2**20,
+    )
 
 
 def test_no_mill_configured_is_an_error():

@@ -116,12 +116,14 @@ def test_live_replayed_and_offline_paths_admit_and_count_the_same_blocks(tmp_pat
 
 def test_replay_keys_are_their_channels_offline_and_foreign_live() -> None:
     key = build_key(BASE.site, "mill-0", "motor_torque")
-    payload = next(iter(scene_blocks(get_scene("start-lrs", CONFIGS[0], duration_s=1.0)))).payload
+    first = next(iter(scene_blocks(get_scene("start-lrs", CONFIGS[0], duration_s=1.0))))
+    payload, recv = first.payload, first.t_end_ns
     replay_key = to_replay(key, "run1")
     live = BlockAdmission(CONFIGS)
     offline = BlockAdmission(CONFIGS, replayed=True, warn_foreign=False)
-    assert live.admit(replay_key, payload, 1) is None and live.foreign == {replay_key: 1}
-    got = offline.admit(replay_key, payload, 1)
+    assert live.admit(replay_key, payload, recv) is None
+    assert live.foreign == {replay_key.rpartition("/")[0]: 1}  # (counted per prefix)
+    got = offline.admit(replay_key, payload, recv)
     assert got is not None and (got.mill_id, got.channel) == ("mill-0", "motor_torque")
     assert offline.foreign_blocks == 0
 
@@ -130,23 +132,26 @@ def test_replay_keys_are_their_channels_offline_and_foreign_live() -> None:
 @given(
     start=st.sampled_from([None, 9, 10]),
     jitter=st.lists(st.integers(-60, 60), min_size=1, max_size=6),
-    seq_step=st.lists(st.sampled_from([1, 1, 1, 0, 2]), min_size=6, max_size=6),
+    seq_step=st.lists(st.sampled_from([1, 1, 1, 0, 2, 100_000]), min_size=6, max_size=6),
+    ahead_s=st.lists(st.sampled_from([0, 0, 0, 59, 61, 7200]), min_size=6, max_size=6),
 )
 def test_a_run_is_regular_exactly_when_accepting_it_block_by_block_finds_nothing(
-    start: int | None, jitter: list[int], seq_step: list[int]
+    start: int | None, jitter: list[int], seq_step: list[int], ahead_s: list[int]
 ) -> None:
     """The batch lane's test of a run (``follows_on``) is the admission rule: jitter of the
-    t0 (in % of a block) and sequence steps drawn at random."""
+    t0 (in % of a block), sequence steps (a +100,000 jump among them) and how far each block
+    reaches ahead of its receive time (the default limit: 60 s) drawn at random."""
     step = 100_000_000  # 100 samples at 1 kHz
     health = ChannelHealth()
     if start is not None:  # the channel's last accepted block: seq 10 at t0 = 0
-        health.accept(Block(np.zeros(100), 0, 1000.0, 10, Unit.RPM, DType.FLOAT64), 0)
+        health.accept(Block(np.zeros(100), 0, 1000.0, 10, Unit.RPM, DType.FLOAT64), step)
     seq = 11 + np.cumsum([0, *seq_step[: len(jitter) - 1]]) - (start == 9)
     t0 = (seq - 10) * step + np.array(jitter) * step // 100
-    regular = health.follows_on(seq.astype(np.uint64), t0.astype(np.int64), step)
+    recv = t0 + step - np.array(ahead_s[: len(jitter)]) * 10**9
+    regular = health.follows_on(seq.astype(np.uint64), t0.astype(np.int64), step, recv)
     verdicts = []
-    for s, t in zip(seq.tolist(), t0.tolist(), strict=True):
-        got = health.accept(Block(np.zeros(100), t, 1000.0, s, Unit.RPM, DType.FLOAT64), 0)
+    for s, t, r in zip(seq.tolist(), t0.tolist(), recv.tolist(), strict=True):
+        got = health.accept(Block(np.zeros(100), t, 1000.0, s, Unit.RPM, DType.FLOAT64), r)
         verdicts.append(got.verdict in ("first", "next") and got.clock_fault is None
                         and not health.in_clock_fault)  # fmt: skip
     assert regular == all(verdicts)

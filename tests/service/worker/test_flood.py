@@ -94,7 +94,7 @@ def test_a_repeated_block_is_ignored_not_counted_twice():
 def test_sequence_gaps_and_stale_channels_become_data_quality_events():
     items = [it for i, it in enumerate(GOOD) if i not in (41, 50)]  # one block of two channels
     with tempfile.TemporaryDirectory() as d, Store(Path(d) / "mw.db") as store:
-        clock = [10**18]
+        clock = [GOOD[-1].recv_ns]  # (after the scene: no block is from the future)
         worker = Worker({CONFIG.id: CONFIG}, {CONFIG.id: MillJob(CONFIG)}, store,
                         None, clock=lambda: clock[0])  # fmt: skip
         for item in items:

@@ -97,6 +97,7 @@ def test_a_gap_is_filled_from_the_spool_in_order_and_results_equal_an_uninterrup
         got = _run(worker, live)
     assert got == clean
     assert recovery.recovered == len(BLOCKS) - len(live)
+    assert worker.store.alarms(mill_id=CONFIG.id) == []  # a filled gap is no loss: no alarm
     assert sorted(asked) == sorted((k, OUTAGE[0], OUTAGE[-1]) for k in _archived(tmp_path / "live"))
     n = len(BLOCKS) // len(CONFIG.channels)
     assert all(seqs == list(range(n)) for seqs in _archived(tmp_path / "live").values())
@@ -120,6 +121,11 @@ def test_what_the_spool_never_held_stays_a_loss_with_its_exact_count(tmp_path) -
     )
     # the cause: the spool answered and never held them (the gateway was down)
     assert all((e["never_spooled"], e["dropped_by_retention"]) == (len(down), 0) for e in losses)
+    gaps = {a.subject: a for a in worker.store.alarms(mill_id=CONFIG.id)
+            if a.rule == "sequence_gaps"}  # fmt: skip
+    assert set(gaps) == set(CONFIG.channels)  # raised at the first loss, with its count
+    assert all(a.value == len(down) and f"{len(down)} blocks (seq 70–90)" in a.message
+               for a in gaps.values())  # fmt: skip
     archived = _archived(tmp_path / "live")
     want = [s for s in range(len(BLOCKS) // len(CONFIG.channels)) if s not in down]
     assert all(seqs == want for seqs in archived.values())
@@ -160,3 +166,24 @@ def test_a_loss_the_spools_retention_caused_is_stored_with_that_cause(tmp_path) 
     got = sorted((e["channel"], e["first_seq"], e["missing_blocks"], e["dropped_by_retention"],
                   e["never_spooled"]) for e in losses)  # fmt: skip
     assert got == sorted((c, 60, 31, 20, 11) for c in CONFIG.channels)
+
+
+def test_a_forged_jump_asks_no_spool_and_moves_nothing(tmp_path) -> None:
+    """Issue 26: a block with sequence number 2^63 (or +100,000) used to reveal a "gap" of
+    9.2e18 blocks; it is implausible, so no spool is asked for it and the real blocks after it
+    are analysed as if it never came."""
+    from tests.service.worker.test_implausible import FORGERIES
+
+    clean = _run(_worker(tmp_path / "clean"), BLOCKS)
+    asked: list[tuple[str, int, int]] = []
+    forged = list(BLOCKS)
+    for at, kind in ((60, "seq_2_63"), (200, "jump_100000")):
+        item = forged[at]
+        forged.insert(at + 1, QueuedBlock(item.key, FORGERIES[kind][1](item.payload),
+                                          item.recv_ns))  # fmt: skip
+    with Spool(tmp_path / "spool") as spool:
+        worker = _worker(tmp_path / "live")
+        _attach(worker, spool, asked)
+        got = _run(worker, forged)
+    assert asked == [] and got == clean
+    assert sum(sum(h.implausible.values()) for h in worker.health[CONFIG.id].channels.values()) == 2
