@@ -87,6 +87,7 @@ __all__ = [
     "Admission",
     "AdmissionLimits",
     "ChannelHealth",
+    "ChannelPosition",
     "LatencyReservoir",
     "Loss",
     "MillHealth",
@@ -156,7 +157,10 @@ def implausible_reason(
     return None
 
 
-class _Position(Protocol):
+class ChannelPosition(Protocol):
+    """Where a channel is: what the plausibility rule and the spool gap fill read of it (the
+    worker's :class:`ChannelHealth`, or the archiving thread's archived positions)."""
+
     @property
     def last_seq(self) -> int | None: ...
 
@@ -170,7 +174,7 @@ class _Position(Protocol):
     def last_lead_ns(self) -> int: ...
 
 
-def last_block(channel: _Position) -> tuple[int, int, int, int] | None:
+def last_block(channel: ChannelPosition) -> tuple[int, int, int, int] | None:
     """(last seq, its t0, just past its last sample, its lead: how far that end lay after its
     receipt, 0 when before) of a channel's position (a :class:`ChannelHealth`, or what the
     archiving thread keeps); None without one."""

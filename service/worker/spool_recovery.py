@@ -71,7 +71,13 @@ import zenoh
 from ingest.spool.query import SpoolAnswer, fetch_spooled
 from ingest.spool.store import payload_seq
 from service.worker.block_queue import QueuedBlock
-from service.worker.health import DEFAULT_LIMITS, AdmissionLimits, implausible_payload, last_block
+from service.worker.health import (
+    DEFAULT_LIMITS,
+    AdmissionLimits,
+    ChannelPosition,
+    implausible_payload,
+    last_block,
+)
 
 if TYPE_CHECKING:
     from service.worker.worker import Worker
@@ -101,23 +107,9 @@ MAX_HOLES = 100
 Fetch = Callable[[str, int, int], SpoolAnswer]
 
 
-class _Seq(Protocol):
-    @property
-    def last_seq(self) -> int | None: ...
-
-    @property
-    def last_t0_ns(self) -> int | None: ...
-
-    @property
-    def last_sample_ns(self) -> int | None: ...
-
-    @property
-    def last_lead_ns(self) -> int: ...
-
-
 class _Channels(Protocol):
     @property
-    def channels(self) -> Mapping[str, _Seq]: ...
+    def channels(self) -> Mapping[str, ChannelPosition]: ...
 
 
 #: The last sequence number of each mill's channels (``[mill].channels[channel].last_seq``).
