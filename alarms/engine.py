@@ -13,7 +13,10 @@ transitions and the same deterministic alarm ids (:func:`alarms.lifecycle.alarm_
 * **event** quantities — an offending event raises (or escalates) at once. The condition
   returns to normal after ``clean_events_to_clear`` consecutive clean events, or once
   ``quiet_s_to_clear`` passed without a recurrence (checked on every later observation of the
-  mill and on :meth:`AlarmEngine.tick`), or on acknowledgement when ``clear_on_ack``.
+  mill and on :meth:`AlarmEngine.tick`), or on acknowledgement when ``clear_on_ack``. Every
+  later offending event while the alarm is open *re-annunciates* it (same alarm id, new value
+  and limit, ``exceed_count`` + 1, raised again if acknowledged; a ``reannunciated``
+  transition the store, REST and OPC UA carry like any other).
 
 Bad input never raises: an unknown mill or quantity, or a non-finite value, is logged once per
 kind and ignored. State is bounded: trackers exist only for subjects with an open alarm or a
@@ -271,13 +274,18 @@ class AlarmEngine:
         message = rule.message(obs, severity, book.time_zone, raised_ns)
         if book.simulated:
             message = SIMULATED_PREFIX + message
+        advice = rule.advice_for(obs, severity, book.time_zone)
         if alarm is None:
-            cond.alarm = _new_alarm(rule, key, obs, severity, threshold, message, book.simulated)
+            cond.alarm = _new_alarm(rule, key, obs, severity, threshold, (message, advice),
+                                    book.simulated)  # fmt: skip
             return [lifecycle.raise_alarm(cond.alarm)]
+        args = (obs.t_ns, obs.value, threshold, message, advice)
         if severity.rank > alarm.severity.rank:
-            return [lifecycle.escalate(alarm, severity, obs.t_ns, obs.value, threshold, message)]
+            return [lifecycle.escalate(alarm, severity, *args)]
         if not alarm.condition:
-            return [lifecycle.recur(alarm, obs.t_ns, obs.value, threshold, message)]
+            return [lifecycle.recur(alarm, *args)]
+        if rule.kind is Kind.EVENT:
+            return [lifecycle.reannunciate(alarm, *args)]
         return []
 
     def _quiet_clears(self, mill_id: str, t_ns: int) -> list[Transition]:
@@ -303,13 +311,15 @@ def _new_alarm(
     obs: Observation,
     severity: Severity,
     threshold: float,
-    message: str,
+    texts: tuple[str, str],
     simulated: bool,
 ) -> Alarm:
     mill_id, name, subject = key
+    message, advice = texts
     return Alarm(
         alarm_id=lifecycle.alarm_id_for(mill_id, name, subject, obs.t_ns),
         mill_id=mill_id, rule=name, subject=subject, quantity=rule.quantity, unit=rule.unit,
         severity=severity, state=AlarmState.RAISED, raised_ns=obs.t_ns, updated_ns=obs.t_ns,
         value=obs.value, threshold=threshold, message=message, simulated=simulated,
+        advice=advice,
     )  # fmt: skip
