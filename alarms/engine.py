@@ -9,7 +9,10 @@ transitions and the same deterministic alarm ids (:func:`alarms.lifecycle.alarm_
   went beyond its threshold stayed beyond it for ``raise_delay_s``; the highest confirmed
   severity raises the alarm or escalates it in place. The condition returns to normal when the
   value stayed at or inside the clear level (threshold ∓ deadband) for ``clear_delay_s``. A value
-  between the clear level and the threshold touches nothing: no chatter.
+  between the clear level and the threshold touches nothing: no chatter. A level rule that
+  clears on acknowledgement (``starts_per_month``: a count that stays high until the month
+  ends) stays quiet after that acknowledgement until the value is normal again or a more severe
+  level is reached — one annunciation per level, not one per observation.
 * **event** quantities — an offending event raises (or escalates) at once. The condition
   returns to normal after ``clean_events_to_clear`` consecutive clean events, or once
   ``quiet_s_to_clear`` passed without a recurrence (checked on every later observation of the
@@ -67,10 +70,11 @@ class _Condition:
     clean_events: int = 0
     last_offence_ns: int | None = None
     alarm: Alarm | None = None
+    silenced: str | None = None  # severity acknowledged away (level rule with clear_on_ack)
 
     @property
     def idle(self) -> bool:
-        return self.alarm is None and not self.above_since
+        return self.alarm is None and not self.above_since and self.silenced is None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -79,6 +83,7 @@ class _Condition:
             "clean_events": self.clean_events,
             "last_offence_ns": self.last_offence_ns,
             "alarm": None if self.alarm is None else self.alarm.to_dict(),
+            "silenced": self.silenced,
         }
 
     @classmethod
@@ -90,6 +95,7 @@ class _Condition:
             int(d.get("clean_events", 0)),
             d.get("last_offence_ns"),
             None if alarm is None else Alarm.from_dict(alarm),
+            d.get("silenced"),
         )
 
 
@@ -147,6 +153,8 @@ class AlarmEngine:
             rule = self.books[key[0]].rule(key[1])
             assert cond.alarm is not None
             out = lifecycle.acknowledge(cond.alarm, by, t_ns, rule.clear_on_ack)
+            if rule.kind is Kind.LEVEL and rule.clear_on_ack and not cond.alarm.open:
+                cond.silenced = str(cond.alarm.severity)  # until normal or a worse level
             self._keep(key, cond)
             return out
 
@@ -231,6 +239,9 @@ class AlarmEngine:
             cond.normal_since = None
         elif cond.normal_since is None:
             cond.normal_since = obs.t_ns
+            cond.silenced = None
+        if confirmed and cond.alarm is None and cond.silenced is not None:
+            confirmed = [s for s in confirmed if Severity(s).rank > Severity(cond.silenced).rank]
         if confirmed:
             return self._offend(rule, key, cond, obs, Severity(confirmed[-1]))
         alarm = cond.alarm

@@ -37,8 +37,8 @@ start_peak (event)          starter type's mean + 2 / + 3         1 clean start 
                             std. dev., capped at the shaft's                             §8.2
                             limit (E-LRS 131/151 %, LRS 310/348
                             %, Grid 1207/1539 %)
-starts_per_month (level)    warning > 5, alarm > 20               new month; latched     §6.1.3,
-                                                                                         §6.2.8
+starts_per_month (level)    warning > 5, alarm > 20               on ack (then quiet at  §6.1.3,
+                                                                  that level); latched   §6.2.8
 oscillation_range (level)   warning > 25 %, alarm > 45 %          ≤ 23 % for 5 min       Tab. 14–15
 bending_amplitude (level)   warning > 25, alarm > 43,             ≤ 23 MPa for 5 min     §8.1
                             critical > 90 MPa
@@ -128,9 +128,10 @@ class Rule:
     """One alarm rule; see the module docstring for the lifecycle knobs.
 
     ``headline`` is a ``str.format`` template over ``value`` (formatted with ``value_format``),
-    ``subject``, ``where`` (" on <subject>" or "") and the observation's context (a None value
-    counts as missing): what, the value and where, first; the message adds the limit, the time
-    and ``action`` (one short imperative). ``advice``: the reasoning in plain words, a template
+    ``limit`` (" (<severity> > <limit>)", right after the value), ``subject``, ``where``
+    (" on <subject>" or "") and the observation's context (a None value counts as missing):
+    what, the value against its limit and where, first; the message adds the time and
+    ``action`` (one short imperative). ``advice``: the reasoning in plain words, a template
     over the same fields; ``source``: where the set points come from (author and section), put
     after the advice, never in the message. ``clauses``: ``(name, template, fallback)`` —
     ``{name}`` is ``template`` formatted when the context holds every field it names (not None),
@@ -229,12 +230,13 @@ class Rule:
         alarm); ``raised_ns`` is accepted for the callers and not repeated (the alarm's
         ``raised_ns`` field holds it)."""
         fields = self._fields(obs, time_zone)
-        headline = self.headline.format_map(fields)
         criterion = self.criterion or (
             f"{severity} {_SIGN[self.direction]} {self.fmt(self.threshold(severity, obs))}"
         )
+        fields["limit"] = f" ({criterion})"
+        headline = self.headline.format_map(fields)
         action = self.level(severity).action or self.action
-        return f"{headline} ({criterion}) at {fields['time']}: {action}"
+        return f"{headline} at {fields['time']}: {action}"
 
     def advice_for(self, obs: Observation, severity: Severity, time_zone: str = "UTC") -> str:
         """Why it matters and what to check, then the source (author and section)."""
@@ -316,7 +318,7 @@ def _start_peak(config: MillConfig) -> Rule:
     return Rule(
         "start_peak", "start_peak_pct",
         _levels(*levels, (Severity.ALARM, limits.alarm)),
-        headline=f"Start peak {{value}}{{shaft}}, {starter} starter",
+        headline=f"Start peak {{value}}{{limit}}{{shaft}}, {starter} starter",
         clauses=(("shaft", " on the {side} motor shaft", " on the motor shaft"),),
         action="check the starter before the next start",
         advice=advice + "." + how,
@@ -329,18 +331,21 @@ def _start_peak(config: MillConfig) -> Rule:
 def _starts_per_month(config: MillConfig) -> Rule:
     """Starts in the local calendar month (Diering 2011 §6.1.3 supplier norm 3–5, §6.2.8 field
     average 20–22, §10.3 "recorded and scrutinized"). Level without delays (a count does not
-    chatter); latched: a busy month must be acknowledged even after the count resets."""
+    chatter); latched: a busy month must be acknowledged even after the count resets; clears
+    on acknowledgement and stays quiet at that level for the rest of the month (a count stays
+    high until the month ends: an alarm standing for weeks would be a stale alarm)."""
     a = config.alarms
     return Rule(
         "starts_per_month", "starts_this_month",
         _levels((Severity.WARNING, a.starts_per_month_warn),
                 (Severity.ALARM, a.starts_per_month_alarm)),
-        headline="{value} starts in the calendar month {month}",
+        headline="{value} starts in the calendar month {month}{limit}",
         action="review why the mill stopped each time",
         advice="Every start loads the drivetrain with start-up peaks and adds fatigue damage. "
         "Suppliers expect 3 to 5 starts a month; the measured mills averaged 20 to 22. Record "
         "and scrutinize every stop",
         source="Diering 2011 §6.1.3, §6.2.8, §10.3", value_format="{:.0f}", latched=True,
+        clear_on_ack=True,
     )  # fmt: skip
 
 
@@ -352,7 +357,7 @@ def _oscillation(config: MillConfig) -> Rule:
         "oscillation_range", "oscillation_range_pct",
         _levels((Severity.WARNING, a.oscillation_range_warn_pct),
                 (Severity.ALARM, a.oscillation_range_alarm_pct)),
-        headline="Torque oscillation range {value} of rated{where}",
+        headline="Torque oscillation range {value} of rated{limit}{where}",
         action="check the spectrum and gear wear",
         advice="The running torque swings more than on the measured mills (23.6 % average, "
         "45.4 % the highest). Look at the spectrum for the line that grew (gear mesh, liner "
@@ -377,7 +382,7 @@ def _bending(config: MillConfig) -> Rule:
     )  # fmt: skip
     return Rule(
         "bending_amplitude", "bending_amplitude_mpa", levels,
-        headline="Pinion bending amplitude {value}{where}",
+        headline="Pinion bending amplitude {value}{limit}{where}",
         action="check the drivetrain alignment",
         advice="Bending fatigue of the pinion shaft depends on this amplitude: experience says "
         "keep it below 25 MPa, 43 MPa leaves a fatigue reserve factor of 2, above 90 MPa shafts "
@@ -396,7 +401,7 @@ def _barring(config: MillConfig) -> Rule:
     return Rule(
         "barring_peak", "barring_peak_pct",
         _levels((Severity.ALARM, config.barring_peak_limit_pct)),
-        headline="Barring peak {value} of rated{where}",
+        headline="Barring peak {value} of rated{limit}{where}",
         action="loosen the charge before a full start",
         advice="Barring needed more torque than the highest measured on such drives (185 % "
         "single drive, 314 % dual drive): the charge may have set during a long stop. Loosen it "
@@ -413,8 +418,8 @@ def _unexplained_peak(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "unexplained_peak", "unexplained_peak_hz", _levels((Severity.WARNING, 0.0)),
-        headline="Unexplained spectral peak at {value}{where}{natural}",
-        clauses=(("natural", ", nearest natural frequency {nearest_natural_hz} Hz", ""),
+        headline="Unexplained peak {value}{limit}{where}{natural}",
+        clauses=(("natural", ", natural {nearest_natural_hz} Hz", ""),
                  ("model", "The nearest natural frequency of the drivetrain model is "
                   "{nearest_natural_hz} Hz", "The mill file has no torsional model to compare "
                   "it with")),
@@ -423,7 +428,7 @@ def _unexplained_peak(config: MillConfig) -> Rule:
         "can be a torsional resonance (peaks at 10 to 15 Hz on measured mills). {model}; "
         "inspect the drivetrain",
         source="Diering 2011 §6.2.7, Fedin & Vinogradov 2018", value_format="{:.2f} Hz",
-        criterion="warning: no drivetrain excitation",
+        criterion="warning: no known excitation",
         quiet_s_to_clear=a.unexplained_peak_quiet_s,
     )  # fmt: skip
 
@@ -435,7 +440,7 @@ def _resonance(config: MillConfig) -> Rule:
     return Rule(
         "resonance_margin", "resonance_margin",
         _levels((Severity.WARNING, a.resonance_margin_warn)),
-        headline="Resonance margin {value}{where}{pair}",
+        headline="Resonance margin {value}{limit}{where}{pair}",
         clauses=(("pair", " ({line} {frequency_hz} Hz, natural {natural_hz} Hz)", ""),),
         action="review the mill speed",
         advice="An excitation runs close to a torsional natural frequency of the drivetrain, "
@@ -456,7 +461,7 @@ def _remaining_life(config: MillConfig) -> Rule:
     return Rule(
         "remaining_life", "remaining_life_years",
         _levels((Severity.WARNING, a.life_warn_fraction), (Severity.ALARM, a.life_alarm_fraction)),
-        headline="Remaining life {value} for {subject}",
+        headline="Remaining life {value}{limit} for {subject}",
         action="review the damage report",
         advice="At the current damage rate this component wears out before its design life "
         "ends. Bending range (alignment), start peaks and the number of starts drive the "
@@ -474,7 +479,7 @@ def _stale(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "stale_channel", "stale_channel", _levels((Severity.WARNING, a.stale_after_s)),
-        headline="No data{where} for {value}",
+        headline="No data{where} for {value}{limit}",
         action="check transmitter, gateway and network",
         advice="The channel sends nothing: the rotating telemetry transmitter, the gateway or "
         "the network link dropped out. Nothing is analysed for it until data flow again",
@@ -487,7 +492,7 @@ def _spike_rate(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "spike_rate", "spike_rate", _levels((Severity.WARNING, a.spike_rate_warn_per_min)),
-        headline="Telemetry spikes {value}{where}",
+        headline="Telemetry spikes {value}{limit}{where}",
         action="check the antenna and radios nearby",
         advice="Radio interference (two-way radios, phones) puts spikes into the telemetry. "
         "Flagged samples are left out of the analysis; check the telemetry antenna and radio "
@@ -504,7 +509,7 @@ def _sequence_gaps(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "sequence_gaps", "sequence_gaps", _levels((Severity.WARNING, a.sequence_gaps_warn_per_min)),
-        headline="Data blocks missing {value}{where}",
+        headline="Data blocks missing {value}{limit}{where}",
         action="check the gateway and its network",
         advice="Blocks of samples never arrived: the sensor gateway or the network between "
         "gateway and service loses data",
@@ -519,7 +524,7 @@ def _archive(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "archive_write_failures", "archive_write_failures", _levels((Severity.ALARM, 0.0)),
-        headline="Archive writes failed: {value}",
+        headline="Archive writes failed: {value}{limit}",
         action="check the archive disk",
         advice="Raw telemetry is not being archived, so it is lost for long-term trending and "
         "re-analysis. Check the archive disk (space, permissions, health)",
@@ -535,7 +540,7 @@ def _analysis_lag(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "analysis_lag", "analysis_lag", _levels((Severity.WARNING, a.analysis_lag_warn_s)),
-        headline="Analysis {value} behind the data",
+        headline="Analysis {value} behind the data{limit}",
         action="give the worker more CPU",
         advice="Results and alarms come late; nothing is lost (every block is archived). If "
         "the lag keeps growing the worker is short of CPU: give it more, or move mills to "
@@ -551,7 +556,7 @@ def _report_delivery(config: MillConfig) -> Rule:
     (files, mail), latched: the site must see it even once a later attempt succeeded."""
     return Rule(
         "report_delivery", "report_failures", _levels((Severity.ALARM, 0.0)),
-        headline="Monthly report {month}: {stage} failed after {value}",
+        headline="Monthly report {month}: {stage} failed after {value}{limit}",
         action="fix the cause, then run 'millwatch report'",
         advice="The report did not reach site management: {error}. Fix the cause (reports "
         "directory: space, permissions; mail: SMTP host, credentials, recipients); the service "
@@ -569,7 +574,7 @@ def _load_sharing(config: MillConfig) -> Rule:
     return Rule(
         "load_sharing", "load_sharing_imbalance_pct",
         _levels((Severity.WARNING, a.imbalance_warn_pct), (Severity.ALARM, a.imbalance_alarm_pct)),
-        headline="Load-sharing imbalance {value} between the drives",
+        headline="Load-sharing imbalance {value}{limit} between the drives",
         action="check load-sharing control and pinions",
         advice="One motor carries more of the load than the other, which overloads its side. "
         "Check the drives' load-sharing control and the pinion alignment of both sides",

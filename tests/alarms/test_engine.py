@@ -94,7 +94,7 @@ def test_every_exceeding_start_reannunciates_the_same_alarm():
     assert {t.alarm_id for t in later} == {raised.alarm_id}
     last = later[-1].alarm
     assert (last.value, last.exceed_count, last.state) == (1060.0, 4, "raised")
-    assert last.value_at_raise == 792.0 and "Start peak 1060 % on the motor shaft" in last.message
+    assert last.value_at_raise == 792.0 and "Start peak 1060 % (alarm > 348 %) on the motor shaft" in last.message
     (cleared,) = feed(eng, "start_peak_pct", [200], start_s=5 * 3600, channel="motor_torque")
     assert cleared.kind == "cleared" and cleared.value == 200.0
     assert (cleared.alarm.value, cleared.alarm.value_at_raise) == (1060.0, 792.0)
@@ -130,8 +130,22 @@ def test_latched_alarm_recurs_and_an_acknowledged_one_clears_on_normal():
     eng = engine()
     fired = feed(eng, "starts_this_month", [6, 1, 6], step_s=86400)
     assert kinds(fired) == ["raised", "normal", "recurred"]
-    eng.acknowledge(fired[0].alarm_id, "ops", T0 + 3 * 86400 * NS)
-    assert kinds(feed(eng, "starts_this_month", [1], start_s=4 * 86400)) == ["cleared"]
+    acked = eng.acknowledge(fired[0].alarm_id, "ops", T0 + 3 * 86400 * NS)
+    assert kinds(acked) == ["acknowledged", "cleared"]  # starts_per_month clears on ack
+
+
+def test_an_acknowledged_month_count_stays_quiet_until_a_worse_level_or_a_new_month():
+    """One annunciation per level and month, not one per start: a count stays high until the
+    month ends (EEMUA 191: no alarm standing for weeks)."""
+    eng = engine()
+    (raised,) = feed(eng, "starts_this_month", [6])
+    eng.acknowledge(raised.alarm_id, "ops", T0 + NS)
+    assert feed(eng, "starts_this_month", [7, 8, 20], start_s=3600) == []
+    (worse,) = feed(eng, "starts_this_month", [21], start_s=5 * 3600)
+    assert (worse.kind, worse.severity) == ("raised", "alarm")
+    eng.acknowledge(worse.alarm_id, "ops", T0 + 6 * 3600 * NS)
+    assert feed(eng, "starts_this_month", [22, 1], start_s=7 * 3600) == []  # new month: 1
+    assert kinds(feed(eng, "starts_this_month", [6], start_s=9 * 3600)) == ["raised"]
 
 
 def test_archive_failures_latch_and_clear_on_acknowledgement():
