@@ -77,8 +77,8 @@ from typing import Any, Literal
 
 from alarms.observations import QUANTITIES, Kind, Observation, local_month
 from alarms.times import iso_local
-from analytics.drivetrain.start_limits import K_ALARM, K_WARNING
 from analytics.drivetrain.mill_config import MillConfig, Starter
+from analytics.drivetrain.start_limits import K_ALARM, K_WARNING
 
 __all__ = ["MESSAGE_MAX", "Level", "Rule", "RuleBook", "Severity", "build_rules"]
 
@@ -240,9 +240,7 @@ class Rule:
 
     def advice_for(self, obs: Observation, severity: Severity, time_zone: str = "UTC") -> str:
         """Why it matters and what to check, then the source (author and section)."""
-        text = (self.level(severity).advice or self.advice).format_map(
-            self._fields(obs, time_zone)
-        )
+        text = (self.level(severity).advice or self.advice).format_map(self._fields(obs, time_zone))
         return f"{text}. Source: {self.source}."
 
 

@@ -47,8 +47,8 @@ from pydantic import (
 )
 
 from analytics.drivetrain.shaft_stress import ShaftStressModel, StressConcentration
-from analytics.drivetrain.torsional_params import TorsionalParams
 from analytics.drivetrain.start_limits import StartPeakLimits, shaft_limit_pct, start_peak_limits
+from analytics.drivetrain.torsional_params import TorsionalParams
 from analytics.fatigue.sn_curves import SNCurve
 from analytics.fatigue.sn_models import SN_MODEL_PARAMETERS, SNModelParameters, build_sn_curve
 
@@ -291,12 +291,14 @@ class AlarmThresholds(_Frozen):
     which rule uses which field."""
 
     start_peak_warn_pct: Positive | None = Field(
-        default=None, description="None: the starter type's, mean + 2 standard deviations "
-        "(Diering 2011 Tables 3-11), capped at the motor shaft's absolute limit"
+        default=None,
+        description="None: the starter type's, mean + 2 standard deviations "
+        "(Diering 2011 Tables 3-11), capped at the motor shaft's absolute limit",
     )
     start_peak_alarm_pct: Positive | None = Field(
-        default=None, description="None: the starter type's, mean + 3 standard deviations "
-        "(Diering 2011 Tables 3-11), capped at the motor shaft's absolute limit"
+        default=None,
+        description="None: the starter type's, mean + 3 standard deviations "
+        "(Diering 2011 Tables 3-11), capped at the motor shaft's absolute limit",
     )
     starts_per_month_warn: Annotated[int, Field(ge=1)] = 5
     starts_per_month_alarm: Annotated[int, Field(ge=1)] = 20

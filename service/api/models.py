@@ -183,12 +183,16 @@ class AlarmOut(BaseModel):
     raised: str = Field(description="Raised, ISO-8601 UTC (= raised_ns).")
     updated_ns: int = Field(description="Time of the latest transition (the poll cursor).")
     updated: str = Field(description="Latest transition, ISO-8601 UTC (= updated_ns).")
-    value: float | None = Field(description="The latest offending value (raise, escalation, "
-                                "recurrence, re-annunciation), in ``unit``; a clear keeps it.")
+    value: float | None = Field(
+        description="The latest offending value (raise, escalation, "
+        "recurrence, re-annunciation), in ``unit``; a clear keeps it."
+    )
     threshold: float | None = Field(description="The limit ``value`` was judged against.")
-    message: str = Field(description="At most 200 characters (the ``SIMULATED DATA: `` prefix "
-                         "included): what, the value against its limit, where, when, one "
-                         "action. No document citations: those are in ``advice``.")
+    message: str = Field(
+        description="At most 200 characters (the ``SIMULATED DATA: `` prefix "
+        "included): what, the value against its limit, where, when, one "
+        "action. No document citations: those are in ``advice``."
+    )
     condition: bool
     acked_ns: int | None
     acked: str | None = Field(description="Acknowledged, ISO-8601 UTC (= acked_ns).")
@@ -200,20 +204,23 @@ class AlarmOut(BaseModel):
         False, description="Raised on simulated data (the demo's mills); the message says so too."
     )
     value_at_raise: float | None = Field(
-        None, description="The value that raised the alarm, kept for ever (``value`` follows "
-        "later exceedances)."
+        None,
+        description="The value that raised the alarm, kept for ever (``value`` follows "
+        "later exceedances).",
     )
     threshold_at_raise: float | None = Field(
         None, description="The limit ``value_at_raise`` was judged against."
     )
     exceed_count: int = Field(
-        1, description="Offending values so far: an event alarm (a start, a barring session) "
-        "re-annunciates on every exceeding event and counts it."
+        1,
+        description="Offending values so far: an event alarm (a start, a barring session) "
+        "re-annunciates on every exceeding event and counts it.",
     )
     advice: str = Field(
-        "", description="Why the alarm matters, what to check, and the source of its set "
-        "points (author and section), in plain words (README \"Alarms\", the master alarm "
-        "database)."
+        "",
+        description="Why the alarm matters, what to check, and the source of its set "
+        'points (author and section), in plain words (README "Alarms", the master alarm '
+        "database).",
     )
 
 

@@ -94,7 +94,10 @@ def test_every_exceeding_start_reannunciates_the_same_alarm():
     assert {t.alarm_id for t in later} == {raised.alarm_id}
     last = later[-1].alarm
     assert (last.value, last.exceed_count, last.state) == (1060.0, 4, "raised")
-    assert last.value_at_raise == 792.0 and "Start peak 1060 % (alarm > 348 %) on the motor shaft" in last.message
+    assert (
+        last.value_at_raise == 792.0
+        and "Start peak 1060 % (alarm > 348 %) on the motor shaft" in last.message
+    )
     (cleared,) = feed(eng, "start_peak_pct", [200], start_s=5 * 3600, channel="motor_torque")
     assert cleared.kind == "cleared" and cleared.value == 200.0
     assert (cleared.alarm.value, cleared.alarm.value_at_raise) == (1060.0, 792.0)
@@ -103,6 +106,7 @@ def test_every_exceeding_start_reannunciates_the_same_alarm():
 def test_a_cleared_stale_channel_keeps_the_value_that_raised_it():
     eng = engine()
     (raised,) = feed(eng, "stale_channel", [12.0], channel="speed")
+    assert raised.alarm.value_at_raise == 12.0
     (cleared,) = feed(eng, "stale_channel", [1.6], start_s=10, channel="speed")
     assert cleared.kind == "cleared" and (cleared.value, cleared.threshold) == (1.6, 5.0)
     assert (cleared.alarm.value, cleared.alarm.threshold) == (12.0, 10.0)

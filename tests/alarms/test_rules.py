@@ -85,14 +85,18 @@ def test_every_quantity_has_exactly_one_rule():
 def test_thresholds_come_from_the_mill_config():
     cfg = mill()
     custom = cfg.model_copy(
-        update={"alarms": cfg.alarms.model_copy(update={"start_peak_warn_pct": 250.0,
-                                                      "start_peak_alarm_pct": 280.0})}
+        update={
+            "alarms": cfg.alarms.model_copy(
+                update={"start_peak_warn_pct": 250.0, "start_peak_alarm_pct": 280.0}
+            )
+        }
     )
     rule = build_rules(custom).rules["start_peak_pct"]
     assert [lv.threshold for lv in rule.levels] == [250.0, 280.0]
     default = build_rules(cfg).rules["start_peak_pct"]
     assert [lv.threshold for lv in default.levels] == [
-        pytest.approx(233.12 + 2 * 38.43), pytest.approx(233.12 + 3 * 38.43)
+        pytest.approx(233.12 + 2 * 38.43),
+        pytest.approx(233.12 + 3 * 38.43),
     ]
     assert build_rules(mill("ball-dual-lrs")).rules["barring_peak_pct"].levels[0].threshold == 314
 
@@ -123,8 +127,12 @@ def test_message_reads_like_an_engineer_wrote_it():
         "Start peak 362 % (alarm > 348 %) on the motor shaft, LRS starter at "
         "2026-11-02T02:14:07.000+02:00: check the starter before the next start"
     )
-    assert t.alarm.advice.startswith("A liquid resistance starter (LRS) normally peaks at about 233 %")
-    assert t.alarm.advice.endswith("Source: Diering 2011 Table 4 (§6.2.1–6.2.2), §8.2, §10.2, §10.4.")
+    assert t.alarm.advice.startswith(
+        "A liquid resistance starter (LRS) normally peaks at about 233 %"
+    )
+    assert t.alarm.advice.endswith(
+        "Source: Diering 2011 Table 4 (§6.2.1–6.2.2), §8.2, §10.2, §10.4."
+    )
     assert (t.value, t.threshold) == (362.0, pytest.approx(348.41))
 
 
@@ -156,7 +164,9 @@ def test_start_limits_follow_the_starter_type():
 
     def fired(starter: Starter, pct: float) -> list[str]:
         eng = AlarmEngine.for_mills([_starter_mill(starter)])
-        return [str(t.severity) for t in feed(eng, "start_peak_pct", [pct], mill_id="rod-1100-grid")]
+        return [
+            str(t.severity) for t in feed(eng, "start_peak_pct", [pct], mill_id="rod-1100-grid")
+        ]
 
     assert fired(Starter.GRID, 542.0) == [] and fired(Starter.GRID, 874.0) == []
     assert fired(Starter.E_LRS, 240.0) == ["alarm"]
@@ -229,7 +239,8 @@ def test_context_numbers_are_rounded_and_missing_ones_marked():
     ctx["natural_hz"] = 61.0
     (t,) = feed(engine(raise_delay_s=0), "resonance_margin", [0.05], **ctx)
     assert t.message.startswith(
-        "Resonance margin 5.0% (warning < 10.0%) on pinion_torque (girth_mesh 64.12 Hz, natural 61 Hz)"
+        "Resonance margin 5.0% (warning < 10.0%) on pinion_torque "
+        "(girth_mesh 64.12 Hz, natural 61 Hz)"
     )
 
 
@@ -278,7 +289,9 @@ def test_options_are_validated_naming_the_field():
 
 def test_the_month_defaults_to_the_local_calendar_month():
     (t,) = feed(engine(), "starts_this_month", [6])
-    assert t.message.startswith("6 starts in the calendar month 2026-11 (warning > 5) at 2026-11-02")
+    assert t.message.startswith(
+        "6 starts in the calendar month 2026-11 (warning > 5) at 2026-11-02"
+    )
 
 
 def test_the_alarms_package_imports_only_analytics_and_plain_libraries():
