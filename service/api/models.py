@@ -227,7 +227,11 @@ class AlarmOut(BaseModel):
 class TransitionOut(BaseModel):
     alarm_id: str
     seq: int
-    kind: str
+    kind: str = Field(
+        description="raised, escalated, acknowledged, normal, recurred, reannunciated (an event "
+        "rule's event offended again: the same alarm, its value and exceed_count updated) or "
+        "cleared."
+    )
     t_ns: int
     t: str = Field(description="Transition time, ISO-8601 UTC (= t_ns).")
     severity: str
