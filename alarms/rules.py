@@ -54,7 +54,7 @@ sequence_gaps (level)       warning > 0/min (*option*)            0 for 5 min   
 archive_write_failures      alarm > 0 (*option*)                  3 clean reports;       DESIGN
 (event)                                                           latched
 analysis_lag (level)        warning > 120 s (*option*)            ≤ 60 s                 §10.6
-load_sharing (level)        warning > 10 %, alarm > 20 %          ≤ 8 % for 5 min        §6.2.2
+load_sharing (level)        warning > 15 %, alarm > 25 %          ≤ 13 % for 5 min       §6.2.2
                             (*option*)
 report_delivery (event)     alarm > 0 failed attempts             1 delivery; latched    §10.6
 =========================== ===================================== ====================== =======
