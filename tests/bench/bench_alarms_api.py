@@ -6,8 +6,8 @@ Starts the real service in this process (runtime over zenoh on 127.0.0.1, SQLite
 thread, uvicorn on 127.0.0.1) with the 5.2 MW LRS mill, feeds it one simulated Grid-like start
 (above the LRS starter's start-peak levels) so there are alarms to list, then lets
 ``--clients`` pollers ask ``/alarms?state=open`` at ``--rate`` requests per second in total,
-each sending back the ETag it got (``If-None-Match``), as a SCADA poller would. Pollers start at random phases of their
-period (seeded), like independent control-room systems.
+each sending back the ETag it got (``If-None-Match``), as a SCADA poller would. Pollers start
+at random phases of their period (seeded), like independent control-room systems.
 
 The pollers are asyncio tasks with one keep-alive HTTP/1.1 connection each (a minimal client
 over asyncio streams: httpx cost more CPU per request than the server), in
