@@ -54,7 +54,7 @@ sequence_gaps (level)       warning > 0/min (*option*)            0 for 5 min   
 archive_write_failures      alarm > 0 (*option*)                  3 clean reports;       DESIGN
 (event)                                                           latched
 analysis_lag (level)        warning > 120 s (*option*)            ≤ 60 s                 §10.6
-load_sharing (level)        warning > 15 %, alarm > 25 %          ≤ 13 % for 5 min       §6.2.2
+load_sharing (level)        warning > 25 %, alarm > 35 %          ≤ 23 % for 5 min       §6.2.2
                             (*option*)
 report_delivery (event)     alarm > 0 failed attempts             1 delivery; latched    §10.6
 =========================== ===================================== ====================== =======
@@ -576,7 +576,7 @@ def _load_sharing(config: MillConfig) -> Rule:
         action="check load-sharing control and pinions",
         advice="One motor carries more of the load than the other, which overloads its side. "
         "Check the drives' load-sharing control and the pinion alignment of both sides",
-        source="Diering 2011 §6.2.2, Table 15 (limits: engineering defaults)",
+        source="Diering 2011 §6.2.2, Tables 7–8 (limits: engineering defaults)",
         value_format="{:.0f} %",
         deadband=a.imbalance_deadband_pct, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,

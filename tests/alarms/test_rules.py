@@ -55,9 +55,9 @@ CASES = [
      [0, 0, 0]),
     ("report_failures", "sag-5200-lrs", {"stage": "mail", "month": "2024-01", "error": "x"},
      [4], "report_delivery", "alarm", [0, 0]),
-    ("load_sharing_imbalance_pct", "ball-dual-lrs", {}, [17, 17], "load_sharing", "warning",
-     [3, 10, 15]),
-    ("load_sharing_imbalance_pct", "ball-dual-lrs", {}, [26, 26], "load_sharing", "alarm", [3]),
+    ("load_sharing_imbalance_pct", "ball-dual-lrs", {}, [27, 27], "load_sharing", "warning",
+     [3, 20, 25]),
+    ("load_sharing_imbalance_pct", "ball-dual-lrs", {}, [36, 36], "load_sharing", "alarm", [3]),
     ("analysis_lag", "sag-5200-lrs", {}, [130], "analysis_lag", "warning", [0, 30, 120]),
 ]  # fmt: skip
 
@@ -179,13 +179,13 @@ def test_message_time_is_the_time_of_the_raising_value():
     that value's time (site zone, with its offset), which is the alarm's ``raised_ns``; a later
     escalation states its own value's time."""
     eng = engine("ball-dual-lrs")
-    first = feed(eng, "load_sharing_imbalance_pct", [17, 17], step_s=38, mill_id="ball-dual-lrs")
+    first = feed(eng, "load_sharing_imbalance_pct", [27, 27], step_s=38, mill_id="ball-dual-lrs")
     assert first == []  # 38 s < 60 s raise delay
-    (raised,) = feed(eng, "load_sharing_imbalance_pct", [17], start_s=76, mill_id="ball-dual-lrs")
+    (raised,) = feed(eng, "load_sharing_imbalance_pct", [27], start_s=76, mill_id="ball-dual-lrs")
     assert raised.alarm.raised_ns == raised.t_ns == T0 + 76 * NS
     assert f"at {iso_local(raised.t_ns, 'Africa/Johannesburg')}" in raised.message
     assert "at 2026-11-02T00:01:16.000+02:00" in raised.message
-    later = feed(eng, "load_sharing_imbalance_pct", [26, 26, 26], step_s=200, start_s=200,
+    later = feed(eng, "load_sharing_imbalance_pct", [36, 36, 36], step_s=200, start_s=200,
                  mill_id="ball-dual-lrs")  # fmt: skip
     assert kinds(later) == ["escalated"]
     (esc,) = later
@@ -202,10 +202,10 @@ def test_alarm_options_come_from_the_mill_file():
     options = "[alarms]\nimbalance_warn_pct = 30.0\nimbalance_alarm_pct = 40.0\nraise_delay_s = 0\n"
     custom = MillConfig.from_toml_text(toml.replace("[alarms]\n", options))
     default = engine("ball-dual-lrs", raise_delay_s=0)
-    raised = feed(default, "load_sharing_imbalance_pct", [25], mill_id="ball-dual-lrs")
+    raised = feed(default, "load_sharing_imbalance_pct", [28], mill_id="ball-dual-lrs")
     assert kinds(raised) == ["raised"]
     eng = AlarmEngine.for_mills([custom])
-    assert feed(eng, "load_sharing_imbalance_pct", [25], mill_id="ball-dual-lrs") == []
+    assert feed(eng, "load_sharing_imbalance_pct", [28], mill_id="ball-dual-lrs") == []
     (t,) = feed(eng, "load_sharing_imbalance_pct", [31], start_s=60, mill_id="ball-dual-lrs")
     assert "(warning > 30 %)" in t.message
 
