@@ -99,7 +99,7 @@ def measure(path: Path, days: float, seed: int, spectra: bool, ack_min: float) -
     return {
         "mill": config.id,
         "starter": str(config.drive.starter),
-        "starts": sum(1 for o in observations if o.quantity == "start_peak_pct"),
+        "starts": len({o.t_ns for o in observations if o.quantity == "start_peak_pct"}),
         "annunciations": n,
         "per_10_min_20": n * OPERATOR_MILLS * 600.0 / (days * 86400.0),
         "max_standing_h": max(standing, default=0.0),
