@@ -17,7 +17,7 @@ operator is assumed to acknowledge every annunciation ``--ack-min`` minutes afte
 * ``by rule``: annunciations per rule.
 
 Scene time: a scene of ``--days`` days; the rate scales by that span. Analysis speed, not alarm
-rate, is the cost: about 30 min of CPU per mill-month with spectra (README Benchmarks).
+rate, is the cost: 20–35 min of CPU per mill-month with spectra (README Benchmarks).
 """
 
 from __future__ import annotations
