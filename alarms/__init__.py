@@ -8,10 +8,14 @@ What is here:
   (the engine's input) and the quantities rules may watch.
 * :mod:`alarms.from_analysis` — observations from the analyzer's facts (starts, steady windows,
   spectra, data quality).
-* :mod:`alarms.rules` — the rules from the field evidence: levels, severities, delays, latching.
+* :mod:`alarms.rules` — the rules from the field evidence: levels, severities, delays, latching,
+  and each alarm's two texts: ``message`` (≤ 200 characters: what, value against limit, where,
+  one action) and ``advice`` (why, what to check, the source); start-peak levels per starter
+  type come from :mod:`analytics.drivetrain.start_limits`.
 * :mod:`alarms.lifecycle` — the alarm records (:class:`Alarm`, ``TransitionRecord``; the one
   definition the store and the API map by field name) and the transitions
-  raised → acknowledged → cleared.
+  raised → acknowledged → cleared; event alarms re-annunciate in place; the value at raise is
+  kept.
 * :mod:`alarms.engine` — :class:`AlarmEngine`: applies the rules to observations, drives the
   lifecycle, snapshots and restores its state.
 * :mod:`alarms.wire` — the ``…/@alarms`` message of a transition (publish, decode).

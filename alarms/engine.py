@@ -9,11 +9,17 @@ transitions and the same deterministic alarm ids (:func:`alarms.lifecycle.alarm_
   went beyond its threshold stayed beyond it for ``raise_delay_s``; the highest confirmed
   severity raises the alarm or escalates it in place. The condition returns to normal when the
   value stayed at or inside the clear level (threshold ∓ deadband) for ``clear_delay_s``. A value
-  between the clear level and the threshold touches nothing: no chatter.
+  between the clear level and the threshold touches nothing: no chatter. A level rule that
+  clears on acknowledgement (``starts_per_month``: a count that stays high until the month
+  ends) stays quiet after that acknowledgement until the value is normal again or a more severe
+  level is reached — one annunciation per level, not one per observation.
 * **event** quantities — an offending event raises (or escalates) at once. The condition
   returns to normal after ``clean_events_to_clear`` consecutive clean events, or once
   ``quiet_s_to_clear`` passed without a recurrence (checked on every later observation of the
-  mill and on :meth:`AlarmEngine.tick`), or on acknowledgement when ``clear_on_ack``.
+  mill and on :meth:`AlarmEngine.tick`), or on acknowledgement when ``clear_on_ack``. Every
+  later offending event while the alarm is open *re-annunciates* it (same alarm id, new value
+  and limit, ``exceed_count`` + 1, raised again if acknowledged; a ``reannunciated``
+  transition the store, REST and OPC UA carry like any other).
 
 Bad input never raises: an unknown mill or quantity, or a non-finite value, is logged once per
 kind and ignored. State is bounded: trackers exist only for subjects with an open alarm or a
@@ -64,10 +70,11 @@ class _Condition:
     clean_events: int = 0
     last_offence_ns: int | None = None
     alarm: Alarm | None = None
+    silenced: str | None = None  # severity acknowledged away (level rule with clear_on_ack)
 
     @property
     def idle(self) -> bool:
-        return self.alarm is None and not self.above_since
+        return self.alarm is None and not self.above_since and self.silenced is None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -76,6 +83,7 @@ class _Condition:
             "clean_events": self.clean_events,
             "last_offence_ns": self.last_offence_ns,
             "alarm": None if self.alarm is None else self.alarm.to_dict(),
+            "silenced": self.silenced,
         }
 
     @classmethod
@@ -87,6 +95,7 @@ class _Condition:
             int(d.get("clean_events", 0)),
             d.get("last_offence_ns"),
             None if alarm is None else Alarm.from_dict(alarm),
+            d.get("silenced"),
         )
 
 
@@ -144,6 +153,8 @@ class AlarmEngine:
             rule = self.books[key[0]].rule(key[1])
             assert cond.alarm is not None
             out = lifecycle.acknowledge(cond.alarm, by, t_ns, rule.clear_on_ack)
+            if rule.kind is Kind.LEVEL and rule.clear_on_ack and not cond.alarm.open:
+                cond.silenced = str(cond.alarm.severity)  # until normal or a worse level
             self._keep(key, cond)
             return out
 
@@ -228,6 +239,9 @@ class AlarmEngine:
             cond.normal_since = None
         elif cond.normal_since is None:
             cond.normal_since = obs.t_ns
+            cond.silenced = None
+        if confirmed and cond.alarm is None and cond.silenced is not None:
+            confirmed = [s for s in confirmed if Severity(s).rank > Severity(cond.silenced).rank]
         if confirmed:
             return self._offend(rule, key, cond, obs, Severity(confirmed[-1]))
         alarm = cond.alarm
@@ -271,13 +285,18 @@ class AlarmEngine:
         message = rule.message(obs, severity, book.time_zone, raised_ns)
         if book.simulated:
             message = SIMULATED_PREFIX + message
+        advice = rule.advice_for(obs, severity, book.time_zone)
         if alarm is None:
-            cond.alarm = _new_alarm(rule, key, obs, severity, threshold, message, book.simulated)
+            cond.alarm = _new_alarm(rule, key, obs, severity, threshold, (message, advice),
+                                    book.simulated)  # fmt: skip
             return [lifecycle.raise_alarm(cond.alarm)]
+        args = (obs.t_ns, obs.value, threshold, message, advice)
         if severity.rank > alarm.severity.rank:
-            return [lifecycle.escalate(alarm, severity, obs.t_ns, obs.value, threshold, message)]
+            return [lifecycle.escalate(alarm, severity, *args)]
         if not alarm.condition:
-            return [lifecycle.recur(alarm, obs.t_ns, obs.value, threshold, message)]
+            return [lifecycle.recur(alarm, *args)]
+        if rule.kind is Kind.EVENT:
+            return [lifecycle.reannunciate(alarm, *args)]
         return []
 
     def _quiet_clears(self, mill_id: str, t_ns: int) -> list[Transition]:
@@ -303,13 +322,15 @@ def _new_alarm(
     obs: Observation,
     severity: Severity,
     threshold: float,
-    message: str,
+    texts: tuple[str, str],
     simulated: bool,
 ) -> Alarm:
     mill_id, name, subject = key
+    message, advice = texts
     return Alarm(
         alarm_id=lifecycle.alarm_id_for(mill_id, name, subject, obs.t_ns),
         mill_id=mill_id, rule=name, subject=subject, quantity=rule.quantity, unit=rule.unit,
         severity=severity, state=AlarmState.RAISED, raised_ns=obs.t_ns, updated_ns=obs.t_ns,
         value=obs.value, threshold=threshold, message=message, simulated=simulated,
+        advice=advice,
     )  # fmt: skip

@@ -17,10 +17,18 @@ Transitions, each recorded with time, triggering value and threshold (:class:`Tr
 * ``normal`` — a *latched* alarm's condition returned to normal before anyone acknowledged it:
   the alarm stays ``raised`` until acknowledged, then clears.
 * ``recurred`` — the condition came back while a latched alarm waited in ``normal``.
+* ``reannunciated`` — an event rule's event offended again while its alarm is open (a start
+  above the limit after an earlier one): the *same* alarm takes the new value and limit, counts
+  the exceedance (``exceed_count``) and is raised again if it was acknowledged — the control
+  room sees every exceeding event (ISA-18.2 re-alarming of discrete events).
 * ``cleared`` — the condition returned to normal (acknowledged or not latched), or it was
   acknowledged while normal, or acknowledged under a clear-on-acknowledgement rule.
 
-Severity never steps down while the alarm is open (see :mod:`alarms.rules`). The functions here
+Severity never steps down while the alarm is open (see :mod:`alarms.rules`). An alarm's
+``value``/``threshold`` are those of its latest offending value (raise, escalation, recurrence,
+re-annunciation) and ``value_at_raise``/``threshold_at_raise`` those it was raised with: the
+``normal`` and ``cleared`` transitions record the value that ended the condition in the
+transition only, never over the alarm's offending value. The functions here
 mutate one :class:`Alarm` and return the :class:`Transition` they record; deciding *when* is
 :mod:`alarms.engine`'s job. Everything converts to plain JSON data (``to_dict``/``from_dict``).
 
@@ -52,6 +60,7 @@ __all__ = [
     "clear",
     "escalate",
     "raise_alarm",
+    "reannunciate",
     "recur",
     "return_to_normal",
 ]
@@ -69,6 +78,7 @@ class TransitionKind(StrEnum):
     ACKNOWLEDGED = "acknowledged"
     NORMAL = "normal"
     RECURRED = "recurred"
+    REANNUNCIATED = "reannunciated"
     CLEARED = "cleared"
 
 
@@ -84,7 +94,11 @@ class Alarm:
     ``value``/``threshold`` belong to the latest transition (``None`` once stored when not
     finite: SQLite keeps NaN as NULL); ``condition`` is False while a latched alarm waits for
     acknowledgement after its condition returned to normal; ``seq`` counts the alarm's
-    transitions; ``simulated``: raised on data from the simulator (its message says so too).
+    transitions; ``simulated``: raised on data from the simulator (its message says so too);
+    ``value_at_raise``/``threshold_at_raise``: the value and limit it was raised with (kept
+    for ever); ``exceed_count``: offending values that raised, escalated, recurred or
+    re-annunciated it; ``message``: the short sentence for the control room (≤ 200 characters);
+    ``advice``: why it matters, what to check, and the source, in plain words.
     Readers that hold one (the API's alarm board) never mutate it; only the lifecycle
     functions below do, on the engine's own copy."""
 
@@ -107,6 +121,10 @@ class Alarm:
     cleared_ns: int | None = None
     seq: int = 0
     simulated: bool = False
+    value_at_raise: float | None = None
+    threshold_at_raise: float | None = None
+    exceed_count: int = 1
+    advice: str = ""
 
     @property
     def open(self) -> bool:
@@ -171,9 +189,9 @@ def _record(
 ) -> Transition:
     alarm.seq += 1
     alarm.updated_ns = max(alarm.updated_ns, t_ns)
-    if value is not None:
+    if kind in _OFFENDING and value is not None:
         alarm.value = value
-    if threshold is not None:
+    if kind in _OFFENDING and threshold is not None:
         alarm.threshold = threshold
     return Transition(
         alarm.alarm_id, alarm.seq, kind, t_ns, alarm.severity, alarm.state, value, threshold,
@@ -181,29 +199,66 @@ def _record(
     )  # fmt: skip
 
 
+_OFFENDING = frozenset(
+    {TransitionKind.RAISED, TransitionKind.ESCALATED, TransitionKind.RECURRED,
+     TransitionKind.REANNUNCIATED}
+)  # fmt: skip
+
+
 def raise_alarm(alarm: Alarm) -> Transition:
-    """Record the ``raised`` transition of a freshly built alarm (state ``raised``)."""
+    """Record the ``raised`` transition of a freshly built alarm (state ``raised``); its value
+    and threshold are kept as ``value_at_raise``/``threshold_at_raise``."""
+    alarm.value_at_raise = alarm.value
+    alarm.threshold_at_raise = alarm.threshold
     return _record(
         alarm, TransitionKind.RAISED, alarm.raised_ns, alarm.value, alarm.threshold, alarm.message
     )
 
 
 def escalate(
-    alarm: Alarm, severity: Severity, t_ns: int, value: float, threshold: float, message: str
-) -> Transition:
+    alarm: Alarm, severity: Severity, t_ns: int, value: float, threshold: float, message: str,
+    advice: str | None = None,
+) -> Transition:  # fmt: skip
     """Raise the severity of an open alarm in place; an acknowledged alarm is raised again."""
     alarm.severity = severity
-    alarm.state = AlarmState.RAISED
-    alarm.condition = True
-    alarm.message = message
-    return _record(alarm, TransitionKind.ESCALATED, t_ns, value, threshold, message)
+    return _offend_again(alarm, TransitionKind.ESCALATED, t_ns, value, threshold, message, advice)
 
 
-def recur(alarm: Alarm, t_ns: int, value: float, threshold: float, message: str) -> Transition:
+def recur(
+    alarm: Alarm, t_ns: int, value: float, threshold: float, message: str,
+    advice: str | None = None,
+) -> Transition:  # fmt: skip
     """The condition of a latched alarm waiting in ``normal`` came back."""
     alarm.condition = True
     alarm.message = message
+    alarm.exceed_count += 1
+    if advice is not None:
+        alarm.advice = advice
     return _record(alarm, TransitionKind.RECURRED, t_ns, value, threshold, message)
+
+
+def reannunciate(
+    alarm: Alarm, t_ns: int, value: float, threshold: float, message: str,
+    advice: str | None = None,
+) -> Transition:  # fmt: skip
+    """An event offended again while its alarm is open: new value, limit and message, one more
+    exceedance, and raised again if it was acknowledged (module docstring)."""
+    return _offend_again(
+        alarm, TransitionKind.REANNUNCIATED, t_ns, value, threshold, message, advice
+    )
+
+
+def _offend_again(
+    alarm: Alarm, kind: TransitionKind, t_ns: int, value: float, threshold: float,
+    message: str, advice: str | None,
+) -> Transition:  # fmt: skip
+    alarm.state = AlarmState.RAISED
+    alarm.condition = True
+    alarm.message = message
+    alarm.exceed_count += 1
+    if advice is not None:
+        alarm.advice = advice
+    return _record(alarm, kind, t_ns, value, threshold, message)
 
 
 def clear(

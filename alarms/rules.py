@@ -19,18 +19,26 @@ Lifecycle knobs (:mod:`alarms.engine` applies them):
 * ``latched``: a condition that returns to normal before anyone acknowledged it keeps the alarm
   raised until acknowledged (the control room must see that it happened).
 
-Rules and their defaults (fields of ``MillConfig.alarms``; *option*: not a source value). A
-message states the time of the value that raised (or escalated) the alarm, in the site's time
-zone with its offset (:func:`alarms.times.iso_local`: ``2026-11-02T17:00:38.412+02:00``), and
-the start-peak advice is the mill's starter's (:data:`START_ADVICE`: Grid, LRS, E-LRS).
+Rules and their defaults (fields of ``MillConfig.alarms``; *option*: not a source value).
+Every alarm carries two texts (ISA-18.2 rationalisation; README "Alarms" is the master alarm
+database):
+
+* ``message`` — at most :data:`MESSAGE_MAX` characters as served (the ``SIMULATED DATA: ``
+  prefix included), for a control-room list: what, the value against its limit (within the
+  first 100 characters), where, the time of that value (site zone with its offset,
+  :func:`alarms.times.iso_local`), and one action. No document citations.
+* ``advice`` — why it matters, what to check and the source (author and section), in plain
+  words; the start-peak advice is the mill's starter's (:data:`START_ADVICE`).
 
 =========================== ===================================== ====================== =======
 rule                        levels                                clears                 source
 =========================== ===================================== ====================== =======
-start_peak (event)          warning > 250 %, alarm > 300 %        3 clean starts         §6.2.1,
-                                                                                         §10.4
-starts_per_month (level)    warning > 5, alarm > 20               new month; latched     §6.1.3,
-                                                                                         §6.2.8
+start_peak (event)          starter type's mean + 2 / + 3         1 clean start          Tab. 3–11,
+                            std. dev., capped at the shaft's                             §8.2
+                            limit (E-LRS 131/151 %, LRS 310/348
+                            %, Grid 1207/1539 %)
+starts_per_month (level)    warning > 5, alarm > 20               on ack (then quiet at  §6.1.3,
+                                                                  that level); latched   §6.2.8
 oscillation_range (level)   warning > 25 %, alarm > 45 %          ≤ 23 % for 5 min       Tab. 14–15
 bending_amplitude (level)   warning > 25, alarm > 43,             ≤ 23 MPa for 5 min     §8.1
                             critical > 90 MPa
@@ -49,10 +57,13 @@ archive_write_failures      alarm > 0 (*option*)                  3 clean report
 store_write_failures        warning > 0 (*option*)                3 clean reports;       DESIGN
 (event)                                                           latched
 analysis_lag (level)        warning > 120 s (*option*)            ≤ 60 s                 §10.6
-load_sharing (level)        warning > 10 %, alarm > 20 %          ≤ 8 % for 5 min        §6.2.2
+load_sharing (level)        warning > 25 %, alarm > 35 %          ≤ 23 % for 5 min       §6.2.2
                             (*option*)
 report_delivery (event)     alarm > 0 failed attempts             1 delivery; latched    §10.6
 =========================== ===================================== ====================== =======
+
+Event rules re-annunciate: every offending event while the alarm is open updates the same
+alarm (:mod:`alarms.engine`).
 
 Severity never steps down while an alarm is open: an alarm that reached ``alarm`` stays an
 ``alarm`` until it clears (stepping down would chatter between levels; the transitions keep the
@@ -70,8 +81,12 @@ from typing import Any, Literal
 from alarms.observations import QUANTITIES, Kind, Observation, local_month
 from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig, Starter
+from analytics.drivetrain.start_limits import K_ALARM, K_WARNING
 
-__all__ = ["Level", "Rule", "RuleBook", "Severity", "build_rules"]
+__all__ = ["MESSAGE_MAX", "Level", "Rule", "RuleBook", "Severity", "build_rules"]
+
+MESSAGE_MAX = 200
+"""Longest ``message`` as served, characters (issue 27: a control-room list shows it whole)."""
 
 
 class Severity(StrEnum):
@@ -91,11 +106,12 @@ _RANK = {Severity.WARNING: 0, Severity.ALARM: 1, Severity.CRITICAL: 2}
 
 @dataclass(frozen=True, slots=True)
 class Level:
-    """One severity of a rule: beyond ``threshold`` (strictly) it applies; ``advice`` overrides
-    the rule's advice at this severity."""
+    """One severity of a rule: beyond ``threshold`` (strictly) it applies; ``action`` and
+    ``advice`` override the rule's at this severity."""
 
     severity: Severity
     threshold: float
+    action: str | None = None
     advice: str | None = None
 
 
@@ -107,24 +123,32 @@ class _Defaults(dict[str, Any]):
         return "?"
 
 
+_SIGN = {"above": ">", "below": "<"}
+
+
 @dataclass(frozen=True, slots=True)
 class Rule:
     """One alarm rule; see the module docstring for the lifecycle knobs.
 
-    ``headline`` is a ``str.format`` template over ``time`` (local), ``value`` (formatted with
-    ``value_format``), ``subject``, ``where`` (" on <subject>" or "") and the observation's
-    context (a None value counts as missing); ``clauses``: ``(name, template, fallback)`` —
-    ``{name}`` in the headline is ``template`` formatted when the context holds every field it
-    names (not None), else ``fallback``, so an optional fact never reads "None Hz" or "? Hz";
-    ``criterion`` replaces the generated "<severity> above <limit>" text when the
-    threshold itself means nothing to a reader. ``scale_key``: thresholds and deadband are
-    multiplied by ``context[scale_key]`` (default ``default_scale``).
+    ``headline`` is a ``str.format`` template over ``value`` (formatted with ``value_format``),
+    ``limit`` (" (<severity> > <limit>)", right after the value), ``subject``, ``where``
+    (" on <subject>" or "") and the observation's context (a None value counts as missing):
+    what, the value against its limit and where, first; the message adds the time and
+    ``action`` (one short imperative). ``advice``: the reasoning in plain words, a template
+    over the same fields; ``source``: where the set points come from (author and section), put
+    after the advice, never in the message. ``clauses``: ``(name, template, fallback)`` —
+    ``{name}`` is ``template`` formatted when the context holds every field it names (not None),
+    else ``fallback``, so an optional fact never reads "None Hz" or "? Hz"; ``criterion``
+    replaces the generated "<severity> > <limit>" when the threshold itself means nothing to a
+    reader. ``scale_key``: thresholds and deadband are multiplied by ``context[scale_key]``
+    (default ``default_scale``).
     """
 
     name: str
     quantity: str
     levels: tuple[Level, ...]
     headline: str
+    action: str
     advice: str
     source: str
     value_format: str
@@ -157,8 +181,10 @@ class Rule:
 
     def threshold(self, severity: Severity, obs: Observation) -> float:
         """The threshold of ``severity`` for this observation (scaled)."""
-        level = next(lv for lv in self.levels if lv.severity == severity)
-        return level.threshold * self.scale(obs)
+        return self.level(severity).threshold * self.scale(obs)
+
+    def level(self, severity: Severity) -> Level:
+        return next(lv for lv in self.levels if lv.severity == severity)
 
     def beyond(self, value: float, threshold: float) -> bool:
         return value > threshold if self.direction == "above" else value < threshold
@@ -182,13 +208,7 @@ class Rule:
     def fmt(self, value: float) -> str:
         return self.value_format.format(value)
 
-    def message(
-        self, obs: Observation, severity: Severity, time_zone: str, raised_ns: int | None = None
-    ) -> str:
-        """A sentence for the control room: what, when, how bad, per which source, what to do.
-        ``time`` is ``obs``'s (the value that raised or escalated the alarm); ``raised_ns``: the
-        alarm was raised earlier (an escalation or recurrence), said after the headline."""
-        level = next(lv for lv in self.levels if lv.severity == severity)
+    def _fields(self, obs: Observation, time_zone: str) -> _Defaults:
         fields = _Defaults({k: _short(v) for k, v in obs.context.items() if v is not None})
         subject = obs.subject
         fields.setdefault("month", local_month(obs.t_ns, time_zone))
@@ -202,13 +222,29 @@ class Rule:
             needed = [f for _, f, _, _ in string.Formatter().parse(template) if f]
             known = all(f in fields for f in needed)
             fields[name] = template.format_map(fields) if known else fallback
-        headline = self.headline.format_map(fields)
-        if raised_ns is not None and raised_ns != obs.t_ns:
-            headline += f" (alarm raised {iso_local(raised_ns, time_zone)})"
+        return fields
+
+    def message(
+        self, obs: Observation, severity: Severity, time_zone: str, raised_ns: int | None = None
+    ) -> str:
+        """The control-room sentence: what, value against limit, where, when, one action
+        (module docstring; at most :data:`MESSAGE_MAX` characters with the simulated-data
+        prefix). ``time`` is ``obs``'s (the value that raised, escalated or re-annunciated the
+        alarm); ``raised_ns`` is accepted for the callers and not repeated (the alarm's
+        ``raised_ns`` field holds it)."""
+        fields = self._fields(obs, time_zone)
         criterion = self.criterion or (
-            f"{severity} {self.direction} {self.fmt(self.threshold(severity, obs))}"
+            f"{severity} {_SIGN[self.direction]} {self.fmt(self.threshold(severity, obs))}"
         )
-        return f"{headline} ({criterion}, {self.source}): {level.advice or self.advice}"
+        fields["limit"] = f" ({criterion})"
+        headline = self.headline.format_map(fields)
+        action = self.level(severity).action or self.action
+        return f"{headline} at {fields['time']}: {action}"
+
+    def advice_for(self, obs: Observation, severity: Severity, time_zone: str = "UTC") -> str:
+        """Why it matters and what to check, then the source (author and section)."""
+        text = (self.level(severity).advice or self.advice).format_map(self._fields(obs, time_zone))
+        return f"{text}. Source: {self.source}."
 
 
 def _short(value: Any) -> Any:
@@ -238,45 +274,57 @@ def _levels(*pairs: tuple[Severity, float]) -> tuple[Level, ...]:
     return tuple(Level(sev, thr) for sev, thr in pairs)
 
 
-#: Start-peak advice per starter (Diering 2011 §6.2.1–6.2.2, Tables 6 and 11: average peak
-#: switch-on / short-circuit torque, % of motor rated torque; §10.2 starter maintenance; §10.4
-#: design service factors and "Grid type starters [should] not [be] used for mill applications").
+#: Start-peak texts per starter: short name for the message, and the advice (Diering 2011
+#: §6.2.1–6.2.2, Tables 3–11: peak switch-on / short-circuit torque, % of motor rated torque;
+#: §10.2 starter maintenance; §10.4 "Grid type starters [should] not [be] used for mill
+#: applications").
 START_ADVICE = {
     Starter.GRID: (
-        "fixed grid resistor (Grid) starter",
-        "Grid starters average 542 % switch-on and 324 % short-circuit peaks "
-        "(Diering 2011 Table 6), which strongly recommends not using Grid starters on mills "
-        "(§10.4): plan the change to an LRS or E-LRS starter and keep the number of starts to "
-        "a minimum until then",
+        "Grid",
+        "A fixed grid resistor (Grid) starter puts very high peaks into the drivetrain: on "
+        "average 542 % of rated torque at switch-on and 324 % at short circuit, twice an LRS. "
+        "Diering recommends not using Grid starters on mills: plan the change to an LRS or "
+        "E-LRS starter and keep the number of starts low until then",
     ),
     Starter.LRS: (
-        "liquid resistance starter (LRS)",
-        "LRS starts average 233 % switch-on and 197 % short-circuit peaks (Table 6): check the "
-        "liquid resistance starter (electrolyte density, verify with the strain gauges) and the "
-        "start sequence (§10.2)",
+        "LRS",
+        "A liquid resistance starter (LRS) normally peaks at about 233 % of rated torque at "
+        "switch-on and 197 % at short circuit. A start well above that points to the starter: "
+        "check the electrolyte density (verify with the strain gauges) and the start sequence",
     ),
     Starter.E_LRS: (
-        "enhanced liquid resistance starter (E-LRS)",
-        "E-LRS starts average only 92 % switch-on and 119 % short-circuit peaks (Table 6): a peak "
-        "this high means the starter is not working as designed; check its control and "
-        "electrolyte and the start sequence (§10.2)",
+        "E-LRS",
+        "An enhanced liquid resistance starter (E-LRS) normally peaks at only about 92 % of "
+        "rated torque at switch-on and 119 % at short circuit. A peak this high means the "
+        "starter is not working as designed: check its control, the electrolyte and the start "
+        "sequence",
     ),
 }
 
 
 def _start_peak(config: MillConfig) -> Rule:
-    """Start peak torque, % of motor rated torque (Diering 2011 §7.2, §10.4; Table 6: E-LRS averages
-    92 %, LRS 233 %, Grid 542 %), with advice for the mill's starter (:data:`START_ADVICE`).
-    Event; clears after ``clean_starts_to_clear`` clean starts."""
+    """Start peak torque, % of motor rated torque, against the mill's starter type's set points
+    (:meth:`MillConfig.start_peak_limits`: mean + 2 / + 3 standard deviations of Diering 2011
+    Tables 3–11, capped at the motor shaft's absolute limit). Event; re-annunciates on every
+    exceeding start; clears after ``clean_starts_to_clear`` clean starts (default 1)."""
     a = config.alarms
+    limits = config.start_peak_limits()
     starter, advice = START_ADVICE[config.drive.starter]
+    levels = ((Severity.WARNING, limits.warning),) if limits.warning is not None else ()
+    how = (
+        f" The limits are this starter's normal peaks plus {K_WARNING:g} (warning) and "
+        f"{K_ALARM:g} (alarm) standard deviations, at most {limits.shaft_limit:.0f} % (the torque "
+        "the motor shaft stands fewer than 1,000 times, Diering 2011 §8.2)"
+    )
     return Rule(
         "start_peak", "start_peak_pct",
-        _levels((Severity.WARNING, a.start_peak_warn_pct),
-                (Severity.ALARM, a.start_peak_alarm_pct)),
-        headline=f"Start at {{time}}{{where}} with the {starter} reached {{value}} of rated "
-        "motor torque",
-        advice=advice, source="Diering 2011 §6.2.1, §10.2, §10.4", value_format="{:.0f} %",
+        _levels(*levels, (Severity.ALARM, limits.alarm)),
+        headline=f"Start peak {{value}}{{limit}}{{shaft}}, {starter} starter",
+        clauses=(("shaft", " on the {side} motor shaft", " on the motor shaft"),),
+        action="check the starter before the next start",
+        advice=advice + "." + how,
+        source=f"{limits.source} (§6.2.1–6.2.2), §8.2, §10.2, §10.4",
+        value_format="{:.0f} %",
         deadband=a.start_peak_deadband_pct, clean_events_to_clear=a.clean_starts_to_clear,
     )  # fmt: skip
 
@@ -284,16 +332,21 @@ def _start_peak(config: MillConfig) -> Rule:
 def _starts_per_month(config: MillConfig) -> Rule:
     """Starts in the local calendar month (Diering 2011 §6.1.3 supplier norm 3–5, §6.2.8 field
     average 20–22, §10.3 "recorded and scrutinized"). Level without delays (a count does not
-    chatter); latched: a busy month must be acknowledged even after the count resets."""
+    chatter); latched: a busy month must be acknowledged even after the count resets; clears
+    on acknowledgement and stays quiet at that level for the rest of the month (a count stays
+    high until the month ends: an alarm standing for weeks would be a stale alarm)."""
     a = config.alarms
     return Rule(
         "starts_per_month", "starts_this_month",
         _levels((Severity.WARNING, a.starts_per_month_warn),
                 (Severity.ALARM, a.starts_per_month_alarm)),
-        headline="{value} starts in the calendar month {month} (latest at {time})",
-        advice="every start exposes the drivetrain to start-up peaks: record and scrutinize "
-        "each stop (supplier norm 3–5 starts a month)",
+        headline="{value} starts in the calendar month {month}{limit}",
+        action="review why the mill stopped each time",
+        advice="Every start loads the drivetrain with start-up peaks and adds fatigue damage. "
+        "Suppliers expect 3 to 5 starts a month; the measured mills averaged 20 to 22. Record "
+        "and scrutinize every stop",
         source="Diering 2011 §6.1.3, §6.2.8, §10.3", value_format="{:.0f}", latched=True,
+        clear_on_ack=True,
     )  # fmt: skip
 
 
@@ -305,10 +358,12 @@ def _oscillation(config: MillConfig) -> Rule:
         "oscillation_range", "oscillation_range_pct",
         _levels((Severity.WARNING, a.oscillation_range_warn_pct),
                 (Severity.ALARM, a.oscillation_range_alarm_pct)),
-        headline="Steady-state torque oscillation range{where} reached {value} of rated motor "
-        "torque at {time}",
-        advice="check the spectrum (gear mesh, liner passing, pinion speed) and gear wear",
-        source="Diering 2011 Tables 14–15, §10.5", value_format="{:.0f} %",
+        headline="Torque oscillation range {value} of rated{limit}{where}",
+        action="check the spectrum and gear wear",
+        advice="The running torque swings more than on the measured mills (23.6 % average, "
+        "45.4 % the highest). Look at the spectrum for the line that grew (gear mesh, liner "
+        "passing, pinion speed) and inspect the gears for wear",
+        source="Diering 2011 §6.2.4, Tables 14–15, §10.5", value_format="{:.0f} %",
         deadband=a.oscillation_deadband_pct, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,
     )  # fmt: skip
@@ -322,12 +377,18 @@ def _bending(config: MillConfig) -> Rule:
         Level(Severity.WARNING, a.bending_amplitude_warn_mpa),
         Level(Severity.ALARM, a.bending_amplitude_alarm_mpa),
         Level(Severity.CRITICAL, a.bending_amplitude_critical_mpa,
-              "failure predicted within weeks at this amplitude: realign the drivetrain now"),
+              "realign the drivetrain now",
+              "At this bending amplitude pinion shafts have failed within weeks. Realign the "
+              "whole drivetrain now (bearings, gear, foundation)"),
     )  # fmt: skip
     return Rule(
         "bending_amplitude", "bending_amplitude_mpa", levels,
-        headline="Pinion-shaft bending amplitude{where} reached {value} at {time}",
-        advice="check the alignment of the whole drivetrain (bearing and gear wear, foundation)",
+        headline="Pinion bending amplitude {value}{limit}{where}",
+        action="check the drivetrain alignment",
+        advice="Bending fatigue of the pinion shaft depends on this amplitude: experience says "
+        "keep it below 25 MPa, 43 MPa leaves a fatigue reserve factor of 2, above 90 MPa shafts "
+        "fail within weeks. Check the alignment of the whole drivetrain (bearing and gear wear, "
+        "foundation)",
         source="Diering 2011 §8.1, §10.1", value_format="{:.1f} MPa",
         deadband=a.bending_deadband_mpa, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,
@@ -341,8 +402,11 @@ def _barring(config: MillConfig) -> Rule:
     return Rule(
         "barring_peak", "barring_peak_pct",
         _levels((Severity.ALARM, config.barring_peak_limit_pct)),
-        headline="Barring at {time}{where} reached {value} of rated motor torque",
-        advice="the charge may have set during a long stop: loosen it before a full start",
+        headline="Barring peak {value} of rated{limit}{where}",
+        action="loosen the charge before a full start",
+        advice="Barring needed more torque than the highest measured on such drives (185 % "
+        "single drive, 314 % dual drive): the charge may have set during a long stop. Loosen it "
+        "before a full start",
         source="Diering 2011 §6.2.3, Tables 12–13", value_format="{:.0f} %",
         deadband=a.barring_deadband_pct, clean_events_to_clear=1, clear_on_ack=True,
     )  # fmt: skip
@@ -355,29 +419,33 @@ def _unexplained_peak(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "unexplained_peak", "unexplained_peak_hz", _levels((Severity.WARNING, 0.0)),
-        headline="Spectral peak at {value}{where} ({time}) matches no drivetrain excitation"
-        "{natural}",
-        clauses=(("natural", "; nearest natural frequency {nearest_natural_hz} Hz",
-                  "; the mill file has no torsional model to compare it with"),),
-        advice="possible torsional resonance: compare with the drivetrain model and inspect",
+        headline="Unexplained peak {value}{limit}{where}{natural}",
+        clauses=(("natural", ", natural {nearest_natural_hz} Hz", ""),
+                 ("model", "The nearest natural frequency of the drivetrain model is "
+                  "{nearest_natural_hz} Hz", "The mill file has no torsional model to compare "
+                  "it with")),
+        action="compare with the drivetrain model",
+        advice="A peak in the torque spectrum that no drivetrain speed or gear mesh explains "
+        "can be a torsional resonance (peaks at 10 to 15 Hz on measured mills). {model}; "
+        "inspect the drivetrain",
         source="Diering 2011 §6.2.7, Fedin & Vinogradov 2018", value_format="{:.2f} Hz",
-        criterion="warning: unexplained by the drivetrain kinematics",
+        criterion="warning: no known excitation",
         quiet_s_to_clear=a.unexplained_peak_quiet_s,
     )  # fmt: skip
 
 
 def _resonance(config: MillConfig) -> Rule:
     """Excitation close to a torsional natural frequency (Fedin & Vinogradov 2018 torsional model;
-    Diering 2011
-    §6.1.1 resonance near 90 % speed during acceleration). Level, lower is worse."""
+    Diering 2011 §6.1.1 resonance near 90 % speed during acceleration). Level, lower is worse."""
     a = config.alarms
     return Rule(
         "resonance_margin", "resonance_margin",
         _levels((Severity.WARNING, a.resonance_margin_warn)),
-        headline="Excitation{excitation}{where} is only {value} from{natural} ({time})",
-        clauses=(("excitation", " {line} at {frequency_hz} Hz", ""),
-                 ("natural", " the natural frequency {natural_hz} Hz", " a natural frequency")),
-        advice="running close to resonance amplifies torque oscillations: review speed and model",
+        headline="Resonance margin {value}{limit}{where}{pair}",
+        clauses=(("pair", " ({line} {frequency_hz} Hz, natural {natural_hz} Hz)", ""),),
+        action="review the mill speed",
+        advice="An excitation runs close to a torsional natural frequency of the drivetrain, "
+        "which amplifies the torque oscillations. Review the mill speed and the drivetrain model",
         source="Fedin & Vinogradov 2018, Diering 2011 §6.1.1", value_format="{:.1%}",
         direction="below",
         deadband=a.resonance_margin_deadband, raise_delay_s=a.raise_delay_s,
@@ -394,10 +462,11 @@ def _remaining_life(config: MillConfig) -> Rule:
     return Rule(
         "remaining_life", "remaining_life_years",
         _levels((Severity.WARNING, a.life_warn_fraction), (Severity.ALARM, a.life_alarm_fraction)),
-        headline="Projected remaining life of {subject} is {value} at the current damage rate "
-        "({time})",
-        advice="the damage rate is too high: review bending (alignment), start peaks and "
-        "start count in the damage report",
+        headline="Remaining life {value}{limit} for {subject}",
+        action="review the damage report",
+        advice="At the current damage rate this component wears out before its design life "
+        "ends. Bending range (alignment), start peaks and the number of starts drive the "
+        "damage: the damage report shows which",
         source="Diering 2011 §8.2–8.3", value_format="{:.1f} years", direction="below",
         deadband=a.life_deadband_fraction, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s, scale_key="remaining_design_life_years",
@@ -411,8 +480,10 @@ def _stale(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "stale_channel", "stale_channel", _levels((Severity.WARNING, a.stale_after_s)),
-        headline="No data{where} for {value} (at {time})",
-        advice="check the telemetry transmitter, the gateway and the network link",
+        headline="No data{where} for {value}{limit}",
+        action="check transmitter, gateway and network",
+        advice="The channel sends nothing: the rotating telemetry transmitter, the gateway or "
+        "the network link dropped out. Nothing is analysed for it until data flow again",
         source="Diering 2011 §5.1", value_format="{:.0f} s", deadband=a.stale_after_s * 0.5,
     )  # fmt: skip
 
@@ -422,9 +493,11 @@ def _spike_rate(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "spike_rate", "spike_rate", _levels((Severity.WARNING, a.spike_rate_warn_per_min)),
-        headline="Telemetry spikes{where}: {value} ({time})",
-        advice="check the telemetry antenna and radio sources near the mill; flagged samples "
-        "are excluded from the analysis",
+        headline="Telemetry spikes {value}{limit}{where}",
+        action="check the antenna and radios nearby",
+        advice="Radio interference (two-way radios, phones) puts spikes into the telemetry. "
+        "Flagged samples are left out of the analysis; check the telemetry antenna and radio "
+        "sources near the mill",
         source="Diering 2011 §5.2.2", value_format="{:.1f} per minute",
         deadband=a.spike_rate_deadband_per_min, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,
@@ -439,11 +512,13 @@ def _sequence_gaps(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "sequence_gaps", "sequence_gaps", _levels((Severity.WARNING, a.sequence_gaps_warn_blocks)),
-        headline="Data lost{where}: {value}{seqs}, found at {time}",
-        advice="check the sensor gateway, its spool and the network between gateway and "
-        "service; the lost span is a data-quality event of the mill",
+        headline="Data lost: {value}{seqs}{limit}{where}",
+        action="check the gateway, its spool and its network",
+        advice="Blocks of samples never arrived and no cache or spool of the gateway held them: "
+        "the gateway was down when they fell due, or its spool's retention had dropped them "
+        "(the mill's data-quality event of the span says which, and how many)",
         source="Diering 2011 §5.1", value_format="{:.0f} blocks",
-        clauses=(("seqs", " (seq {first_seq}–{last_seq})", ""),),
+        criterion="warning: any loss", clauses=(("seqs", " (seq {first_seq}–{last_seq})", ""),),
         quiet_s_to_clear=a.data_quality_quiet_s, latched=True,
     )  # fmt: skip
 
@@ -455,12 +530,14 @@ def _implausible(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "implausible_blocks", "implausible_blocks", _levels((Severity.WARNING, 0.0)),
-        headline="Implausible data block dropped{where} ({reason}) at {time}",
-        advice="a sender on this mill's keys publishes sequence numbers or times its history "
-        "and the clock rule out: check the gateway's clock and configuration, and who may "
-        "publish on the mill's keys (zenoh access control)",
+        headline="Implausible data dropped: {value}{limit} ({reason}){where}",
+        action="check the gateway's clock and who may publish",
+        advice="A sender on this mill's keys publishes sequence numbers or times that the "
+        "channel's history and the clock rule out; the blocks are archived as evidence and not "
+        "analysed. Check the gateway's clock and configuration, and who may publish on the "
+        "mill's keys (zenoh access control, README Security)",
         source="Diering 2011 §5.1", value_format="{:.0f} blocks",
-        criterion="warning: any implausible block",
+        criterion="warning: any",
         quiet_s_to_clear=a.data_quality_quiet_s, latched=True,
     )  # fmt: skip
 
@@ -471,9 +548,11 @@ def _archive(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "archive_write_failures", "archive_write_failures", _levels((Severity.ALARM, 0.0)),
-        headline="{value} failed at {time}: raw telemetry is not being archived",
-        advice="check the archive disk (space, permissions, health)",
-        source="Diering 2011 §10.6", value_format="{:.0f} archive writes",
+        headline="Archive writes failed: {value}{limit}",
+        action="check the archive disk",
+        advice="Raw telemetry is not being archived, so it is lost for long-term trending and "
+        "re-analysis. Check the archive disk (space, permissions, health)",
+        source="Diering 2011 §10.6", value_format="{:.0f}",
         clean_events_to_clear=a.archive_clean_reports_to_clear, latched=True,
     )  # fmt: skip
 
@@ -488,10 +567,11 @@ def _store(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "store_write_failures", "store_write_failures", _levels((Severity.WARNING, 0.0)),
-        headline="{value} failed at {time}: results wait in memory until the store can be "
-        "written",
-        advice="check the store's disk (space, permissions) and that its file is in place; "
-        "millwatch writes what waits by itself once it can",
+        headline="Store writes failed: {value}{limit}",
+        action="check the store's disk and file",
+        advice="Results and alarm transitions wait in memory and are stored in order once the "
+        "store can be written again; no checkpoint is written meanwhile. Check the store's disk "
+        "(space, permissions) and that its file is in place",
         source="Diering 2011 §10.6", value_format="{:.0f} store writes",
         clean_events_to_clear=a.archive_clean_reports_to_clear, latched=True,
     )  # fmt: skip
@@ -504,9 +584,11 @@ def _analysis_lag(config: MillConfig) -> Rule:
     a = config.alarms
     return Rule(
         "analysis_lag", "analysis_lag", _levels((Severity.WARNING, a.analysis_lag_warn_s)),
-        headline="Analysis {value} behind the received data (at {time})",
-        advice="nothing is lost (every block is archived); if the lag keeps growing the "
-        "worker is short of CPU: give it more, or move mills to another worker",
+        headline="Analysis {value} behind the data{limit}",
+        action="give the worker more CPU",
+        advice="Results and alarms come late; nothing is lost (every block is archived). If "
+        "the lag keeps growing the worker is short of CPU: give it more, or move mills to "
+        "another worker",
         source="Diering 2011 §10.6", value_format="{:.0f} s",
         deadband=a.analysis_lag_warn_s * 0.5,
     )  # fmt: skip
@@ -518,11 +600,13 @@ def _report_delivery(config: MillConfig) -> Rule:
     (files, mail), latched: the site must see it even once a later attempt succeeded."""
     return Rule(
         "report_delivery", "report_failures", _levels((Severity.ALARM, 0.0)),
-        headline="Monthly report {month}: {stage} failed after {value} ({time}): {error}",
-        advice="fix the cause (reports directory: space, permissions; mail: SMTP host, "
-        "credentials, recipients); the service tries again, or run 'millwatch report'",
+        headline="Monthly report {month}: {stage} failed after {value}{limit}",
+        action="fix the cause, then run 'millwatch report'",
+        advice="The report did not reach site management: {error}. Fix the cause (reports "
+        "directory: space, permissions; mail: SMTP host, credentials, recipients); the service "
+        "tries again, or run 'millwatch report'",
         source="Diering 2011 §10.6", value_format="{:.0f} attempts",
-        criterion="alarm: the report did not reach its destination",
+        criterion="alarm: not delivered",
         clean_events_to_clear=1, latched=True,
     )  # fmt: skip
 
@@ -534,9 +618,12 @@ def _load_sharing(config: MillConfig) -> Rule:
     return Rule(
         "load_sharing", "load_sharing_imbalance_pct",
         _levels((Severity.WARNING, a.imbalance_warn_pct), (Severity.ALARM, a.imbalance_alarm_pct)),
-        headline="Load sharing between the drive sides is {value} out of balance at {time}",
-        advice="check the drives' load-sharing control and the pinion alignment of both sides",
-        source="Diering 2011 §6.2.2, Table 15", value_format="{:.0f} %",
+        headline="Load-sharing imbalance {value}{limit} between the drives",
+        action="check load-sharing control and pinions",
+        advice="One motor carries more of the load than the other, which overloads its side. "
+        "Check the drives' load-sharing control and the pinion alignment of both sides",
+        source="Diering 2011 §6.2.2, Tables 7–8 (limits: engineering defaults)",
+        value_format="{:.0f} %",
         deadband=a.imbalance_deadband_pct, raise_delay_s=a.raise_delay_s,
         clear_delay_s=a.clear_delay_s,
     )  # fmt: skip

@@ -10,23 +10,28 @@ subscribe to :func:`ingest.keys.alarm_pattern`). Encoding ``application/json``, 
       "site": "rustenburg",                 # null when the publisher does not know it
       "transition": {
         "kind": "raised",                   # raised | escalated | acknowledged | normal |
-                                            # recurred | cleared
+                                            # recurred | reannunciated | cleared
         "seq": 1,                           # 1, 2, … per alarm: gaps mean a missed message
         "t_ns": 1763692440000000000,        # int64 ns since the Unix epoch, UTC
         "time_utc": "2025-11-21T02:34:00.000Z", # RFC 3339, ms (alarms.times)
         "severity": "alarm",                # warning | alarm | critical (after the transition)
         "state": "raised",                  # raised | acknowledged | cleared
-        "value": 312.0, "threshold": 300.0, # null for acknowledgements and quiet clears
+        "value": 362.0, "threshold": 348.4, # null for acknowledgements and quiet clears
         "by": null,                         # who acknowledged
-        "message": "Start at … (alarm above 300 %, Diering 2011 §7.2, §10.4): check …"
+        "message": "Start peak 362 % on the motor shaft, LRS starter (alarm > 348 %) at …"
       },
       "alarm": {                            # the alarm's whole state after the transition
         "alarm_id": "sag-5200-lrs:start_peak:-:1763692440000000000",
         "mill_id": "...", "rule": "start_peak", "subject": "", "quantity": "start_peak_pct",
         "unit": "% rated motor torque", "severity": "alarm", "state": "raised",
         "condition": true, "raised_ns": …, "updated_ns": …, "acked_ns": null,
-        "acked_by": null, "cleared_ns": null, "value": 312.0, "threshold": 300.0,
-        "message": "…", "seq": 1,
+        "acked_by": null, "cleared_ns": null,
+        "value": 362.0, "threshold": 348.4, # the latest offending value and its limit
+        "value_at_raise": 362.0, "threshold_at_raise": 348.4,  # kept for ever
+        "exceed_count": 1,                  # offending values (events re-annunciate)
+        "message": "…",                     # ≤ 200 characters: what, value vs limit, action
+        "advice": "A liquid resistance … Source: Diering 2011 Table 4 …",  # why, what to check
+        "seq": 1,
         "simulated": false                  # true: raised on simulated data (the demo)
       }
     }

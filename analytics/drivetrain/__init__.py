@@ -5,6 +5,8 @@ Modules::
     mill_config      MillConfig: one validated, frozen description of a mill (TOML → pydantic)
     kinematics       expected excitation lines (orders, frequencies) of a steady spectrum
     stress           volts → strain → stress, section moduli, combined stress (Diering 2011 App. D)
+    start_limits     start-peak set points per starter type: mean + 2 / + 3 standard deviations
+                     of Diering 2011 Tables 3–11, capped at the motor shaft's absolute limit
     shaft_stress     ShaftStressModel: the fatigue factors K_f of bending and torsion and the
                      local combined stress rainflow counts (Diering 2011 §8.1–8.2, App. D)
     torsional_params TorsionalParams: the [torsional] table of a mill file (Fedin & Vinogradov

@@ -12,7 +12,9 @@ Sources of the defaults (README "References"):
 * shaft diameters 0.2 m / 0.31 m (Diering 2011 §5.2.3),
 * 820M17, S_ut = 980 MPa, Marin factors 0.68/0.75/0.897/1.0, K_t = 2.2 at the keyway
   (Diering 2011 §8.1); K_t = 2 on the torque trace and the FAT 160/100 curves (Diering 2011 App. D),
-* alarm thresholds: start peak 250/300 % (Diering 2011 Tables 4, 6: LRS 233 % average);
+* alarm thresholds: start peak per starter type, mean + 2/3 standard deviations of its peaks,
+  capped at the motor shaft's absolute limit (Diering 2011 Tables 3–11, §8.2;
+  :mod:`analytics.drivetrain.start_limits`);
   starts/month 5 (supplier norm 3–5, §6.1.3) and 20 (field average 20–22, §6.2.8);
   steady-state oscillation range 25/45 % (Table 14: 23.6 % average, 45.4 % max);
   bending amplitude 25/43/90 MPa (§8.1); barring peak 185 % single / 314 % dual (Tables 12–13),
@@ -26,6 +28,7 @@ Errors: a :class:`pydantic.ValidationError` converts to one line per problem wit
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import tomllib
@@ -44,6 +47,7 @@ from pydantic import (
 )
 
 from analytics.drivetrain.shaft_stress import ShaftStressModel, StressConcentration
+from analytics.drivetrain.start_limits import StartPeakLimits, shaft_limit_pct, start_peak_limits
 from analytics.drivetrain.torsional_params import TorsionalParams
 from analytics.fatigue.sn_curves import SNCurve
 from analytics.fatigue.sn_models import SN_MODEL_PARAMETERS, SNModelParameters, build_sn_curve
@@ -286,8 +290,16 @@ class AlarmThresholds(_Frozen):
     defaults are engineering judgement; every field names its unit. :mod:`alarms.rules` says
     which rule uses which field."""
 
-    start_peak_warn_pct: Positive = 250.0
-    start_peak_alarm_pct: Positive = 300.0
+    start_peak_warn_pct: Positive | None = Field(
+        default=None,
+        description="None: the starter type's, mean + 2 standard deviations "
+        "(Diering 2011 Tables 3-11), capped at the motor shaft's absolute limit",
+    )
+    start_peak_alarm_pct: Positive | None = Field(
+        default=None,
+        description="None: the starter type's, mean + 3 standard deviations "
+        "(Diering 2011 Tables 3-11), capped at the motor shaft's absolute limit",
+    )
     starts_per_month_warn: Annotated[int, Field(ge=1)] = 5
     starts_per_month_alarm: Annotated[int, Field(ge=1)] = 20
     oscillation_range_warn_pct: Positive = 25.0
@@ -304,7 +316,7 @@ class AlarmThresholds(_Frozen):
     raise_delay_s: NonNegative = 60.0             # a level stays beyond this long to raise …
     clear_delay_s: NonNegative = 300.0            # … and within the clear level to clear
     start_peak_deadband_pct: NonNegative = 10.0
-    clean_starts_to_clear: Annotated[int, Field(ge=1)] = 3
+    clean_starts_to_clear: Annotated[int, Field(ge=1)] = 1  # the next normal start clears
     oscillation_deadband_pct: NonNegative = 2.0
     bending_deadband_mpa: NonNegative = 2.0
     barring_deadband_pct: NonNegative = 10.0
@@ -323,8 +335,11 @@ class AlarmThresholds(_Frozen):
     data_quality_quiet_s: Positive = 300.0        # no further loss / implausible block: clear
     archive_clean_reports_to_clear: Annotated[int, Field(ge=1)] = 3
     analysis_lag_warn_s: Positive = 120.0         # analysis behind the archive this long
-    imbalance_warn_pct: Positive = 10.0           # dual drives: load-sharing imbalance, %
-    imbalance_alarm_pct: Positive = 20.0
+    # dual drives: load-sharing imbalance (BS − NBS) / mean, %; unbalanced sharing is common
+    # (Diering 2011 §6.2.2; start peaks 167 % barring side vs 144 % non-barring, Tables 7–8)
+    # and the simulated LRS dual drive runs 20 % apart: at 10 % its alarm stood 34 h of 48
+    imbalance_warn_pct: Positive = 25.0
+    imbalance_alarm_pct: Positive = 35.0
     imbalance_deadband_pct: NonNegative = 2.0
     # fmt: on
 
@@ -340,6 +355,8 @@ class AlarmThresholds(_Frozen):
             ("life_alarm_fraction", "life_warn_fraction"),  # lower life is worse
         ]
         for low, high in pairs:
+            if getattr(self, low) is None or getattr(self, high) is None:
+                continue
             if not getattr(self, low) < getattr(self, high):
                 raise ValueError(
                     f"{low} ({getattr(self, low)}) must be below {high} ({getattr(self, high)})"
@@ -452,6 +469,7 @@ class MillConfig(_Frozen):
             if ch.kind in ("torque", "bending") and dual != (ch.side is not None):
                 need = "needs side 'bs' or 'nbs'" if dual else "must not set side"
                 raise ValueError(f"channel {name!r} on a {self.drive.layout} drive {need}")
+        self.start_peak_limits()  # a configured start-peak level must fit the starter's
         prior = self.life.prior_damage
         if isinstance(prior, dict):
             unknown = sorted(set(prior) - set(self.components))
@@ -500,6 +518,33 @@ class MillConfig(_Frozen):
         """Barring peak limit, % motor rated torque (configured, else Tables 12–13)."""
         configured = self.alarms.barring_peak_pct
         return configured if configured is not None else BARRING_LIMIT_PCT[self.drive.layout]
+
+    def start_peak_limits(self) -> StartPeakLimits:
+        """Start-peak set points, % of motor rated torque: the starter type's
+        (:func:`~analytics.drivetrain.start_limits.start_peak_limits`, capped at the motor
+        shaft's absolute limit), each replaced by ``alarms.start_peak_warn_pct`` /
+        ``alarms.start_peak_alarm_pct`` when the mill file sets it."""
+        shaft = shaft_limit_pct(
+            self.shafts.motor_diameter_m, self.motor_rated_torque_knm, self.material.s_ut_mpa
+        )
+        limits = start_peak_limits(str(self.drive.starter), self.sides, shaft)
+        warn, alarm = self.alarms.start_peak_warn_pct, self.alarms.start_peak_alarm_pct
+        alarm = limits.alarm if alarm is None else alarm
+        warn = limits.warning if warn is None else warn
+        if warn is not None and not warn < alarm:
+            raise ValueError(
+                f"alarms: start_peak_warn_pct ({warn}) must be below the start-peak alarm "
+                f"level ({alarm:.0f} % for this {self.drive.starter} starter)"
+            )
+        return dataclasses.replace(limits, warning=warn, alarm=alarm)
+
+    def start_peak_levels(self) -> tuple[float, float]:
+        """(warning, alarm) start-peak levels, % of motor rated torque
+        (:meth:`start_peak_limits`; the alarm level twice when the shaft's cap leaves no
+        warning band)."""
+        limits = self.start_peak_limits()
+        warning = limits.alarm if limits.warning is None else limits.warning
+        return warning, limits.alarm
 
     def excitation_orders(self) -> dict[str, float]:
         """Expected excitations as orders of pinion rotation (cycles per pinion revolution).

@@ -158,8 +158,7 @@ class EventBook:
     def start_alarm(self, pct: float | None) -> str | None:
         """The start's level (:func:`~analytics.operation.transients.start_peak_level`, as
         the alarm rule judges it), None when below the warning level or without a peak."""
-        a = self.config.alarms
-        level = start_peak_level(pct, a.start_peak_warn_pct, a.start_peak_alarm_pct)
+        level = start_peak_level(pct, *self.config.start_peak_levels())
         return level if level in ("warning", "alarm") else None
 
     def _stop_event(self, ring: SampleRing, n0: int, n1: int) -> dict[str, Any]:

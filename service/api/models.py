@@ -144,9 +144,10 @@ ALARM_EXAMPLE: JsonDict = {
     "raised": "2024-05-01T10:40:00Z",
     "updated_ns": 1714560000000000000,
     "updated": "2024-05-01T10:40:00Z",
-    "value": 262.0,
-    "threshold": 250.0,
-    "message": "Start peak 262 % of rated torque",
+    "value": 362.0,
+    "threshold": 348.41,
+    "message": "Start peak 362 % on the motor shaft, LRS starter (alarm > 348 %) at "
+    "2024-05-01T06:40:00.000-04:00: check the starter before the next start",
     "condition": True,
     "acked_ns": None,
     "acked": None,
@@ -155,6 +156,13 @@ ALARM_EXAMPLE: JsonDict = {
     "cleared": None,
     "seq": 1,
     "simulated": False,
+    "value_at_raise": 362.0,
+    "threshold_at_raise": 348.41,
+    "exceed_count": 1,
+    "advice": "A liquid resistance starter (LRS) normally peaks at about 233 % of rated torque at "
+    "switch-on and 197 % at short circuit. A start well above that points to the starter: check "
+    "the electrolyte density (verify with the strain gauges) and the start sequence. … Source: "
+    "Diering 2011 Table 4 (§6.2.1–6.2.2), §8.2, §10.2, §10.4.",
 }
 
 
@@ -175,9 +183,16 @@ class AlarmOut(BaseModel):
     raised: str = Field(description="Raised, ISO-8601 UTC (= raised_ns).")
     updated_ns: int = Field(description="Time of the latest transition (the poll cursor).")
     updated: str = Field(description="Latest transition, ISO-8601 UTC (= updated_ns).")
-    value: float | None
-    threshold: float | None
-    message: str
+    value: float | None = Field(
+        description="The latest offending value (raise, escalation, "
+        "recurrence, re-annunciation), in ``unit``; a clear keeps it."
+    )
+    threshold: float | None = Field(description="The limit ``value`` was judged against.")
+    message: str = Field(
+        description="At most 200 characters (the ``SIMULATED DATA: `` prefix "
+        "included): what, the value against its limit, where, when, one "
+        "action. No document citations: those are in ``advice``."
+    )
     condition: bool
     acked_ns: int | None
     acked: str | None = Field(description="Acknowledged, ISO-8601 UTC (= acked_ns).")
@@ -188,12 +203,35 @@ class AlarmOut(BaseModel):
     simulated: bool = Field(
         False, description="Raised on simulated data (the demo's mills); the message says so too."
     )
+    value_at_raise: float | None = Field(
+        None,
+        description="The value that raised the alarm, kept for ever (``value`` follows "
+        "later exceedances).",
+    )
+    threshold_at_raise: float | None = Field(
+        None, description="The limit ``value_at_raise`` was judged against."
+    )
+    exceed_count: int = Field(
+        1,
+        description="Offending values so far: an event alarm (a start, a barring session) "
+        "re-annunciates on every exceeding event and counts it.",
+    )
+    advice: str = Field(
+        "",
+        description="Why the alarm matters, what to check, and the source of its set "
+        'points (author and section), in plain words (README "Alarms", the master alarm '
+        "database).",
+    )
 
 
 class TransitionOut(BaseModel):
     alarm_id: str
     seq: int
-    kind: str
+    kind: str = Field(
+        description="raised, escalated, acknowledged, normal, recurred, reannunciated (an event "
+        "rule's event offended again: the same alarm, its value and exceed_count updated) or "
+        "cleared."
+    )
     t_ns: int
     t: str = Field(description="Transition time, ISO-8601 UTC (= t_ns).")
     severity: str

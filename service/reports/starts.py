@@ -97,21 +97,21 @@ def month_bounds_ns(month: str, time_zone: str) -> tuple[int, int]:
     return start, end
 
 
-def peak_status(start: Mapping[str, Any], alarms: AlarmThresholds) -> str:
+def peak_status(start: Mapping[str, Any], levels: tuple[float, float]) -> str:
     """A start's peak (% rated motor torque, the larger of switch-on and short-circuit:
     :func:`~analytics.operation.transients.start_peaks`) against the start-peak levels
     (:func:`~analytics.operation.transients.start_peak_level`, as the ``start_peak`` alarm
     judges it): ``alarm``, ``warning``, ``ok``, ``n/a`` without a peak. ``start``: a start
-    event's data."""
+    event's data; ``levels``: (warning, alarm) %, :meth:`MillConfig.start_peak_levels`."""
     peak = max(start_peaks(start).values(), default=None)
-    return start_peak_level(peak, alarms.start_peak_warn_pct, alarms.start_peak_alarm_pct)
+    return start_peak_level(peak, *levels)
 
 
 STARTS_EXAMPLE: dict[str, Any] = {
     "mill": "sag-5200-lrs", "simulated": False, "month": "2024-05",
     "time_zone": "America/Santiago", "count": 21, "failed": 2, "norm_per_month": [3, 5],
     "count_warn": 5, "count_alarm": 20, "count_status": "alarm",
-    "peak_limits_pct": {"warn": 250.0, "alarm": 300.0},
+    "peak_limits_pct": {"warn": 309.98, "alarm": 348.41},
     "starts": [{"t_ns": 1714560000000000000, "t": "2024-05-01T10:40:00Z",
                 "local_time": "2024-05-01T06:40:00-04:00", "end_t_ns": 1714560030000000000,
                 "end_t": "2024-05-01T10:40:30Z", "failed": False, "switch_on_peak_pct": 262.0,
@@ -135,8 +135,11 @@ class StartCount:
     peak_alarm_pct: float
 
 
-def count_starts(failed: Sequence[bool], alarms: AlarmThresholds) -> StartCount:
-    """The count of a month's starts (``failed``: one flag per start) and its status."""
+def count_starts(
+    failed: Sequence[bool], alarms: AlarmThresholds, levels: tuple[float, float]
+) -> StartCount:
+    """The count of a month's starts (``failed``: one flag per start) and its status;
+    ``levels``: the start-peak (warning, alarm) %, :meth:`MillConfig.start_peak_levels`."""
     n = len(failed)
     return StartCount(
         count=n,
@@ -145,8 +148,8 @@ def count_starts(failed: Sequence[bool], alarms: AlarmThresholds) -> StartCount:
         warn_above=alarms.starts_per_month_warn,
         alarm_above=alarms.starts_per_month_alarm,
         status=starts_status(n, alarms),
-        peak_warn_pct=alarms.start_peak_warn_pct,
-        peak_alarm_pct=alarms.start_peak_alarm_pct,
+        peak_warn_pct=levels[0],
+        peak_alarm_pct=levels[1],
     )
 
 
@@ -206,7 +209,7 @@ class MonthStarts(BaseModel):
     starts: list[StartOut] = Field(description="The month's starts, oldest first.")
 
 
-def _start(event: EventRow, tz: zoneinfo.ZoneInfo, alarms: AlarmThresholds) -> StartOut:
+def _start(event: EventRow, tz: zoneinfo.ZoneInfo, levels: tuple[float, float]) -> StartOut:
     d = event.data
     end = event.t_end_ns
     return StartOut(
@@ -220,16 +223,16 @@ def _start(event: EventRow, tz: zoneinfo.ZoneInfo, alarms: AlarmThresholds) -> S
         short_circuit_peak_pct=d.get("short_circuit_peak_pct"),
         rise_time_10_90_ms=d.get("rise_time_10_90_ms"),
         shock_load=bool(d.get("shock_load", False)),
-        peak_status=peak_status(d, alarms).replace("n/a", "ok"),  # API: ok|warning|alarm
+        peak_status=peak_status(d, levels).replace("n/a", "ok"),  # API: ok|warning|alarm
     )
 
 
 def starts_in_month(store: Store, config: MillConfig, month: str) -> MonthStarts:
     """The month's starts (oldest first) and their count against norm and levels."""
     since, until = month_bounds_ns(month, config.time_zone)
-    tz, a = zoneinfo.ZoneInfo(config.time_zone), config.alarms
-    starts = [_start(e, tz, a) for e in store.events(config.id, "start", since, until)]
-    c = count_starts([s.failed for s in starts], a)
+    tz, levels = zoneinfo.ZoneInfo(config.time_zone), config.start_peak_levels()
+    starts = [_start(e, tz, levels) for e in store.events(config.id, "start", since, until)]
+    c = count_starts([s.failed for s in starts], config.alarms, levels)
     return MonthStarts(
         mill=config.id,
         simulated=config.simulated,

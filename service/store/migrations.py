@@ -84,6 +84,13 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             mill_id TEXT NOT NULL, phase TEXT NOT NULL, day TEXT NOT NULL,
             seconds REAL NOT NULL, PRIMARY KEY (mill_id, phase, day))""",
     ),
+    (  # 6 → 7: an alarm keeps the value and limit it was raised with, counts its exceedances
+        # (event alarms re-annunciate) and carries its advice beside the short message
+        "ALTER TABLE alarms ADD COLUMN value_at_raise REAL",
+        "ALTER TABLE alarms ADD COLUMN threshold_at_raise REAL",
+        "ALTER TABLE alarms ADD COLUMN exceed_count INTEGER NOT NULL DEFAULT 1",
+        "ALTER TABLE alarms ADD COLUMN advice TEXT NOT NULL DEFAULT ''",
+    ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 _PART_CHECKPOINTS = 4  # the schema version that brought checkpoint_parts

@@ -72,17 +72,50 @@ def test_acknowledge_is_idempotent_and_unknown_ids_are_refused():
         eng.acknowledge("no-such-alarm", "alice", T0)
 
 
-def test_start_peak_clears_after_three_clean_starts_deadband_starts_do_not_count():
+def test_start_peak_clears_after_one_clean_start_deadband_starts_do_not_count():
+    """LRS limits 310 % / 348 % (Table 4 mean + 2 / + 3 std. dev.); a clean start is at or
+    below 300 % (warning − the 10 % deadband)."""
     eng = engine()
-    fired = feed(eng, "start_peak_pct", [312, 200, 245, 200], step_s=3600)
-    assert kinds(fired) == ["raised"]  # 245 is inside the 10 % deadband: neither clean nor bad
-    fired = feed(eng, "start_peak_pct", [210], start_s=5 * 3600)
-    assert kinds(fired) == ["cleared"] and "3 clean in a row" in fired[0].message
+    fired = feed(eng, "start_peak_pct", [360, 305], step_s=3600)
+    assert kinds(fired) == ["raised"]  # 305 is inside the deadband: neither clean nor bad
+    fired = feed(eng, "start_peak_pct", [210], start_s=3 * 3600)
+    assert kinds(fired) == ["cleared"] and "1 clean in a row" in fired[0].message
+
+
+def test_every_exceeding_start_reannunciates_the_same_alarm():
+    """Later starts above the limit update the open alarm's value, limit, message and count and
+    raise it again if acknowledged; the value at raise is kept, also at clear."""
+    eng = engine()
+    (raised,) = feed(eng, "start_peak_pct", [792], channel="motor_torque")
+    eng.acknowledge(raised.alarm_id, "ops", T0 + NS)
+    later = feed(eng, "start_peak_pct", [518, 782, 1060], step_s=3600, start_s=3600,
+                 channel="motor_torque")  # fmt: skip
+    assert kinds(later) == ["reannunciated"] * 3
+    assert {t.alarm_id for t in later} == {raised.alarm_id}
+    last = later[-1].alarm
+    assert (last.value, last.exceed_count, last.state) == (1060.0, 4, "raised")
+    assert (
+        last.value_at_raise == 792.0
+        and "Start peak 1060 % (alarm > 348 %) on the motor shaft" in last.message
+    )
+    (cleared,) = feed(eng, "start_peak_pct", [200], start_s=5 * 3600, channel="motor_torque")
+    assert cleared.kind == "cleared" and cleared.value == 200.0
+    assert (cleared.alarm.value, cleared.alarm.value_at_raise) == (1060.0, 792.0)
+
+
+def test_a_cleared_stale_channel_keeps_the_value_that_raised_it():
+    eng = engine()
+    (raised,) = feed(eng, "stale_channel", [12.0], channel="speed")
+    assert raised.alarm.value_at_raise == 12.0
+    (cleared,) = feed(eng, "stale_channel", [1.6], start_s=10, channel="speed")
+    assert cleared.kind == "cleared" and (cleared.value, cleared.threshold) == (1.6, 5.0)
+    assert (cleared.alarm.value, cleared.alarm.threshold) == (12.0, 10.0)
+    assert "No data on speed for 12 s (warning > 10 s)" in cleared.alarm.message
 
 
 def test_a_bad_start_resets_the_clean_count_and_escalates():
-    eng = engine()
-    fired = feed(eng, "start_peak_pct", [260, 200, 200, 310, 200, 200], step_s=3600)
+    eng = engine(clean_starts_to_clear=2)
+    fired = feed(eng, "start_peak_pct", [320, 200, 360, 200], step_s=3600)
     assert kinds(fired) == ["raised", "escalated"]
 
 
@@ -101,8 +134,22 @@ def test_latched_alarm_recurs_and_an_acknowledged_one_clears_on_normal():
     eng = engine()
     fired = feed(eng, "starts_this_month", [6, 1, 6], step_s=86400)
     assert kinds(fired) == ["raised", "normal", "recurred"]
-    eng.acknowledge(fired[0].alarm_id, "ops", T0 + 3 * 86400 * NS)
-    assert kinds(feed(eng, "starts_this_month", [1], start_s=4 * 86400)) == ["cleared"]
+    acked = eng.acknowledge(fired[0].alarm_id, "ops", T0 + 3 * 86400 * NS)
+    assert kinds(acked) == ["acknowledged", "cleared"]  # starts_per_month clears on ack
+
+
+def test_an_acknowledged_month_count_stays_quiet_until_a_worse_level_or_a_new_month():
+    """One annunciation per level and month, not one per start: a count stays high until the
+    month ends (EEMUA 191: no alarm standing for weeks)."""
+    eng = engine()
+    (raised,) = feed(eng, "starts_this_month", [6])
+    eng.acknowledge(raised.alarm_id, "ops", T0 + NS)
+    assert feed(eng, "starts_this_month", [7, 8, 20], start_s=3600) == []
+    (worse,) = feed(eng, "starts_this_month", [21], start_s=5 * 3600)
+    assert (worse.kind, worse.severity) == ("raised", "alarm")
+    eng.acknowledge(worse.alarm_id, "ops", T0 + 6 * 3600 * NS)
+    assert feed(eng, "starts_this_month", [22, 1], start_s=7 * 3600) == []  # new month: 1
+    assert kinds(feed(eng, "starts_this_month", [6], start_s=9 * 3600)) == ["raised"]
 
 
 def test_archive_failures_latch_and_clear_on_acknowledgement():

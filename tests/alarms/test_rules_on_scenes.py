@@ -14,7 +14,7 @@ import pytest
 
 from alarms.from_analysis import report_observations
 from alarms.report import alarms_for_report
-from analytics.drivetrain.mill_config import MillConfig
+from analytics.drivetrain.mill_config import MillConfig, Starter
 from analytics.mill.analyzer import MillAnalyzer
 from ingest.mill_files import load_mill_config
 from ingest.sim.scenes import get_scene
@@ -47,6 +47,11 @@ def with_alarms(config: MillConfig, **thresholds: float) -> MillConfig:
     return config.model_copy(update={"alarms": alarms})
 
 
+def _starter(config: MillConfig, starter: Starter) -> MillConfig:
+    """``config`` with another starter type: an E-LRS mill whose start behaves like an LRS's."""
+    return config.model_copy(update={"drive": config.drive.model_copy(update={"starter": starter})})
+
+
 def test_a_clean_steady_scene_raises_nothing():
     assert alarms_of(SAG, "steady", 300.0) == set()
 
@@ -66,6 +71,7 @@ def test_starts_per_month_fires_on_the_second_start_above_the_limit():
                      bending_amplitude_critical_mpa=5.0), "steady", 300.0, "bending_amplitude"),
         (with_alarms(SAG, start_peak_warn_pct=50.0, start_peak_alarm_pct=60.0),
          "start-lrs", 100.0, "start_peak"),
+        (_starter(SAG, Starter.E_LRS), "start-lrs", 100.0, "start_peak"),
         (with_alarms(DUAL, barring_peak_pct=50.0), "barring", 240.0, "barring_peak"),
     ],
 )  # fmt: skip

@@ -12,15 +12,17 @@ from tests.alarms.helpers import engine, feed
 
 def test_round_trip_carries_the_transition_and_the_alarm_state():
     eng = engine()
-    (t,) = feed(eng, "start_peak_pct", [312])
+    (t,) = feed(eng, "start_peak_pct", [362])
     message = decode_transition(encode_transition(t, site="rustenburg"))
     assert message["schema"] == ALARM_SCHEMA == "millwatch.alarm.v1"
     assert message["site"] == "rustenburg"
     tr, alarm = message["transition"], message["alarm"]
-    assert (tr["kind"], tr["seq"], tr["value"], tr["threshold"]) == ("raised", 1, 312.0, 300.0)
+    assert (tr["kind"], tr["seq"], tr["value"], tr["threshold"]) == ("raised", 1, 362.0, 348.41)
     assert tr["time_utc"].endswith("Z") and tr["t_ns"] == t.t_ns
     assert alarm["alarm_id"] == t.alarm_id and alarm["state"] == "raised"
     assert alarm["message"] == t.message
+    assert alarm["advice"] == t.alarm.advice and "Diering 2011 Table 4" in alarm["advice"]
+    assert (alarm["value_at_raise"], alarm["exceed_count"]) == (362.0, 1)
 
 
 def test_acknowledgement_has_null_value_and_names_who():

@@ -3,11 +3,11 @@
     .venv/bin/python tests/bench/bench_alarms_api.py --clients 50 --rate 200 --seconds 10
 
 Starts the real service in this process (runtime over zenoh on 127.0.0.1, SQLite store, worker
-thread, uvicorn on 127.0.0.1) with the 5.2 MW mill, feeds it one simulated start above 250 % of
-rated torque so there are alarms to list, then lets ``--clients`` pollers ask
-``/alarms?state=open`` at ``--rate`` requests per second in total, each sending back the ETag it
-got (``If-None-Match``), as a SCADA poller would. Pollers start at random phases of their
-period (seeded), like independent control-room systems.
+thread, uvicorn on 127.0.0.1) with the 5.2 MW LRS mill, feeds it one simulated Grid-like start
+(above the LRS starter's start-peak levels) so there are alarms to list, then lets
+``--clients`` pollers ask ``/alarms?state=open`` at ``--rate`` requests per second in total,
+each sending back the ETag it got (``If-None-Match``), as a SCADA poller would. Pollers start
+at random phases of their period (seeded), like independent control-room systems.
 
 The pollers are asyncio tasks with one keep-alive HTTP/1.1 connection each (a minimal client
 over asyncio streams: httpx cost more CPU per request than the server), in
@@ -56,7 +56,7 @@ def start_service(directory: Path) -> tuple[ServiceRuntime, uvicorn.Server, int]
     runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
     runtime.start()
     config = runtime.mills["sag-5200-lrs"]
-    scene = starting_now(get_scene("start-lrs", config, seed=0, duration_s=60.0))
+    scene = starting_now(get_scene("start-grid", config, seed=0, duration_s=60.0))
     with open_session(build_config(connect=[tcp_endpoint(zport)])) as session:
         report = ScenePublisher(session, scene, speed=None, wait_subscribers_s=10.0).run()
     for _ in range(600):  # until the worker analysed the scene (at most a minute)

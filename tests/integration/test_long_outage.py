@@ -49,12 +49,12 @@ START_AT_S = 5.0
 
 def alarming_mill(directory: Path) -> Path:
     """The test mill with its start-peak warning at 150 % of rated torque (the scene's start
-    peaks near 190 %, under the seed's 250 %): its start raises the ``start_peak`` alarm,
+    peaks near 190 %, under the LRS starter's 310 %): its start raises the ``start_peak`` alarm,
     which the outage must not lose."""
     text = MILL_FILE.read_text(encoding="utf-8")
-    assert "start_peak_warn_pct = 250.0" in text
+    assert "\n[alarms]" in text
     path = directory / MILL_FILE.name
-    path.write_text(text.replace("start_peak_warn_pct = 250.0", "start_peak_warn_pct = 150.0"),
+    path.write_text(text.replace("\n[alarms]", "\n[alarms]\nstart_peak_warn_pct = 150.0", 1),
                     encoding="utf-8")  # fmt: skip
     return path
 

@@ -60,7 +60,8 @@ def _settings(tmp: Path, zenoh_port: int, **worker: Any) -> ServiceSettings:
 
 def _feed(runtime: ServiceRuntime, zenoh_port: int, duration_s: float) -> None:
     config = runtime.mills[MILL]
-    scene = starting_now(get_scene("start-lrs", config, seed=0, duration_s=duration_s))
+    # a Grid-like start on the LRS mill: its peak (792 %) raises the start_peak alarm
+    scene = starting_now(get_scene("start-grid", config, seed=0, duration_s=duration_s))
     with open_session(build_config(connect=[tcp_endpoint(zenoh_port)])) as session:
         report = ScenePublisher(session, scene, speed=None, wait_subscribers_s=5.0).run()
     assert _wait_until(lambda: runtime.worker.blocks_handled >= report.blocks, 30.0)

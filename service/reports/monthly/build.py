@@ -158,7 +158,7 @@ def _start_row(e: EventRow, config: MillConfig, zone: zoneinfo.ZoneInfo) -> Star
         pinion_switch_on_pct=_peak(d.get("switch_on", ()), "pinion_pct"),
         rise_10_90_ms=d.get("rise_time_10_90_ms"),
         accel_s=d.get("accel_s"),
-        status=peak_status(d, config.alarms),
+        status=peak_status(d, config.start_peak_levels()),
         peak_pct=max(start_peaks(d).values(), default=None),
     )
 
@@ -170,7 +170,7 @@ def _starts(events: list[EventRow], config: MillConfig, days: list[str]) -> Star
     per_day = dict.fromkeys(days, 0)
     for r in rows:
         per_day[r.local_time[:10]] += 1
-    c = count_starts([r.failed for r in rows], config.alarms)
+    c = count_starts([r.failed for r in rows], config.alarms, config.start_peak_levels())
     return Starts(
         count=c.count,
         failed=c.failed,

@@ -42,7 +42,7 @@ def test_seed_621_worked_example() -> None:
 def test_defaults_from_seeds() -> None:
     cfg = MillConfig.model_validate(_data())
     a = cfg.alarms
-    assert (a.start_peak_warn_pct, a.start_peak_alarm_pct) == (250.0, 300.0)
+    assert (a.start_peak_warn_pct, a.start_peak_alarm_pct) == (None, None)  # the starter's
     assert (a.starts_per_month_warn, a.starts_per_month_alarm) == (5, 20)
     assert (a.oscillation_range_warn_pct, a.oscillation_range_alarm_pct) == (25.0, 45.0)
     assert (
@@ -95,7 +95,7 @@ def test_frozen() -> None:
             "alarms",
             "start_peak_warn_pct",
             400.0,
-            "alarms: start_peak_warn_pct (400.0) must be below",
+            "(top level): alarms: start_peak_warn_pct (400.0) must be below",
         ),
         ("material", "s_ut_mpa", 50.0, "material.s_ut_mpa: must be > 100"),
     ],

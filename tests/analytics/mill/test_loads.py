@@ -273,8 +273,7 @@ def test_starts_status_is_strictly_above_the_levels_like_the_alarm_rules():
 
 def test_start_level_is_strictly_above_the_peaks_like_the_alarm_rules():
     a = LoadAnalysis(mill("sag-5200-lrs"))
-    levels = a.config.alarms  # warning above 250 %, alarm above 300 % (Diering 2011 §7.2)
-    warn, alarm = levels.start_peak_warn_pct, levels.start_peak_alarm_pct
+    warn, alarm = a.config.start_peak_levels()  # LRS: Table 4 mean + 2 / + 3 std. dev.
     got = [a.events.start_alarm(p) for p in (None, warn, warn + 0.1, alarm, alarm + 0.1)]
     assert got == [None, None, "warning", "warning", "alarm"]
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from ingest.mill_files import load_mill_config
 from service.cli.main import main
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -43,7 +44,8 @@ def test_analyze_json_end_to_end(recording, capsys):
     assert ("motor_torque", "girth_mesh") in lines and r["unexplained_peaks"] == []
     peak = max(start["switch_on_peak_pct"], start["short_circuit_peak_pct"])
     raised = [a for a in r["alarms"] if a["rule"] == "start_peak"]
-    assert bool(raised) == (peak > 250.0)  # Diering 2011 §7.2: warning above 250 % of rated
+    warn, _ = load_mill_config(MILL).start_peak_levels()  # the LRS starter's (Table 4)
+    assert bool(raised) == (peak > warn)
     assert r["data_quality"]["faults"]["motor_torque"]["spikes"] == 0
 
 

@@ -133,8 +133,9 @@ def test_whole_recording_conclusions_equal_millwatch_analyze(whole, recording):
 
 
 def test_alarms_of_a_grid_start(tmp_path: Path, capsys):
+    """A Grid-like start on the LRS mill (normal on a Grid mill, an alarm on an LRS one)."""
     rec, out = tmp_path / "grid.mcap", tmp_path / "fox.mcap"
-    mill = MILLS / "rod-1100-grid.toml"
+    mill = MILLS / "sag-5200-lrs.toml"
     assert main(["simulate", "--scene", "start-grid", "--mill", str(mill), "--out", str(rec),
                  "--no-progress", "--duration", "40s"]) == 0  # fmt: skip
     assert main(["archive", "export", str(rec), "--mill", str(mill), "--out", str(out),

@@ -122,11 +122,12 @@ class RestPoller:
 
 
 def _feed(runtime: ServiceRuntime, port: int, configs: list[MillConfig]) -> None:
-    """One LRS start per mill, published at full speed in parallel; waits until handled."""
+    """One Grid-like start per (LRS) mill, whose peak raises the start_peak alarm, published at
+    full speed in parallel; waits until handled."""
     reports: list[int] = []
 
     def publish(config: MillConfig, seed: int) -> None:
-        scene = starting_now(get_scene("start-lrs", config, seed=seed, duration_s=SCENE_S))
+        scene = starting_now(get_scene("start-grid", config, seed=seed, duration_s=SCENE_S))
         with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
             reports.append(ScenePublisher(session, scene, speed=None, wait_subscribers_s=5.0)
                            .run().blocks)  # fmt: skip

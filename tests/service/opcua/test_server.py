@@ -173,7 +173,7 @@ def test_alarm_event_arrives_within_2_s_of_its_rest_appearance(plant: Plant) -> 
     assert found, "no OPC UA event for the alarm"
     t_event, event = found[0]
     assert t_event - plant.rest_seen[alarm["alarm_id"]] <= 2.0
-    assert event.Severity == SEVERITY[alarm["severity"]] == 400
+    assert event.Severity == SEVERITY[alarm["severity"]] == 700  # 792 % > the LRS 348 %
     assert event.Message.Text == alarm["message"]
     assert event.SourceNode == ua.NodeId(f"{SITE}/{MILL}", event.SourceNode.NamespaceIndex)
     assert event.Retain is True

@@ -100,7 +100,8 @@ def pair(tmp_path_factory) -> Iterator[Pair]:
     queryables = WorkerQueryables(runtime.session, worker_side)
     queryables.start()
     try:
-        scene = starting_now(get_scene("start-lrs", runtime.mills[MILL], seed=0, duration_s=60))
+        # a Grid-like start on the LRS mill: its peak raises the start_peak alarm
+        scene = starting_now(get_scene("start-grid", runtime.mills[MILL], seed=0, duration_s=60))
         with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
             report = ScenePublisher(session, scene, speed=None, wait_subscribers_s=5.0).run()
         assert _wait(lambda: runtime.worker.blocks_handled >= report.blocks, 30.0)

@@ -325,7 +325,7 @@ def test_the_alarm_reaches_the_store_through_the_worker_thread(tmp_path):
             "alarm",
             "raised",
         )
-        assert "2024-01" in alarm.message and "connect failed" in alarm.message
+        assert "2024-01" in alarm.message and "connect failed" in alarm.advice
         assert "4 attempts" in alarm.message
         worker.request_observations(
             [

@@ -55,7 +55,7 @@ def test_the_service_catches_up_writes_the_files_and_alarms_a_mail_it_cannot_sen
         assert _wait(lambda: raised(), 120.0), "no report_delivery alarm"
         (alarm,) = raised()
         assert alarm.subject == "mail" and alarm.state == "raised"
-        assert month in alarm.message and "connect failed" in alarm.message
+        assert month in alarm.message and "connect failed" in alarm.advice
         assert alarm.alarm_id in {r.alarm_id for r in backend.alarm_board().rows(A.id)}
         for ext in ("html", "pdf", "zip"):
             assert (tmp_path / "reports" / A.id / f"{month}.{ext}").is_file()

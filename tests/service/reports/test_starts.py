@@ -56,7 +56,7 @@ def _start(switch_on: float | None, short_circuit: float | None = None) -> dict:
 
 
 def test_start_peaks_count_strictly_above_the_levels():
-    a = AlarmThresholds()  # warning above 250 %, alarm above 300 % (§7.2)
+    a = (250.0, 300.0)  # warning above 250 %, alarm above 300 %
     assert [peak_status(_start(p), a) for p in (None, 249.9, 250.0, 250.1, 300.0, 300.1)] == [
         "n/a", "ok", "ok", "warning", "warning", "alarm"]  # fmt: skip
 
@@ -64,7 +64,7 @@ def test_start_peaks_count_strictly_above_the_levels():
 def test_a_start_peak_is_the_larger_of_switch_on_and_short_circuit_as_the_alarm_judges():
     """One start-peak level: the report's status, the event's ``alarm`` and the ``start_peak``
     alarm rule all judge max(switch-on, short-circuit) per side."""
-    a = AlarmThresholds()
+    a = (250.0, 300.0)
     assert peak_status(_start(200.0, 260.0), a) == "warning"
     assert peak_status(_start(320.0, 260.0), a) == "alarm"
     assert peak_status(_start(None, 260.0), a) == "warning"
@@ -72,7 +72,7 @@ def test_a_start_peak_is_the_larger_of_switch_on_and_short_circuit_as_the_alarm_
 
 def test_start_count_against_norm_and_levels():
     a = AlarmThresholds()  # norm 3–5, warning above 5, alarm above 20 (§6.1.3, §6.2.8)
-    statuses = {n: count_starts([False] * n, a).status for n in (0, 5, 6, 20, 21)}
+    statuses = {n: count_starts([False] * n, a, (250.0, 300.0)).status for n in (0, 5, 6, 20, 21)}
     assert statuses == {0: "ok", 5: "ok", 6: "warning", 20: "warning", 21: "alarm"}
-    c = count_starts([True, False, True], a)
+    c = count_starts([True, False, True], a, (250.0, 300.0))
     assert (c.count, c.failed, c.norm, c.warn_above, c.alarm_above) == (3, 2, (3, 5), 5, 20)

@@ -24,7 +24,7 @@ def _write(store: Store, transitions: list[Transition]) -> None:
 
 def _history() -> list[Transition]:
     eng = engine()
-    fired = feed(eng, "start_peak_pct", [260, 312], step_s=3600)  # raised, escalated
+    fired = feed(eng, "start_peak_pct", [320, 362], step_s=3600)  # raised, escalated
     fired += eng.acknowledge(fired[0].alarm_id, "ops", T0 + 7200 * NS)
     fired += feed(eng, "bending_amplitude_mpa", [30, 30], start_s=9000, channel="pinion_bending")
     return fired
@@ -42,7 +42,7 @@ def test_a_version_1_file_migrates_and_keeps_its_data(tmp_path):
     db.commit()
     db.close()
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 6
+        assert store.schema_version == SCHEMA_VERSION == 7
         assert store.events("m1") == [EventRow("m1", "start", 5, {})]
         assert store.alarms() == []
 
@@ -61,7 +61,9 @@ def test_round_trip_of_alarms_and_transitions_across_a_reopen(tmp_path):
             "raised", "escalated", "acknowledged"
         ]  # fmt: skip
         steps = store.alarm_transitions(start_id)
-        assert (steps[1].value, steps[1].threshold, steps[1].t_ns) == (312.0, 300.0, fired[1].t_ns)
+        assert (steps[1].value, steps[1].threshold, steps[1].t_ns) == (362.0, 348.41, fired[1].t_ns)
+        assert (start.value_at_raise, start.exceed_count) == (320.0, 2)
+        assert start.advice.endswith("§10.2, §10.4.")
         assert steps[2].by == "ops" and steps[2].value is None
         assert store.alarm("nope") is None and store.alarm_transitions("nope") == []
 

@@ -85,6 +85,8 @@ def test_checkpoints_of_the_old_format_are_dropped_with_a_warning(tmp_path, capl
     db.execute("DROP TABLE mill_days")  # schema 5
     db.execute("ALTER TABLE alarms DROP COLUMN simulated")  # schema 5
     db.execute("DROP TABLE phase_daily")  # schema 6
+    for column in ("value_at_raise", "threshold_at_raise", "exceed_count", "advice"):
+        db.execute(f"ALTER TABLE alarms DROP COLUMN {column}")  # schema 7
     db.execute("CREATE TABLE checkpoints (id INTEGER PRIMARY KEY, created_ns INTEGER NOT NULL, "
                "position_json TEXT NOT NULL, state_json TEXT NOT NULL)")  # fmt: skip
     db.execute("INSERT INTO checkpoints VALUES (1, 5, '{}', '{\"pipelines\": {}}')")
