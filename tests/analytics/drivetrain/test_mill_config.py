@@ -95,7 +95,7 @@ def test_frozen() -> None:
             "alarms",
             "start_peak_warn_pct",
             400.0,
-            "(top level): alarms: start_peak_warn_pct (400.0) must be below",
+            "alarms: start_peak_warn_pct (400.0) must be below",
         ),
         ("material", "s_ut_mpa", 50.0, "material.s_ut_mpa: must be > 100"),
     ],
