@@ -358,7 +358,8 @@ class CatchUp:
         started = time.monotonic()
         try:
             n = self._rounds(mill, key, last)
-            self.catch_ups += 1
+            with self._lock:  # (two catch-up threads count into the same totals)
+                self.catch_ups += 1
             # (WARNING when anything came: an outage the caches did not cover)
             log.log(logging.WARNING if n else logging.INFO,
                     "%s: %d blocks caught up from the gateway's spools in %.1f s", mill, n,
@@ -410,7 +411,8 @@ class CatchUp:
                     del at[k]
                 else:
                     at[k] = last + 1
-        self.recovered += got
+        with self._lock:
+            self.recovered += got
         return got
 
     def _record_causes(self, key: str, first: int, seqs: list[int], dropped: int) -> None:
@@ -435,7 +437,8 @@ class CatchUp:
                 held.clear()
             for item in items:
                 if self._repeat(mill, item):
-                    self.repeats += 1
+                    with self._lock:
+                        self.repeats += 1
                     continue
                 self._gaps(item)
                 self._handle(item)
