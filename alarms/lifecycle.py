@@ -358,7 +358,7 @@ def acknowledge(
     Acknowledging an acknowledged alarm records nothing but its comment, if any (a
     ``commented`` transition); a cleared alarm: :class:`ActionNotAllowedError`."""
     if alarm.state is AlarmState.CLEARED:
-        raise ActionNotAllowedError(_refusal(alarm, "acknowledged", "there is nothing to "
+        raise ActionNotAllowedError(_refusal(alarm, "cleared", "there is nothing to "
                                              "acknowledge any more"))  # fmt: skip
     if alarm.state is not AlarmState.RAISED:
         return [add_comment(alarm, by, t_ns, comment)] if comment.strip() else []
