@@ -167,3 +167,21 @@ def test_openapi_teaches_every_action(client):
         assert "recorded" in op["description"], action
     shelve = spec["components"]["schemas"]["ShelveBody"]
     assert {"kind", "until", "duration_s", "comment", "by"} <= set(shelve["properties"])
+
+
+def test_the_worker_ends_a_timed_shelve_at_its_wall_clock_expiry(client, alarm_id):
+    shelved = _post(client, alarm_id, "shelve", {"kind": "timed", "duration_s": 1.0}).json()
+    assert shelved["shelved"] is True
+    detail = shelved
+    deadline = time.monotonic() + 6.0
+    for _ in range(120):  # the worker looks every second
+        detail = client.get(f"/alarms/{alarm_id}").json()
+        if not detail["shelved"] or time.monotonic() > deadline:
+            break
+        time.sleep(0.05)
+    assert detail["shelving_state"] == "unshelved"
+    expired = detail["transitions"][-1]
+    assert (expired["kind"], expired["by"]) == ("shelve_expired", None)
+    assert expired["t_ns"] >= shelved["shelved_until_ns"]
+    listed = next(a for a in client.get("/alarms").json()["alarms"] if a["alarm_id"] == alarm_id)
+    assert listed["seq"] == detail["seq"] and listed["shelved"] is False
