@@ -30,7 +30,8 @@ What is here:
 
 Data flow: analyzer facts → ``from_analysis`` → observations → ``engine`` (``rules`` decide,
 ``lifecycle`` records) → transitions out; operator actions → ``engine.act`` → transitions out;
-the caller stores them (``service.store``) and publishes them (``wire``). No I/O here: imports only :mod:`analytics`.
+the caller stores them (``service.store``) and publishes them (``wire``). No I/O here:
+imports only :mod:`analytics`.
 
 Where things go: a moment written as text anywhere → :func:`alarms.times.iso_utc` or
 :func:`alarms.times.iso_local`, never a format of its own; a new rule is a rule in
