@@ -326,7 +326,8 @@ class ApiSettings(_Strict):
     alarms as the ``by`` its caller names (default ``api``), and signs the actions the API sends
     the workers over zenoh (``millwatch api``; they check them with their own copy).
     ``users``: per-user keys (:class:`ApiUser`): the action is recorded as the key's user.
-    ``max_shelve_s``: the longest timed shelve (default 8 h, one shift; at most 7 days).
+    ``max_shelve_s``: the longest timed shelve (default 8 h, one shift; at most 7 days),
+    checked where the action is applied (the worker) and by ``millwatch api`` before it asks.
     ``max_body_bytes``: the largest request body (413 beyond, before it is read);
     ``report_renders``: reports built and rendered at once (one more: 503 with Retry-After)."""
 

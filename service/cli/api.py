@@ -48,6 +48,7 @@ def serve_api(settings: ServiceSettings, mills: dict[str, MillConfig] | None = N
             mills,
             api_key=settings.api.api_key,
             api_keys=ApiKeys.from_settings(settings.api),
+            max_shelve_s=settings.api.max_shelve_s,
             timeout_s=settings.api.query_timeout_s,
         )
         backend.start()

@@ -37,7 +37,7 @@ import zenoh
 from prometheus_client import CollectorRegistry
 from pydantic import ValidationError
 
-from alarms.actions import ActionKind, OperatorAction
+from alarms.actions import DEFAULT_MAX_SHELVE_S, ActionKind, InvalidActionError, OperatorAction
 from alarms.times import iso_utc
 from alarms.wire import AlarmWireError
 from analytics.drivetrain.mill_config import MillConfig
@@ -53,7 +53,7 @@ from ingest.keys import (
 from service.api.alarm_board import AlarmBoard, row_from_dict
 from service.api.identity import ApiKeys
 from service.api.mill_views import config_of, mill_detail, mill_summary, site_mills
-from service.errors import Forbidden, GatewayTimeout, NotFound, Unavailable
+from service.errors import BadRequest, Forbidden, GatewayTimeout, NotFound, Unavailable
 from service.remote.metrics import remote_registry
 from service.remote.protocol import (
     Question,
@@ -101,6 +101,7 @@ class ZenohBackend:
         *,
         api_key: str | None = None,
         api_keys: ApiKeys | None = None,
+        max_shelve_s: float = DEFAULT_MAX_SHELVE_S,
         timeout_s: float = DEFAULT_TIMEOUT_S,
     ) -> None:
         self.session = session
@@ -109,6 +110,8 @@ class ZenohBackend:
         #: The keys REST callers may use (default: the shared ``api_key`` alone); actions are
         #: signed with ``api_key`` whoever's key the caller sent.
         self.api_keys = ApiKeys(api_key) if api_keys is None else api_keys
+        #: The longest timed shelve this API sends (the worker checks its own too).
+        self.max_shelve_s = max_shelve_s
         self.timeout_s = timeout_s
         self._board = AlarmBoard()
         self._by_key = {(c.site, c.id): m for m, c in self.mills.items()}
@@ -352,6 +355,10 @@ class ZenohBackend:
             raise Forbidden("Alarm actions disabled", "This API has no api.api_key configured, "
                             "so it cannot sign alarm actions for the workers.")  # fmt: skip
         mill_id = self._alarm_row_mill(action.alarm_id)
+        try:
+            action.check_expiry(time.time_ns(), self.max_shelve_s)
+        except InvalidActionError as exc:
+            raise BadRequest("Invalid shelve expiry", str(exc)) from exc
         detail = self._ask(mill_id, Question.ACT, act_args(action, self.api_key))
         self._board.merge([row_from_dict(detail)])
         return detail

@@ -261,6 +261,9 @@ def test_remote_actions_reach_the_workers_store(pair):
     assert (stored.confirmed, stored.shelving_state, stored.comment_count) == (
         True, "one_shot_shelved", 1)  # fmt: skip
     assert stored.last_comment == "seen from the API"
+    long = pair.remote.post(f"{url}/shelve", headers=key,
+                            json={"kind": "timed", "duration_s": 9 * 3600})  # fmt: skip
+    assert long.status_code == 422 and "api.max_shelve_s" in long.json()["detail"]
     again = pair.remote.post(f"{url}/confirm", headers=key)
     assert again.status_code == 409 and "already confirmed" in again.json()["detail"]
     assert pair.local.get(url).json() == shelved.json()
