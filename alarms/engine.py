@@ -70,7 +70,7 @@ SUPPRESSED_WHILE_STOPPED = frozenset(
 )  # fmt: skip
 """Rules judged on a running mill's steady windows and spectra: meaningless while the mill is
 stopped, so their alarms are suppressed by design from its stop to its next start (README
-"Alarms", column *suppressed while stopped*)."""
+"Operator actions", suppression by design)."""
 CLOSED_REMEMBERED = 256
 """Cleared alarms the engine remembers (newest acted on or cleared), so actions on one in the
 same batch build on each other before the store holds the first."""
