@@ -34,17 +34,19 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections import OrderedDict
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from alarms import lifecycle
+from alarms.actions import ActionKind, ActionNotAllowedError, OperatorAction, ShelvingState
 from alarms.lifecycle import Alarm, AlarmState, Transition
 from alarms.observations import Kind, Observation
 from alarms.rules import Rule, RuleBook, Severity, build_rules
 from analytics.drivetrain.mill_config import MillConfig
 
-__all__ = ["SIMULATED_PREFIX", "AlarmEngine", "UnknownAlarmError"]
+__all__ = ["SIMULATED_PREFIX", "SUPPRESSED_WHILE_STOPPED", "AlarmEngine", "UnknownAlarmError"]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +54,16 @@ SNAPSHOT_VERSION = 1
 SIMULATED_PREFIX = "SIMULATED DATA: "
 """Starts the message of every alarm of a mill whose data come from the simulator."""
 _NS = 1_000_000_000
+SUPPRESSED_WHILE_STOPPED = frozenset(
+    {"oscillation_range", "bending_amplitude", "unexplained_peak", "resonance_margin",
+     "load_sharing"}
+)  # fmt: skip
+"""Rules judged on a running mill's steady windows and spectra: meaningless while the mill is
+stopped, so their alarms are suppressed by design from its stop to its next start (README
+"Alarms", column *suppressed while stopped*)."""
+CLOSED_REMEMBERED = 256
+"""Cleared alarms the engine remembers (newest acted on or cleared), so actions on one in the
+same batch build on each other before the store holds the first."""
 
 
 class UnknownAlarmError(KeyError):
@@ -108,6 +120,11 @@ class AlarmEngine:
         self._open: dict[str, Key] = {}  # open alarm id → its condition
         self._logged: set[tuple[str, str]] = set()
         self._lock = threading.RLock()
+        #: Conditions out of service → the alarm they were removed on (operator action).
+        self._out_of_service: dict[Key, str] = {}
+        #: Mills stopped since their last stop event (suppression by design).
+        self._stopped: set[str] = set()
+        self._closed: OrderedDict[str, Alarm] = OrderedDict()
 
     @classmethod
     def for_mills(cls, configs: Iterable[MillConfig]) -> AlarmEngine:
@@ -122,6 +139,8 @@ class AlarmEngine:
             if rule is None:
                 return []
             key = (obs.mill_id, rule.name, obs.subject)
+            if key in self._out_of_service:  # (frozen until returned to service)
+                return self._quiet_clears(obs.mill_id, obs.t_ns)
             cond = self._conditions.get(key) or _Condition()
             if rule.kind is Kind.LEVEL:
                 out = self._level(rule, key, cond, obs)
@@ -146,17 +165,66 @@ class AlarmEngine:
     def acknowledge(self, alarm_id: str, by: str, t_ns: int) -> list[Transition]:
         """Acknowledge an open alarm (idempotent); raises :class:`UnknownAlarmError`."""
         with self._lock:
-            key = self._open.get(alarm_id)
-            if key is None:
+            if alarm_id not in self._open:
                 raise UnknownAlarmError(alarm_id)
-            cond = self._conditions[key]
-            rule = self.books[key[0]].rule(key[1])
-            assert cond.alarm is not None
-            out = lifecycle.acknowledge(cond.alarm, by, t_ns, rule.clear_on_ack)
-            if rule.kind is Kind.LEVEL and rule.clear_on_ack and not cond.alarm.open:
-                cond.silenced = str(cond.alarm.severity)  # until normal or a worse level
-            self._keep(key, cond)
+            return self.act(OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by), t_ns)
+
+    def act(
+        self, action: OperatorAction, t_ns: int, stored: Alarm | None = None
+    ) -> list[Transition]:
+        """Apply an operator action at ``t_ns`` (wall clock) to an open alarm, or to a
+        cleared one — the newer of ``stored`` (the store's record) and the engine's memory of
+        it; the transitions it recorded. Raises :class:`UnknownAlarmError` when neither knows
+        the alarm, :class:`~alarms.actions.ActionNotAllowedError` naming the state that
+        refuses it. An acknowledgement of an open alarm with a ``clear_on_ack`` rule clears
+        it; a removal from service freezes its condition: no observation of it is judged, so
+        it raises nothing new, until it is returned to service."""
+        with self._lock:
+            key = self._open.get(action.alarm_id)
+            if key is not None:
+                return self._act_on_open(key, action, t_ns)
+            alarm = self._closed_copy(action.alarm_id, stored)
+            out = self._act_on_closed(alarm, action, t_ns)
+            self._remember(alarm)
             return out
+
+    def set_running(self, mill_id: str, running: bool, t_ns: int) -> list[Transition]:
+        """The mill started (``running``) or stopped at ``t_ns`` (its start and stop events):
+        the open alarms of :data:`SUPPRESSED_WHILE_STOPPED` rules are suppressed from a stop
+        and unsuppressed at the next start; alarms raised meanwhile are born suppressed."""
+        with self._lock:
+            if (mill_id in self._stopped) is not running:
+                return []
+            if running:
+                self._stopped.discard(mill_id)
+                why = "the mill started"
+            else:
+                self._stopped.add(mill_id)
+                why = "the mill stopped; this rule judges a running mill"
+            out = []
+            for key in [k for k in self._open.values() if k[0] == mill_id]:
+                alarm = self._conditions[key].alarm
+                if alarm is not None and key[1] in SUPPRESSED_WHILE_STOPPED:
+                    t = lifecycle.set_suppressed(alarm, not running, t_ns, why)
+                    out += [t] if t is not None else []
+            return out
+
+    def expire_shelves(self, now_ns: int) -> list[Transition]:
+        """Unshelve the open alarms whose timed shelve expired at ``now_ns`` (wall clock: the
+        operator's time, not the samples'); call it regularly."""
+        with self._lock:
+            out = []
+            for key in list(self._open.values()):
+                alarm = self._conditions[key].alarm
+                if (alarm is not None and alarm.shelving_state is ShelvingState.TIMED_SHELVED
+                        and (alarm.shelved_until_ns or 0) <= now_ns):  # fmt: skip
+                    out.append(lifecycle.unshelve(alarm, None, now_ns, expired=True))
+            return out
+
+    def out_of_service(self, mill_id: str | None = None) -> dict[Key, str]:
+        """The conditions out of service (of one mill) → the alarm each was removed on."""
+        with self._lock:
+            return {k: a for k, a in self._out_of_service.items() if mill_id in (None, k[0])}
 
     # ------------------------------------------------------------------ reading
     def open_alarms(self, mill_id: str | None = None) -> list[Alarm]:
@@ -181,7 +249,10 @@ class AlarmEngine:
                 {"mill_id": m, "rule": r, "subject": s, **c.to_dict()}
                 for (m, r, s), c in self._conditions.items()
             ]
-        return {"version": SNAPSHOT_VERSION, "conditions": conditions}
+            out_of_service = [[*k, a] for k, a in self._out_of_service.items()]
+            stopped = sorted(self._stopped)
+        return {"version": SNAPSHOT_VERSION, "conditions": conditions,
+                "out_of_service": out_of_service, "stopped": stopped}  # fmt: skip
 
     def restore(self, snapshot: Mapping[str, Any]) -> None:
         """Replace the state with a :meth:`snapshot`; conditions of mills or rules no longer
@@ -197,8 +268,91 @@ class AlarmEngine:
                     log.warning("alarm snapshot: dropping %s (no longer configured)", key)
                     continue
                 self._keep(key, _Condition.from_dict(entry))
+            self._stopped = {m for m in snapshot.get("stopped", []) if m in self.books}
+            self._out_of_service = {}
+            for mill_id, rule, subject, alarm_id in snapshot.get("out_of_service", []):
+                if self._configured((mill_id, rule, subject)):
+                    self._out_of_service[(mill_id, rule, subject)] = alarm_id
 
     # ------------------------------------------------------------------ internals
+    def _suppressed(self, key: Key) -> bool:
+        return key[0] in self._stopped and key[1] in SUPPRESSED_WHILE_STOPPED
+
+    def _act_on_open(self, key: Key, action: OperatorAction, t_ns: int) -> list[Transition]:
+        cond = self._conditions[key]
+        alarm = cond.alarm
+        assert alarm is not None
+        if action.kind is ActionKind.ACKNOWLEDGE:
+            rule = self.books[key[0]].rule(key[1])
+            out = lifecycle.acknowledge(alarm, action.user, t_ns, rule.clear_on_ack,
+                                        action.comment)  # fmt: skip
+            if rule.kind is Kind.LEVEL and rule.clear_on_ack and not alarm.open:
+                cond.silenced = str(alarm.severity)  # until normal or a worse level
+        else:
+            out = [self._apply(key, alarm, action, t_ns)]
+        self._keep(key, cond)
+        return out
+
+    def _act_on_closed(self, alarm: Alarm, action: OperatorAction, t_ns: int) -> list[Transition]:
+        key = (alarm.mill_id, alarm.rule, alarm.subject)
+        if action.kind is ActionKind.ACKNOWLEDGE:
+            return lifecycle.acknowledge(alarm, action.user, t_ns, False, action.comment)
+        if action.kind in _SERVICE:
+            other = self._conditions[key].alarm if key in self._conditions else None
+            if other is not None and other.alarm_id != alarm.alarm_id:
+                raise ActionNotAllowedError(
+                    f"Alarm {alarm.alarm_id!r} is cleared and its condition has the open alarm "
+                    f"{other.alarm_id!r}: act on that one."
+                )
+            if not self._configured(key):
+                raise ActionNotAllowedError(f"Alarm {alarm.alarm_id!r} is cleared and its rule "
+                                            f"{alarm.rule!r} is no longer configured for mill "
+                                            f"{alarm.mill_id!r}.")  # fmt: skip
+        return [self._apply(key, alarm, action, t_ns)]
+
+    def _apply(self, key: Key, alarm: Alarm, action: OperatorAction, t_ns: int) -> Transition:
+        """The actions other than acknowledge, on an open or a cleared alarm."""
+        user, comment, kind = action.user, action.comment, action.kind
+        if kind is ActionKind.CONFIRM:
+            return lifecycle.confirm(alarm, user, t_ns, comment)
+        if kind is ActionKind.COMMENT:
+            return lifecycle.add_comment(alarm, user, t_ns, comment)
+        if kind in (ActionKind.SHELVE_TIMED, ActionKind.SHELVE_ONE_SHOT):
+            return lifecycle.shelve(alarm, kind, user, t_ns, action.shelve_until_ns, comment)
+        if kind is ActionKind.UNSHELVE:
+            return lifecycle.unshelve(alarm, user, t_ns, comment)
+        return self._service(key, alarm, action, t_ns)
+
+    def _service(self, key: Key, alarm: Alarm, action: OperatorAction, t_ns: int) -> Transition:
+        in_service = action.kind is ActionKind.RETURN_TO_SERVICE
+        removed_on = self._out_of_service.get(key)
+        if in_service and removed_on not in (None, alarm.alarm_id):
+            raise ActionNotAllowedError(f"The condition of alarm {alarm.alarm_id!r} was removed "
+                                        f"from service on alarm {removed_on!r}: return it to "
+                                        "service there.")  # fmt: skip
+        out = lifecycle.set_in_service(alarm, in_service, action.user, t_ns, action.comment)
+        if in_service:
+            self._out_of_service.pop(key, None)
+        else:
+            self._out_of_service[key] = alarm.alarm_id
+        return out
+
+    def _closed_copy(self, alarm_id: str, stored: Alarm | None) -> Alarm:
+        """The newest known state of a cleared alarm (a copy to act on)."""
+        known = self._closed.get(alarm_id)
+        newer = stored is not None and (known is None or stored.seq > known.seq)
+        if newer and stored is not None and stored.alarm_id == alarm_id:
+            known = stored
+        if known is None:
+            raise UnknownAlarmError(alarm_id)
+        return known.copy()
+
+    def _remember(self, alarm: Alarm) -> None:
+        self._closed[alarm.alarm_id] = alarm.copy()
+        self._closed.move_to_end(alarm.alarm_id)
+        while len(self._closed) > CLOSED_REMEMBERED:
+            self._closed.popitem(last=False)
+
     def _configured(self, key: Key) -> bool:
         book = self.books.get(key[0])
         return book is not None and any(r.name == key[1] for r in book.rules.values())
@@ -207,6 +361,7 @@ class AlarmEngine:
         """File the condition after a change: forget cleared alarms and idle trackers."""
         if cond.alarm is not None and not cond.alarm.open:
             self._open.pop(cond.alarm.alarm_id, None)
+            self._remember(cond.alarm)
             cond.alarm = None
         if cond.alarm is not None:
             self._open[cond.alarm.alarm_id] = key
@@ -289,6 +444,7 @@ class AlarmEngine:
         if alarm is None:
             cond.alarm = _new_alarm(rule, key, obs, severity, threshold, (message, advice),
                                     book.simulated)  # fmt: skip
+            cond.alarm.suppressed = self._suppressed(key)
             return [lifecycle.raise_alarm(cond.alarm)]
         args = (obs.t_ns, obs.value, threshold, message, advice)
         if severity.rank > alarm.severity.rank:
@@ -302,6 +458,8 @@ class AlarmEngine:
     def _quiet_clears(self, mill_id: str, t_ns: int) -> list[Transition]:
         out = []
         for key in [k for k in self._open.values() if k[0] == mill_id]:
+            if key in self._out_of_service:
+                continue
             cond = self._conditions[key]
             rule = self.books[mill_id].rule(key[1])
             quiet = rule.quiet_s_to_clear
@@ -314,6 +472,9 @@ class AlarmEngine:
                 out.append(lifecycle.return_to_normal(alarm, rule.latched, t_ns, None, None, why))
                 self._keep(key, cond)
         return out
+
+
+_SERVICE = (ActionKind.REMOVE_FROM_SERVICE, ActionKind.RETURN_TO_SERVICE)
 
 
 def _new_alarm(

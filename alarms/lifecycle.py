@@ -47,6 +47,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
+from alarms.actions import ActionKind, ActionNotAllowedError, ShelvingState
 from alarms.rules import Severity
 
 __all__ = [
@@ -56,13 +57,19 @@ __all__ = [
     "TransitionKind",
     "TransitionRecord",
     "acknowledge",
+    "add_comment",
     "alarm_id_for",
     "clear",
+    "confirm",
     "escalate",
     "raise_alarm",
     "reannunciate",
     "recur",
     "return_to_normal",
+    "set_in_service",
+    "set_suppressed",
+    "shelve",
+    "unshelve",
 ]
 
 
@@ -80,6 +87,15 @@ class TransitionKind(StrEnum):
     RECURRED = "recurred"
     REANNUNCIATED = "reannunciated"
     CLEARED = "cleared"
+    CONFIRMED = "confirmed"
+    COMMENTED = "commented"
+    SHELVED = "shelved"
+    UNSHELVED = "unshelved"
+    SHELVE_EXPIRED = "shelve_expired"
+    SUPPRESSED = "suppressed"
+    UNSUPPRESSED = "unsuppressed"
+    REMOVED_FROM_SERVICE = "removed_from_service"
+    RETURNED_TO_SERVICE = "returned_to_service"
 
 
 def alarm_id_for(mill_id: str, rule: str, subject: str, raised_ns: int) -> str:
@@ -125,6 +141,18 @@ class Alarm:
     threshold_at_raise: float | None = None
     exceed_count: int = 1
     advice: str = ""
+    confirmed: bool = False
+    confirmed_at_ns: int | None = None
+    confirmed_by: str | None = None
+    shelving_state: ShelvingState = ShelvingState.UNSHELVED
+    shelved_until_ns: int | None = None
+    shelved_by: str | None = None
+    suppressed: bool = False
+    out_of_service: bool = False
+    comment_count: int = 0
+    last_comment: str | None = None
+    last_comment_by: str | None = None
+    last_commented_ns: int | None = None
 
     @property
     def open(self) -> bool:
@@ -137,11 +165,32 @@ class Alarm:
         """Plain JSON data (enums as strings)."""
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         d["severity"], d["state"] = str(self.severity), str(self.state)
+        d["shelving_state"] = str(self.shelving_state)
+        d["shelved"] = self.shelved
         return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Alarm:
-        return cls(**{**d, "severity": Severity(d["severity"]), "state": AlarmState(d["state"])})
+        """From :meth:`to_dict`'s data (computed and unknown keys ignored; fields added since
+        the data was written take their defaults)."""
+        shelving = ShelvingState(d.get("shelving_state") or ShelvingState.UNSHELVED)
+        known = {k: v for k, v in d.items() if k in _ALARM_FIELDS}
+        return cls(**{**known, "severity": Severity(d["severity"]),
+                      "state": AlarmState(d["state"]), "shelving_state": shelving})  # fmt: skip
+
+    @property
+    def shelved(self) -> bool:
+        """Shelved by an operator, timed or one-shot (``to_dict`` carries it as ``shelved``)."""
+        return self.shelving_state is not ShelvingState.UNSHELVED
+
+    @property
+    def annunciated(self) -> bool:
+        """Shown to the control room: open, and neither shelved, suppressed nor out of
+        service (those still record, but do not annunciate)."""
+        return self.open and not (self.shelved or self.suppressed or self.out_of_service)
+
+
+_ALARM_FIELDS = frozenset(f.name for f in dataclasses.fields(Alarm))
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,6 +208,7 @@ class TransitionRecord:
     threshold: float | None
     message: str
     by: str | None
+    comment: str | None
 
     def to_row(self) -> dict[str, Any]:
         """Plain JSON data of the transition alone (the fields of :class:`TransitionRecord`)."""
@@ -186,6 +236,7 @@ def _record(
     threshold: float | None,
     message: str,
     by: str | None = None,
+    comment: str | None = None,
 ) -> Transition:
     alarm.seq += 1
     alarm.updated_ns = max(alarm.updated_ns, t_ns)
@@ -193,9 +244,12 @@ def _record(
         alarm.value = value
     if kind in _OFFENDING and threshold is not None:
         alarm.threshold = threshold
+    if comment:
+        alarm.comment_count += 1
+        alarm.last_comment, alarm.last_comment_by, alarm.last_commented_ns = comment, by, t_ns
     return Transition(
         alarm.alarm_id, alarm.seq, kind, t_ns, alarm.severity, alarm.state, value, threshold,
-        message, by, alarm.copy(),
+        message, by, comment or None, alarm.copy(),
     )  # fmt: skip
 
 
@@ -256,6 +310,7 @@ def _offend_again(
     alarm.condition = True
     alarm.message = message
     alarm.exceed_count += 1
+    alarm.confirmed, alarm.confirmed_at_ns, alarm.confirmed_by = False, None, None
     if advice is not None:
         alarm.advice = advice
     return _record(alarm, kind, t_ns, value, threshold, message)
@@ -264,11 +319,23 @@ def _offend_again(
 def clear(
     alarm: Alarm, t_ns: int, value: float | None, threshold: float | None, why: str
 ) -> Transition:
-    """Close the alarm for good."""
+    """Close the alarm for good; a shelve ends with it (a cleared alarm annunciates nothing)."""
     alarm.state = AlarmState.CLEARED
     alarm.condition = False
     alarm.cleared_ns = t_ns
-    return _record(alarm, TransitionKind.CLEARED, t_ns, value, threshold, "Cleared: " + why)
+    text = "Cleared: " + why + _end_shelve(alarm)
+    return _record(alarm, TransitionKind.CLEARED, t_ns, value, threshold, text)
+
+
+def _end_shelve(alarm: Alarm, kinds: tuple[ShelvingState, ...] = tuple(ShelvingState)) -> str:
+    """Unshelve ``alarm`` when its shelving is one of ``kinds``; the words to add to the
+    transition's message ("" when nothing ended)."""
+    if alarm.shelving_state is ShelvingState.UNSHELVED or alarm.shelving_state not in kinds:
+        return ""
+    was = alarm.shelving_state
+    alarm.shelving_state = ShelvingState.UNSHELVED
+    alarm.shelved_until_ns = alarm.shelved_by = None
+    return f" ({'one-shot' if was is ShelvingState.ONE_SHOT_SHELVED else 'timed'} shelve ended)"
 
 
 def return_to_normal(
@@ -278,22 +345,120 @@ def return_to_normal(
     if latched and alarm.state is AlarmState.RAISED:
         alarm.condition = False
         text = f"Back to normal: {why}; latched until acknowledged"
+        text += _end_shelve(alarm, (ShelvingState.ONE_SHOT_SHELVED,))
         return _record(alarm, TransitionKind.NORMAL, t_ns, value, threshold, text)
     return clear(alarm, t_ns, value, threshold, why)
 
 
-def acknowledge(alarm: Alarm, by: str, t_ns: int, clear_on_ack: bool) -> list[Transition]:
-    """Acknowledge a raised alarm; it clears too when its condition is already normal (latched)
-    or its rule clears on acknowledgement. Acknowledging an acknowledged alarm records nothing."""
+def acknowledge(
+    alarm: Alarm, by: str, t_ns: int, clear_on_ack: bool, comment: str = ""
+) -> list[Transition]:
+    """Acknowledge a raised alarm (``comment`` kept with the transition); it clears too when
+    its condition is already normal (latched) or its rule clears on acknowledgement.
+    Acknowledging an acknowledged alarm records nothing but its comment, if any (a
+    ``commented`` transition); a cleared alarm: :class:`ActionNotAllowedError`."""
+    if alarm.state is AlarmState.CLEARED:
+        raise ActionNotAllowedError(_refusal(alarm, "acknowledged", "there is nothing to "
+                                             "acknowledge any more"))  # fmt: skip
     if alarm.state is not AlarmState.RAISED:
-        return []
+        return [add_comment(alarm, by, t_ns, comment)] if comment.strip() else []
     alarm.state = AlarmState.ACKNOWLEDGED
     alarm.acked_ns = t_ns
     alarm.acked_by = by
     text = f"Acknowledged by {by}"
-    out = [_record(alarm, TransitionKind.ACKNOWLEDGED, t_ns, None, None, text, by)]
+    out = [_record(alarm, TransitionKind.ACKNOWLEDGED, t_ns, None, None, text, by, comment)]
     if not alarm.condition:
         out.append(clear(alarm, t_ns, None, None, "acknowledged after the condition ended"))
     elif clear_on_ack:
         out.append(clear(alarm, t_ns, None, None, "acknowledged (this rule clears on ack)"))
     return out
+
+
+def _refusal(alarm: Alarm, state_words: str, why: str) -> str:
+    return f"Alarm {alarm.alarm_id!r} is {state_words}: {why}."
+
+
+def confirm(alarm: Alarm, by: str, t_ns: int, comment: str = "") -> Transition:
+    """The operator confirms an acknowledged alarm, open or cleared (OPC UA Part 9
+    ConfirmedState); refused (:class:`ActionNotAllowedError`) while it waits for an
+    acknowledgement and when already confirmed."""
+    if alarm.state is AlarmState.RAISED or alarm.acked_ns is None:
+        raise ActionNotAllowedError(_refusal(alarm, f"{alarm.state} and not acknowledged",
+                                             "acknowledge it before confirming"))  # fmt: skip
+    if alarm.confirmed:
+        raise ActionNotAllowedError(_refusal(alarm, f"already confirmed by {alarm.confirmed_by}",
+                                             "nothing to confirm"))  # fmt: skip
+    alarm.confirmed, alarm.confirmed_at_ns, alarm.confirmed_by = True, t_ns, by
+    text = f"Confirmed by {by}"
+    return _record(alarm, TransitionKind.CONFIRMED, t_ns, None, None, text, by, comment)
+
+
+def add_comment(alarm: Alarm, by: str, t_ns: int, comment: str) -> Transition:
+    """A comment on the alarm, open or cleared (Part 9 AddComment)."""
+    text = f"Comment by {by}"
+    return _record(alarm, TransitionKind.COMMENTED, t_ns, None, None, text, by, comment)
+
+
+def shelve(
+    alarm: Alarm, kind: ActionKind, by: str, t_ns: int, until_ns: int | None, comment: str = ""
+) -> Transition:
+    """Shelve an open alarm: ``kind`` :attr:`ActionKind.SHELVE_TIMED` until ``until_ns`` (wall
+    clock) or :attr:`ActionKind.SHELVE_ONE_SHOT` until its condition returns to normal. As
+    Part 9's ShelvedStateMachineType: refused for a cleared alarm and when already shelved the
+    same way (a timed shelve is not extended: unshelve first)."""
+    target = (ShelvingState.TIMED_SHELVED if kind is ActionKind.SHELVE_TIMED
+              else ShelvingState.ONE_SHOT_SHELVED)  # fmt: skip
+    if not alarm.open:
+        why = "a cleared alarm is not annunciated, so there is nothing to shelve"
+        raise ActionNotAllowedError(_refusal(alarm, "cleared", why))
+    if alarm.shelving_state is target:
+        raise ActionNotAllowedError(_refusal(alarm, f"already {target}", "unshelve it first"))
+    alarm.shelving_state, alarm.shelved_by = target, by
+    alarm.shelved_until_ns = until_ns if target is ShelvingState.TIMED_SHELVED else None
+    text = f"Shelved ({target}) by {by}"
+    return _record(alarm, TransitionKind.SHELVED, t_ns, None, None, text, by, comment)
+
+
+def unshelve(
+    alarm: Alarm, by: str | None, t_ns: int, comment: str = "", *, expired: bool = False
+) -> Transition:
+    """Show a shelved alarm again: by ``by`` (Part 9 Unshelve), or ``expired`` (a timed
+    shelve's expiry passed; ``by`` None); :class:`ActionNotAllowedError` when not shelved."""
+    if alarm.shelving_state is ShelvingState.UNSHELVED:
+        raise ActionNotAllowedError(_refusal(alarm, "not shelved", "nothing to unshelve"))
+    was = alarm.shelving_state
+    alarm.shelving_state = ShelvingState.UNSHELVED
+    alarm.shelved_until_ns = alarm.shelved_by = None
+    if expired:
+        text = "Timed shelve expired"
+        return _record(alarm, TransitionKind.SHELVE_EXPIRED, t_ns, None, None, text)
+    text = f"Unshelved ({was} before) by {by}"
+    return _record(alarm, TransitionKind.UNSHELVED, t_ns, None, None, text, by, comment)
+
+
+def set_in_service(
+    alarm: Alarm, in_service: bool, by: str, t_ns: int, comment: str = ""
+) -> Transition:
+    """Mark the alarm's condition out of service (``in_service`` False) or back in service;
+    :class:`ActionNotAllowedError` when it already is. The engine keeps the condition's own
+    flag (:class:`alarms.engine.AlarmEngine`)."""
+    if alarm.out_of_service is not in_service:
+        now = "in service" if in_service else "out of service"
+        raise ActionNotAllowedError(_refusal(alarm, f"already {now}", "nothing to change"))
+    alarm.out_of_service = not in_service
+    if in_service:
+        kind, text = TransitionKind.RETURNED_TO_SERVICE, f"Returned to service by {by}"
+    else:
+        kind, text = TransitionKind.REMOVED_FROM_SERVICE, f"Removed from service by {by}"
+    return _record(alarm, kind, t_ns, None, None, text, by, comment)
+
+
+def set_suppressed(alarm: Alarm, suppressed: bool, t_ns: int, why: str) -> Transition | None:
+    """Suppress by design (state-based, e.g. while the mill is stopped) or lift it; None when
+    the alarm already is so."""
+    if alarm.suppressed is suppressed:
+        return None
+    alarm.suppressed = suppressed
+    kind = TransitionKind.SUPPRESSED if suppressed else TransitionKind.UNSUPPRESSED
+    text = ("Suppressed by design: " if suppressed else "No longer suppressed: ") + why
+    return _record(alarm, kind, t_ns, None, None, text)

@@ -36,6 +36,11 @@ Example (``deploy/plant.toml``)::
     name = "operator"                    # may acknowledge alarms
     password_file = "/run/secrets/opcua-operator"   # or password_env = "MILLWATCH_OPCUA_PASSWORD"
 
+    [[api.users]]                        # per-user REST keys: actions recorded as this user
+    name = "j.perez"
+    role = "operator"                    # or "viewer": may not act on alarms
+    key_file = "/run/secrets/api-j.perez"   # or key_env = "MILLWATCH_API_KEY_JPEREZ"
+
 Scale-out (``deploy/worker-*.toml``, ``deploy/api.toml``): ``[zenoh] mode = "client"`` with
 ``connect`` = the router, ``[worker] partition`` = the key expressions of this worker's mills,
 ``[api] query_timeout_s`` for ``millwatch api``.
@@ -60,6 +65,7 @@ from pydantic import (
     model_validator,
 )
 
+from alarms.actions import DEFAULT_MAX_SHELVE_S
 from analytics.drivetrain.mill_config import MillConfig, describe_validation_error
 from ingest.keys import LAYOUT_VERSION, ROOT
 from ingest.mill_files import load_mill_config, load_mill_configs
@@ -68,6 +74,8 @@ from ingest.zenoh_tls import TlsFiles
 
 __all__ = [
     "REPORT_FORMATS",
+    "ApiSettings",
+    "ApiUser",
     "MailSettings",
     "OpcUaSettings",
     "OpcUaUser",
@@ -279,19 +287,66 @@ class WorkerSettings(_Strict):
         return value
 
 
+class ApiUser(_Strict):
+    """One REST API user (``[[api.users]]``): ``name`` and a key from ``key_file`` (a secret
+    file; trailing newline dropped) or the environment variable ``key_env`` — never in this
+    file, never logged. ``role``: ``operator`` may act on alarms (acknowledge, confirm,
+    comment, shelve, remove from service), ``viewer`` is refused them (403). The acting user
+    recorded with every action is this name."""
+
+    name: Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.@-]{0,63}$")]
+    key_file: Path | None = None
+    key_env: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")] | None = None
+    role: Literal["operator", "viewer"] = "operator"
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_key_here(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "key" in data:
+            raise ValueError(
+                "key: not in the settings file; put it in a secret file named by "
+                "key_file, or in the environment variable named by key_env"
+            )
+        return data
+
+    @model_validator(mode="after")
+    def _one_source(self) -> ApiUser:
+        if self.key_file is None and self.key_env is None:
+            raise ValueError(f"user {self.name!r}: set key_file or key_env")
+        return self
+
+    def key(self) -> str | None:
+        """The user's API key (None when its environment variable is unset)."""
+        return read_secret(self.key_file, self.key_env, f"api.users.{self.name}")
+
+
 class ApiSettings(_Strict):
     """The REST API; ``query_timeout_s``: how long the API waits for a worker's answer over
-    zenoh (``millwatch api``) before it answers 504. ``api_key``: needed to acknowledge alarms,
-    and shared with the workers, which check the acks the API signs with it.
+    zenoh (``millwatch api``) before it answers 504. ``api_key``: the shared key — acts on
+    alarms as the ``by`` its caller names (default ``api``), and signs the actions the API sends
+    the workers over zenoh (``millwatch api``; they check them with their own copy).
+    ``users``: per-user keys (:class:`ApiUser`): the action is recorded as the key's user.
+    ``max_shelve_s``: the longest timed shelve (default 8 h, one shift; at most 7 days).
     ``max_body_bytes``: the largest request body (413 beyond, before it is read);
     ``report_renders``: reports built and rendered at once (one more: 503 with Retry-After)."""
 
     host: str = "127.0.0.1"
     port: Annotated[int, Field(ge=0, le=65535)] = 8080
     api_key: str | None = None
+    users: tuple[ApiUser, ...] = ()
+    max_shelve_s: Annotated[float, Field(gt=0, le=7 * 86400)] = DEFAULT_MAX_SHELVE_S
     query_timeout_s: Annotated[float, Field(gt=0, le=600)] = 10.0
     max_body_bytes: Annotated[int, Field(ge=1024, le=64 * 2**20)] = 64 * 1024
     report_renders: Annotated[int, Field(ge=1, le=64)] = 2
+
+    @field_validator("users")
+    @classmethod
+    def _unique(cls, value: tuple[ApiUser, ...]) -> tuple[ApiUser, ...]:
+        names = [u.name for u in value]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"user {twice[0]!r} is configured twice")
+        return value
 
 
 class MillSettings(_Strict):
@@ -536,6 +591,7 @@ class ServiceSettings(_Strict):
                     update={"directory": at(self.reports.directory), "mail": mail}
                 ),
                 "opcua": self._resolved_opcua(at),
+                "api": self._resolved_api(at),
             }
         )
 
@@ -546,6 +602,13 @@ class ServiceSettings(_Strict):
         return self.zenoh.model_copy(
             update={"tls": tls.model_copy(update={"directory": at(tls.directory)})}
         )
+
+    def _resolved_api(self, at: Any) -> ApiSettings:
+        users = tuple(
+            u.model_copy(update={"key_file": at(u.key_file)}) if u.key_file is not None else u
+            for u in self.api.users
+        )
+        return self.api.model_copy(update={"users": users})
 
     def _resolved_opcua(self, at: Any) -> OpcUaSettings:
         o = self.opcua

@@ -13,19 +13,27 @@ Polling (SCADA/HMI every few seconds):
   ``(alarm_id, seq)``). ``updated_ns`` is sample time, so use the ETag on the open list when
   mills' clocks may lag each other.
 
-Acknowledgement goes through the worker thread (:meth:`service.worker.worker.Worker.request_ack`),
-so
-its transitions are stored and published on ``…/@alarms`` like any other and the engine is never
-touched from an API thread.
+Operator actions (acknowledge, confirm, comment, shelve, …: :mod:`alarms.actions`) go through the
+worker thread (:meth:`service.worker.worker.Worker.request_action`), so their transitions are
+stored and published on ``…/@alarms`` like any other and the engine is never touched from an API
+thread.
 """
 
 from __future__ import annotations
 
 import hashlib
 import hmac
+import time
 from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Any
 
+from alarms.actions import (
+    DEFAULT_MAX_SHELVE_S,
+    ActionKind,
+    ActionNotAllowedError,
+    InvalidActionError,
+    OperatorAction,
+)
 from alarms.engine import UnknownAlarmError
 from alarms.lifecycle import Alarm, AlarmState
 from service.api.times import with_iso
@@ -40,6 +48,7 @@ __all__ = [
     "acknowledge",
     "alarm_detail",
     "alarm_list",
+    "apply_action",
     "check_api_key",
     "parse_states",
 ]
@@ -93,14 +102,17 @@ def matches(if_none_match: str | None, tag: str) -> bool:
 
 
 def alarm_detail(store: Store, alarm_id: str) -> dict[str, Any]:
-    """One alarm with its transitions; :class:`NotFound` naming the id."""
+    """One alarm with its transitions and its comments (each: ``user``, ``t_ns``, ``text``,
+    the transition's ``kind`` and ``seq``); :class:`NotFound` naming the id."""
     row = store.alarm(alarm_id)
     if row is None:
         raise NotFound(
             "Unknown alarm", f"No alarm {alarm_id!r} is stored here; GET /alarms lists the alarms."
         )
     transitions = [t.to_row() for t in store.alarm_transitions(alarm_id)]
-    return {**row.to_dict(), "transitions": transitions}
+    comments = [{"user": t["by"], "t_ns": t["t_ns"], "text": t["comment"], "kind": t["kind"],
+                 "seq": t["seq"]} for t in transitions if t["comment"]]  # fmt: skip
+    return {**row.to_dict(), "transitions": transitions, "comments": comments}
 
 
 def check_api_key(configured: str | None, given: str | None) -> None:
@@ -124,40 +136,56 @@ def check_api_key(configured: str | None, given: str | None) -> None:
 
 def acknowledge(runtime: ServiceRuntime, store: Store, alarm_id: str, by: str) -> dict[str, Any]:
     """Acknowledge through the worker thread and return the alarm as stored afterwards."""
-    row = store.alarm(alarm_id)
+    action = OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by)
+    return apply_action(runtime, store, action, DEFAULT_MAX_SHELVE_S)
+
+
+def apply_action(
+    runtime: ServiceRuntime, store: Store, action: OperatorAction, max_shelve_s: float
+) -> dict[str, Any]:
+    """Apply an operator action through the worker thread and return the alarm as stored
+    afterwards (:meth:`service.api.backend.Backend.act`). An acknowledgement of an
+    acknowledged alarm without a comment changes nothing and returns it as it is."""
+    row = store.alarm(action.alarm_id)
     if row is None:
-        alarm_detail(store, alarm_id)  # raises NotFound naming the id
+        alarm_detail(store, action.alarm_id)  # raises NotFound naming the id
     assert row is not None
-    if row.state == AlarmState.CLEARED:
+    try:
+        action.check_expiry(time.time_ns(), max_shelve_s)
+    except InvalidActionError as exc:
+        raise BadRequest("Invalid shelve expiry", str(exc)) from exc
+    if action.kind is ActionKind.ACKNOWLEDGE and row.state == AlarmState.CLEARED:
         raise Conflict(
             "Alarm cleared",
-            f"Alarm {alarm_id!r} is already cleared; there is nothing to acknowledge.",
+            f"Alarm {action.alarm_id!r} is already cleared; there is nothing to acknowledge.",
         )
-    if row.state == AlarmState.RAISED:
-        _ack_on_worker(runtime, row.mill_id, alarm_id, by)
-    return alarm_detail(store, alarm_id)
+    idle_ack = action.kind is ActionKind.ACKNOWLEDGE and row.state == AlarmState.ACKNOWLEDGED
+    if not (idle_ack and not action.comment.strip()):
+        _act_on_worker(runtime, row.mill_id, action)
+    return alarm_detail(store, action.alarm_id)
 
 
-def _ack_on_worker(runtime: ServiceRuntime, mill_id: str, alarm_id: str, by: str) -> None:
-    request = runtime.request_ack(mill_id, alarm_id, by)
+def _act_on_worker(runtime: ServiceRuntime, mill_id: str, action: OperatorAction) -> None:
+    request = runtime.request_action(mill_id, action)
+    alarm_id, what = action.alarm_id, action.label
     if request is None:
         raise Unavailable(
             "Worker stopped",
-            "The analysis worker is not running, so the "
-            "acknowledgement cannot be applied; try again shortly.",
+            f"The analysis worker is not running, so the {what} cannot be applied; try again "
+            "shortly.",
         )
     try:
         request.done.result(timeout=ACK_TIMEOUT_S)
     except FutureTimeout as exc:
         raise Unavailable(
             "Worker busy",
-            f"The worker did not apply the acknowledgement within "
-            f"{ACK_TIMEOUT_S:.0f} s; it is still queued.",
+            f"The worker did not apply the {what} within {ACK_TIMEOUT_S:.0f} s; it is still "
+            "queued.",
         ) from exc
     except MillHeldError as exc:
-        raise Conflict(
-            "Mill held", f"Alarm {alarm_id!r} cannot be acknowledged now: {exc}."
-        ) from exc
+        raise Conflict("Mill held", f"Alarm {alarm_id!r} cannot take a {what} now: {exc}.") from exc
+    except ActionNotAllowedError as exc:
+        raise Conflict("Action not allowed", f"{exc} (asked: {what})") from exc
     except UnknownAlarmError as exc:
         raise Conflict(
             "Alarm not open",

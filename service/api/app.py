@@ -43,5 +43,5 @@ def create_app(source: ServiceRuntime | Backend, limits: ApiLimits | None = None
     install_problem_handlers(app)
     app.include_router(api_router(backend, RenderSlots(limits)))
     keyed = keyed_routes(KEYED_ROUTES)
-    app.add_middleware(RequestGuard, limits=limits, api_key=backend.api_key, keyed=keyed)
+    app.add_middleware(RequestGuard, limits=limits, keys=backend.api_keys, keyed=keyed)
     return app

@@ -3,8 +3,8 @@
 Two implementations (README "Scale"):
 
 * :class:`service.api.local_backend.LocalBackend` — the runtime in this process answers
-  (``millwatch serve``, the demo): store reads, the worker's status snapshot, acks through the
-  worker thread.
+  (``millwatch serve``, the demo): store reads, the worker's status snapshot, operator actions
+  (:meth:`Backend.act`) through the worker thread.
 * :class:`service.remote.zenoh_backend.ZenohBackend` — workers elsewhere answer through zenoh
   queryables (``millwatch api``); each worker itself answers with a :class:`LocalBackend`, so the
   remote API returns the same bodies and the same errors.
@@ -21,8 +21,10 @@ from typing import Any, Protocol
 
 from prometheus_client import CollectorRegistry
 
+from alarms.actions import OperatorAction
 from analytics.drivetrain.mill_config import MillConfig
 from service.api.alarm_board import AlarmBoard
+from service.api.identity import ApiKeys
 from service.reports.life import LifeReport
 from service.reports.monthly import MonthlyReport
 from service.reports.starts import MonthStarts
@@ -38,7 +40,14 @@ class Backend(Protocol):
     def mills(self) -> Mapping[str, MillConfig]: ...
 
     @property
-    def api_key(self) -> str | None: ...
+    def api_key(self) -> str | None:
+        """The shared ``[api] api_key`` (also what signs actions sent over zenoh)."""
+        ...
+
+    @property
+    def api_keys(self) -> ApiKeys:
+        """Every key that may reach the API, and whose it is (:mod:`service.api.identity`)."""
+        ...
 
     def alarm_board(self) -> AlarmBoard: ...
 
@@ -69,7 +78,19 @@ class Backend(Protocol):
 
     def alarm(self, alarm_id: str) -> dict[str, Any]: ...
 
-    def ack(self, alarm_id: str, by: str) -> dict[str, Any]: ...
+    def act(self, action: OperatorAction) -> dict[str, Any]:
+        """Apply an operator action (:mod:`alarms.actions`; ``action.user`` is the
+        authenticated user: the caller checked the key or the OPC UA session) through the
+        alarm's worker, stored and published like any transition; the alarm's detail
+        afterwards (the ``GET /alarms/{id}`` body). Raises :class:`~service.errors.NotFound`
+        for an unknown alarm, :class:`~service.errors.Conflict` when the alarm's state refuses
+        the action (the detail names the state), :class:`~service.errors.BadRequest` for a
+        shelve expiry in the past or beyond ``[api] max_shelve_s``."""
+        ...
+
+    def ack(self, alarm_id: str, by: str) -> dict[str, Any]:
+        """:meth:`act` with an acknowledgement by ``by`` (kept for older callers)."""
+        ...
 
     def readiness(self) -> dict[str, Any]: ...
 

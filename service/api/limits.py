@@ -18,7 +18,6 @@ requests held every worker thread, so ``/health`` waited 39 s.
 
 from __future__ import annotations
 
-import hmac
 import re
 import threading
 from collections.abc import Awaitable, Callable, Iterable, Iterator, MutableMapping
@@ -29,8 +28,9 @@ from typing import Any
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import JSONResponse
 
-from service.api.errors import PROBLEM
-from service.errors import Unavailable
+from service.api.errors import PROBLEM, status_of
+from service.api.identity import ApiKeys
+from service.errors import ApiError, Unavailable
 from service.settings import ApiSettings
 
 __all__ = ["ApiLimits", "RenderSlots", "RequestGuard", "TooBusy", "keyed_routes", "limits_of"]
@@ -120,8 +120,9 @@ def keyed_routes(routes: Iterable[tuple[str, str]]) -> list[tuple[re.Pattern[str
 
 
 class RequestGuard:
-    """The ASGI middleware of the module docstring. ``api_key``: the configured key (None:
-    routes that need one answer 403); ``keyed``: the routes that need it, from
+    """The ASGI middleware of the module docstring. ``keys``: the configured keys
+    (:class:`~service.api.identity.ApiKeys`: none, or a viewer's key, answers 403 on a keyed
+    route; a missing or unknown key 401); ``keyed``: the routes that need one, from
     :func:`keyed_routes`."""
 
     def __init__(
@@ -129,12 +130,12 @@ class RequestGuard:
         app: Asgi,
         *,
         limits: ApiLimits,
-        api_key: str | None,
+        keys: ApiKeys,
         keyed: list[tuple[re.Pattern[str], set[str]]],
     ) -> None:
         self.app = app
         self.limits = limits
-        self.api_key = api_key
+        self.keys = keys
         self.keyed = keyed
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
@@ -155,16 +156,13 @@ class RequestGuard:
                             f"bytes; this one declares {length[:20]}.", path)  # fmt: skip
         if not self._needs_key(scope["method"], path):
             return None
-        given = _header(scope, b"x-api-key")
-        if not self.api_key:
-            return _problem(403, "Acknowledgement disabled", "This service has no "
-                            "api.api_key configured, so alarms cannot be acknowledged over the "
-                            "API.", path)  # fmt: skip
-        if given and hmac.compare_digest(given.encode(), self.api_key.encode()):
-            return None
-        title = "Wrong API key" if given else "API key required"
-        return _problem(401, title, "Send the service's API key in the X-API-Key header.", path,
-                        **{"WWW-Authenticate": 'APIKey header="X-API-Key"'})  # fmt: skip
+        try:
+            self.keys.operator(_header(scope, b"x-api-key"))
+        except ApiError as exc:
+            status = status_of(exc)
+            headers = {"WWW-Authenticate": 'APIKey header="X-API-Key"'} if status == 401 else {}
+            return _problem(status, exc.title, exc.detail, path, **headers)
+        return None
 
     def _needs_key(self, method: str, path: str) -> bool:
         return any(method in methods and regex.match(path) for regex, methods in self.keyed)

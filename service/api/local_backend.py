@@ -3,7 +3,8 @@
 Used by the in-process API (``millwatch serve``, the demo) and by every worker to answer zenoh
 queries (:mod:`service.remote.queryables`), so a remote API returns what an in-process one would.
 Reads go to the store (read-only connections) and to ``runtime.status``, the snapshot the worker
-thread refreshes every 0.5 s; acknowledgements go through the worker thread.
+thread refreshes every 0.5 s; operator actions (acknowledge, confirm, comment, shelve, …) go
+through the worker thread.
 
 The alarm board (:mod:`service.api.alarm_board`) is fed by the runtime's stored transitions (it
 registers on ``runtime.alarm_listeners``) and loaded once from the store when the store is open.
@@ -16,9 +17,11 @@ from typing import Any
 
 from prometheus_client import CollectorRegistry
 
+from alarms.actions import ActionKind, OperatorAction
 from alarms.lifecycle import Transition
 from service.api.alarm_board import AlarmBoard, row_from_dict
-from service.api.alarm_views import acknowledge, alarm_detail
+from service.api.alarm_views import alarm_detail, apply_action
+from service.api.identity import ApiKeys
 from service.api.metrics import metrics_registry
 from service.api.mill_views import (
     config_of,
@@ -49,6 +52,8 @@ class LocalBackend:
         self.runtime = runtime
         self.mills = runtime.mills
         self.api_key = runtime.settings.api.api_key
+        self.api_keys = ApiKeys.from_settings(runtime.settings.api)
+        self.max_shelve_s = runtime.settings.api.max_shelve_s
         self.worker_name = worker or worker_identity(runtime.settings)
         self._board = AlarmBoard()
         self._board_loaded = False
@@ -76,11 +81,16 @@ class LocalBackend:
     def alarm(self, alarm_id: str) -> dict[str, Any]:
         return alarm_detail(store_of(self.runtime), alarm_id)
 
-    def ack(self, alarm_id: str, by: str) -> dict[str, Any]:
-        """Acknowledge through the worker thread (no API key check: the caller did it)."""
-        detail = acknowledge(self.runtime, store_of(self.runtime), alarm_id, by)
+    def act(self, action: OperatorAction) -> dict[str, Any]:
+        """Apply an operator action through the worker thread (no key check: the caller did
+        it); shelve expiries are checked against ``[api] max_shelve_s`` here, on the worker."""
+        detail = apply_action(self.runtime, store_of(self.runtime), action, self.max_shelve_s)
         self._board.merge([row_from_dict(detail)])
         return detail
+
+    def ack(self, alarm_id: str, by: str) -> dict[str, Any]:
+        """Acknowledge through the worker thread (no API key check: the caller did it)."""
+        return self.act(OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by))
 
     # ------------------------------------------------------------------ mills
     def status(self, mill_id: str) -> MillStatus:

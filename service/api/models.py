@@ -7,22 +7,28 @@ once there (:class:`service.reports.life.LifeReport`, :class:`service.reports.st
 
 from __future__ import annotations
 
-from typing import Any
+from datetime import datetime
+from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 from pydantic.config import JsonDict
 
+from alarms.actions import COMMENT_MAX_CHARS, USER_MAX_CHARS
 from service.reports.starts import MonthStarts, StartOut
 from service.status import MillStatus
 
 __all__ = [
     "AckBody",
+    "ActionBody",
     "AlarmDetail",
     "AlarmList",
     "AlarmOut",
+    "CommentBody",
+    "CommentOut",
     "MillDetail",
     "MillSummary",
     "MonthStarts",
+    "ShelveBody",
     "Spectrum",
     "StartOut",
     "TransitionOut",
@@ -163,6 +169,22 @@ ALARM_EXAMPLE: JsonDict = {
     "switch-on and 197 % at short circuit. A start well above that points to the starter: check "
     "the electrolyte density (verify with the strain gauges) and the start sequence. … Source: "
     "Diering 2011 Table 4 (§6.2.1–6.2.2), §8.2, §10.2, §10.4.",
+    "confirmed": False,
+    "confirmed_at_ns": None,
+    "confirmed_at": None,
+    "confirmed_by": None,
+    "shelving_state": "timed_shelved",
+    "shelved_until_ns": 1714567200000000000,
+    "shelved_until": "2024-05-01T12:40:00Z",
+    "shelved_by": "j.perez",
+    "suppressed": False,
+    "out_of_service": False,
+    "comment_count": 1,
+    "last_comment": "Starter electrolyte being checked by the electrician on shift",
+    "last_comment_by": "j.perez",
+    "last_commented_ns": 1714560300000000000,
+    "last_commented": "2024-05-01T10:45:00Z",
+    "shelved": True,
 }
 
 
@@ -222,6 +244,42 @@ class AlarmOut(BaseModel):
         'points (author and section), in plain words (README "Alarms", the master alarm '
         "database).",
     )
+    confirmed: bool = Field(
+        False,
+        description="An operator confirmed the acknowledged alarm (POST …/confirm; OPC UA "
+        "ConfirmedState). A re-annunciation or escalation asks for a new acknowledgement and "
+        "confirmation.",
+    )
+    confirmed_at_ns: int | None = Field(None, description="When confirmed, ns UTC.")
+    confirmed_at: str | None = Field(None, description="When confirmed, ISO-8601 UTC.")
+    confirmed_by: str | None = Field(None, description="Who confirmed (the key's user).")
+    shelving_state: str = Field(
+        "unshelved",
+        description="unshelved, timed_shelved (until shelved_until) or one_shot_shelved "
+        "(until the condition returns to normal). A shelved alarm is recorded but not "
+        "annunciated.",
+    )
+    shelved_until_ns: int | None = Field(
+        None, description="A timed shelve's expiry (wall clock), ns UTC."
+    )
+    shelved_until: str | None = Field(None, description="The timed shelve's expiry, ISO-8601.")
+    shelved_by: str | None = Field(None, description="Who shelved it.")
+    suppressed: bool = Field(
+        False,
+        description="Suppressed by design: its rule judges a running mill and the mill is "
+        'stopped (README "Alarms"). Recorded, not annunciated.',
+    )
+    out_of_service: bool = Field(
+        False,
+        description="Its condition (mill, rule, subject) was removed from service: it raises "
+        "nothing new and this alarm is frozen until returned to service. Not annunciated.",
+    )
+    comment_count: int = Field(0, description="Comments so far (the detail lists them).")
+    last_comment: str | None = Field(None, description="The newest comment's text.")
+    last_comment_by: str | None = Field(None, description="Who wrote the newest comment.")
+    last_commented_ns: int | None = Field(None, description="When, ns UTC.")
+    last_commented: str | None = Field(None, description="When, ISO-8601 UTC.")
+    shelved: bool = Field(False, description="shelving_state is timed_shelved or one_shot_shelved.")
 
 
 class TransitionOut(BaseModel):
@@ -229,8 +287,10 @@ class TransitionOut(BaseModel):
     seq: int
     kind: str = Field(
         description="raised, escalated, acknowledged, normal, recurred, reannunciated (an event "
-        "rule's event offended again: the same alarm, its value and exceed_count updated) or "
-        "cleared."
+        "rule's event offended again: the same alarm, its value and exceed_count updated), "
+        "cleared; operator actions: confirmed, commented, shelved, unshelved, "
+        "removed_from_service, returned_to_service; and shelve_expired (a timed shelve ran "
+        "out), suppressed, unsuppressed (by design, as the mill stops and starts)."
     )
     t_ns: int
     t: str = Field(description="Transition time, ISO-8601 UTC (= t_ns).")
@@ -239,7 +299,20 @@ class TransitionOut(BaseModel):
     value: float | None
     threshold: float | None
     message: str
-    by: str | None
+    by: str | None = Field(description="Who acted (acknowledged, confirmed, commented, …).")
+    comment: str | None = Field(description="The comment given with the action, if any.")
+
+
+class CommentOut(BaseModel):
+    """One comment on an alarm (from its transitions: an acknowledgement, a confirmation, a
+    shelve… may carry one, and ``commented`` transitions are comments alone)."""
+
+    user: str | None = Field(description="Who wrote it.")
+    t_ns: int
+    t: str = Field(description="When, ISO-8601 UTC (= t_ns).")
+    text: str
+    kind: str = Field(description="The transition that carried it (commented, acknowledged…).")
+    seq: int
 
 
 class AlarmList(BaseModel):
@@ -264,15 +337,95 @@ class AlarmList(BaseModel):
 
 class AlarmDetail(AlarmOut):
     transitions: list[TransitionOut]
+    comments: list[CommentOut] = Field(description="Every comment, oldest first.")
 
 
-class AckBody(BaseModel):
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"by": "j.perez"}]})
+_PRINTABLE = r"^[^\x00-\x1f\x7f-\x9f]*$"
+_BY = Field(
+    None,
+    min_length=1,
+    max_length=USER_MAX_CHARS,
+    pattern=_PRINTABLE,
+    description="Who acts. With a per-user key: omit it, or give the key's own user (another "
+    "name is refused: the key's user is recorded). With the shared api_key: the name "
+    "recorded (default api).",
+)
+_COMMENT = Field(
+    "",
+    max_length=COMMENT_MAX_CHARS,
+    pattern=_PRINTABLE,
+    description=f"A remark kept with the action (at most {COMMENT_MAX_CHARS} characters, no "
+    "control characters); the alarm's detail lists it under comments.",
+)
 
-    by: str = Field(
-        "api",
-        min_length=1,
-        max_length=64,
-        pattern=r"^[^\x00-\x1f\x7f-\x9f]+$",
-        description="Who acknowledges: at most 64 characters, no control characters.",
+
+class ActionBody(BaseModel):
+    """The body of an action without arguments (confirm, unshelve, out-of-service,
+    in-service): who and an optional comment; the body may be left out."""
+
+    model_config = ConfigDict(
+        extra="forbid", json_schema_extra={"examples": [{"comment": "Checked on site"}]}
     )
+
+    by: str | None = _BY
+    comment: str = _COMMENT
+
+
+class AckBody(ActionBody):
+    """``POST /alarms/{id}/ack``: ``{"by": …, "comment": …}``, both optional."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"by": "j.perez", "comment": "Starter being checked"}]},
+    )
+
+
+class CommentBody(ActionBody):
+    """``POST /alarms/{id}/comment``: the comment is required."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"comment": "Electrician on the way to the starter"}]},
+    )
+
+    comment: str = Field(
+        min_length=1,
+        max_length=COMMENT_MAX_CHARS,
+        pattern=_PRINTABLE,
+        description=f"The comment (1 to {COMMENT_MAX_CHARS} characters, no control characters).",
+    )
+
+
+class ShelveBody(ActionBody):
+    """``POST /alarms/{id}/shelve``: ``timed`` — hidden until ``until`` (ISO-8601) or for
+    ``duration_s`` seconds from now, at most ``[api] max_shelve_s`` (default 8 h); ``one_shot``
+    — hidden until the condition returns to normal (neither ``until`` nor ``duration_s``)."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"kind": "timed", "duration_s": 3600, "comment": "Sensor being replaced"},
+                {"kind": "timed", "until": "2024-05-01T14:00:00Z"},
+                {"kind": "one_shot", "comment": "Known during the relining"},
+            ]
+        },
+    )
+
+    kind: Literal["timed", "one_shot"] = Field(description="timed or one_shot.")
+    until: datetime | None = Field(
+        None, description="timed: the expiry, ISO-8601 (without an offset: UTC)."
+    )
+    duration_s: float | None = Field(
+        None, gt=0, description="timed: the shelve's length in seconds from now."
+    )
+
+    @model_validator(mode="after")
+    def _expiry(self) -> ShelveBody:
+        given = [n for n in ("until", "duration_s") if getattr(self, n) is not None]
+        if self.kind == "timed" and len(given) != 1:
+            raise ValueError("a timed shelve needs exactly one of until or duration_s")
+        if self.kind == "one_shot" and given:
+            raise ValueError(f"a one_shot shelve ends when the condition returns to normal; "
+                             f"{given[0]} is only for a timed shelve")  # fmt: skip
+        return self

@@ -22,6 +22,7 @@ import uvicorn
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, open_session
 from service.api.app import create_app
+from service.api.identity import ApiKeys
 from service.api.limits import limits_of
 from service.cli.serve import AnnouncingServer, check_api_port, check_secrets, run_until_signal
 from service.opcua.launch import start_opcua
@@ -46,6 +47,7 @@ def serve_api(settings: ServiceSettings, mills: dict[str, MillConfig] | None = N
             session,
             mills,
             api_key=settings.api.api_key,
+            api_keys=ApiKeys.from_settings(settings.api),
             timeout_s=settings.api.query_timeout_s,
         )
         backend.start()

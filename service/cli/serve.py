@@ -31,6 +31,7 @@ import uvicorn
 from analytics.drivetrain.mill_config import MillConfig
 from ingest.zenoh_session import build_config, try_open
 from service.api.app import create_app
+from service.api.identity import ApiKeys
 from service.api.limits import limits_of
 from service.api.local_backend import LocalBackend
 from service.opcua.launch import start_opcua
@@ -155,9 +156,11 @@ def check_store(settings: ServiceSettings, source: str | Path) -> None:
 
 
 def check_secrets(settings: ServiceSettings, source: str | Path) -> None:
-    """The secret files the settings name (OPC UA users' passwords when OPC UA is on, the
-    report mail's password) can be read now, not only once the worker has recovered."""
+    """The secret files the settings name (REST users' keys, OPC UA users' passwords when OPC
+    UA is on, the report mail's password) can be read now, not only once the worker has
+    recovered."""
     try:
+        ApiKeys.from_settings(settings.api)
         if settings.opcua.enabled:
             for user in settings.opcua.users:
                 user.password()

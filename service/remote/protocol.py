@@ -19,6 +19,10 @@ alarms     —                       the mill's alarms (rows, most recent first)
 alarm      ``alarm_id``            ``GET /alarms/{id}`` body
 ack        ``alarm_id``, ``by``,   the alarm after acknowledgement
            ``t_ns``, ``mac``
+act        ``alarm_id``, ``kind``, the alarm after the operator action
+           ``user``, ``comment``,  (:class:`alarms.actions.OperatorAction`)
+           ``shelve_until_ns``,
+           ``t_ns``, ``mac``
 =========  ======================  ==============================================
 
 An ``ack`` changes state, so it is signed (:func:`ack_args`, checked by :func:`checked_ack`): the
@@ -30,6 +34,12 @@ it, compares in constant time (``hmac.compare_digest``) and refuses a time more 
 is answered 401 and changes nothing; a worker without ``api_key`` refuses every ack (403). The
 key itself never travels. Within the window a captured ack can be replayed only as itself (the
 same alarm, the same person), which acknowledging again does not change.
+
+An ``act`` (every operator action: :mod:`alarms.actions`) is signed the same way
+(:func:`act_args`, :func:`checked_act`) over everything it carries — the alarm, the action's
+kind, the user, the comment, the shelve expiry and the time — under its own domain
+(``millwatch-act-v1``), so a captured request cannot be replayed as another action, for another
+user, with another comment or expiry, nor as an ``ack`` (nor an ``ack`` as an ``act``).
 
 Answers are UTF-8 JSON (:data:`JSON`); a typed answer is sent as its model's JSON data and
 read back with ``model_validate`` (:class:`StatusAnswer`, ``MonthStarts``; the life report, a
@@ -53,6 +63,7 @@ from typing import Any
 
 from pydantic import BaseModel, Field
 
+from alarms.actions import ActionKind, InvalidActionError, OperatorAction
 from service.api.errors import error_for_status, status_of
 from service.errors import ApiError, BadRequest, Forbidden, Unauthorized
 from service.status import MillStatus
@@ -64,10 +75,12 @@ __all__ = [
     "Question",
     "StatusAnswer",
     "ack_args",
+    "act_args",
     "alarm_args",
     "alarm_id_of",
     "by_of",
     "checked_ack",
+    "checked_act",
     "decode",
     "decode_args",
     "encode",
@@ -94,6 +107,7 @@ class Question(StrEnum):
     ALARMS = "alarms"
     ALARM = "alarm"
     ACK = "ack"
+    ACT = "act"
     FLEET = "fleet"
 
 
@@ -193,6 +207,68 @@ def checked_ack(
                            f"s from this worker's clock (at most {ACK_WINDOW_S:.0f} s): the "
                            "clocks differ or the ack was replayed.")  # fmt: skip
     return alarm_id, by
+
+
+_ACT_DOMAIN = b"millwatch-act-v1"
+
+
+def _act_content(action: OperatorAction, t_ns: int) -> list[Any]:
+    return [action.alarm_id, str(action.kind), action.user, action.comment,
+            action.shelve_until_ns, t_ns]  # fmt: skip
+
+
+def _act_mac(key: str, content: list[Any]) -> str:
+    message = json.dumps(content, ensure_ascii=True).encode("ascii")
+    return hmac.new(key.encode("utf-8"), _ACT_DOMAIN + message, hashlib.sha256).hexdigest()
+
+
+def act_args(action: OperatorAction, key: str, t_ns: int | None = None) -> dict[str, Any]:
+    """Arguments of ``act``, signed with the shared ``key`` at ``t_ns`` (default: now)."""
+    t = time.time_ns() if t_ns is None else t_ns
+    return {"alarm_id": action.alarm_id, "kind": str(action.kind), "user": action.user,
+            "comment": action.comment, "shelve_until_ns": action.shelve_until_ns, "t_ns": t,
+            "mac": _act_mac(key, _act_content(action, t))}  # fmt: skip
+
+
+def _action_of(args: dict[str, Any]) -> OperatorAction:
+    kind, user, comment = args.get("kind"), args.get("user"), args.get("comment", "")
+    until = args.get("shelve_until_ns")
+    if not isinstance(kind, str) or not isinstance(user, str) or not isinstance(comment, str):
+        raise BadRequest("Malformed action", "An act needs kind, user and comment strings.")
+    if until is not None and type(until) is not int:
+        raise BadRequest("Malformed action", f"shelve_until_ns must be an integer, got {until!r}.")
+    try:
+        return OperatorAction(alarm_id_of(args), ActionKind(kind), user, comment, until)
+    except (ValueError, InvalidActionError) as exc:
+        raise BadRequest("Malformed action", str(exc)) from exc
+
+
+def checked_act(key: str | None, args: dict[str, Any], now_ns: int | None = None) -> OperatorAction:
+    """The :class:`~alarms.actions.OperatorAction` of an ``act`` signed with ``key`` within
+    :data:`ACK_WINDOW_S` of ``now_ns``; errors as :func:`checked_ack`, and
+    :class:`BadRequest` for an action that is malformed."""
+    if not key:
+        raise Forbidden("Alarm actions disabled", "This worker has no api.api_key configured, "
+                        "so it refuses alarm actions over zenoh.")  # fmt: skip
+    action = _action_of(args)
+    t_ns, mac = args.get("t_ns"), args.get("mac")
+    if type(t_ns) is not int or not isinstance(mac, str):
+        raise Unauthorized("Unsigned action", "An alarm action over zenoh must be signed with "
+                           "the API key (t_ns and mac); ask the API instead.")  # fmt: skip
+    if not hmac.compare_digest(mac.encode(), _act_mac(key, _act_content(action, t_ns)).encode()):
+        raise Unauthorized("Wrong action signature", "The action is not signed with this "
+                           "worker's api.api_key (the API and the worker must share it), or "
+                           "it was altered on the way.")  # fmt: skip
+    _fresh(t_ns, now_ns, "action")
+    return action
+
+
+def _fresh(t_ns: int, now_ns: int | None, what: str) -> None:
+    now = time.time_ns() if now_ns is None else now_ns
+    if abs(now - t_ns) > ACK_WINDOW_S * 1e9:
+        raise Unauthorized(f"Stale {what}", f"The {what} was signed {(now - t_ns) / 1e9:.0f} "
+                           f"s from this worker's clock (at most {ACK_WINDOW_S:.0f} s): the "
+                           f"clocks differ or the {what} was replayed.")  # fmt: skip
 
 
 # ---------------------------------------------------------------------- encodings

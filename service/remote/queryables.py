@@ -15,9 +15,10 @@ What can be asked, with which arguments, and how answers and errors are encoded:
 :mod:`service.remote.protocol` (the API's end, :mod:`service.remote.zenoh_backend`, reads the
 same module). :data:`ANSWERS` says how this worker answers each question.
 
-Trust: ``ack`` changes state, so the worker answers it only when it is signed with the shared
-``[api] api_key`` (:func:`service.remote.protocol.checked_ack`); an unsigned ``get`` on
-``…/@query/ack`` is a 401 and changes nothing. The router's access control
+Trust: ``ack`` and ``act`` (every operator action) change state, so the worker answers them only
+when they are signed with the shared ``[api] api_key`` (:func:`service.remote.protocol.checked_ack`,
+:func:`~service.remote.protocol.checked_act`); an unsigned ``get`` on ``…/@query/ack`` or
+``…/@query/act`` is a 401 and changes nothing. The router's access control
 (``deploy/zenoh/router.json5``) also lets only the ``api`` certificate ask ``…/@query/*``.
 
 Queryable callbacks run on zenoh's threads, which also deliver telemetry: they only hand the
@@ -45,6 +46,7 @@ from service.remote.protocol import (
     StatusAnswer,
     alarm_id_of,
     checked_ack,
+    checked_act,
     decode_args,
     encode,
     month_of,
@@ -80,6 +82,12 @@ def _ack(backend: LocalBackend, mill_id: str, args: dict[str, Any]) -> Any:
     return backend.ack(alarm_id, by)
 
 
+def _act(backend: LocalBackend, mill_id: str, args: dict[str, Any]) -> Any:
+    action = checked_act(backend.api_key, args)
+    _own_alarm(backend, mill_id, action.alarm_id)
+    return backend.act(action)
+
+
 ANSWERS: dict[Question, Answer] = {
     Question.STATUS: lambda b, m, _: StatusAnswer(
         status=b.status(m), worker=b.worker_info()
@@ -91,6 +99,7 @@ ANSWERS: dict[Question, Answer] = {
     Question.ALARMS: lambda b, m, _: [row_to_dict(r) for r in b.alarm_board().rows(m)],
     Question.ALARM: _alarm,
     Question.ACK: _ack,
+    Question.ACT: _act,
     Question.FLEET: lambda b, m, _: fleet_mill_to_dict(b.fleet_mill(m)),
 }
 """How a worker answers each :class:`~service.remote.protocol.Question`."""

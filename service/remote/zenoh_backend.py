@@ -37,6 +37,7 @@ import zenoh
 from prometheus_client import CollectorRegistry
 from pydantic import ValidationError
 
+from alarms.actions import ActionKind, OperatorAction
 from alarms.times import iso_utc
 from alarms.wire import AlarmWireError
 from analytics.drivetrain.mill_config import MillConfig
@@ -50,13 +51,14 @@ from ingest.keys import (
     worker_token_pattern,
 )
 from service.api.alarm_board import AlarmBoard, row_from_dict
+from service.api.identity import ApiKeys
 from service.api.mill_views import config_of, mill_detail, mill_summary, site_mills
 from service.errors import Forbidden, GatewayTimeout, NotFound, Unavailable
 from service.remote.metrics import remote_registry
 from service.remote.protocol import (
     Question,
     StatusAnswer,
-    ack_args,
+    act_args,
     alarm_args,
     decode,
     encode,
@@ -98,11 +100,15 @@ class ZenohBackend:
         mills: Mapping[str, MillConfig],
         *,
         api_key: str | None = None,
+        api_keys: ApiKeys | None = None,
         timeout_s: float = DEFAULT_TIMEOUT_S,
     ) -> None:
         self.session = session
         self.mills = dict(mills)
         self.api_key = api_key
+        #: The keys REST callers may use (default: the shared ``api_key`` alone); actions are
+        #: signed with ``api_key`` whoever's key the caller sent.
+        self.api_keys = ApiKeys(api_key) if api_keys is None else api_keys
         self.timeout_s = timeout_s
         self._board = AlarmBoard()
         self._by_key = {(c.site, c.id): m for m, c in self.mills.items()}
@@ -338,17 +344,21 @@ class ZenohBackend:
     def alarm(self, alarm_id: str) -> dict[str, Any]:
         return self._ask(self._alarm_row_mill(alarm_id), Question.ALARM, alarm_args(alarm_id))
 
-    def ack(self, alarm_id: str, by: str) -> dict[str, Any]:
-        """Ask the alarm's worker to acknowledge it (the route checked the API key), signed
-        with the key (:func:`~service.remote.protocol.ack_args`); :class:`Forbidden` without
-        one."""
+    def act(self, action: OperatorAction) -> dict[str, Any]:
+        """Ask the alarm's worker to apply an operator action (the route checked the key, the
+        OPC UA server the session's user), signed with ``api_key`` over the whole action
+        (:func:`~service.remote.protocol.act_args`); :class:`Forbidden` without one."""
         if not self.api_key:
-            raise Forbidden("Acknowledgement disabled", "This API has no api.api_key configured, "
-                            "so it cannot sign acknowledgements for the workers.")  # fmt: skip
-        mill_id = self._alarm_row_mill(alarm_id)
-        detail = self._ask(mill_id, Question.ACK, ack_args(alarm_id, by, self.api_key))
+            raise Forbidden("Alarm actions disabled", "This API has no api.api_key configured, "
+                            "so it cannot sign alarm actions for the workers.")  # fmt: skip
+        mill_id = self._alarm_row_mill(action.alarm_id)
+        detail = self._ask(mill_id, Question.ACT, act_args(action, self.api_key))
         self._board.merge([row_from_dict(detail)])
         return detail
+
+    def ack(self, alarm_id: str, by: str) -> dict[str, Any]:
+        """:meth:`act` with an acknowledgement by ``by``."""
+        return self.act(OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by))
 
     def readiness(self) -> dict[str, Any]:
         """Ready when zenoh is connected, every mill's worker answers and is ready itself

@@ -91,6 +91,22 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "ALTER TABLE alarms ADD COLUMN exceed_count INTEGER NOT NULL DEFAULT 1",
         "ALTER TABLE alarms ADD COLUMN advice TEXT NOT NULL DEFAULT ''",
     ),
+    (  # 7 → 8: operator actions (alarms.actions): confirmation, shelving, suppression by
+        # design, out of service, comments — on the alarm, and each transition's comment
+        "ALTER TABLE alarms ADD COLUMN confirmed INTEGER NOT NULL DEFAULT 0",
+        "ALTER TABLE alarms ADD COLUMN confirmed_at_ns INTEGER",
+        "ALTER TABLE alarms ADD COLUMN confirmed_by TEXT",
+        "ALTER TABLE alarms ADD COLUMN shelving_state TEXT NOT NULL DEFAULT 'unshelved'",
+        "ALTER TABLE alarms ADD COLUMN shelved_until_ns INTEGER",
+        "ALTER TABLE alarms ADD COLUMN shelved_by TEXT",
+        "ALTER TABLE alarms ADD COLUMN suppressed INTEGER NOT NULL DEFAULT 0",
+        "ALTER TABLE alarms ADD COLUMN out_of_service INTEGER NOT NULL DEFAULT 0",
+        "ALTER TABLE alarms ADD COLUMN comment_count INTEGER NOT NULL DEFAULT 0",
+        "ALTER TABLE alarms ADD COLUMN last_comment TEXT",
+        "ALTER TABLE alarms ADD COLUMN last_comment_by TEXT",
+        "ALTER TABLE alarms ADD COLUMN last_commented_ns INTEGER",
+        "ALTER TABLE alarm_transitions ADD COLUMN comment TEXT",
+    ),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 _PART_CHECKPOINTS = 4  # the schema version that brought checkpoint_parts

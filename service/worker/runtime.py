@@ -50,6 +50,7 @@ from typing import Any
 
 import zenoh
 
+from alarms.actions import ActionKind, OperatorAction
 from alarms.lifecycle import Transition
 from alarms.observations import Observation
 from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
@@ -71,7 +72,7 @@ from service.worker.drain_watch import DrainWatch
 from service.worker.health import AdmissionLimits, MillHealth
 from service.worker.recovery import recover
 from service.worker.spool_recovery import QUERY_TIMEOUT_S, CatchUp
-from service.worker.worker import AckRequest, MillPipeline, Worker
+from service.worker.worker import ActionRequest, MillPipeline, Worker
 
 __all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
 
@@ -422,13 +423,18 @@ class ServiceRuntime:
         """The worker thread runs (so a queued acknowledgement will be applied)."""
         return self.worker is not None and self._thread is not None and self._thread.is_alive()
 
-    def request_ack(self, mill_id: str, alarm_id: str, by: str) -> AckRequest | None:
+    def request_ack(self, mill_id: str, alarm_id: str, by: str) -> ActionRequest | None:
         """Queue an acknowledgement for the worker thread (see :meth:`Worker.request_ack`);
         None when the worker is not running."""
+        return self.request_action(mill_id, OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by))
+
+    def request_action(self, mill_id: str, action: OperatorAction) -> ActionRequest | None:
+        """Queue an operator action for the worker thread (see
+        :meth:`Worker.request_action`); None when the worker is not running."""
         worker = self.worker
         if worker is None or not self.worker_alive:
             return None
-        return worker.request_ack(mill_id, alarm_id, by)
+        return worker.request_action(mill_id, action)
 
     # ------------------------------------------------------------------ readiness
     def readiness(self) -> dict[str, Any]:

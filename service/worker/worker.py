@@ -83,6 +83,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from alarms.actions import ActionKind, OperatorAction
 from alarms.engine import AlarmEngine
 from alarms.lifecycle import Transition
 from alarms.observations import Observation
@@ -114,7 +115,7 @@ from service.worker.health import (
     WriteEpisodes,
 )
 
-__all__ = ["HELD", "AckRequest", "ArchiveLog", "MillPipeline", "MillUpdate", "Worker"]
+__all__ = ["HELD", "ActionRequest", "ArchiveLog", "MillPipeline", "MillUpdate", "Worker"]
 
 log = logging.getLogger(__name__)
 
@@ -139,6 +140,8 @@ _STORE_KEPT = ("results and alarm transitions wait in memory and are stored in o
 #: A channel's implausible blocks of one reason are stored as a data-quality event at most this
 #: often (s of receive time; each event says how many were dropped since the previous one).
 IMPLAUSIBLE_EVENT_EVERY_S = 60.0
+SHELVE_CHECK_S = 1.0
+"""How often (s, wall clock) the worker looks for expired timed shelves."""
 _INT64_MAX = 2**63 - 1
 
 
@@ -161,14 +164,16 @@ class MillUpdate:
 
 
 @dataclass(frozen=True)
-class AckRequest:
-    """An acknowledgement asked for by another thread (the API), applied by the worker thread
-    in :meth:`Worker.step`; ``done`` gets the stored transitions, or the engine's exception
-    (e.g. :class:`alarms.engine.UnknownAlarmError` when the alarm is no longer open)."""
+class ActionRequest:
+    """An operator action (:class:`alarms.actions.OperatorAction`: acknowledge, confirm,
+    comment, shelve, …) asked for by another thread (the API, the OPC UA server), applied by the
+    worker thread in :meth:`Worker.step`; ``done`` gets the stored transitions, or the engine's
+    exception (:class:`alarms.engine.UnknownAlarmError` for an alarm neither the engine nor
+    the store knows, :class:`alarms.actions.ActionNotAllowedError` naming the state that
+    refuses it)."""
 
     mill_id: str
-    alarm_id: str
-    by: str
+    action: OperatorAction
     done: Future[list[Transition]] = field(default_factory=Future)
 
 
@@ -253,7 +258,7 @@ class Worker:
         self._stored_late: Counter[str] = Counter()  # (during a store episode, for its last line)
         self._store_failures_reported = 0
         #: Acknowledgements applied whose transitions are not stored yet (the store failed).
-        self._acked: list[tuple[AckRequest, list[Transition]]] = []
+        self._acked: list[tuple[ActionRequest, list[Transition]]] = []
         self.blocks_handled = 0
         #: Held mills (see the module docstring): mill id → why (the restore error's message).
         self.held: dict[str, str] = {}
@@ -277,7 +282,8 @@ class Worker:
         self.latency = LatencyReservoir()
         self._archive_errors_reported = 0
         self.on_alarms: Callable[[list[Transition]], None] | None = None
-        self._acks: queue.SimpleQueue[AckRequest] = queue.SimpleQueue()
+        self._acks: queue.SimpleQueue[ActionRequest] = queue.SimpleQueue()
+        self._shelves_checked_ns = 0
         self._outside: queue.SimpleQueue[Observation] = queue.SimpleQueue()
         #: Each mill's newest unrecoverable losses (stored; newest first), for its status.
         self.losses = {m: deque(store.losses(m, LOSSES_SHOWN), LOSSES_SHOWN) for m in mills}
@@ -553,6 +559,8 @@ class Worker:
         checkpoint when due."""
         acked = self._apply_acks()
         observed = self._apply_outside()
+        if self.store_health.ok:
+            observed |= self._expire_shelves()
         try:
             self.commit()
             self.latency.add_batch(self._clock(), items)
@@ -601,11 +609,17 @@ class Worker:
         return max(per_mill.values(), default=0) >= LANE_MIN_RUN
 
     # ------------------------------------------------------------------ acknowledgements
-    def request_ack(self, mill_id: str, alarm_id: str, by: str) -> AckRequest:
-        """Ask the worker thread to acknowledge an alarm (any thread may call this); wait on
-        the request's ``done`` future. The worker applies it at its next :meth:`step` (within
-        ~0.1 s), stores and publishes its transitions like any other, then checkpoints."""
-        request = AckRequest(mill_id, alarm_id, by)
+    def request_ack(self, mill_id: str, alarm_id: str, by: str) -> ActionRequest:
+        """:meth:`request_action` of an acknowledgement by ``by``."""
+        return self.request_action(mill_id, OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by))
+
+    def request_action(self, mill_id: str, action: OperatorAction) -> ActionRequest:
+        """Ask the worker thread to apply an operator action to an alarm of ``mill_id`` (any
+        thread may call this); wait on the request's ``done`` future. The worker applies it
+        at its next :meth:`step` (within ~0.1 s) at its wall clock, stores and publishes its
+        transitions like any other, then checkpoints (an action is a wall-clock fact the
+        archive cannot replay)."""
+        request = ActionRequest(mill_id, action)
         self._acks.put(request)
         return request
 
@@ -639,10 +653,10 @@ class Worker:
                 changed.add(obs.mill_id)
             self._pending.add(obs.mill_id, update)
 
-    def _apply_acks(self) -> list[tuple[AckRequest, list[Transition]]]:
+    def _apply_acks(self) -> list[tuple[ActionRequest, list[Transition]]]:
         """Apply the queued acknowledgements to the mills' alarm engines (worker thread); none
         while the store cannot be written (they stay queued: the API answers that)."""
-        applied: list[tuple[AckRequest, list[Transition]]] = []
+        applied: list[tuple[ActionRequest, list[Transition]]] = []
         while self.store_health.ok:  # (else they wait: an ack must be stored before it counts)
             try:
                 request = self._acks.get_nowait()
@@ -657,15 +671,36 @@ class Worker:
             applied.append((request, transitions))
         return applied
 
-    def _acknowledge(self, request: AckRequest) -> list[Transition]:
-        """Apply one acknowledgement; :class:`MillHeldError` for a held mill (its alarm engine
-        was not restored, so it does not know the mill's open alarms)."""
+    def _acknowledge(self, request: ActionRequest) -> list[Transition]:
+        """Apply one operator action; :class:`MillHeldError` for a held mill (its alarm engine
+        was not restored, so it does not know the mill's open alarms). A cleared alarm is not
+        in the engine: its stored record is read here and handed over, so the action builds on
+        it (the engine remembers it for the next action, before the store holds this one)."""
         if request.mill_id in self.held:
             raise MillHeldError(request.mill_id, self.held[request.mill_id])
         engine = self.pipelines[request.mill_id].alarms
-        return engine.acknowledge(request.alarm_id, request.by, self._clock())
+        alarm_id = request.action.alarm_id
+        stored = None if engine.alarm(alarm_id) is not None else self.store.alarm(alarm_id)
+        return engine.act(request.action, self._clock(), stored)
 
-    def _finish_acks(self, acked: list[tuple[AckRequest, list[Transition]]]) -> None:
+    def _expire_shelves(self) -> set[str]:
+        """Unshelve the alarms whose timed shelve expired (wall clock; at most every
+        :data:`SHELVE_CHECK_S`); the mills whose alarms changed."""
+        now = self._clock()
+        if now - self._shelves_checked_ns < SHELVE_CHECK_S * 1e9:
+            return set()
+        self._shelves_checked_ns = now
+        changed = set()
+        for mill_id, pipeline in self.pipelines.items():
+            if mill_id in self.held:
+                continue
+            transitions = pipeline.alarms.expire_shelves(now)
+            if transitions:
+                changed.add(mill_id)
+                self._pending.add(mill_id, MillUpdate(alarm_transitions=transitions))
+        return changed
+
+    def _finish_acks(self, acked: list[tuple[ActionRequest, list[Transition]]]) -> None:
         """After the acks' transitions are stored: checkpoint at once, because an ack is a
         wall-clock fact the archive cannot replay, then tell the callers."""
         mills = {request.mill_id for request, transitions in acked if transitions}

@@ -20,11 +20,19 @@ def _iso_beside_ns(names: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def test_the_alarm_bodies_have_the_fields_of_the_records_in_their_order():
-    alarm = _iso_beside_ns(columns(Alarm))
+    alarm = (*_iso_beside_ns(columns(Alarm)), "shelved")  # (shelved: computed, Alarm.to_dict)
     assert tuple(AlarmOut.model_fields) == alarm
     assert tuple(ALARM_EXAMPLE) == alarm
     assert tuple(TransitionOut.model_fields) == _iso_beside_ns(columns(TransitionRecord))
-    assert tuple(AlarmDetail.model_fields) == (*alarm, "transitions")
+    assert tuple(AlarmDetail.model_fields) == (*alarm, "transitions", "comments")
+
+
+def test_the_alarm_as_plain_data_is_what_the_body_lists():
+    fields = tuple(Alarm.from_dict(ALARM_EXAMPLE).to_dict())
+    assert fields == tuple(f for f in ALARM_EXAMPLE if f in fields)
+    assert set(ALARM_EXAMPLE) - set(fields) == {"raised", "updated", "acked", "cleared",
+                                                "confirmed_at", "shelved_until",
+                                                "last_commented"}  # fmt: skip
 
 
 def test_the_alarm_tables_have_the_columns_of_the_records(tmp_path):

@@ -42,7 +42,7 @@ def test_a_version_1_file_migrates_and_keeps_its_data(tmp_path):
     db.commit()
     db.close()
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 7
+        assert store.schema_version == SCHEMA_VERSION == 8
         assert store.events("m1") == [EventRow("m1", "start", 5, {})]
         assert store.alarms() == []
 
