@@ -37,7 +37,7 @@ from typing import Any
 from asyncua import Node, Server, ua
 
 from analytics.drivetrain.mill_config import MillConfig
-from service.opcua.ua_types import nid, status
+from service.opcua.ua_types import nid, stamped, status
 from service.opcua.units import UNECE_URI, UNITS, unit_id
 from service.opcua.values import Kind, Point, ns_to_datetime
 
@@ -120,11 +120,9 @@ def datavalue(point: Point, now: datetime | None = None) -> ua.DataValue:
     now = now or datetime.now(UTC)
     source = ns_to_datetime(point.t_ns) or now
     if point.value is None:
-        return ua.DataValue(ua.Variant(None, ua.VariantType.Null), StatusCode=_NO_DATA,
-                            SourceTimestamp=source, ServerTimestamp=now)  # fmt: skip
+        return stamped(ua.Variant(None, ua.VariantType.Null), source, now, _NO_DATA)
     value = list(point.value) if point.kind is Kind.STRINGS else point.value
-    return ua.DataValue(ua.Variant(value, _VARIANT[point.kind]), SourceTimestamp=source,
-                        ServerTimestamp=now)  # fmt: skip
+    return stamped(ua.Variant(value, _VARIANT[point.kind]), source, now)
 
 
 class MillNodes:

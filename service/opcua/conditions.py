@@ -46,6 +46,7 @@ and sends the condition's new event.
 
 from __future__ import annotations
 
+import asyncio
 import copy
 import logging
 import uuid
@@ -64,7 +65,7 @@ from alarms.lifecycle import Alarm
 from alarms.rules import Severity
 from service.errors import ApiError, BadRequest, Conflict, GatewayTimeout, NotFound, Unavailable
 from service.opcua.address_space import MillNodes
-from service.opcua.ua_types import nid, status
+from service.opcua.ua_types import nid, stamped, status
 from service.opcua.units import UNITS
 from service.opcua.values import ns_to_datetime
 
@@ -173,7 +174,7 @@ class Conditions:
             templates[type_id] = template
         out = cls(server, mills, notifiers, templates)
         for type_id in (ua.ObjectIds.RefreshStartEventType, ua.ObjectIds.RefreshEndEventType):
-            ev = await events.get_event_obj_from_type_node(server.get_node(nid(type_id)))
+            ev: Any = await events.get_event_obj_from_type_node(server.get_node(nid(type_id)))
             ev.SourceNode, ev.SourceName = nid(ua.ObjectIds.Server), "Server"
             ev.Severity = 1
             out._refresh_events[type_id] = ev
@@ -191,6 +192,7 @@ class Conditions:
             if row.alarm_id in self._open or row.open:
                 await self.emit(row)
                 sent += 1
+                await asyncio.sleep(0)  # (a new condition takes ~0.1 s: let values through)
         return sent
 
     async def emit(self, row: Alarm, time_ns: int | None = None) -> None:
@@ -231,6 +233,7 @@ class Conditions:
         created = [n.nodeid for n in made]
         for name, part_type in (("ShelvingState", ua.ObjectIds.ShelvedStateMachineType),
                                 ("ConfirmedState", ua.ObjectIds.TwoStateVariableType)):  # fmt: skip
+            await asyncio.sleep(0)
             parts = await instantiate(node, self.server.get_node(nid(part_type)),
                                       _child(node_id, name), ua.QualifiedName(name, 0),
                                       instantiate_optional=False)  # fmt: skip
@@ -247,8 +250,11 @@ class Conditions:
         event.NodeId = node_id
         path = INPUT_PATHS.get(row.rule, "").format(subject=row.subject)
         event.InputNode = (path and mill.variable(path)) or value
-        children = {name: nid_ for name in event.data_types
-                    if name not in _NOT_WRITTEN and (nid_ := _child(node_id, name)) in created}
+        children = {
+            name: nid_
+            for name in event.data_types
+            if name not in _NOT_WRITTEN and (nid_ := _child(node_id, name)) in created
+        }
         children["Value"] = value  # fmt: skip
         self._link_methods(created)
         cond = _Condition(row, node, event, self.notifiers[row.mill_id], children)
@@ -302,10 +308,11 @@ class Conditions:
                 v = cond.alarm.value
                 variant = ua.Variant(None if v is None else float(v), ua.VariantType.Double)
             else:
-                variant = ua.Variant(getattr(event, name, None), event.data_types[name])
-            await self.server.write_attribute_value(
-                node_id, ua.DataValue(variant, SourceTimestamp=source, ServerTimestamp=now)
-            )
+                vtype = event.data_types[name]  # (a NodeId for a structure: inferred)
+                value = getattr(event, name, None)
+                variant = (ua.Variant(value, vtype) if isinstance(vtype, ua.VariantType)
+                           else ua.Variant(value))  # fmt: skip
+            await self.server.write_attribute_value(node_id, stamped(variant, source, now))
 
     async def _trigger(self, event: Any, notifiers: Iterable[ua.NodeId]) -> None:
         """To each notifier's subscribers (the copy kept for asyncua's own bookkeeping is the
@@ -402,7 +409,8 @@ _ALARM_FIELDS = frozenset(Alarm.__dataclass_fields__)
 
 def _child(node_id: ua.NodeId, name: str) -> ua.NodeId:
     """The NodeId asyncua gives the child ``name`` (``A/B`` → ``.A.B``) of an instance."""
-    return nid(f"{node_id.Identifier}.{name.replace('/', '.')}", node_id.NamespaceIndex)
+    ident: Any = node_id.Identifier
+    return nid(f"{ident}.{name.replace('/', '.')}", node_id.NamespaceIndex)
 
 
 def _two_state(event: Any, name: str, value: bool, true: str, false: str) -> None:
@@ -466,4 +474,3 @@ def _last_user(row: Alarm) -> str:
                (row.last_commented_ns, row.last_comment_by))  # fmt: skip
     done = [(t, who) for t, who in actions if t and who]
     return max(done)[1] if done else (row.shelved_by or "")
-

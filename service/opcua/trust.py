@@ -41,6 +41,7 @@ class ClientTrust:
         self._seen: tuple[tuple[str, int], ...] | None = None
         self._trusted: set[bytes] = set()
         self._store = TrustStore([trusted_dir], [])
+        self._store_loaded = False
 
     def _listing(self) -> tuple[tuple[str, int], ...]:
         files = (p for p in self.trusted_dir.iterdir() if p.suffix.lower() in _SUFFIXES)
@@ -60,12 +61,17 @@ class ClientTrust:
                 continue
             trusted.add(uacrypto.der_from_x509(cert))
         self._trusted = trusted
-        await self._store.load_trust()
+        self._store_loaded = False
+        if trusted:  # (asyncua's store refuses to be empty)
+            await self._store.load_trust()
+            self._store_loaded = True
         self._seen = listing
         log.info("OPC UA trust list: %d client certificates in %s", len(trusted),
                  self.trusted_dir)  # fmt: skip
 
     def _issued_by_trusted(self, cert: x509.Certificate) -> bool:
+        if not self._store_loaded:
+            return False
         try:
             return self._store.is_trusted(cert)
         except Exception:  # cryptography's verifier refuses odd certificates by raising

@@ -35,7 +35,10 @@ Channels/MissingBlocksTotal               –        ``health.missing_blocks_tot
 The oscillation range of Diering 2011 §6.2.4 (Tables 14–15) is ``RangePct`` of the torque channels,
 the bending range of §6.2.6 (Tables 16–17) ``RangePerRev`` of the bending channel (MPa). A value
 the answer does not have (no steady window yet, no projection) is ``None``: the variable then
-reads with a bad status, never a made-up number.
+reads with a bad status, never a made-up number. Each point also carries the sample time its
+value belongs to (its SourceTimestamp: the steady window's for ``SteadyState/…``, else the
+mill's latest analysed sample) and, where a range of normal operation is known, its ``EURange``
+(:func:`eu_range`).
 """
 
 from __future__ import annotations

@@ -128,8 +128,9 @@ def test_a_condition_is_a_limit_alarm_with_its_states_input_value_and_limit(plan
     assert got["AckedState.Id"] is (alarm["state"] == "acknowledged")
     assert got["HighLimit"] == pytest.approx(alarm["threshold"])
     assert got["Value"] == pytest.approx(alarm["value"])
-    assert got["InputNode"] == child(condition_id(alarm, got["InputNode"].NamespaceIndex),
-                                     "Value")  # no mill variable holds a start's peak
+    assert got["InputNode"] == child(
+        condition_id(alarm, got["InputNode"].NamespaceIndex), "Value"
+    )  # no mill variable holds a start's peak
     assert got["Message"].Text == alarm["message"]
 
 
@@ -282,10 +283,12 @@ def _open_alarms(plant: Plant) -> dict[str, set[str]]:
 
 
 def _refreshed(kinds: list[str]) -> set[str]:
-    """The condition events between one start and one end."""
-    assert kinds[0] == "start" and kinds[-1] == "end" and kinds.count("start") == 1, kinds
-    assert kinds.count("end") == 1 and len(set(kinds[1:-1])) == len(kinds) - 2, kinds
-    return set(kinds[1:-1])
+    """The condition events between the start and the end (a live event of an alarm changing
+    meanwhile may come before, between or after them)."""
+    assert kinds.count("start") == 1 and kinds.count("end") == 1, kinds
+    start, end = kinds.index("start"), kinds.index("end")
+    assert start < end, kinds
+    return set(kinds[start + 1 : end])
 
 
 @pytest.mark.parametrize("login", [(None, None), (VIEWER, VIEWER_PW), (OPERATOR, OPERATOR_PW)],
@@ -299,10 +302,10 @@ def test_condition_refresh_on_server_site_and_mill_notifiers(
     async def run() -> dict[str, list[str]]:
         async with client(plant, *login) as c:
             ns = await _ns(c)
-            nodes = {"server": c.nodes.server, "site": c.get_node(ua.NodeId(SITE, ns)),
-                     "mill": c.get_node(ua.NodeId(f"{SITE}/{MILL}", ns)),
-                     "idle site": c.get_node(ua.NodeId(SITE_IDLE, ns)),
-                     "idle mill": c.get_node(ua.NodeId(f"{SITE_IDLE}/{MILL_IDLE}", ns))}  # fmt: skip
+            paths = {"site": SITE, "mill": f"{SITE}/{MILL}", "idle site": SITE_IDLE,
+                     "idle mill": f"{SITE_IDLE}/{MILL_IDLE}"}  # fmt: skip
+            nodes = {name: c.get_node(ua.NodeId(p, ns)) for name, p in paths.items()}
+            nodes["server"] = c.nodes.server
             out = {name: _kinds(await _refresh(c, node)) for name, node in nodes.items()}
             out["mill, refresh 2"] = _kinds(await _refresh(c, nodes["mill"], second=True))
             return out
@@ -310,23 +313,26 @@ def test_condition_refresh_on_server_site_and_mill_notifiers(
     before = _open_alarms(plant)
     got = {name: _refreshed(kinds) for name, kinds in asyncio.run(run()).items()}
     after = _open_alarms(plant)
-    assert before[MILL] and before[MILL_B] and not before[MILL_IDLE]
-    for opened in (before, after):  # an alarm may have changed meanwhile: one of them holds
-        want = {"server": opened[MILL] | opened[MILL_B], "site": opened[MILL] | opened[MILL_B],
-                "mill": opened[MILL], "mill, refresh 2": opened[MILL], "idle site": set(),
-                "idle mill": set()}  # fmt: skip
-        if got == want:
-            break
-    assert got == want
+    assert not before[MILL_IDLE] and not after[MILL_IDLE]
+    assert got["idle site"] == got["idle mill"] == set()
+    # stale-channel alarms come and go while the refreshes run: each refresh holds the alarms
+    # open throughout, and only alarms open at some time
+    below = {"server": (MILL, MILL_B), "site": (MILL, MILL_B), "mill": (MILL,),
+             "mill, refresh 2": (MILL,)}  # fmt: skip
+    for name, mills in below.items():
+        throughout = set().union(*(before[m] & after[m] for m in mills))
+        ever = set().union(*(before[m] | after[m] for m in mills))
+        assert throughout <= got[name] <= ever, name
+        assert any(":start_peak:" in a for a in got[name]), name
 
 
 # ---------------------------------------------------------------------- Part 8 and the types
 def test_values_carry_the_sample_time_and_the_server_time(plant: Plant) -> None:
-    async def run() -> tuple[ua.DataValue, Any, list[ua.DataValue]]:
+    async def run() -> tuple[ua.DataValue, ua.DataValue, list[ua.DataValue]]:
         async with client(plant) as c:
             ns = await _ns(c)
             state = c.get_node(ua.NodeId(f"{SITE}/{MILL}/State", ns))
-            last = await c.get_node(ua.NodeId(f"{SITE}/{MILL}/LastSampleTime", ns)).read_value()
+            last = c.get_node(ua.NodeId(f"{SITE}/{MILL}/LastSampleTime", ns))
             changes: list[ua.DataValue] = []
 
             class Handler:
@@ -334,19 +340,22 @@ def test_values_carry_the_sample_time_and_the_server_time(plant: Plant) -> None:
                     changes.append(data.monitored_item.Value)
 
             sub = await c.create_subscription(20, Handler())
-            await sub.subscribe_data_change(state)
+            await sub.subscribe_data_change(last)
             for _ in range(100):
                 if changes:
                     break
                 await asyncio.sleep(0.05)
             await sub.delete()
-            return await state.read_data_value(), last, changes
+            return await state.read_data_value(), await last.read_data_value(), changes
 
-    dv, last_sample, changes = asyncio.run(run())
+    state, last, changes = asyncio.run(run())
     assert changes, "no data change notification"
-    for value in (dv, changes[0]):
+    for value in (state, last, changes[0]):
         assert value.SourceTimestamp is not None and value.ServerTimestamp is not None
-        assert abs((value.SourceTimestamp - last_sample).total_seconds()) < 1e-3
+    # LastSampleTime's value is the time of the mill's latest sample: its SourceTimestamp
+    for value in (last, changes[0]):
+        assert abs((value.SourceTimestamp - value.Value.Value).total_seconds()) < 1e-3
+    assert state.SourceTimestamp <= last.SourceTimestamp  # State was set at an earlier sample
 
 
 def test_analog_items_carry_a_range_and_mills_are_of_the_mill_type(plant: Plant) -> None:
@@ -408,10 +417,16 @@ def test_history_read_serves_alarm_events_and_refuses_values(plant: Plant) -> No
     events, idle_events, refused = asyncio.run(run())
     events = [e for e in events if e.EventId.decode().startswith(alarm["alarm_id"] + ":")]
     stored = rest(plant, f"/alarms/{alarm['alarm_id']}")["transitions"]
-    assert [e.Message.Text for e in events] == [t["message"] for t in stored]
-    assert [int(e.Time.timestamp() * 1e6) for e in events] == [t["t_ns"] // 1000 for t in stored]
-    acked = [e for e, t in zip(events, stored, strict=True) if t["kind"] == "acknowledged"]
-    assert acked and acked[0].ClientUserId == alarm["acked_by"]
+    times = [e.Time for e in events]
+    assert times == sorted(times)  # oldest first
+    by_seq = {int(e.EventId.decode().rpartition(":")[2]): e for e in events}
+    assert sorted(by_seq) == [t["seq"] for t in stored]
+    for t in stored:
+        e = by_seq[t["seq"]]
+        assert e.Message.Text == t["message"]
+        assert abs(e.Time.timestamp() * 1e6 - t["t_ns"] / 1000) <= 1.5  # µs, rounded
+        assert e.ClientUserId == (t["by"] or "") and e.Comment.Text == (t["comment"] or "")
+    assert any(t["kind"] == "acknowledged" and t["by"] == OPERATOR for t in stored)
     assert idle_events == []
     assert _code(refused) == ua.StatusCodes.BadHistoryOperationUnsupported
 
@@ -440,8 +455,9 @@ def test_an_unknown_client_certificate_is_refused_until_trusted(
     with pytest.raises(Exception) as refused:  # asyncua raises the status, or the channel closes
         asyncio.run(connect(cert, key))
     assert "BadCertificateUntrusted" in repr(refused.value) or isinstance(
-        refused.value, ua.UaStatusCodeError | ConnectionError | TimeoutError)
+        refused.value, ua.UaStatusCodeError | ConnectionError | TimeoutError
+    )
     rejected = trusted_dir(plant).parent / "rejected"
-    assert [p.read_bytes() for p in rejected.iterdir()] .count(cert.read_bytes()) == 1
+    assert [p.read_bytes() for p in rejected.iterdir()].count(cert.read_bytes()) == 1
     (trusted_dir(plant) / "stranger.der").write_bytes(cert.read_bytes())  # the admin trusts it
     assert "Server" in asyncio.run(connect(cert, key))
