@@ -47,6 +47,7 @@ __all__ = [
     "CALLER",
     "CLIENT",
     "OPERATOR",
+    "SESSION",
     "VIEWER",
     "AccessRules",
     "Login",
@@ -65,6 +66,11 @@ CALLER: contextvars.ContextVar[User | None] = contextvars.ContextVar("opcua_call
 
 CLIENT: contextvars.ContextVar[str] = contextvars.ContextVar("opcua_client", default="unknown")
 """The host of the client whose session is being activated (:func:`record_client_address`)."""
+
+SESSION: contextvars.ContextVar[ua.NodeId | None] = contextvars.ContextVar(
+    "opcua_session", default=None
+)
+"""The id of the session whose methods are being called (:func:`record_client_address`)."""
 
 _WRITE = nid(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)
 _CALL = nid(ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
@@ -181,8 +187,10 @@ def _host(peer: Any) -> str:
 
 def record_client_address(iserver: Any) -> None:
     """Make every session of ``iserver`` (an asyncua ``InternalServer``) set :data:`CLIENT` to
-    its peer's host while it is activated, which is when asyncua asks the user manager: the
-    wrapper is set on this server's sessions only, asyncua itself is unchanged."""
+    its peer's host while it is activated, which is when asyncua asks the user manager, and
+    :data:`SESSION` to its id while its method calls run (ConditionRefresh serves only the
+    caller's own subscriptions): the wrappers are set on this server's sessions only, asyncua
+    itself is unchanged."""
     create = iserver.create_session
 
     def create_session(name: Any, *args: Any, **kwargs: Any) -> Any:
@@ -197,6 +205,16 @@ def record_client_address(iserver: Any) -> None:
                 CLIENT.reset(token)
 
         session.activate_session = activate_session
+        call = session.call
+
+        async def call_in_session(methods: Any) -> Any:
+            token = SESSION.set(session.session_id)
+            try:
+                return await call(methods)
+            finally:
+                SESSION.reset(token)
+
+        session.call = call_in_session
         return session
 
     iserver.create_session = create_session

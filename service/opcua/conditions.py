@@ -38,6 +38,8 @@ event-monitored item of the subscription (or the one item), a RefreshStartEvent,
 event of every open condition below the item's notifier (the Server object and ``Millwatch``:
 all; a site: its mills'; a mill: its own) and a RefreshEndEvent — also when there is none. The
 two markers pass whatever the item's where clause (a filter for conditions would drop them).
+Only the calling session's own subscriptions are refreshed (another's:
+``BadSubscriptionIdInvalid``).
 
 The operator methods are in :mod:`service.opcua.methods`; they call
 :meth:`Conditions.act`, which goes through the backend's ``act`` (what the REST actions call)
@@ -64,6 +66,7 @@ from alarms.actions import OperatorAction, ShelvingState
 from alarms.lifecycle import Alarm
 from alarms.rules import Severity
 from service.errors import ApiError, BadRequest, Conflict, GatewayTimeout, NotFound, Unavailable
+from service.opcua.access import SESSION
 from service.opcua.address_space import MillNodes
 from service.opcua.ua_types import nid, stamped, status
 from service.opcua.units import UNITS
@@ -335,8 +338,9 @@ class Conditions:
     async def refresh(self, subscription_id: int, item_id: int | None = None) -> ua.StatusCode:
         """ConditionRefresh(2) for ``subscription_id`` (module docstring)."""
         sub = self.server.iserver.subscription_service.subscriptions.get(subscription_id)
-        if sub is None:
-            return status(ua.StatusCodes.BadSubscriptionIdInvalid)
+        caller = SESSION.get()
+        if sub is None or (caller is not None and sub.session_id != caller):
+            return status(ua.StatusCodes.BadSubscriptionIdInvalid)  # (none of the caller's)
         items = sub.monitored_item_srv
         pairs = [(node, mid) for node, mids in items._monitored_events.items() for mid in mids
                  if item_id is None or mid == item_id]  # fmt: skip

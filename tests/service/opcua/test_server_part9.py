@@ -326,6 +326,28 @@ def test_condition_refresh_on_server_site_and_mill_notifiers(
         assert any(":start_peak:" in a for a in got[name]), name
 
 
+def test_a_session_refreshes_only_its_own_subscription_and_items(plant: Plant) -> None:
+    async def run() -> tuple[int, int]:
+        async with client(plant, OPERATOR, OPERATOR_PW) as owner, client(plant) as other:
+            sub = await owner.create_subscription(100, Collector())
+            item = await sub.subscribe_events(owner.nodes.server, ua.NodeId(IDS.AlarmConditionType))
+            condition_type = other.get_node(ua.NodeId(IDS.ConditionType))
+            with pytest.raises(ua.UaStatusCodeError) as foreign:
+                await condition_type.call_method(
+                    ua.NodeId(IDS.ConditionType_ConditionRefresh),
+                    ua.Variant(sub.subscription_id, ua.VariantType.UInt32))  # fmt: skip
+            with pytest.raises(ua.UaStatusCodeError) as no_item:
+                await owner.get_node(ua.NodeId(IDS.ConditionType)).call_method(
+                    ua.NodeId(IDS.ConditionType_ConditionRefresh2),
+                    ua.Variant(sub.subscription_id, ua.VariantType.UInt32),
+                    ua.Variant(item + 1000, ua.VariantType.UInt32))  # fmt: skip
+            return _code(foreign.value), _code(no_item.value)
+
+    foreign, no_item = asyncio.run(run())
+    assert foreign == ua.StatusCodes.BadSubscriptionIdInvalid
+    assert no_item == ua.StatusCodes.BadMonitoredItemIdInvalid
+
+
 # ---------------------------------------------------------------------- Part 8 and the types
 def test_values_carry_the_sample_time_and_the_server_time(plant: Plant) -> None:
     async def run() -> tuple[ua.DataValue, ua.DataValue, list[ua.DataValue]]:
