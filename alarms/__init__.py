@@ -15,17 +15,23 @@ What is here:
 * :mod:`alarms.lifecycle` — the alarm records (:class:`Alarm`, ``TransitionRecord``; the one
   definition the store and the API map by field name) and the transitions
   raised → acknowledged → cleared; event alarms re-annunciate in place; the value at raise is
-  kept.
+  kept; confirmation, comments, shelving, suppression and out of service on the same record,
+  each a transition (who, when, comment).
+* :mod:`alarms.actions` — :class:`OperatorAction`: what an operator does to an alarm
+  (acknowledge, confirm, comment, timed / one-shot shelve, unshelve, remove from / return to
+  service; ISA-18.2, OPC UA Part 9), validated; the same for REST and OPC UA.
 * :mod:`alarms.engine` — :class:`AlarmEngine`: applies the rules to observations, drives the
-  lifecycle, snapshots and restores its state.
+  lifecycle, applies operator actions (:meth:`AlarmEngine.act`), suppresses by design while a
+  mill is stopped, expires timed shelves, snapshots and restores its state.
 * :mod:`alarms.wire` — the ``…/@alarms`` message of a transition (publish, decode).
 * :mod:`alarms.report` — the alarms a recording would have raised (``millwatch analyze``).
 * :mod:`alarms.times` — a moment as text, the one ISO-8601 form of every surface (alarm
   messages, the alarm wire, and every ``service`` surface, which imports it from here).
 
 Data flow: analyzer facts → ``from_analysis`` → observations → ``engine`` (``rules`` decide,
-``lifecycle`` records) → transitions out; the caller stores them (``service.store``) and
-publishes them (``wire``). No I/O here: imports only :mod:`analytics`.
+``lifecycle`` records) → transitions out; operator actions → ``engine.act`` → transitions out;
+the caller stores them (``service.store``) and publishes them (``wire``). No I/O here:
+imports only :mod:`analytics`.
 
 Where things go: a moment written as text anywhere → :func:`alarms.times.iso_utc` or
 :func:`alarms.times.iso_local`, never a format of its own; a new rule is a rule in
@@ -34,6 +40,7 @@ field of :class:`Alarm`, a store migration and the API model
 (``tests/service/api/test_models.py`` names what is missing).
 """
 
+from alarms.actions import ActionKind, OperatorAction
 from alarms.engine import AlarmEngine, UnknownAlarmError
 from alarms.lifecycle import Alarm, AlarmState, Transition, TransitionKind
 from alarms.observations import QUANTITIES, Kind, Observation
@@ -42,11 +49,13 @@ from alarms.rules import Severity, build_rules
 
 __all__ = [
     "QUANTITIES",
+    "ActionKind",
     "Alarm",
     "AlarmEngine",
     "AlarmState",
     "Kind",
     "Observation",
+    "OperatorAction",
     "Severity",
     "Transition",
     "TransitionKind",

@@ -21,6 +21,16 @@ transitions and the same deterministic alarm ids (:func:`alarms.lifecycle.alarm_
   and limit, ``exceed_count`` + 1, raised again if acknowledged; a ``reannunciated``
   transition the store, REST and OPC UA carry like any other).
 
+Operator actions (:meth:`AlarmEngine.act`, :mod:`alarms.actions`) apply at the caller's wall
+clock to an open alarm, or to a cleared one from its stored record (the engine keeps no cleared
+alarm, but remembers the last :data:`CLOSED_REMEMBERED` it cleared or acted on, so actions on
+one build on each other before the store holds them). A condition removed from service is
+frozen — its observations are not judged, so it raises, escalates and clears nothing — until
+returned to service (kept in the snapshot). Suppression by design is state-based: while a mill
+is stopped (:meth:`AlarmEngine.set_running`, from its start and stop events) the alarms of
+:data:`SUPPRESSED_WHILE_STOPPED` rules are suppressed. :meth:`AlarmEngine.expire_shelves` ends
+timed shelves at their wall-clock expiry.
+
 Bad input never raises: an unknown mill or quantity, or a non-finite value, is logged once per
 kind and ignored. State is bounded: trackers exist only for subjects with an open alarm or a
 pending raise (subjects are channels, sides, components — a configured, finite set); cleared

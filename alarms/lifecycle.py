@@ -24,6 +24,26 @@ Transitions, each recorded with time, triggering value and threshold (:class:`Tr
 * ``cleared`` — the condition returned to normal (acknowledged or not latched), or it was
   acknowledged while normal, or acknowledged under a clear-on-acknowledgement rule.
 
+Operator actions (:mod:`alarms.actions`; ISA-18.2, OPC UA Part 9), each a transition with who
+(``by``), when (the worker's wall clock) and the ``comment`` given:
+
+* ``acknowledged`` (above) may carry a comment; ``commented`` — a comment alone, on any alarm,
+  open or cleared (``comment_count``, ``last_comment…`` on the alarm; every comment stays in
+  the transitions).
+* ``confirmed`` — :func:`confirm`: after acknowledgement (Part 9 ConfirmedState); an
+  escalation or re-annunciation asks for it again (``confirmed`` back to False).
+* ``shelved`` / ``unshelved`` / ``shelve_expired`` — :func:`shelve` (timed until
+  ``shelved_until_ns``, or one-shot until the condition returns to normal), :func:`unshelve`;
+  a clear ends any shelve, a ``normal`` a one-shot one (said in that transition's message).
+* ``removed_from_service`` / ``returned_to_service`` — :func:`set_in_service` (the engine
+  freezes the condition meanwhile).
+* ``suppressed`` / ``unsuppressed`` — :func:`set_suppressed`: by design, from the mill's state
+  (:data:`alarms.engine.SUPPRESSED_WHILE_STOPPED`).
+
+A shelved, suppressed or out-of-service alarm records as usual but is not annunciated
+(:attr:`Alarm.annunciated`). Each action refused in the alarm's state raises
+:class:`~alarms.actions.ActionNotAllowedError` naming that state, and changes nothing.
+
 Severity never steps down while the alarm is open (see :mod:`alarms.rules`). An alarm's
 ``value``/``threshold`` are those of its latest offending value (raise, escalation, recurrence,
 re-annunciation) and ``value_at_raise``/``threshold_at_raise`` those it was raised with: the
@@ -115,6 +135,11 @@ class Alarm:
     for ever); ``exceed_count``: offending values that raised, escalated, recurred or
     re-annunciated it; ``message``: the short sentence for the control room (≤ 200 characters);
     ``advice``: why it matters, what to check, and the source, in plain words.
+    Operator actions (module docstring): ``confirmed``/``confirmed_at_ns``/``confirmed_by``;
+    ``shelving_state`` (:class:`~alarms.actions.ShelvingState`) with ``shelved_until_ns``
+    (timed: wall clock) and ``shelved_by``; ``suppressed`` (by design, state-based);
+    ``out_of_service`` (its condition removed from service); ``comment_count`` and the newest
+    comment (``last_comment``, ``last_comment_by``, ``last_commented_ns``).
     Readers that hold one (the API's alarm board) never mutate it; only the lifecycle
     functions below do, on the engine's own copy."""
 
@@ -358,7 +383,7 @@ def acknowledge(
     Acknowledging an acknowledged alarm records nothing but its comment, if any (a
     ``commented`` transition); a cleared alarm: :class:`ActionNotAllowedError`."""
     if alarm.state is AlarmState.CLEARED:
-        raise ActionNotAllowedError(_refusal(alarm, "acknowledged", "there is nothing to "
+        raise ActionNotAllowedError(_refusal(alarm, "cleared", "there is nothing to "
                                              "acknowledge any more"))  # fmt: skip
     if alarm.state is not AlarmState.RAISED:
         return [add_comment(alarm, by, t_ns, comment)] if comment.strip() else []

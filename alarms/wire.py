@@ -10,14 +10,18 @@ subscribe to :func:`ingest.keys.alarm_pattern`). Encoding ``application/json``, 
       "site": "rustenburg",                 # null when the publisher does not know it
       "transition": {
         "kind": "raised",                   # raised | escalated | acknowledged | normal |
-                                            # recurred | reannunciated | cleared
+                                            # recurred | reannunciated | cleared | confirmed |
+                                            # commented | shelved | unshelved |
+                                            # shelve_expired | suppressed | unsuppressed |
+                                            # removed_from_service | returned_to_service
         "seq": 1,                           # 1, 2, … per alarm: gaps mean a missed message
         "t_ns": 1763692440000000000,        # int64 ns since the Unix epoch, UTC
         "time_utc": "2025-11-21T02:34:00.000Z", # RFC 3339, ms (alarms.times)
         "severity": "alarm",                # warning | alarm | critical (after the transition)
         "state": "raised",                  # raised | acknowledged | cleared
         "value": 362.0, "threshold": 348.4, # null for acknowledgements and quiet clears
-        "by": null,                         # who acknowledged
+        "by": null,                         # who acted (acknowledged, confirmed, shelved…)
+        "comment": null,                    # the comment given with the action, if any
         "message": "Start peak 362 % on the motor shaft, LRS starter (alarm > 348 %) at …"
       },
       "alarm": {                            # the alarm's whole state after the transition
@@ -32,12 +36,22 @@ subscribe to :func:`ingest.keys.alarm_pattern`). Encoding ``application/json``, 
         "message": "…",                     # ≤ 200 characters: what, value vs limit, action
         "advice": "A liquid resistance … Source: Diering 2011 Table 4 …",  # why, what to check
         "seq": 1,
-        "simulated": false                  # true: raised on simulated data (the demo)
+        "simulated": false,                 # true: raised on simulated data (the demo)
+        "confirmed": false, "confirmed_at_ns": null, "confirmed_by": null,
+        "shelving_state": "unshelved",      # | timed_shelved | one_shot_shelved
+        "shelved_until_ns": null, "shelved_by": null, "shelved": false,
+        "suppressed": false,                # by design (e.g. a running-mill rule, mill stopped)
+        "out_of_service": false,            # its condition removed from service
+        "comment_count": 0, "last_comment": null, "last_comment_by": null,
+        "last_commented_ns": null
       }
     }
 
 A consumer keeps the latest ``alarm`` per ``alarm_id`` (the highest ``seq``); a transition with
-``state == "cleared"`` ends it. Non-finite numbers are sent as ``null`` (strict JSON).
+``state == "cleared"`` ends it (later operator actions on a cleared alarm — a comment, a
+confirmation — still come, with higher ``seq``). A shelved, suppressed or out-of-service alarm
+is recorded but not annunciated: a control room shows it apart. Non-finite numbers are sent as
+``null`` (strict JSON).
 """
 
 from __future__ import annotations

@@ -12,14 +12,17 @@ What is here:
 * :mod:`service.api.local_backend` — the backend over a runtime in this process (also what a
   worker answers zenoh queries with).
 * :mod:`service.api.mill_views`, :mod:`service.api.alarm_views` — what the per-mill and alarm
-  endpoints answer, from the store and the worker's status snapshot.
+  endpoints answer, from the store and the worker's status snapshot; operator actions
+  (:mod:`alarms.actions`) applied through the worker thread.
 * :mod:`service.api.alarm_board` — every alarm's current state in memory (cheap ``/alarms``).
 * :mod:`service.api.models` — the request and response bodies (OpenAPI schema); the typed
   results of the analysis (``MillStatus``, ``LifeReport``, ``MonthStarts``, ``FleetView``) are
   defined once by their producers and are the backend's return types and the response models.
 * :mod:`service.api.errors` — domain errors and their ``application/problem+json`` answers.
-* :mod:`service.api.limits` — what one client can cost: body size (413 before reading), the
-  API key before an ack's body, concurrent report renders (503 + Retry-After).
+* :mod:`service.api.identity` — who acts: the shared ``api_key`` and per-user keys
+  (``[[api.users]]``, operator or viewer), resolved to the user an action is recorded as.
+* :mod:`service.api.limits` — what one client can cost: body size (413 before reading), an
+  operator's key before an action's body, concurrent report renders (503 + Retry-After).
 * :mod:`service.api.metrics` — the Prometheus collector of a runtime;
   :mod:`service.api.domain_metrics` — its domain gauges (damage, remaining life, oscillation,
   bending, starts, lag, state) and the cache of the life computation they need.

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from service.api.identity import ApiIdentity, ApiKeys
 from service.settings import ServiceSettings, SettingsError, load_service_settings
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
@@ -185,3 +186,60 @@ def test_zenoh_tls_files_are_relative_to_the_settings_file_and_plain_is_a_choice
     assert files.private_key == path.parent / "tls" / "worker-key.pem"
     path.write_text('[zenoh]\nlisten = ["tcp/0.0.0.0:7447"]\nplain_beyond_loopback = true\n')
     assert load_service_settings(path).zenoh.listen == ("tcp/0.0.0.0:7447",)
+
+
+def test_api_user_keys_are_relative_never_held_and_name_their_user(tmp_path, monkeypatch):
+    path = tmp_path / "millwatch.toml"
+    path.write_text(
+        '[api]\napi_key = "shared-key"\nmax_shelve_s = 3600\n'
+        '[[api.users]]\nname = "j.perez"\nkey_file = "keys/j.perez"\n'
+        '[[api.users]]\nname = "wall"\nkey_env = "WALL_KEY"\nrole = "viewer"\n'
+    )
+    (tmp_path / "keys").mkdir()
+    (tmp_path / "keys" / "j.perez").write_text("perez-key-0123456789\n")
+    monkeypatch.setenv("WALL_KEY", "wall-key-0123456789ab")
+    s = load_service_settings(path)
+    op, wall = s.api.users
+    assert op.key_file == (tmp_path / "keys" / "j.perez").resolve()
+    assert (op.key(), wall.key(), wall.role, s.api.max_shelve_s) == (
+        "perez-key-0123456789", "wall-key-0123456789ab", "viewer", 3600.0)  # fmt: skip
+    assert "-key-" not in repr(s)
+    keys = ApiKeys.from_settings(s.api)
+    assert keys.find("perez-key-0123456789") == ApiIdentity("j.perez", "operator", False)
+    assert keys.find("shared-key") == ApiIdentity("api", "operator", True)
+    assert keys.find("wall-key-0123456789ab").role == "viewer" and keys.find("x") is None
+    monkeypatch.delenv("WALL_KEY")
+    with pytest.raises(SettingsError, match=r"api\.users\.wall: key_env WALL_KEY holds no key"):
+        ApiKeys.from_settings(s.api)
+    (tmp_path / "keys" / "j.perez").write_text("short")
+    monkeypatch.setenv("WALL_KEY", "wall-key-0123456789ab")
+    with pytest.raises(SettingsError, match=r"api\.users\.j\.perez: the key in key_file .* is 5 "):
+        ApiKeys.from_settings(s.api)
+    (tmp_path / "keys" / "j.perez").write_text("wall-key-0123456789ab")
+    with pytest.raises(SettingsError, match="share a key"):
+        ApiKeys.from_settings(s.api)
+
+
+@pytest.mark.parametrize(
+    ("users", "message"),
+    [
+        ('name = "op"\nkey = "hunter2"\n', "key: not in the settings file"),
+        ('name = "op"\n', "set key_file or key_env"),
+        ('name = "op"\nkey_env = "X"\nrole = "admin"\n', "api.users.0.role"),
+        ('name = "op"\nkey_env = "X"\n[[api.users]]\nname = "op"\nkey_env = "Y"\n',
+         "user 'op' is configured twice"),
+    ],
+)  # fmt: skip
+def test_api_users_refuse_keys_in_the_file_and_name_the_field(tmp_path, users, message):
+    path = tmp_path / "millwatch.toml"
+    path.write_text("[[api.users]]\n" + users)
+    with pytest.raises(SettingsError, match=r"api\.users") as err:
+        load_service_settings(path)
+    assert message in str(err.value) and "hunter2" not in str(err.value)
+
+
+def test_the_longest_shelve_is_bounded(tmp_path):
+    path = tmp_path / "millwatch.toml"
+    path.write_text("[api]\nmax_shelve_s = 864000\n")
+    with pytest.raises(SettingsError, match=r"api\.max_shelve_s"):
+        load_service_settings(path)

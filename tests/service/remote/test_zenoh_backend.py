@@ -18,6 +18,7 @@ import httpx
 import pytest
 import zenoh
 
+from alarms.actions import ActionKind, OperatorAction
 from ingest.keys import query_key, worker_token_key
 from ingest.mill_files import load_mill_config
 from ingest.sim.publisher import ScenePublisher, starting_now
@@ -26,7 +27,7 @@ from ingest.zenoh_session import build_config, free_loopback_port, open_session,
 from service.api.app import create_app
 from service.api.local_backend import LocalBackend
 from service.errors import Unavailable
-from service.remote.protocol import ack_args
+from service.remote.protocol import ack_args, act_args
 from service.remote.queryables import WorkerQueryables
 from service.remote.report_codec import report_from_dict
 from service.remote.zenoh_backend import ZenohBackend
@@ -185,12 +186,12 @@ def test_report_json_round_trips_through_the_codec(pair):
     assert report_to_dict(report_from_dict(data)) == data
 
 
-def _ack_over_zenoh(port: int, mill: str, args: dict) -> tuple[bool, dict]:
-    """A zenoh ``get`` on the mill's ``…/@query/ack`` from a session of our own (not the API):
-    (ok, answer or problem JSON) of the one reply."""
+def _ack_over_zenoh(port: int, mill: str, args: dict, question: str = "ack") -> tuple[bool, dict]:
+    """A zenoh ``get`` on the mill's ``…/@query/<question>`` from a session of our own (not the
+    API): (ok, answer or problem JSON) of the one reply."""
     with open_session(build_config(connect=[tcp_endpoint(port)])) as session:
         config = load_mill_config(MILLS / f"{mill}.toml")
-        key = query_key(config.site, config.id, "ack")
+        key = query_key(config.site, config.id, question)
         replies = list(session.get(key, payload=json.dumps(args).encode(), timeout=5.0))
     assert len(replies) == 1
     reply = replies[0]
@@ -240,6 +241,54 @@ def test_remote_ack_checks_the_key_in_the_api_and_the_worker_applies_it(pair):
     again = pair.remote.get("/alarms", params={"state": "raised"}, headers={"If-None-Match": tag})
     assert again.status_code == 200 and alarm["alarm_id"] not in again.text
     assert pair.local.get(f"/alarms/{alarm['alarm_id']}").json() == r.json()
+
+
+def test_remote_actions_reach_the_workers_store(pair):
+    """After the ack above: comment, confirm and a one-shot shelve through ``millwatch api``'s
+    backend, applied by the worker and stored there, the same detail both ways."""
+    alarm_id = next(r.alarm_id for r in pair.runtime.store.alarms() if r.state == "acknowledged")
+    key = {"X-API-Key": API_KEY}
+    url = f"/alarms/{alarm_id}"
+    r = pair.remote.post(f"{url}/comment", headers=key,
+                         json={"by": "remote-op", "comment": "seen from the API"})  # fmt: skip
+    assert r.status_code == 200, r.text
+    assert r.json()["comments"][-1] == {**r.json()["comments"][-1], "user": "remote-op",
+                                        "text": "seen from the API"}  # fmt: skip
+    assert pair.remote.post(f"{url}/confirm", headers=key).json()["confirmed_by"] == "api"
+    shelved = pair.remote.post(f"{url}/shelve", headers=key, json={"kind": "one_shot"})
+    assert shelved.json()["shelving_state"] == "one_shot_shelved"
+    stored = pair.runtime.store.alarm(alarm_id)
+    assert (stored.confirmed, stored.shelving_state, stored.comment_count) == (
+        True, "one_shot_shelved", 1)  # fmt: skip
+    assert stored.last_comment == "seen from the API"
+    again = pair.remote.post(f"{url}/confirm", headers=key)
+    assert again.status_code == 409 and "already confirmed" in again.json()["detail"]
+    assert pair.local.get(url).json() == shelved.json()
+    assert pair.backend.alarm_board().get(alarm_id).seq == stored.seq
+
+
+def test_a_signed_action_cannot_be_replayed_as_another(pair):
+    """The MAC covers the alarm, kind, user, comment, expiry and time: any field changed is a
+    forgery; an ack's signature is not an act's; a stale one is refused; nothing changes."""
+    alarm_id = next(r.alarm_id for r in pair.runtime.store.alarms() if r.state != "cleared")
+    before = pair.runtime.store.alarm(alarm_id)
+    signed = act_args(OperatorAction(alarm_id, ActionKind.COMMENT, "op", "fine"), API_KEY)
+    late = act_args(OperatorAction(alarm_id, ActionKind.COMMENT, "op", "fine"), API_KEY,
+                    t_ns=time.time_ns() - int(300e9))  # fmt: skip
+    as_ack = {**ack_args(alarm_id, "op", API_KEY), "kind": "comment", "user": "op",
+              "comment": "fine"}  # fmt: skip
+    for args, title in (
+        ({**signed, "kind": "remove_from_service", "comment": ""}, "Wrong action signature"),
+        ({**signed, "user": "intruder"}, "Wrong action signature"),
+        ({**signed, "comment": "all clear, nothing to see"}, "Wrong action signature"),
+        (as_ack, "Wrong action signature"),
+        ({k: v for k, v in signed.items() if k != "mac"}, "Unsigned action"),
+        (late, "Stale action"),
+        ({**signed, "kind": "snooze"}, "Malformed action"),
+    ):
+        ok, answer = _ack_over_zenoh(pair.port, MILL, args, "act")
+        assert not ok and answer["title"] == title, (title, answer)
+    assert pair.runtime.store.alarm(alarm_id) == before
 
 
 def test_reports_status_over_zenoh_is_the_workers_own(pair):

@@ -1,9 +1,11 @@
-"""Alarms in the SQLite store: migration 1 → 2, round trip, reopen, idempotent replay, filters."""
+"""Alarms in the SQLite store: migrations (1 → 2, 7 → 8), round trip, reopen, idempotent replay,
+filters, operator actions and their comments."""
 
 from __future__ import annotations
 
 import sqlite3
 
+from alarms.actions import ActionKind, OperatorAction
 from alarms.lifecycle import Alarm, Transition, TransitionRecord
 from service.store.database import Store
 from service.store.migrations import MIGRATIONS, SCHEMA_VERSION
@@ -91,3 +93,72 @@ def test_filters_by_state_time_and_mill(tmp_path):
         assert [a.alarm_id for a in store.alarms(since_ns=T0 + 8000 * NS)] == [bending_id]
         assert store.alarms(mill_id="other") == []
         assert [a.alarm_id for a in store.alarms()] == [bending_id, fired[0].alarm_id]
+
+
+def _actions() -> list[Transition]:
+    """An alarm acknowledged with a comment, confirmed, shelved until a time, removed from
+    service (the engine's output, as the worker stores it)."""
+    eng = engine()
+    (raised,) = feed(eng, "start_peak_pct", [360])
+    alarm_id, t = raised.alarm_id, T0 + 60 * NS
+    fired = [raised]
+    for i, (kind, extra) in enumerate([
+        (ActionKind.ACKNOWLEDGE, {"comment": "seen"}),
+        (ActionKind.CONFIRM, {}),
+        (ActionKind.SHELVE_TIMED, {"shelve_until_ns": t + 3600 * NS}),
+        (ActionKind.REMOVE_FROM_SERVICE, {"comment": "gauge replaced"}),
+    ]):  # fmt: skip
+        fired += eng.act(OperatorAction(alarm_id, kind, "j.perez", **extra), t + i * NS)
+    return fired
+
+
+def test_operator_actions_round_trip_with_their_comments(tmp_path):
+    fired = _actions()
+    with Store(tmp_path / "s.db") as store:
+        _write(store, fired)
+    with Store(tmp_path / "s.db") as store:
+        alarm = store.alarm(fired[0].alarm_id)
+        assert alarm == fired[-1].alarm
+        assert (alarm.confirmed, alarm.shelving_state, alarm.out_of_service) == (
+            True, "timed_shelved", True)  # fmt: skip
+        assert (alarm.comment_count, alarm.last_comment) == (2, "gauge replaced")
+        steps = store.alarm_transitions(alarm.alarm_id)
+        assert [(t.kind, t.by, t.comment) for t in steps] == [
+            ("raised", None, None), ("acknowledged", "j.perez", "seen"),
+            ("confirmed", "j.perez", None), ("shelved", "j.perez", None),
+            ("removed_from_service", "j.perez", "gauge replaced"),
+        ]  # fmt: skip
+
+
+def test_a_version_7_file_migrates_its_alarms_to_unshelved_unconfirmed_in_service(tmp_path):
+    path = tmp_path / "s.db"
+    db = sqlite3.connect(path)
+    for migration in MIGRATIONS[:7]:
+        for statement in migration:
+            db.execute(statement)
+    db.execute("PRAGMA user_version = 7")
+    raised = _history()[0]
+    old = {k: v for k, v in raised.alarm.to_dict().items() if k in _V7_ALARM}
+    db.execute(f"INSERT INTO alarms ({', '.join(old)}) VALUES ({', '.join('?' * len(old))})",
+               tuple(old.values()))  # fmt: skip
+    step = {k: v for k, v in raised.to_row().items() if k != "comment"}
+    db.execute(f"INSERT INTO alarm_transitions ({', '.join(step)}) "
+               f"VALUES ({', '.join('?' * len(step))})", tuple(step.values()))  # fmt: skip
+    db.commit()
+    db.close()
+    with Store(path) as store:
+        assert store.schema_version == 8
+        alarm = store.alarm(raised.alarm_id)
+        assert alarm == raised.alarm  # the new fields read back as their defaults
+        assert (alarm.confirmed, alarm.shelving_state, alarm.suppressed) == (
+            False, "unshelved", False)  # fmt: skip
+        assert (alarm.out_of_service, alarm.comment_count, alarm.last_comment) == (False, 0, None)
+        assert store.alarm_transitions(raised.alarm_id)[0].comment is None
+
+
+_V7_ALARM = (
+    "alarm_id", "mill_id", "rule", "subject", "quantity", "unit", "severity", "state",
+    "raised_ns", "updated_ns", "value", "threshold", "message", "condition", "acked_ns",
+    "acked_by", "cleared_ns", "seq", "simulated", "value_at_raise", "threshold_at_raise",
+    "exceed_count", "advice",
+)  # fmt: skip

@@ -87,9 +87,20 @@ def test_checkpoints_of_the_old_format_are_dropped_with_a_warning(tmp_path, capl
     db.execute("DROP TABLE phase_daily")  # schema 6
     for column in ("value_at_raise", "threshold_at_raise", "exceed_count", "advice"):
         db.execute(f"ALTER TABLE alarms DROP COLUMN {column}")  # schema 7
-    for column in ("confirmed", "confirmed_at_ns", "confirmed_by", "shelving_state",
-                   "shelved_until_ns", "shelved_by", "suppressed", "out_of_service",
-                   "comment_count", "last_comment", "last_comment_by", "last_commented_ns"):
+    for column in (
+        "confirmed",
+        "confirmed_at_ns",
+        "confirmed_by",
+        "shelving_state",
+        "shelved_until_ns",
+        "shelved_by",
+        "suppressed",
+        "out_of_service",
+        "comment_count",
+        "last_comment",
+        "last_comment_by",
+        "last_commented_ns",
+    ):
         db.execute(f"ALTER TABLE alarms DROP COLUMN {column}")  # schema 8
     db.execute("ALTER TABLE alarm_transitions DROP COLUMN comment")  # schema 8
     db.execute("CREATE TABLE checkpoints (id INTEGER PRIMARY KEY, created_ns INTEGER NOT NULL, "
