@@ -204,6 +204,7 @@ class OpcUaServer:
         trusted = s.trusted_clients_dir or self.certificate_dir / "trusted"
         trusted.mkdir(parents=True, exist_ok=True)
         server.set_certificate_validator(ClientTrust(trusted, trusted.parent / "rejected"))
+        log.info("OPC UA client certificates trusted: those in %s", trusted)
         return server
 
     async def _build_mills(self, server: Server) -> None:
