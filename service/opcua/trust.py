@@ -40,8 +40,8 @@ class ClientTrust:
         self.rejected_dir = rejected_dir
         self._seen: tuple[tuple[str, int], ...] | None = None
         self._trusted: set[bytes] = set()
-        self._store = TrustStore([trusted_dir], [])
-        self._store_loaded = False
+        self._store: x509.verification.Store | None = None
+        self._policy = TrustStore([], [])  # (its verification policy, for CA-issued ones)
 
     def _listing(self) -> tuple[tuple[str, int], ...]:
         files = (p for p in self.trusted_dir.iterdir() if p.suffix.lower() in _SUFFIXES)
@@ -52,30 +52,29 @@ class ClientTrust:
         listing = self._listing()
         if listing == self._seen:
             return
-        trusted = set()
+        certs = []
         for name, _ in listing:
             try:
-                cert = await uacrypto.load_certificate(self.trusted_dir / name)
+                certs.append(await uacrypto.load_certificate(self.trusted_dir / name))
             except (ValueError, OSError) as exc:
                 log.warning("OPC UA trust list: %s is no certificate (%s); ignored", name, exc)
-                continue
-            trusted.add(uacrypto.der_from_x509(cert))
-        self._trusted = trusted
-        self._store_loaded = False
-        if trusted:  # (asyncua's store refuses to be empty)
-            await self._store.load_trust()
-            self._store_loaded = True
+        self._trusted = {uacrypto.der_from_x509(c) for c in certs}
+        # a CA's certificate in the list trusts what it issued (asyncua's verification policy;
+        # its store refuses to be empty)
+        self._store = x509.verification.Store(certs) if certs else None
         self._seen = listing
-        log.info("OPC UA trust list: %d client certificates in %s", len(trusted),
+        log.info("OPC UA trust list: %d client certificates in %s", len(certs),
                  self.trusted_dir)  # fmt: skip
 
     def _issued_by_trusted(self, cert: x509.Certificate) -> bool:
-        if not self._store_loaded:
+        if self._store is None:
             return False
+        verifier = self._policy.policy_builder.store(self._store).build_client_verifier()
         try:
-            return self._store.is_trusted(cert)
-        except Exception:  # cryptography's verifier refuses odd certificates by raising
+            verifier.verify(cert, [])
+        except Exception:  # VerificationError, or a certificate the verifier cannot read
             return False
+        return True
 
     async def __call__(self, cert: x509.Certificate, app: ua.ApplicationDescription) -> None:
         """Raise ``ServiceError`` (``BadCertificateTimeInvalid``/``Untrusted``) unless valid
