@@ -105,14 +105,21 @@ def acked_alarm(plant: Plant, mill: str) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------- condition instances
-def test_a_condition_is_a_limit_alarm_with_its_states_input_value_and_limit(plant: Plant) -> None:
-    alarm = rest(plant, f"/alarms/{raised_alarm(plant, MILL)['alarm_id']}")
+@pytest.mark.parametrize("mill", [MILL, MILL_B])
+def test_a_condition_is_a_limit_alarm_with_its_states_input_value_and_limit(
+    plant: Plant, mill: str
+) -> None:
+    """(The second condition of a type is made from the first one's blueprint.)"""
+    alarm = rest(plant, f"/alarms/{raised_alarm(plant, mill)['alarm_id']}")
 
     async def inspect() -> dict[str, Any]:
         async with client(plant) as c:
             ns = await _ns(c)
             cond = condition_id(alarm, ns)
-            out = {"type": await c.get_node(cond).read_type_definition()}
+            out = {"type": await c.get_node(cond).read_type_definition(),
+                   "name": (await c.get_node(cond).read_browse_name()).Name,
+                   "methods": sorted([(await m.read_browse_name()).Name for m in
+                                      await c.get_node(cond).get_methods()])}  # fmt: skip
             for path in ("ShelvingState.CurrentState.Id", "ConfirmedState.Id", "EnabledState.Id",
                          "AckedState.Id", "ActiveState.Id", "SuppressedOrShelved", "HighLimit",
                          "Value", "InputNode", "Severity", "Message", "Retain"):  # fmt: skip
@@ -121,6 +128,8 @@ def test_a_condition_is_a_limit_alarm_with_its_states_input_value_and_limit(plan
 
     got = asyncio.run(inspect())
     assert got["type"] == ua.NodeId(IDS.ExclusiveLevelAlarmType)  # start_peak has a limit
+    assert got["name"] == alarm["alarm_id"]
+    assert got["methods"] == ["Acknowledge", "AddComment", "Disable", "Enable"]
     assert got["ShelvingState.CurrentState.Id"] == ua.NodeId(IDS.ShelvedStateMachineType_Unshelved)
     assert got["EnabledState.Id"] is True and got["ActiveState.Id"] is True
     assert got["SuppressedOrShelved"] is False and got["Retain"] is True
