@@ -22,13 +22,11 @@ thread.
 from __future__ import annotations
 
 import hashlib
-import hmac
 import time
 from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Any
 
 from alarms.actions import (
-    DEFAULT_MAX_SHELVE_S,
     ActionKind,
     ActionNotAllowedError,
     InvalidActionError,
@@ -37,7 +35,7 @@ from alarms.actions import (
 from alarms.engine import UnknownAlarmError
 from alarms.lifecycle import Alarm, AlarmState
 from service.api.times import with_iso
-from service.errors import BadRequest, Conflict, Forbidden, NotFound, Unauthorized, Unavailable
+from service.errors import BadRequest, Conflict, NotFound, Unavailable
 from service.store.database import Store
 from service.worker.checkpoints import MillHeldError
 from service.worker.runtime import ServiceRuntime
@@ -45,11 +43,9 @@ from service.worker.runtime import ServiceRuntime
 __all__ = [
     "ACK_TIMEOUT_S",
     "STATE_PATTERN",
-    "acknowledge",
     "alarm_detail",
     "alarm_list",
     "apply_action",
-    "check_api_key",
     "parse_states",
 ]
 
@@ -113,31 +109,6 @@ def alarm_detail(store: Store, alarm_id: str) -> dict[str, Any]:
     comments = [{"user": t["by"], "t_ns": t["t_ns"], "text": t["comment"], "kind": t["kind"],
                  "seq": t["seq"]} for t in transitions if t["comment"]]  # fmt: skip
     return {**row.to_dict(), "transitions": transitions, "comments": comments}
-
-
-def check_api_key(configured: str | None, given: str | None) -> None:
-    """401 without the right ``X-API-Key``; 403 when no key is configured (acks disabled)."""
-    if not configured:
-        raise Forbidden(
-            "Acknowledgement disabled",
-            "This service has no api.api_key configured, "
-            "so alarms cannot be acknowledged over the API.",
-        )
-    if not given:
-        raise Unauthorized(
-            "API key required",
-            "Send the service's API key in the X-API-Key header to acknowledge an alarm.",
-        )
-    if not hmac.compare_digest(given.encode(), configured.encode()):
-        raise Unauthorized(
-            "Wrong API key", "The X-API-Key header does not match this service's API key."
-        )
-
-
-def acknowledge(runtime: ServiceRuntime, store: Store, alarm_id: str, by: str) -> dict[str, Any]:
-    """Acknowledge through the worker thread and return the alarm as stored afterwards."""
-    action = OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by)
-    return apply_action(runtime, store, action, DEFAULT_MAX_SHELVE_S)
 
 
 def apply_action(

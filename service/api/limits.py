@@ -5,10 +5,11 @@ Measured before (issue 26): a 100 MB unauthenticated ``POST /alarms/x/ack`` adde
 requests held every worker thread, so ``/health`` waited 39 s.
 
 * :class:`RequestGuard` (an ASGI middleware, outermost): a declared ``Content-Length`` above
-  ``max_body_bytes`` is answered 413 before a byte of the body is read; a route that needs the API
-  key (``X-API-Key``, :data:`service.api.routes.alarms.API_KEY`) is answered 401/403 *before*
-  its body is read; a body streamed without a length is counted as it arrives and cut at the
-  limit (413). Bodies under the limit go through untouched.
+  ``max_body_bytes`` is answered 413 before a byte of the body is read; an action route, which
+  needs an operator's key (``X-API-Key``, :data:`service.api.routes.alarms.API_KEY`;
+  :mod:`service.api.identity`), is answered 401 (no known key) or 403 (a viewer's key, or none
+  configured) *before* its body is read; a body streamed without a length is counted as it
+  arrives and cut at the limit (413). Bodies under the limit go through untouched.
 * :class:`RenderSlots`: at most ``renders`` report renders at once; one more is answered at once
   with 503 and ``Retry-After`` (:class:`TooBusy`) instead of queueing on the thread pool that
   the other routes share. ``/health`` is an ``async`` route and needs no thread at all.

@@ -663,7 +663,7 @@ class Worker:
             except queue.Empty:
                 return applied
             try:
-                transitions = self._acknowledge(request)
+                transitions = self._apply_action(request)
             except Exception as exc:  # handed to the waiting caller, who maps it
                 request.done.set_exception(exc)
                 continue
@@ -671,7 +671,7 @@ class Worker:
             applied.append((request, transitions))
         return applied
 
-    def _acknowledge(self, request: ActionRequest) -> list[Transition]:
+    def _apply_action(self, request: ActionRequest) -> list[Transition]:
         """Apply one operator action; :class:`MillHeldError` for a held mill (its alarm engine
         was not restored, so it does not know the mill's open alarms). A cleared alarm is not
         in the engine: its stored record is read here and handed over, so the action builds on

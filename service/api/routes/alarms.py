@@ -110,7 +110,7 @@ def alarms_router(backend: Backend) -> APIRouter:
 
     @router.get(
         "/alarms/{alarm_id}",
-        summary="One alarm with its transitions",
+        summary="One alarm with its transitions and comments (who did what, when)",
         response_model=AlarmDetail,
         responses=problem_responses(404, 422, 503),
     )

@@ -119,6 +119,15 @@ def test_serve_names_an_unreadable_secret_file_before_its_banner(tmp_path: Path)
                     f"{tmp_path / 'no-such-secret'} (No such file or directory)")  # fmt: skip
 
 
+def test_serve_names_an_api_user_whose_key_is_unset_before_its_banner(tmp_path: Path) -> None:
+    settings = _settings(tmp_path, MILL_FILE)
+    with settings.open("a") as f:
+        f.write('[[api.users]]\nname = "j.perez"\nkey_env = "MILLWATCH_TEST_UNSET_KEY"\n')
+    line = _one_line_error(_run("serve", "--config", str(settings)))
+    assert line == (f"millwatch: error: {settings}: api.users.j.perez: key_env "
+                    "MILLWATCH_TEST_UNSET_KEY holds no key")  # fmt: skip
+
+
 def test_serve_names_an_api_port_in_use(tmp_path: Path) -> None:
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
