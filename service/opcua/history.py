@@ -8,7 +8,8 @@
   severity, message, state, user (ClientUserId) and comment, the fields of
   :mod:`service.opcua.conditions` where a transition says them, and EventId
   ``<alarm id>:<seq>``. Oldest first (newest first when StartTime is after EndTime), at most
-  ``NumValuesPerNode`` (0: :data:`MAX_EVENTS`).
+  ``NumValuesPerNode`` (0: :data:`MAX_EVENTS`) per answer; a ContinuationPoint when more
+  follow (the same request with it returns the next page).
 * **Values** (``ReadRawModifiedDetails``, processed, at-time) and events of any other node are
   answered ``BadHistoryOperationUnsupported`` per node — never Good with nothing: millwatch's
   variables are not historized here (their history is REST's reports and ``/metrics``).
@@ -62,7 +63,7 @@ class AlarmHistory(HistoryManager):
         for rv in params.NodesToRead:
             result = ua.HistoryReadResult()
             if isinstance(details, ua.ReadEventDetails):
-                served = await self._events(details, rv.NodeId)
+                served = await self._events(details, rv, result)
                 if served is not None:
                     result.HistoryData = served
                     out.append(result)
@@ -71,23 +72,40 @@ class AlarmHistory(HistoryManager):
             out.append(result)
         return out
 
-    async def _events(self, details: ua.ReadEventDetails,
-                      node_id: ua.NodeId) -> ua.HistoryEvent | None:  # fmt: skip
+    async def _events(self, details: ua.ReadEventDetails, rv: ua.HistoryReadValueId,
+                      result: ua.HistoryReadResult) -> ua.HistoryEvent | None:  # fmt: skip
+        """The events of the page ``rv`` asks (its ContinuationPoint: how many of the same
+        request were sent before); sets ``result``'s ContinuationPoint when more follow."""
         start, end = _ns(details.StartTime, _NEVER), _ns(details.EndTime, _FOREVER)
         backwards = start > end
         lo, hi = (end, start) if backwards else (start, end)
-        alarms = await self.alarms_of(node_id, lo, hi)
+        alarms = await self.alarms_of(rv.NodeId, lo, hi)
         if alarms is None:
             return None
-        evs = [e for e in transition_events(self.template, alarms) if lo <= e[0] <= hi]
-        evs.sort(key=lambda e: e[0], reverse=backwards)
-        limit = details.NumValuesPerNode or MAX_EVENTS
         history = ua.HistoryEvent()
-        for _, event in evs[: min(limit, MAX_EVENTS)]:
+        offset = _offset(rv.ContinuationPoint)
+        if offset is None:
+            result.StatusCode = status(ua.StatusCodes.BadContinuationPointInvalid)
+            return history
+        evs = [e for e in transition_events(self.template, alarms) if lo <= e[0] <= hi]
+        evs.sort(key=lambda e: (e[0], e[1].EventId), reverse=backwards)
+        limit = min(details.NumValuesPerNode or MAX_EVENTS, MAX_EVENTS)
+        for _, event in evs[offset : offset + limit]:
             fields = ua.HistoryEventFieldList()
             fields.EventFields = event.to_event_fields(details.Filter.SelectClauses)
             history.Events.append(fields)
+        if offset + limit < len(evs):
+            result.ContinuationPoint = str(offset + limit).encode()
         return history
+
+
+def _offset(continuation: bytes | None) -> int | None:
+    """The events already sent of a paged read (0 without a continuation point; None: not
+    one of ours)."""
+    if not continuation:
+        return 0
+    text = continuation.decode("ascii", "replace")
+    return int(text) if text.isdigit() else None
 
 
 def transition_events(template: Any, alarms: Iterable[dict[str, Any]]) -> list[tuple[int, Any]]:

@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 from asyncua import Client, Node, ua
+from asyncua.common.events import get_filter_from_event_type
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from cryptography.x509.oid import ExtendedKeyUsageOID
@@ -492,3 +493,40 @@ def test_an_unknown_client_certificate_is_refused_until_trusted(
     assert [p.read_bytes() for p in rejected.iterdir()].count(cert.read_bytes()) == 1
     (trusted_dir(plant) / "stranger.der").write_bytes(cert.read_bytes())  # the admin trusts it
     assert "Server" in asyncio.run(connect(cert, key))
+
+
+def test_history_read_pages_with_continuation_points(plant: Plant) -> None:
+    async def run() -> tuple[list[bytes], list[list[bytes]], int]:
+        async with client(plant) as c:
+            ns = await _ns(c)
+            mill = c.get_node(ua.NodeId(f"{SITE}/{MILL}", ns))
+            evtype = c.get_node(ua.NodeId(IDS.AlarmConditionType))
+            whole = [e.EventId for e in await mill.read_event_history(None, None, 0, [evtype])]
+            details = ua.ReadEventDetails(
+                StartTime=ua.get_win_epoch(), EndTime=ua.get_win_epoch(), NumValuesPerNode=2,
+                Filter=await get_filter_from_event_type([evtype]),
+            )  # fmt: skip
+            select = details.Filter.SelectClauses
+            at = [i for i, s in enumerate(select) if [q.Name for q in s.BrowsePath] == ["EventId"]]
+            pages: list[list[bytes]] = []
+            continuation = None
+            for _ in range(100):
+                rv = ua.HistoryReadValueId(NodeId=mill.nodeid, ContinuationPoint=continuation)
+                params = ua.HistoryReadParameters(HistoryReadDetails=details, NodesToRead=[rv])
+                result = (await c.uaclient.history_read(params))[0]
+                result.StatusCode.check()
+                pages.append([f.EventFields[at[0]].Value for f in result.HistoryData.Events])
+                continuation = result.ContinuationPoint
+                if not continuation:
+                    break
+            rv = ua.HistoryReadValueId(NodeId=mill.nodeid, ContinuationPoint=b"not ours")
+            params = ua.HistoryReadParameters(HistoryReadDetails=details, NodesToRead=[rv])
+            bad = (await c.uaclient.history_read(params))[0].StatusCode.value
+            return whole, pages, bad
+
+    whole, pages, bad = asyncio.run(run())
+    assert len(whole) >= 3 and all(len(p) <= 2 for p in pages)
+    paged = [e for p in pages for e in p]
+    assert paged[: len(whole)] == whole  # (an alarm changing meanwhile adds at the end)
+    assert len(set(paged)) == len(paged)
+    assert bad == ua.StatusCodes.BadContinuationPointInvalid
