@@ -14,7 +14,8 @@ runtime in this process under ``millwatch serve`` and the workers over zenoh und
 * the Part 9 methods (Acknowledge, Confirm, AddComment, shelving, Enable/Disable) call the
   backend's ``act`` as the OPC UA user; ConditionRefresh answers any session
   (:mod:`service.opcua.methods`, :mod:`service.opcua.access`);
-* HistoryRead of alarm events is answered from the store (:mod:`service.opcua.history`);
+* HistoryRead of alarm events is answered from the store (:mod:`service.opcua.history`; its
+  backend calls on a thread of their own, never delaying the value updates);
 * a signing client's certificate must be in the trust list (:mod:`service.opcua.trust`);
 * BuildInfo names millwatch and its version (:data:`PRODUCT_URI`).
 
@@ -119,6 +120,9 @@ class OpcUaServer:
         self._started = threading.Event()
         self._error: BaseException | None = None
         self._calls = ThreadPoolExecutor(1, thread_name_prefix="millwatch-opcua-backend")
+        # history reads (one backend call per alarm) on their own thread: never in the way of
+        # the value updates
+        self._history_calls = ThreadPoolExecutor(1, thread_name_prefix="millwatch-opcua-history")
         self._logged: set[tuple[str, str]] = set()
         self._logins: Logins | None = None
         self._mills: dict[str, MillNodes] = {}
@@ -151,6 +155,7 @@ class OpcUaServer:
         if self._thread is not None:
             self._thread.join(timeout=30)
         self._calls.shutdown(wait=True, cancel_futures=True)
+        self._history_calls.shutdown(wait=True, cancel_futures=True)
 
     def _run(self) -> None:
         try:
@@ -314,7 +319,9 @@ class OpcUaServer:
         mills = self._conditions.mills_below(notifier)
         if mills is None:
             return None
-        return await self._call(self._stored_alarms, mills, lo_ns, hi_ns)
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._history_calls, self._stored_alarms, mills, lo_ns,
+                                          hi_ns)  # fmt: skip
 
     def _stored_alarms(self, mills: set[str], lo_ns: int, hi_ns: int) -> list[Any]:
         board = self._board()
