@@ -506,6 +506,10 @@ class OpcUaSettings(_Strict):
     * ``security``: the policies offered (``None``, ``Basic256Sha256_Sign``,
       ``Basic256Sha256_SignAndEncrypt``); the server's self-signed certificate is made at first
       start in ``certificate_dir`` (default: ``opcua/`` beside the store).
+    * ``trusted_clients_dir``: the trust list — client application certificates (or their
+      CAs' certificates), DER or PEM files; a signing client whose certificate is not there is
+      refused and its certificate saved in ``rejected/`` beside it (default: ``trusted/`` in
+      ``certificate_dir``; :mod:`service.opcua.trust`).
     * ``update_s``: how often values are read from the backend (≤ 1 s; default 0.25 s).
     * ``login_free_failures``, ``login_lockout_s``: after this many failed logins from one
       client host, every login from it is refused for ``login_lockout_s`` (default 1 s),
@@ -525,6 +529,7 @@ class OpcUaSettings(_Strict):
         "Basic256Sha256_SignAndEncrypt",
     )
     certificate_dir: Path | None = None
+    trusted_clients_dir: Path | None = None
     update_s: Annotated[float, Field(gt=0, le=1.0)] = 0.25
     login_free_failures: Annotated[int, Field(ge=1, le=100)] = 5
     login_lockout_s: Annotated[float, Field(gt=0, le=300)] = 1.0
@@ -617,6 +622,8 @@ class ServiceSettings(_Strict):
             "users": users,
             "user_certificates": tuple(at(p) for p in o.user_certificates),
             "certificate_dir": None if o.certificate_dir is None else at(o.certificate_dir),
+            "trusted_clients_dir": None if o.trusted_clients_dir is None
+            else at(o.trusted_clients_dir),
         })  # fmt: skip
 
     def load_mills(self, source: str | Path = "") -> dict[str, MillConfig]:

@@ -39,7 +39,7 @@ from service.api.app import create_app
 from service.api.local_backend import LocalBackend
 from service.cli.args import positive_float, positive_int
 from service.cli.serve import AnnouncingServer, check_api_port, run_until_signal
-from service.opcua.launch import start_opcua
+from service.opcua.launch import start_opcua, trust_directories
 from service.settings import ServiceSettings
 from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
@@ -288,8 +288,11 @@ def _opcua_lines(settings: ServiceSettings) -> str:
     """Where the OPC UA server listens and how to log in (the demo's own password)."""
     o = settings.opcua
     user = o.users[0]
+    trusted, rejected = trust_directories(settings)
     return (
         f"  OPC UA     {o.endpoint} (security None or Basic256Sha256; anonymous: read-only)\n"
         f"             user {user.name!r}, password {user.password()!r} (in {user.password_file}); "
-        "acknowledge alarms with the condition's Acknowledge method\n"
+        "act on alarms with the conditions' Part 9 methods\n"
+        f"             a signing client's certificate is refused until moved from {rejected} "
+        f"to {trusted}\n"
     )

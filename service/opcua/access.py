@@ -5,9 +5,11 @@
   ``[opcua] user_certificates``; a client without credentials is anonymous, admitted only when
   ``[opcua] anonymous`` is on. Passwords are read once at start and never logged.
 * :class:`AccessRules` (an asyncua permission ruleset, consulted for every request): anonymous
-  sessions may browse, read, subscribe and read history — no Write, no Call (so no
-  Acknowledge, no ConditionRefresh); logged-in users may also call methods. Writes of
-  millwatch's variables are refused anyway: they are read-only (AccessLevel CurrentRead).
+  sessions may browse, read, subscribe, read history and call ConditionRefresh(2) — a
+  view-only display must resynchronise — but no Write and no other method; logged-in users may
+  call methods, and each operator method checks the role itself (:mod:`service.opcua.methods`:
+  viewers get ``BadUserAccessDenied``). Writes of millwatch's variables are refused anyway:
+  they are read-only (AccessLevel CurrentRead).
 * The rule check runs in the task that then serves the request, so it records the session's user
   in :data:`CALLER`; a method (Acknowledge) reads who called it from there — asyncua passes a
   method only its arguments.
@@ -36,13 +38,16 @@ from asyncua import ua
 from asyncua.crypto import uacrypto
 from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, User, UserRole
 from asyncua.server.user_managers import UserManager
+from asyncua.ua.ua_binary import struct_from_binary
 
 from service.opcua.ua_types import nid
 
 __all__ = [
+    "ANONYMOUS_METHODS",
     "CALLER",
     "CLIENT",
     "OPERATOR",
+    "SESSION",
     "VIEWER",
     "AccessRules",
     "Login",
@@ -62,11 +67,29 @@ CALLER: contextvars.ContextVar[User | None] = contextvars.ContextVar("opcua_call
 CLIENT: contextvars.ContextVar[str] = contextvars.ContextVar("opcua_client", default="unknown")
 """The host of the client whose session is being activated (:func:`record_client_address`)."""
 
-_NOT_ANONYMOUS = frozenset(
+SESSION: contextvars.ContextVar[ua.NodeId | None] = contextvars.ContextVar(
+    "opcua_session", default=None
+)
+"""The id of the session whose methods are being called (:func:`record_client_address`)."""
+
+_WRITE = nid(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)
+_CALL = nid(ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
+#: The methods an anonymous session may call.
+ANONYMOUS_METHODS = frozenset(
     nid(i)
-    for i in (ua.ObjectIds.WriteRequest_Encoding_DefaultBinary,
-              ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
+    for i in (ua.ObjectIds.ConditionType_ConditionRefresh,
+              ua.ObjectIds.ConditionType_ConditionRefresh2)
 )  # fmt: skip
+
+
+def _only_refresh(body: Any) -> bool:
+    """Whether a CallRequest's body (an asyncua ``Buffer``, read from a copy) calls nothing but
+    ConditionRefresh(2)."""
+    try:
+        params = struct_from_binary(ua.CallParameters, body.copy())
+    except Exception:  # a body that does not decode is refused here, and by the server
+        return False
+    return all(m.MethodId in ANONYMOUS_METHODS for m in params.MethodsToCall)
 
 
 @dataclass(frozen=True, slots=True)
@@ -164,8 +187,10 @@ def _host(peer: Any) -> str:
 
 def record_client_address(iserver: Any) -> None:
     """Make every session of ``iserver`` (an asyncua ``InternalServer``) set :data:`CLIENT` to
-    its peer's host while it is activated, which is when asyncua asks the user manager: the
-    wrapper is set on this server's sessions only, asyncua itself is unchanged."""
+    its peer's host while it is activated, which is when asyncua asks the user manager, and
+    :data:`SESSION` to its id while its method calls run (ConditionRefresh serves only the
+    caller's own subscriptions): the wrappers are set on this server's sessions only, asyncua
+    itself is unchanged."""
     create = iserver.create_session
 
     def create_session(name: Any, *args: Any, **kwargs: Any) -> Any:
@@ -180,6 +205,16 @@ def record_client_address(iserver: Any) -> None:
                 CLIENT.reset(token)
 
         session.activate_session = activate_session
+        call = session.call
+
+        async def call_in_session(methods: Any) -> Any:
+            token = SESSION.set(session.session_id)
+            try:
+                return await call(methods)
+            finally:
+                SESSION.reset(token)
+
+        session.call = call_in_session
         return session
 
     iserver.create_session = create_session
@@ -261,7 +296,9 @@ class AccessRules(SimpleRoleRuleset):
         if user is None or action_type_id not in self._user_types:
             return False
         if user.role is UserRole.Anonymous:
-            return action_type_id not in _NOT_ANONYMOUS
+            if action_type_id == _CALL:
+                return _only_refresh(body)
+            return action_type_id != _WRITE
         return True
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from service.api.backend import Backend
@@ -10,7 +11,17 @@ from service.settings import ServiceSettings
 if TYPE_CHECKING:
     from service.opcua.server import OpcUaServer
 
-__all__ = ["start_opcua"]
+__all__ = ["start_opcua", "trust_directories"]
+
+
+def trust_directories(settings: ServiceSettings) -> tuple[Path, Path]:
+    """``(trusted, rejected)``: the trust list of client certificates (``[opcua]
+    trusted_clients_dir``, default ``trusted/`` in the certificate directory) and where refused
+    certificates are saved (``rejected/`` beside it)."""
+    o = settings.opcua
+    certificates = o.certificate_dir or settings.store.path.parent / "opcua"
+    trusted = o.trusted_clients_dir or certificates / "trusted"
+    return trusted, trusted.parent / "rejected"
 
 
 def start_opcua(backend: Backend, settings: ServiceSettings) -> OpcUaServer | None:

@@ -11,7 +11,13 @@ runtime in this process under ``millwatch serve`` and the workers over zenoh und
   one helper thread, never on the loop) and writes only the values that changed;
 * every :data:`ALARM_EVERY_S` it looks at the alarm board's version and sends the condition
   events of the alarms that changed (:mod:`service.opcua.conditions`);
-* Acknowledge calls the backend's ``ack`` as the OPC UA user (:mod:`service.opcua.access`).
+* the Part 9 methods (Acknowledge, Confirm, AddComment, shelving, Enable/Disable) call the
+  backend's ``act`` as the OPC UA user; ConditionRefresh answers any session
+  (:mod:`service.opcua.methods`, :mod:`service.opcua.access`);
+* HistoryRead of alarm events is answered from the store (:mod:`service.opcua.history`; its
+  backend calls on a thread of their own, never delaying the value updates);
+* a signing client's certificate must be in the trust list (:mod:`service.opcua.trust`);
+* BuildInfo names millwatch and its version (:data:`PRODUCT_URI`).
 
 A backend error on one mill (its worker gone, a timeout) leaves that mill's values as they were
 and is logged once per kind; the server never stops for it. :meth:`OpcUaServer.start` returns
@@ -22,6 +28,7 @@ once the endpoint listens (or raises :class:`OpcUaError` saying why it cannot);
 from __future__ import annotations
 
 import asyncio
+import importlib.metadata
 import logging
 import threading
 import time
@@ -29,19 +36,19 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TypeVar
 
 from asyncua import Server, ua
-from asyncua.crypto.permission_rules import User
 
+import service
+from alarms.actions import OperatorAction
 from service.api.backend import Backend
 from service.api.mill_views import mill_summary
 from service.api.models import MillSummary
 from service.errors import ApiError
 from service.opcua.access import (
-    CALLER,
-    OPERATOR,
     AccessRules,
     Login,
     Logins,
@@ -49,14 +56,23 @@ from service.opcua.access import (
     certificate_names,
     record_client_address,
 )
-from service.opcua.address_space import NAMESPACE_URI, MillNodes, root_folder
+from service.opcua.address_space import (
+    NAMESPACE_URI,
+    MillNodes,
+    mill_type,
+    root_folder,
+    site_folder,
+)
 from service.opcua.certificate import APPLICATION_URI, ensure_certificate
 from service.opcua.conditions import Conditions
-from service.opcua.ua_types import nid, status
+from service.opcua.history import AlarmHistory
+from service.opcua.methods import ConditionMethods
+from service.opcua.trust import ClientTrust
+from service.opcua.ua_types import nid
 from service.opcua.values import Point, mill_points
 from service.settings import OpcUaSettings, OpcUaUser, SettingsError
 
-__all__ = ["ALARM_EVERY_S", "OpcUaError", "OpcUaServer", "OpcUaStats"]
+__all__ = ["ALARM_EVERY_S", "PRODUCT_URI", "OpcUaError", "OpcUaServer", "OpcUaStats"]
 
 log = logging.getLogger(__name__)
 
@@ -68,8 +84,11 @@ _POLICIES = {
     "Basic256Sha256_SignAndEncrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
 }
 T = TypeVar("T")
-#: The longest Acknowledge comment (printable characters) passed on in the condition's event.
-COMMENT_MAX_CHARS = 256
+PRODUCT_URI = "urn:millwatch"
+"""BuildInfo's ProductUri (ProductName and ManufacturerName ``millwatch``, SoftwareVersion the
+installed package's version)."""
+HISTORY_ALARMS = 500
+"""The most alarms (newest first) whose transitions one event HistoryRead reads per notifier."""
 
 
 class OpcUaError(OSError):
@@ -101,6 +120,9 @@ class OpcUaServer:
         self._started = threading.Event()
         self._error: BaseException | None = None
         self._calls = ThreadPoolExecutor(1, thread_name_prefix="millwatch-opcua-backend")
+        # history reads (one backend call per alarm) on their own thread: never in the way of
+        # the value updates
+        self._history_calls = ThreadPoolExecutor(1, thread_name_prefix="millwatch-opcua-history")
         self._logged: set[tuple[str, str]] = set()
         self._logins: Logins | None = None
         self._mills: dict[str, MillNodes] = {}
@@ -133,6 +155,7 @@ class OpcUaServer:
         if self._thread is not None:
             self._thread.join(timeout=30)
         self._calls.shutdown(wait=True, cancel_futures=True)
+        self._history_calls.shutdown(wait=True, cancel_futures=True)
 
     def _run(self) -> None:
         try:
@@ -169,11 +192,12 @@ class OpcUaServer:
         self._logins = Logins(logins, certs, anonymous=s.anonymous, throttle=throttle)
         server = Server(user_manager=self._logins)
         record_client_address(server.iserver)  # (the throttle counts per client host)
-        server.iserver.bind_condition_methods = True  # ConditionRefresh
+        server.product_uri, server.manufacturer_name = PRODUCT_URI, "millwatch"
+        server.set_server_name("millwatch")
         await server.init()
         server.set_endpoint(s.endpoint)
-        server.set_server_name("millwatch")
         await server.set_application_uri(APPLICATION_URI)
+        await _build_info(server)
         tokens: list[type] = [ua.UserNameIdentityToken, ua.X509IdentityToken]
         if s.anonymous:
             tokens.append(ua.AnonymousIdentityToken)
@@ -182,24 +206,33 @@ class OpcUaServer:
         cert, key = await ensure_certificate(self.certificate_dir)
         await server.load_certificate(str(cert))
         await server.load_private_key(str(key))
+        trusted = s.trusted_clients_dir or self.certificate_dir / "trusted"
+        trusted.mkdir(parents=True, exist_ok=True)
+        server.set_certificate_validator(ClientTrust(trusted, trusted.parent / "rejected"))
+        log.info("OPC UA client certificates trusted: those in %s", trusted)
         return server
 
     async def _build_mills(self, server: Server) -> None:
         ns = await server.register_namespace(NAMESPACE_URI)
         root = await root_folder(server, ns)
+        await mill_type(server, ns)
         sites: dict[str, Any] = {}
+        notifiers: dict[str, tuple[ua.NodeId, ...]] = {}
         for config in self.backend.mills.values():
             if config.site not in sites:
-                sites[config.site] = await root.add_folder(
-                    nid(config.site, ns), ua.QualifiedName(config.site, ns)
-                )
+                sites[config.site] = await site_folder(server, root, config.site, ns)
             mill = await MillNodes.create(server, ns, sites[config.site], config)
-            await mill.node.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
             await mill.apply(mill_points(config, None, None, None, None))  # every node, unknown
             self._mills[config.id] = mill
-        self._conditions = await Conditions.create(server, self._mills)
-        ack_method = server.get_node(nid(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge))
-        server.link_method(ack_method, self._acknowledge)
+            notifiers[config.id] = (mill.node.nodeid, sites[config.site].nodeid, root.nodeid,
+                                    nid(ua.ObjectIds.Server))  # fmt: skip
+        self._conditions = conditions = await Conditions.create(server, self._mills, notifiers)
+        assert self._logins is not None
+        methods = ConditionMethods(conditions, self._logins, self._act)
+        methods.link(server)
+        conditions.method_handlers = methods.handler
+        template = conditions.history_template()
+        server.iserver.history_manager = AlarmHistory(server.iserver, template, self._alarms_of)
 
     # ------------------------------------------------------------------ polling
     async def _call(self, fn: Callable[..., T], *args: Any) -> T:
@@ -274,27 +307,44 @@ class OpcUaServer:
         except ApiError:
             return None
 
-    # ------------------------------------------------------------------ Acknowledge
-    async def _acknowledge(self, parent: ua.NodeId, *args: ua.Variant) -> ua.StatusCode:
-        """``Acknowledge(EventId, Comment)`` on a condition, by the calling user."""
-        assert self._conditions is not None and self._logins is not None
-        user: User | None = CALLER.get()
-        if self._logins.role_of(user) != OPERATOR or user is None or user.name is None:
-            return status(ua.StatusCodes.BadUserAccessDenied)
-        if len(args) != 2:
-            return status(ua.StatusCodes.BadArgumentsMissing)
-        event_id = args[0].Value if isinstance(args[0], ua.Variant) else args[0]
-        comment = args[1].Value if isinstance(args[1], ua.Variant) else args[1]
-        text = comment.Text if isinstance(comment, ua.LocalizedText) else str(comment or "")
-        if text and (len(text) > COMMENT_MAX_CHARS or not text.isprintable()):
-            return status(ua.StatusCodes.BadInvalidArgument)  # (sent on to every subscriber)
+    # ------------------------------------------------------------------ methods, history
+    async def _act(self, action: OperatorAction) -> dict[str, Any]:
+        """The backend's ``act`` (on the helper thread)."""
+        return await self._call(self.backend.act, action)
 
-        async def ack(alarm_id: str, by: str) -> dict[str, Any]:
-            return await self._call(self.backend.ack, alarm_id, by)
+    async def _alarms_of(self, notifier: ua.NodeId, lo_ns: int, hi_ns: int) -> list[Any] | None:
+        """The stored alarms (details with transitions) of the mills below ``notifier`` open at
+        some time in ``[lo_ns, hi_ns]``; None when ``notifier`` is none of ours."""
+        assert self._conditions is not None
+        mills = self._conditions.mills_below(notifier)
+        if mills is None:
+            return None
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._history_calls, self._stored_alarms, mills, lo_ns,
+                                          hi_ns)  # fmt: skip
 
-        result = await self._conditions.acknowledge(parent, event_id, text or "", user.name, ack)
-        log.info("OPC UA Acknowledge of %s by %s: %s", parent.to_string(), user.name, result.name)
-        return result
+    def _stored_alarms(self, mills: set[str], lo_ns: int, hi_ns: int) -> list[Any]:
+        board = self._board()
+        rows = [] if board is None else [
+            r for r in board.rows() if r.mill_id in mills and r.raised_ns <= hi_ns
+            and (r.cleared_ns is None or r.cleared_ns >= lo_ns)]  # fmt: skip
+        out = []
+        for row in rows[:HISTORY_ALARMS]:
+            try:
+                out.append(self.backend.alarm(row.alarm_id))
+            except ApiError:
+                continue  # gone from the store since the board listed it
+        return out
+
+
+async def _build_info(server: Server) -> None:
+    """BuildInfo: millwatch, its installed version, built when its package was installed."""
+    try:
+        version = importlib.metadata.version("millwatch")
+    except importlib.metadata.PackageNotFoundError:
+        version = "unknown"
+    built = datetime.fromtimestamp(Path(service.__file__).stat().st_mtime, UTC)
+    await server.set_build_info(PRODUCT_URI, "millwatch", "millwatch", version, version, built)
 
 
 def _password(user: OpcUaUser) -> str:

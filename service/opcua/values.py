@@ -35,12 +35,15 @@ Channels/MissingBlocksTotal               –        ``health.missing_blocks_tot
 The oscillation range of Diering 2011 §6.2.4 (Tables 14–15) is ``RangePct`` of the torque channels,
 the bending range of §6.2.6 (Tables 16–17) ``RangePerRev`` of the bending channel (MPa). A value
 the answer does not have (no steady window yet, no projection) is ``None``: the variable then
-reads with a bad status, never a made-up number.
+reads with a bad status, never a made-up number. Each point also carries the sample time its
+value belongs to (its SourceTimestamp: the steady window's for ``SteadyState/…``, else the
+mill's latest analysed sample) and, where a range of normal operation is known, its ``EURange``
+(:func:`eu_range`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from enum import Enum
 from typing import Any
@@ -53,7 +56,7 @@ from service.reports.life import ComponentLife, LifeReport, Projection
 from service.reports.starts import MonthStarts
 from service.status import NO_STATUS, MillHealthStatus, MillStatus
 
-__all__ = ["Kind", "Point", "mill_points", "ns_to_datetime"]
+__all__ = ["Kind", "Point", "eu_range", "mill_points", "ns_to_datetime"]
 
 _UNIT_OF_KIND = {"torque": "kN·m", "bending": "MPa", "rpm": "rpm"}
 #: The per-channel points of a steady window: mean, range_per_rev, mean_pct, range_pct.
@@ -78,11 +81,16 @@ class Kind(Enum):
 
 @dataclass(frozen=True, slots=True)
 class Point:
-    """One variable's value (``None``: not known), data type and millwatch unit (or None)."""
+    """One variable's value (``None``: not known), data type and millwatch unit (or None);
+    ``t_ns``: the sample time the value belongs to (ns since the epoch; its SourceTimestamp);
+    ``eu_range``: ``(low, high)`` in ``unit``, the range a display scales to (its
+    ``EURange``; None: not defined, the variable is then no AnalogItemType)."""
 
     value: Any
     kind: Kind
     unit: str | None = None
+    t_ns: int | None = None
+    eu_range: tuple[float, float] | None = None
 
 
 def ns_to_datetime(t_ns: int | None) -> datetime | None:
@@ -118,7 +126,39 @@ def mill_points(
     points.update(_steady_points(config, status.latest_steady))
     points.update(_life_points(config, life))
     points.update(_channel_points(config, status.health))
-    return points
+    return _stamped(config, points, status)
+
+
+def _stamped(config: MillConfig, points: dict[str, Point], status: MillStatus) -> dict[str, Point]:
+    """Every point with its sample time (the steady window's for ``SteadyState/…``, the
+    mill's latest analysed sample for the others) and its ``EURange`` (:func:`eu_range`)."""
+    steady = status.latest_steady
+    out = {}
+    for path, p in points.items():
+        t_ns = steady.t_ns if steady is not None and path.startswith("SteadyState/") else None
+        out[path] = replace(p, t_ns=t_ns or status.last_sample_ns,
+                            eu_range=eu_range(config, path))  # fmt: skip
+    return out
+
+
+def eu_range(config: MillConfig, path: str) -> tuple[float, float] | None:
+    """The ``EURange`` of a point (OPC UA Part 8 §5.3.2: the range of normal operation a
+    display scales to), where millwatch has one: speed 0–110 % of rated, imbalance and % of
+    rated torque 0–100 %, torque range 0–100 %, bending amplitude 0 to the mill's critical
+    bending limit (``[alarms] bending_amplitude_critical_mpa``), damage 0–1 (Miner's sum: 1 is
+    the end of the fatigue life), a channel's mean its ``full_scale``."""
+    parts = path.split("/")
+    fixed = {"SpeedPct": (0.0, 110.0), "ImbalancePct": (0.0, 100.0), "MeanPct": (0.0, 100.0),
+             "RangePct": (0.0, 100.0), "Damage": (0.0, 1.0),
+             "Amplitude": (0.0, float(config.alarms.bending_amplitude_critical_mpa))}  # fmt: skip
+    if parts[-1] in fixed:
+        return fixed[parts[-1]]
+    if parts[0] == "SteadyState" and parts[-1] == "Mean" and len(parts) == 3:
+        channel = config.channels.get(parts[1])
+        if channel is not None and channel.full_scale is not None:
+            low, high = channel.full_scale
+            return float(low), float(high)
+    return None
 
 
 def _starts_points(starts: MonthStarts | None) -> dict[str, Point]:

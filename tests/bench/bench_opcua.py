@@ -43,6 +43,7 @@ from ingest.zenoh_session import build_config, free_loopback_port, open_session,
 from service.api.local_backend import LocalBackend
 from service.opcua.server import OpcUaServer
 from service.settings import OpcUaSettings, ServiceSettings
+from service.status import MillStatus
 from service.worker.mill_job import MillJob
 from service.worker.runtime import ServiceRuntime
 
@@ -93,14 +94,17 @@ class ChangingBackend:
     def __getattr__(self, name: str) -> Any:
         return getattr(self.real, name)
 
-    def mill_statuses(self) -> dict[str, dict[str, Any]]:
+    def mill_statuses(self) -> dict[str, MillStatus]:
         now = time.time() - T0
         out = {}
         for mill_id, status in self.real.mill_statuses().items():
             offset = self._offset[mill_id]
             changed = np.floor(now - offset) + offset
-            health = {**status["health"], "missing_blocks_total": int(changed * 1000)}
-            out[mill_id] = {**status, "health": health}
+            if status.health is None:
+                out[mill_id] = status
+                continue
+            health = status.health.model_copy(update={"missing_blocks_total": int(changed * 1000)})
+            out[mill_id] = status.model_copy(update={"health": health})
         return out
 
 

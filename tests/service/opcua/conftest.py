@@ -1,7 +1,8 @@
 """The plant of the OPC UA tests: a real runtime (zenoh on 127.0.0.1, MCAP, SQLite) with two LRS
 mills, the REST API (uvicorn) and the OPC UA server over the same runtime, fed one simulated
 start per mill over zenoh while an OPC UA client records the alarm events and a REST poller
-records when each alarm appears and when it is acknowledged."""
+records when each alarm appears and when it is acknowledged. A third mill, on a site of its own,
+is fed nothing (it never has an alarm)."""
 
 from __future__ import annotations
 
@@ -32,6 +33,7 @@ from tests.integration.live import wait as wait_until
 from tests.service.conftest import MILL, _settings, serve
 
 MILL_B = "sag-5200-lrs-b"
+MILL_IDLE, SITE_IDLE = "ball-idle", "kroondal"  # fed nothing: never an alarm
 OPERATOR, OPERATOR_PW = "operator", "op-secret-1"
 VIEWER, VIEWER_PW = "viewer", "view-secret-2"
 SCENE_S = 40.0
@@ -160,13 +162,21 @@ def opcua_settings(tmp: Path, port: int) -> OpcUaSettings:
     })  # fmt: skip
 
 
+def trusted_dir(plant: Plant) -> Path:
+    """The OPC UA server's trust list of client certificates (made at its start)."""
+    return plant.directory / "opcua" / "trusted"
+
+
 @pytest.fixture(scope="package")
 def plant(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Plant]:
     tmp = tmp_path_factory.mktemp("opcua")
     zenoh_port = free_loopback_port()
     settings = _settings(tmp, zenoh_port, stale_after_s=600.0)
     first = settings.load_mills()[MILL]
-    mills = {MILL: first, MILL_B: first.model_copy(update={"id": MILL_B})}
+    quiet = first.alarms.model_copy(update={"stale_after_s": 1e9})  # no data, no alarm
+    mills = {MILL: first, MILL_B: first.model_copy(update={"id": MILL_B}),
+             MILL_IDLE: first.model_copy(update={"id": MILL_IDLE, "site": SITE_IDLE,
+                                                 "alarms": quiet})}  # fmt: skip
     runtime = ServiceRuntime(settings, mills, MillJob)
     runtime.start()
     stack: list[Any] = []
@@ -182,7 +192,7 @@ def plant(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Plant]:
         stack.append(recorder.stop)
         poller.start()
         stack.append(poller.stop)
-        _feed(runtime, zenoh_port, list(mills.values()))
+        _feed(runtime, zenoh_port, [mills[MILL], mills[MILL_B]])
         yield Plant(runtime, rest, opcua.endpoint, opcua, recorder.events, poller.seen,
                     poller.acked, tmp)  # fmt: skip
     finally:

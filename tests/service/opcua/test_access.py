@@ -1,11 +1,14 @@
 """Logins and the per-request rule: passwords compared, anonymous only when allowed and then
-never writing or calling; the caller recorded for the method that runs next."""
+never writing nor calling anything but ConditionRefresh; the caller recorded for the method
+that runs next."""
 
 from __future__ import annotations
 
 import pytest
 from asyncua import ua
+from asyncua.common.utils import Buffer
 from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.ua.ua_binary import struct_to_binary
 
 from service.opcua.access import CALLER, OPERATOR, VIEWER, AccessRules, Login, Logins
 
@@ -48,11 +51,25 @@ SUBSCRIBE = ua.NodeId(ua.ObjectIds.CreateMonitoredItemsRequest_Encoding_DefaultB
 ADD_NODES = ua.NodeId(ua.ObjectIds.AddNodesRequest_Encoding_DefaultBinary)
 
 
-def test_anonymous_reads_and_subscribes_but_never_writes_nor_calls():
+def _call_body(*method_ids: int) -> Buffer:
+    params = ua.CallParameters(MethodsToCall=[
+        ua.CallMethodRequest(ObjectId=ua.NodeId(ua.ObjectIds.ConditionType),
+                             MethodId=ua.NodeId(m)) for m in method_ids])  # fmt: skip
+    return Buffer(struct_to_binary(params))
+
+
+def test_anonymous_reads_subscribes_and_refreshes_but_never_writes_nor_calls_other_methods():
     rules, anon = AccessRules(), User(role=UserRole.Anonymous)
     assert rules.check_validity(anon, READ, None) and rules.check_validity(anon, SUBSCRIBE, None)
     assert not rules.check_validity(anon, WRITE, None)
-    assert not rules.check_validity(anon, CALL, None)
+    refresh = _call_body(ua.ObjectIds.ConditionType_ConditionRefresh,
+                         ua.ObjectIds.ConditionType_ConditionRefresh2)  # fmt: skip
+    assert rules.check_validity(anon, CALL, refresh)
+    assert refresh.read(1)  # the rule read a copy: the server still has the whole body
+    ack = _call_body(ua.ObjectIds.ConditionType_ConditionRefresh,
+                     ua.ObjectIds.AcknowledgeableConditionType_Acknowledge)  # fmt: skip
+    assert not rules.check_validity(anon, CALL, ack)
+    assert not rules.check_validity(anon, CALL, Buffer(b"\x01"))  # undecodable: refused
 
 
 def test_users_call_but_nobody_changes_the_address_space():

@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import math
 import re
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,7 @@ from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
+from alarms.actions import COMMENT_MAX_CHARS
 from service.api.local_backend import LocalBackend
 from service.opcua.address_space import NAMESPACE_URI
 from service.opcua.conditions import SEVERITY
@@ -31,6 +33,7 @@ from tests.service.opcua.conftest import (
     VIEWER,
     VIEWER_PW,
     Plant,
+    trusted_dir,
     wait_until,
 )
 
@@ -84,7 +87,9 @@ def test_browse_shows_sites_and_mills_as_rest_lists_them(plant: Plant) -> None:
 
     listed = asyncio.run(browse())
     mills = rest(plant, "/mills")
-    assert listed == {SITE: sorted(m["id"] for m in mills)}
+    sites = {m["site"] for m in mills}
+    assert listed == {s: sorted(m["id"] for m in mills if m["site"] == s) for s in sites}
+    assert len(sites) == 2
 
 
 async def _ns(c: Client) -> int:
@@ -193,7 +198,7 @@ def test_an_overlong_acknowledge_comment_is_refused_and_changes_nothing(plant: P
                 ACK, ua.Variant(event.EventId, ua.VariantType.ByteString), ua.LocalizedText(comment)
             )
 
-    for comment in ("x" * 257, "seen\x1b[2J"):
+    for comment in ("x" * (COMMENT_MAX_CHARS + 1), "seen\x1b[2J"):
         with pytest.raises(ua.UaStatusCodeError) as refused:
             asyncio.run(acknowledge(comment))
         assert _status_of(refused.value) == ua.StatusCodes.BadInvalidArgument
@@ -211,6 +216,7 @@ def test_acknowledge_over_opcua_with_credentials_shows_on_rest(
     async def acknowledge() -> None:
         c = client(plant, OPERATOR, OPERATOR_PW)
         cert, key = await _client_certificate(tmp_path)
+        shutil.copy(cert, trusted_dir(plant) / "test-client.der")  # on the trust list
         await c.set_security(SecurityPolicyBasic256Sha256, str(cert), str(key),
                              mode=ua.MessageSecurityMode.SignAndEncrypt)  # fmt: skip
         async with c:
@@ -222,6 +228,8 @@ def test_acknowledge_over_opcua_with_credentials_shows_on_rest(
     stored = rest(plant, f"/alarms/{alarm['alarm_id']}")
     assert stored["state"] == "acknowledged"
     assert stored["acked_by"] == OPERATOR
+    ack = [t for t in stored["transitions"] if t["kind"] == "acknowledged"]
+    assert ack[-1]["comment"] == "seen in the control room" and ack[-1]["by"] == OPERATOR
     acked = wait_until(lambda: [e for _, e in alarm_events(plant, MILL)
                                 if getattr(e, "AckedState/Id")], 5.0)  # fmt: skip
     assert acked and acked[-1].ClientUserId == OPERATOR

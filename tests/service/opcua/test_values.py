@@ -26,7 +26,7 @@ from service.api.domain_metrics import domain_families
 from service.api.mill_views import mill_detail
 from service.api.models import MillSummary
 from service.opcua.address_space import datavalue
-from service.opcua.values import Kind, Point, mill_points
+from service.opcua.values import Kind, Point, mill_points, ns_to_datetime
 from service.remote.protocol import encode
 from service.reports.history import life_inputs
 from service.reports.life import compute_life, life_from_dict, life_to_dict
@@ -173,3 +173,27 @@ def test_metrics_read_the_life_answer_by_attribute(answers):
     assert all(v > 0 for v in damage.values()) and set(damage) == set(MILL.components)
     assert life.status == "insufficient_history"  # minutes of data: no remaining-life gauge
     assert families["millwatch_remaining_life_years"].samples == []
+
+
+def test_points_carry_their_sample_time_and_known_ranges(answers, points):
+    """SourceTimestamp: the steady window's time for steady points, else the latest sample's;
+    EURange where a range of normal operation is known (in the point's unit)."""
+    status = answers["status"]
+    window_ns, last_ns = status.latest_steady.t_ns, status.last_sample_ns
+    assert window_ns < last_ns
+    for path, point in points.items():
+        assert point.t_ns == (window_ns if path.startswith("SteadyState/") else last_ns), path
+        written = datavalue(point)
+        assert written.SourceTimestamp == ns_to_datetime(point.t_ns)
+        assert written.ServerTimestamp is not None
+    assert points["SteadyState/SpeedPct"].eu_range == (0.0, 110.0)
+    for comp in MILL.components:
+        assert points[f"Components/{comp}/Damage"].eu_range == (0.0, 1.0)
+    bending = [n for n in STEADY if MILL.channels[n].kind == "bending"]
+    for name in bending:
+        limit = MILL.alarms.bending_amplitude_critical_mpa
+        assert points[f"SteadyState/{name}/Amplitude"].eu_range == (0.0, limit)
+    ranged = {p.rsplit("/", 1)[-1] for p, pt in points.items() if pt.eu_range is not None}
+    assert ranged <= {"SpeedPct", "ImbalancePct", "MeanPct", "RangePct", "Amplitude", "Damage",
+                      "Mean"}  # fmt: skip
+    assert points["Channels/MissingBlocksTotal"].eu_range is None
