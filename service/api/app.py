@@ -8,7 +8,8 @@ running :class:`~service.worker.runtime.ServiceRuntime` in this process (a runti
 directly is wrapped in one), or a :class:`~service.remote.zenoh_backend.ZenohBackend` that asks
 the workers over zenoh (``millwatch api``). The routes are :func:`service.api.router.api_router`;
 :class:`~service.api.limits.RequestGuard` bounds bodies and checks the API key before a route
-reads anything. Nothing is read at import time.
+reads anything; :class:`~service.api.head.HeadAsGet` answers HEAD wherever GET exists. Nothing
+is read at import time.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from fastapi_offline import FastAPIOffline
 
 from service.api.backend import Backend
 from service.api.errors import install_problem_handlers
+from service.api.head import HeadAsGet
 from service.api.limits import ApiLimits, RenderSlots, RequestGuard, keyed_routes
 from service.api.local_backend import LocalBackend
 from service.api.router import api_router
@@ -42,6 +44,7 @@ def create_app(source: ServiceRuntime | Backend, limits: ApiLimits | None = None
     app.state.backend = backend
     install_problem_handlers(app)
     app.include_router(api_router(backend, RenderSlots(limits)))
+    app.add_middleware(HeadAsGet, router=app.router)  # HEAD wherever GET exists
     keyed = keyed_routes(KEYED_ROUTES)
     app.add_middleware(RequestGuard, limits=limits, api_key=backend.api_key, keyed=keyed)
     return app

@@ -249,7 +249,8 @@ class AlarmList(BaseModel):
                 {
                     "alarms": [ALARM_EXAMPLE],
                     "count": 1,
-                    "cursor": 1714560000000000000,
+                    "cursor": "7f3a9c2e-118",
+                    "resync": False,
                 }
             ]
         }
@@ -257,8 +258,15 @@ class AlarmList(BaseModel):
 
     alarms: list[AlarmOut] = Field(description="Most recently changed first.")
     count: int
-    cursor: int | None = Field(
-        description="Largest updated_ns returned (or the since given): pass it back as since."
+    cursor: str = Field(
+        description="The alarm board's latest change when this answer was made "
+        "(<epoch>-<change number>): pass it back as since to get every alarm changed after "
+        "it. Not a time."
+    )
+    resync: bool = Field(
+        False,
+        description="true when since was a cursor this API did not issue (it restarted, or "
+        "another replica answered): the listing is whole — replace what you hold.",
     )
 
 

@@ -128,14 +128,21 @@ def test_alarms_etag_answers_304_while_nothing_changed(client):
     assert cleared.status_code == 200 and cleared.headers["etag"] != tag
 
 
-def test_alarms_since_cursor_returns_only_later_changes(client):
+def test_alarms_cursor_is_a_change_number_and_since_it_lists_only_later_changes(client):
     body = client.get("/alarms").json()
     cursor = body["cursor"]
-    assert cursor == max(a["updated_ns"] for a in body["alarms"])
-    at = client.get("/alarms", params={"since": cursor}).json()
-    assert at["count"] >= 1 and all(a["updated_ns"] >= cursor for a in at["alarms"])
-    after = client.get("/alarms", params={"since": cursor + 1}).json()
-    assert after == {"alarms": [], "count": 0, "cursor": cursor + 1}
+    assert re.fullmatch(r"[0-9a-f]{8}-[0-9]+", cursor) and body["resync"] is False
+    after = client.get("/alarms", params={"since": cursor}).json()
+    assert after["resync"] is False
+    epoch, change = cursor.split("-")
+    later = int(after["cursor"].split("-")[1])  # (the runtime runs on: stale channels may alarm)
+    assert after["cursor"].startswith(epoch) and later >= int(change)
+    assert (after["count"] == 0) == (later == int(change))
+    foreign = client.get("/alarms", params={"since": "00000000-5"}).json()  # a restarted API's
+    assert foreign["resync"] is True and foreign["count"] >= body["count"] >= 1
+    newest = max(a["updated_ns"] for a in body["alarms"])  # integer ns: a sample-time filter
+    at = client.get("/alarms", params={"since": newest}).json()
+    assert at["count"] >= 1 and all(a["updated_ns"] >= newest for a in at["alarms"])
 
 
 def test_alarm_times_are_also_iso_and_since_takes_iso(client):
@@ -144,7 +151,7 @@ def test_alarm_times_are_also_iso_and_since_takes_iso(client):
     assert alarm["raised"] == iso_utc(alarm["raised_ns"]) and alarm["raised"].endswith("Z")
     assert alarm["updated"] == iso_utc(alarm["updated_ns"])
     assert "acked" in alarm and "cleared" in alarm
-    whole_s = body["cursor"] // 10**9 * 10**9
+    whole_s = max(a["updated_ns"] for a in body["alarms"]) // 10**9 * 10**9
     since = iso_utc(whole_s).replace("Z", "+00:00")
     at = client.get("/alarms", params={"since": since}).json()
     assert at["count"] >= 1 and all(a["updated_ns"] >= whole_s for a in at["alarms"])
@@ -188,6 +195,7 @@ def test_ack_of_an_unknown_alarm_is_a_404_naming_it(client):
 def test_ack_is_applied_by_the_worker_stored_published_and_checkpointed(client, live_api):
     alarm = _start_alarm(client)
     tag = client.get("/alarms").headers["etag"]
+    cursor = client.get("/alarms", params={"state": "open"}).json()["cursor"]
     heard: list[dict] = []
     with open_session(build_config(connect=[tcp_endpoint(live_api.zenoh_port)])) as session:
         sub = session.declare_subscriber(
@@ -207,6 +215,10 @@ def test_ack_is_applied_by_the_worker_stored_published_and_checkpointed(client, 
     assert [t["kind"] for t in acked["transitions"]][-1] == "acknowledged"
     assert heard and heard[-1]["transition"]["kind"] == "acknowledged"
     assert client.get("/alarms", headers={"If-None-Match": tag}).status_code == 200
+    # a cursor poller with the open filter sees the ack (the change cursor, not sample time)
+    changed = client.get("/alarms", params={"state": "open", "since": cursor}).json()
+    seen = {a["alarm_id"]: a for a in changed["alarms"]}
+    assert seen[alarm["alarm_id"]]["state"] == "acknowledged" and not changed["resync"]
     _, state = live_api.runtime.store.latest_checkpoints()[MILL]
     conditions = state["pipelines"][MILL]["alarms"]["conditions"]
     assert any((c["alarm"] or {}).get("state") == "acknowledged" for c in conditions)
