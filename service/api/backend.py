@@ -23,6 +23,7 @@ from prometheus_client import CollectorRegistry
 
 from analytics.drivetrain.mill_config import MillConfig
 from service.api.alarm_board import AlarmBoard
+from service.api.journal import JournalPage, JournalQuery
 from service.reports.life import LifeReport
 from service.reports.monthly import MonthlyReport
 from service.reports.starts import MonthStarts
@@ -76,3 +77,8 @@ class Backend(Protocol):
     def reports_status(self) -> dict[str, Any]: ...
 
     def registry(self) -> CollectorRegistry: ...
+
+    def alarm_journal(self, query: JournalQuery) -> JournalPage:
+        """Stored alarm transitions in journal order, at most ``query.limit + 1``, and the
+        mills that did not answer (``GET /alarms/journal``, :mod:`service.api.journal`)."""
+        ...

@@ -19,6 +19,7 @@ from prometheus_client import CollectorRegistry
 from alarms.lifecycle import Transition
 from service.api.alarm_board import AlarmBoard, row_from_dict
 from service.api.alarm_views import acknowledge, alarm_detail
+from service.api.journal import JournalPage, JournalQuery, journal_entries
 from service.api.metrics import metrics_registry
 from service.api.mill_views import (
     config_of,
@@ -81,6 +82,12 @@ class LocalBackend:
         detail = acknowledge(self.runtime, store_of(self.runtime), alarm_id, by)
         self._board.merge([row_from_dict(detail)])
         return detail
+
+    def alarm_journal(self, query: JournalQuery) -> JournalPage:
+        """The store's journal entries (404 for a mill not analysed here)."""
+        if query.mill_id is not None:
+            config_of(self.mills, query.mill_id)
+        return JournalPage(journal_entries(store_of(self.runtime), query), [])
 
     # ------------------------------------------------------------------ mills
     def status(self, mill_id: str) -> MillStatus:

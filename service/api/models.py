@@ -18,8 +18,10 @@ from service.status import MillStatus
 __all__ = [
     "AckBody",
     "AlarmDetail",
+    "AlarmJournal",
     "AlarmList",
     "AlarmOut",
+    "JournalEntry",
     "MillDetail",
     "MillSummary",
     "MonthStarts",
@@ -283,4 +285,57 @@ class AckBody(BaseModel):
         max_length=64,
         pattern=r"^[^\x00-\x1f\x7f-\x9f]+$",
         description="Who acknowledges: at most 64 characters, no control characters.",
+    )
+
+
+class JournalEntry(TransitionOut):
+    """One transition in the alarm journal, with its alarm's identity beside it."""
+
+    mill_id: str
+    rule: str = Field(description="The alarm's rule (README master alarm database).")
+    subject: str = Field(description="What the rule watches, e.g. a channel; '' for the mill.")
+    quantity: str
+    unit: str
+    simulated: bool = Field(description="Raised on simulated data (the demo's mills).")
+
+
+class AlarmJournal(BaseModel):
+    """``GET /alarms/journal``: stored transitions in time order, a page at a time."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "entries": [
+                        {
+                            **{k: ALARM_EXAMPLE[k] for k in ("alarm_id", "seq", "severity")},
+                            "kind": "raised",
+                            "t_ns": 1714560000000000000,
+                            "t": "2024-05-01T10:40:00.000Z",
+                            "state": "raised",
+                            **{k: ALARM_EXAMPLE[k] for k in ("value", "threshold", "message")},
+                            "by": None,
+                            **{k: ALARM_EXAMPLE[k] for k in ("mill_id", "rule", "subject")},
+                            **{k: ALARM_EXAMPLE[k] for k in ("quantity", "unit", "simulated")},
+                        }
+                    ],
+                    "count": 1,
+                    "next": None,
+                    "unreachable": [],
+                }
+            ]
+        }
+    )
+
+    entries: list[JournalEntry] = Field(
+        description="In time order: t_ns, then alarm_id, then seq. An acknowledgement's time "
+        "is the wall clock, the others' the mill's sample time."
+    )
+    count: int = Field(description="Entries on this page (at most limit).")
+    next: str | None = Field(
+        description="Pass back as after= for the next page; null: this is the last page."
+    )
+    unreachable: list[str] = Field(
+        description="Mills whose worker did not answer (millwatch api): their entries are "
+        "missing from this page."
     )

@@ -47,6 +47,7 @@ from service.remote.protocol import (
     checked_ack,
     decode_args,
     encode,
+    journal_query_of,
     month_of,
     problem_of,
 )
@@ -92,6 +93,7 @@ ANSWERS: dict[Question, Answer] = {
     Question.ALARM: _alarm,
     Question.ACK: _ack,
     Question.FLEET: lambda b, m, _: fleet_mill_to_dict(b.fleet_mill(m)),
+    Question.JOURNAL: lambda b, m, a: b.alarm_journal(journal_query_of(a, m)).entries,
 }
 """How a worker answers each :class:`~service.remote.protocol.Question`."""
 
