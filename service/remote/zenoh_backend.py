@@ -20,7 +20,8 @@ a worker that does not answer in time is a 504 naming the mill, the worker and i
 never a hang. Errors the worker raised come back as ``reply_err`` problem JSON and are raised
 again as the same :mod:`service.api.errors` exceptions, so the API answers what an in-process
 one would. ``GET /mills`` and ``/ready`` gather every mill's status with one ``get`` on
-``millwatch/v1/*/*/@query/status``.
+``millwatch/v1/*/*/@query/status``; ``GET /alarms/journal`` without a mill gathers every mill's
+``…/@query/journal`` page and merges them in time order (:func:`service.api.journal.merge_pages`).
 """
 
 from __future__ import annotations
