@@ -34,7 +34,9 @@ KEYED_ROUTES = (("POST", ACK_PATH),)
 INT64_MAX = 2**63 - 1
 
 _STATE_HELP = (
-    "raised, acknowledged, cleared — comma-separated — or open (= raised,acknowledged) or all."
+    "raised, acknowledged, cleared — comma-separated — or open (= raised,acknowledged) or all. "
+    "With a cursor in since, every changed alarm is listed whatever its state (one that left "
+    "these states comes back once, to be dropped)."
 )
 _SINCE_HELP = (
     "The previous answer's cursor (e.g. 7f3a9c2e-118): every alarm changed after it, in its "
