@@ -83,12 +83,6 @@ class LocalBackend:
         self._board.merge([row_from_dict(detail)])
         return detail
 
-    def alarm_journal(self, query: JournalQuery) -> JournalPage:
-        """The store's journal entries (404 for a mill not analysed here)."""
-        if query.mill_id is not None:
-            config_of(self.mills, query.mill_id)
-        return JournalPage(journal_entries(store_of(self.runtime), query), [])
-
     # ------------------------------------------------------------------ mills
     def status(self, mill_id: str) -> MillStatus:
         """The worker's status snapshot of one mill (404 for a mill not analysed here;
@@ -178,3 +172,9 @@ class LocalBackend:
         if self._registry is None:
             self._registry = metrics_registry(self.runtime)
         return self._registry
+
+    def alarm_journal(self, query: JournalQuery) -> JournalPage:
+        """The store's journal entries (404 for a mill not analysed here)."""
+        if query.mill_id is not None:
+            config_of(self.mills, query.mill_id)
+        return JournalPage(journal_entries(store_of(self.runtime), query), [])

@@ -356,17 +356,6 @@ class ZenohBackend:
         self._board.merge([row_from_dict(detail)])
         return detail
 
-    def alarm_journal(self, query: JournalQuery) -> JournalPage:
-        """The journal of one mill (its worker's answer), or of every mill: one ``get`` on
-        every mill's ``@query/journal``, the answers merged in order; mills that did not
-        answer are ``unreachable``."""
-        args = journal_args(query)
-        if query.mill_id is not None:
-            return JournalPage(self._ask(query.mill_id, Question.JOURNAL, args), [])
-        gathered = self._gather(Question.JOURNAL, args=args)
-        unreachable = [m for m in self.mills if m not in gathered]
-        return JournalPage(merge_pages(gathered.values(), query.limit), unreachable)
-
     def readiness(self) -> dict[str, Any]:
         """Ready when zenoh is connected, every mill's worker answers and is ready itself
         (archive, store, worker thread), every mill's data is fresh and every mill is analysed
@@ -412,6 +401,17 @@ class ZenohBackend:
         if self._registry is None:
             self._registry = remote_registry(self)
         return self._registry
+
+    def alarm_journal(self, query: JournalQuery) -> JournalPage:
+        """The journal of one mill (its worker's answer), or of every mill: one ``get`` on
+        every mill's ``@query/journal``, the answers merged in order; mills that did not
+        answer are ``unreachable``."""
+        args = journal_args(query)
+        if query.mill_id is not None:
+            return JournalPage(self._ask(query.mill_id, Question.JOURNAL, args), [])
+        gathered = self._gather(Question.JOURNAL, args=args)
+        unreachable = [m for m in self.mills if m not in gathered]
+        return JournalPage(merge_pages(gathered.values(), query.limit), unreachable)
 
 
 def _error_payload(reply: zenoh.Reply) -> bytes:

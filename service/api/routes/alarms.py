@@ -58,6 +58,13 @@ _POLL_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 
 
+def _since(since: str | int | datetime | None) -> Cursor | int | None:
+    """``since`` as the board takes it: a change cursor, or ns UTC of sample time."""
+    if isinstance(since, str):
+        return Cursor.parse(since)
+    return ns_of(since) if isinstance(since, datetime) else since
+
+
 def alarms_router(backend: Backend) -> APIRouter:
     """The alarm routes over a backend."""
     router = APIRouter(tags=["alarms"])
@@ -110,10 +117,3 @@ def alarms_router(backend: Backend) -> APIRouter:
         return with_iso(backend.ack(alarm_id, by))
 
     return router
-
-
-def _since(since: str | int | datetime | None) -> Cursor | int | None:
-    """``since`` as the board takes it: a change cursor, or ns UTC of sample time."""
-    if isinstance(since, str):
-        return Cursor.parse(since)
-    return ns_of(since) if isinstance(since, datetime) else since
