@@ -16,7 +16,6 @@ from typing import Any
 from fastapi.testclient import TestClient
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from prometheus_client import CollectorRegistry
 
 from alarms.lifecycle import (
     Alarm,
@@ -32,6 +31,10 @@ from alarms.rules import Severity
 from service.api.alarm_board import AlarmBoard, Cursor, row_to_dict
 from service.api.app import create_app
 from service.api.times import with_iso
+from service.settings import ServiceSettings
+from service.store.database import Store
+from service.worker.mill_job import MillJob
+from service.worker.runtime import ServiceRuntime
 from tests.alarms.helpers import NS, T0
 
 MILLS = ("m1", "m2", "m3")
@@ -235,30 +238,33 @@ def test_a_poller_racing_a_writer_thread_ends_holding_the_board():
     assert poller.view == poller.expected(plant.board) and polls > 1
 
 
-class _BoardOnly:
-    """The part of a backend ``GET /alarms`` asks: the alarm board (no mills, no key)."""
-
-    api_key = None
-
-    def __init__(self, board: AlarmBoard) -> None:
-        self.board = board
-        self.mills: dict[str, Any] = {}
-
-    def alarm_board(self) -> AlarmBoard:
-        return self.board
-
-    def registry(self) -> CollectorRegistry:
-        return CollectorRegistry()
+def _served_store(tmp_path) -> tuple[ServiceRuntime, Store]:
+    """A runtime whose store is open (its worker is not needed: transitions are written and
+    announced below, as the worker does after its commit)."""
+    settings = ServiceSettings.model_validate({"store": {"path": str(tmp_path / "mw.db")}})
+    runtime = ServiceRuntime(settings, {}, MillJob)
+    runtime.store = Store(settings.store.path)
+    return runtime, runtime.store
 
 
-def test_over_http_a_cursor_poller_sees_the_ack_of_an_old_alarm_and_head_answers_too():
-    plant = Plant()
-    plant.act("raise", 1, 0)  # m2 at t = 0
-    plant.act("raise", 0, 600)  # m1 at t = 600 s: max(updated_ns) = 600 s
-    with TestClient(create_app(_BoardOnly(plant.board))) as client:
+def _commit(runtime: ServiceRuntime, store: Store, transitions: list[Transition]) -> None:
+    """What the worker does with the engine's transitions: store them, then tell the
+    listeners (the API's alarm board)."""
+    with store.transaction() as db:
+        Store.put_alarm_transitions(db, transitions, [t.alarm for t in transitions])
+    for listener in runtime.alarm_listeners:
+        listener(transitions)
+
+
+def test_over_http_a_cursor_poller_sees_the_ack_of_an_old_alarm_and_head_answers_too(tmp_path):
+    runtime, store = _served_store(tmp_path)
+    m2, m1 = _new_alarm("m2", 0, 0), _new_alarm("m1", 600, 1)  # max(updated_ns): t = 600 s
+    with store, TestClient(create_app(runtime)) as client:
+        _commit(runtime, store, [raise_alarm(m2), raise_alarm(m1)])
         first = client.get("/alarms", params={"state": "open"})
+        assert first.json()["count"] == 2
         cursor, newest = first.json()["cursor"], T0 + 600 * NS
-        plant.act("ack", 0, 300)  # the old alarm, acknowledged at t = 300 s
+        _commit(runtime, store, acknowledge(m2, "operator-7", T0 + 300 * NS, False))  # t < 600 s
         changed = client.get("/alarms", params={"state": "open", "since": cursor}).json()
         assert [(a["mill_id"], a["state"]) for a in changed["alarms"]] == [("m2", "acknowledged")]
         by_time = client.get("/alarms", params={"since": newest}).json()  # the old cursor
@@ -272,3 +278,6 @@ def test_over_http_a_cursor_poller_sees_the_ack_of_an_old_alarm_and_head_answers
                             headers={"If-None-Match": get.headers["etag"]})  # fmt: skip
         assert again.status_code == 304
         assert client.head("/alarms/x/ack").status_code == 405  # no GET there
+        journal = client.get("/alarms/journal").json()["entries"]
+        assert [(e["mill_id"], e["kind"]) for e in journal] == [
+            ("m2", "raised"), ("m2", "acknowledged"), ("m1", "raised")]  # fmt: skip
