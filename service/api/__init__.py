@@ -4,7 +4,8 @@ Routes ask a backend: the store and runtime in process, or the workers over zeno
 
 What is here:
 
-* :mod:`service.api.app` — :func:`~service.api.app.create_app`: the app over a backend.
+* :mod:`service.api.app` — :func:`~service.api.app.create_app`: the app over a backend;
+  :class:`~service.api.app.HeadAsGet`: HEAD wherever GET exists (the GET without its body).
 * :mod:`service.api.router` — the one router including every resource's routes.
 * :mod:`service.api.routes` — one router file per resource (its own map).
 * :mod:`service.api.backend` — the :class:`~service.api.backend.Backend` protocol: what the
@@ -14,7 +15,11 @@ What is here:
 * :mod:`service.api.mill_views`, :mod:`service.api.alarm_views` — what the per-mill and alarm
   endpoints answer, from the store and the worker's status snapshot; operator actions
   (:mod:`alarms.actions`) applied through the worker thread.
-* :mod:`service.api.alarm_board` — every alarm's current state in memory (cheap ``/alarms``).
+* :mod:`service.api.alarm_board` — every alarm's current state in memory (cheap ``/alarms``),
+  with the change cursor: a change number of the board and its epoch, never sample time, so a
+  poller misses no change (an acknowledgement of an older alarm included).
+* :mod:`service.api.journal` — the alarm journal (``/alarms/journal``): stored transitions in
+  time order by mill and time, keyset-paged; per-mill pages of workers merged in order.
 * :mod:`service.api.models` — the request and response bodies (OpenAPI schema); the typed
   results of the analysis (``MillStatus``, ``LifeReport``, ``MonthStarts``, ``FleetView``) are
   defined once by their producers and are the backend's return types and the response models.
@@ -26,7 +31,9 @@ What is here:
 * :mod:`service.api.metrics` — the Prometheus collector of a runtime;
   :mod:`service.api.domain_metrics` — its domain gauges (damage, remaining life, oscillation,
   bending, starts, lag, state) and the cache of the life computation they need.
-* :mod:`service.api.times` — every ``*_ns`` time also as ISO-8601 UTC; ISO query times.
+* :mod:`service.api.times` — every ``*_ns`` time also as ISO-8601 UTC (every JSON answer,
+  the report JSON and ``/reports/status`` included: a test walks every GET route); ISO query
+  times.
 
 Data flow: request → route (validates, calls one backend method) → ``LocalBackend`` → views →
 store/runtime status (times given ISO-8601 beside, :func:`service.api.times.with_iso`, in the

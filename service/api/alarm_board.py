@@ -14,17 +14,32 @@ Merging is by the alarm's ``seq`` (it counts the alarm's transitions): a row rep
 only when its ``seq`` is higher, so the same transition arriving twice (store load and callback,
 republished after a crash recovery, message and query reply) changes nothing, whatever the order.
 
+The change cursor: every row the board accepts gets the board's next *change number* (1, 2, …,
+in the order the board took them, whatever the alarms' own times), and the board has an *epoch*,
+a random id drawn when it is made. A listing's ``cursor`` (:class:`Cursor`, ``"<epoch>-<n>"``) is
+the board's change number when the listing was made; ``since=<cursor>`` lists every alarm whose
+change number is above it — in its current state, whatever the ``state`` filter (an alarm that
+left the states a poller watches comes back once, so it can drop it). Sample time plays no part,
+so an acknowledgement of an old alarm, a comment, or a lagging mill's new alarm is never missed
+(``updated_ns``, the mill's clock, would miss them). A cursor of another epoch (the API process
+restarted, or another replica answered) or one this board never issued gets the whole listing
+with ``resync`` true: the poller replaces what it holds, never an empty answer.
+
 Listings are computed once per board *version* (it increments on every change) and filter, and
-kept as ready JSON bytes with their ETag (:func:`service.api.alarm_views.etag`, unchanged): a poll
-that finds its listing cached costs a dict lookup, and a ``304`` costs no serialisation at all.
+kept as ready JSON bytes with their ETag (the listed ``(alarm_id, seq)`` pairs and the cursor: it
+changes exactly when the body would): a poll that finds its listing cached costs a dict lookup,
+and a ``304`` costs no serialisation at all.
 
 Memory: the board holds every alarm ever stored, like the table (about 1 kB each).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+import re
+import secrets
 import threading
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
@@ -32,13 +47,36 @@ from typing import Any
 
 from alarms.lifecycle import Alarm, Transition
 from alarms.wire import decode_transition
-from service.api.alarm_views import etag
 from service.api.times import with_iso
 
-__all__ = ["AlarmBoard", "Listing", "row_from_dict"]
+__all__ = ["CURSOR_PATTERN", "AlarmBoard", "Cursor", "Listing", "row_from_dict"]
 
 MAX_CACHED_LISTINGS = 256
 _ROW_FIELDS = frozenset(f.name for f in fields(Alarm))
+
+
+CURSOR_PATTERN = r"^[0-9a-f]{8}-[0-9]{1,19}$"
+"""What a change cursor looks like: ``<epoch>-<change number>`` (module docstring)."""
+_CURSOR = re.compile(CURSOR_PATTERN)
+
+
+@dataclass(frozen=True, slots=True)
+class Cursor:
+    """A point in a board's changes: its ``epoch`` (8 hex digits) and a change number."""
+
+    epoch: str
+    change: int
+
+    def __str__(self) -> str:
+        return f"{self.epoch}-{self.change}"
+
+    @classmethod
+    def parse(cls, text: str) -> Cursor:
+        """The cursor ``"<epoch>-<n>"``; ``ValueError`` naming the text when it is not one."""
+        if not _CURSOR.match(text):
+            raise ValueError(f"{text[:40]!r} is not a cursor (<8 hex digits>-<number>)")
+        epoch, change = text.split("-")
+        return cls(epoch, int(change))
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +103,17 @@ def row_to_dict(row: Alarm) -> dict[str, Any]:
     return {k: _finite(v) for k, v in row.to_dict().items()}
 
 
+def _listing_etag(rows: list[Alarm], cursor: Cursor) -> str:
+    """Strong ETag of a listing: the listed ``(alarm_id, seq)`` pairs (as
+    :func:`service.api.alarm_views.etag`) and the cursor the body carries, so the tag changes
+    exactly when the body would."""
+    h = hashlib.blake2b(digest_size=12)
+    h.update(f"{cursor};".encode())
+    for r in rows:
+        h.update(f"{r.alarm_id}:{r.seq};".encode())
+    return f'"{len(rows)}-{h.hexdigest()}"'
+
+
 def _encode(body: dict[str, Any]) -> bytes:
     """JSON bytes as Starlette's ``JSONResponse`` renders them."""
     return json.dumps(
@@ -76,17 +125,27 @@ class AlarmBoard:
     """Current state of every alarm, versioned; see the module docstring. Thread-safe: writers
     are the worker thread or zenoh callbacks, readers the API's event loop."""
 
-    def __init__(self) -> None:
+    def __init__(self, epoch: str | None = None) -> None:
         self._rows: dict[str, Alarm] = {}
         self._lock = threading.Lock()
         self._version = 0
         self._sorted: list[Alarm] | None = None
-        self._listings: dict[tuple[tuple[str, ...], int | None, str | None], Listing] = {}
+        self._listings: dict[tuple[tuple[str, ...], int | Cursor | None, str | None], Listing] = {}
+        self.epoch = secrets.token_hex(4) if epoch is None else epoch
+        """This board's epoch: 8 hex digits, random unless given (tests)."""
+        self._change = 0
+        # alarm id → its change number, in change order (a changed row is moved to the end)
+        self._changes: dict[str, int] = {}
 
     @property
     def version(self) -> int:
         """Increments on every change of the board."""
         return self._version
+
+    @property
+    def cursor(self) -> Cursor:
+        """The board's latest change: ``since`` this lists nothing until the next change."""
+        return Cursor(self.epoch, self._change)
 
     def __len__(self) -> int:
         return len(self._rows)
@@ -100,6 +159,9 @@ class AlarmBoard:
                 old = self._rows.get(row.alarm_id)
                 if old is None or row.seq > old.seq:
                     self._rows[row.alarm_id] = row
+                    self._change += 1
+                    self._changes.pop(row.alarm_id, None)
+                    self._changes[row.alarm_id] = self._change
                     changed += 1
             if changed:
                 self._version += 1
@@ -126,34 +188,55 @@ class AlarmBoard:
         return ordered if mill_id is None else [r for r in ordered if r.mill_id == mill_id]
 
     def listing(
-        self, states: tuple[str, ...], since_ns: int | None, mill_id: str | None
+        self, states: tuple[str, ...], since: int | Cursor | None, mill_id: str | None
     ) -> Listing:
-        """The ``/alarms`` answer for a filter (states: empty for all), cached per version."""
-        key = (states, since_ns, mill_id)
+        """The ``/alarms`` answer for a filter (states: empty for all), cached per version.
+        ``since``: a :class:`Cursor` (the changes after it, module docstring) or ns UTC (a
+        sample-time filter: ``updated_ns`` at or after it)."""
+        key = (states, since, mill_id)
         cached = self._listings.get(key)
         if cached is not None and cached.version == self._version:
             return cached
         with self._lock:
-            version = self._version
-            ordered = self._ordered_locked()
-        wanted = set(states)
+            version, cursor = self._version, self.cursor
+            issued = isinstance(since, Cursor) and self._issued(since)
+            if isinstance(since, Cursor) and issued:
+                candidates = self._changed_after(since.change)
+            else:
+                candidates = self._ordered_locked()
+        wanted = set(() if issued else states)
+        since_ns = since if isinstance(since, int) else None
         rows = [
             r
-            for r in ordered
+            for r in candidates
             if (not wanted or r.state in wanted)
             and (since_ns is None or r.updated_ns >= since_ns)
             and (mill_id is None or r.mill_id == mill_id)
         ]
-        cursor = max((r.updated_ns for r in rows), default=since_ns)
         alarms = [with_iso(row_to_dict(r)) for r in rows]
-        body = {"alarms": alarms, "count": len(rows), "cursor": cursor}
-        listing = Listing(_encode(body), etag(rows), version)
+        body = {"alarms": alarms, "count": len(rows), "cursor": str(cursor),
+                "resync": isinstance(since, Cursor) and not issued}  # fmt: skip
+        listing = Listing(_encode(body), _listing_etag(rows, cursor), version)
         with self._lock:
             if len(self._listings) >= MAX_CACHED_LISTINGS:
                 self._listings = {}
             if version == self._version:
                 self._listings[key] = listing
         return listing
+
+    def _issued(self, cursor: Cursor) -> bool:
+        """Whether this board issued ``cursor`` (its epoch, not beyond its latest change)."""
+        return cursor.epoch == self.epoch and cursor.change <= self._change
+
+    def _changed_after(self, change: int) -> list[Alarm]:
+        """The rows changed after ``change``, most recently changed first (under the lock)."""
+        out = []
+        for alarm_id in reversed(self._changes):
+            if self._changes[alarm_id] <= change:
+                break
+            out.append(self._rows[alarm_id])
+        out.sort(key=lambda r: (-r.updated_ns, r.alarm_id))
+        return out
 
     def _ordered(self) -> list[Alarm]:
         with self._lock:

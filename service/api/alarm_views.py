@@ -8,10 +8,10 @@ Polling (SCADA/HMI every few seconds):
   ``If-None-Match`` gets ``304 Not Modified`` with no body while nothing changed.
   (A max(``updated_ns``) + count tag misses an escalation of an older alarm: ``updated_ns`` is
   the mill's sample clock, acknowledgements are wall clock, so the max need not move.)
-* **cursor** — ``since`` = the ``cursor`` of the previous answer (largest ``updated_ns`` seen):
-  only alarms changed at or after it come back (the boundary alarm again; de-duplicate on
-  ``(alarm_id, seq)``). ``updated_ns`` is sample time, so use the ETag on the open list when
-  mills' clocks may lag each other.
+* **cursor** — ``since`` = the ``cursor`` of the previous answer: a change number of the alarm
+  board, not a time (:mod:`service.api.alarm_board`), so every alarm changed after it comes back,
+  an acknowledgement of an older alarm included. :func:`alarm_list` (the store's listing, a
+  reference for the board's) still filters on ``updated_ns``, sample time.
 
 Operator actions (acknowledge, confirm, comment, shelve, …: :mod:`alarms.actions`) go through the
 worker thread (:meth:`service.worker.worker.Worker.request_action`), so their transitions are

@@ -25,6 +25,7 @@ from alarms.actions import OperatorAction
 from analytics.drivetrain.mill_config import MillConfig
 from service.api.alarm_board import AlarmBoard
 from service.api.identity import ApiKeys
+from service.api.journal import JournalPage, JournalQuery
 from service.reports.life import LifeReport
 from service.reports.monthly import MonthlyReport
 from service.reports.starts import MonthStarts
@@ -97,3 +98,8 @@ class Backend(Protocol):
     def reports_status(self) -> dict[str, Any]: ...
 
     def registry(self) -> CollectorRegistry: ...
+
+    def alarm_journal(self, query: JournalQuery) -> JournalPage:
+        """Stored alarm transitions in journal order, at most ``query.limit + 1``, and the
+        mills that did not answer (``GET /alarms/journal``, :mod:`service.api.journal`)."""
+        ...

@@ -21,10 +21,12 @@ __all__ = [
     "AckBody",
     "ActionBody",
     "AlarmDetail",
+    "AlarmJournal",
     "AlarmList",
     "AlarmOut",
     "CommentBody",
     "CommentOut",
+    "JournalEntry",
     "MillDetail",
     "MillSummary",
     "MonthStarts",
@@ -322,7 +324,8 @@ class AlarmList(BaseModel):
                 {
                     "alarms": [ALARM_EXAMPLE],
                     "count": 1,
-                    "cursor": 1714560000000000000,
+                    "cursor": "7f3a9c2e-118",
+                    "resync": False,
                 }
             ]
         }
@@ -330,8 +333,15 @@ class AlarmList(BaseModel):
 
     alarms: list[AlarmOut] = Field(description="Most recently changed first.")
     count: int
-    cursor: int | None = Field(
-        description="Largest updated_ns returned (or the since given): pass it back as since."
+    cursor: str = Field(
+        description="The alarm board's latest change when this answer was made "
+        "(<epoch>-<change number>): pass it back as since to get every alarm changed after "
+        "it. Not a time."
+    )
+    resync: bool = Field(
+        False,
+        description="true when since was a cursor this API did not issue (it restarted, or "
+        "another replica answered): the listing is whole — replace what you hold.",
     )
 
 
@@ -429,3 +439,57 @@ class ShelveBody(ActionBody):
             raise ValueError(f"a one_shot shelve ends when the condition returns to normal; "
                              f"{given[0]} is only for a timed shelve")  # fmt: skip
         return self
+
+
+class JournalEntry(TransitionOut):
+    """One transition in the alarm journal, with its alarm's identity beside it."""
+
+    mill_id: str
+    rule: str = Field(description="The alarm's rule (README master alarm database).")
+    subject: str = Field(description="What the rule watches, e.g. a channel; '' for the mill.")
+    quantity: str
+    unit: str
+    simulated: bool = Field(description="Raised on simulated data (the demo's mills).")
+
+
+class AlarmJournal(BaseModel):
+    """``GET /alarms/journal``: stored transitions in time order, a page at a time."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "entries": [
+                        {
+                            **{k: ALARM_EXAMPLE[k] for k in ("alarm_id", "seq", "severity")},
+                            "kind": "raised",
+                            "t_ns": 1714560000000000000,
+                            "t": "2024-05-01T10:40:00.000Z",
+                            "state": "raised",
+                            **{k: ALARM_EXAMPLE[k] for k in ("value", "threshold", "message")},
+                            "by": None,
+                            "comment": None,
+                            **{k: ALARM_EXAMPLE[k] for k in ("mill_id", "rule", "subject")},
+                            **{k: ALARM_EXAMPLE[k] for k in ("quantity", "unit", "simulated")},
+                        }
+                    ],
+                    "count": 1,
+                    "next": None,
+                    "unreachable": [],
+                }
+            ]
+        }
+    )
+
+    entries: list[JournalEntry] = Field(
+        description="In time order: t_ns, then alarm_id, then seq. An acknowledgement's time "
+        "is the wall clock, the others' the mill's sample time."
+    )
+    count: int = Field(description="Entries on this page (at most limit).")
+    next: str | None = Field(
+        description="Pass back as after= for the next page; null: this is the last page."
+    )
+    unreachable: list[str] = Field(
+        description="Mills whose worker did not answer (millwatch api): their entries are "
+        "missing from this page."
+    )

@@ -9,6 +9,7 @@ from service.api.backend import Backend
 from service.api.limits import RenderSlots
 from service.api.routes.alarms import alarms_router
 from service.api.routes.health import health_router
+from service.api.routes.journal import journal_router
 from service.api.routes.metrics import metrics_router
 from service.api.routes.mills import mills_router
 from service.api.routes.reports import reports_router
@@ -23,6 +24,7 @@ def api_router(backend: Backend, renders: RenderSlots) -> APIRouter:
     router.include_router(health_router(backend))
     router.include_router(mills_router(backend))
     router.include_router(reports_router(backend, renders))
+    router.include_router(journal_router(backend))  # before /alarms/{alarm_id}
     router.include_router(alarms_router(backend))
     router.include_router(metrics_router(backend.registry()))
     return router

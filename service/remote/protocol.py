@@ -23,6 +23,8 @@ act        ``alarm_id``, ``kind``, the alarm after the operator action
            ``user``, ``comment``,  (:class:`alarms.actions.OperatorAction`)
            ``shelve_until_ns``,
            ``t_ns``, ``mac``
+journal    ``from_ns``, ``to_ns``, the mill's alarm journal entries, at most
+           ``after``, ``limit``    ``limit + 1`` (:mod:`service.api.journal`)
 =========  ======================  ==============================================
 
 An ``ack`` changes state, so it is signed (:func:`ack_args`, checked by :func:`checked_ack`): the
@@ -65,6 +67,7 @@ from pydantic import BaseModel, Field
 
 from alarms.actions import ActionKind, InvalidActionError, OperatorAction
 from service.api.errors import error_for_status, status_of
+from service.api.journal import INT64_MAX, JournalKey, JournalQuery
 from service.errors import ApiError, BadRequest, Forbidden, Unauthorized
 from service.status import MillStatus
 
@@ -84,6 +87,8 @@ __all__ = [
     "decode",
     "decode_args",
     "encode",
+    "journal_args",
+    "journal_query_of",
     "month_args",
     "month_of",
     "problem_from",
@@ -109,6 +114,7 @@ class Question(StrEnum):
     ACK = "ack"
     ACT = "act"
     FLEET = "fleet"
+    JOURNAL = "journal"
 
 
 class StatusAnswer(BaseModel):
@@ -160,6 +166,28 @@ def by_of(args: dict[str, Any]) -> str:
         raise BadRequest("Malformed acknowledger", f"by must be at most {BY_MAX_CHARS} characters "
                          f"without control characters, got {shown}.")  # fmt: skip
     return by
+
+
+def journal_args(query: JournalQuery) -> dict[str, Any]:
+    """Arguments of ``journal`` (the mill is the key's)."""
+    after = None if query.after is None else str(query.after)
+    return {"from_ns": query.from_ns, "to_ns": query.to_ns, "after": after, "limit": query.limit}
+
+
+def journal_query_of(args: dict[str, Any], mill_id: str) -> JournalQuery:
+    """The ``journal`` arguments about ``mill_id``; :class:`BadRequest` naming a bad one."""
+    bounds = {"from_ns": args.get("from_ns", 0), "to_ns": args.get("to_ns", INT64_MAX),
+              "limit": args.get("limit", 500)}  # fmt: skip
+    for name, value in bounds.items():
+        if type(value) is not int or not 0 <= value <= INT64_MAX:
+            raise BadRequest("Malformed journal query", f"{name} must be an integer 0 … 2^63 − 1, "
+                             f"got {value!r}.")  # fmt: skip
+    after = args.get("after")
+    try:
+        key = None if after is None else JournalKey.parse(str(after))
+    except ValueError as exc:
+        raise BadRequest("Malformed journal query", f"after: {exc}.") from None
+    return JournalQuery(mill_id, bounds["from_ns"], bounds["to_ns"], key, bounds["limit"])
 
 
 # ---------------------------------------------------------------------- signed acks

@@ -49,6 +49,7 @@ from service.remote.protocol import (
     checked_act,
     decode_args,
     encode,
+    journal_query_of,
     month_of,
     problem_of,
 )
@@ -101,6 +102,7 @@ ANSWERS: dict[Question, Answer] = {
     Question.ACK: _ack,
     Question.ACT: _act,
     Question.FLEET: lambda b, m, _: fleet_mill_to_dict(b.fleet_mill(m)),
+    Question.JOURNAL: lambda b, m, a: b.alarm_journal(journal_query_of(a, m)).entries,
 }
 """How a worker answers each :class:`~service.remote.protocol.Question`."""
 

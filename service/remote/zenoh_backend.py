@@ -20,7 +20,8 @@ a worker that does not answer in time is a 504 naming the mill, the worker and i
 never a hang. Errors the worker raised come back as ``reply_err`` problem JSON and are raised
 again as the same :mod:`service.api.errors` exceptions, so the API answers what an in-process
 one would. ``GET /mills`` and ``/ready`` gather every mill's status with one ``get`` on
-``millwatch/v1/*/*/@query/status``.
+``millwatch/v1/*/*/@query/status``; ``GET /alarms/journal`` without a mill gathers every mill's
+``…/@query/journal`` page and merges them in time order (:func:`service.api.journal.merge_pages`).
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from ingest.keys import (
 )
 from service.api.alarm_board import AlarmBoard, row_from_dict
 from service.api.identity import ApiKeys
+from service.api.journal import JournalPage, JournalQuery, merge_pages
 from service.api.mill_views import config_of, mill_detail, mill_summary, site_mills
 from service.errors import BadRequest, Forbidden, GatewayTimeout, NotFound, Unavailable
 from service.remote.metrics import remote_registry
@@ -62,6 +64,7 @@ from service.remote.protocol import (
     alarm_args,
     decode,
     encode,
+    journal_args,
     month_args,
     problem_from,
 )
@@ -186,15 +189,18 @@ class ZenohBackend:
         gathered = self._gather(Question.ALARMS)
         return self._board.merge(row_from_dict(r) for rows in gathered.values() for r in rows)
 
-    def _gather(self, what: Question, site: str | None = None) -> dict[str, Any]:
-        """One ``get`` on every mill's (of ``site``'s) ``@query/<what>``: the answers by mill
-        id (mills whose worker is gone, or that did not answer within the timeout, are
-        missing)."""
+    def _gather(
+        self, what: Question, site: str | None = None, args: dict[str, Any] | None = None
+    ) -> dict[str, Any]:
+        """One ``get`` on every mill's (of ``site``'s) ``@query/<what>`` (with ``args``): the
+        answers by mill id (mills whose worker is gone, or that did not answer within the
+        timeout, are missing)."""
         out: dict[str, Any] = {}
         if not self.live_workers():
             return out
         pattern = query_pattern(what) if site is None else query_pattern(what, site=site)
-        for reply in self.session.get(pattern, timeout=self.timeout_s):
+        payload = None if args is None else encode(args)
+        for reply in self.session.get(pattern, payload=payload, timeout=self.timeout_s):
             if reply.ok is None:
                 log.warning("a worker failed %s: %s", what, _error_payload(reply)[:200])
                 continue
@@ -412,6 +418,17 @@ class ZenohBackend:
         if self._registry is None:
             self._registry = remote_registry(self)
         return self._registry
+
+    def alarm_journal(self, query: JournalQuery) -> JournalPage:
+        """The journal of one mill (its worker's answer), or of every mill: one ``get`` on
+        every mill's ``@query/journal``, the answers merged in order; mills that did not
+        answer are ``unreachable``."""
+        args = journal_args(query)
+        if query.mill_id is not None:
+            return JournalPage(self._ask(query.mill_id, Question.JOURNAL, args), [])
+        gathered = self._gather(Question.JOURNAL, args=args)
+        unreachable = [m for m in self.mills if m not in gathered]
+        return JournalPage(merge_pages(gathered.values(), query.limit), unreachable)
 
 
 def _error_payload(reply: zenoh.Reply) -> bytes:

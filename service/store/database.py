@@ -327,6 +327,32 @@ class Store:
                "WHERE alarm_id = ? ORDER BY seq")  # fmt: skip
         return [from_row(TransitionRecord, r) for r in self._query_rows(sql, (alarm_id,))]
 
+    def alarm_journal(
+        self,
+        mill_id: str | None,
+        from_ns: int,
+        to_ns: int,
+        after: tuple[int, str, int] | None,
+        limit: int,
+    ) -> list[sqlite3.Row]:
+        """Alarm transitions with ``from_ns`` ≤ ``t_ns`` < ``to_ns`` (of one mill, or all),
+        after the position ``after`` = ``(t_ns, alarm_id, seq)``, in that order, at most
+        ``limit``; each row has the transition's columns and its alarm's ``mill_id``, ``rule``,
+        ``subject``, ``quantity``, ``unit`` and ``simulated`` (``service.api.journal``)."""
+        picked = ", ".join(f"t.{c}" for c in columns(TransitionRecord))
+        sql = (f"SELECT {picked}, a.mill_id, a.rule, a.subject, a.quantity, a.unit, a.simulated "
+               "FROM alarm_transitions t JOIN alarms a ON a.alarm_id = t.alarm_id "
+               "WHERE t.t_ns >= ? AND t.t_ns < ?")  # fmt: skip
+        args: list[Any] = [from_ns, to_ns]
+        if mill_id is not None:
+            sql += " AND a.mill_id = ?"
+            args.append(mill_id)
+        if after is not None:
+            sql += " AND (t.t_ns, t.alarm_id, t.seq) > (?, ?, ?)"
+            args += after
+        sql += " ORDER BY t.t_ns, t.alarm_id, t.seq LIMIT ?"
+        return self._query_rows(sql, (*args, limit))
+
     def latest_checkpoints(self) -> dict[str, tuple[dict[str, Any], dict[str, Any]]]:
         """The newest intact checkpoint of every part: ``part → (position, state)`` (see
         :meth:`choose_checkpoints`, which also says what it refused)."""

@@ -18,9 +18,10 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Header, Query, Request, Response, Security
 from fastapi.security import APIKeyHeader
-from pydantic import Field
+from pydantic import Field, StringConstraints
 
 from alarms.actions import ActionKind, InvalidActionError, OperatorAction
+from service.api.alarm_board import CURSOR_PATTERN, Cursor
 from service.api.alarm_views import STATE_PATTERN, matches, parse_states
 from service.api.backend import Backend
 from service.api.errors import problem_responses
@@ -64,8 +65,19 @@ KEYED_ROUTES = tuple(("POST", path) for path in ACTION_PATHS.values())
 INT64_MAX = 2**63 - 1
 
 _STATE_HELP = (
-    "raised, acknowledged, cleared — comma-separated — or open (= raised,acknowledged) or all."
+    "raised, acknowledged, cleared — comma-separated — or open (= raised,acknowledged) or all. "
+    "With a cursor in since, every changed alarm is listed whatever its state (one that left "
+    "these states comes back once, to be dropped)."
 )
+_SINCE_HELP = (
+    "The previous answer's cursor (e.g. 7f3a9c2e-118): every alarm changed after it, in its "
+    "current state, whatever state says — acknowledgements, comments and lagging mills "
+    "included; a cursor of a restarted API gets the whole listing with resync true. Or a "
+    "sample-time filter, updated_ns at or after: ISO-8601 (2024-05-01T10:40:00Z; without an "
+    "offset: UTC) or integer ns UTC (the cursor of old versions: it misses an acknowledgement "
+    "of an older alarm)."
+)
+CursorText = Annotated[str, StringConstraints(pattern=CURSOR_PATTERN)]
 _POLL_RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {
         "description": "The alarms; the ETag header identifies this listing.",
@@ -75,6 +87,13 @@ _POLL_RESPONSES: dict[int | str, dict[str, Any]] = {
     },
     304: {"description": "Not modified since the ETag sent in If-None-Match (no body)."},
 }
+
+
+def _since(since: str | int | datetime | None) -> Cursor | int | None:
+    """``since`` as the board takes it: a change cursor, or ns UTC of sample time."""
+    if isinstance(since, str):
+        return Cursor.parse(since)
+    return ns_of(since) if isinstance(since, datetime) else since
 
 
 def alarms_router(backend: Backend) -> APIRouter:
@@ -90,19 +109,15 @@ def alarms_router(backend: Backend) -> APIRouter:
     async def alarms(
         state: Annotated[str | None, Query(pattern=STATE_PATTERN, description=_STATE_HELP)] = None,
         since: Annotated[
-            Annotated[int, Field(ge=0, le=INT64_MAX)] | IsoTime | None,
-            Query(
-                description="Changed at or after: integer ns UTC (the previous answer's cursor) "
-                "or ISO-8601 (e.g. 2024-05-01T10:40:00Z; without an offset: UTC).",
-            ),
+            CursorText | Annotated[int, Field(ge=0, le=INT64_MAX)] | IsoTime | None,
+            Query(description=_SINCE_HELP),
         ] = None,
         mill: Annotated[str | None, Query(max_length=64, description="One mill only.")] = None,
         if_none_match: Annotated[str | None, Header(max_length=1000)] = None,
     ) -> Response:
         if mill is not None:
             config_of(backend.mills, mill)
-        since_ns = ns_of(since) if isinstance(since, datetime) else since
-        listing = backend.alarm_board().listing(parse_states(state), since_ns, mill)
+        listing = backend.alarm_board().listing(parse_states(state), _since(since), mill)
         headers = {"ETag": listing.etag, "Cache-Control": "no-cache"}
         if matches(if_none_match, listing.etag):
             return Response(status_code=304, headers=headers)

@@ -12,6 +12,8 @@ next try with their cause, each mill's newest complete month.
 
 * ``month``: the site's local calendar month; default: the mill's current one (that of its
   last analysed sample).
+* ``json`` is the report's data, every ``*_ns`` time with its ISO-8601 UTC twin beside it (as
+  every JSON answer of the API: :func:`service.api.times.with_iso`).
 * ``format``: wins when given; otherwise the ``Accept`` header chooses (``text/html``,
   ``text/csv`` or ``application/zip``, ``application/pdf``, ``application/json``; anything else
   gives JSON).
@@ -41,6 +43,7 @@ from fastapi.responses import Response
 from service.api.errors import problem_responses
 from service.api.limits import ApiLimits, RenderSlots
 from service.api.routes.params import MillId, Month, Site
+from service.api.times import with_iso
 from service.errors import BadRequest
 from service.reports.fleet_document import render_fleet
 from service.reports.monthly import MonthlyReport, report_to_dict
@@ -56,7 +59,7 @@ __all__ = ["FORMATS", "reports_router"]
 log = logging.getLogger(__name__)
 
 FORMATS: dict[str, tuple[str, Callable[[MonthlyReport], str | bytes]]] = {
-    "json": ("application/json", lambda r: json.dumps(report_to_dict(r))),
+    "json": ("application/json", lambda r: json.dumps(with_iso(report_to_dict(r)))),
     "html": ("text/html; charset=utf-8", render_html),
     "csv": ("application/zip", render_csv),
     "pdf": ("application/pdf", render_pdf),
@@ -143,7 +146,7 @@ def reports_router(backend: ReportSource, renders: RenderSlots | None = None) ->
         responses=problem_responses(503),
     )
     def reports_status() -> dict[str, Any]:
-        return backend.reports_status()
+        return with_iso(backend.reports_status())
 
     return router
 

@@ -44,9 +44,11 @@ def test_listing_equals_the_store_listing(tmp_path, states, since, mill):
     board.apply_transitions(fired)
     with Store(tmp_path / "s.db") as store:
         _write(store, fired)
-        body, tag = alarm_list(store, states, since, mill)
+        body, _ = alarm_list(store, states, since, mill)
     listing = board.listing(states, since, mill)
-    assert json.loads(listing.body) == body and listing.etag == tag
+    got = json.loads(listing.body)
+    assert (got["alarms"], got["count"]) == (body["alarms"], body["count"])
+    assert got["cursor"] == str(board.cursor) and got["resync"] is False
 
 
 def test_merge_keeps_the_highest_seq_in_any_order():
@@ -60,7 +62,7 @@ def test_merge_keeps_the_highest_seq_in_any_order():
         for t in shuffled:
             board.apply_transitions([t])
         got, want = board.listing((), None, None), in_order.listing((), None, None)
-        assert (got.body, got.etag) == (want.body, want.etag)
+        assert json.loads(got.body)["alarms"] == json.loads(want.body)["alarms"]
 
 
 def test_version_moves_only_on_change_and_listings_are_cached_per_version():
@@ -83,6 +85,7 @@ def test_wire_messages_merge_like_transitions():
     direct.apply_transitions(fired)
     for t in fired:
         wired.apply_message(encode_transition(t, "rustenburg"))
-    assert wired.listing((), None, None).body == direct.listing((), None, None).body
+    wired_body, direct_body = (json.loads(b.listing((), None, None).body) for b in (wired, direct))
+    assert wired_body["alarms"] == direct_body["alarms"]
     assert isinstance(wired.get(fired[0].alarm_id), Alarm)
     assert wired.rows("sag-5200-lrs") == direct.rows() and wired.rows("ball-9") == []

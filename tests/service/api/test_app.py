@@ -128,14 +128,21 @@ def test_alarms_etag_answers_304_while_nothing_changed(client):
     assert cleared.status_code == 200 and cleared.headers["etag"] != tag
 
 
-def test_alarms_since_cursor_returns_only_later_changes(client):
+def test_alarms_cursor_is_a_change_number_and_since_it_lists_only_later_changes(client):
     body = client.get("/alarms").json()
     cursor = body["cursor"]
-    assert cursor == max(a["updated_ns"] for a in body["alarms"])
-    at = client.get("/alarms", params={"since": cursor}).json()
-    assert at["count"] >= 1 and all(a["updated_ns"] >= cursor for a in at["alarms"])
-    after = client.get("/alarms", params={"since": cursor + 1}).json()
-    assert after == {"alarms": [], "count": 0, "cursor": cursor + 1}
+    assert re.fullmatch(r"[0-9a-f]{8}-[0-9]+", cursor) and body["resync"] is False
+    after = client.get("/alarms", params={"since": cursor}).json()
+    assert after["resync"] is False
+    epoch, change = cursor.split("-")
+    later = int(after["cursor"].split("-")[1])  # (the runtime runs on: stale channels may alarm)
+    assert after["cursor"].startswith(epoch) and later >= int(change)
+    assert (after["count"] == 0) == (later == int(change))
+    foreign = client.get("/alarms", params={"since": "00000000-5"}).json()  # a restarted API's
+    assert foreign["resync"] is True and foreign["count"] >= body["count"] >= 1
+    newest = max(a["updated_ns"] for a in body["alarms"])  # integer ns: a sample-time filter
+    at = client.get("/alarms", params={"since": newest}).json()
+    assert at["count"] >= 1 and all(a["updated_ns"] >= newest for a in at["alarms"])
 
 
 def test_alarm_times_are_also_iso_and_since_takes_iso(client):
@@ -144,7 +151,7 @@ def test_alarm_times_are_also_iso_and_since_takes_iso(client):
     assert alarm["raised"] == iso_utc(alarm["raised_ns"]) and alarm["raised"].endswith("Z")
     assert alarm["updated"] == iso_utc(alarm["updated_ns"])
     assert "acked" in alarm and "cleared" in alarm
-    whole_s = body["cursor"] // 10**9 * 10**9
+    whole_s = max(a["updated_ns"] for a in body["alarms"]) // 10**9 * 10**9
     since = iso_utc(whole_s).replace("Z", "+00:00")
     at = client.get("/alarms", params={"since": since}).json()
     assert at["count"] >= 1 and all(a["updated_ns"] >= whole_s for a in at["alarms"])
@@ -188,6 +195,7 @@ def test_ack_of_an_unknown_alarm_is_a_404_naming_it(client):
 def test_ack_is_applied_by_the_worker_stored_published_and_checkpointed(client, live_api):
     alarm = _start_alarm(client)
     tag = client.get("/alarms").headers["etag"]
+    cursor = client.get("/alarms", params={"state": "open"}).json()["cursor"]
     heard: list[dict] = []
     with open_session(build_config(connect=[tcp_endpoint(live_api.zenoh_port)])) as session:
         sub = session.declare_subscriber(
@@ -207,6 +215,10 @@ def test_ack_is_applied_by_the_worker_stored_published_and_checkpointed(client, 
     assert [t["kind"] for t in acked["transitions"]][-1] == "acknowledged"
     assert heard and heard[-1]["transition"]["kind"] == "acknowledged"
     assert client.get("/alarms", headers={"If-None-Match": tag}).status_code == 200
+    # a cursor poller with the open filter sees the ack (the change cursor, not sample time)
+    changed = client.get("/alarms", params={"state": "open", "since": cursor}).json()
+    seen = {a["alarm_id"]: a for a in changed["alarms"]}
+    assert seen[alarm["alarm_id"]]["state"] == "acknowledged" and not changed["resync"]
     _, state = live_api.runtime.store.latest_checkpoints()[MILL]
     conditions = state["pipelines"][MILL]["alarms"]["conditions"]
     assert any((c["alarm"] or {}).get("state") == "acknowledged" for c in conditions)
@@ -483,3 +495,78 @@ def test_status_gauges_read_the_status_and_life_and_counters_start_at_zero(clien
               for s in scraped["millwatch_decode_errors_total"]}  # fmt: skip
     assert errors == {(c, k): 0 for c in status.channel_health for k in DECODE_ERROR_KINDS}
     assert len(DECODE_ERROR_KINDS) >= 6
+
+
+# ---------------------------------------------------------------------- every GET: HEAD, ISO
+DOCS = ["/docs", "/docs/oauth2-redirect", "/redoc", "/openapi.json"]
+
+
+def _get_paths(client) -> list[str]:
+    """Every GET route of the app (the OpenAPI document's, plus the docs' own), its path
+    parameters filled with what the runtime holds; the report also as JSON."""
+    spec = client.get("/openapi.json").json()
+    alarm_id = _start_alarm(client)["alarm_id"]
+    site = client.get(f"/mills/{MILL}").json()["site"]
+    values = {"mill_id": MILL, "alarm_id": alarm_id, "site": site}
+    paths = [re.sub(r"\{(\w+)\}", lambda m: values[m.group(1)], p)
+             for p, ops in spec["paths"].items() if "get" in ops]  # fmt: skip
+    assert len(paths) >= 14 and f"/alarms/{alarm_id}" in paths
+    reports = [p + "?format=json" for p in paths if "/reports/" in p and "status" not in p]
+    return paths + reports + DOCS
+
+
+def _ns_without_iso(data: Any, where: str = "") -> list[str]:
+    """Every ``<name>_ns`` key in ``data`` (at any depth) without ``<name>`` beside it."""
+    if isinstance(data, list):
+        return [w for i, item in enumerate(data) for w in _ns_without_iso(item, f"{where}[{i}]")]
+    if not isinstance(data, dict):
+        return []
+    out = [f"{where}.{k}" for k in data if isinstance(k, str) and k.endswith("_ns")
+           and k[:-3] not in data]  # fmt: skip
+    return out + [w for k, v in data.items() for w in _ns_without_iso(v, f"{where}.{k}")]
+
+
+def test_every_get_route_answers_head_with_its_headers_and_no_body(client):
+    for path in _get_paths(client):
+        get, head = client.get(path), client.head(path)
+        assert head.status_code == get.status_code, path
+        assert head.content == b"", path
+        assert head.headers["content-type"] == get.headers["content-type"], path
+        if "etag" in get.headers:
+            assert head.headers["etag"] == get.headers["etag"], path
+    assert client.head(f"/alarms/{_start_alarm(client)['alarm_id']}/ack").status_code == 405
+
+
+def test_every_ns_time_of_every_json_answer_has_its_iso_twin(client):
+    """/alarms, /alarms/{id}, the journal, mills, life, starts, spectrum, fleet, /health,
+    /ready, /reports/status, the monthly and fleet report JSON: each ``x_ns`` has ``x``."""
+    missing, walked = [], 0
+    for path in _get_paths(client):
+        r = client.get(path)
+        if path in DOCS or not r.headers["content-type"].startswith("application/json"):
+            continue
+        walked += 1
+        missing += [path + w for w in _ns_without_iso(r.json())]
+    assert walked >= 14 and missing == [], "\n".join(missing)
+
+
+def test_the_alarm_journal_of_the_mill_in_time_order(client):
+    body = client.get("/alarms/journal", params={"mill": MILL}).json()
+    entries = body["entries"]
+    assert body["count"] == len(entries) >= 1 and body["unreachable"] == []
+    keys = [(e["t_ns"], e["alarm_id"], e["seq"]) for e in entries]
+    assert keys == sorted(keys) and all(e["mill_id"] == MILL for e in entries)
+    start = next(e for e in entries if e["rule"] == "start_peak" and e["kind"] == "raised")
+    assert start["t"] == iso_utc(start["t_ns"]) and start["quantity"] == "start_peak_pct"
+    t = start["t_ns"]
+    window = client.get("/alarms/journal", params={"from": t, "to": iso_utc(t + 10**6)}).json()
+    assert (start["alarm_id"], 1) in {(e["alarm_id"], e["seq"]) for e in window["entries"]}
+    assert all(t <= e["t_ns"] < t + 10**6 for e in window["entries"])
+    first = client.get("/alarms/journal", params={"mill": MILL, "limit": 1}).json()
+    if body["count"] > 1:
+        assert first["count"] == 1 and first["next"]
+        rest = client.get("/alarms/journal", params={"after": first["next"]}).json()
+        assert rest["entries"][0] == entries[1]
+    assert_problem(client.get("/alarms/journal", params={"mill": "ball-9"}), 404, "'ball-9'")
+    assert_problem(client.get("/alarms/journal", params={"after": "x"}), 422, "after")
+    assert_problem(client.get("/alarms/journal", params={"limit": 0}), 422, "limit")

@@ -1,4 +1,5 @@
-"""Signed acknowledgements (:func:`service.remote.protocol.checked_ack`): what a worker accepts."""
+"""Signed acknowledgements (:func:`service.remote.protocol.checked_ack`): what a worker accepts;
+the journal question's arguments."""
 
 from __future__ import annotations
 
@@ -6,8 +7,19 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from service.api.journal import JournalKey, JournalQuery
 from service.errors import BadRequest, Forbidden, Unauthorized
-from service.remote.protocol import ACK_WINDOW_S, BY_MAX_CHARS, ack_args, by_of, checked_ack
+from service.remote.protocol import (
+    ACK_WINDOW_S,
+    BY_MAX_CHARS,
+    ack_args,
+    by_of,
+    checked_ack,
+    decode,
+    encode,
+    journal_args,
+    journal_query_of,
+)
 
 KEY = "shared-key"
 NOW = 1_800_000_000_000_000_000
@@ -44,3 +56,25 @@ def test_unsigned_stale_keyless_and_long_acks_are_refused():
     with pytest.raises(BadRequest, match="control characters"):
         by_of({"by": "op\nforged line"})
     assert by_of({}) == "api"
+
+
+@given(
+    from_ns=st.integers(0, 2**63 - 1),
+    to_ns=st.integers(0, 2**63 - 1),
+    after=st.none() | st.builds(JournalKey, st.integers(0, 2**63 - 1),
+                                st.text(min_size=1, max_size=200).filter(lambda s: "\n" not in s),
+                                st.integers(1, 10**6)),
+    limit=st.integers(1, 5000),
+)  # fmt: skip
+def test_journal_arguments_round_trip_through_json(from_ns, to_ns, after, limit):
+    query = JournalQuery("m1", from_ns, to_ns, after, limit)
+    assert journal_query_of(decode(encode(journal_args(query))), "m1") == query
+
+
+@pytest.mark.parametrize(
+    "args", [{"from_ns": -1}, {"to_ns": "soon"}, {"limit": 1.5}, {"after": "nowhere"}]
+)
+def test_a_malformed_journal_argument_is_a_bad_request_naming_it(args):
+    with pytest.raises(BadRequest) as info:
+        journal_query_of(args, "m1")
+    assert next(iter(args)) in info.value.detail
