@@ -42,7 +42,7 @@ the live path's.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -55,11 +55,13 @@ from analytics.signal.sample_ring import SampleRing
 
 __all__ = [
     "APP_D_PERIODS",
+    "NO_COST",
     "SWITCH_OFF_MARGIN_S",
     "AppDCost",
     "AppDCounting",
     "app_d_month",
     "app_d_projections",
+    "cost_from_records",
 ]
 
 SWITCH_OFF_MARGIN_S = 0.5
@@ -160,6 +162,27 @@ def app_d_projections(
         out["measured"] = app_d_month(cost, measured_starts_per_month, month, 1.0,
                                       running_fraction)  # fmt: skip
     return out
+
+
+def cost_from_records(records: Iterable[Mapping[str, Any] | None]) -> dict[str, AppDCost]:
+    """Each component's portions summed over stop events' ``app_d`` records (stops stored
+    before App. D was counted, and stops without a start, carry none and are left out)."""
+    parts: dict[str, list[list[float]]] = {}
+    n = 0
+    for rec in records:
+        if not rec:
+            continue
+        n += 1
+        for comp, d in rec["components"].items():
+            p = parts.setdefault(comp, [[], [], [], []])
+            p[0].append(d["start_stop"])
+            p[1].append(rec["start_stop_s"])
+            p[2].append(d["run"])
+            p[3].append(rec["run_s"])
+    return {
+        c: AppDCost(len(p[0]), math.fsum(p[0]), math.fsum(p[1]), math.fsum(p[2]), math.fsum(p[3]))
+        for c, p in parts.items()
+    }
 
 
 # ---------------------------------------------------------------- counting

@@ -31,6 +31,7 @@ __all__ = [
     "Steady",
     "SteadyDay",
     "SteadyPoint",
+    "WhatIfBasis",
     "WhatIfRow",
     "report_to_dict",
 ]
@@ -88,7 +89,8 @@ class Starts:
 @dataclass(frozen=True, slots=True)
 class ComponentDamage:
     """Damage of one component: per day and phase, per phase, the month's total; the cost of
-    a start (App. D, §8.3) from this month's phases."""
+    a start as Diering 2011 App. D counts it (§8.3; :mod:`analytics.mill.app_d`) from the
+    start-stop records the month's stops closed (``start_stops`` of them)."""
 
     component: str
     per_day: dict[str, dict[str, float]]
@@ -98,16 +100,36 @@ class ComponentDamage:
     start_stop_seconds: float | None
     run_damage_per_hour: float | None
     hours_of_running_per_start: float | None
+    start_stops: int = 0
 
 
 @dataclass(frozen=True, slots=True)
 class WhatIfRow:
-    """App. D scenario: starts per 4-week month → damage per month and life per component."""
+    """App. D scenario: starts per 4-week month → damage per month, life from new
+    (``life_years``) and remaining life from the damage so far at the month's end
+    (``remaining_years``) per component, the mill running ``running_fraction`` of the time
+    outside its starts and stops (App. D's scenarios: 1)."""
 
     scenario: str
     starts_per_month: float
     damage_per_month: dict[str, float | None]
     life_years: dict[str, float | None]
+    remaining_years: dict[str, float | None] = field(default_factory=dict)
+    running_fraction: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class WhatIfBasis:
+    """What the what-if table rests on, printed beside it: the start-stop records and run
+    portions it was measured on, the month of 4 weeks, the measured rate and fraction."""
+
+    method: str
+    start_stops: int
+    run_hours: float
+    month_days: float
+    measured_starts_per_month: float | None
+    measured_running_fraction: float | None
+    assumptions: list[str]
 
 
 @dataclass(frozen=True, slots=True)
@@ -239,6 +261,7 @@ class MonthlyReport:
     cumulative: CumulativeDamage
     trend: list[MonthTrend]
     notes: list[str] = field(default_factory=list)
+    what_if_basis: WhatIfBasis | None = None
 
     @property
     def empty(self) -> bool:
