@@ -64,7 +64,7 @@ from analytics.mill.phase_damage import (
     project_monthly_damage,
     start_cost,
 )
-from service.reports.numbers import finite_life
+from service.reports.numbers import finite_life, years_range_text
 from service.reports.plain import plain
 from service.store.records import DamageRow
 
@@ -793,19 +793,6 @@ def _basis(config: MillConfig) -> LifeBasis:
 
 
 _RATE_WORDS = {"last": "recent", "since": "since-monitoring", "worst": "worst month's"}
-
-
-def years_range_text(lo: float | None, hi: float | None) -> str:
-    """``31 to 38 years``, ``9,458 years`` (one figure when the ends agree within 5 %)."""
-    if lo is None or hi is None:
-        return "no projection"
-
-    def fmt(y: float) -> str:
-        return f"{y:,.0f}" if y >= 10 else f"{y:.1f}"
-
-    if math.isclose(lo, hi, rel_tol=0.05):
-        return f"{fmt(lo)} years"
-    return f"{fmt(lo)} to {fmt(hi)} years"
 
 
 def _note(config: MillConfig, status: str, missing: list[str], gov: ComponentLife | None,

@@ -49,6 +49,7 @@ from analytics.operation.transients import start_peaks
 from service.reports.history import last_months, life_inputs, monthly_trend
 from service.reports.life import compute_life, local_iso, monitored_seconds
 from service.reports.month_summary import SummaryStart, build_cumulative, build_summary
+from service.reports.monthly.advice import build_advice, month_evidence
 from service.reports.monthly.model import (
     AlarmEntry,
     ComponentDamage,
@@ -104,6 +105,11 @@ def build_monthly_report(
         stored_alarms = store.alarms(mill_id=config.id)
         alarms = _alarms(stored_alarms, reader.start_ns, reader.end_ns)
         long_view = _long_view(store, config, month, reader, starts, stored_alarms)
+        steady = steady_section(steady_rows, config, reader)
+        evidence = month_evidence(config, month, covered, starts, steady, harmonics)
+        trend = long_view["trend"]
+        advice = build_advice(store, config, evidence, trend[-2] if len(trend) > 1 else None,
+                              damage)  # fmt: skip
     so_far = {c: v.damage for c, v in long_view["life"].components.items()}
     what_if, what_if_basis = what_if_table(cost, starts.count, covered, seconds, so_far)
     report = MonthlyReport(
@@ -124,7 +130,7 @@ def build_monthly_report(
         phase_seconds=seconds,
         damage=damage,
         what_if=what_if,
-        steady=steady_section(steady_rows, config, reader),
+        steady=steady,
         harmonics=harmonics,
         alarms=alarms,
         data_quality=_data_quality([e for e in events if e.kind == "data_quality"]),
@@ -132,6 +138,7 @@ def build_monthly_report(
         **long_view,
         notes=_notes(span, starts, covered, config.simulated),
         what_if_basis=what_if_basis,
+        advice=advice,
     )
     log.info("monthly report %s %s: %d starts", config.id, month, starts.count)
     return report

@@ -12,12 +12,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from service.reports.actions import Action, CarriedAction
 from service.reports.history import MonthTrend
 from service.reports.life import LifeReport
 from service.reports.month_summary import CumulativeDamage, ReportSummary
 from service.reports.plain import finite_or_none, plain
 
 __all__ = [
+    "Advice",
     "AlarmEntry",
     "ComponentDamage",
     "DataQuality",
@@ -234,6 +236,18 @@ class DataQuality:
 
 
 @dataclass(frozen=True, slots=True)
+class Advice:
+    """Page 1's words (:mod:`service.reports.actions`): what drives the damage (``drivers``,
+    sentences), this month's recommended ``actions`` with their evidence and source, and last
+    month's (``previous_month``) carried with their status (done, still open, not checked)."""
+
+    drivers: list[str]
+    actions: list[Action]
+    previous_month: str
+    carried: list[CarriedAction]
+
+
+@dataclass(frozen=True, slots=True)
 class MonthlyReport:
     """The monthly damage report (JSON via :func:`report_to_dict`)."""
 
@@ -262,6 +276,7 @@ class MonthlyReport:
     trend: list[MonthTrend]
     notes: list[str] = field(default_factory=list)
     what_if_basis: WhatIfBasis | None = None
+    advice: Advice | None = None
 
     @property
     def empty(self) -> bool:

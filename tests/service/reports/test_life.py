@@ -313,7 +313,7 @@ def test_the_fleet_orders_mills_with_reasons(store):
                                   "mill": "other", "remaining_life_years_min": 1.0})  # fmt: skip
     view = build_fleet("rustenburg", [good, worse], ["gone"], now, SIM.time_zone)
     assert [v.mill for v in view.visit_order] == ["other", SIM.id]
-    assert view.visit_order[0].reason.startswith("shortest remaining life 1.0 ")
+    assert view.visit_order[0].reason.startswith("shortest remaining life 1–")
     assert view.unreachable == ["gone"] and view.simulated
 
 

@@ -245,7 +245,7 @@ def test_route_serves_every_format(client):
         (URL, {"month": "2024-13"}, 422, "2024-13"),
         (URL, {"month": MONTH, "format": "docx"}, 422, "docx"),
         ("/mills/nope/reports/monthly", {"month": MONTH}, 404, "nope"),
-        (URL, {"month": MONTH, "table": "nope"}, 422, "what_if_life"),  # names the valid ones
+        (URL, {"month": MONTH, "table": "nope"}, 422, "life_band"),  # names the valid ones
         (URL, {"month": MONTH, "table": "starts", "format": "pdf"}, 422, "starts"),
     ],
 )
