@@ -7,9 +7,11 @@ rule               fires when → action (source)
 =================  ==========================================================================
 ``starts``         starts above the supplier norm of 3–5 a month → record and scrutinise every
                    stop and start, keep them to a minimum (Diering 2011 §6.1.3, §10.3)
-``start_peaks``    a start peaked above the start-peak warning level (250 % of rated, §7.2) →
-                   investigate the trips; check the liquid starter's electrolyte density with
-                   strain gauges (§10.2; a Grid starter: not recommended for mills, §10.4)
+``start_peaks``    a start peaked above the start-peak warning level (the starter type's mean +
+                   2 SD, §6.2.1, Tables 3–11, §7.2), or 8 of 10 or more of the month's starts
+                   above the starter type's field average → investigate the trips; check the
+                   liquid starter's electrolyte density with strain gauges (§10.2; a Grid
+                   starter: not recommended for mills, §10.4)
 ``bending``        steady bending amplitude above 25 MPa (experience), 43 MPa (fatigue reserve
                    factor 2 at rated torque) or 90 MPa (failure within weeks), Diering 2011
                    §8.1 → check the drivetrain alignment; realign the whole drivetrain after any
@@ -62,7 +64,8 @@ oscillation ranges at 16–24 % of rated on average."""
 @dataclass(frozen=True, slots=True)
 class Evidence:
     """What the rules read of one month (None: not measured). Peaks and levels in % of rated
-    motor torque, bending amplitude MPa, line amplitude % of rated torque."""
+    motor torque, bending amplitude MPa, line amplitude % of rated torque; ``typical_peak_pct``:
+    the starter type's field average peak (``typical_peak_source``: its table)."""
 
     month: str
     monitored_days: float
@@ -73,6 +76,8 @@ class Evidence:
     peak_warn_pct: float
     bending_amplitude_max_mpa: float | None
     gear_error_line_pct: float | None
+    typical_peak_pct: float | None = None
+    typical_peak_source: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -104,20 +109,37 @@ def _starts(e: Evidence) -> Action | None:
     times = f"{sig(e.starts / hi, 2)}–{sig(e.starts / lo, 2)}×"
     return Action(
         "starts",
-        "Record and scrutinise every stop and start; keep starts to a minimum.",
+        "Investigate why the mill stops; record and scrutinise every stop and start; keep "
+        "starts to a minimum.",
         f"{e.starts} starts in {e.month}: {times} the norm of {lo}–{hi} a month.",
         "Diering 2011 §6.1.3, §10.3",
     )
 
 
+HIGH_SHARE = 0.8
+"""Share of a month's starts above the starter type's field average that points at the starter
+(at least :data:`HIGH_SHARE_MIN_STARTS` starts): half of a healthy starter's starts lie above its
+average, 8 of 10 or more by chance about one month in twenty (binomial tail)."""
+HIGH_SHARE_MIN_STARTS = 10
+
+
 def _start_peaks(e: Evidence) -> Action | None:
-    above = [p for p in e.start_peaks_pct if p > e.peak_warn_pct]
-    if not above:
-        return None
     n = len(e.start_peaks_pct)
-    trips = f"; {e.trips} trip{'s' if e.trips != 1 else ''}" if e.trips else ""
-    evidence = (f"{len(above)} of {n} starts peaked above {sig(e.peak_warn_pct)} % of rated "
-                f"torque (highest {sig(max(above))} %){trips}.")  # fmt: skip
+    above = [p for p in e.start_peaks_pct if p > e.peak_warn_pct]
+    typical = e.typical_peak_pct
+    high = [] if typical is None else [p for p in e.start_peaks_pct if p > typical]
+    mostly_high = n >= HIGH_SHARE_MIN_STARTS and len(high) >= HIGH_SHARE * n
+    if not above and not mostly_high:
+        return None
+    said = [f"{len(above)} of {n} starts peaked above the warning level of "
+            f"{sig(e.peak_warn_pct)} % of rated torque"]  # fmt: skip
+    if typical is not None:
+        said.append(f"{len(high)} of {n} above the {e.starter} field average of {sig(typical)} % "
+                    f"(Diering 2011 {e.typical_peak_source})".replace(" ()", ""))  # fmt: skip
+    said.append(f"highest {sig(max(e.start_peaks_pct))} %")
+    if e.trips:
+        said.append(f"{e.trips} trip{'s' if e.trips != 1 else ''}")
+    evidence = "; ".join(said) + "."
     if e.starter == "Grid":
         return Action("start_peaks", "Replace the Grid starter: not recommended for mills.",
                       evidence, "Diering 2011 §10.2, §10.4")  # fmt: skip
@@ -126,7 +148,7 @@ def _start_peaks(e: Evidence) -> Action | None:
         "Investigate the trips and the starter; check the liquid starter's electrolyte density "
         "with strain-gauge measurements.",
         evidence,
-        "Diering 2011 §7.2, §10.2",
+        "Diering 2011 §6.2.1, §7.2, §10.2",
         urgent=len(above) == n and n > 1,
     )
 

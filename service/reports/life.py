@@ -64,7 +64,7 @@ from analytics.mill.phase_damage import (
     project_monthly_damage,
     start_cost,
 )
-from service.reports.numbers import finite_life, years_range_text
+from service.reports.numbers import NO_FINITE_LIFE, finite_life, years_range_text
 from service.reports.plain import plain
 from service.store.records import DamageRow
 
@@ -813,5 +813,7 @@ def _note(config: MillConfig, status: str, missing: list[str], gov: ComponentLif
              if p.remaining_life_years is not None]  # fmt: skip
     said = ", ".join(rates[:-1]) + f" and {rates[-1]}" if len(rates) > 1 else "".join(rates)
     years = years_range_text(gov.remaining_life_years_min, gov.remaining_life_years_max)
-    return (f"{sim}{gov.component} governs with {years} left at the {said} "
-            f"rate{'s' if len(rates) > 1 else ''} ({curve}; {prior_text}).")  # fmt: skip
+    at = f"at the {said} rate{'s' if len(rates) > 1 else ''}"
+    if years == NO_FINITE_LIFE:
+        return f"{sim}{gov.component} governs: {years} {at} ({curve}; {prior_text})."
+    return f"{sim}{gov.component} governs with {years} left {at} ({curve}; {prior_text})."

@@ -197,29 +197,32 @@ def _drivers(r: MonthlyReport) -> tuple[Paragraph, ...]:
 
 
 def _actions(r: MonthlyReport) -> tuple[Table, ...]:
-    """Recommended actions with their evidence and source, and last month's carried."""
+    """Recommended actions with their evidence and source, in one table with last month's:
+    this month's ``new`` or ``still open``, last month's that no longer fire ``done`` (or ``not
+    checked`` when this month was not monitored)."""
     a = r.advice
     if a is None:
         return ()
-    now = Table(
-        "summary_actions",
-        (Column("action", "recommended action", text=True),
-         Column("evidence", "evidence", text=True), Column("source", "source", text=True)),
-        rows([[("URGENT: " if x.urgent else "") + x.action, x.evidence, x.source]
-              for x in a.actions]),
-        caption="Recommended actions (Diering 2011 §10 and §6–§8; Fedin & Vinogradov 2018)",
-        empty_text="No action called for by this month's evidence.",
+    carried = {c.rule: c for c in a.carried}
+    since = f" (since {a.previous_month})"
+    items: list[list[Cell]] = [
+        [("URGENT: " if x.urgent else "") + x.action, x.evidence, x.source,
+         "still open" + since if x.rule in carried else "new"] for x in a.actions
+    ]  # fmt: skip
+    items += [[c.action, c.evidence_now, "", c.status] for c in a.carried
+              if c.status != "still open"]  # fmt: skip
+    return (
+        Table(
+            "summary_actions",
+            (Column("action", "recommended action", text=True),
+             Column("evidence", "evidence", text=True), Column("source", "source", text=True),
+             Column("status", "status", text=True)),
+            rows(items),
+            caption="Recommended actions (Diering 2011 §10 and §6–§8; Fedin & Vinogradov "
+            f"2018), and those of {a.previous_month or 'last month'}",
+            empty_text="No action called for by this month's or last month's evidence.",
+        ),
     )  # fmt: skip
-    before = Table(
-        "summary_actions_carried",
-        (Column("action", f"action of {a.previous_month}", text=True),
-         Column("status", "status", text=True, status=True),
-         Column("evidence_now", f"in {r.month}", text=True)),
-        rows([[x.action, x.status, x.evidence_now] for x in a.carried]),
-        caption=f"Last month's actions ({a.previous_month}): done or still open",
-        empty_text=f"No action was recommended for {a.previous_month or 'last month'}.",
-    )  # fmt: skip
-    return now, before
 
 
 def _summary(r: MonthlyReport) -> Section:

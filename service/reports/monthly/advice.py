@@ -4,6 +4,8 @@ evidence from the report's sections and, for last month, from the store)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.operation.transients import start_peaks
 from service.reports.actions import Evidence, carry, drivers, recommend
@@ -41,7 +43,13 @@ def month_evidence(
         peak_warn_pct=starts.peak_warn_pct,
         bending_amplitude_max_mpa=max(bending) if bending else None,
         gear_error_line_pct=_gear_line_pct(harmonics),
+        **_typical(config),
     )
+
+
+def _typical(config: MillConfig) -> dict[str, Any]:
+    limits = config.start_peak_limits()
+    return {"typical_peak_pct": limits.typical, "typical_peak_source": limits.source}
 
 
 def _previous_evidence(store: Store, config: MillConfig, trend: MonthTrend) -> Evidence:
@@ -61,6 +69,7 @@ def _previous_evidence(store: Store, config: MillConfig, trend: MonthTrend) -> E
         peak_warn_pct=config.start_peak_levels()[0],
         bending_amplitude_max_mpa=max(bending) if bending else None,
         gear_error_line_pct=_gear_line_pct(harmonics),
+        **_typical(config),
     )
 
 

@@ -35,11 +35,12 @@ def _measured(
     starts: int, covered_s: float, seconds: Mapping[str, float]
 ) -> tuple[float | None, float | None]:
     """This month's starts per 4-week month and running fraction (running seconds over the
-    monitored seconds outside starts and stops)."""
+    monitored seconds outside starts and stops; None when no phase time is stored)."""
     if covered_s <= 0:
         return None, None
     outside = covered_s - seconds.get("start", 0.0) - seconds.get("stop", 0.0)
-    fraction = min(seconds.get("run", 0.0) / outside, 1.0) if outside > 0 else None
+    known = outside > 0 and sum(seconds.values()) > 0
+    fraction = min(seconds.get("run", 0.0) / outside, 1.0) if known else None
     return starts / covered_s * MONTH_S, fraction
 
 

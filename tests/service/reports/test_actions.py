@@ -20,7 +20,8 @@ from service.reports.actions import (
 QUIET = Evidence(
     month="2024-03", monitored_days=31.0, starts=4, trips=0, starter="LRS",
     start_peaks_pct=[180.0, 200.0, 190.0, 210.0], peak_warn_pct=250.0,
-    bending_amplitude_max_mpa=15.0, gear_error_line_pct=0.5,
+    bending_amplitude_max_mpa=15.0, gear_error_line_pct=0.5, typical_peak_pct=233.12,
+    typical_peak_source="Table 4",
 )  # fmt: skip
 
 
@@ -38,9 +39,25 @@ def test_starts_above_the_norm_with_every_peak_high_point_at_the_starter():
     assert set(got) == {"starts", "start_peaks"}
     assert "17–28×" in got["starts"].evidence and "§10.3" in got["starts"].source
     peaks = got["start_peaks"]
-    assert "84 of 84 starts peaked above 250 %" in peaks.evidence and "269 %" in peaks.evidence
-    assert "20 trips" in peaks.evidence and "electrolyte" in peaks.action and peaks.urgent
+    assert "84 of 84 starts peaked above the warning level of 250 %" in peaks.evidence
+    assert "highest 269 %" in peaks.evidence and "20 trips" in peaks.evidence
+    assert "electrolyte" in peaks.action and peaks.urgent
     assert recommend(_with(starts=5)) == []  # the norm's upper end is still the norm
+
+
+def test_every_peak_above_the_starter_s_field_average_points_at_the_starter():
+    """269 % on every start: below the warning level (310 %) but above the LRS average of
+    233 % (Diering 2011 Table 4) on 84 of 84 starts — a healthy starter's are half above."""
+    e = _with(starts=84, start_peaks_pct=[269.0] * 84, peak_warn_pct=310.0)
+    (peaks,) = [a for a in recommend(e) if a.rule == "start_peaks"]
+    assert "84 of 84 above the LRS field average of 233 % (Diering 2011 Table 4)" in (
+        peaks.evidence
+    )
+    assert not peaks.urgent and "electrolyte" in peaks.action
+    healthy = _with(starts=12, start_peaks_pct=[200.0, 260.0] * 6, peak_warn_pct=310.0)
+    assert [a.rule for a in recommend(healthy)] == ["starts"]
+    few = _with(start_peaks_pct=[269.0] * 4, peak_warn_pct=310.0)  # too few to tell
+    assert recommend(few) == []
 
 
 def test_a_grid_starter_is_named():
