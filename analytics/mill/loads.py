@@ -15,7 +15,9 @@ each of which owns its state and its piece of the snapshot:
   :mod:`analytics.operation.steady_state`;
 * ``fatigue`` (:mod:`analytics.mill.load_damage`) — stress, one
   :class:`~analytics.fatigue.rainflow.RainflowCounter` and one
-  :class:`~analytics.mill.phase_damage.PhaseDamage` per component (Diering 2011 §8.1–8.2).
+  :class:`~analytics.mill.phase_damage.PhaseDamage` per component (Diering 2011 §8.1–8.2);
+* ``app_d`` (:mod:`analytics.mill.app_d`) — App. D's start-stop records and run portions per
+  component, fed with decided samples from the ring; each stop event carries its record.
 
 The snapshot's format (kind, version, keys in order) is :mod:`analytics.mill.load_snapshot`'s.
 

@@ -134,8 +134,9 @@ def _start_peaks(e: Evidence) -> Action | None:
     said = [f"{len(above)} of {n} starts peaked above the warning level of "
             f"{sig(e.peak_warn_pct)} % of rated torque"]  # fmt: skip
     if typical is not None:
-        said.append(f"{len(high)} of {n} above the {e.starter} field average of {sig(typical)} % "
-                    f"(Diering 2011 {e.typical_peak_source})".replace(" ()", ""))  # fmt: skip
+        src = f" ({e.typical_peak_source})" if e.typical_peak_source else ""
+        said.append(f"{len(high)} of {n} above the {e.starter} field average of "
+                    f"{sig(typical)} %{src}")  # fmt: skip
     said.append(f"highest {sig(max(e.start_peaks_pct))} %")
     if e.trips:
         said.append(f"{e.trips} trip{'s' if e.trips != 1 else ''}")

@@ -5,14 +5,20 @@ Diering 2011 §10.6 asks for "automatic reports"; issue 17 for one content in th
 format shows what :func:`monthly_document` puts here, in this order (:data:`SECTIONS`):
 
 1. **Summary** (page 1 of the PDF, top of the HTML): life consumed to date and the remaining
-   range per component (or why there is none), starts against the 3–5 norm (§6.1.3), the
-   worst start against the start-peak levels (§7.2), alarms raised, what changed since last
-   month, damage per component and the share of it from starts and stops (§8.3, App. D);
+   range per component (or why there is none), what drives the damage in words and the
+   recommended actions with last month's (§10, §6–§8; :mod:`service.reports.actions`), starts
+   against the 3–5 norm (§6.1.3), the worst start against the start-peak levels (§7.2), alarms
+   raised, what changed since last month, damage per component and the share of it from
+   starts and stops (§8.3, App. D);
 2. remaining life (§8.2): cumulative damage against the design line (figure), the range by
-   rate basis, what drives it, life at the App. D start rates; 3. the 12-month trend (§10.6
-   "long term trending"); 4. starts; 5. fatigue damage; 6. what-if (App. D); 7. steady-state
+   rate basis, the band from S-N scatter (50/90/97.7 % survival), what drives it; 3. the
+   12-month trend (§10.6 "long term trending"); 4. starts; 5. fatigue damage; 6. what-if
+   (App. D: one table on one start-cost basis, its assumptions above it); 7. steady-state
    oscillation and bending (Tables 14–15, §8.1); 8. harmonics (§6.1.2, §6.2.7); 9. alarms;
    10. data quality (§5.2.2).
+
+Life and damage numbers go through :mod:`service.reports.numbers` (≤ 3 significant digits; no
+lives beyond its horizon).
 
 Adding a section: write ``def _name(r: MonthlyReport) -> Section`` with its paragraphs, tables
 (each a unique ``name``: it becomes a CSV table) and figures (``_figure(name, builder, r)``
@@ -456,10 +462,13 @@ def _what_if_basis(r: MonthlyReport) -> tuple[Paragraph, ...]:
     if b is None:
         return ()
     rate = "–" if b.measured_starts_per_month is None else fmt(b.measured_starts_per_month)
-    frac = "–" if b.measured_running_fraction is None else fmt(100 * b.measured_running_fraction)
+    frac = ("not known (no time in phases stored: no 'measured' row)"
+            if b.measured_running_fraction is None
+            else f"{fmt(100 * b.measured_running_fraction)} % of the time outside starts and "
+            "stops")  # fmt: skip
     measured = (f"Measured on {b.start_stops} start-stop records and {fmt(b.run_hours)} h of "
-                f"steady running this month; measured rate {rate} starts per 4-week month, "
-                f"running {frac} % of the time outside starts and stops.")  # fmt: skip
+                f"steady running this month; measured rate {rate} starts per 4-week month; "
+                f"running {frac}.")  # fmt: skip
     return tuple(Paragraph(t, "meta") for t in (measured, *b.assumptions))
 
 

@@ -3,7 +3,7 @@
 * three significant digits at most (a Miner sum or a life is not known better: the S-N scatter
   alone spans a factor 2.5 between 50 % and 97.7 % survival), thousands separators, no
   trailing zeros: ``23,000``, ``84``, ``0.0123``; very small or large numbers as
-  ``1.23 × 10⁻⁷``;
+  ``1.23×10⁻⁷``;
 * lives beyond :data:`HORIZON_YEARS` read :data:`NO_FINITE_LIFE` — a number of centuries says
   nothing more than "not at these loads" — and carry no end date.
 
@@ -38,7 +38,7 @@ def sig(x: float | None, digits: int = 3) -> str:
     """``x`` to ``digits`` significant digits (``–`` for none or not-a-number).
 
     >>> [sig(v) for v in (23043.01, 84.0, 0.012345, 1.5e-7, 0.0)]
-    ['23,000', '84', '0.0123', '1.5 × 10⁻⁷', '0']
+    ['23,000', '84', '0.0123', '1.5×10⁻⁷', '0']
     """
     if x is None or not math.isfinite(x):
         return "–"
@@ -48,7 +48,7 @@ def sig(x: float | None, digits: int = 3) -> str:
     if exp < -3 or exp >= 6:
         mant, e = f"{x:.{digits - 1}e}".split("e")
         mant = mant.rstrip("0").rstrip(".")
-        return f"{mant} × 10{str(int(e)).translate(_SUPER)}".replace("-", MINUS, 1)
+        return f"{mant}×10{str(int(e)).translate(_SUPER)}".replace("-", MINUS, 1)
     rounded = round(x, digits - 1 - exp)
     decimals = max(digits - 1 - exp, 0)
     text = f"{rounded:,.{decimals}f}"

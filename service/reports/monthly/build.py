@@ -7,9 +7,12 @@ one the maintenance team reads each month. Its sections and their sources:
   configured warning/alarm levels (field average 20–22, §6.2.8), each start's switch-on and
   short-circuit peaks against the start-peak limits (250/300 % of rated torque, §7.2, Tables 4–6);
 * Miner damage per day, phase and component (§8.2, App. D: start, run and stop portions);
-* the cost of a start in hours of steady running and the App. D what-if table of damage and life
-  against starts per month (5/day, 1/day, 1/week, 1/month, and this month's observed rate; a
-  month is 4 weeks as App. D counts it, :data:`analytics.mill.phase_damage.MONTH_S`);
+* the cost of a start as App. D counts it (the start-stop records the month's stops carry) and
+  the one App. D what-if table of damage and life against starts per month (5/day, 1/day,
+  1/week, 1/month, and ``measured``: this month's start rate and running fraction; a month is
+  4 weeks as App. D counts it), with its assumptions (:mod:`service.reports.monthly.what_if`);
+* page 1's words: what drives the damage and the recommended actions, last month's carried
+  (``advice``: :mod:`service.reports.monthly.advice`, :mod:`service.reports.actions`);
 * steady-state oscillation range (Tables 14–15) and pinion bending amplitude (§8.1) trends,
 * harmonic line trends and unexplained spectral peaks (§6.1.2, §6.2.7),
 * the month's alarms and data-quality events (§5.2.2);

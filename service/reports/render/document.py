@@ -71,7 +71,7 @@ NBSP = "\u00a0"
 
 def fmt(x: float | None, digits: int = 3) -> str:
     """A number as a person reads it: :func:`service.reports.numbers.sig` (``digits``
-    significant digits, thousands separators, ``1.23 × 10⁻⁷`` when very small or large, a true
+    significant digits, thousands separators, ``1.23×10⁻⁷`` when very small or large, a true
     minus sign, ``–`` for none or not-a-number)."""
     return sig(None if x is None else float(x), digits)
 

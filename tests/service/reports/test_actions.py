@@ -21,7 +21,7 @@ QUIET = Evidence(
     month="2024-03", monitored_days=31.0, starts=4, trips=0, starter="LRS",
     start_peaks_pct=[180.0, 200.0, 190.0, 210.0], peak_warn_pct=250.0,
     bending_amplitude_max_mpa=15.0, gear_error_line_pct=0.5, typical_peak_pct=233.12,
-    typical_peak_source="Table 4",
+    typical_peak_source="Diering 2011 Table 4",
 )  # fmt: skip
 
 
