@@ -193,12 +193,21 @@ _PORTION = {
 }
 
 
+_BATCH = 4096
+"""Cycles of a component kept before their damage is computed (one vectorised, exact pass per
+batch, as :class:`~analytics.mill.phase_damage.PhaseDamage` does: the sums are exact, so
+batching does not change them)."""
+
+
 class _Portion:
-    """One open portion: a rainflow counter per component and its sample count."""
+    """One open portion: a rainflow counter per component, its cycles not yet costed, their
+    damage so far and the portion's sample count."""
 
     def __init__(self, components: list[str]) -> None:
         self.counters = {c: RainflowCounter() for c in components}
         self.damage = {c: MinerSum() for c in components}
+        self.raw: dict[str, list[tuple[np.ndarray, ...]]] = {c: [] for c in components}
+        self.raw_n = dict.fromkeys(components, 0)
         self.samples = 0
 
     def feed(self, stress: Mapping[str, np.ndarray], recorders: Mapping[str, DamageRecorder],
@@ -206,19 +215,33 @@ class _Portion:
         for comp, x in stress.items():
             cycles = self.counters[comp].feed(x[np.isfinite(x)])
             if len(cycles):
-                self.damage[comp].add_block(recorders[comp].block_damage(cycles), exact=True)
+                self.raw[comp].append((cycles.range.copy(), cycles.mean.copy(),
+                                       cycles.count.copy()))  # fmt: skip
+                self.raw_n[comp] += len(cycles)
+                if self.raw_n[comp] >= _BATCH:
+                    self._cost(comp, recorders[comp])
         self.samples += n
+
+    def _cost(self, comp: str, recorder: DamageRecorder) -> None:
+        """The damage of the cycles held, added to the component's sum."""
+        if self.raw[comp]:
+            r, m, c = (np.concatenate(parts) for parts in zip(*self.raw[comp], strict=True))
+            self.damage[comp].add_block(recorder.damage_of(r, m, c), exact=True)
+            self.raw[comp], self.raw_n[comp] = [], 0
 
     def closed(self, recorders: Mapping[str, DamageRecorder]) -> dict[str, float]:
         """Damage per component with the residue closed as half cycles."""
         out = {}
         for comp, counter in self.counters.items():
+            self._cost(comp, recorders[comp])
             res = counter.close()
             extra = recorders[comp].block_damage(res) if len(res) else np.empty(0)
             out[comp] = self.damage[comp].value + math.fsum(extra.tolist())
         return out
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self, recorders: Mapping[str, DamageRecorder]) -> dict[str, Any]:
+        for comp, rec in recorders.items():
+            self._cost(comp, rec)
         return {
             "samples": self.samples,
             "counters": {c: k.snapshot() for c, k in self.counters.items()},
@@ -227,7 +250,7 @@ class _Portion:
 
     @classmethod
     def restore(cls, d: dict[str, Any]) -> _Portion:
-        p = cls([])
+        p = cls(list(d["counters"]))
         p.samples = int(d["samples"])
         p.counters = {c: RainflowCounter.restore(s) for c, s in d["counters"].items()}
         p.damage = {c: MinerSum.restore(s) for c, s in d["damage"].items()}
@@ -240,13 +263,16 @@ class AppDCounting:
     the events of that transition are measured), ``cost()`` to read, ``last_record`` for the
     stop event that closed the latest start-stop record."""
 
-    CONFIGURED = frozenset({"fs", "components", "margin", "preroll"})
+    #: ``recorders``: the components' damage recorders of the load stage (its configuration),
+    #: as last passed in.
+    CONFIGURED = frozenset({"fs", "components", "margin", "preroll", "recorders"})
 
     def __init__(self, fs: float, components: list[str]) -> None:
         self.fs = fs
         self.components = list(components)
         self.margin = round(SWITCH_OFF_MARGIN_S * fs)
         self.preroll = round(START_PREROLL_S * fs)
+        self.recorders: Mapping[str, DamageRecorder] = {}
         self.app_d_portions = _Book(self.components)
 
     @property
@@ -271,6 +297,7 @@ class AppDCounting:
                 recorders: Mapping[str, DamageRecorder]) -> None:  # fmt: skip
         """Feed the decided samples of the current phase (a running phase held back by the
         margin: its end is not known yet)."""
+        self.recorders = recorders
         running = self._b.state == OperatingState.RUNNING
         until = decided - self.margin if running else decided
         self._feed(ring, until, stress, recorders)
@@ -303,6 +330,7 @@ class AppDCounting:
     def on_transition(self, tr: Transition, ring: SampleRing, stress: _Stress,
                       recorders: Mapping[str, DamageRecorder]) -> None:  # fmt: skip
         """Close the portion the transition ends and open the next."""
+        self.recorders = recorders
         prev, st = OperatingState(self._b.state), OperatingState(tr.state)
         end = tr.sample - self.margin if prev == OperatingState.RUNNING else tr.sample
         self._feed(ring, max(end, self._b.fed), stress, recorders)
@@ -372,13 +400,13 @@ class AppDCounting:
     # ------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
         """The counters and sums (plain JSON data), under the key ``app_d_portions``."""
-        b = self._b
+        b, rec = self._b, self.recorders
         return {"app_d_portions": {
             "fed": b.fed,
             "state": b.state,
             "since": b.since,
-            "start_stop": None if b.start_stop is None else b.start_stop.snapshot(),
-            "run": None if b.run is None else b.run.snapshot(),
+            "start_stop": None if b.start_stop is None else b.start_stop.snapshot(rec),
+            "run": None if b.run is None else b.run.snapshot(rec),
             "cycle_run": b.cycle_run,
             "totals": {c: [t[0], t[1].snapshot(), t[2], t[3].snapshot(), t[4]]
                        for c, t in b.totals.items()},
