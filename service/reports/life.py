@@ -34,8 +34,9 @@ Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
   end dates only within :data:`service.reports.numbers.HORIZON_YEARS`.
 * **what drives it**: monitored damage by phase (store names: ``start``, ``run``, ``stop``,
   ``barring``, ``stopped``, ``unknown``) and by component; life at the App. D start rates
-  (5/day, 1/day, 1/week, 1/month per 4-week month) from the measured cost of a start
-  (:func:`analytics.mill.phase_damage.start_cost`).
+  (5/day, 1/day, 1/week, 1/month per 4-week month) from the cost of a start as App. D
+  counts it (the stops' start-stop records, :mod:`analytics.mill.app_d`; a store written
+  before them: the phase sums, :func:`analytics.mill.phase_damage.start_cost`).
 
 Pure: :class:`LifeInputs` (rows, coverage, counts) in, :class:`LifeReport` (frozen dataclasses,
 JSON-ready through :func:`life_to_dict`) out. The store is read by
@@ -57,6 +58,7 @@ from pydantic import ConfigDict, TypeAdapter, with_config
 
 from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.app_d import APP_D_PERIODS, AppDCost, app_d_month
 from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
@@ -108,7 +110,9 @@ class LifeInputs:
     ``starts``: starts since monitoring began; ``phase_seconds``: seconds per operating phase
     (``start``, ``stop``, ``run``, ``stopped``, …) over the monitored time, as the analyzer
     counted them; ``live``: the worker's damage summary
-    per component (``committed``, ``pending_residue``), only when evaluating now."""
+    per component (``committed``, ``pending_residue``), only when evaluating now; ``app_d``:
+    App. D's start-stop records and run portions per component over the monitored time (the
+    stops' records, :mod:`analytics.mill.app_d`), the basis of the what-if lives."""
 
     config: MillConfig
     rows: list[DamageRow]
@@ -117,6 +121,7 @@ class LifeInputs:
     phase_seconds: Mapping[str, float]
     evaluated_ns: int
     live: Mapping[str, Mapping[str, float]] | None = None
+    app_d: Mapping[str, AppDCost] | None = None
 
 
 _DESCRIBED = ConfigDict(use_attribute_docstrings=True)
@@ -603,7 +608,7 @@ def _component(
         projections=projections,
         remaining_life_years_min=min(years) if years else None,
         remaining_life_years_max=max(years) if years else None,
-        what_if=_what_if(ctx, inputs, phases, damage),
+        what_if=_what_if(ctx, inputs, phases, damage, comp),
         live=live is not None,
         life_band=_band(ctx, comp, damage, projections),
     )
@@ -722,17 +727,23 @@ def _project(ctx: _Ctx, damage: float, basis: str, rate: float | None,
 
 
 def _what_if(
-    ctx: _Ctx, inputs: LifeInputs, phases: dict[str, float], damage: float
+    ctx: _Ctx, inputs: LifeInputs, phases: dict[str, float], damage: float, comp: str
 ) -> list[WhatIfLife]:
-    """Life at the App. D start rates from the monitored cost of a start (none when
-    the history is insufficient)."""
-    s = inputs.phase_seconds
-    full = {"start": 0.0, "stop": 0.0, "run": 0.0, **phases}
-    cost = start_cost(full, inputs.starts, s.get("start", 0.0) + s.get("stop", 0.0),
-                      s.get("run", 0.0))  # fmt: skip
+    """Life at the App. D start rates from the cost of a start as App. D counts it
+    (``inputs.app_d``: the stops' start-stop records; without them, from the phase sums as
+    before App. D was counted); none while the history is insufficient."""
+    cost = (inputs.app_d or {}).get(comp)
+    if cost is not None and cost.start_stops:
+        months = {n: app_d_month(cost, k, t, per) for n, (k, t, per) in APP_D_PERIODS.items()}
+    else:
+        s = inputs.phase_seconds
+        full = {"start": 0.0, "stop": 0.0, "run": 0.0, **phases}
+        old = start_cost(full, inputs.starts, s.get("start", 0.0) + s.get("stop", 0.0),
+                         s.get("run", 0.0))  # fmt: skip
+        months = {n: project_monthly_damage(old, k) for n, k in APP_D_SCENARIOS.items()}
     out: list[WhatIfLife] = []
     for name, n in APP_D_SCENARIOS.items():
-        per_month = project_monthly_damage(cost, n) if ctx.sufficient else None
+        per_month = months[name] if ctx.sufficient else None
         years, end, capped = _what_if_life(ctx, damage, per_month)
         out.append(WhatIfLife(name, n, per_month, years, end, capped))
     return out

@@ -54,6 +54,7 @@ from analytics.mill.results import (
     ComponentDamage,
     StartEvent,
     SteadyWindowResult,
+    StopEvent,
 )
 from analytics.spectra.resonance import resonance_margins
 from analytics.spectra.settings import stagger_for
@@ -222,6 +223,8 @@ class MillJob:
             update.events.append(self._event_row(event))
             if isinstance(event, StartEvent):
                 self.ledger.add(starts=[event.t_ns])
+            elif isinstance(event, StopEvent):
+                self.ledger.add(stops=[(event.t_ns, event.app_d)])
             observations += self._event_observations(event)
         for window in self._new_windows():
             update.records.append(("steady", int(window["t_ns"]), window))

@@ -36,6 +36,7 @@ tables are sampled hourly. Month bounds, the starts norm and the statuses come f
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -107,7 +108,7 @@ def build_monthly_report(
         covered = monitored_seconds(reader.coverage(), reader.start_ns, reader.end_ns)
         stored_alarms = store.alarms(mill_id=config.id)
         alarms = _alarms(stored_alarms, reader.start_ns, reader.end_ns)
-        long_view = _long_view(store, config, month, reader, starts, stored_alarms)
+        long_view = _long_view(store, config, month, reader, starts, stored_alarms, cost)
         steady = steady_section(steady_rows, config, reader)
         evidence = month_evidence(config, month, covered, starts, steady, harmonics)
         trend = long_view["trend"]
@@ -234,10 +235,12 @@ def _long_view(
     reader: MonthReader,
     starts: Starts,
     stored_alarms: list[Alarm],
+    cost: dict[str, AppDCost],
 ) -> dict[str, Any]:
-    """``summary``, ``life`` (as of the month's end), ``cumulative`` and ``trend`` (the
-    :class:`MonthlyReport` fields of page 1 and the long view)."""
-    inputs = life_inputs(store, config, reader.end_ns)
+    """``summary``, ``life`` (as of the month's end; its App. D what-if lives on the month's
+    start-stop records, ``cost``: the basis of the report's what-if table), ``cumulative`` and
+    ``trend`` (the :class:`MonthlyReport` fields of page 1 and the long view)."""
+    inputs = dataclasses.replace(life_inputs(store, config, reader.end_ns), app_d=cost)
     life = compute_life(inputs)
     months = last_months(month, TREND_MONTHS)
     trend = monthly_trend(store, config, months, [r for r in inputs.rows if r.day >= months[0]])

@@ -138,3 +138,17 @@ def test_snapshot_round_trip_keeps_the_portions():
         if lo == 148_000:  # in the stop's margin, the run portion open
             split = LoadAnalysis.restore(sc.config, split.snapshot())
     assert split.app_d.cost() == whole.app_d.cost()
+
+
+@pytest.mark.parametrize("frame", [997, 10_000])
+def test_the_portions_do_not_depend_on_the_framing(frame):
+    """Split anywhere (the Stateful contract): the same samples in other frames, the same
+    start-stop records and run portions (exact sums: equal to 1e-15)."""
+    sc, a = _lrs()
+    b = run(sc, frame=frame)
+    for comp, cost in a.app_d.cost().items():
+        other = b.app_d.cost()[comp]
+        assert other.start_stops == cost.start_stops == 1
+        assert other.start_stop_s == cost.start_stop_s and other.run_s == cost.run_s
+        assert other.start_stop_damage == pytest.approx(cost.start_stop_damage, rel=1e-15)
+        assert other.run_damage == pytest.approx(cost.run_damage, rel=1e-15)

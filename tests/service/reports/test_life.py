@@ -128,6 +128,22 @@ def test_life_band_from_the_s_n_scatter(store):
             assert (b.end_date_earliest is None) == (b.remaining_life_years_min > 1000)
 
 
+def test_what_if_lives_rest_on_app_d_s_start_stop_records(store):
+    """``/life``'s what-if: App. D's cost of a start from the stops' records since monitoring
+    began (the same arithmetic as the analyzer's monthly projection)."""
+    from analytics.mill.app_d import APP_D_PERIODS, app_d_month
+
+    inputs = life_inputs(store, SIM_T, _ns("2024-03-01"))
+    stops = [e for e in store.events(SIM.id, "stop") if e.data.get("app_d")]
+    assert inputs.app_d and len(stops) >= 2
+    life = compute_life(inputs)
+    for comp, cost in inputs.app_d.items():
+        assert cost.start_stops == len(stops)
+        for w in life.components[comp].what_if:
+            k, period, per = APP_D_PERIODS[w.scenario]
+            assert w.damage_per_month == pytest.approx(app_d_month(cost, k, period, per))
+
+
 def test_no_start_seen_is_said_and_the_minimum_is_configurable(store):
     rows = store.damage(SIM.id, until_day="2024-01-01")
     span = (JAN_T0, JAN_T0 + 20 * 86_400 * 10**9)

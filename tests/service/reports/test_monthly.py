@@ -255,3 +255,16 @@ def test_route_errors_are_problem_json(client, path, params, status, named):
     assert r.headers["content-type"] == "application/problem+json"
     body = r.json()
     assert body["status"] == status and body["title"] and named in body["detail"]
+
+
+def test_the_life_what_if_and_the_report_table_share_one_basis(store):
+    """The life section's App. D lives rest on the same start-stop records as the table."""
+    from analytics.drivetrain.mill_config import LifeConfig
+
+    relaxed = CONFIG.model_copy(update={"life": LifeConfig(min_monitoring_days=0, min_starts=0)})
+    report = build_monthly_report(store, relaxed, MONTH)
+    assert report.life.status == "ok"
+    for c, life in report.life.components.items():
+        for w in life.what_if:
+            row = next(r for r in report.what_if if r.scenario == w.scenario)
+            assert w.damage_per_month == pytest.approx(row.damage_per_month[c], rel=1e-12)
