@@ -235,12 +235,14 @@ def _long_view(
     reader: MonthReader,
     starts: Starts,
     stored_alarms: list[Alarm],
-    cost: dict[str, AppDCost],
+    cost: dict[str, AppDCost] | None = None,
 ) -> dict[str, Any]:
     """``summary``, ``life`` (as of the month's end; its App. D what-if lives on the month's
     start-stop records, ``cost``: the basis of the report's what-if table), ``cumulative`` and
     ``trend`` (the :class:`MonthlyReport` fields of page 1 and the long view)."""
-    inputs = dataclasses.replace(life_inputs(store, config, reader.end_ns), app_d=cost)
+    inputs = life_inputs(store, config, reader.end_ns)
+    if cost is not None:
+        inputs = dataclasses.replace(inputs, app_d=cost)
     life = compute_life(inputs)
     months = last_months(month, TREND_MONTHS)
     trend = monthly_trend(store, config, months, [r for r in inputs.rows if r.day >= months[0]])
