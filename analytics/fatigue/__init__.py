@@ -15,7 +15,8 @@ Recorders (consume Cycles; combine freely, as pyLife's detectors and recorders d
 
 Curves and sums::
 
-    sn_curves        SNCurve (m1, m2, S_D, N_D, N_L), Goodman correction, equivalent range
+    sn_curves        SNCurve (m1, m2, S_D, N_D, N_L; scatter sd_log10_N, life_factor), Goodman
+                     correction, equivalent range
     sn_models        named S-N models → curves
     exact_sum        correctly rounded sums (compensated, for a year of 1 kHz data); ExactSum
     *_kernels        compiled loops of rainflow, damage and the exact sum

@@ -9,7 +9,7 @@ Modules (each imports only the ones listed before it)::
                      steady-state window, a component's damage), read by attribute by every
                      surface
     phase_damage     PhaseTimeline, PhaseDamage: the damage and cycle recorder by operating phase
-                     and local day, the cost of a start, monthly projections, the one
+                     and local day, the phase-sum cost of a start (life's what-if), the one
                      SECONDS_PER_YEAR of damage rates (Diering 2011 §8.3, App. D); here
                      because it joins fatigue (cycles, Miner) with operation (states)
     report           the tables of the load report (starts per month, phase seconds, damage,
@@ -27,6 +27,9 @@ Modules (each imports only the ones listed before it)::
                      hold, rainflow counters and damage recorders
     load_snapshot    the load stage's checkpoint format (kind, version 3, keys in order) and the
                      renaming of a version-2 checkpoint
+    app_d            AppDCounting: the cost of a start as Diering 2011 App. D counts it (start and
+                     stop portions joined, residue counted; run portion steady running only),
+                     live per start-stop record; AppDCost, app_d_month, app_d_projections
     loads            LoadAnalysis: the load stage — feeds the state machine and the ring, hands
                      frames and transitions to the load_* parts (each owns its state and its
                      keys of the snapshot), the report; snapshot/restore

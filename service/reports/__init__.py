@@ -24,6 +24,11 @@ What is here:
 * :mod:`service.reports.fleet_document` — the fleet report (HTML, PDF, CSV) from the fleet
   answer (``GET /sites/{site}/reports/fleet``).
 * :mod:`service.reports.plain` — report data to JSON-ready plain data.
+* :mod:`service.reports.numbers` — the one formatting of life and damage numbers (≤ 3
+  significant digits; "no finite life predicted at these loads" beyond the horizon, no end
+  date then); the renderers' ``fmt`` uses it.
+* :mod:`service.reports.actions` — what drives the damage in words and the recommended actions
+  (pure rules on a month's evidence, each threshold with its source), carried to next month.
 * :mod:`service.reports.monthly_document` — what the monthly report says, once: its sections in
   order (summary first) as a document of :mod:`service.reports.render`, which renders it as
   HTML, PDF and tidy CSV tables; :mod:`service.reports.figures` draws its plots;

@@ -25,10 +25,12 @@ import zoneinfo
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from datetime import date, datetime, timedelta
+from typing import Any
 
 import numpy as np
 
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.app_d import cost_from_records
 from analytics.mill.phase_damage import phase_totals
 from service.reports.life import LifeInputs, midnight_ns, monitored_seconds
 from service.reports.starts import month_bounds_ns
@@ -68,6 +70,7 @@ class LifeLedger:
         self._days: dict[str, tuple[int, int]] = {}
         self._phases: dict[tuple[str, str], float] = {}
         self._starts: set[int] = set()
+        self._stops: dict[int, dict[str, Any]] = {}
 
     @classmethod
     def from_store(cls, store: Store, config: MillConfig) -> LifeLedger:
@@ -79,6 +82,7 @@ class LifeLedger:
             days=[(d, a, b) for d, a, b in store.mill_days(config.id) if b > a]
             or _days_of_damage(store, config),
             starts=[e.t_ns for e in store.event_times(config.id, ("start",), 0, _END_NS)],
+            stops=[(e.t_ns, e.data.get("app_d")) for e in store.events(config.id, "stop")],
         )
         return ledger
 
@@ -88,9 +92,11 @@ class LifeLedger:
         phases: Iterable[PhaseRow] = (),
         days: Iterable[tuple[str, int, int]] = (),
         starts: Iterable[int] = (),
+        stops: Iterable[tuple[int, Mapping[str, Any] | None]] = (),
     ) -> None:
         """Rows as the store takes them (:class:`~service.store.database.Store`'s
-        ``set_damage``, ``set_phases``, ``extend_days``; start events by time)."""
+        ``set_damage``, ``set_phases``, ``extend_days``; start events by time; stop events by
+        time with the App. D start-stop record they carry, :mod:`analytics.mill.app_d`)."""
         for r in rows:
             self._rows[(r.component, r.phase, r.day)] = r
         for p in phases:
@@ -99,6 +105,9 @@ class LifeLedger:
             lo, hi = self._days.get(day, (first, last))
             self._days[day] = (min(lo, first), max(hi, last))
         self._starts.update(starts)
+        for t_ns, record in stops:
+            if record:
+                self._stops[t_ns] = dict(record)
 
     def inputs(
         self,
@@ -125,7 +134,8 @@ class LifeLedger:
             for (phase, day), seconds in sorted(self._phases.items(), key=lambda kv: kv[0][::-1])
             if day <= last_day
         )
-        return LifeInputs(self.config, rows, coverage, starts, phase_s, end, live)
+        app_d = cost_from_records(r for t, r in sorted(self._stops.items()) if since <= t < end)
+        return LifeInputs(self.config, rows, coverage, starts, phase_s, end, live, app_d)
 
 
 _END_NS = 2**63 - 1

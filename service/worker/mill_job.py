@@ -223,6 +223,8 @@ class MillJob:
             update.events.append(self._event_row(event))
             if isinstance(event, StartEvent):
                 self.ledger.add(starts=[event.t_ns])
+            elif isinstance(event, StopEvent):
+                self.ledger.add(stops=[(event.t_ns, event.app_d)])
             if isinstance(event, StartEvent | StopEvent):  # (suppression by design: engine)
                 update.alarm_transitions += self.alarms.observe_all(observations)
                 observations = []

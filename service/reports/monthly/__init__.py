@@ -11,6 +11,11 @@ What is here:
 * :mod:`service.reports.monthly.reader` — the month read from the store, bounded on the
   indexes (only the fields the report shows; harmonic tables one per hour).
 * :mod:`service.reports.monthly.trends` — the steady-state and harmonic trend sections.
+* :mod:`service.reports.monthly.what_if` — the one App. D table: the month's start-stop
+  records (carried by its stop events) → damage per month, life from new and remaining life at
+  App. D's start rates and as measured, with the assumptions.
+* :mod:`service.reports.monthly.advice` — page 1's words: the evidence of this month and last
+  for the rules of :mod:`service.reports.actions`, drivers and actions carried.
 
 Data flow: store → :class:`~service.reports.monthly.reader.MonthReader` → section builders →
 :class:`MonthlyReport` → :mod:`service.reports.monthly_document` (what it says) → renderers.
