@@ -11,6 +11,9 @@ Sources
   torsion are different loads at the keyway, each with its own factor, so the local combined
   stress is ``σ_θ = K_f,b σ_b (½ + ½ cos 2θ) + K_f,t τ sin 2θ`` — the factors act before rainflow
   counting, on the trace, since the two parts of one trace carry different factors.
+* Diering 2011 App. D §3: the bending stress alone as a component of its own
+  (``pinion_bending``, on the normal-stress curve), with K_f,b — or App. D's one factor.
+* θ is the mill file's ``shafts.plane_angle_deg`` (default 45°).
 * Diering 2011 App. D: one ``K_t = 2`` multiplies the whole (torsional) stress trace. Kept as the
   explicit option ``shafts.stress_concentration = "single_kt"``: the combined trace of eq. 12 is
   scaled as a whole by the torsion factor ``K_f,t`` (= ``kt_torsion`` for q = 1), and
@@ -64,10 +67,16 @@ class ShaftStressModel:
 
     @classmethod
     def from_factors(
-        cls, kt_bending: float, kt_torsion: float, q: float, mode: StressConcentration
+        cls,
+        kt_bending: float,
+        kt_torsion: float,
+        q: float,
+        mode: StressConcentration,
+        theta: float = THETA_SEED,
     ) -> ShaftStressModel:
-        """The model of a mill file's ``[shafts]`` values (``q``: notch sensitivity)."""
-        return cls(fatigue_factor(kt_bending, q), fatigue_factor(kt_torsion, q), mode)
+        """The model of a mill file's ``[shafts]`` values (``q``: notch sensitivity; ``theta``:
+        the plane angle of eq. 12, rad)."""
+        return cls(fatigue_factor(kt_bending, q), fatigue_factor(kt_torsion, q), mode, theta)
 
     @property
     def _weights(self) -> tuple[float, float]:
@@ -97,6 +106,20 @@ class ShaftStressModel:
         """Factor on the torsion components' cycle ranges: K_f,t."""
         return self.kf_torsion
 
+    @property
+    def bending_scale(self) -> float:
+        """Factor on the bending component's cycle ranges (``pinion_bending``, App. D §3):
+        K_f,b (``"per_load"``), or App. D's one factor K_f,t (``"single_kt"``)."""
+        return self.kf_torsion if self.mode == "single_kt" else self.kf_bending
+
+    def scale(self, component: str) -> float:
+        """Factor on ``component``'s cycle ranges (drive side suffix allowed)."""
+        if component.startswith("pinion_combined"):
+            return self.combined_scale
+        if component.startswith("pinion_bending"):
+            return self.bending_scale
+        return self.torsion_scale
+
     def describe(self, component: str) -> str:
         """The factors a component's damage carries, in words, e.g. "K_f 2.2 on bending, 2 on
         torsion"."""
@@ -104,6 +127,8 @@ class ShaftStressModel:
             return f"K_f {self.kf_bending:g} on bending, {self.kf_torsion:g} on torsion"
         if component.startswith("pinion_combined"):
             return f"K_f {self.kf_torsion:g} on the whole combined stress (App. D)"
+        if component.startswith("pinion_bending"):
+            return f"K_f {self.bending_scale:g} on bending"
         return f"K_f {self.kf_torsion:g} on torsion"
 
     def summary(self) -> str:
@@ -115,10 +140,14 @@ class ShaftStressModel:
 
     def as_dict(self) -> dict[str, float | str]:
         """Plain data: what a snapshot's damage was computed with (the factors used by
-        :attr:`mode`)."""
-        if self.mode == "single_kt":
-            return {"mode": self.mode, "kf_torsion": self.kf_torsion}
-        return {"mode": self.mode, "kf_bending": self.kf_bending, "kf_torsion": self.kf_torsion}
+        :attr:`mode`, and the plane angle in degrees when it is not 45°, so that snapshots
+        from before the angle was configurable still match)."""
+        out: dict[str, float | str] = {"mode": self.mode, "kf_torsion": self.kf_torsion}
+        if self.mode == "per_load":
+            out = {"mode": self.mode, "kf_bending": self.kf_bending, "kf_torsion": self.kf_torsion}
+        if self.theta != THETA_SEED:
+            out["theta_deg"] = math.degrees(self.theta)
+        return out
 
     def refusal(self, was: Mapping[str, Any] | None, scales: Collection[float]) -> str | None:
         """Why damage and rainflow residues computed with the factors ``was`` (a snapshot's
@@ -136,20 +165,25 @@ class ShaftStressModel:
         return (
             f"the snapshot's damage was computed with the stress concentration {_words(was)}, "
             f"the configuration now gives {_words(now)} ([shafts] of the mill file); to "
-            f"continue from it, set {_settings(was)} in [shafts], or analyse the archive afresh "
+            f"continue from it, set {_settings(was, 'theta_deg' in now)} in [shafts], or "
+            "analyse the archive afresh "
             "with the new factors"
         )
 
 
 def _words(d: Mapping[str, Any]) -> str:
-    """Recorded fatigue factors in words."""
+    """Recorded fatigue factors (and plane angle) in words."""
+    theta = f" at θ = {d['theta_deg']:g}°" if "theta_deg" in d else ""
     if d["mode"] == "single_kt":
-        return f"K_f {d['kf_torsion']:g} on the whole stress (App. D)"
-    return f"K_f {d['kf_bending']:g} on bending and {d['kf_torsion']:g} on torsion"
+        return f"K_f {d['kf_torsion']:g} on the whole stress (App. D){theta}"
+    return f"K_f {d['kf_bending']:g} on bending and {d['kf_torsion']:g} on torsion{theta}"
 
 
-def _settings(d: Mapping[str, Any]) -> str:
-    """``[shafts]`` values (notch sensitivity 1) that give recorded fatigue factors."""
+def _settings(d: Mapping[str, Any], angle: bool) -> str:
+    """``[shafts]`` values (notch sensitivity 1) that give recorded fatigue factors (and the
+    plane angle when it was not 45° or ``angle`` asks for it)."""
+    angle = angle or "theta_deg" in d
+    theta = f", plane_angle_deg = {d.get('theta_deg', 45.0):g}" if angle else ""
     if d["mode"] == "single_kt":
-        return f'stress_concentration = "single_kt", kt_torsion = {d["kf_torsion"]:g}'
-    return f"kt_bending = {d['kf_bending']:g}, kt_torsion = {d['kf_torsion']:g}"
+        return f'stress_concentration = "single_kt", kt_torsion = {d["kf_torsion"]:g}{theta}'
+    return f"kt_bending = {d['kf_bending']:g}, kt_torsion = {d['kf_torsion']:g}{theta}"

@@ -1,10 +1,12 @@
 """Stress, rainflow counting and Miner damage of the load stage, per damage component.
 
-Components (Diering 2011 §8.1–8.2), per drive side, on the material's S-N curve, with the
-fatigue factors of :mod:`analytics.drivetrain.shaft_stress` (``[shafts]`` of the mill file):
-``pinion_combined`` (σ_θ at θ = 45°, eq. 12 with σ_y = 0: K_f,b·σ_b·(½ + ½cos 2θ) +
-K_f,t·τ·sin 2θ; or App. D's one factor on the whole trace), ``pinion_torsion`` and
-``motor_torsion`` (τ = 16T/(πd³), K_f,t). Each has one
+Components (Diering 2011 §8.1–8.2), per drive side, each on its S-N curve and mean-stress
+correction (``[material.components.<kind>]``, else the material's ``[material.sn]``, no
+correction), with the fatigue factors of :mod:`analytics.drivetrain.shaft_stress` (``[shafts]``
+of the mill file): ``pinion_combined`` (σ_θ at θ = ``plane_angle_deg``, default 45°, eq. 12 with
+σ_y = 0: K_f,b·σ_b·(½ + ½cos 2θ) + K_f,t·τ·sin 2θ; or App. D's one factor on the whole trace),
+``pinion_torsion`` and ``motor_torsion`` (τ = 16T/(πd³), K_f,t), and — only when the mill file
+configures it — ``pinion_bending`` (σ_b alone, App. D §3). Each has one
 :class:`~analytics.fatigue.rainflow.RainflowCounter` and one
 :class:`~analytics.mill.phase_damage.PhaseDamage` that books its cycles by phase and local day.
 
@@ -53,13 +55,14 @@ class FatigueCounting:
 
     def begin(self, t0_ns: int) -> None:
         """New damage recorders for a record whose sample 0 is at ``t0_ns`` (ns since the
-        Unix epoch), on the material's S-N curve with each component's stress scale."""
+        Unix epoch): each component on its own S-N curve and mean-stress correction
+        (``[material.components]``, else the material's curve) with its stress scale."""
         cfg, model = self.config, self.roles.stress_model
-        curve = cfg.material.sn_curve()
         for c in self.roles.components:
-            combined = c.startswith("pinion_combined")
             rec = DamageRecorder(
-                curve, scale=model.combined_scale if combined else model.torsion_scale
+                cfg.material.sn_curve(c),
+                scale=model.scale(c),
+                mean_correction=cfg.material.mean_correction(c),
             )
             self.damage[c] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone)
 
@@ -73,6 +76,8 @@ class FatigueCounting:
             out[f"pinion_combined{sfx}"] = model.combined(sb, tau_p)
             out[f"pinion_torsion{sfx}"] = tau_p
             out[f"motor_torsion{sfx}"] = shear_stress_from_torque(tm, shafts.motor_diameter_m)
+            if f"pinion_bending{sfx}" in self.counters:
+                out[f"pinion_bending{sfx}"] = sb
         return out
 
     def count(self, block: np.ndarray, timeline: PhaseTimeline, decided: int) -> None:
@@ -166,8 +171,34 @@ class FatigueCounting:
         factors (:meth:`~analytics.drivetrain.shaft_stress.ShaftStressModel.refusal`)."""
         scales = {d["recorder"]["scale"] for d in snapshot["damage"].values()}
         why = self.roles.stress_model.refusal(snapshot.get("stress"), scales)
+        if why is None:
+            why = self._fatigue_refusal(snapshot["damage"])
         if why is not None:
             raise SnapshotMismatch(f"mill {self.config.id!r}: {why}")
+
+    def _fatigue_refusal(self, damage: dict[str, Any]) -> str | None:
+        """Why recorders snapshotted with other components, S-N curves or mean-stress
+        corrections (``[material]`` of the mill file) cannot continue; None when they can."""
+        if damage and set(damage) != set(self.roles.components):
+            return (
+                f"the snapshot holds the components {', '.join(sorted(damage))}, the "
+                f"configuration gives {', '.join(sorted(self.roles.components))} "
+                "([material.components] of the mill file); analyse the archive afresh"
+            )
+        material = self.config.material
+        for comp, d in sorted(damage.items()):
+            was, now = d["recorder"], material.sn_curve(comp).to_dict()
+            correction = material.mean_correction(comp)
+            now_mc = None if correction is None else correction.to_dict()
+            if was["curve"] != now or was["mean_correction"] != now_mc:
+                return (
+                    f"{comp}'s damage was computed on the S-N curve {was['curve']['name']!r} "
+                    f"with mean-stress correction {_mc_words(was['mean_correction'])}, the "
+                    f"configuration now gives {now['name']!r} with {_mc_words(now_mc)} "
+                    "([material.sn] and [material.components] of the mill file); restore the "
+                    "file's earlier values, or analyse the archive afresh"
+                )
+        return None
 
     def snapshot(self) -> dict[str, Any]:
         """The counters' and recorders' state (plain JSON data)."""
@@ -184,3 +215,8 @@ class FatigueCounting:
         self.last = {k: float(v) for k, v in d["last"].items()}
         self.counters = {c: RainflowCounter.restore(s) for c, s in d["counters"].items()}
         self.damage = {c: PhaseDamage.restore(s) for c, s in d["damage"].items()}
+
+
+def _mc_words(correction: dict[str, Any] | None) -> str:
+    """A recorded mean-stress correction in words."""
+    return "none" if correction is None else f"Goodman (S_ut {correction['S_ut']:g} MPa)"
