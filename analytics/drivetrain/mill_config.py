@@ -499,9 +499,7 @@ class SimulationConfig(_Frozen):
 
     bending_range_mpa: Annotated[float, Field(ge=0, le=500, allow_inf_nan=False)] | None = None
     motor_oscillation_pct: Annotated[float, Field(ge=0, le=200, allow_inf_nan=False)] | None = None
-    pinion_oscillation_pct: Annotated[float, Field(ge=0, le=200, allow_inf_nan=False)] | None = (
-        None
-    )
+    pinion_oscillation_pct: Annotated[float, Field(ge=0, le=200, allow_inf_nan=False)] | None = None
     load_pct: Annotated[float, Field(gt=0, le=200, allow_inf_nan=False)] | None = None
 
     def scene_params(self) -> dict[str, float]:

@@ -682,7 +682,9 @@ def _what_if_life(
 ) -> tuple[float | None, str | None, bool]:
     if per_month is None or per_month <= 0.0:
         return None, None, False
-    years = max(ctx.config.life.miner_limit - damage, 0.0) / (per_month * SECONDS_PER_YEAR / MONTH_S)
+    years = max(ctx.config.life.miner_limit - damage, 0.0) / (
+        per_month * SECONDS_PER_YEAR / MONTH_S
+    )
     end, capped = _end_date(ctx, years)
     return years, end, capped
 
