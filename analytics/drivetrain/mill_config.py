@@ -151,11 +151,30 @@ class ShaftConfig(_Frozen):
     kt_torsion: Annotated[float, Field(ge=1.0, le=10.0)] = 2.0
     notch_sensitivity: Annotated[float, Field(ge=0, le=1)] = 1.0
     stress_concentration: StressConcentration = "per_load"
-    plane_angle_deg: Annotated[float, Field(gt=-90, lt=90, allow_inf_nan=False)] = Field(
+    plane_angle_deg: float | Literal["critical"] = Field(
         default=45.0,
         description="θ of the combined stress (Diering 2011 §8.2 eq. 12), degrees: 45 as the "
-        "thesis found at the torque peaks and App. D uses",
+        'thesis found at the torque peaks and App. D uses; "critical": the θ of the grid '
+        "(critical_plane_step_deg) with the most damage",
     )
+    critical_plane_step_deg: Annotated[float, Field(ge=1, le=45, allow_inf_nan=False)] = Field(
+        default=15.0,
+        description='Grid step of plane_angle_deg = "critical", degrees: θ = −90 + k·step, '
+        "strictly between −90 and 90; must divide 180",
+    )
+
+    @field_validator("plane_angle_deg", mode="before")
+    @classmethod
+    def _plane(cls, value: Any) -> Any:
+        """An angle strictly between −90° and 90°, or ``"critical"``: one message either way."""
+        if value == "critical":
+            return value
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        if not (ok and -90.0 < float(value) < 90.0):
+            raise ValueError(
+                'must be an angle in degrees strictly between -90 and 90, or "critical"'
+            )
+        return float(value)
 
     @model_validator(mode="after")
     def _bending_factor_used(self) -> ShaftConfig:
@@ -165,16 +184,36 @@ class ShaftConfig(_Frozen):
                 "the torsion factor kt_torsion on the whole combined stress): remove it, or use "
                 '"per_load"'
             )
+        self._critical_step_used()
         return self
+
+    def _critical_step_used(self) -> None:
+        """``critical_plane_step_deg`` only with the critical plane, and a step dividing 180."""
+        if "critical_plane_step_deg" not in self.model_fields_set:
+            return
+        if self.plane_angle_deg != "critical":
+            raise ValueError(
+                f'critical_plane_step_deg is only used with plane_angle_deg = "critical" '
+                f"(plane_angle_deg is {self.plane_angle_deg!r}): remove it, or search the "
+                "critical plane"
+            )
+        n = 180.0 / self.critical_plane_step_deg
+        if abs(n - round(n)) > 1e-9:
+            raise ValueError(
+                f"critical_plane_step_deg {self.critical_plane_step_deg:g} does not divide 180° "
+                "(e.g. 5, 10, 15, 30)"
+            )
 
     def stress_model(self) -> ShaftStressModel:
         """The fatigue factors and combined stress of these shafts."""
+        critical = self.plane_angle_deg == "critical"
         return ShaftStressModel.from_factors(
             self.kt_bending,
             self.kt_torsion,
             self.notch_sensitivity,
             self.stress_concentration,
-            theta=math.radians(self.plane_angle_deg),
+            theta=math.radians(45.0 if critical else float(self.plane_angle_deg)),
+            critical_step_deg=self.critical_plane_step_deg if critical else None,
         )
 
 

@@ -164,8 +164,9 @@ class LoadAnalysis:
 
     @property
     def damage(self) -> dict[str, PhaseDamage]:
-        """The damage recorder of each component (empty before the first frame)."""
-        return self.fatigue.damage
+        """The damage recorder of each component (empty before the first frame; on the
+        critical plane, the plane with the most damage)."""
+        return self.fatigue.reported()
 
     @property
     def keep_windows(self) -> int:

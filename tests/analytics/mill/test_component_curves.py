@@ -161,7 +161,9 @@ def test_a_snapshot_on_other_curves_is_refused_in_words():
         ("material.components.pinion_torsion", "sn = { name = 'fat-shear', params = { S_e = 1 } }",
          "unknown parameters for 'fat-shear': ['S_e']"),
         ("life", "miner_limit = 0", "life.miner_limit: must be > 0.0, got 0"),
-        ("shafts", "plane_angle_deg = 90", "shafts.plane_angle_deg: must be < 90.0, got 90"),
+        ("shafts", "plane_angle_deg = 90",
+         'shafts.plane_angle_deg: must be an angle in degrees strictly between -90 and 90, '
+         'or "critical", got 90'),
         ("simulation", "load_pct = 0", "simulation.load_pct: must be > 0.0, got 0"),
     ],
 )  # fmt: skip
@@ -209,3 +211,72 @@ def mill_text() -> str:
     from tests.analytics.scene_helpers import MILLS
 
     return (MILLS / "rod-1100-grid.toml").read_text(encoding="utf-8")
+
+
+def critical(config: MillConfig, step: float = 15.0) -> MillConfig:
+    data = config.model_dump(mode="json", exclude_unset=True)
+    data["shafts"] = {**data["shafts"], "plane_angle_deg": "critical",
+                      "critical_plane_step_deg": step}  # fmt: skip
+    return MillConfig.model_validate(data)
+
+
+def combined_at(theta_deg: float, config: MillConfig) -> float:
+    """Independent damage of the combined stress on the plane ``theta_deg`` (Shigley)."""
+    sh, d = config.shafts, scene_data()
+    tau = 16.0 * d["pinion_torque"] * 1e-3 / (math.pi * sh.pinion_diameter_m**3)
+    two = math.radians(2.0 * theta_deg)
+    sigma = sh.kt_bending * d["pinion_bending"] * (0.5 + 0.5 * math.cos(two)) + (
+        sh.kt_torsion * tau * math.sin(two)
+    )
+    c = cycles(sigma)
+    return goodman_shigley_damage(np.column_stack([c[:, 0], np.zeros(len(c)), c[:, 2]]), config)
+
+
+def test_the_critical_plane_reports_the_plane_of_most_damage_on_its_grid():
+    cfg = critical(mill("sag-5200-lrs"), step=15.0)
+    assert cfg.shafts.stress_model().plane_angles_deg() == tuple(range(-75, 90, 15))
+    sc, data = start_scene(), scene_data()
+    a = LoadAnalysis(cfg)
+    from analytics.signal.frame_aligner import Frame
+
+    for lo in range(0, sc.n_samples, 1000):
+        hi = min(lo + 1000, sc.n_samples)
+        a.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo:hi] for k, v in data.items()}))
+    row = a.report()["damage"]["pinion_combined"]
+    theta = row["plane_angle_deg"]
+    assert "critical plane" in row["stress_factors"]
+    assert row["with_residue"] == pytest.approx(combined_at(theta, cfg), rel=1e-12)
+    every = {t: combined_at(t, cfg) for t in range(-75, 90, 15)}
+    assert every[theta] >= 0.99 * max(every.values())  # chosen on committed damage
+    assert row["with_residue"] >= analysed(mill("sag-5200-lrs"))["pinion_combined"]
+    assert set(a.report()["damage"]) == {"pinion_combined", "pinion_torsion", "motor_torsion"}
+
+
+def test_the_critical_plane_continues_exactly_after_a_restore():
+    cfg = critical(mill("sag-5200-lrs"), step=30.0)
+    sc, data = start_scene(), scene_data()
+    from analytics.signal.frame_aligner import Frame
+
+    def feed(a: LoadAnalysis, lo: int, hi: int) -> None:
+        for b in range(lo, hi, 1000):
+            e = min(b + 1000, hi)
+            a.feed(Frame(sc.t_ns(b), sc.fs, {k: v[b:e] for k, v in data.items()}))
+
+    whole = LoadAnalysis(cfg)
+    feed(whole, 0, sc.n_samples)
+    part = LoadAnalysis(cfg)
+    feed(part, 0, 17000)
+    resumed = LoadAnalysis.restore(cfg, part.snapshot())
+    feed(resumed, 17000, sc.n_samples)
+    assert resumed.report()["damage"] == whole.report()["damage"]
+    with pytest.raises(SnapshotMismatch, match="on the critical plane"):
+        LoadAnalysis.restore(mill("sag-5200-lrs"), part.snapshot())
+
+
+def test_a_critical_plane_step_without_the_critical_plane_is_refused():
+    data = mill("sag-5200-lrs").model_dump(mode="json", exclude_unset=True)
+    data["shafts"] = {**data["shafts"], "critical_plane_step_deg": 10.0}
+    with pytest.raises(ValueError, match="critical_plane_step_deg is only used with"):
+        MillConfig.model_validate(data)
+    with pytest.raises(ValueError, match="does not divide 180"):
+        critical(mill("sag-5200-lrs"), step=7.0)
