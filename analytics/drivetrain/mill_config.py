@@ -157,10 +157,12 @@ class ShaftConfig(_Frozen):
         'thesis found at the torque peaks and App. D uses; "critical": the θ of the grid '
         "(critical_plane_step_deg) with the most damage",
     )
-    critical_plane_step_deg: Annotated[float, Field(ge=1, le=45, allow_inf_nan=False)] = Field(
-        default=15.0,
-        description='Grid step of plane_angle_deg = "critical", degrees: θ = −90 + k·step, '
-        "strictly between −90 and 90; must divide 180",
+    critical_plane_step_deg: Annotated[float, Field(ge=1, le=45, allow_inf_nan=False)] | None = (
+        Field(
+            default=None,
+            description='Grid step of plane_angle_deg = "critical", degrees (None: 15): θ = '
+            "−90 + k·step, strictly between −90 and 90; must divide 180",
+        )
     )
 
     @field_validator("plane_angle_deg", mode="before")
@@ -189,7 +191,7 @@ class ShaftConfig(_Frozen):
 
     def _critical_step_used(self) -> None:
         """``critical_plane_step_deg`` only with the critical plane, and a step dividing 180."""
-        if "critical_plane_step_deg" not in self.model_fields_set:
+        if self.critical_plane_step_deg is None:
             return
         if self.plane_angle_deg != "critical":
             raise ValueError(
@@ -213,7 +215,7 @@ class ShaftConfig(_Frozen):
             self.notch_sensitivity,
             self.stress_concentration,
             theta=math.radians(45.0 if critical else float(self.plane_angle_deg)),
-            critical_step_deg=self.critical_plane_step_deg if critical else None,
+            critical_step_deg=(self.critical_plane_step_deg or 15.0) if critical else None,
         )
 
 

@@ -280,3 +280,14 @@ def test_a_critical_plane_step_without_the_critical_plane_is_refused():
         MillConfig.model_validate(data)
     with pytest.raises(ValueError, match="does not divide 180"):
         critical(mill("sag-5200-lrs"), step=7.0)
+
+
+@pytest.mark.parametrize("name", ["ball-dual-lrs", "rod-1100-grid", "sag-5200-lrs"])
+def test_the_stored_form_of_a_shipped_mill_reloads_as_the_same_configuration(name):
+    """The store keeps what the file set (``exclude_unset``): the month-end reports and
+    ``millwatch report`` validate it again, and a setting refused when set (``kt_bending``
+    under App. D's ``single_kt``) must not come back as a written-out default."""
+    config = mill(name)
+    for c in (config, config.model_copy(update={"simulated": True})):
+        stored = c.model_dump(mode="json", exclude_unset=True)
+        assert MillConfig.model_validate(stored) == c
