@@ -606,6 +606,7 @@ class MillConfig(_Frozen):
                 need = "needs side 'bs' or 'nbs'" if dual else "must not set side"
                 raise ValueError(f"channel {name!r} on a {self.drive.layout} drive {need}")
         self.start_peak_limits()  # a configured start-peak level must fit the starter's
+        self._goodman_bounded()
         if self.simulation is not None and not self.simulated:
             raise ValueError(
                 "simulation: scene parameters are only for a simulated mill (simulated = true); "
@@ -618,6 +619,47 @@ class MillConfig(_Frozen):
                 raise ValueError(f"life.prior_damage: unknown component(s) {unknown}; this "
                                  f"mill's components: {', '.join(self.components)}")  # fmt: skip
         return self
+
+    def _goodman_bounded(self) -> None:
+        """Goodman has no answer for a cycle mean at S_ut (a block holding one is refused,
+        :class:`~analytics.fatigue.sn_curves.MeanStressError`): a component with the correction
+        must not reach S_ut within its channels' full scales (beyond them a sample is flagged
+        at the rail and not counted)."""
+        s_ut = self.material.s_ut_mpa
+        for comp, bound in self.stress_bounds().items():
+            kind = comp.removesuffix("_bs").removesuffix("_nbs")
+            if self.material.mean_correction(comp) is not None and bound >= s_ut:
+                raise ValueError(
+                    f'material.components.{kind}.mean_stress = "goodman": within the channels\' '
+                    f"full scales {comp} reaches {bound:.0f} MPa, not below S_ut = {s_ut:g} MPa "
+                    "(Goodman gives no finite life there); narrow the torque and bending "
+                    "channels' full_scale to the real range, or leave the correction out"
+                )
+
+    def stress_bounds(self) -> dict[str, float]:
+        """The largest |stress| (MPa, fatigue factors included) each component can reach within
+        its channels' full scales; a component without its channels is left out."""
+        model, sh, out = self.shafts.stress_model(), self.shafts, {}
+        for side in self.sides:
+            sfx = f"_{side}" if side else ""
+            top = {
+                (ch.kind, ch.shaft): max(abs(v) for v in ch.full_scale)
+                for ch in self.channels.values()
+                if ch.side == side and ch.full_scale is not None
+            }
+            sb = top.get(("bending", "pinion"))
+            tp, tm = top.get(("torque", "pinion")), top.get(("torque", "motor"))
+            tau_p = None if tp is None else tp / (math.pi * sh.pinion_diameter_m**3 / 16 * 1e3)
+            if tau_p is not None and sb is not None:
+                out[f"pinion_combined{sfx}"] = model.combined_bound(sb, tau_p)
+            if tau_p is not None:
+                out[f"pinion_torsion{sfx}"] = model.torsion_scale * tau_p
+            if tm is not None:
+                tau_m = tm / (math.pi * sh.motor_diameter_m**3 / 16 * 1e3)
+                out[f"motor_torsion{sfx}"] = model.torsion_scale * tau_m
+            if sb is not None:
+                out[f"pinion_bending{sfx}"] = model.bending_scale * sb
+        return {c: b for c, b in out.items() if c in self.components}
 
     @classmethod
     def from_toml_text(cls, text: str) -> MillConfig:

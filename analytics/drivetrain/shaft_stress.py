@@ -156,6 +156,16 @@ class ShaftStressModel:
             return f"K_f {self.bending_scale:g} on bending"
         return f"K_f {self.kf_torsion:g} on torsion"
 
+    def combined_bound(self, sigma_b: float, tau: float) -> float:
+        """The largest |combined stress| (MPa, with :attr:`combined_scale`) that nominal
+        bending and shear stresses of at most ``sigma_b`` and ``tau`` (MPa) can give on any of
+        :meth:`plane_angles_deg`."""
+        out = 0.0
+        for theta in self.plane_angles_deg():
+            wb, wt = self.at(theta)._weights
+            out = max(out, abs(wb) * sigma_b + abs(wt) * tau)
+        return out * self.combined_scale
+
     @property
     def _plane(self) -> str:
         """The plane of the combined stress in words ("" at App. D's 45°)."""

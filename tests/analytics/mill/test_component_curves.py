@@ -291,3 +291,18 @@ def test_the_stored_form_of_a_shipped_mill_reloads_as_the_same_configuration(nam
     for c in (config, config.model_copy(update={"simulated": True})):
         stored = c.model_dump(mode="json", exclude_unset=True)
         assert MillConfig.model_validate(stored) == c
+
+
+def test_goodman_is_refused_where_the_full_scales_reach_the_ultimate_strength():
+    """A cycle mean at S_ut has no Goodman life (the block would be refused mid-stream): the
+    file is refused at load instead, naming the setting and the stress the full scales allow."""
+    sag = mill("sag-5200-lrs")  # pinion_combined reaches 849 MPa within its full scales
+    assert sag.stress_bounds()["pinion_combined"] == pytest.approx(848.8, abs=0.1)
+    with_material(sag, components={"pinion_combined": {"mean_stress": "goodman"}})  # 850
+    with pytest.raises(ValueError) as refused:
+        with_material(sag, s_ut_mpa=800.0,
+                      components={"pinion_combined": {"mean_stress": "goodman"}})  # fmt: skip
+    assert ('material.components.pinion_combined.mean_stress = "goodman": within the '
+            "channels' full scales pinion_combined reaches 849 MPa, not below S_ut = 800 MPa"
+            in str(refused.value))  # fmt: skip
+    with_material(sag, s_ut_mpa=800.0, components={"pinion_torsion": {"mean_stress": "goodman"}})
