@@ -49,13 +49,15 @@ from pydantic import (
 from analytics.drivetrain.shaft_stress import ShaftStressModel, StressConcentration
 from analytics.drivetrain.start_limits import StartPeakLimits, shaft_limit_pct, start_peak_limits
 from analytics.drivetrain.torsional_params import TorsionalParams
-from analytics.fatigue.sn_curves import SNCurve
+from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
 from analytics.fatigue.sn_models import SN_MODEL_PARAMETERS, SNModelParameters, build_sn_curve
 
 __all__ = [
     "COMPONENT_KINDS",
+    "FATIGUE_KINDS",
     "AlarmThresholds",
     "ChannelConfig",
+    "ComponentFatigue",
     "DriveConfig",
     "DriveLayout",
     "LifeConfig",
@@ -64,6 +66,7 @@ __all__ = [
     "MillConfigError",
     "SNModel",
     "ShaftConfig",
+    "SimulationConfig",
     "Starter",
     "describe_validation_error",
 ]
@@ -148,6 +151,32 @@ class ShaftConfig(_Frozen):
     kt_torsion: Annotated[float, Field(ge=1.0, le=10.0)] = 2.0
     notch_sensitivity: Annotated[float, Field(ge=0, le=1)] = 1.0
     stress_concentration: StressConcentration = "per_load"
+    plane_angle_deg: float | Literal["critical"] = Field(
+        default=45.0,
+        description="θ of the combined stress (Diering 2011 §8.2 eq. 12), degrees: 45 as the "
+        'thesis found at the torque peaks and App. D uses; "critical": the θ of the grid '
+        "(critical_plane_step_deg) with the most damage",
+    )
+    critical_plane_step_deg: Annotated[float, Field(ge=1, le=45, allow_inf_nan=False)] | None = (
+        Field(
+            default=None,
+            description='Grid step of plane_angle_deg = "critical", degrees (None: 15): θ = '
+            "−90 + k·step, strictly between −90 and 90; must divide 180",
+        )
+    )
+
+    @field_validator("plane_angle_deg", mode="before")
+    @classmethod
+    def _plane(cls, value: Any) -> Any:
+        """An angle strictly between −90° and 90°, or ``"critical"``: one message either way."""
+        if value == "critical":
+            return value
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        if not (ok and -90.0 < float(value) < 90.0):
+            raise ValueError(
+                'must be an angle in degrees strictly between -90 and 90, or "critical"'
+            )
+        return float(value)
 
     @model_validator(mode="after")
     def _bending_factor_used(self) -> ShaftConfig:
@@ -157,12 +186,36 @@ class ShaftConfig(_Frozen):
                 "the torsion factor kt_torsion on the whole combined stress): remove it, or use "
                 '"per_load"'
             )
+        self._critical_step_used()
         return self
+
+    def _critical_step_used(self) -> None:
+        """``critical_plane_step_deg`` only with the critical plane, and a step dividing 180."""
+        if self.critical_plane_step_deg is None:
+            return
+        if self.plane_angle_deg != "critical":
+            raise ValueError(
+                f'critical_plane_step_deg is only used with plane_angle_deg = "critical" '
+                f"(plane_angle_deg is {self.plane_angle_deg!r}): remove it, or search the "
+                "critical plane"
+            )
+        n = 180.0 / self.critical_plane_step_deg
+        if abs(n - round(n)) > 1e-9:
+            raise ValueError(
+                f"critical_plane_step_deg {self.critical_plane_step_deg:g} does not divide 180° "
+                "(e.g. 5, 10, 15, 30)"
+            )
 
     def stress_model(self) -> ShaftStressModel:
         """The fatigue factors and combined stress of these shafts."""
+        critical = self.plane_angle_deg == "critical"
         return ShaftStressModel.from_factors(
-            self.kt_bending, self.kt_torsion, self.notch_sensitivity, self.stress_concentration
+            self.kt_bending,
+            self.kt_torsion,
+            self.notch_sensitivity,
+            self.stress_concentration,
+            theta=math.radians(45.0 if critical else float(self.plane_angle_deg)),
+            critical_step_deg=(self.critical_plane_step_deg or 15.0) if critical else None,
         )
 
 
@@ -189,6 +242,23 @@ class SNModel(_Frozen):
         return {**SN_MODEL_PARAMETERS[self.name], **self.params}
 
 
+#: Component kinds a ``[material.components.<kind>]`` table may name: the analysed components
+#: (:data:`COMPONENT_KINDS`) and ``pinion_bending``, the bending stress alone (K_f,b·σ_b), which
+#: is analysed only when the mill file gives it a table (Diering 2011 App. D §3: bending on the
+#: normal-stress curve, torsion on the shear-stress curve).
+FATIGUE_KINDS = ("pinion_combined", "pinion_torsion", "motor_torsion", "pinion_bending")
+
+
+class ComponentFatigue(_Frozen):
+    """One component kind's fatigue model (``[material.components.<kind>]``): its S-N curve
+    (``sn``; None: the material's ``[material.sn]``) and mean-stress correction
+    (``mean_stress``: ``"none"``, or ``"goodman"`` — S_eq = S/(1 − S_m/S_ut) with the material's
+    S_ut, Diering 2011 §8.1 Figure 37; :class:`~analytics.fatigue.sn_curves.GoodmanCorrection`)."""
+
+    sn: SNModel | None = None
+    mean_stress: Literal["none", "goodman"] = "none"
+
+
 #: Material fields removed because nothing read them (a file that sets one is refused, saying why).
 _REMOVED_MATERIAL = {
     "elastic_modulus_gpa": "channels are calibrated by their own gain and offset",
@@ -206,6 +276,22 @@ class MaterialConfig(_Frozen):
     kc: Fraction = 0.897
     kd: Fraction = 1.0
     sn: SNModel = Field(default_factory=SNModel)
+    components: dict[str, ComponentFatigue] = Field(
+        default_factory=dict,
+        description="Per component kind: its own S-N curve and mean-stress correction "
+        "(kinds: pinion_combined, pinion_torsion, motor_torsion, pinion_bending)",
+    )
+
+    @field_validator("components")
+    @classmethod
+    def _known_kinds(cls, value: dict[str, ComponentFatigue]) -> dict[str, ComponentFatigue]:
+        unknown = sorted(set(value) - set(FATIGUE_KINDS))
+        if unknown:
+            raise ValueError(
+                f"unknown component kind(s) {unknown}; a [material.components.<kind>] table "
+                f"names one of {', '.join(FATIGUE_KINDS)} (the same for every drive side)"
+            )
+        return value
 
     @model_validator(mode="before")
     @classmethod
@@ -222,16 +308,34 @@ class MaterialConfig(_Frozen):
         """S_e = k_a k_b k_c k_d · 0.5 S_ut in MPa (Diering 2011 §8.1 eqs. 2–4)."""
         return self.ka * self.kb * self.kc * self.kd * 0.5 * self.s_ut_mpa
 
-    def sn_curve(self) -> SNCurve:
-        """The configured S-N curve; S_e defaults to this material's Marin endurance limit."""
-        p = self.sn.resolved_params()
+    def sn_curve(self, kind: str | None = None) -> SNCurve:
+        """The S-N curve of component ``kind`` (its ``[material.components.<kind>]`` ``sn``),
+        else the material's ``[material.sn]``; S_e defaults to this material's Marin endurance
+        limit. ``kind`` may carry a drive side suffix (``pinion_torsion_bs``)."""
+        own = self._component(kind)
+        model = own.sn if own is not None and own.sn is not None else self.sn
+        p = model.resolved_params()
         s_e = p.get("S_e")
         params = SNModelParameters(
             S_ut=self.s_ut_mpa,
             S_e=self.endurance_limit_mpa if s_e is None else s_e,
             fat=p.get("fat"),
         )
-        return build_sn_curve(self.sn.name, params)
+        return build_sn_curve(model.name, params)
+
+    def mean_correction(self, kind: str) -> GoodmanCorrection | None:
+        """The mean-stress correction of component ``kind`` (side suffix allowed): Goodman on
+        this material's S_ut when its table says ``mean_stress = "goodman"``, else None."""
+        own = self._component(kind)
+        if own is None or own.mean_stress == "none":
+            return None
+        return GoodmanCorrection(self.s_ut_mpa)
+
+    def _component(self, kind: str | None) -> ComponentFatigue | None:
+        """The ``[material.components]`` table of ``kind`` with any drive side suffix removed."""
+        if kind is None:
+            return None
+        return self.components.get(kind.removesuffix("_bs").removesuffix("_nbs"))
 
 
 _KEY_PATTERN = r"^[a-z0-9][a-z0-9_\-]*(/[a-z0-9][a-z0-9_\-]*)*$"
@@ -381,7 +485,8 @@ class LifeConfig(_Frozen):
     monitoring only, and the answer says so.
 
     No projection before ``min_monitoring_days`` of monitoring including ``min_starts`` starts;
-    ``rate_window_days`` is the "recent" rate's window."""
+    ``rate_window_days`` is the "recent" rate's window; ``miner_limit`` the Miner sum taken as
+    failure (default 1, Diering 2011 §8.2; below 1 for a conservative assessment)."""
 
     commissioned: date | None = Field(
         default=None, description="Local date the drivetrain went into service."
@@ -392,6 +497,11 @@ class LifeConfig(_Frozen):
     min_monitoring_days: Annotated[float, Field(ge=0, le=3650)] = 14.0
     min_starts: Annotated[int, Field(ge=0, le=1000)] = 1
     rate_window_days: Annotated[int, Field(ge=1, le=366)] = 30
+    miner_limit: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)] = Field(
+        default=1.0,
+        description="Miner sum D at which a component is taken to fail (Diering 2011 §8.2: 1); "
+        "life consumed is D / miner_limit, remaining life (miner_limit − D) / rate",
+    )
 
     @field_validator("prior_rate")
     @classmethod
@@ -415,6 +525,27 @@ class LifeConfig(_Frozen):
         """N of ``first_<N>_days``; None without a prior rate."""
         m = _PRIOR_RATE.match(self.prior_rate or "")
         return int(m.group(1)) if m else None
+
+
+class SimulationConfig(_Frozen):
+    """The simulated mill's condition (``[simulation]``, only in a ``simulated = true`` file):
+    the simulator's scene parameters for this mill, each overriding the sources' default a
+    catalogue scene would use (a scene file's own ``[params]`` override these in turn).
+
+    ``bending_range_mpa``: steady pinion bending range, MPa (default: Diering 2011 Tables 16–17
+    averages, 15.29 single / 37.5 dual; §6.2.5 measured 73.5–88 MPa on misaligned pinions);
+    ``motor_oscillation_pct`` / ``pinion_oscillation_pct``: steady torque oscillation ranges, %
+    of motor rated torque (default Table 14 averages, 23.61 / 16.38); ``load_pct``: steady load,
+    % of rated (default 90)."""
+
+    bending_range_mpa: Annotated[float, Field(ge=0, le=500, allow_inf_nan=False)] | None = None
+    motor_oscillation_pct: Annotated[float, Field(ge=0, le=200, allow_inf_nan=False)] | None = None
+    pinion_oscillation_pct: Annotated[float, Field(ge=0, le=200, allow_inf_nan=False)] | None = None
+    load_pct: Annotated[float, Field(gt=0, le=200, allow_inf_nan=False)] | None = None
+
+    def scene_params(self) -> dict[str, float]:
+        """The parameters set here, by the simulator's names."""
+        return self.model_dump(exclude_none=True)
 
 
 #: Barring peak limits in % of motor rated torque (Diering 2011 Tables 12–13, §6.2.3).
@@ -449,6 +580,11 @@ class MillConfig(_Frozen):
         description="The mill's data come from the simulator (the demo, example mills): every "
         "answer, report and alarm about the mill says so. Never set for a real mill.",
     )
+    simulation: SimulationConfig | None = Field(
+        default=None,
+        description="The simulator's scene parameters for this mill (only with simulated = "
+        "true); see SimulationConfig.",
+    )
 
     @field_validator("time_zone")
     @classmethod
@@ -470,6 +606,12 @@ class MillConfig(_Frozen):
                 need = "needs side 'bs' or 'nbs'" if dual else "must not set side"
                 raise ValueError(f"channel {name!r} on a {self.drive.layout} drive {need}")
         self.start_peak_limits()  # a configured start-peak level must fit the starter's
+        self._goodman_bounded()
+        if self.simulation is not None and not self.simulated:
+            raise ValueError(
+                "simulation: scene parameters are only for a simulated mill (simulated = true); "
+                "a real mill's file leaves [simulation] out"
+            )
         prior = self.life.prior_damage
         if isinstance(prior, dict):
             unknown = sorted(set(prior) - set(self.components))
@@ -478,6 +620,47 @@ class MillConfig(_Frozen):
                                  f"mill's components: {', '.join(self.components)}")  # fmt: skip
         return self
 
+    def _goodman_bounded(self) -> None:
+        """Goodman has no answer for a cycle mean at S_ut (a block holding one is refused,
+        :class:`~analytics.fatigue.sn_curves.MeanStressError`): a component with the correction
+        must not reach S_ut within its channels' full scales (beyond them a sample is flagged
+        at the rail and not counted)."""
+        s_ut = self.material.s_ut_mpa
+        for comp, bound in self.stress_bounds().items():
+            kind = comp.removesuffix("_bs").removesuffix("_nbs")
+            if self.material.mean_correction(comp) is not None and bound >= s_ut:
+                raise ValueError(
+                    f'material.components.{kind}.mean_stress = "goodman": within the channels\' '
+                    f"full scales {comp} reaches {bound:.0f} MPa, not below S_ut = {s_ut:g} MPa "
+                    "(Goodman gives no finite life there); narrow the torque and bending "
+                    "channels' full_scale to the real range, or leave the correction out"
+                )
+
+    def stress_bounds(self) -> dict[str, float]:
+        """The largest |stress| (MPa, fatigue factors included) each component can reach within
+        its channels' full scales; a component without its channels is left out."""
+        model, sh, out = self.shafts.stress_model(), self.shafts, {}
+        for side in self.sides:
+            sfx = f"_{side}" if side else ""
+            top = {
+                (ch.kind, ch.shaft): max(abs(v) for v in ch.full_scale)
+                for ch in self.channels.values()
+                if ch.side == side and ch.full_scale is not None
+            }
+            sb = top.get(("bending", "pinion"))
+            tp, tm = top.get(("torque", "pinion")), top.get(("torque", "motor"))
+            tau_p = None if tp is None else tp / (math.pi * sh.pinion_diameter_m**3 / 16 * 1e3)
+            if tau_p is not None and sb is not None:
+                out[f"pinion_combined{sfx}"] = model.combined_bound(sb, tau_p)
+            if tau_p is not None:
+                out[f"pinion_torsion{sfx}"] = model.torsion_scale * tau_p
+            if tm is not None:
+                tau_m = tm / (math.pi * sh.motor_diameter_m**3 / 16 * 1e3)
+                out[f"motor_torsion{sfx}"] = model.torsion_scale * tau_m
+            if sb is not None:
+                out[f"pinion_bending{sfx}"] = model.bending_scale * sb
+        return {c: b for c, b in out.items() if c in self.components}
+
     @classmethod
     def from_toml_text(cls, text: str) -> MillConfig:
         """Parse and validate TOML text; raises ``TOMLDecodeError`` or ``ValidationError``."""
@@ -485,8 +668,12 @@ class MillConfig(_Frozen):
 
     @property
     def components(self) -> list[str]:
-        """The analysed components: each of :data:`COMPONENT_KINDS` on each drive side."""
-        return [f"{k}_{s}" if s else k for s in self.sides for k in COMPONENT_KINDS]
+        """The analysed components: each of :data:`COMPONENT_KINDS` on each drive side, and
+        ``pinion_bending`` when ``[material.components.pinion_bending]`` asks for it."""
+        kinds = COMPONENT_KINDS + (
+            ("pinion_bending",) if "pinion_bending" in self.material.components else ()
+        )
+        return [f"{k}_{s}" if s else k for s in self.sides for k in kinds]
 
     @property
     def sides(self) -> tuple[str | None, ...]:

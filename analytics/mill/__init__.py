@@ -23,8 +23,9 @@ Modules (each imports only the ones listed before it)::
                      (Diering 2011 §6.1.1, §6.2.3, §6.2.5), starts per day/month/total;
                      keep (a bounded list of plain JSON records)
     load_steady      SteadyProgress: decided running samples → the steady-state meter → windows
-    load_damage      FatigueCounting: stress per component (Diering 2011 §8.1–8.2), the NaN
-                     hold, rainflow counters and damage recorders
+    load_damage      FatigueCounting: stress per component (Diering 2011 §8.1–8.2, App. D §3),
+                     the NaN hold, rainflow counters and damage recorders (each component on its
+                     own S-N curve and mean-stress correction; the critical plane's traces)
     load_snapshot    the load stage's checkpoint format (kind, version 3, keys in order) and the
                      renaming of a version-2 checkpoint
     app_d            AppDCounting: the cost of a start as Diering 2011 App. D counts it (start and

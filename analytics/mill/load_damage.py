@@ -1,10 +1,15 @@
 """Stress, rainflow counting and Miner damage of the load stage, per damage component.
 
-Components (Diering 2011 §8.1–8.2), per drive side, on the material's S-N curve, with the
-fatigue factors of :mod:`analytics.drivetrain.shaft_stress` (``[shafts]`` of the mill file):
-``pinion_combined`` (σ_θ at θ = 45°, eq. 12 with σ_y = 0: K_f,b·σ_b·(½ + ½cos 2θ) +
-K_f,t·τ·sin 2θ; or App. D's one factor on the whole trace), ``pinion_torsion`` and
-``motor_torsion`` (τ = 16T/(πd³), K_f,t). Each has one
+Components (Diering 2011 §8.1–8.2), per drive side, each on its S-N curve and mean-stress
+correction (``[material.components.<kind>]``, else the material's ``[material.sn]``, no
+correction), with the fatigue factors of :mod:`analytics.drivetrain.shaft_stress` (``[shafts]``
+of the mill file): ``pinion_combined`` (σ_θ at θ = ``plane_angle_deg``, default 45°, eq. 12 with
+σ_y = 0: K_f,b·σ_b·(½ + ½cos 2θ) + K_f,t·τ·sin 2θ; or App. D's one factor on the whole trace),
+``pinion_torsion`` and ``motor_torsion`` (τ = 16T/(πd³), K_f,t), and — only when the mill file
+configures it — ``pinion_bending`` (σ_b alone, App. D §3). On the critical plane
+(``plane_angle_deg = "critical"``) the combined stress is counted on every θ of the grid, as
+traces ``pinion_combined@<θ>``, and each answer reports the one with the most committed damage
+(its θ in the damage table's ``plane_angle_deg``). Each counted trace has one
 :class:`~analytics.fatigue.rainflow.RainflowCounter` and one
 :class:`~analytics.mill.phase_damage.PhaseDamage` that books its cycles by phase and local day.
 
@@ -21,7 +26,8 @@ phase timeline and how far the phases are decided are the caller's, passed in wi
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -37,6 +43,8 @@ from analytics.mill.report import damage_table
 
 __all__ = ["FatigueCounting"]
 
+T = TypeVar("T")
+
 
 class FatigueCounting:
     """Rainflow counters and damage recorders of a mill's components (module docstring)."""
@@ -47,22 +55,59 @@ class FatigueCounting:
         self.config = config
         self.roles = roles
         self.fs = fs
-        self.counters = {c: RainflowCounter() for c in roles.components}
+        keys = self.keys()
+        self.counters = {c: RainflowCounter() for c in keys}
         self.damage: dict[str, PhaseDamage] = {}
-        self.lead = dict.fromkeys(roles.components, 0)
-        self.last = dict.fromkeys(roles.components, math.nan)
+        self.lead = dict.fromkeys(keys, 0)
+        self.last = dict.fromkeys(keys, math.nan)
+
+    def keys(self) -> list[str]:
+        """The counted traces: each component, the combined one on every plane of the critical
+        plane search as ``<component>@<θ in degrees>``."""
+        model = self.roles.stress_model
+        out = []
+        for c in self.roles.components:
+            if c.startswith("pinion_combined") and model.critical_step_deg is not None:
+                out += [f"{c}@{t:g}" for t in model.plane_angles_deg()]
+            else:
+                out.append(c)
+        return out
+
+    def chosen(self) -> dict[str, str]:
+        """Each component's counted trace: itself, or on the critical plane the plane with the
+        most committed damage so far (ties: the plane nearest 45°, App. D's)."""
+        out: dict[str, str] = {}
+        for key in sorted(self.damage, key=_from_45):
+            comp = key.split("@")[0]
+            best = out.get(comp)
+            if best is None or self.damage[key].committed > self.damage[best].committed:
+                out[comp] = key
+        return {c: out[c] for c in self.roles.components if c in out}
+
+    def pick(self, per_trace: Mapping[str, T]) -> dict[str, T]:
+        """Per component, the value of its counted trace (:meth:`chosen`) from a mapping keyed
+        by trace (e.g. App. D's costs, counted on every plane of a critical plane search)."""
+        chosen = self.chosen()
+        keys = {c: chosen.get(c, c) for c in self.roles.components}
+        return {c: per_trace[k] for c, k in keys.items() if k in per_trace}
+
+    def reported(self) -> dict[str, PhaseDamage]:
+        """The damage recorder of each component (:meth:`chosen`)."""
+        return {c: self.damage[k] for c, k in self.chosen().items()}
 
     def begin(self, t0_ns: int) -> None:
         """New damage recorders for a record whose sample 0 is at ``t0_ns`` (ns since the
-        Unix epoch), on the material's S-N curve with each component's stress scale."""
+        Unix epoch): each component on its own S-N curve and mean-stress correction
+        (``[material.components]``, else the material's curve) with its stress scale."""
         cfg, model = self.config, self.roles.stress_model
-        curve = cfg.material.sn_curve()
-        for c in self.roles.components:
-            combined = c.startswith("pinion_combined")
+        for key in self.keys():
+            c = key.split("@")[0]
             rec = DamageRecorder(
-                curve, scale=model.combined_scale if combined else model.torsion_scale
+                cfg.material.sn_curve(c),
+                scale=model.scale(c),
+                mean_correction=cfg.material.mean_correction(c),
             )
-            self.damage[c] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone)
+            self.damage[key] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone)
 
     def stress(self, block: np.ndarray) -> dict[str, np.ndarray]:
         """Stress (MPa) of each component over a block of ring rows (NaN where missing)."""
@@ -80,9 +125,15 @@ class FatigueCounting:
             sfx = f"_{side}" if side else ""
             tm, tp, sb = block[1 + 3 * k], block[2 + 3 * k], block[3 + 3 * k]  # missing: NaN
             tau_p = shear_stress_from_torque(tp, shafts.pinion_diameter_m)
-            out[f"pinion_combined{sfx}"] = model.combined(sb, tau_p)
+            if model.critical_step_deg is None:
+                out[f"pinion_combined{sfx}"] = model.combined(sb, tau_p)
+            else:
+                for theta in model.plane_angles_deg():
+                    out[f"pinion_combined{sfx}@{theta:g}"] = model.at(theta).combined(sb, tau_p)
             out[f"pinion_torsion{sfx}"] = tau_p
             out[f"motor_torsion{sfx}"] = shear_stress_from_torque(tm, shafts.motor_diameter_m)
+            if f"pinion_bending{sfx}" in self.counters:
+                out[f"pinion_bending{sfx}"] = sb
         return out
 
     def count(self, block: np.ndarray, timeline: PhaseTimeline, decided: int) -> None:
@@ -125,26 +176,23 @@ class FatigueCounting:
 
     def by_day(self, timeline: PhaseTimeline, decided: int) -> dict[str, Any]:
         """Attributed damage per component, local day and phase so far."""
-        out = {}
-        for comp, pd in self.damage.items():
+        for pd in self.damage.values():
             pd.attribute(timeline, decided)
-            out[comp] = pd.days()
-        return out
+        return {comp: pd.days() for comp, pd in self.reported().items()}
 
     def cycles_by_day(self, timeline: PhaseTimeline, decided: int) -> dict[str, Any]:
         """Attributed rainflow cycles per component, local day and phase (half cycles 0.5)."""
-        out = {}
-        for comp, pd in self.damage.items():
+        for pd in self.damage.values():
             pd.attribute(timeline, decided)
-            out[comp] = pd.cycle_days()
-        return out
+        return {comp: pd.cycle_days() for comp, pd in self.reported().items()}
 
     def summary(self) -> dict[str, dict[str, float]]:
         """Miner damage per component: ``committed``, ``pending_residue``, ``with_residue``."""
         out = {}
-        for comp, pd in self.damage.items():
+        for comp, key in self.chosen().items():
+            pd = self.damage[key]
             committed = pd.committed
-            with_residue = pd.with_residue(self.counters[comp].close())
+            with_residue = pd.with_residue(self.counters[key].close())
             out[comp] = {
                 "committed": committed,
                 "pending_residue": with_residue - committed,
@@ -166,10 +214,15 @@ class FatigueCounting:
         component with the fatigue factors its stress carries in words (``stress_factors``)."""
         for pd in self.damage.values():
             pd.attribute(timeline, decided)
-        residues = {c: k.close() for c, k in self.counters.items()}
-        table = damage_table(self.damage, residues, seconds, starts_total, n / self.fs, app_d)
+        chosen = self.chosen()
+        residues = {c: self.counters[k].close() for c, k in chosen.items()}
+        table = damage_table(
+            self.reported(), residues, seconds, starts_total, n / self.fs, self.pick(app_d)
+        )
         for comp, row in table.items():
             row["stress_factors"] = self.roles.stress_model.describe(comp)
+            if "@" in chosen[comp]:
+                row["plane_angle_deg"] = float(chosen[comp].split("@")[1])
         return table
 
     def check(self, snapshot: dict[str, Any]) -> None:
@@ -177,8 +230,35 @@ class FatigueCounting:
         factors (:meth:`~analytics.drivetrain.shaft_stress.ShaftStressModel.refusal`)."""
         scales = {d["recorder"]["scale"] for d in snapshot["damage"].values()}
         why = self.roles.stress_model.refusal(snapshot.get("stress"), scales)
+        if why is None:
+            why = self._fatigue_refusal(snapshot["damage"])
         if why is not None:
             raise SnapshotMismatch(f"mill {self.config.id!r}: {why}")
+
+    def _fatigue_refusal(self, damage: dict[str, Any]) -> str | None:
+        """Why recorders snapshotted with other components, S-N curves or mean-stress
+        corrections (``[material]`` of the mill file) cannot continue; None when they can."""
+        if damage and set(damage) != set(self.keys()):
+            return (
+                f"the snapshot holds the components {', '.join(sorted(damage))}, the "
+                f"configuration gives {', '.join(sorted(self.keys()))} "
+                "([material.components] of the mill file); analyse the archive afresh"
+            )
+        material = self.config.material
+        for key, d in sorted(damage.items()):
+            comp = key.split("@")[0]
+            was, now = d["recorder"], material.sn_curve(comp).to_dict()
+            correction = material.mean_correction(comp)
+            now_mc = None if correction is None else correction.to_dict()
+            if was["curve"] != now or was["mean_correction"] != now_mc:
+                return (
+                    f"{comp}'s damage was computed on the S-N curve {was['curve']['name']!r} "
+                    f"with mean-stress correction {_mc_words(was['mean_correction'])}, the "
+                    f"configuration now gives {now['name']!r} with {_mc_words(now_mc)} "
+                    "([material.sn] and [material.components] of the mill file); restore the "
+                    "file's earlier values, or analyse the archive afresh"
+                )
+        return None
 
     def snapshot(self) -> dict[str, Any]:
         """The counters' and recorders' state (plain JSON data)."""
@@ -195,3 +275,13 @@ class FatigueCounting:
         self.last = {k: float(v) for k, v in d["last"].items()}
         self.counters = {c: RainflowCounter.restore(s) for c, s in d["counters"].items()}
         self.damage = {c: PhaseDamage.restore(s) for c, s in d["damage"].items()}
+
+
+def _mc_words(correction: dict[str, Any] | None) -> str:
+    """A recorded mean-stress correction in words."""
+    return "none" if correction is None else f"Goodman (S_ut {correction['S_ut']:g} MPa)"
+
+
+def _from_45(key: str) -> float:
+    """How far a counted trace's plane lies from 45° (0 for a trace without a plane)."""
+    return abs(float(key.split("@")[1]) - 45.0) if "@" in key else 0.0

@@ -123,7 +123,7 @@ class LoadAnalysis:
         self.events = EventBook(config, self.settings, self.roles, self.clock)
         self.steady = SteadyProgress(config, self.roles, self.clock, window_s)
         self.fatigue = FatigueCounting(config, self.roles, self.fs)
-        self.app_d = AppDCounting(self.fs, list(self.roles.components))
+        self.app_d = AppDCounting(self.fs, self.fatigue.keys())
 
     # ------------------------------------------------------------ reading
     @property
@@ -168,8 +168,9 @@ class LoadAnalysis:
 
     @property
     def damage(self) -> dict[str, PhaseDamage]:
-        """The damage recorder of each component (empty before the first frame)."""
-        return self.fatigue.damage
+        """The damage recorder of each component (empty before the first frame; on the
+        critical plane, the plane with the most damage)."""
+        return self.fatigue.reported()
 
     @property
     def keep_windows(self) -> int:
@@ -310,8 +311,16 @@ class LoadAnalysis:
         if tr.state == OperatingState.STOPPED:
             for e in events:
                 if e["event"] == "stop":
-                    e["app_d"] = self.app_d.last_record
+                    e["app_d"] = self._app_d_record()
         return events
+
+    def _app_d_record(self) -> dict[str, Any] | None:
+        """The start-stop record the last stop closed, per component (on the critical plane:
+        the plane that governs now)."""
+        record = self.app_d.last_record
+        if record is None:
+            return None
+        return {**record, "components": self.fatigue.pick(record["components"])}
 
     # ------------------------------------------------------------ report
     def damage_by_day(self) -> dict[str, dict[str, dict[str, float]]]:

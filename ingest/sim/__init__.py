@@ -8,7 +8,8 @@ Tables 3–17. Same seed, same samples — bitwise, whatever the chunk size.
 What is here, in the order data flows:
 
 - ``spec``         what a scene is: ``SceneSpec``, ``SceneParams``, the event types
-- ``scenes``       the catalogue of named scenes and scene files → ``SceneSpec``
+- ``scenes``       the catalogue of named scenes and scene files → ``SceneSpec`` (a mill file's
+                   ``[simulation]`` parameters under the scene's own)
 - ``seed_tables``  Diering 2011's numbers: peak torques per starter, barring, bending, line weights
 - ``waveforms``    signal shapes: raised-cosine fronts, ringing, the steady oscillation lines
 - ``segments``     one operating stretch each (idle, start, run, stop, barring) → drivetrain state

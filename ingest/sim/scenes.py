@@ -16,6 +16,9 @@ events::
     kind = "trip"
     at_s = 400
 
+A mill file's ``[simulation]`` table (e.g. ``bending_range_mpa = 80`` for a misaligned pinion)
+sets that mill's scene parameters under every scene's own (:func:`with_mill_params`).
+
 Catalogue (Diering 2011 numbers behind each are in :mod:`ingest.sim.renderer`):
 
 ``steady``            10 min of steady running,
@@ -48,6 +51,7 @@ from ingest.sim.spec import (
     FailedStartEvent,
     ResonanceEvent,
     SceneError,
+    SceneParams,
     SceneSpec,
     SpikesEvent,
     StartEvent,
@@ -55,7 +59,15 @@ from ingest.sim.spec import (
     TripEvent,
 )
 
-__all__ = ["CATALOGUE", "get_scene", "list_scenes", "load_scene_file", "month_events", "scene_spec"]
+__all__ = [
+    "CATALOGUE",
+    "get_scene",
+    "list_scenes",
+    "load_scene_file",
+    "month_events",
+    "scene_spec",
+    "with_mill_params",
+]
 
 log = logging.getLogger(__name__)
 
@@ -175,7 +187,17 @@ def scene_spec(name: str, config: MillConfig, seed: int = 0) -> SceneSpec:
         builder = CATALOGUE[name]
     except KeyError:
         raise KeyError(f"unknown scene {name!r}; known: {', '.join(list_scenes())}") from None
-    return builder(config, seed)
+    return with_mill_params(builder(config, seed), config)
+
+
+def with_mill_params(spec: SceneSpec, config: MillConfig) -> SceneSpec:
+    """``spec`` with the mill file's ``[simulation]`` scene parameters under the parameters the
+    spec sets itself (a catalogue scene's or a scene file's own ``[params]`` win)."""
+    if config.simulation is None:
+        return spec
+    own = spec.params.model_dump(exclude_unset=True)
+    params = {**config.simulation.scene_params(), **own}
+    return spec.model_copy(update={"params": SceneParams.model_validate(params)})
 
 
 def get_scene(name: str, config: MillConfig, seed: int = 0, **overrides: Any) -> Scene:
@@ -183,14 +205,16 @@ def get_scene(name: str, config: MillConfig, seed: int = 0, **overrides: Any) ->
     (e.g. ``duration_s``, ``params``)."""
     spec = scene_spec(name, config, seed)
     if overrides:
-        spec = SceneSpec.model_validate({**spec.model_dump(), **overrides})
+        dump = {**spec.model_dump(), "params": spec.params.model_dump(exclude_unset=True)}
+        spec = SceneSpec.model_validate({**dump, **overrides})
+        spec = with_mill_params(spec, config)
     return Scene(config, spec)
 
 
 def _spec_from_table(data: dict[str, Any], config: MillConfig) -> SceneSpec:
     base = data.pop("base", None)
     if base is None:
-        return SceneSpec.model_validate(data)
+        return with_mill_params(SceneSpec.model_validate(data), config)
     spec = scene_spec(base, config, int(data.get("seed", 0))).model_dump()
     spec["params"] = {**spec["params"], **data.pop("params", {})}
     spec["events"] = [*spec["events"], *data.pop("events", [])]

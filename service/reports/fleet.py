@@ -57,7 +57,8 @@ _SEVERITY_RANK = {"critical": 3, "alarm": 2, "warning": 1}
 @dataclass(frozen=True, slots=True)
 class FleetMill:
     """One mill of the fleet (module docstring). ``life_consumed``: the largest Miner damage
-    to date of its components (prior included; 1 = the Miner limit); month series are aligned
+    to date of its components as a fraction of the mill's Miner limit (prior included; 1 = the
+    limit, ``[life] miner_limit``); month series are aligned
     with ``months``; ``None`` where nothing was measured."""
 
     mill: str
@@ -151,7 +152,8 @@ def fleet_entry(
         life_missing=list(life.missing),
         life_note=life.note,
         governing_component=life.governing_component,
-        life_consumed=max((c.damage for c in life.components.values()), default=0.0),
+        life_consumed=max((c.damage for c in life.components.values()), default=0.0)
+        / life.basis.miner_limit,
         remaining_life_years_min=gov.remaining_life_years_min if gov else None,
         remaining_life_years_max=gov.remaining_life_years_max if gov else None,
         end_date_earliest=min(ends) if ends else None,

@@ -50,7 +50,7 @@ def _life(view: Mapping[str, Any]) -> Section:
         "fleet_life",
         (Column("mill", "mill", text=True), Column("life_status", "life", text=True),
          Column("governing_component", "governing component", text=True),
-         Column("life_consumed_pct", "life consumed", "% of D = 1"),
+         Column("life_consumed_pct", "life consumed", "% of Miner limit"),
          Column("remaining_min_years", "remaining life, least", "years"),
          Column("remaining_max_years", "remaining life, most", "years"),
          Column("end_date_earliest", "end, earliest", text=True),

@@ -96,7 +96,6 @@ _NS = 1_000_000_000
 WORST_MONTH_MIN_DAYS = 7.0
 """A calendar month counts for the worst-month rate once this many days of it were monitored."""
 LAST_DATE = date(9999, 12, 31)
-MINER_LIMIT = 1.0
 
 
 # ----------------------------------------------------------------------------- the data
@@ -561,7 +560,7 @@ def _prior(ctx: _Ctx, rows: list[DamageRow]) -> PriorDamage:
     per = {}
     for c in ctx.config.components:
         rate = _rate(ctx, rows, c, first, ctx.since, hi, last_day) or 0.0
-        per[c] = min(rate * years, MINER_LIMIT)
+        per[c] = min(rate * years, ctx.config.life.miner_limit)
     days = ctx.monitored_s(ctx.since, hi) * _NS / DAY_NS
     return PriorDamage(method, commissioned, years, days, per,
                        f"the damage rate of the first {days:.1f} days monitored applied "
@@ -620,17 +619,19 @@ mean − 2 standard deviations of log N; :data:`analytics.fatigue.sn_curves.SD_L
 
 
 def _band(ctx: _Ctx, comp: str, damage: float, projections: list[Projection]) -> list[LifeBand]:
-    """Remaining life (f − D)/rate at each survival: the curve's N times f = 10^((2 − z)·s)
-    (Miner's D scales by 1/f), over the projections' rates (highest rate: least life)."""
+    """Remaining life (L·f − D)/rate at each survival: the component's curve's N times
+    f = 10^((2 − z)·s) (Miner's D scales by 1/f; L the Miner limit), over the projections'
+    rates (highest rate: least life)."""
     rates = [p.rate_per_year for p in projections if p.remaining_life_years is not None
              and p.rate_per_year is not None and p.rate_per_year > 0]  # fmt: skip
     if not rates:
         return []
-    curve = ctx.config.material.sn_curve()
+    curve = ctx.config.material.sn_curve(comp)
+    limit = ctx.config.life.miner_limit
     out = []
     for p in SURVIVALS:
         f = curve.life_factor(p)
-        lo, hi = (max(f - damage, 0.0) / r for r in (max(rates), min(rates)))
+        lo, hi = (max(limit * f - damage, 0.0) / r for r in (max(rates), min(rates)))
         out.append(LifeBand(round(100.0 * p, 1), f, lo, hi, _meaningful_end(ctx, lo),
                             _meaningful_end(ctx, hi)))  # fmt: skip
     return out
@@ -710,7 +711,7 @@ def _project(ctx: _Ctx, damage: float, basis: str, rate: float | None,
     if not ctx.sufficient:
         return Projection(basis, rate if ctx.since else None, None, None, False, ctx.why_not,
                           month)  # fmt: skip
-    if damage >= MINER_LIMIT:
+    if damage >= ctx.config.life.miner_limit:
         end, capped = _end_date(ctx, 0.0)
         return Projection(basis, rate, 0.0, end, capped, None, month)
     if rate is None:
@@ -721,7 +722,7 @@ def _project(ctx: _Ctx, damage: float, basis: str, rate: float | None,
     if rate <= 0.0:
         why = "no damage counted in the period: no basis for a projection"
         return Projection(basis, rate, None, None, False, why, month)
-    years = (MINER_LIMIT - damage) / rate
+    years = (ctx.config.life.miner_limit - damage) / rate
     end, capped = _end_date(ctx, years)
     return Projection(basis, rate, years, end, capped, None, month)
 
@@ -754,7 +755,9 @@ def _what_if_life(
 ) -> tuple[float | None, str | None, bool]:
     if per_month is None or per_month <= 0.0:
         return None, None, False
-    years = max(MINER_LIMIT - damage, 0.0) / (per_month * SECONDS_PER_YEAR / MONTH_S)
+    years = max(ctx.config.life.miner_limit - damage, 0.0) / (
+        per_month * SECONDS_PER_YEAR / MONTH_S
+    )
     end, capped = _end_date(ctx, years)
     return years, end, capped
 
@@ -769,11 +772,22 @@ def _governing(comps: dict[str, ComponentLife]) -> str | None:
 
 
 # ----------------------------------------------------------------------------- words
+def _component_curves(config: MillConfig) -> dict[str, dict[str, Any]]:
+    """The components' own S-N curves and mean-stress corrections (``[material.components]``;
+    empty when every component is on the material's curve without correction)."""
+    out = {}
+    for kind, own in sorted(config.material.components.items()):
+        curve = config.material.sn_curve(kind)
+        out[kind] = {"model": (own.sn or config.material.sn).name, "name": curve.name,
+                     "stress": str(curve.kind), "mean_stress": own.mean_stress}  # fmt: skip
+    return out
+
+
 def _basis(config: MillConfig) -> LifeBasis:
     curve = config.material.sn_curve()
     life = config.life
     return LifeBasis(
-        miner_limit=MINER_LIMIT,
+        miner_limit=life.miner_limit,
         sn_curve={
             "model": config.material.sn.name,
             "parameters": config.material.sn.resolved_params(),
@@ -786,6 +800,7 @@ def _basis(config: MillConfig) -> LifeBasis:
             "stress": str(curve.kind),
             "stress_concentration": config.shafts.stress_model().summary(),
             "source": "Diering 2011 §8.1–8.2, App. D",
+            "components": _component_curves(config),
         },
         damage="prior (see prior) + stored daily damage of attributed rainflow cycles, or the "
         "worker's live committed damage when larger, + the open rainflow residue closed now "
@@ -795,7 +810,8 @@ def _basis(config: MillConfig) -> LifeBasis:
         f"{life.rate_window_days} local days, since monitoring began, and in the worst local "
         f"calendar month with at least {WORST_MONTH_MIN_DAYS:g} days monitored; none below "
         f"{life.min_monitoring_days:g} days of monitoring and {life.min_starts} start(s)",
-        remaining_life="(1 − D) / rate, from the last analysed sample; Miner limit D = 1",
+        remaining_life=f"({life.miner_limit:g} − D) / rate, from the last analysed sample; "
+        f"Miner limit D = {life.miner_limit:g} ([life] miner_limit)",
         end_date="local date of the last analysed sample + the remaining life; beyond "
         "9999-12-31 it is 9999-12-31 with end_date_capped true",
         design_line="D(t) = years since commissioning (else since monitoring began) / design "

@@ -354,7 +354,7 @@ class MonthEndJob:
         try:
             futures: dict[Future[dict[str, str]], tuple[str, str]] = {
                 pool.submit(_write_report_job, str(self.store.path),
-                            self.mills[m].model_dump(mode="json"), mo,
+                            self.mills[m].model_dump(mode="json", exclude_unset=True), mo,
                             tuple(self._missing(m, mo)), str(self.settings.directory)): (m, mo)
                 for m, mo in tasks
             }  # fmt: skip

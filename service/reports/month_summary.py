@@ -133,7 +133,7 @@ def _components(life: LifeReport, this: MonthTrend, last: MonthTrend) -> list[Co
             component=name,
             damage_to_date=c.damage,
             damage_prior=c.damage_prior,
-            life_consumed_pct=100.0 * c.damage,
+            life_consumed_pct=100.0 * c.damage / life.basis.miner_limit,
             design_line_pct=None if c.design_line is None else 100.0 * c.design_line,
             remaining_life_years_min=c.remaining_life_years_min,
             remaining_life_years_max=c.remaining_life_years_max,

@@ -142,7 +142,10 @@ class ServiceRuntime:
         self.store = Store(s.store.path)
         for mill_id, config in self.mills.items():
             self.store.put_mill(
-                mill_id, config.site, config.model_dump(mode="json"), time.time_ns()
+                mill_id,
+                config.site,
+                config.model_dump(mode="json", exclude_unset=True),
+                time.time_ns(),
             )
         self.archive = ArchiveWriter(
             s.archive.directory,

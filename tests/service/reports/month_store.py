@@ -42,7 +42,12 @@ def fill(path: Path, segments: Iterable[tuple[MillConfig, str]], seed: int = 1) 
     at ``path``, and record each mill's configuration as the service does."""
     with Store(path) as store:
         for i, (config, start) in enumerate(segments):
-            store.put_mill(config.id, config.site, config.model_dump(mode="json"), utc_ns(start))
+            store.put_mill(
+                config.id,
+                config.site,
+                config.model_dump(mode="json", exclude_unset=True),
+                utc_ns(start),
+            )
             scene = get_scene(
                 "start-lrs",
                 config,

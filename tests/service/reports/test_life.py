@@ -404,3 +404,28 @@ def test_a_mill_without_data_and_one_past_the_miner_limit():
     life = compute_life(LifeInputs(worn, rows, [(JAN_T0, JAN_T0 + 2 * day)], 0, {}, JAN_T0))
     for p in life.components["pinion_combined"].projections[:2]:
         assert p.remaining_life_years == 0.0 and p.end_date == "2024-01-03"
+
+
+def test_the_miner_limit_of_the_mill_file_sets_remaining_life_and_life_consumed(store):
+    """``[life] miner_limit``: remaining life (limit − D)/rate at every rate, the what-if lives
+    likewise, life consumed D/limit in the fleet; the basis states it. (An estimated prior of
+    0.1: the first 90 days' rate of the misaligned sag mill since 2011 would exceed 0.5.)"""
+    half = REAL.model_copy(update={"life": REAL.life.model_copy(update={"miner_limit": 0.5})})
+    one, low = read_life(store, REAL, _ns("2024-03-01")), read_life(store, half, _ns("2024-03-01"))
+    assert low.basis.miner_limit == 0.5 and "Miner limit D = 0.5" in low.basis.remaining_life
+    for name, c in one.components.items():
+        d = c.damage
+        assert low.components[name].damage == d < 0.5
+        for p, q in zip(c.projections, low.components[name].projections, strict=True):
+            if p.remaining_life_years is not None:
+                assert q.remaining_life_years == pytest.approx(
+                    p.remaining_life_years * (0.5 - d) / (1.0 - d), rel=1e-12
+                )
+        for w, v in zip(c.what_if, low.components[name].what_if, strict=True):
+            if w.remaining_life_years is not None:
+                assert v.remaining_life_years == pytest.approx(
+                    w.remaining_life_years * (0.5 - d) / (1.0 - d), rel=1e-12
+                )
+    now = _ns("2024-03-01")
+    consumed = fleet_entry(store, half, now).life_consumed
+    assert consumed == pytest.approx(2 * fleet_entry(store, REAL, now).life_consumed, rel=1e-12)
