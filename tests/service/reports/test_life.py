@@ -23,6 +23,7 @@ from pydantic import ValidationError
 from pypdf import PdfReader
 
 from alarms.engine import SIMULATED_PREFIX
+from alarms.lifecycle import Alarm, AlarmState, Severity
 from analytics.drivetrain.mill_config import LifeConfig, MillConfig, describe_validation_error
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks
@@ -34,6 +35,7 @@ from service.api.routes.mills import mills_router
 from service.api.routes.reports import reports_router
 from service.remote.report_codec import report_from_dict
 from service.reports.fleet import build_fleet, fleet_entry, fleet_mill_from_dict, fleet_to_dict
+from service.reports.fleet_document import render_fleet
 from service.reports.history import life_inputs
 from service.reports.life import LifeInputs, LifeReport, compute_life, life_to_dict
 from service.reports.monthly import build_monthly_report, report_to_dict
@@ -290,7 +292,8 @@ def _client(backend: LocalBackend) -> TestClient:
 def test_the_fleet_orders_mills_with_reasons(store):
     now = _ns("2024-02-20")
     good = fleet_entry(store, SIM_T, now)
-    assert good.months[-1] == "2024-02" and good.starts_per_month[-2:] == [2, 2]
+    # the last finished month, not the unfinished February
+    assert good.months[-1] == "2024-01" and good.starts_per_month[-1] == 2
     assert good.life_status == "ok" and good.remaining_life_years_min is not None
     worse = fleet_mill_from_dict({**fleet_to_dict(build_fleet("x", [good], [], now))["mills"][0],
                                   "mill": "other", "remaining_life_years_min": 1.0})  # fmt: skip
@@ -298,6 +301,30 @@ def test_the_fleet_orders_mills_with_reasons(store):
     assert [v.mill for v in view.visit_order] == ["other", SIM.id]
     assert view.visit_order[0].reason.startswith("shortest remaining life 1.0 ")
     assert view.unreachable == ["gone"] and view.simulated
+    assert "in 2024-01" in view.visit_order[1].reason and "this month" not in str(view)
+
+
+def _alarm(mill: str, rule: str, severity: str) -> Alarm:
+    return Alarm(f"{mill}:{rule}", mill, rule, "x", "q", "", Severity(severity),
+                 AlarmState.RAISED, 0, 0, 1.0, 0.0, f"{rule} is open")  # fmt: skip
+
+
+def test_an_it_alarm_is_listed_apart_and_never_outranks_the_machines_condition(store):
+    """A failed report mail (report_delivery, an alarm) on a mill with a long life does not
+    put it before a mill whose machine condition is worse; it is listed as an IT problem."""
+    now = _ns("2024-02-20")
+    it = fleet_entry(store, SIM_T, now, open_alarms=[_alarm(SIM_T.id, "report_delivery", "alarm")])
+    assert it.open_alarms == 0 and it.worst_open_severity is None
+    assert it.it_problems == ["report_delivery (alarm): report_delivery is open"]
+    worn = fleet_mill_from_dict({**fleet_to_dict(build_fleet("x", [it], [], now))["mills"][0],
+                                 "mill": "worn", "it_problems": [],
+                                 "life_consumed": it.life_consumed + 0.15})  # fmt: skip
+    view = build_fleet("rustenburg", [it, worn], [], now, SIM.time_zone)
+    assert [v.mill for v in view.visit_order] == ["worn", SIM_T.id]
+    doc = str(render_fleet(fleet_to_dict(view), "html")).replace("<wbr>", "")
+    assert "Monitoring problems (for IT)" in doc and "report_delivery is open" in doc
+    bending = _alarm(SIM_T.id, "bending_amplitude", "warning")
+    assert fleet_entry(store, SIM_T, now, open_alarms=[bending]).worst_open_severity == "warning"
 
 
 def test_fleet_life_and_report_over_http_say_simulated_only_for_simulated_mills(store):
