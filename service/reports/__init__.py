@@ -19,8 +19,9 @@ What is here:
 * :mod:`service.reports.monthly` — the monthly report as plain data, built from the store (a
   package: building, the report's dataclasses, the store reader, the trend sections);
   :mod:`service.reports.month_summary` — its page 1 and cumulative damage against design life.
-* :mod:`service.reports.fleet` — the mills of a site side by side and the visit order
-  (``GET /sites/{site}/fleet``).
+* :mod:`service.reports.fleet` — the mills of a site side by side and the visit order by the
+  machines' condition, the monitoring's own alarms apart (``GET /sites/{site}/fleet``;
+  ``millwatch report --fleet`` from a store file).
 * :mod:`service.reports.fleet_document` — the fleet report (HTML, PDF, CSV) from the fleet
   answer (``GET /sites/{site}/reports/fleet``).
 * :mod:`service.reports.plain` — report data to JSON-ready plain data.
@@ -33,6 +34,9 @@ What is here:
 * :mod:`service.reports.mail` — a report's mail (SMTP, STARTTLS, login; stdlib only).
 * :mod:`service.reports.month_end` — the month-end job of the service: each finished local
   month's reports written and mailed, catch-up, retries, the ``report_delivery`` alarm.
+* :mod:`service.reports.sim_history` — a store of N SIMULATED months quickly (one cycle per
+  mill analysed through the real worker, its rows tiled over each month; the mills stored as
+  simulated): ``millwatch history build`` and the report benchmarks.
 
 Data flow: store rows (+ the worker's status for life) → ``MonthlyReport`` (plain dataclasses)
 → :func:`~service.reports.monthly_document.monthly_document` → ``Document`` → renderers of

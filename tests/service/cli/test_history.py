@@ -1,0 +1,74 @@
+"""``millwatch history build`` end to end as subprocesses: two simulated months of one mill
+written quickly, then its monthly report and the fleet report read from that store say
+"simulated" and show both months; mistakes are one line (exit status 2)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
+
+
+def millwatch(*args: str | Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "service.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=300, check=False)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def built(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[Path, subprocess.CompletedProcess[str], float]:
+    store = tmp_path_factory.mktemp("history") / "h.db"
+    t = time.perf_counter()
+    done = millwatch("history", "build", "--mills", MILL, "--months", "2", "--last", "2024-01",
+                     "--store", store, "--run-min", "1")  # fmt: skip
+    return store, done, time.perf_counter() - t
+
+
+def test_two_months_are_built_quickly_with_a_progress_bar(built):
+    store, done, secs = built
+    assert done.returncode == 0, done.stderr
+    assert secs < 120  # one 1-min cycle analysed, two months tiled
+    assert "[" + "#" * 30 + "] 3/3" in done.stderr  # the bar: 1 cycle + 2 months
+    assert "2 SIMULATED months (2023-12 to 2024-01)" in done.stdout
+    assert store.is_file()
+
+
+def test_the_report_from_the_store_is_marked_simulated_and_has_the_history(built, tmp_path):
+    store, _, _ = built
+    done = millwatch("report", "--store", store, "--mill", "sag-5200-lrs", "--month",
+                     "2024-01", "--format", "html", "--out", tmp_path)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    html = (tmp_path / "sag-5200-lrs" / "2024-01.html").read_text(encoding="utf-8")
+    html = html.replace("<wbr>", "").replace("<span class='nw'>", "").replace("</span>", "")
+    assert "SIMULATED DATA" in html
+    assert "What changed since last month (2023-12)" in html
+    assert "Monitoring covered 31.00 days of the month." in html
+    fleet = millwatch("report", "--store", store, "--fleet", "rustenburg", "--month",
+                      "2024-01", "--format", "html", "--out", tmp_path)  # fmt: skip
+    assert fleet.returncode == 0, fleet.stderr
+    page = (tmp_path / "rustenburg-fleet" / "2024-01.html").read_text(encoding="utf-8")
+    page = page.replace("<wbr>", "").replace("<span class='nw'>", "").replace("</span>", "")
+    assert "SIMULATED DATA" in page and "2023-12" in page and "in 2024-01" in page
+
+
+def test_an_existing_store_is_never_added_to(built):
+    store, _, _ = built
+    done = millwatch("history", "build", "--mills", MILL, "--months", "1", "--store", store)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines()[-1] == (
+        f"millwatch: error: store file {store} exists: choose a new path or give --replace "
+        f"to delete it"
+    )
+
+
+def test_help_teaches_the_command():
+    done = millwatch("history", "build", "--help")
+    assert done.returncode == 0
+    for words in ("--mills", "--months", "--store", "simulated", "millwatch report --store"):
+        assert words in done.stdout
