@@ -163,6 +163,9 @@ def _summary_life(r: MonthlyReport) -> Table:
 
 
 def _summary_changes(r: MonthlyReport) -> Table:
+    last = r.summary.previous_month
+    if not r.summary.previous_monitored:
+        last += ": not monitored, nothing to compare"
     return Table(
         "summary_changes",
         (Column("quantity", "quantity", text=True), Column("unit", "unit", text=True),
@@ -170,7 +173,7 @@ def _summary_changes(r: MonthlyReport) -> Table:
          Column("change", "change")),
         rows([[c.quantity, c.unit, c.this_month, c.last_month, c.change]
               for c in r.summary.changes]),
-        caption=f"What changed since last month ({r.summary.previous_month})",
+        caption=f"What changed since last month ({last})",
         empty_text="Nothing to compare with last month.",
     )  # fmt: skip
 
@@ -244,8 +247,9 @@ def _life(r: MonthlyReport) -> Section:
     )  # fmt: skip
     b = life.basis
     basis = Paragraph(
-        f"Miner limit D = {fmt(b.miner_limit)}; S-N curve: {_sn_curve(b.sn_curve)}. "
-        f"{b.damage} {b.rates} {b.remaining_life}",
+        f"Basis of these figures. Failure: Miner damage D = {fmt(b.miner_limit)}. S-N curve: "
+        f"{_sn_curve(b.sn_curve)}. Damage counted: {b.damage.rstrip('.')}. Rates: "
+        f"{b.rates.rstrip('.')}. Remaining life: {b.remaining_life.rstrip('.')}.",
         "meta",
     )
     prior = Paragraph(f"Damage before monitoring ({life.prior.method}): {life.prior.note}", "meta")

@@ -187,9 +187,10 @@ def tile_month(
     m = _Month(all_days[:n], t0, [], [], defaultdict(float), defaultdict(float))
     for kind, a, b in month_cycles(days if days is not None else n, seed):
         _add_cycle(m, tpl, kind, t0 + int(a * 1e9), t0 + int(b * 1e9))
+    channel = _gap_channel(config)
     m.events += [EventRow(config.id, "data_quality", t0 + int(h * 3.6e12),
-                          {"channel": "pinion_bending", "problem": "sequence_gap",
-                           "missing_blocks": 1}, subject=f"pinion_bending:{h}")
+                          {"channel": channel, "problem": "sequence_gap",
+                           "missing_blocks": 1}, subject=f"{channel}:{h}")
                  for h in range(0, n * 24, 97)]  # fmt: skip
     covered = {(config.id, d): (t0 + i * DAY_NS, t0 + (i + 1) * DAY_NS)
                for i, d in enumerate(m.days)}  # fmt: skip
@@ -206,6 +207,13 @@ def tile_month(
         for name, t, data in m.records:
             Store.add_record(db, config.id, name, t, data)
     return {"events": len(m.events), "records": len(m.records), "damage_rows": len(m.damage)}
+
+
+def _gap_channel(config: MillConfig) -> str:
+    """The channel the tiled telemetry gaps are on, named as the mill file names it: its first
+    bending channel (else its first channel)."""
+    bending = [n for n, c in config.channels.items() if str(c.kind) == "bending"]
+    return (bending or list(config.channels))[0]
 
 
 @dataclass(frozen=True, slots=True)

@@ -32,7 +32,7 @@ from ingest.sim.spec import StartEvent, StopEvent
 from service.api.errors import install_problem_handlers
 from service.api.local_backend import LocalBackend
 from service.api.routes.mills import mills_router
-from service.api.routes.reports import reports_router
+from service.api.routes.reports import FORMATS, reports_router
 from service.remote.report_codec import report_from_dict
 from service.reports.fleet import build_fleet, fleet_entry, fleet_mill_from_dict, fleet_to_dict
 from service.reports.fleet_document import render_fleet
@@ -235,7 +235,8 @@ def test_the_report_has_page_one_cumulative_damage_and_a_trend(store):
     assert s.worst_start.peak_pct == max(x.peak_pct for x in report.starts.starts)
     assert s.worst_start.peak_pct >= s.worst_start.switch_on_pct  # switch-on or short-circuit
     starts = next(c for c in s.changes if c.quantity == "starts")
-    assert (starts.this_month, starts.last_month, starts.change) == (2.0, 2.0, 0.0)
+    assert (starts.this_month, starts.last_month, starts.change) == (2, 2, 0)
+    assert isinstance(starts.this_month, int)  # a count is shown as one ("2", not "2.00")
     comp = next(c for c in s.components if c.component == "pinion_combined")
     assert comp.damage_to_date == report.life.components["pinion_combined"].damage
     assert comp.remaining_life_years_min is not None and comp.end_date_earliest is not None
@@ -271,6 +272,29 @@ def test_the_january_report_says_insufficient_history(store):
     assert report.summary.life_status == "insufficient_history"
     assert all(c.life_reason and c.remaining_life_years_min is None
                for c in report.summary.components)  # fmt: skip
+
+
+def test_an_unmonitored_last_month_is_not_compared_as_zero(store):
+    """December 2023 has no monitored time: 'what changed' shows no figures for it (not
+    '0 starts, ok') and says why."""
+    report = build_monthly_report(store, SIM_T, "2024-01")
+    assert report.summary.previous_month == "2023-12" and not report.summary.previous_monitored
+    by = {c.quantity: c for c in report.summary.changes}
+    assert by["starts"].last_month is None and by["starts"].change is None
+    assert by["alarms raised"].last_month is None
+    assert all(c.last_month is None for q, c in by.items() if q.startswith("damage"))
+    html = str(FORMATS["html"][1](report))
+    html = html.replace("<wbr>", "").replace("<span class='nw'>", "").replace("</span>", "")
+    assert "2023-12: not monitored, nothing to compare" in html
+    # the basis paragraph is labelled, part by part
+    for label in (
+        "Basis of these figures. Failure: Miner damage D = 1",
+        ". S-N curve: ",
+        ". Damage counted: prior",
+        ". Rates: stored",
+        ". Remaining life: (1 − D)",
+    ):
+        assert label in html, label
 
 
 # ----------------------------------------------------------------------------- fleet, API
