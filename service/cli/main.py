@@ -117,7 +117,7 @@ COMMANDS = (
     ),
     Command(
         "history",
-        "service.cli.history",
+        "service.cli.history.command",
         "write N months of simulated history for mill files into a store (reports, fleet)",
     ),
 )

@@ -34,9 +34,6 @@ What is here:
 * :mod:`service.reports.mail` — a report's mail (SMTP, STARTTLS, login; stdlib only).
 * :mod:`service.reports.month_end` — the month-end job of the service: each finished local
   month's reports written and mailed, catch-up, retries, the ``report_delivery`` alarm.
-* :mod:`service.reports.sim_history` — a store of N SIMULATED months quickly (one cycle per
-  mill analysed through the real worker, its rows tiled over each month; the mills stored as
-  simulated): ``millwatch history build`` and the report benchmarks.
 
 Data flow: store rows (+ the worker's status for life) → ``MonthlyReport`` (plain dataclasses)
 → :func:`~service.reports.monthly_document.monthly_document` → ``Document`` → renderers of

@@ -1,7 +1,7 @@
 """Benchmark: build a month's damage report, then render it in every format (target ≤ 1 s each).
 
 Simulating and analysing a whole month takes long, so the store is filled in two steps, by the
-functions of ``millwatch history build`` (:mod:`service.reports.sim_history`):
+functions of ``millwatch history build`` (:mod:`service.cli.history.tiling`):
 
 1. one representative stop-to-stop cycle (LRS start, ``--run-min`` minutes of steady running,
    stop) is simulated and analysed through the real pipeline (``Worker.handle``, in process),
@@ -41,9 +41,9 @@ from typing import Any
 from ingest.mill_files import load_mill_config
 from ingest.sim.spec import DEFAULT_T0_NS
 from service.api.routes.reports import FORMATS
+from service.cli.history.tiling import CycleTemplate, analyse_cycle, tile_month
 from service.reports.history import last_months
 from service.reports.monthly import build_monthly_report
-from service.reports.sim_history import CycleTemplate, analyse_cycle, tile_month
 from service.reports.starts import month_bounds_ns
 from service.store.database import Store
 

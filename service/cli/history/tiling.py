@@ -18,7 +18,8 @@ in two steps, per mill:
 
 The mills are stored with ``simulated = true`` (:func:`build_history`), so every report, fleet
 view and alarm made from the store says it is simulated data. ``tests/bench/bench_report.py``
-and ``bench_month_end.py`` fill their stores with the same functions.
+and ``bench_month_end.py`` fill their stores with the same functions. (Here, beside the command,
+not in :mod:`service.reports`: it drives the worker, and the worker uses the reports.)
 """
 
 from __future__ import annotations
