@@ -11,6 +11,8 @@ Sources
 * EN 1993-1-9 §7, Fig. 7.1/7.2: Δσ_C at N_C = 2·10⁶, knee Δσ_D at N_D = 5·10⁶, then m = 5 to the
   cut-off Δσ_L at N_L = 10⁸ (Δσ_D = 0.737·Δσ_C, Δσ_L = 0.549·Δσ_D); shear m = 5 from Δτ_C at 2·10⁶
   to the cut-off Δτ_L = 0.457·Δτ_C at 10⁸. Below the cut-off a cycle does no damage.
+* Scatter (:data:`SD_LOG10_N`, :meth:`SNCurve.life_factor`): BS 7608 / IIW design curves, the
+  mean minus two standard deviations of log10 N (the seeds give none).
 * Fotopoulos 1983 §4.2 eq. 4, n₁ = n₂(S₂/S₁)^m: a spectrum as cycles of one reference
   range (Diering 2011 writes the S-N slope as the signed −m; here m > 0).
 
@@ -32,6 +34,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from enum import StrEnum
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -41,6 +44,7 @@ from analytics.fatigue import damage_kernels as _dk
 from analytics.fatigue.exact_sum import fsum
 
 __all__ = [
+    "SD_LOG10_N",
     "GoodmanCorrection",
     "MeanStressError",
     "SNCurve",
@@ -49,6 +53,14 @@ __all__ = [
     "equivalent_range",
     "marin_endurance_limit",
 ]
+
+SD_LOG10_N = 0.2
+"""The S-N scatter every curve carries unless told otherwise: a standard deviation of log10 N of
+0.2 about the mean curve, the curve itself 2 standard deviations below the mean (97.7 %
+survival). The seeds give no scatter; this is the documented standard value of weld design
+curves: BS 7608 design curves are the mean minus two standard deviations of log10 N, the
+standard deviation about 0.18–0.25 by detail class (the IIW recommendations likewise place their
+characteristic curves about two standard deviations below the mean)."""
 
 _N_SHIGLEY_LOW = 1e3  # cycles at 0.8·S_ut (Shigley)
 _N_SHIGLEY_KNEE = 1e6  # cycles at S_e (Shigley)
@@ -170,6 +182,19 @@ class SNCurve:
     N_L: float = math.inf
     kind: StressKind = StressKind.RANGE
     name: str = ""
+    #: S-N scatter: standard deviation of log10 N about the mean curve (see :data:`SD_LOG10_N`).
+    sd_log10_N: float = 0.2
+    #: Standard deviations of log10 N this curve lies below the mean (design curves: 2).
+    sd_below_mean: float = 2.0
+
+    def life_factor(self, survival: float) -> float:
+        """N at the survival probability ``survival`` (0–1) over N on this curve, the curve
+        shifted along log N: 10^((k − z)·s), k = :attr:`sd_below_mean`, z the standard normal
+        quantile of ``survival``, s = :attr:`sd_log10_N` (1 at the curve's own survival)."""
+        if not 0.0 < survival < 1.0:
+            raise ValueError(f"survival probability must lie between 0 and 1, got {survival!r}")
+        z = NormalDist().inv_cdf(survival)
+        return float(10.0 ** ((self.sd_below_mean - z) * self.sd_log10_N))
 
     def __post_init__(self) -> None:
         _positive("m1", self.m1)

@@ -30,6 +30,7 @@ from analytics.drivetrain.mill_config import MillConfig
 from analytics.drivetrain.stress import shear_stress_from_torque
 from analytics.fatigue.miner import DamageRecorder
 from analytics.fatigue.rainflow import RainflowCounter
+from analytics.mill.app_d import AppDCost
 from analytics.mill.load_roles import LoadRoles
 from analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
 from analytics.mill.report import damage_table
@@ -62,6 +63,15 @@ class FatigueCounting:
                 curve, scale=model.combined_scale if combined else model.torsion_scale
             )
             self.damage[c] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone)
+
+    def stress(self, block: np.ndarray) -> dict[str, np.ndarray]:
+        """Stress (MPa) of each component over a block of ring rows (NaN where missing)."""
+        return self._stress(block)
+
+    @property
+    def recorders(self) -> dict[str, DamageRecorder]:
+        """Each component's damage recorder (curve, stress scale), after :meth:`begin`."""
+        return {c: pd.recorder for c, pd in self.damage.items()}
 
     def _stress(self, block: np.ndarray) -> dict[str, np.ndarray]:
         """Stress (MPa) of each component over a block of ring rows."""
@@ -149,6 +159,7 @@ class FatigueCounting:
         seconds: dict[str, float],
         starts_total: int,
         n: int,
+        app_d: dict[str, AppDCost],
     ) -> dict[str, Any]:
         """:func:`~analytics.mill.report.damage_table` after ``n`` stream samples, the cycles
         of the decided phases attributed and the open residues closed (on copies), each
@@ -156,7 +167,7 @@ class FatigueCounting:
         for pd in self.damage.values():
             pd.attribute(timeline, decided)
         residues = {c: k.close() for c, k in self.counters.items()}
-        table = damage_table(self.damage, residues, seconds, starts_total, n / self.fs)
+        table = damage_table(self.damage, residues, seconds, starts_total, n / self.fs, app_d)
         for comp, row in table.items():
             row["stress_factors"] = self.roles.stress_model.describe(comp)
         return table

@@ -22,14 +22,15 @@ __all__ = ["KEYS", "KIND", "VERSION", "assemble", "checked", "from_version_2"]
 KIND = "mill_analyzer"  # the name LoadAnalysis had when checkpoints were first written
 VERSION = 3  # 2: arrays packed by analytics.snapshot_arrays; 3: steady channels named by the
 #: mill file (a version-2 snapshot is renamed on restore: :func:`from_version_2`)
-#: The keys of a snapshot, in the order stored checkpoints hold them (``phase_days`` added at
-#: the end: older checkpoints restore without it, and without ``starts_total``).
+#: The keys of a snapshot, in the order stored checkpoints hold them (``phase_days`` and
+#: ``app_d_portions`` added at the end: older checkpoints restore without them, and without
+#: ``starts_total``).
 KEYS = (
     "kind", "version", "mill", "n", "t0_ns", "steady_until", "open_start", "open_stop",
     "stop_after_start", "starts", "stops", "barrings", "windows", "starts_per_day",
     "starts_per_month", "phase_samples", "lead", "discontinuities", "last", "sm",
     "timeline", "ring", "counters", "damage", "meter", "barring", "starts_total", "stress",
-    "phase_days",
+    "phase_days", "app_d_portions",
 )  # fmt: skip
 
 

@@ -42,6 +42,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.mill.app_d import AppDCounting
 from analytics.mill.load_damage import FatigueCounting
 from analytics.mill.load_days import KEEP_START_DAYS, KEEP_START_MONTHS, PhaseDays, StreamClock
 from analytics.mill.load_events import PREROLL_S, EventBook
@@ -93,7 +94,7 @@ class LoadAnalysis:
     #: The parts that own a piece of the state (each writes its keys of the snapshot and sets
     #: them back: ``snapshot()``/``load()``; what each derives from the configuration is its
     #: ``CONFIGURED``).
-    PARTS = ("clock", "days", "events", "steady", "fatigue")
+    PARTS = ("clock", "days", "events", "steady", "fatigue", "app_d")
     #: Attributes derived in ``__init__`` from the configuration and the caller's settings, and
     #: the parts; every other attribute is state, written by :meth:`snapshot` and set back by
     #: :meth:`restore`.
@@ -120,6 +121,7 @@ class LoadAnalysis:
         self.events = EventBook(config, self.settings, self.roles, self.clock)
         self.steady = SteadyProgress(config, self.roles, self.clock, window_s)
         self.fatigue = FatigueCounting(config, self.roles, self.fs)
+        self.app_d = AppDCounting(self.fs, list(self.roles.components))
 
     # ------------------------------------------------------------ reading
     @property
@@ -224,6 +226,7 @@ class LoadAnalysis:
         self.events.progress(self.ring, decided)
         self.fatigue.count(block, self.timeline, decided)
         self.n += n
+        self.app_d.advance(self.ring, decided, self.fatigue.stress, self.fatigue.recorders)
         self.steady.progress(self.ring, self.timeline, decided)
         if len(self.timeline.samples) > 32:
             self.timeline.prune(min(self.fatigue.oldest_needed(decided), self.steady.steady_until))
@@ -300,7 +303,13 @@ class LoadAnalysis:
         prev, prev_at = self.timeline.states[-1], self.timeline.samples[-1]
         self.timeline.add(tr)
         self.days.close(prev, prev_at, tr.sample)
-        return self.events.on_transition(tr, self.ring)
+        self.app_d.on_transition(tr, self.ring, self.fatigue.stress, self.fatigue.recorders)
+        events = self.events.on_transition(tr, self.ring)
+        if tr.state == OperatingState.STOPPED:
+            for e in events:
+                if e["event"] == "stop":
+                    e["app_d"] = self.app_d.last_record
+        return events
 
     # ------------------------------------------------------------ report
     def damage_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
@@ -333,7 +342,12 @@ class LoadAnalysis:
         ev = self.events
         failed = ev.failed_per_month()
         damage = self.fatigue.table(
-            self.timeline, self.sm.decided_until, seconds, ev.starts_total, self.n
+            self.timeline,
+            self.sm.decided_until,
+            seconds,
+            ev.starts_total,
+            self.n,
+            self.app_d.cost(),
         )
         cfg = self.config
         return {
@@ -378,7 +392,7 @@ class LoadAnalysis:
     def _ring_needed_from(self) -> int:
         """Oldest ring sample a later phase window, barring session or steady window may read."""
         pre = round(PREROLL_S * self.fs)
-        need = [self.n - pre, self.steady.steady_until, self.sm.decided_until - pre]
+        need = [self.n - pre, self.steady.steady_until, self.sm.decided_until - pre, self.app_d.fed]
         return min(need + self.events.ring_needed_from(pre))
 
     @classmethod
@@ -409,7 +423,7 @@ class LoadAnalysis:
 
     def _parts(self) -> tuple[_Part, ...]:
         """The parts, in the order of :attr:`PARTS`."""
-        return self.clock, self.days, self.events, self.steady, self.fatigue
+        return self.clock, self.days, self.events, self.steady, self.fatigue, self.app_d
 
 
 class _Part(Protocol):

@@ -1,8 +1,9 @@
 """The tables of a :class:`~analytics.mill.loads.LoadAnalysis` report, from plain pieces.
 
-Sources: Diering 2011 §6.1.3 and §6.2.8 (starts per month against the supplier norm of 3–5; field
-average 20–22, peak 90), §8.3 and App. D (damage by phase, the cost of a start, damage per month
-for 5 starts/day, 1/day, 1/week, 1/month). Alarm levels come from the mill configuration.
+Sources: Diering 2011 §6.1.3 and §6.2.8 (starts per month against the supplier norm of 3–5;
+field average 20–22, peak 90), §8.3 and App. D (damage by phase, the cost of a start counted as
+App. D counts it, damage per month for 5 starts/day, 1/day, 1/week, 1/month;
+:mod:`analytics.mill.app_d`). Alarm levels come from the mill configuration.
 
 Each function takes the counts, timelines and recorders it tabulates, not the analysis object,
 so this module sits below :mod:`analytics.mill.loads` (which calls it) and imports nothing of it.
@@ -15,14 +16,13 @@ from typing import Any
 
 from analytics.drivetrain.mill_config import AlarmThresholds
 from analytics.fatigue.cycles import Cycles
+from analytics.mill.app_d import NO_COST, AppDCost, app_d_projections
 from analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
     PHASE_OF_STATE,
     PhaseDamage,
     PhaseTimeline,
-    project_monthly_damage,
-    start_cost,
 )
 from analytics.operation.operating_states import OperatingState
 
@@ -31,6 +31,8 @@ __all__ = [
     "damage_table",
     "months_table",
     "phase_seconds",
+    "projection_basis",
+    "start_cost_fields",
     "starts_status",
 ]
 
@@ -86,35 +88,63 @@ def damage_table(
     seconds: dict[str, float],
     starts_total: int,
     elapsed_s: float,
+    app_d: dict[str, AppDCost],
 ) -> dict[str, Any]:
     """Per component: committed damage, what closing the rainflow ``residues`` would add, damage
-    by phase and day, the cost of a start and monthly projections (App. D scenarios and the
-    observed start rate). ``damage`` must be attributed up to the decided sample first."""
+    by phase and day, the cost of a start as App. D counts it (``app_d``:
+    :class:`~analytics.mill.app_d.AppDCost`) and its monthly projections (App. D's scenarios,
+    the mill running the rest of the month, and ``measured``: this record's start rate and
+    running fraction; :func:`~analytics.mill.app_d.app_d_projections`).
+    ``damage`` must be attributed up to the decided sample first."""
+    basis = projection_basis(seconds, starts_total, elapsed_s)
     out = {}
-    scenarios = dict(APP_D_SCENARIOS)
-    if elapsed_s > 0:
-        scenarios["observed"] = starts_total / elapsed_s * MONTH_S  # this record's start rate
     for comp, pd in damage.items():
         pending = pd.with_residue(residues[comp])
-        phases = pd.phases()
-        cost = start_cost(phases, starts_total, seconds["start"] + seconds["stop"], seconds["run"])
+        cost = app_d.get(comp, NO_COST)
         out[comp] = {
             "curve": pd.recorder.curve.name,
             "kt": pd.recorder.scale,
             "committed": pd.committed,
             "pending_residue": pending - pd.committed,
             "with_residue": pending,
-            "phases": phases,
+            "phases": pd.phases(),
             "days": pd.days(),
-            "start_cost": {
-                "damage_per_start": cost.damage_per_start,
-                "start_stop_seconds": cost.start_stop_seconds,
-                "run_damage_per_hour": cost.run_damage_per_hour,
-                "hours_of_running_per_start": cost.hours_of_running,
+            "start_cost": start_cost_fields(cost),
+            "monthly_projection": app_d_projections(
+                cost, basis["measured_starts_per_month"], basis["measured_running_fraction"]
+            ),
+            "starts_per_month_scenarios": {
+                **APP_D_SCENARIOS,
+                "measured": basis["measured_starts_per_month"],
             },
-            "monthly_projection": {
-                name: project_monthly_damage(cost, n) for name, n in scenarios.items()
-            },
-            "starts_per_month_scenarios": scenarios,
+            "projection_basis": basis,
         }
     return out
+
+
+def start_cost_fields(cost: AppDCost) -> dict[str, Any]:
+    """``damage.<component>.start_cost``: App. D's portions summed and the cost of one start."""
+    rate = cost.run_damage_per_second
+    return {
+        "method": "app_d",
+        "start_stops": cost.start_stops,
+        "damage_per_start": cost.damage_per_start,
+        "start_stop_seconds": cost.seconds_per_start,
+        "run_seconds": cost.run_s,
+        "run_damage_per_hour": None if rate is None else rate * 3600.0,
+        "hours_of_running_per_start": cost.hours_of_running_per_start,
+    }
+
+
+def projection_basis(seconds: dict[str, float], starts: int, elapsed_s: float) -> dict[str, Any]:
+    """The assumptions of the monthly projections, printed beside them: a month of 4 weeks,
+    App. D's scenarios with the mill running the rest of the month, and the measured start
+    rate (per 4-week month) and running fraction (running / time outside starts and stops)."""
+    outside = elapsed_s - seconds.get("start", 0.0) - seconds.get("stop", 0.0)
+    return {
+        "month_days": MONTH_S / 86_400.0,
+        "scenarios": "App. D: k start-stop records per day, week or 4-week month, the mill "
+        "running the rest of the time; measured: this record's start rate and running fraction",
+        "measured_starts_per_month": starts / elapsed_s * MONTH_S if elapsed_s > 0 else None,
+        "measured_running_fraction": seconds.get("run", 0.0) / outside if outside > 0 else None,
+    }

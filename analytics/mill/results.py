@@ -155,6 +155,12 @@ class StopEvent(_Event):
     end_t_ns: int
     after_failed_start: bool
     truncated: bool
+    #: The start-stop record this stop closed, as Diering 2011 App. D counts it
+    #: (:mod:`analytics.mill.app_d`): ``start_stop_s`` and ``run_s`` (s), and per component
+    #: the Miner damage of the joined start and stop portions (``start_stop``, residue closed)
+    #: and of the run portions since the start (``run``); absent from stops stored before it
+    #: existed, null when no start was seen before the stop.
+    app_d: dict[str, Any] | None = None
 
 
 class BarringEvent(_Event):

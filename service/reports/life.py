@@ -28,6 +28,10 @@ Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
   page 1 and trend use it too).
 * **end dates**: present exactly when the life is; a date beyond 9999-12-31 is given as
   ``9999-12-31`` with ``end_date_capped`` true (practically unlimited).
+* **S-N scatter** (``life_band``): remaining life at 50, 90 and 97.7 % survival over the same
+  rate range, the configured curve taken as the design curve two standard deviations of
+  log N below the mean (:data:`analytics.fatigue.sn_curves.SD_LOG10_N`; BS 7608 / IIW); its
+  end dates only within :data:`service.reports.numbers.HORIZON_YEARS`.
 * **what drives it**: monitored damage by phase (store names: ``start``, ``run``, ``stop``,
   ``barring``, ``stopped``, ``unknown``) and by component; life at the App. D start rates
   (5/day, 1/day, 1/week, 1/month per 4-week month) from the measured cost of a start
@@ -46,6 +50,7 @@ from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta
+from statistics import NormalDist
 from typing import Any
 
 from pydantic import ConfigDict, TypeAdapter, with_config
@@ -59,6 +64,7 @@ from analytics.mill.phase_damage import (
     project_monthly_damage,
     start_cost,
 )
+from service.reports.numbers import NO_FINITE_LIFE, finite_life, years_range_text
 from service.reports.plain import plain
 from service.store.records import DamageRow
 
@@ -66,6 +72,7 @@ __all__ = [
     "LIFE_ADAPTER",
     "WORST_MONTH_MIN_DAYS",
     "ComponentLife",
+    "LifeBand",
     "LifeBasis",
     "LifeHistory",
     "LifeInputs",
@@ -207,6 +214,28 @@ class WhatIfLife:
 
 @with_config(_DESCRIBED)
 @dataclass(frozen=True, slots=True)
+class LifeBand:
+    """Remaining life at one survival probability of the S-N scatter, over the rate range."""
+
+    survival_pct: float
+    """Probability that the shaft survives to the life given, % (50, 90, 97.7)."""
+    life_factor: float
+    """Cycles to failure at this survival over those on the configured curve (the curve
+    shifted along log N by its scatter), dimensionless."""
+    remaining_life_years_min: float | None
+    """Least remaining life (at the highest damage rate), years; null without a rate."""
+    remaining_life_years_max: float | None
+    """Greatest remaining life (at the lowest damage rate), years; null without a rate."""
+    end_date_earliest: str | None
+    """Local date at the least life, YYYY-MM-DD; null when the life is beyond the horizon
+    (:data:`service.reports.numbers.HORIZON_YEARS`) or not given."""
+    end_date_latest: str | None
+    """Local date at the greatest life, YYYY-MM-DD; null when beyond the horizon or not
+    given."""
+
+
+@with_config(_DESCRIBED)
+@dataclass(frozen=True, slots=True)
 class ComponentLife:
     """Damage and remaining life of one component (Miner sums, dimensionless)."""
 
@@ -240,6 +269,9 @@ class ComponentLife:
     """Remaining life at the App. D start rates."""
     live: bool
     """True when the worker's live damage (not yet stored) is included."""
+    life_band: list[LifeBand] = field(default_factory=list)
+    """Remaining life at 50, 90 and 97.7 % survival (S-N scatter) over the rate range; empty
+    while no life is given."""
 
 
 @with_config(_DESCRIBED)
@@ -573,7 +605,35 @@ def _component(
         remaining_life_years_max=max(years) if years else None,
         what_if=_what_if(ctx, inputs, phases, damage),
         live=live is not None,
+        life_band=_band(ctx, comp, damage, projections),
     )
+
+
+SURVIVALS = (0.5, 0.9, NormalDist().cdf(2.0))
+"""Survival probabilities of the life band: 50 %, 90 % and 97.7 % (the design curve's own,
+mean − 2 standard deviations of log N; :data:`analytics.fatigue.sn_curves.SD_LOG10_N`)."""
+
+
+def _band(ctx: _Ctx, comp: str, damage: float, projections: list[Projection]) -> list[LifeBand]:
+    """Remaining life (f − D)/rate at each survival: the curve's N times f = 10^((2 − z)·s)
+    (Miner's D scales by 1/f), over the projections' rates (highest rate: least life)."""
+    rates = [p.rate_per_year for p in projections if p.remaining_life_years is not None
+             and p.rate_per_year is not None and p.rate_per_year > 0]  # fmt: skip
+    if not rates:
+        return []
+    curve = ctx.config.material.sn_curve()
+    out = []
+    for p in SURVIVALS:
+        f = curve.life_factor(p)
+        lo, hi = (max(f - damage, 0.0) / r for r in (max(rates), min(rates)))
+        out.append(LifeBand(round(100.0 * p, 1), f, lo, hi, _meaningful_end(ctx, lo),
+                            _meaningful_end(ctx, hi)))  # fmt: skip
+    return out
+
+
+def _meaningful_end(ctx: _Ctx, years: float) -> str | None:
+    """The end date when the life is within the horizon (else none: no 8108-11-09)."""
+    return _end_date(ctx, years)[0] if finite_life(years) else None
 
 
 def _design_line(ctx: _Ctx) -> float | None:
@@ -735,19 +795,6 @@ def _basis(config: MillConfig) -> LifeBasis:
 _RATE_WORDS = {"last": "recent", "since": "since-monitoring", "worst": "worst month's"}
 
 
-def years_range_text(lo: float | None, hi: float | None) -> str:
-    """``31 to 38 years``, ``9,458 years`` (one figure when the ends agree within 5 %)."""
-    if lo is None or hi is None:
-        return "no projection"
-
-    def fmt(y: float) -> str:
-        return f"{y:,.0f}" if y >= 10 else f"{y:.1f}"
-
-    if math.isclose(lo, hi, rel_tol=0.05):
-        return f"{fmt(lo)} years"
-    return f"{fmt(lo)} to {fmt(hi)} years"
-
-
 def _note(config: MillConfig, status: str, missing: list[str], gov: ComponentLife | None,
           prior: PriorDamage) -> str:  # fmt: skip
     sim = "Simulated data. " if config.simulated else ""
@@ -766,5 +813,7 @@ def _note(config: MillConfig, status: str, missing: list[str], gov: ComponentLif
              if p.remaining_life_years is not None]  # fmt: skip
     said = ", ".join(rates[:-1]) + f" and {rates[-1]}" if len(rates) > 1 else "".join(rates)
     years = years_range_text(gov.remaining_life_years_min, gov.remaining_life_years_max)
-    return (f"{sim}{gov.component} governs with {years} left at the {said} "
-            f"rate{'s' if len(rates) > 1 else ''} ({curve}; {prior_text}).")  # fmt: skip
+    at = f"at the {said} rate{'s' if len(rates) > 1 else ''}"
+    if years == NO_FINITE_LIFE:
+        return f"{sim}{gov.component} governs: {years} {at} ({curve}; {prior_text})."
+    return f"{sim}{gov.component} governs with {years} left {at} ({curve}; {prior_text})."

@@ -29,6 +29,7 @@ from functools import partial
 
 from matplotlib.figure import Figure as MplFigure
 
+from analytics.fatigue.sn_curves import SD_LOG10_N
 from service.reports.figures import (
     cumulative_figure,
     damage_figure,
@@ -36,7 +37,9 @@ from service.reports.figures import (
     steady_figure,
     trend_figure,
 )
+from service.reports.life import ComponentLife
 from service.reports.monthly import MonthlyReport
+from service.reports.numbers import HORIZON_YEARS, NO_FINITE_LIFE, end_date_text, years_text
 from service.reports.render.document import (
     Cell,
     Column,
@@ -148,14 +151,16 @@ def _summary_life(r: MonthlyReport) -> Table:
          Column("life_consumed_pct", "life consumed to date", "% of D = 1"),
          Column("prior_pct", "of which before monitoring", "% of D = 1"),
          Column("design_line_pct", "design line", "% of D = 1"),
-         Column("remaining_min_years", "remaining life, least", "years"),
-         Column("remaining_max_years", "remaining life, most", "years"),
+         Column("remaining_min_years", "remaining life, least", "years", text=True),
+         Column("remaining_max_years", "remaining life, most", "years", text=True),
          Column("end_earliest", "end, earliest", text=True),
          Column("end_latest", "end, latest", text=True),
          Column("reason", "why no life", text=True)),
         rows([[c.component, c.life_consumed_pct, 100.0 * c.damage_prior, c.design_line_pct,
-               c.remaining_life_years_min, c.remaining_life_years_max,
-               c.end_date_earliest or "–", c.end_date_latest or "–", c.life_reason or "–"]
+               years_text(c.remaining_life_years_min), years_text(c.remaining_life_years_max),
+               end_date_text(c.end_date_earliest, c.remaining_life_years_min),
+               end_date_text(c.end_date_latest, c.remaining_life_years_max),
+               c.life_reason or "–"]
               for c in r.summary.components]),
         caption="Life consumed and remaining life per component (Miner, Diering 2011 §8.2)",
         empty_text="No component analysed yet.",
@@ -187,6 +192,42 @@ def _life_status(r: MonthlyReport) -> Paragraph:
     return Paragraph(s.life_note, "meta")
 
 
+def _drivers(r: MonthlyReport) -> tuple[Paragraph, ...]:
+    """What drives the damage, in words (:func:`service.reports.actions.drivers`)."""
+    if r.advice is None:
+        return ()
+    return (Paragraph("What drives the damage: " + " ".join(r.advice.drivers), "meta"),)
+
+
+def _actions(r: MonthlyReport) -> tuple[Table, ...]:
+    """Recommended actions with their evidence and source, in one table with last month's:
+    this month's ``new`` or ``still open``, last month's that no longer fire ``done`` (or ``not
+    checked`` when this month was not monitored)."""
+    a = r.advice
+    if a is None:
+        return ()
+    carried = {c.rule: c for c in a.carried}
+    since = f" (since {a.previous_month})"
+    items: list[list[Cell]] = [
+        [("URGENT: " if x.urgent else "") + x.action, x.evidence, x.source,
+         "still open" + since if x.rule in carried else "new"] for x in a.actions
+    ]  # fmt: skip
+    items += [[c.action, c.evidence_now, "", c.status] for c in a.carried
+              if c.status != "still open"]  # fmt: skip
+    return (
+        Table(
+            "summary_actions",
+            (Column("action", "recommended action", text=True),
+             Column("evidence", "evidence", text=True), Column("source", "source", text=True),
+             Column("status", "status", text=True)),
+            rows(items),
+            caption="Recommended actions (Diering 2011 §10 and §6–§8; Fedin & Vinogradov "
+            f"2018), and those of {a.previous_month or 'last month'}",
+            empty_text="No action called for by this month's or last month's evidence.",
+        ),
+    )  # fmt: skip
+
+
 def _summary(r: MonthlyReport) -> Section:
     return Section(
         "summary",
@@ -194,6 +235,8 @@ def _summary(r: MonthlyReport) -> Section:
         (
             _life_status(r),
             _summary_life(r),
+            *_drivers(r),
+            *_actions(r),
             _summary_table(r),
             _summary_changes(r),
             _summary_damage(r),
@@ -216,10 +259,11 @@ def _life(r: MonthlyReport) -> Section:
         "life_projections",
         (Column("component", "component", text=True), Column("basis", "rate basis", text=True),
          Column("month", "month", text=True), Column("rate_per_year", "damage rate", "1/year"),
-         Column("remaining_life_years", "remaining life", "years"),
+         Column("remaining_life_years", "remaining life", "years", text=True),
          Column("end_date", "end date", text=True), Column("reason", "why none", text=True)),
-        rows([[c.component, p.basis, p.month or "–", p.rate_per_year, p.remaining_life_years,
-               (f"{p.end_date} (capped)" if p.end_date_capped else p.end_date) or "–",
+        rows([[c.component, p.basis, p.month or "–", p.rate_per_year,
+               years_text(p.remaining_life_years),
+               end_date_text(p.end_date, p.remaining_life_years),
                p.reason or "–"] for c in comps for p in c.projections]),
         caption="Remaining life (1 − D) / rate at each rate basis",
         key_columns=2,
@@ -234,17 +278,7 @@ def _life(r: MonthlyReport) -> Section:
                *(100.0 * c.share_by_phase.get(p, 0.0) for p in phases)] for c in comps]),
         caption="What drives it: share of damage by component and phase",
     )  # fmt: skip
-    scenarios = list(dict.fromkeys(w.scenario for c in comps for w in c.what_if))
-    life_at = {c.component: {w.scenario: w.remaining_life_years for w in c.what_if}
-               for c in comps}  # fmt: skip
-    what_if = Table(
-        "life_what_if",
-        (Column("component", "component", text=True),
-         *(Column(f"life_at_{s.replace('/', '_per_')}", f"at {s} starts", "years")
-           for s in scenarios)),
-        rows([[c.component, *map(life_at[c.component].get, scenarios)] for c in comps]),
-        caption="Remaining life at the App. D start rates (damage to date included)",
-    )  # fmt: skip
+    band = _life_band(comps)
     b = life.basis
     basis = Paragraph(
         f"Basis of these figures. Failure: Miner damage D = {fmt(b.miner_limit)}. S-N curve: "
@@ -265,8 +299,40 @@ def _life(r: MonthlyReport) -> Section:
     return Section(
         "life", "Remaining life and cumulative damage (Diering 2011 §8.2, App. D)",
         (Paragraph(life.note, "meta"), basis, prior,
-         _figure("cumulative", cumulative_figure, r), projections, drivers, what_if, cumulative),
+         _figure("cumulative", cumulative_figure, r), projections, band, _scatter_note(), drivers,
+         cumulative),
     )  # fmt: skip
+
+
+def _life_band(comps: list[ComponentLife]) -> Table:
+    return Table(
+        "life_band",
+        (Column("component", "component", text=True),
+         Column("survival_pct", "survival", "%"), Column("life_factor", "N factor", "1"),
+         Column("remaining_min_years", "remaining life, least", "years", text=True),
+         Column("remaining_max_years", "remaining life, most", "years", text=True),
+         Column("end_earliest", "end, earliest", text=True),
+         Column("end_latest", "end, latest", text=True)),
+        rows([[c.component, b.survival_pct, b.life_factor,
+               years_text(b.remaining_life_years_min), years_text(b.remaining_life_years_max),
+               b.end_date_earliest or "–", b.end_date_latest or "–"]
+              for c in comps for b in c.life_band]),
+        caption="Remaining life with its uncertainty: S-N scatter (survival probability) × "
+        "the range of damage rates",
+        empty_text="No remaining life yet: no band.",
+        key_columns=2,
+    )  # fmt: skip
+
+
+def _scatter_note() -> Paragraph:
+    return Paragraph(
+        f"S-N scatter: the configured curve is taken as a design curve, 2 standard deviations "
+        f"of log10 N below the mean, with a standard deviation of {fmt(SD_LOG10_N)} (the "
+        "seeds give none; BS 7608 design curves are mean − 2 SD, SD 0.18–0.25 by class; IIW "
+        "likewise). 97.7 % survival is the curve itself; 50 % is the mean curve (N × 2.5). "
+        f"Lives beyond {fmt(HORIZON_YEARS)} years read '{NO_FINITE_LIFE}' and have no end date.",
+        "meta",
+    )
 
 
 def _trend(r: MonthlyReport) -> Section:
@@ -359,38 +425,46 @@ def _damage(r: MonthlyReport) -> Section:
         printed=False,
     )  # fmt: skip
     secs = ", ".join(f"{p} {fmt(v / 3600.0)} h" for p, v in r.phase_seconds.items())
-    note = Paragraph(f"Time in phases: {secs}. The cost of a start is (start + stop damage) / "
-                     "starts, expressed as hours of steady running (§8.3).", "meta")  # fmt: skip
+    note = Paragraph(f"Time in phases: {secs}. The cost of a start is App. D's: the damage of "
+                     "the start and stop portions of each start-stop record joined, residue "
+                     "counted, per record, and in hours of steady running at the run portions' "
+                     "rate (§8.3, App. D).", "meta")  # fmt: skip
     return Section("damage", "Fatigue damage (Miner, Diering 2011 §8.2, App. D)",
                    (_figure("damage", damage_figure, r), table, note, daily))  # fmt: skip
 
 
 def _what_if(r: MonthlyReport) -> Section:
-    comps = [c.component for c in r.damage]
-    keys = (Column("scenario", "scenario", text=True),
-            Column("starts_per_month", "starts", "per month"))  # fmt: skip
-
-    def table(name: str, caption: str, unit: str, of: Callable[..., float | None]) -> Table:
-        return Table(
-            name,
-            (*keys, *(Column(f"{c}", c, unit) for c in comps)),
-            rows([[w.scenario, w.starts_per_month, *(of(w, c) for c in comps)]
-                  for w in r.what_if]),
-            caption=caption,
-            key_columns=2,
-        )  # fmt: skip
-
-    life = table("what_if_life", "Life at each start rate", "years",
-                 lambda w, c: w.life_years[c])  # fmt: skip
-    damage = table("what_if_damage", "Damage per 4-week month at each start rate", "1/month",
-                   lambda w, c: w.damage_per_month[c])  # fmt: skip
-    note = Paragraph(
-        "A month is 4 weeks (App. D). Life = 1 / (damage per year); design life "
-        f"{fmt(r.design_life_years)} years. 'observed' is this month's start rate.",
-        "meta",
-    )
+    table = Table(
+        "what_if",
+        (Column("scenario", "scenario", text=True),
+         Column("starts_per_month", "starts", "per 4-week month"),
+         Column("running_pct", "running", "% of the rest"),
+         Column("component", "component", text=True),
+         Column("damage_per_month", "damage", "1/month"),
+         Column("life_years", "life from new", "years", text=True),
+         Column("remaining_years", "remaining life", "years", text=True)),
+        rows([[w.scenario, w.starts_per_month, 100.0 * w.running_fraction, c, d,
+               years_text(w.life_years.get(c)), years_text(w.remaining_years.get(c))]
+              for w in r.what_if for c, d in w.damage_per_month.items()]),
+        caption="Damage and life against starts per month, one start-cost basis (App. D)",
+        empty_text="No start-stop record this month: the cost of a start is not measured.",
+        key_columns=2,
+    )  # fmt: skip
     return Section("what_if", "What if: life against starts per month (Diering 2011 App. D)",
-                   (life, damage, note))  # fmt: skip
+                   (*_what_if_basis(r), table))  # fmt: skip
+
+
+def _what_if_basis(r: MonthlyReport) -> tuple[Paragraph, ...]:
+    """The assumptions beside the table (:class:`~service.reports.monthly.model.WhatIfBasis`)."""
+    b = r.what_if_basis
+    if b is None:
+        return ()
+    rate = "–" if b.measured_starts_per_month is None else fmt(b.measured_starts_per_month)
+    frac = "–" if b.measured_running_fraction is None else fmt(100 * b.measured_running_fraction)
+    measured = (f"Measured on {b.start_stops} start-stop records and {fmt(b.run_hours)} h of "
+                f"steady running this month; measured rate {rate} starts per 4-week month, "
+                f"running {frac} % of the time outside starts and stops.")  # fmt: skip
+    return tuple(Paragraph(t, "meta") for t in (measured, *b.assumptions))
 
 
 # ----------------------------------------------------------------------------- steady state

@@ -44,18 +44,12 @@ from typing import Any
 from alarms.lifecycle import Alarm
 from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.phase_damage import (
-    APP_D_SCENARIOS,
-    MONTH_S,
-    SECONDS_PER_YEAR,
-    StartCost,
-    project_monthly_damage,
-    start_cost,
-)
+from analytics.mill.app_d import NO_COST, AppDCost
 from analytics.operation.transients import start_peaks
 from service.reports.history import last_months, life_inputs, monthly_trend
 from service.reports.life import compute_life, local_iso, monitored_seconds
 from service.reports.month_summary import SummaryStart, build_cumulative, build_summary
+from service.reports.monthly.advice import build_advice, month_evidence
 from service.reports.monthly.model import (
     AlarmEntry,
     ComponentDamage,
@@ -64,10 +58,10 @@ from service.reports.monthly.model import (
     MonthlyReport,
     StartRow,
     Starts,
-    WhatIfRow,
 )
 from service.reports.monthly.reader import MonthReader, results_span
 from service.reports.monthly.trends import harmonics_section, steady_section
+from service.reports.monthly.what_if import month_cost, what_if_table
 from service.reports.starts import (
     STARTS_NORM_PER_MONTH,
     MonthError,
@@ -105,11 +99,19 @@ def build_monthly_report(
         span = results_span(events, steady_rows, harm_span)
         starts = _starts(events, config, reader.days)
         seconds = reader.phase_seconds()
-        damage = _damage(reader.damage(), starts.count, seconds)
+        cost = month_cost(events)
+        damage = _damage(reader.damage(), cost)
         covered = monitored_seconds(reader.coverage(), reader.start_ns, reader.end_ns)
         stored_alarms = store.alarms(mill_id=config.id)
         alarms = _alarms(stored_alarms, reader.start_ns, reader.end_ns)
         long_view = _long_view(store, config, month, reader, starts, stored_alarms)
+        steady = steady_section(steady_rows, config, reader)
+        evidence = month_evidence(config, month, covered, starts, steady, harmonics)
+        trend = long_view["trend"]
+        advice = build_advice(store, config, evidence, trend[-2] if len(trend) > 1 else None,
+                              damage)  # fmt: skip
+    so_far = {c: v.damage for c, v in long_view["life"].components.items()}
+    what_if, what_if_basis = what_if_table(cost, starts.count, covered, seconds, so_far)
     report = MonthlyReport(
         mill=config.id,
         site=config.site,
@@ -127,14 +129,16 @@ def build_monthly_report(
         starts=starts,
         phase_seconds=seconds,
         damage=damage,
-        what_if=_what_if(damage, starts.count, covered),
-        steady=steady_section(steady_rows, config, reader),
+        what_if=what_if,
+        steady=steady,
         harmonics=harmonics,
         alarms=alarms,
         data_quality=_data_quality([e for e in events if e.kind == "data_quality"]),
         simulated=config.simulated,
         **long_view,
         notes=_notes(span, starts, covered, config.simulated),
+        what_if_basis=what_if_basis,
+        advice=advice,
     )
     log.info("monthly report %s %s: %d starts", config.id, month, starts.count)
     return report
@@ -188,7 +192,9 @@ def _starts(events: list[EventRow], config: MillConfig, days: list[str]) -> Star
 
 
 # ----------------------------------------------------------------------------- damage
-def _damage(rows: list[DamageRow], starts: int, seconds: dict[str, float]) -> list[ComponentDamage]:
+def _damage(rows: list[DamageRow], cost: dict[str, AppDCost]) -> list[ComponentDamage]:
+    """Damage per component by day and phase, and the cost of a start as App. D counts it
+    (the start-stop records of the month's stops)."""
     by_comp: dict[str, dict[str, dict[str, float]]] = defaultdict(lambda: defaultdict(dict))
     for r in rows:
         by_comp[r.component][r.day][r.phase] = r.damage
@@ -199,41 +205,22 @@ def _damage(rows: list[DamageRow], starts: int, seconds: dict[str, float]) -> li
             for phase, d in day_phases.items():
                 phases[phase].append(d)
         per_phase = {p: math.fsum(v) for p, v in sorted(phases.items())}
-        full = {"start": 0.0, "stop": 0.0, "run": 0.0, **per_phase}
-        cost = start_cost(full, starts, seconds.get("start", 0.0) + seconds.get("stop", 0.0),
-                          seconds.get("run", 0.0))  # fmt: skip
+        c = cost.get(comp, NO_COST)
+        rate = c.run_damage_per_second
         out.append(
             ComponentDamage(
                 component=comp,
                 per_day={d: dict(sorted(p.items())) for d, p in sorted(per_day.items())},
                 per_phase=per_phase,
                 total=math.fsum(per_phase.values()),
-                damage_per_start=cost.damage_per_start,
-                start_stop_seconds=cost.start_stop_seconds,
-                run_damage_per_hour=cost.run_damage_per_hour,
-                hours_of_running_per_start=cost.hours_of_running,
+                damage_per_start=c.damage_per_start,
+                start_stop_seconds=c.seconds_per_start,
+                run_damage_per_hour=None if rate is None else rate * 3600.0,
+                hours_of_running_per_start=c.hours_of_running_per_start,
+                start_stops=c.start_stops,
             )
         )
     return out
-
-
-def _what_if(damage: list[ComponentDamage], starts: int, covered_s: float) -> list[WhatIfRow]:
-    """App. D: damage per 4-week month and life for the scenarios and the observed rate."""
-    scenarios = dict(APP_D_SCENARIOS)
-    if covered_s > 0:
-        scenarios["observed"] = starts / covered_s * MONTH_S
-    rows = []
-    for name, n in scenarios.items():
-        per_month: dict[str, float | None] = {}
-        life: dict[str, float | None] = {}
-        for c in damage:
-            cost = StartCost(starts, c.damage_per_start, c.start_stop_seconds,
-                             c.run_damage_per_hour, c.hours_of_running_per_start)  # fmt: skip
-            d = project_monthly_damage(cost, n)
-            per_month[c.component] = d
-            life[c.component] = MONTH_S / SECONDS_PER_YEAR / d if d else None
-        rows.append(WhatIfRow(name, n, per_month, life))
-    return rows
 
 
 # ----------------------------------------------------------------------------- long view

@@ -12,12 +12,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from service.reports.actions import Action, CarriedAction
 from service.reports.history import MonthTrend
 from service.reports.life import LifeReport
 from service.reports.month_summary import CumulativeDamage, ReportSummary
 from service.reports.plain import finite_or_none, plain
 
 __all__ = [
+    "Advice",
     "AlarmEntry",
     "ComponentDamage",
     "DataQuality",
@@ -31,6 +33,7 @@ __all__ = [
     "Steady",
     "SteadyDay",
     "SteadyPoint",
+    "WhatIfBasis",
     "WhatIfRow",
     "report_to_dict",
 ]
@@ -88,7 +91,8 @@ class Starts:
 @dataclass(frozen=True, slots=True)
 class ComponentDamage:
     """Damage of one component: per day and phase, per phase, the month's total; the cost of
-    a start (App. D, §8.3) from this month's phases."""
+    a start as Diering 2011 App. D counts it (§8.3; :mod:`analytics.mill.app_d`) from the
+    start-stop records the month's stops closed (``start_stops`` of them)."""
 
     component: str
     per_day: dict[str, dict[str, float]]
@@ -98,16 +102,36 @@ class ComponentDamage:
     start_stop_seconds: float | None
     run_damage_per_hour: float | None
     hours_of_running_per_start: float | None
+    start_stops: int = 0
 
 
 @dataclass(frozen=True, slots=True)
 class WhatIfRow:
-    """App. D scenario: starts per 4-week month → damage per month and life per component."""
+    """App. D scenario: starts per 4-week month → damage per month, life from new
+    (``life_years``) and remaining life from the damage so far at the month's end
+    (``remaining_years``) per component, the mill running ``running_fraction`` of the time
+    outside its starts and stops (App. D's scenarios: 1)."""
 
     scenario: str
     starts_per_month: float
     damage_per_month: dict[str, float | None]
     life_years: dict[str, float | None]
+    remaining_years: dict[str, float | None] = field(default_factory=dict)
+    running_fraction: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class WhatIfBasis:
+    """What the what-if table rests on, printed beside it: the start-stop records and run
+    portions it was measured on, the month of 4 weeks, the measured rate and fraction."""
+
+    method: str
+    start_stops: int
+    run_hours: float
+    month_days: float
+    measured_starts_per_month: float | None
+    measured_running_fraction: float | None
+    assumptions: list[str]
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,6 +236,18 @@ class DataQuality:
 
 
 @dataclass(frozen=True, slots=True)
+class Advice:
+    """Page 1's words (:mod:`service.reports.actions`): what drives the damage (``drivers``,
+    sentences), this month's recommended ``actions`` with their evidence and source, and last
+    month's (``previous_month``) carried with their status (done, still open, not checked)."""
+
+    drivers: list[str]
+    actions: list[Action]
+    previous_month: str
+    carried: list[CarriedAction]
+
+
+@dataclass(frozen=True, slots=True)
 class MonthlyReport:
     """The monthly damage report (JSON via :func:`report_to_dict`)."""
 
@@ -239,6 +275,8 @@ class MonthlyReport:
     cumulative: CumulativeDamage
     trend: list[MonthTrend]
     notes: list[str] = field(default_factory=list)
+    what_if_basis: WhatIfBasis | None = None
+    advice: Advice | None = None
 
     @property
     def empty(self) -> bool:

@@ -29,6 +29,7 @@ from typing import Literal
 from matplotlib.figure import Figure as MplFigure
 
 from alarms.times import iso_local
+from service.reports.numbers import sig
 
 __all__ = [
     "MAX_CHARS",
@@ -69,15 +70,10 @@ NBSP = "\u00a0"
 
 
 def fmt(x: float | None, digits: int = 3) -> str:
-    """A number as a person reads it: ``digits`` significant digits (plain notation from 0.01 to
-    10⁵ with thousands separators, else scientific), a true minus sign, ``–`` for none or
-    not-a-number."""
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "–"
-    if x == 0:
-        return "0"
-    text = f"{x:.{digits}g}" if abs(x) < 1e-2 or abs(x) >= 1e5 else f"{x:,.{digits - 1}f}"
-    return text.replace("-", MINUS)
+    """A number as a person reads it: :func:`service.reports.numbers.sig` (``digits``
+    significant digits, thousands separators, ``1.23 × 10⁻⁷`` when very small or large, a true
+    minus sign, ``–`` for none or not-a-number)."""
+    return sig(None if x is None else float(x), digits)
 
 
 def local_time(t_ns: int | None, time_zone: str) -> str:

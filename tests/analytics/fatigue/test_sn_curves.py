@@ -286,3 +286,22 @@ def test_equivalent_range_empty_and_errors() -> None:
         equivalent_range([1.0, 2.0], [1.0], 3.0, 1e6)
     with pytest.raises(ValueError, match="slope"):
         equivalent_cycles([1.0], [1.0], 0.0, 1.0)
+
+
+def test_life_factor_shifts_the_design_curve_along_log_n():
+    """S-N scatter (BS 7608 / IIW design curves: mean − 2 SD of log10 N, SD 0.2 by default)."""
+    from statistics import NormalDist
+
+    from analytics.fatigue.sn_curves import SD_LOG10_N
+
+    c = SNCurve(m1=5.0, S_D=100.0, N_D=1e6)
+    assert c.sd_log10_N == SD_LOG10_N == 0.2 and c.sd_below_mean == 2.0
+    assert c.life_factor(0.5) == pytest.approx(10**0.4)
+    assert c.life_factor(NormalDist().cdf(2.0)) == pytest.approx(1.0)
+    assert c.life_factor(0.9) == pytest.approx(10 ** ((2 - 1.2815515655446004) * 0.2))
+    wide = SNCurve(m1=5.0, S_D=100.0, N_D=1e6, sd_log10_N=0.3)
+    assert wide.life_factor(0.5) == pytest.approx(10**0.6)
+    with pytest.raises(ValueError, match="survival probability"):
+        c.life_factor(1.0)
+    old = {k: v for k, v in c.to_dict().items() if k not in ("sd_log10_N", "sd_below_mean")}
+    assert SNCurve.from_dict(old) == c  # a curve stored before the scatter existed

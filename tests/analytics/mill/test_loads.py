@@ -332,7 +332,7 @@ def test_snapshot_keys_and_order_are_those_of_stored_checkpoints():
         "stop_after_start", "starts", "stops", "barrings", "windows", "starts_per_day",
         "starts_per_month", "phase_samples", "lead", "discontinuities", "last", "sm",
         "timeline", "ring", "counters", "damage", "meter", "barring", "starts_total", "stress",
-        "phase_days",  # (added at the end: older checkpoints restore without it)
+        "phase_days", "app_d_portions",  # (added at the end: older ones restore without them)
     ]  # fmt: skip
     # version 3: steady channels by the mill file's names (version 2 is renamed on restore)
     assert (snap["kind"], snap["version"]) == ("mill_analyzer", 3)

@@ -113,6 +113,23 @@ def test_below_the_minimum_history_the_answer_is_insufficient_history(store):
     assert life.prior.method == "first_90_days" and life.prior.per_component == {}
 
 
+def test_life_band_from_the_s_n_scatter(store):
+    """50 / 90 / 97.7 % survival: (f − D)/rate with f = 10^((2 − z)·0.2) (BS 7608 / IIW design
+    curve, mean − 2 SD of log N); the 97.7 % band is the configured curve's own range."""
+    life = read_life(store, SIM_T, _ns("2024-03-01"))
+    for c in life.components.values():
+        band = {b.survival_pct: b for b in c.life_band}
+        assert list(band) == [50.0, 90.0, 97.7]
+        assert band[50.0].life_factor == pytest.approx(10**0.4, rel=1e-9)
+        assert band[97.7].life_factor == pytest.approx(1.0, rel=1e-12)
+        assert band[97.7].remaining_life_years_min == pytest.approx(c.remaining_life_years_min)
+        assert band[97.7].remaining_life_years_max == pytest.approx(c.remaining_life_years_max)
+        lows = [band[p].remaining_life_years_min for p in (50.0, 90.0, 97.7)]
+        assert lows == sorted(lows, reverse=True)  # surer survival, shorter life
+        for b in c.life_band:  # simulated minutes: lives of millennia, no end date given
+            assert (b.end_date_earliest is None) == (b.remaining_life_years_min > 1000)
+
+
 def test_no_start_seen_is_said_and_the_minimum_is_configurable(store):
     rows = store.damage(SIM.id, until_day="2024-01-01")
     span = (JAN_T0, JAN_T0 + 20 * 86_400 * 10**9)
@@ -323,7 +340,7 @@ def test_the_fleet_orders_mills_with_reasons(store):
                                   "mill": "other", "remaining_life_years_min": 1.0})  # fmt: skip
     view = build_fleet("rustenburg", [good, worse], ["gone"], now, SIM.time_zone)
     assert [v.mill for v in view.visit_order] == ["other", SIM.id]
-    assert view.visit_order[0].reason.startswith("shortest remaining life 1.0 ")
+    assert view.visit_order[0].reason.startswith("shortest remaining life 1–")
     assert view.unreachable == ["gone"] and view.simulated
     assert "in 2024-01" in view.visit_order[1].reason and "this month" not in str(view)
 

@@ -58,14 +58,32 @@ def test_damage_per_day_sums_equal_the_stored_rows(store, report):
         assert comp.hours_of_running_per_start > 0
 
 
-def test_what_if_follows_app_d_and_life_falls_with_more_starts(report):
+def test_what_if_follows_app_d_and_life_falls_with_more_starts(store, report):
     assert [w.scenario for w in report.what_if] == ["5/day", "1/day", "1/week", "1/month",
-                                                    "observed"]  # fmt: skip
+                                                    "measured"]  # fmt: skip
     lives = [w.life_years["pinion_combined"] for w in report.what_if[:4]]
     assert lives == sorted(lives)  # fewer starts, longer life
-    observed = report.what_if[-1].starts_per_month
+    measured = report.what_if[-1]
     monitored_s = report.trend[-1].monitored_days * 86_400  # one monitored time everywhere
-    assert observed == pytest.approx(3 / monitored_s * 28 * 86_400, rel=1e-9)
+    assert measured.starts_per_month == pytest.approx(3 / monitored_s * 28 * 86_400, rel=1e-9)
+    assert 0 < measured.running_fraction < 1
+    assert all(w.running_fraction == 1.0 for w in report.what_if[:4])  # as App. D assumes
+    for w in report.what_if:  # one basis: remaining life never longer than life from new
+        for c, years in w.remaining_years.items():
+            assert years is not None and years <= w.life_years[c]
+
+
+def test_the_cost_of_a_start_is_app_d_s_from_the_stored_stops(store, report):
+    """One basis: the start-stop records the month's stops carry (App. D), summed."""
+    stops = [e.data["app_d"] for e in store.events(CONFIG.id, "stop") if e.data.get("app_d")]
+    assert len(stops) >= 2
+    basis = report.what_if_basis
+    assert basis is not None and basis.method == "app_d" and basis.start_stops == len(stops)
+    assert basis.month_days == 28 and len(basis.assumptions) >= 3
+    for comp in report.damage:
+        d_ss = math.fsum(s["components"][comp.component]["start_stop"] for s in stops)
+        assert comp.damage_per_start == pytest.approx(d_ss / len(stops), rel=1e-12)
+        assert comp.start_stops == len(stops)
 
 
 def test_steady_harmonics_alarms_and_data_quality_come_from_the_store(store, report):
@@ -227,7 +245,7 @@ def test_route_serves_every_format(client):
         (URL, {"month": "2024-13"}, 422, "2024-13"),
         (URL, {"month": MONTH, "format": "docx"}, 422, "docx"),
         ("/mills/nope/reports/monthly", {"month": MONTH}, 404, "nope"),
-        (URL, {"month": MONTH, "table": "nope"}, 422, "what_if_life"),  # names the valid ones
+        (URL, {"month": MONTH, "table": "nope"}, 422, "life_band"),  # names the valid ones
         (URL, {"month": MONTH, "table": "starts", "format": "pdf"}, 422, "starts"),
     ],
 )
