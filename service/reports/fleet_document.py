@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from service.reports.numbers import end_date_text, years_text
 from service.reports.render.csv_tables import document_csv_zip
 from service.reports.render.document import (
     Column,
@@ -65,14 +66,16 @@ def _life(view: Mapping[str, Any]) -> Section:
         (Column("mill", "mill", text=True), Column("life_status", "life", text=True),
          Column("governing_component", "governing component", text=True),
          Column("life_consumed_pct", "life consumed", "% of D = 1"),
-         Column("remaining_min_years", "remaining life, least", "years"),
-         Column("remaining_max_years", "remaining life, most", "years"),
+         Column("remaining_min_years", "remaining life, least", "years", text=True),
+         Column("remaining_max_years", "remaining life, most", "years", text=True),
          Column("end_date_earliest", "end, earliest", text=True),
          Column("open_alarms", "open alarms, machine"),
          Column("worst_open_severity", "worst open", text=True, status=True)),
         rows([[m["mill"], m["life_status"], m["governing_component"] or "–",
-               100.0 * m["life_consumed"], m["remaining_life_years_min"],
-               m["remaining_life_years_max"], m["end_date_earliest"] or "–", m["open_alarms"],
+               100.0 * m["life_consumed"], years_text(m["remaining_life_years_min"]),
+               years_text(m["remaining_life_years_max"]),
+               end_date_text(m["end_date_earliest"], m["remaining_life_years_min"]),
+               m["open_alarms"],
                m["worst_open_severity"] or "none"] for m in mills]),
         caption="Life consumed and remaining range per mill (its governing component)",
     )  # fmt: skip
