@@ -169,6 +169,8 @@ def _add_cycle(m: _Month, tpl: CycleTemplate, kind: str, t_start: int, t_stop: i
             m.damage[(comp, "run", run_day)] += rate * secs
     run_s = (t_stop - run_from) / 1e9
     for name, rows in (("steady", tpl.steady), ("harmonics", tpl.harmonics)):
+        if not rows:  # a cycle too short for any (harmonic tables need minutes of running)
+            continue
         step = tpl.cadence_s[name]
         for k in range(int(run_s // step)):
             t = run_from + int(k * step * 1e9)
