@@ -30,6 +30,7 @@ from alarms.lifecycle import Alarm
 from analytics.drivetrain.mill_config import MillConfig
 from service.reports.history import last_months, life_inputs, monthly_trend
 from service.reports.life import compute_life, local_iso, years_range_text
+from service.reports.numbers import NO_FINITE_LIFE
 from service.reports.plain import plain
 from service.reports.starts import current_month
 from service.status import NO_STATUS, MillStatus
@@ -231,7 +232,8 @@ def _reason(m: FleetMill) -> str:
         facts.append(f"{m.open_alarms} open alarm(s), the worst {m.worst_open_severity}")
     if m.remaining_life_years_min is not None:
         years = years_range_text(m.remaining_life_years_min, m.remaining_life_years_max)
-        facts.append(f"shortest remaining life {years} ({m.governing_component})")
+        lead = "" if years == NO_FINITE_LIFE else "shortest remaining life "
+        facts.append(f"{lead}{years} ({m.governing_component})")
     else:
         facts.append("no life projection yet (" + "; ".join(m.life_missing or ["no damage"])
                      + ")")  # fmt: skip

@@ -188,7 +188,7 @@ def tile_month(
     n = len(all_days) if days is None else min(int(days), len(all_days))
     t0 = month_bounds_ns(month, config.time_zone)[0]
     m = _Month(all_days[:n], t0, [], [], defaultdict(float), defaultdict(float))
-    for kind, a, b in month_cycles(days if days is not None else n, seed):
+    for kind, a, b in month_cycles(n, seed):  # (a 30-day schedule would overrun February)
         _add_cycle(m, tpl, kind, t0 + int(a * 1e9), t0 + int(b * 1e9))
     channel = _gap_channel(config)
     m.events += [EventRow(config.id, "data_quality", t0 + int(h * 3.6e12),
