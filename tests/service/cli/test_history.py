@@ -51,7 +51,12 @@ def test_the_report_from_the_store_is_marked_simulated_and_has_the_history(built
     html = html.replace("<wbr>", "").replace("<span class='nw'>", "").replace("</span>", "")
     assert "SIMULATED DATA" in html
     assert "What changed since last month (2023-12)" in html
-    assert "Monitoring covered 31.00 days of the month." in html
+    # the monitored time reads the same on page 1 and in the trend table (one formatting)
+    assert "Monitoring covered 31 days of the month." in html
+    trend = html[html.index("t-trend_monthly") :]
+    assert "<td class='nw'>2024-01</td><td class='nw'>31</td>" in trend.replace(
+        "class='l nw'", "class='nw'"
+    )
     fleet = millwatch("report", "--store", store, "--fleet", "rustenburg", "--month",
                       "2024-01", "--format", "html", "--out", tmp_path)  # fmt: skip
     assert fleet.returncode == 0, fleet.stderr

@@ -39,6 +39,7 @@ from service.reports.fleet_document import render_fleet
 from service.reports.history import life_inputs
 from service.reports.life import LifeInputs, LifeReport, compute_life, life_to_dict
 from service.reports.monthly import build_monthly_report, report_to_dict
+from service.reports.numbers import sig
 from service.settings import ServiceSettings
 from service.store.database import Store
 from service.store.records import DamageRow
@@ -270,7 +271,7 @@ def test_the_report_has_page_one_cumulative_damage_and_a_trend(store):
     assert report.trend[-1].windows_sampled > 0 and report.trend[-1].bending_amplitude_mpa.mean
     # one monitored time: page 1, the trend and /life (both months) say the same
     hours = report.trend[-1].monitored_days * 24
-    assert f"Monitoring covered {hours:.2f} hours of the month." in report.notes
+    assert f"Monitoring covered {sig(hours)} hours of the month." in report.notes
     both = sum(t.monitored_days for t in report.trend)
     assert report.life.history.monitored_days == pytest.approx(both, rel=1e-12)
 
