@@ -27,13 +27,14 @@ _HELP = "write N months of simulated history for mill files into a store (report
 
 _EPILOG = """\
 examples:
-  millwatch history build --mills deploy/mills/*.toml --months 12 --store var/history.db
+  millwatch history build --mills deploy/mills/*.toml --months 12 --last 2024-01 \\
+      --store var/history.db
   millwatch history build --mills deploy/mills/sag-5200-lrs.toml --months 2 \\
-      --last 2024-01 --store /tmp/h.db --run-min 2
+      --last 2024-01 --store /tmp/h.db --run-min 2      # small and quick
 
-then read it:
+then read it (a month of those written, the site of the mill files):
   millwatch report --store var/history.db --mill sag-5200-lrs --month 2024-01 --out reports
-  millwatch report --store var/history.db --fleet rustenburg --out reports
+  millwatch report --store var/history.db --fleet rustenburg --month 2024-01 --out reports
 
 --last is the newest month written (default: last month, in UTC); the months before it follow
 back to --months in all. The store file must not exist yet (or use --replace): the command
@@ -133,6 +134,8 @@ def _build(args: argparse.Namespace) -> int:
         f"{', '.join(summary.mills)} to {args.store} "
         f"({summary.store_bytes / 1e6:.0f} MB) in {secs:.0f} s\n"
         f"read it: millwatch report --store {args.store} --mill {summary.mills[0]} "
+        f"--month {months[-1]}\n"
+        f"         millwatch report --store {args.store} --fleet {configs[0].site} "
         f"--month {months[-1]}\n"
     )
     return 0
