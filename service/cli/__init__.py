@@ -8,7 +8,9 @@ The ``millwatch`` command line: one module per sub-command, composed by ``main``
   its handler: ``demo``, ``rainflow``, ``simulate``, ``spectrum``, ``replay``, ``archive``,
   ``serve`` (a worker, and the API with it; also the start-up checks made before a banner and
   the ready line, shared by ``api`` and ``demo``), ``router``, ``api`` (the API alone, over zenoh),
-  ``analyze``, ``report`` (one monthly report from a store file, on demand).
+  ``analyze``, ``report`` (one monthly report, or a site's fleet report, from a store file, on
+  demand), ``history`` (``history/``: ``command`` — ``history build``, N simulated months into a new
+  store file —, and ``tiling``, the library that makes them, also used by the report benches).
 * ``edge/`` — commands run beside the gateways: ``spool`` (the edge forwarder, and the
   ``--spool`` options of ``simulate`` and ``replay``); ``zenoh-certs`` (mTLS certificates).
 * ``args`` — argument types that name the rule a value broke; ``signal_files`` — ``.npy`` /

@@ -115,6 +115,11 @@ COMMANDS = (
         "service.cli.report",
         "write one mill's monthly report (HTML, PDF, CSV) from a store file",
     ),
+    Command(
+        "history",
+        "service.cli.history.command",
+        "write N months of simulated history for mill files into a store (reports, fleet)",
+    ),
 )
 
 

@@ -1,5 +1,7 @@
 """``millwatch report --mill ID --month YYYY-MM``: one monthly report, on demand, from a store.
 
+(``--fleet SITE`` instead of ``--mill``: the fleet report of a site, as of the month's end.)
+
 Builds the monthly damage report of one mill for one local calendar month from a millwatch store
 file (the SQLite file ``millwatch serve`` writes; no running service is needed) and writes it as
 ``<out>/<mill>/<YYYY-MM>.<ext>`` — the same files, names and renderers as the month-end job of
@@ -21,6 +23,10 @@ examples:
   millwatch report --mill sag-5200-lrs --month 2024-01 --store /var/lib/millwatch/millwatch.db \\
       --format pdf --out /srv/reports
   millwatch report --config deploy/plant.toml --mill sag-5200-lrs --month 2024-01
+  millwatch report --fleet rustenburg --month 2024-01 --store var/history.db
+
+A store to try it on: millwatch history build --mills deploy/mills/*.toml --months 12 \\
+      --last 2024-01 --store var/history.db   (simulated data, said so in every report)
 
 The month is the site's local calendar month (the mill's time_zone). A month with no stored
 results still gives a report, empty, and a warning. Exit status 2 with one line naming the
@@ -39,7 +45,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=_EPILOG,
     )
-    p.add_argument("--mill", required=True, metavar="ID", help="mill id, e.g. sag-5200-lrs")
+    who = p.add_mutually_exclusive_group(required=True)
+    who.add_argument("--mill", metavar="ID", help="mill id, e.g. sag-5200-lrs")
+    who.add_argument(
+        "--fleet",
+        metavar="SITE",
+        help="the fleet report of a site instead (all its mills side by side, visit order), "
+        "as of the end of --month: <out>/<SITE>-fleet/<YYYY-MM>.<ext>",
+    )
     p.add_argument(
         "--month", required=True, metavar="YYYY-MM", help="local calendar month, e.g. 2024-01"
     )
@@ -97,7 +110,29 @@ def _main(args: argparse.Namespace) -> int:
             f"store file {store_path} does not exist (give the service's [store] path with "
             f"--store PATH or --config FILE)"
         )
+    if args.fleet is not None:
+        return _write_fleet(store_path, args.fleet, args.month, formats, out)
     return _write(store_path, args.mill, args.month, formats, out)
+
+
+def _write_fleet(
+    store_path: Path, site: str, month: str, formats: tuple[str, ...], out: Path
+) -> int:
+    """The fleet report of ``site`` as of the end of ``month`` (UTC), from the store alone."""
+    from service.reports.files import EXTENSIONS, report_path, write_atomic
+    from service.reports.fleet import fleet_to_dict, store_fleet
+    from service.reports.fleet_document import render_fleet
+    from service.reports.starts import month_bounds_ns
+    from service.store.database import Store
+
+    with Store(store_path) as store:
+        view = fleet_to_dict(store_fleet(store, site, month_bounds_ns(month, "UTC")[1]))
+    for fmt in formats:
+        body = render_fleet(view, fmt)
+        path = report_path(out, f"{site}-fleet", month, EXTENSIONS[fmt])
+        write_atomic(path, body if isinstance(body, bytes) else body.encode("utf-8"))
+        sys.stdout.write(f"{path}\n")
+    return 0
 
 
 def _write(store_path: Path, mill_id: str, month: str, formats: tuple[str, ...], out: Path) -> int:

@@ -19,8 +19,9 @@ What is here:
 * :mod:`service.reports.monthly` — the monthly report as plain data, built from the store (a
   package: building, the report's dataclasses, the store reader, the trend sections);
   :mod:`service.reports.month_summary` — its page 1 and cumulative damage against design life.
-* :mod:`service.reports.fleet` — the mills of a site side by side and the visit order
-  (``GET /sites/{site}/fleet``).
+* :mod:`service.reports.fleet` — the mills of a site side by side and the visit order by the
+  machines' condition, the monitoring's own alarms apart (``GET /sites/{site}/fleet``;
+  ``millwatch report --fleet`` from a store file).
 * :mod:`service.reports.fleet_document` — the fleet report (HTML, PDF, CSV) from the fleet
   answer (``GET /sites/{site}/reports/fleet``).
 * :mod:`service.reports.plain` — report data to JSON-ready plain data.

@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
+from matplotlib.dates import AutoDateLocator, ConciseDateFormatter
 from matplotlib.figure import Figure
 from matplotlib.ticker import (
     AutoLocator,
@@ -226,27 +227,70 @@ def steady_figure(r: MonthlyReport) -> Figure | None:
     return fig
 
 
+#: Horizontal lines of the cumulative-damage plot: (label, Miner damage, colour).
+DAMAGE_LINES = (("warning: half the Miner limit (D = 0.5)", 0.5, "#f0b400"),
+                ("failure: Miner limit (D = 1)", 1.0, "#c00"))  # fmt: skip
+
+
+def _prior_ramp(c: Any, days: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """The ASSUMED damage before monitoring (the prior, spread evenly from commissioning to
+    the first monitored day), for a dotted line apart from the measured one; None without a
+    commissioning date or prior."""
+    prior = c.prior.get(name, 0.0)
+    if not c.commissioned or len(days) < 2 or prior <= 0:
+        return None
+    frac = np.linspace(0.02, 1.0, 40)
+    span_h = (days[1] - days[0]).astype("timedelta64[h]").astype(np.int64)
+    return days[0] + (frac * span_h).astype("timedelta64[h]"), prior * frac
+
+
 def cumulative_figure(r: MonthlyReport) -> Figure | None:
     """Cumulative Miner damage per component (prior included) against the design line
-    D(t) = years since commissioning / design life, by local day (Diering 2011 §8.2)."""
+    D(t) = years since commissioning / design life, by local day (Diering 2011 §8.2), on a
+    log axis (a damage far below the design line stays visible) with the warning and failure
+    levels; the assumed damage before monitoring dotted, the measured days solid."""
     c = r.cumulative
     if not c.days or not c.damage:
         return None
-    days = np.array(c.days, dtype="datetime64[D]")
-    fig, (ax,) = _frame(3.4)
-    ax.plot(days, c.design_line, color="#7f7f7f", linestyle="--", linewidth=1.2,
-            label=f"design line ({fmt(c.design_life_years)} years)")  # fmt: skip
-    for name, values in c.damage.items():
-        ax.plot(days, values, linewidth=1.4, label=name)
-    ax.set_ylim(0, max(1e-12, *(max(v) for v in c.damage.values()), max(c.design_line)) * 1.1)
+    days = np.array(c.days, dtype="datetime64[D]").astype("datetime64[h]")
+    first = 1 if c.commissioned and len(days) > 1 else 0  # days[0]: commissioning, D = 0
+    fig, (ax,) = _frame(3.6)
+    ax.set_yscale("log")
+    t_design, design = days, np.asarray(c.design_line, dtype=float)
+    if first:  # a straight line from commissioning: drawn there too, not only where measured
+        frac = np.linspace(0.02, 1.0, 40)
+        span_h = (days[1] - days[0]).astype("timedelta64[h]").astype(np.int64)
+        t_design = np.concatenate([days[0] + (frac * span_h).astype("timedelta64[h]"), days[2:]])
+        design = np.concatenate([design[1] * frac, design[2:]])
+    ax.plot(t_design[design > 0], design[design > 0], color="#7f7f7f", linestyle="--",
+            linewidth=1.2, label=f"design line ({fmt(c.design_life_years)} years)")  # fmt: skip
+    lows = [float(design[design > 0].min())] if (design > 0).any() else []
+    for i, (name, values) in enumerate(c.damage.items()):
+        colour, v = f"C{i}", np.asarray(values, dtype=float)
+        ramp = _prior_ramp(c, days, name)
+        if ramp is not None:
+            ax.plot(*ramp, color=colour, linestyle=":", linewidth=1.0)
+            lows.append(float(ramp[1][0]))
+        t, v = days[first:][v[first:] > 0], v[first:][v[first:] > 0]
+        ax.plot(t, v, color=colour, linewidth=1.6, marker="." if v.size < 40 else None, ms=4,
+                label=f"{name} (measured)")  # fmt: skip
+        lows += [float(v.min())] if v.size else []
+    for label, level, colour in DAMAGE_LINES:
+        ax.axhline(level, color=colour, linestyle="-.", linewidth=1.0, label=label)
+    if any(_prior_ramp(c, days, n) is not None for n in c.damage):
+        ax.plot([], [], color="#555", linestyle=":", label="assumed before monitoring (prior)")
+    ax.set_ylim(min(lows, default=1e-6) / 3.0, 3.0)
+    ax.margins(x=0.03)  # no point on the frame
     ax.set_ylabel("Miner damage D (1 = failure)")
     ax.set_xlabel("date")
     since = f"since commissioning {c.commissioned}" if c.commissioned else "since monitoring"
-    ax.set_title(f"Cumulative damage against design life, {since}", fontsize=10, y=1)
-    ax.xaxis.set_major_locator(MaxNLocator(nbins=6))
-    ax.yaxis.set_major_locator(MaxNLocator(nbins=5))
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, ncols=3, loc="upper left")
+    ax.set_title(f"Cumulative damage against design life, {since} (log scale)", fontsize=10,
+                 y=1)  # fmt: skip
+    locator = AutoDateLocator(minticks=3, maxticks=7)
+    ax.xaxis.set_major_locator(locator)
+    ax.xaxis.set_major_formatter(ConciseDateFormatter(locator))
+    ax.grid(alpha=0.3, which="major")
+    ax.legend(fontsize=7, ncols=2, loc="lower right")
     return fig
 
 
@@ -259,6 +303,7 @@ def trend_figure(r: MonthlyReport) -> Figure | None:
     x = np.arange(len(months))
     fig, axes = _frame(6.4, 4)
     axes[0].bar(x, [m.starts for m in months], color="#1f77b4", width=0.7)
+    _headroom(axes[0], max(5, *(m.starts for m in months)))
     axes[0].axhspan(3, 5, color="#2ca02c", alpha=0.15, label="norm 3–5")
     axes[0].set_ylabel("starts")
     axes[0].legend(fontsize=8, loc="upper left")
@@ -266,18 +311,24 @@ def trend_figure(r: MonthlyReport) -> Figure | None:
         axes[1].plot(x, [m.damage.get(name, np.nan) for m in months], marker="o", ms=3,
                      linewidth=1.2, label=name)  # fmt: skip
     axes[1].set_ylabel("damage per month")
-    axes[1].legend(fontsize=7, ncols=3, loc="upper left")
+    positive = [v for m in months for v in m.damage.values() if v > 0]
+    if positive:  # components differ by decades: a log axis, room above for the legend
+        axes[1].set_yscale("log")
+        axes[1].set_ylim(min(positive) / 3.0, max(positive) * 1000.0)
+    axes[1].legend(fontsize=7, ncols=6, loc="upper left")
     for ax, stats, label in ((axes[2], "oscillation_range_pct", "oscillation, % rated"),
                              (axes[3], "bending_amplitude_mpa", "bending, MPa")):  # fmt: skip
         mean = [getattr(m, stats).worst_mean() for m in months]
         ax.plot(x, [np.nan if v is None else v for v in mean], marker="o", ms=3, linewidth=1.2)
-        ax.set_ylim(bottom=0)  # from zero: a flat trend looks flat
-        ax.set_ylabel(label)
+        top = max((v for v in mean if v is not None), default=0.0)
+        ax.set_ylim(0, top * 1.2 if top > 0 else 1.0)  # from zero: a flat trend looks flat,
+        ax.set_ylabel(label)  # and its points stay clear of the frame
     for ax in axes:
         ax.set_xlim(-0.6, len(months) - 0.4)
         ax.grid(axis="y", alpha=0.3)
-        ax.yaxis.set_major_locator(MaxNLocator(nbins=3))
-        ax.yaxis.set_major_formatter(ScalarFormatter(useOffset=False))
+        if ax.get_yscale() == "linear":
+            ax.yaxis.set_major_locator(MaxNLocator(nbins=3))
+            ax.yaxis.set_major_formatter(ScalarFormatter(useOffset=False))
     axes[-1].xaxis.set_major_locator(FixedLocator(list(x)))
     axes[-1].xaxis.set_major_formatter(
         FuncFormatter(lambda v, _p: months[int(v)].month[2:] if 0 <= int(v) < len(months) else "")

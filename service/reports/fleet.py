@@ -4,9 +4,12 @@ Diering 2011 §10.6 asks for long-term trending across the plant; §8.3 says ben
 month drive fatigue. Per mill (:class:`FleetMill`, built where the mill's store is —
 :func:`fleet_entry`, by the worker that analyses it): life consumed and the remaining-life range
 of the governing component (the one life computation, :mod:`service.reports.life`), starts per
-month, steady-state oscillation range and bending amplitude per month (the worst channel's mean,
-from :func:`service.reports.history.monthly_trend`), open alarms. :func:`build_fleet` (pure)
-puts the mills of a site in visit order (:data:`VISIT_RULE`) with the reason for each place.
+finished month, steady-state oscillation range and bending amplitude per month (the worst
+channel's mean, from :func:`service.reports.history.monthly_trend`), open alarms on the
+machine's condition, and apart the open alarms of the monitoring itself (:data:`IT_RULES`:
+data, storage, report delivery), which never rank a mill. :func:`build_fleet` (pure) puts the
+mills of a site in visit order (:data:`VISIT_RULE`) with the reason for each place;
+:func:`store_fleet` builds it from a store file alone (``millwatch report --fleet``).
 
 Plain, typed, JSON-ready data (:func:`fleet_to_dict`), for ``GET /sites/{site}/fleet`` and a
 fleet report.
@@ -22,10 +25,12 @@ from typing import Any
 
 from pydantic import ConfigDict, with_config
 
+from alarms.engine import SIMULATED_PREFIX
 from alarms.lifecycle import Alarm
 from analytics.drivetrain.mill_config import MillConfig
 from service.reports.history import last_months, life_inputs, monthly_trend
 from service.reports.life import compute_life, local_iso, years_range_text
+from service.reports.numbers import NO_FINITE_LIFE
 from service.reports.plain import plain
 from service.reports.starts import current_month
 from service.status import NO_STATUS, MillStatus
@@ -33,6 +38,7 @@ from service.store.database import Store
 
 __all__ = [
     "FLEET_MONTHS",
+    "IT_RULES",
     "VISIT_RULE",
     "FleetMill",
     "FleetView",
@@ -41,16 +47,26 @@ __all__ = [
     "fleet_mill_from_dict",
     "fleet_mill_to_dict",
     "fleet_to_dict",
+    "store_fleet",
 ]
 
 FLEET_MONTHS = 6
-"""Months of starts, oscillation and bending shown per mill (the current one the last)."""
+"""Months of starts, oscillation and bending shown per mill (the last finished one the last)."""
 
 VISIT_RULE = (
-    "1. the worst open alarm (critical, alarm, warning); 2. the shortest remaining life at any "
-    "of the three rates; 3. the most life consumed; 4. the highest bending amplitude this month; "
-    "5. the most starts this month"
+    "1. the worst open alarm on the machine's condition (critical, alarm, warning); 2. the "
+    "shortest remaining life at any of the three rates; 3. the most life consumed; 4. the "
+    "highest bending amplitude in the last finished month; 5. the most starts in it. Problems "
+    "of the monitoring itself (data, storage, report delivery) are listed apart and do not "
+    "change the order"
 )
+
+#: Alarm rules about the monitoring system, not the machine (:mod:`alarms.rules`): listed as
+#: IT problems of a mill, never ranked with its mechanical condition.
+IT_RULES = frozenset({
+    "report_delivery", "store_write_failures", "archive_write_failures", "analysis_lag",
+    "stale_channel", "sequence_gaps", "implausible_blocks", "spike_rate",
+})  # fmt: skip
 _SEVERITY_RANK = {"critical": 3, "alarm": 2, "warning": 1}
 
 
@@ -58,8 +74,10 @@ _SEVERITY_RANK = {"critical": 3, "alarm": 2, "warning": 1}
 class FleetMill:
     """One mill of the fleet (module docstring). ``life_consumed``: the largest Miner damage
     to date of its components as a fraction of the mill's Miner limit (prior included; 1 = the
-    limit, ``[life] miner_limit``); month series are aligned
-    with ``months``; ``None`` where nothing was measured."""
+    limit, ``[life] miner_limit``); month series are aligned with ``months`` (finished local
+    months, the last finished one last); ``None`` where nothing was measured.
+    ``open_alarms`` / ``worst_open_severity``: open alarms on the machine's condition;
+    ``it_problems``: open alarms of the monitoring itself (:data:`IT_RULES`), one line each."""
 
     mill: str
     site: str
@@ -78,6 +96,7 @@ class FleetMill:
     bending_amplitude_mpa: list[float | None]
     open_alarms: int
     worst_open_severity: str | None
+    it_problems: list[str]
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,7 +114,7 @@ FLEET_EXAMPLE: dict[str, Any] = {
     "generated_at": "2024-03-01T02:00:00+02:00", "simulated": False, "rule": VISIT_RULE,
     "visit_order": [{"rank": 1, "mill": "ball-dual-lrs", "reason": "shortest remaining life "
                      "12.0–19.4 years (pinion_combined_nbs); life consumed 21.3 % of the Miner "
-                     "limit; bending 38.2 MPa this month; 22 starts this month (norm 3–5)"}],
+                     "limit; bending 38.2 MPa in 2024-02; 22 starts in 2024-02 (norm 3–5)"}],
     "mills": [{"mill": "ball-dual-lrs", "site": "rustenburg", "simulated": False,
                "life_status": "ok", "life_missing": [], "life_note": "…",
                "governing_component": "pinion_combined_nbs", "life_consumed": 0.213,
@@ -103,7 +122,8 @@ FLEET_EXAMPLE: dict[str, Any] = {
                "end_date_earliest": "2036-02-29", "months": ["2024-02", "2024-03"],
                "starts_per_month": [19, 22], "oscillation_range_pct": [21.5, 23.0],
                "bending_amplitude_mpa": [35.1, 38.2], "open_alarms": 1,
-               "worst_open_severity": "warning"}],
+               "worst_open_severity": "warning",
+               "it_problems": ["report_delivery (alarm): mail of 2024-02 failed"]}],
     "unreachable": [],
 }  # fmt: skip
 
@@ -135,7 +155,7 @@ def fleet_entry(
     """One mill's fleet line from its store (read in one snapshot), the worker's status (live
     damage, analysed position) and its open alarms."""
     status = status or NO_STATUS
-    months = last_months(current_month(config, now_ns), FLEET_MONTHS)
+    months = last_months(_month_before(current_month(config, now_ns)), FLEET_MONTHS)
     with store.read_snapshot():
         inputs = life_inputs(store, config, now_ns, live=status.live_damage(),
                              last_sample_ns=status.last_sample_ns)  # fmt: skip
@@ -143,7 +163,8 @@ def fleet_entry(
         trend = monthly_trend(store, config, months)
     gov = life.components.get(life.governing_component or "")
     ends = [p.end_date for p in gov.projections if p.end_date] if gov else []
-    severities = [str(a.severity) for a in open_alarms]
+    machine = [a for a in open_alarms if a.rule not in IT_RULES]
+    severities = [str(a.severity) for a in machine]
     return FleetMill(
         mill=config.id,
         site=config.site,
@@ -161,9 +182,34 @@ def fleet_entry(
         starts_per_month=[t.starts for t in trend],
         oscillation_range_pct=[t.oscillation_range_pct.worst_mean() for t in trend],
         bending_amplitude_mpa=[t.bending_amplitude_mpa.worst_mean() for t in trend],
-        open_alarms=len(open_alarms),
+        open_alarms=len(machine),
         worst_open_severity=max(severities, key=lambda s: _SEVERITY_RANK.get(s, 0), default=None),
+        it_problems=[
+            f"{a.rule} ({a.severity}): {a.message.removeprefix(SIMULATED_PREFIX)}"
+            for a in open_alarms
+            if a.rule in IT_RULES
+        ],  # the view says simulated
     )
+
+
+def _month_before(month: str) -> str:
+    year, mon = int(month[:4]), int(month[5:])
+    return f"{year:04d}-{mon - 1:02d}" if mon > 1 else f"{year - 1:04d}-12"
+
+
+def store_fleet(store: Store, site: str, now_ns: int) -> FleetView:
+    """The fleet of ``site`` from one store file alone (``millwatch report --fleet``): every
+    mill stored with that site, as of ``now_ns``, with its open alarms from the store (no
+    running worker: no live damage). ``ValueError`` naming the sites there if none matches."""
+    configs = [MillConfig.model_validate(m["config"]) for m in store.mills()]
+    mine = [c for c in configs if c.site == site]
+    if not mine:
+        sites = ", ".join(sorted({c.site for c in configs})) or "(none)"
+        raise ValueError(f"site {site!r} has no mill in {store.path}; sites there: {sites}")
+    lines = [fleet_entry(store, c, now_ns,
+                         open_alarms=[a for a in store.alarms(mill_id=c.id) if a.open])
+             for c in mine]  # fmt: skip
+    return build_fleet(site, lines, [], now_ns, mine[0].time_zone)
 
 
 def _last(values: Sequence[float | None]) -> float:
@@ -187,18 +233,22 @@ def _reason(m: FleetMill) -> str:
         facts.append(f"{m.open_alarms} open alarm(s), the worst {m.worst_open_severity}")
     if m.remaining_life_years_min is not None:
         years = years_range_text(m.remaining_life_years_min, m.remaining_life_years_max)
-        facts.append(f"shortest remaining life {years} ({m.governing_component})")
+        lead = "" if years == NO_FINITE_LIFE else "shortest remaining life "
+        facts.append(f"{lead}{years} ({m.governing_component})")
     else:
         facts.append("no life projection yet (" + "; ".join(m.life_missing or ["no damage"])
                      + ")")  # fmt: skip
     facts.append(f"life consumed {100 * m.life_consumed:.3g} % of the Miner limit")
+    month = m.months[-1] if m.months else "the last month"
     bending = _last(m.bending_amplitude_mpa)
     if math.isfinite(bending):
-        facts.append(f"bending {bending:.1f} MPa this month")
+        facts.append(f"bending {bending:.1f} MPa in {month}")
     if m.starts_per_month:
-        facts.append(f"{m.starts_per_month[-1]} starts this month (norm 3–5)")
+        facts.append(f"{m.starts_per_month[-1]} starts in {month} (norm 3–5)")
     if m.worst_open_severity == "warning":
         facts.append(f"{m.open_alarms} open alarm(s), the worst a warning")
+    if m.it_problems:
+        facts.append(f"monitoring problems apart: {len(m.it_problems)} (see below)")
     return "; ".join(facts)
 
 
@@ -234,4 +284,5 @@ def fleet_mill_to_dict(mill: FleetMill) -> dict[str, Any]:
 
 def fleet_mill_from_dict(data: Mapping[str, Any]) -> FleetMill:
     """A mill's line back from :func:`fleet_mill_to_dict`."""
-    return FleetMill(**{f: data[f] for f in FleetMill.__dataclass_fields__})
+    return FleetMill(**{f: data.get(f, []) if f == "it_problems" else data[f]
+                        for f in FleetMill.__dataclass_fields__})  # fmt: skip

@@ -3,7 +3,8 @@ as a :class:`~service.reports.render.document.Document` rendered like the monthl
 
 Built from the plain answer of ``GET /sites/{site}/fleet`` (:func:`service.reports.fleet.
 fleet_to_dict`), so it reads the same in process and under ``millwatch api``. Sections: the
-visit order with its reasons, life consumed and the remaining range per mill (Diering 2011 §8.2),
+visit order with its reasons (the machine's condition), the monitoring system's own open
+alarms apart (for IT), life consumed and the remaining range per mill (Diering 2011 §8.2),
 and month by month per mill: starts (norm 3–5, §6.1.3), steady-state oscillation range
 (Tables 14–15) and pinion bending amplitude (§8.1) — §10.6 "long term trending".
 """
@@ -13,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from service.reports.numbers import end_date_text, years_text
 from service.reports.render.csv_tables import document_csv_zip
 from service.reports.render.document import (
     Column,
@@ -44,6 +46,19 @@ def _visit(view: Mapping[str, Any]) -> Section:
     return Section("visit", "Visit order", tuple(blocks))
 
 
+def _it(view: Mapping[str, Any]) -> Section:
+    """Open alarms of the monitoring itself (data, storage, report delivery), per mill: for
+    IT, not the maintenance visit."""
+    table = Table(
+        "it_problems",
+        (Column("mill", "mill", text=True), Column("problem", "open alarm", text=True)),
+        rows([[m["mill"], p] for m in view["mills"] for p in m.get("it_problems", [])]),
+        caption="Open alarms of the monitoring system (they do not change the visit order)",
+        empty_text="None: data, storage and report delivery are in order.",
+    )
+    return Section("it", "Monitoring problems (for IT)", (table,))
+
+
 def _life(view: Mapping[str, Any]) -> Section:
     mills = view["mills"]
     table = Table(
@@ -51,14 +66,16 @@ def _life(view: Mapping[str, Any]) -> Section:
         (Column("mill", "mill", text=True), Column("life_status", "life", text=True),
          Column("governing_component", "governing component", text=True),
          Column("life_consumed_pct", "life consumed", "% of Miner limit"),
-         Column("remaining_min_years", "remaining life, least", "years"),
-         Column("remaining_max_years", "remaining life, most", "years"),
+         Column("remaining_min_years", "remaining life, least", "years", text=True),
+         Column("remaining_max_years", "remaining life, most", "years", text=True),
          Column("end_date_earliest", "end, earliest", text=True),
-         Column("open_alarms", "open alarms"),
+         Column("open_alarms", "open alarms, machine"),
          Column("worst_open_severity", "worst open", text=True, status=True)),
         rows([[m["mill"], m["life_status"], m["governing_component"] or "–",
-               100.0 * m["life_consumed"], m["remaining_life_years_min"],
-               m["remaining_life_years_max"], m["end_date_earliest"] or "–", m["open_alarms"],
+               100.0 * m["life_consumed"], years_text(m["remaining_life_years_min"]),
+               years_text(m["remaining_life_years_max"]),
+               end_date_text(m["end_date_earliest"], m["remaining_life_years_min"]),
+               m["open_alarms"],
                m["worst_open_severity"] or "none"] for m in mills]),
         caption="Life consumed and remaining range per mill (its governing component)",
     )  # fmt: skip
@@ -95,7 +112,7 @@ def fleet_document(view: Mapping[str, Any]) -> Document:
         running_header=f"millwatch · fleet · {site}",
         file_stem=f"{site}-fleet",
         intro=tuple(intro),
-        sections=(_visit(view), _life(view), _trend(view)),
+        sections=(_visit(view), _it(view), _life(view), _trend(view)),
         footer="millwatch fleet report",
         metadata={"title": f"millwatch fleet {site}", "subject": "fleet report"},
     )

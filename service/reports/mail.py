@@ -8,7 +8,9 @@ and is never logged nor put in an error message (smtplib's debug output is never
 
 Errors are :class:`MailError`, whose message names the server and the step that failed (connect,
 STARTTLS, login, send) — the month-end job retries them and then raises the
-``report_delivery`` alarm with that message.
+``report_delivery`` alarm with that message. A recipient refused while others were accepted is
+not an error here (the message went out): :func:`send_message` returns the refused ones, and the
+month-end job alarms them without sending again.
 """
 
 from __future__ import annotations
@@ -51,15 +53,18 @@ def report_message(
     paths: Mapping[str, str] | None = None,
 ) -> EmailMessage:
     """The mail of one mill's report of ``month``: a short plain-text body saying what is
-    attached and where the files are kept, and the files of ``mail.attach`` found in ``files``
-    (extension → bytes) as attachments named ``<mill>-<YYYY-MM>.<ext>``."""
+    attached and where the files are kept, and the files of the formats ``mail.attach`` found
+    in ``files`` (file extension → bytes: the ``csv`` format is the ``zip`` file of its tables,
+    :data:`~service.reports.files.EXTENSIONS`) as attachments named ``<mill>-<YYYY-MM>.<ext>``."""
     msg = EmailMessage()
     msg["Subject"] = f"millwatch monthly report {month}: mill {mill_id} ({site})"
     msg["From"] = mail.sender
     msg["To"] = ", ".join(mail.recipients)
     msg["Date"] = formatdate(localtime=False)
     msg["Message-ID"] = make_msgid(domain=mail.sender.rsplit("@", 1)[-1])
-    attached = [ext for ext in mail.attach if ext in files]
+    from service.reports.files import EXTENSIONS
+
+    attached = [EXTENSIONS[f] for f in mail.attach if EXTENSIONS[f] in files]
     lines = [
         f"The monthly damage report of mill {mill_id} (site {site}) for {month} "
         f"(the site's local calendar month) is attached: "
@@ -81,9 +86,12 @@ def report_message(
     return msg
 
 
-def send_message(mail: MailSettings, msg: EmailMessage) -> None:
+def send_message(mail: MailSettings, msg: EmailMessage) -> dict[str, str]:
     """Send ``msg`` through ``mail``'s server (module docstring); :class:`MailError` on any
-    failure, naming the step."""
+    failure, naming the step. When the server takes the message for some recipients and
+    refuses others, the message is delivered: the refused ones are returned (address →
+    the server's reply) for the caller to report, not raised — sending again would give the
+    others a second copy."""
     where = f"SMTP server {mail.host}:{mail.port}"
     step = "connect"
     try:
@@ -114,9 +122,13 @@ def send_message(mail: MailSettings, msg: EmailMessage) -> None:
         raise MailError(f"{where}: login as {mail.username!r} refused ({exc.smtp_code})") from None
     except (smtplib.SMTPException, OSError) as exc:
         raise MailError(f"{where}: {step} failed: {_reason(exc)}") from None
-    if refused:
-        raise MailError(f"{where}: recipients refused: {', '.join(sorted(refused))}")
-    log.info("mailed %s to %d recipient(s) via %s", msg["Subject"], len(mail.recipients), where)
+    log.info("mailed %s to %d recipient(s) via %s", msg["Subject"],
+             len(mail.recipients) - len(refused), where)  # fmt: skip
+    return {rcpt: f"{code} {_text(reply)}".strip() for rcpt, (code, reply) in refused.items()}
+
+
+def _text(reply: bytes | str) -> str:
+    return reply.decode("utf-8", "replace") if isinstance(reply, bytes) else str(reply)
 
 
 def _reason(exc: BaseException) -> str:

@@ -22,7 +22,9 @@ management". :class:`MonthEndJob` runs in its own thread in ``millwatch serve`` 
   :meth:`~service.worker.worker.Worker.request_observations`, so it is stored, shown by
   ``GET /alarms`` and published like any alarm). The month is tried again after
   ``retry_failed_after_s``; a later success sends a clean observation (the latched alarm then
-  waits for an acknowledgement).
+  waits for an acknowledgement). A mail the server took for some recipients and refused for
+  others is delivered, not retried (a retry would give the others another copy): its receipt
+  lists the refused addresses, and the ``report_delivery`` alarm names them, once.
 """
 
 from __future__ import annotations
@@ -177,6 +179,8 @@ class MonthEndJob:
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
         self._failures: dict[tuple[str, str, str], Failure] = {}
+        #: Mails delivered to some recipients and refused for others: task → the alarm's text.
+        self._refused: dict[tuple[str, str], str] = {}
         self.last_run: RunSummary | None = None
         self.busy = False
         self.next_check_ns: int | None = None
@@ -295,23 +299,32 @@ class MonthEndJob:
 
     def _succeeded(self, stage: str, tasks: list[tuple[str, str]]) -> None:
         now = self._clock()
+        partial = {t: self._refused.pop(t) for t in tasks if t in self._refused}
         with self._lock:
             for mill_id, month in tasks:
                 self._failures.pop((mill_id, month, stage), None)
         self._alarm([Observation(m, "report_failures", 0.0, now,
                                  {"stage": stage, "month": mo, "error": ""})
-                     for m, mo in tasks])  # fmt: skip
+                     for m, mo in tasks if (m, mo) not in partial])  # fmt: skip
+        for task, error in partial.items():  # delivered, but not to everyone: alarmed once
+            self._failed(stage, task, 1, error, retry=False)
 
-    def _failed(self, stage: str, task: tuple[str, str], attempts: int, error: str) -> None:
+    def _failed(
+        self, stage: str, task: tuple[str, str], attempts: int, error: str, retry: bool = True
+    ) -> None:
+        """Record and alarm a failure; ``retry``: the month is tried again later (not for a
+        mail that some recipients received: its receipt stops a re-send)."""
         mill_id, month = task
         now = self._clock()
-        retry = now + int(self.settings.retry_failed_after_s * 1e9)
-        failure = Failure(mill_id, month, stage, attempts, error, now, retry)
+        after = now + int(self.settings.retry_failed_after_s * 1e9) if retry else now
+        failure = Failure(mill_id, month, stage, attempts, error, now, after)
         with self._lock:
             self._failures[(mill_id, month, stage)] = failure
+        again = f"tried again in {self.settings.retry_failed_after_s:.0f} s" if retry else \
+            "not sent again"  # fmt: skip
         log.error("monthly report of mill %s for %s: %s failed after %d attempts: %s "
-                  "(alarm report_delivery raised; tried again in %.0f s)", mill_id, month,
-                  stage, attempts, error, self.settings.retry_failed_after_s)  # fmt: skip
+                  "(alarm report_delivery raised; %s)", mill_id, month, stage, attempts, error,
+                  again)  # fmt: skip
         self._alarm([Observation(mill_id, "report_failures", float(attempts), now,
                                  {"stage": stage, "month": month, "error": error})])  # fmt: skip
 
@@ -382,18 +395,25 @@ class MonthEndJob:
             d = self.settings.directory
             paths = {EXTENSIONS[f]: report_path(d, mill_id, month, EXTENSIONS[f])
                      for f in self.settings.formats}  # fmt: skip
+            attach = {EXTENSIONS[f] for f in mail.attach}
             try:
-                files = {ext: p.read_bytes() for ext, p in paths.items() if ext in mail.attach}
+                files = {ext: p.read_bytes() for ext, p in paths.items() if ext in attach}
                 where = {e: str(p) for e, p in paths.items()}
                 msg = report_message(
                     mail, mill_id=mill_id, site=config.site, month=month, files=files, paths=where
                 )
-                send_message(mail, msg)
+                refused = send_message(mail, msg)
                 receipt = {"t_ns": self._clock(), "host": mail.host, "port": mail.port,
-                           "recipients": list(mail.recipients), "message_id": msg["Message-ID"],
+                           "recipients": [r for r in mail.recipients if r not in refused],
+                           "refused": refused, "message_id": msg["Message-ID"],
                            "attached": sorted(files)}  # fmt: skip
                 write_atomic(self._receipt(mill_id, month), json.dumps(receipt).encode())
                 out[(mill_id, month)] = None
+                if refused:
+                    who = "; ".join(f"{r} ({why})" for r, why in sorted(refused.items()))
+                    self._refused[(mill_id, month)] = (
+                        f"recipients refused: {who}; the others received it"
+                    )
             except Exception as exc:
                 out[(mill_id, month)] = _cause(exc)
         return out

@@ -75,7 +75,7 @@ class SummaryStart:
 @dataclass(frozen=True, slots=True)
 class MonthChange:
     """A figure this month against last month: ``change`` = this − last (None if either is
-    missing)."""
+    missing: a month with no monitored time has no figures, not zeros). Counts are ints."""
 
     quantity: str
     unit: str
@@ -101,6 +101,7 @@ class ReportSummary:
     alarms_raised: int
     alarms_raised_by_severity: dict[str, int]
     previous_month: str
+    previous_monitored: bool
     changes: list[MonthChange]
 
 
@@ -122,6 +123,11 @@ class CumulativeDamage:
 def _change(quantity: str, unit: str, this: float | None, last: float | None) -> MonthChange:
     delta = None if this is None or last is None else this - last
     return MonthChange(quantity, unit, this, last, delta)
+
+
+def _monitored(t: MonthTrend, value: float | None) -> float | None:
+    """``value`` for a month with monitored time; None (unmonitored) otherwise."""
+    return value if t.monitored_days > 0 else None
 
 
 def _components(life: LifeReport, this: MonthTrend, last: MonthTrend) -> list[ComponentSummary]:
@@ -161,18 +167,20 @@ def build_summary(
     and the severities of the alarms raised this month (and the count last month)."""
     this, last = trend[-1], trend[-2]
     changes = [
-        _change("starts", "starts", float(this.starts), float(last.starts)),
-        _change("alarms raised", "alarms", float(len(raised_severities)),
-                float(raised_last_month)),
+        _change("starts", "starts", _monitored(this, this.starts),
+                _monitored(last, last.starts)),
+        _change("alarms raised", "alarms", len(raised_severities),
+                _monitored(last, raised_last_month)),
         _change("oscillation range, mean of the worst channel", "% rated torque",
                 this.oscillation_range_pct.worst_mean(), last.oscillation_range_pct.worst_mean()),
         _change("bending amplitude, mean of the worst channel", "MPa",
                 this.bending_amplitude_mpa.worst_mean(), last.bending_amplitude_mpa.worst_mean()),
     ]  # fmt: skip
     changes += [
-        _change(f"damage {c}", "Miner sum", this.damage.get(c, 0.0), last.damage.get(c, 0.0))
+        _change(f"damage {c}", "Miner sum", _monitored(this, this.damage.get(c, 0.0)),
+                _monitored(last, last.damage.get(c, 0.0)))
         for c in life.components
-    ]
+    ]  # fmt: skip
     count, norm, status = starts
     return ReportSummary(
         simulated=life.simulated,
@@ -188,6 +196,7 @@ def build_summary(
         alarms_raised=len(raised_severities),
         alarms_raised_by_severity=dict(sorted(Counter(raised_severities).items())),
         previous_month=last.month,
+        previous_monitored=last.monitored_days > 0,
         changes=changes,
     )
 

@@ -4,12 +4,13 @@ says, once.
 Diering 2011 §10.6 asks for "automatic reports"; issue 17 for one content in three renderings. Every
 format shows what :func:`monthly_document` puts here, in this order (:data:`SECTIONS`):
 
-1. **Summary** (page 1 of the PDF, top of the HTML): life consumed to date and the remaining
-   range per component (or why there is none), what drives the damage in words and the
-   recommended actions with last month's (§10, §6–§8; :mod:`service.reports.actions`), starts
-   against the 3–5 norm (§6.1.3), the worst start against the start-peak levels (§7.2), alarms
-   raised, what changed since last month, damage per component and the share of it from
-   starts and stops (§8.3, App. D);
+1. **Summary** (page 1 of the PDF, top of the HTML; one line per component, so a dual-drive
+   mill's summary fits the page too): life consumed to date and the remaining range per
+   component (or why there is none), what drives the damage in words and the recommended
+   actions with last month's (§10, §6–§8; :mod:`service.reports.actions`), starts against the
+   3–5 norm (§6.1.3), the worst start against the start-peak levels (§7.2), alarms raised, what
+   changed since last month (an unmonitored month shown as such); the month's damage by phase
+   is in section 5;
 2. remaining life (§8.2): cumulative damage against the design line (figure), the range by
    rate basis, the band from S-N scatter (50/90/97.7 % survival), what drives it; 3. the
    12-month trend (§10.6 "long term trending"); 4. starts; 5. fatigue damage; 6. what-if
@@ -44,8 +45,15 @@ from service.reports.figures import (
     trend_figure,
 )
 from service.reports.life import ComponentLife
+from service.reports.month_summary import ComponentSummary
 from service.reports.monthly import MonthlyReport
-from service.reports.numbers import HORIZON_YEARS, NO_FINITE_LIFE, end_date_text, years_text
+from service.reports.numbers import (
+    HORIZON_YEARS,
+    NO_FINITE_LIFE,
+    end_date_text,
+    years_range_text,
+    years_text,
+)
 from service.reports.render.document import (
     Cell,
     Column,
@@ -131,42 +139,37 @@ def _summary_table(r: MonthlyReport) -> Table:
     )  # fmt: skip
 
 
-def _share(part: float, total: float) -> float | None:
-    return 100.0 * part / total if total > 0 else None
+def _remaining_text(c: ComponentSummary) -> str:
+    """Page 1's remaining life of a component in one cell: the range over the rate bases
+    (``31–38 years``, :data:`~service.reports.numbers.NO_FINITE_LIFE`) or why there is none."""
+    if c.remaining_life_years_min is None:
+        return c.life_reason or "no projection"
+    return years_range_text(c.remaining_life_years_min, c.remaining_life_years_max)
 
 
-def _summary_damage(r: MonthlyReport) -> Table:
-    return Table(
-        "summary_damage",
-        columns(Column("component", "component", text=True),
-                ("damage", "damage this month", "1"),
-                ("start_stop_share", "from starts and stops", "%"),
-                ("hours_of_running_per_start", "a start costs", "h of running")),
-        rows([[c.component, c.total,
-               _share(c.per_phase.get("start", 0.0) + c.per_phase.get("stop", 0.0), c.total),
-               c.hours_of_running_per_start] for c in r.damage]),
-        caption="Fatigue damage of the month per component (Miner sum; 1 = failure)",
-        empty_text="No damage counted this month.",
-    )  # fmt: skip
+def _end_dates_text(c: ComponentSummary) -> str:
+    """Page 1's end dates of a component in one cell: ``earliest to latest``, one date when
+    they agree, ``–`` when no life is finite (no capped or far-future date)."""
+    lo = end_date_text(c.end_date_earliest, c.remaining_life_years_min)
+    hi = end_date_text(c.end_date_latest, c.remaining_life_years_max)
+    if lo == "–" or hi in ("–", lo):
+        return lo if hi in ("–", lo) else f"{hi} or later"
+    return f"{lo} to {hi}"
 
 
 def _summary_life(r: MonthlyReport) -> Table:
+    """Page 1's life table: one line per component (range and end dates in one cell each, so
+    a dual-drive mill's six components keep the summary on one page)."""
     return Table(
         "summary_life",
         (Column("component", "component", text=True),
          Column("life_consumed_pct", "life consumed to date", "% of D = 1"),
          Column("prior_pct", "of which before monitoring", "% of D = 1"),
          Column("design_line_pct", "design line", "% of D = 1"),
-         Column("remaining_min_years", "remaining life, least", "years", text=True),
-         Column("remaining_max_years", "remaining life, most", "years", text=True),
-         Column("end_earliest", "end, earliest", text=True),
-         Column("end_latest", "end, latest", text=True),
-         Column("reason", "why no life", text=True)),
+         Column("remaining", "remaining life (range of the rate bases)", text=True),
+         Column("end_dates", "end dates", text=True)),
         rows([[c.component, c.life_consumed_pct, 100.0 * c.damage_prior, c.design_line_pct,
-               years_text(c.remaining_life_years_min), years_text(c.remaining_life_years_max),
-               end_date_text(c.end_date_earliest, c.remaining_life_years_min),
-               end_date_text(c.end_date_latest, c.remaining_life_years_max),
-               c.life_reason or "–"]
+               _remaining_text(c), _end_dates_text(c)]
               for c in r.summary.components]),
         caption="Life consumed and remaining life per component (Miner, Diering 2011 §8.2)",
         empty_text="No component analysed yet.",
@@ -174,6 +177,9 @@ def _summary_life(r: MonthlyReport) -> Table:
 
 
 def _summary_changes(r: MonthlyReport) -> Table:
+    last = r.summary.previous_month
+    if not r.summary.previous_monitored:
+        last += ": not monitored, nothing to compare"
     return Table(
         "summary_changes",
         (Column("quantity", "quantity", text=True), Column("unit", "unit", text=True),
@@ -181,7 +187,7 @@ def _summary_changes(r: MonthlyReport) -> Table:
          Column("change", "change")),
         rows([[c.quantity, c.unit, c.this_month, c.last_month, c.change]
               for c in r.summary.changes]),
-        caption=f"What changed since last month ({r.summary.previous_month})",
+        caption=f"What changed since last month ({last})",
         empty_text="Nothing to compare with last month.",
     )  # fmt: skip
 
@@ -242,7 +248,6 @@ def _summary(r: MonthlyReport) -> Section:
             *_actions(r),
             _summary_table(r),
             _summary_changes(r),
-            _summary_damage(r),
         ),
         page_break_after=True,
     )
@@ -284,8 +289,9 @@ def _life(r: MonthlyReport) -> Section:
     band = _life_band(comps)
     b = life.basis
     basis = Paragraph(
-        f"Miner limit D = {fmt(b.miner_limit)}; S-N curve: {_sn_curve(b.sn_curve)}. "
-        f"{b.damage} {b.rates} {b.remaining_life}",
+        f"Basis of these figures. Failure: Miner damage D = {fmt(b.miner_limit)}. S-N curve: "
+        f"{_sn_curve(b.sn_curve)}. Damage counted: {b.damage.rstrip('.')}. Rates: "
+        f"{b.rates.rstrip('.')}. Remaining life: {b.remaining_life.rstrip('.')}.",
         "meta",
     )
     prior = Paragraph(f"Damage before monitoring ({life.prior.method}): {life.prior.note}", "meta")

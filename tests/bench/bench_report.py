@@ -1,6 +1,7 @@
 """Benchmark: build a month's damage report, then render it in every format (target ≤ 1 s each).
 
-Simulating and analysing a whole month takes long, so the store is filled in two steps:
+Simulating and analysing a whole month takes long, so the store is filled in two steps, by the
+functions of ``millwatch history build`` (:mod:`service.cli.history.tiling`):
 
 1. one representative stop-to-stop cycle (LRS start, ``--run-min`` minutes of steady running,
    stop) is simulated and analysed through the real pipeline (``Worker.handle``, in process),
@@ -34,134 +35,30 @@ import shutil
 import subprocess
 import tempfile
 import time
-from collections import defaultdict
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene, month_events
-from ingest.sim.spec import DEFAULT_T0_NS, FailedStartEvent, StartEvent, StopEvent, TripEvent
+from ingest.sim.spec import DEFAULT_T0_NS
 from service.api.routes.reports import FORMATS
+from service.cli.history.tiling import CycleTemplate, analyse_cycle, tile_month
 from service.reports.history import last_months
 from service.reports.monthly import build_monthly_report
 from service.reports.starts import month_bounds_ns
 from service.store.database import Store
-from service.store.records import DamageRow, EventRow
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+
+Template = CycleTemplate  # bench_month_end.py imports these names from here
 
 log = logging.getLogger("bench_report")
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 MONTH = "2024-01"
 
 
-def analyse_cycle(config: Any, path: Path, run_min: float) -> Store:
-    """One start, ``run_min`` minutes of running and a stop, through the real worker."""
-    stop_at = 5.0 + 30.0 + run_min * 60.0
-    events = (StartEvent(at_s=5.0), StopEvent(at_s=stop_at))
-    scene = get_scene("start-lrs", config, seed=2, duration_s=stop_at + 60.0, events=events)
-    store = Store(path)
-    pipeline = MillJob(config, damage_every_s=30.0)
-    worker = Worker({config.id: config}, {config.id: pipeline}, store, None)
-    for b in scene_blocks(scene):
-        worker.handle(QueuedBlock(b.key, b.payload, b.t_end_ns))
-    worker.commit()
-    return store
-
-
-def cycles(days: float, seed: int = 7) -> list[tuple[str, float, float]]:
-    """``(kind of start, start s, stop s)`` of the month scene's schedule."""
-    evs = sorted(month_events(np.random.default_rng([seed, 0x307]), days=days),
-                 key=lambda e: e.at_s)  # fmt: skip
-    out, start = [], None
-    for e in evs:
-        if isinstance(e, StartEvent | FailedStartEvent):
-            start = ("failed" if isinstance(e, FailedStartEvent) else "ok", e.at_s)
-        elif isinstance(e, StopEvent | TripEvent) and start is not None:
-            out.append((start[0], start[1], e.at_s))
-            start = None
-    return out
-
-
-class Template:
-    """What one analysed cycle stored: events, records, damage per phase, timings."""
-
-    def __init__(self, store: Store, mill_id: str) -> None:
-        self.start = store.events(mill_id, "start")[0]
-        self.stop = store.events(mill_id, "stop")[0]
-        self.steady = sorted(store.records(mill_id, "steady"))
-        self.harmonics = sorted(store.records(mill_id, "harmonics"), key=lambda r: r[0])
-        run_s = (self.stop.t_ns - self.start.t_end_ns) / 1e9
-        self.phase = defaultdict(float)
-        for r in store.damage(mill_id):
-            self.phase[(r.component, r.phase)] += r.damage
-        self.run_rate = {c: d / run_s for (c, p), d in self.phase.items() if p == "run"}
-        self.accel_s = (self.start.t_end_ns - self.start.t_ns) / 1e9
-        self.cadence_s = {k: self._cadence(v) for k, v in
-                          (("steady", self.steady), ("harmonics", self.harmonics))}  # fmt: skip
-
-    @staticmethod
-    def _cadence(rows: list[tuple[int, Any]]) -> float:
-        return (rows[-1][0] - rows[0][0]) / 1e9 / (len(rows) - 1) if len(rows) > 1 else 60.0
-
-
-def _shift(e: EventRow, t_ns: int, failed: bool = False) -> EventRow:
-    dt = t_ns - e.t_ns
-    data = {**e.data, "t_ns": t_ns, "failed": failed or e.data.get("failed", False)}
-    end = None if e.t_end_ns is None else e.t_end_ns + dt
-    return EventRow(e.mill_id, e.kind, t_ns, data, end, e.subject)
-
-
-def tile(store: Store, tpl: Template, config: Any, days: float, month: str = MONTH
+def tile(store: Store, tpl: CycleTemplate, config: Any, days: float, month: str = MONTH
          ) -> dict[str, int]:  # fmt: skip
-    """Fill ``store`` with ``month`` (see the module docstring); returns row counts."""
-    zone, t0 = config.time_zone, month_bounds_ns(month, config.time_zone)[0]
-    events, records, damage = [], [], defaultdict(float)
-    for kind, a, b in cycles(days):
-        t_start, t_stop = t0 + int(a * 1e9), t0 + int(b * 1e9)
-        events += [_shift(tpl.start, t_start, kind == "failed"), _shift(tpl.stop, t_stop)]
-        day = datetime.fromtimestamp(t_start / 1e9, tz=_zone(zone)).date().isoformat()
-        for (comp, phase), d in tpl.phase.items():
-            if phase in ("start", "stop"):
-                damage[(comp, phase, day)] += d
-        if kind == "failed":
-            continue
-        run_s = b - a - tpl.accel_s
-        for comp, rate in tpl.run_rate.items():
-            damage[(comp, "run", day)] += rate * run_s  # the cycle's day, for simplicity
-        for name, rows in (("steady", tpl.steady), ("harmonics", tpl.harmonics)):
-            step = tpl.cadence_s[name]
-            for k in range(int(run_s // step)):
-                t = t_start + int((tpl.accel_s + k * step) * 1e9)
-                records.append((name, t, {**rows[k % len(rows)][1], "t_ns": t}))
-    events += [EventRow(config.id, "data_quality", t0 + int(h * 3.6e12),
-                        {"channel": "pinion_bending", "problem": "sequence_gap",
-                         "missing_blocks": 1}, subject=f"pinion_bending:{h}")
-               for h in range(0, int(days * 24), 97)]  # fmt: skip
-    covered = {}
-    for i in range(int(days)):
-        lo, hi = t0 + i * 86_400 * 10**9, t0 + (i + 1) * 86_400 * 10**9
-        day = datetime.fromtimestamp(lo / 1e9, tz=_zone(zone)).date().isoformat()
-        covered[(config.id, day)] = (lo, hi)
-    with store.transaction() as db:
-        Store.extend_days(db, covered)
-        Store.add_events(db, events)
-        Store.set_damage(db, [DamageRow(config.id, c, p, d, v, 0.0)
-                              for (c, p, d), v in damage.items()])  # fmt: skip
-        for name, t, data in records:
-            Store.add_record(db, config.id, name, t, data)
-    return {"events": len(events), "records": len(records), "damage_rows": len(damage)}
-
-
-def _zone(name: str) -> Any:
-    import zoneinfo
-
-    return zoneinfo.ZoneInfo(name)
+    """``month`` of ``config``'s mill tiled from ``tpl`` over ``days`` days on the month
+    scene's schedule (seed 7, the same every month and mill: a benchmark repeats itself)."""
+    return tile_month(store, tpl, config, month, days=days, seed=7)
 
 
 def best_of(fn: Any, repeat: int) -> tuple[float, float, Any]:

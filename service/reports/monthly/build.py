@@ -66,6 +66,7 @@ from service.reports.monthly.model import (
 from service.reports.monthly.reader import MonthReader, results_span
 from service.reports.monthly.trends import harmonics_section, steady_section
 from service.reports.monthly.what_if import month_cost, what_if_table
+from service.reports.numbers import sig
 from service.reports.starts import (
     STARTS_NORM_PER_MONTH,
     MonthError,
@@ -305,7 +306,9 @@ def _notes(
     if span[0] is None and covered_s <= 0:
         return [*sim, "No results are stored for this month: nothing to report."]
     hours = covered_s / 3600.0
-    covered = f"{hours / 24.0:.2f} days" if hours >= 48.0 else f"{hours:.2f} hours"
+    # formatted as the trend table's "monitored [days]" is (one formatting: 29.96 read "29.96
+    # days" here and "30.00" there)
+    covered = f"{sig(hours / 24.0)} days" if hours >= 48.0 else f"{sig(hours)} hours"
     notes = [*sim, f"Monitoring covered {covered} of the month."]
     if starts.count == 0:
         notes.append("No starts this month: the cost of a start cannot be measured.")

@@ -23,6 +23,7 @@ from pydantic import ValidationError
 from pypdf import PdfReader
 
 from alarms.engine import SIMULATED_PREFIX
+from alarms.lifecycle import Alarm, AlarmState, Severity
 from analytics.drivetrain.mill_config import LifeConfig, MillConfig, describe_validation_error
 from ingest.mill_files import load_mill_config
 from ingest.sim.blocks import scene_blocks
@@ -31,12 +32,14 @@ from ingest.sim.spec import StartEvent, StopEvent
 from service.api.errors import install_problem_handlers
 from service.api.local_backend import LocalBackend
 from service.api.routes.mills import mills_router
-from service.api.routes.reports import reports_router
+from service.api.routes.reports import FORMATS, reports_router
 from service.remote.report_codec import report_from_dict
 from service.reports.fleet import build_fleet, fleet_entry, fleet_mill_from_dict, fleet_to_dict
+from service.reports.fleet_document import render_fleet
 from service.reports.history import life_inputs
 from service.reports.life import LifeInputs, LifeReport, compute_life, life_to_dict
 from service.reports.monthly import build_monthly_report, report_to_dict
+from service.reports.numbers import sig
 from service.settings import ServiceSettings
 from service.store.database import Store
 from service.store.records import DamageRow
@@ -266,7 +269,8 @@ def test_the_report_has_page_one_cumulative_damage_and_a_trend(store):
     assert s.worst_start.peak_pct == max(x.peak_pct for x in report.starts.starts)
     assert s.worst_start.peak_pct >= s.worst_start.switch_on_pct  # switch-on or short-circuit
     starts = next(c for c in s.changes if c.quantity == "starts")
-    assert (starts.this_month, starts.last_month, starts.change) == (2.0, 2.0, 0.0)
+    assert (starts.this_month, starts.last_month, starts.change) == (2, 2, 0)
+    assert isinstance(starts.this_month, int)  # a count is shown as one ("2", not "2.00")
     comp = next(c for c in s.components if c.component == "pinion_combined")
     assert comp.damage_to_date == report.life.components["pinion_combined"].damage
     assert comp.remaining_life_years_min is not None and comp.end_date_earliest is not None
@@ -283,7 +287,7 @@ def test_the_report_has_page_one_cumulative_damage_and_a_trend(store):
     assert report.trend[-1].windows_sampled > 0 and report.trend[-1].bending_amplitude_mpa.mean
     # one monitored time: page 1, the trend and /life (both months) say the same
     hours = report.trend[-1].monitored_days * 24
-    assert f"Monitoring covered {hours:.2f} hours of the month." in report.notes
+    assert f"Monitoring covered {sig(hours)} hours of the month." in report.notes
     both = sum(t.monitored_days for t in report.trend)
     assert report.life.history.monitored_days == pytest.approx(both, rel=1e-12)
 
@@ -302,6 +306,29 @@ def test_the_january_report_says_insufficient_history(store):
     assert report.summary.life_status == "insufficient_history"
     assert all(c.life_reason and c.remaining_life_years_min is None
                for c in report.summary.components)  # fmt: skip
+
+
+def test_an_unmonitored_last_month_is_not_compared_as_zero(store):
+    """December 2023 has no monitored time: 'what changed' shows no figures for it (not
+    '0 starts, ok') and says why."""
+    report = build_monthly_report(store, SIM_T, "2024-01")
+    assert report.summary.previous_month == "2023-12" and not report.summary.previous_monitored
+    by = {c.quantity: c for c in report.summary.changes}
+    assert by["starts"].last_month is None and by["starts"].change is None
+    assert by["alarms raised"].last_month is None
+    assert all(c.last_month is None for q, c in by.items() if q.startswith("damage"))
+    html = str(FORMATS["html"][1](report))
+    html = html.replace("<wbr>", "").replace("<span class='nw'>", "").replace("</span>", "")
+    assert "2023-12: not monitored, nothing to compare" in html
+    # the basis paragraph is labelled, part by part
+    for label in (
+        "Basis of these figures. Failure: Miner damage D = 1",
+        ". S-N curve: ",
+        ". Damage counted: prior",
+        ". Rates: stored",
+        ". Remaining life: (1 − D)",
+    ):
+        assert label in html, label
 
 
 # ----------------------------------------------------------------------------- fleet, API
@@ -323,7 +350,8 @@ def _client(backend: LocalBackend) -> TestClient:
 def test_the_fleet_orders_mills_with_reasons(store):
     now = _ns("2024-02-20")
     good = fleet_entry(store, SIM_T, now)
-    assert good.months[-1] == "2024-02" and good.starts_per_month[-2:] == [2, 2]
+    # the last finished month, not the unfinished February
+    assert good.months[-1] == "2024-01" and good.starts_per_month[-1] == 2
     assert good.life_status == "ok" and good.remaining_life_years_min is not None
     worse = fleet_mill_from_dict({**fleet_to_dict(build_fleet("x", [good], [], now))["mills"][0],
                                   "mill": "other", "remaining_life_years_min": 1.0})  # fmt: skip
@@ -331,6 +359,30 @@ def test_the_fleet_orders_mills_with_reasons(store):
     assert [v.mill for v in view.visit_order] == ["other", SIM.id]
     assert view.visit_order[0].reason.startswith("shortest remaining life 1–")
     assert view.unreachable == ["gone"] and view.simulated
+    assert "in 2024-01" in view.visit_order[1].reason and "this month" not in str(view)
+
+
+def _alarm(mill: str, rule: str, severity: str) -> Alarm:
+    return Alarm(f"{mill}:{rule}", mill, rule, "x", "q", "", Severity(severity),
+                 AlarmState.RAISED, 0, 0, 1.0, 0.0, f"{rule} is open")  # fmt: skip
+
+
+def test_an_it_alarm_is_listed_apart_and_never_outranks_the_machines_condition(store):
+    """A failed report mail (report_delivery, an alarm) on a mill with a long life does not
+    put it before a mill whose machine condition is worse; it is listed as an IT problem."""
+    now = _ns("2024-02-20")
+    it = fleet_entry(store, SIM_T, now, open_alarms=[_alarm(SIM_T.id, "report_delivery", "alarm")])
+    assert it.open_alarms == 0 and it.worst_open_severity is None
+    assert it.it_problems == ["report_delivery (alarm): report_delivery is open"]
+    worn = fleet_mill_from_dict({**fleet_to_dict(build_fleet("x", [it], [], now))["mills"][0],
+                                 "mill": "worn", "it_problems": [],
+                                 "life_consumed": it.life_consumed + 0.15})  # fmt: skip
+    view = build_fleet("rustenburg", [it, worn], [], now, SIM.time_zone)
+    assert [v.mill for v in view.visit_order] == ["worn", SIM_T.id]
+    doc = str(render_fleet(fleet_to_dict(view), "html")).replace("<wbr>", "")
+    assert "Monitoring problems (for IT)" in doc and "report_delivery is open" in doc
+    bending = _alarm(SIM_T.id, "bending_amplitude", "warning")
+    assert fleet_entry(store, SIM_T, now, open_alarms=[bending]).worst_open_severity == "warning"
 
 
 def test_fleet_life_and_report_over_http_say_simulated_only_for_simulated_mills(store):

@@ -337,3 +337,82 @@ def test_the_alarm_reaches_the_store_through_the_worker_thread(tmp_path):
         worker.step(BlockQueue(10), timeout_s=0.0)
         (alarm,) = store.alarms(mill_id=A.id)
         assert alarm.state == "raised" and not alarm.condition  # latched until acknowledged
+
+
+class RefusingInbox:
+    """A plain SMTP handler that refuses one recipient (550) and keeps each message."""
+
+    def __init__(self, refuse: str) -> None:
+        self.refuse = refuse
+        self.messages: list[tuple[list[str], bytes]] = []
+
+    async def handle_RCPT(self, server, session, envelope, address, rcpt_options) -> str:
+        if address == self.refuse:
+            return "550 5.1.1 no such mailbox"
+        envelope.rcpt_tos.append(address)
+        return "250 OK"
+
+    async def handle_DATA(self, server, session, envelope) -> str:
+        self.messages.append((list(envelope.rcpt_tos), envelope.content))
+        return "250 OK"
+
+
+@pytest.fixture
+def refusing_server():
+    inbox = RefusingInbox("gone@plant.example")
+    controller = Controller(inbox, hostname="127.0.0.1", port=free_loopback_port())
+    controller.start()
+    try:
+        yield inbox, controller.port
+    finally:
+        controller.stop()
+
+
+def plain_mail(port: int, **extra) -> dict:
+    return {
+        "host": "127.0.0.1",
+        "port": port,
+        "starttls": False,
+        "sender": "millwatch@plant.example",
+        "recipients": ["manager@plant.example", "gone@plant.example"],
+        "timeout_s": 10,
+        **extra,
+    }
+
+
+def test_a_refused_recipient_is_alarmed_once_and_the_others_get_one_copy(
+    store, tmp_path, refusing_server
+):
+    inbox, port = refusing_server
+    seen: list[Observation] = []
+    j = job(store, tmp_path, "2024-02-01T06:00", mail=plain_mail(port), attempts=3,
+            sink=seen.extend)  # fmt: skip
+    summary = j.run_once()
+    assert (summary.written, summary.mailed) == (2, 2)
+    assert sorted(r for r, _ in inbox.messages) == [["manager@plant.example"]] * 2
+    raised = [o for o in seen if o.value > 0]
+    assert {o.mill_id for o in raised} == set(MILLS) and len(raised) == 2
+    assert all("gone@plant.example" in o.context["error"] and "550" in o.context["error"]
+               for o in raised)  # fmt: skip
+    # no clean mail observation clears it at once
+    assert not [o for o in seen if o.value == 0 and o.context["stage"] == "mail"]
+    # neither a retry round, a later pass nor a restart sends it again
+    assert j.run_once().due == 0
+    assert job(store, tmp_path, "2024-02-02T06:00", mail=plain_mail(port)).run_once().due == 0
+    assert len(inbox.messages) == 2
+    receipt = (tmp_path / A.id / "2024-01.mailed.json").read_text()
+    assert "gone@plant.example" in receipt
+
+
+def test_the_csv_zip_is_attached_when_the_csv_format_is_asked(store, tmp_path, refusing_server):
+    inbox, port = refusing_server
+    mail = plain_mail(port, recipients=["manager@plant.example"], attach=["csv", "pdf"])
+    assert job(store, tmp_path, "2024-02-01T06:00", mail=mail).run_once().mailed == 2
+    for _, content in inbox.messages:
+        msg = email.message_from_bytes(content, policy=email.policy.default)
+        mill_id = next(m for m in MILLS if m in msg["Subject"])
+        attached = {p.get_filename(): p.get_content() for p in msg.iter_attachments()}
+        assert set(attached) == {f"{mill_id}-2024-01.zip", f"{mill_id}-2024-01.pdf"}
+        zipped = attached[f"{mill_id}-2024-01.zip"]
+        assert zipped == (tmp_path / mill_id / "2024-01.zip").read_bytes()
+        assert "ZIP" in msg.get_body(("plain",)).get_content()
