@@ -666,6 +666,12 @@ class MillConfig(_Frozen):
         """Parse and validate TOML text; raises ``TOMLDecodeError`` or ``ValidationError``."""
         return cls.model_validate(tomllib.loads(text))
 
+    def stored_form(self) -> dict[str, Any]:
+        """The configuration as the store keeps it (plain JSON data): what the mill file set,
+        defaults left out, so it reads back as the same configuration (a full dump would
+        write out settings a mode refuses, e.g. ``kt_bending`` beside App. D's single K_t)."""
+        return self.model_dump(mode="json", exclude_unset=True)
+
     @property
     def components(self) -> list[str]:
         """The analysed components: each of :data:`COMPONENT_KINDS` on each drive side, and

@@ -367,7 +367,7 @@ class MonthEndJob:
         try:
             futures: dict[Future[dict[str, str]], tuple[str, str]] = {
                 pool.submit(_write_report_job, str(self.store.path),
-                            self.mills[m].model_dump(mode="json", exclude_unset=True), mo,
+                            self.mills[m].stored_form(), mo,
                             tuple(self._missing(m, mo)), str(self.settings.directory)): (m, mo)
                 for m, mo in tasks
             }  # fmt: skip

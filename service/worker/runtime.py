@@ -144,7 +144,7 @@ class ServiceRuntime:
             self.store.put_mill(
                 mill_id,
                 config.site,
-                config.model_dump(mode="json", exclude_unset=True),
+                config.stored_form(),
                 time.time_ns(),
             )
         self.archive = ArchiveWriter(

@@ -116,9 +116,7 @@ def fill(d: Path, mills: dict[str, Any], args: argparse.Namespace) -> None:
     t = time.perf_counter()
     with Store(path) as store:
         for config in mills.values():
-            store.put_mill(
-                config.id, config.site, config.model_dump(mode="json", exclude_unset=True), NOW_NS
-            )
+            store.put_mill(config.id, config.site, config.stored_form(), NOW_NS)
             counts = tile(store, tpl, config, args.days)
     filled = time.perf_counter() - t
     print(

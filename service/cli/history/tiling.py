@@ -255,7 +255,7 @@ def build_history(
     with Store(store_path) as store:
         for config in configs:
             sim = config.model_copy(update={"simulated": True})
-            store.put_mill(sim.id, sim.site, sim.model_dump(mode="json"), now_ns)
+            store.put_mill(sim.id, sim.site, sim.stored_form(), now_ns)
             scratch = work_dir / f"{sim.id}-cycle.db"
             scratch.unlink(missing_ok=True)
             with analyse_cycle(sim, scratch, run_min) as cycle_store:

@@ -284,13 +284,13 @@ def test_a_critical_plane_step_without_the_critical_plane_is_refused():
 
 @pytest.mark.parametrize("name", ["ball-dual-lrs", "rod-1100-grid", "sag-5200-lrs"])
 def test_the_stored_form_of_a_shipped_mill_reloads_as_the_same_configuration(name):
-    """The store keeps what the file set (``exclude_unset``): the month-end reports and
+    """The store keeps what the file set (``MillConfig.stored_form``, what the worker, the
+    month-end job and ``millwatch history build`` write): the month-end reports and
     ``millwatch report`` validate it again, and a setting refused when set (``kt_bending``
     under App. D's ``single_kt``) must not come back as a written-out default."""
     config = mill(name)
     for c in (config, config.model_copy(update={"simulated": True})):
-        stored = c.model_dump(mode="json", exclude_unset=True)
-        assert MillConfig.model_validate(stored) == c
+        assert MillConfig.model_validate(c.stored_form()) == c
 
 
 def test_goodman_is_refused_where_the_full_scales_reach_the_ultimate_strength():

@@ -45,7 +45,7 @@ def fill(path: Path, segments: Iterable[tuple[MillConfig, str]], seed: int = 1) 
             store.put_mill(
                 config.id,
                 config.site,
-                config.model_dump(mode="json", exclude_unset=True),
+                config.stored_form(),
                 utc_ns(start),
             )
             scene = get_scene(
