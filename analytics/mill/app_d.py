@@ -165,22 +165,25 @@ def app_d_projections(
 
 
 def cost_from_records(records: Iterable[Mapping[str, Any] | None]) -> dict[str, AppDCost]:
-    """Each component's portions summed over stop events' ``app_d`` records (stops stored
-    before App. D was counted, and stops without a start, carry none and are left out)."""
+    """Each component's portions summed over stop events' ``app_d`` records: a record holds
+    ``start_stops`` (1, or 0 for a stop whose start was not seen: its steady running only;
+    records written before that key hold one) start-stop records and the steady running
+    since the previous record. Stops stored before App. D was counted carry none."""
     parts: dict[str, list[list[float]]] = {}
-    n = 0
+    starts: dict[str, int] = {}
     for rec in records:
         if not rec:
             continue
-        n += 1
+        k = int(rec.get("start_stops", 1))
         for comp, d in rec["components"].items():
             p = parts.setdefault(comp, [[], [], [], []])
+            starts[comp] = starts.get(comp, 0) + k
             p[0].append(d["start_stop"])
             p[1].append(rec["start_stop_s"])
             p[2].append(d["run"])
             p[3].append(rec["run_s"])
     return {
-        c: AppDCost(len(p[0]), math.fsum(p[0]), math.fsum(p[1]), math.fsum(p[2]), math.fsum(p[3]))
+        c: AppDCost(starts[c], math.fsum(p[0]), math.fsum(p[1]), math.fsum(p[2]), math.fsum(p[3]))
         for c, p in parts.items()
     }
 
@@ -371,23 +374,29 @@ class AppDCounting:
         self._b.cycle_run["samples"] += run.samples
 
     def _book_start_stop(self, recorders: Mapping[str, DamageRecorder]) -> None:
+        """The stop's record: its start-stop record (none when the start was not seen, e.g. a
+        recording that begins running) and the steady running since the last record, so the
+        records of a store sum to the totals :meth:`cost` states (issue 24: one truth)."""
         ss, self._b.start_stop = self._b.start_stop, None
-        if ss is None:
+        run = self._b.cycle_run
+        if ss is None and not run["samples"]:
             self._b.last_record = None
             return
-        damage = ss.closed(recorders)
-        for comp, d in damage.items():
-            tot = self._b.totals[comp]
-            tot[0] += 1
-            tot[1].add(d)
-            tot[2] += ss.samples
+        damage = dict.fromkeys(self.components, 0.0)
+        if ss is not None:
+            damage = ss.closed(recorders)
+            for comp, d in damage.items():
+                tot = self._b.totals[comp]
+                tot[0] += 1
+                tot[1].add(d)
+                tot[2] += ss.samples
         self._b.last_record = {
-            "start_stop_s": ss.samples / self.fs,
-            "run_s": self._b.cycle_run["samples"] / self.fs,
-            "components": {
-                c: {"start_stop": damage[c], "run": self._b.cycle_run["damage"][c]} for c in damage
-            },
+            "start_stops": 0 if ss is None else 1,
+            "start_stop_s": 0.0 if ss is None else ss.samples / self.fs,
+            "run_s": run["samples"] / self.fs,
+            "components": {c: {"start_stop": damage[c], "run": run["damage"][c]} for c in damage},
         }
+        self._b.cycle_run = self._zero_run()
 
     # ------------------------------------------------------------ reading
     def cost(self) -> dict[str, AppDCost]:

@@ -318,8 +318,13 @@ def test_the_scene_gives_every_quantity_a_value(parity, mill):
     assert sum(not s["failed"] for s in r["starts"]) == 1 and len(r["stops"]) == 2
     assert len(r["steady_state"]) == 2 and r["state"] == "stopped"
     assert all(r["phase_seconds"][p] > 10.0 for p in ("stopped", "start", "run", "stop"))
+    # every component costs its start; the combined stress (Shigley curve, no cut-off) costs
+    # every phase, while torsion on App. D's shear curve (FAT 100, a cut-off) may cost nothing
+    # in steady running (the dual mill's torsion ranges lie below it)
     for comp, d in r["damage"].items():
-        assert all(d["phases"][p] > 0.0 for p in ("start", "run", "stop")), comp
+        assert d["phases"]["start"] > 0.0, comp
+        if comp.startswith("pinion_combined"):
+            assert all(d["phases"][p] > 0.0 for p in ("start", "run", "stop")), comp
 
 
 @pytest.mark.parametrize("mill", CONFIGS)

@@ -152,3 +152,31 @@ def test_the_portions_do_not_depend_on_the_framing(frame):
         assert other.start_stop_s == cost.start_stop_s and other.run_s == cost.run_s
         assert other.start_stop_damage == pytest.approx(cost.start_stop_damage, rel=1e-15)
         assert other.run_damage == pytest.approx(cost.run_damage, rel=1e-15)
+
+
+def test_the_stop_records_sum_to_the_cost_when_the_recording_begins_running():
+    """A recording that begins running (no start seen) books its steady running in the first
+    stop's record (``start_stops`` 0), so the records a store keeps sum to what the analyzer
+    states: the report and ``analyze`` give one cost of a start (the parity test's scene)."""
+    from analytics.mill.app_d import cost_from_records
+    from analytics.signal.frame_aligner import Frame
+    from ingest.sim.scenes import get_scene
+    from tests.analytics.scene_helpers import mill
+
+    sc = get_scene("steady", mill("sag-5200-lrs"), seed=11, duration_s=215.0,
+                   initial_state="running",
+                   events=[{"kind": "stop", "at_s": 65}, {"kind": "start", "at_s": 100},
+                           {"kind": "stop", "at_s": 182}])  # fmt: skip
+    data = sc.render(0, sc.n_samples)
+    a, stops = LoadAnalysis(sc.config), []
+    for lo in range(0, sc.n_samples, 1000):
+        hi = min(lo + 1000, sc.n_samples)
+        out = a.feed(Frame(sc.t_ns(lo), sc.fs, {k: v[lo:hi] for k, v in data.items()}))
+        stops += [e for e in out if e.get("event") == "stop"]
+    assert [e["app_d"]["start_stops"] for e in stops] == [0, 1]
+    summed, live = cost_from_records(e["app_d"] for e in stops), a.app_d.cost()
+    for comp, c in live.items():
+        s = summed[comp]
+        assert (s.start_stops, s.run_s) == (c.start_stops, c.run_s), comp
+        assert s.run_damage == pytest.approx(c.run_damage, rel=1e-15, abs=0.0), comp
+        assert s.start_stop_damage == c.start_stop_damage, comp
