@@ -89,7 +89,7 @@ class CycleMatrixDays:
             "days": {
                 d: {p: _sparse(m) for p, m in sorted(ph.items())}
                 for d, ph in sorted(self.days.items())
-            },  # fmt: skip
+            },
         }
 
     def snapshot(self) -> dict[str, Any]:
