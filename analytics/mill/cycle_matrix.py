@@ -9,10 +9,10 @@ blocked.
 Stresses are the component's as counted, *after* the stress factors (the damage recorder's
 ``scale``: K_t or the fatigue factors the trace carries), in MPa, before any mean-stress
 correction: the ranges and means the S-N curve is read at. The bin edges are fixed per component
-from the mill file (:func:`matrix_edges`: ranges 0 … 2·B, means −B … B, B the largest |stress|
-the component reaches within its channels' full scales, :meth:`MillConfig.stress_bounds
-<analytics.drivetrain.mill_config.MillConfig.stress_bounds>`), never from the data; a cycle
-outside them lands in an under/overflow bin and is still counted.
+from the mill file (:func:`matrix_edges`: ranges 0 … 2·B in geometric steps, means −B … B, B the
+largest |stress| the component reaches within its channels' full scales,
+:meth:`MillConfig.stress_bounds <analytics.drivetrain.mill_config.MillConfig.stress_bounds>`),
+never from the data; a cycle outside them lands in an under/overflow bin and is still counted.
 
 The plain form (:meth:`CycleMatrixDays.plain`, also the snapshot) is sparse: per day and phase
 ``[[cell, half cycles], …]`` of the occupied cells only, ``cell`` = range bin × (mean bins) +
@@ -27,20 +27,31 @@ import numpy as np
 
 from analytics.fatigue.matrices import RangeMeanMatrix, uniform_edges
 
-__all__ = ["MEAN_BINS", "RANGE_BINS", "CycleMatrixDays", "matrix_edges", "sparse_matrix"]
+__all__ = [
+    "MEAN_BINS",
+    "RANGE_BINS",
+    "CycleMatrixDays",
+    "day_records",
+    "matrix_edges",
+    "sparse_matrix",
+]
 
-RANGE_BINS = 48
-MEAN_BINS = 24
+RANGE_BINS = 56
+MEAN_BINS = 40
+#: The smallest range edge above 0, as a fraction of the top one (2·B).
+RANGE_DECADES = 3.0
 
 
 def matrix_edges(bound_mpa: float) -> tuple[np.ndarray, np.ndarray]:
-    """Range edges 0 … 2·``bound_mpa`` in :data:`RANGE_BINS` bins, mean edges −bound … bound in
-    :data:`MEAN_BINS` bins (MPa), for a component whose |stress| stays within ``bound_mpa``."""
+    """Range edges 0, then :data:`RANGE_BINS` geometric steps from 2·B·10^−3 to 2·B (equal
+    ratios, ~13 % wide, so a running mill's few-MPa cycles and a start's hundreds are both
+    resolved); mean edges −B … B in :data:`MEAN_BINS` equal bins (MPa), for a component whose
+    |stress| stays within B = ``bound_mpa``."""
     if not bound_mpa > 0.0:
         raise ValueError(f"a component's stress bound must be > 0 MPa, got {bound_mpa!r}")
-    return uniform_edges(0.0, 2.0 * bound_mpa, RANGE_BINS), uniform_edges(
-        -bound_mpa, bound_mpa, MEAN_BINS
-    )
+    top = 2.0 * bound_mpa
+    ranges = np.concatenate([[0.0], np.geomspace(top * 10**-RANGE_DECADES, top, RANGE_BINS)])
+    return ranges, uniform_edges(-bound_mpa, bound_mpa, MEAN_BINS)
 
 
 def sparse_matrix(edges: tuple[Any, Any], cells: list[list[int]]) -> RangeMeanMatrix:
@@ -57,7 +68,7 @@ class CycleMatrixDays:
     """Per local day and phase, the range–mean matrix of the cycles counted (module docstring);
     only the last ``keep_days`` days are kept (the worker stores each day as it moves)."""
 
-    def __init__(self, range_edges: Any, mean_edges: Any, keep_days: int = 8) -> None:
+    def __init__(self, range_edges: Any, mean_edges: Any, keep_days: int = 3) -> None:
         self.blank = RangeMeanMatrix(range_edges, mean_edges)
         self.keep_days = keep_days
         self.days: dict[str, dict[str, RangeMeanMatrix]] = {}
@@ -107,3 +118,19 @@ def _sparse(m: RangeMeanMatrix) -> list[list[int]]:
     flat = m.half_cycles.ravel()
     idx = np.flatnonzero(flat)
     return [[int(i), int(flat[i])] for i in idx]
+
+
+def day_records(by_component: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per local day, the stored form of its matrices (the worker's ``cycle_matrix`` record):
+    ``{"day", "components": {component: {"range_edges", "mean_edges", "phases": {phase:
+    cells}}}}`` from :meth:`CycleMatrixDays.plain` per component."""
+    out: dict[str, dict[str, Any]] = {}
+    for comp, plain in sorted(by_component.items()):
+        for day, phases in plain["days"].items():
+            rec = out.setdefault(day, {"day": day, "components": {}})
+            rec["components"][comp] = {
+                "range_edges": plain["range_edges"],
+                "mean_edges": plain["mean_edges"],
+                "phases": phases,
+            }
+    return dict(sorted(out.items()))
