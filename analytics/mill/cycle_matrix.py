@@ -33,6 +33,7 @@ __all__ = [
     "CycleMatrixDays",
     "day_records",
     "matrix_edges",
+    "sparse_cells",
     "sparse_matrix",
 ]
 
@@ -98,7 +99,7 @@ class CycleMatrixDays:
             "range_edges": [float(x) for x in self.edges[0]],
             "mean_edges": [float(x) for x in self.edges[1]],
             "days": {
-                d: {p: _sparse(m) for p, m in sorted(ph.items())}
+                d: {p: sparse_cells(m) for p, m in sorted(ph.items())}
                 for d, ph in sorted(self.days.items())
             },
         }
@@ -114,7 +115,8 @@ class CycleMatrixDays:
         return out
 
 
-def _sparse(m: RangeMeanMatrix) -> list[list[int]]:
+def sparse_cells(m: RangeMeanMatrix) -> list[list[int]]:
+    """The occupied cells of ``m``: ``[[cell, half cycles], …]`` (module docstring)."""
     flat = m.half_cycles.ravel()
     idx = np.flatnonzero(flat)
     return [[int(i), int(flat[i])] for i in idx]
