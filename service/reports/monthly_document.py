@@ -13,10 +13,11 @@ format shows what :func:`monthly_document` puts here, in this order (:data:`SECT
    is in section 5;
 2. remaining life (§8.2): cumulative damage against the design line (figure), the range by
    rate basis, the band from S-N scatter (50/90/97.7 % survival), what drives it; 3. the
-   12-month trend (§10.6 "long term trending"); 4. starts; 5. fatigue damage; 6. what-if
-   (App. D: one table on one start-cost basis, its assumptions above it); 7. steady-state
-   oscillation and bending (Tables 14–15, §8.1); 8. harmonics (§6.1.2, §6.2.7); 9. alarms;
-   10. data quality (§5.2.2).
+   12-month trend (§10.6 "long term trending"); 4. starts; 5. fatigue damage; 6. rainflow
+   cycles and S-N curves (per component, the month's range–mean matrix and its S-N curve with
+   the month's spectrum, or "no cycles counted"); 7. what-if (App. D: one table on one
+   start-cost basis, its assumptions above it); 8. steady-state oscillation and bending
+   (Tables 14–15, §8.1); 9. harmonics (§6.1.2, §6.2.7); 10. alarms; 11. data quality (§5.2.2).
 
 Life and damage numbers go through :mod:`service.reports.numbers` (≤ 3 significant digits; no
 lives beyond its horizon).
@@ -40,6 +41,7 @@ from analytics.fatigue.sn_curves import SD_LOG10_N
 from service.reports.figures import (
     cumulative_figure,
     damage_figure,
+    spectrum_figure,
     starts_figure,
     steady_figure,
     trend_figure,
@@ -441,6 +443,29 @@ def _damage(r: MonthlyReport) -> Section:
                    (_figure("damage", damage_figure, r), table, note, daily))  # fmt: skip
 
 
+def _spectra(r: MonthlyReport) -> Section:
+    """Per component, the month's rainflow range–mean matrix and its S-N curve with the
+    month's spectrum (:func:`~service.reports.figures.spectrum_figure`)."""
+    about = Paragraph(
+        "Each component's rainflow cycles of the month (ASTM E1049 counting): left, how many "
+        "cycles of each stress range and mean (log colour scale); right, its own S-N curve "
+        "with the month's cumulative spectrum (cycles with range ≥ S). Stresses are as "
+        "counted, after the stress factors (K_t or the fatigue factors of the component), "
+        "before any mean-stress correction (drawn dashed where the component has Goodman's); "
+        "bins fixed by the channels' full scales, so the days add up exactly.", "meta")  # fmt: skip
+    figures = tuple(
+        Figure(
+            f"spectrum_{s.component}",
+            functools.cache(partial(spectrum_figure, r, s.component)),
+            empty_text=f"{s.component}: no cycles counted in {r.month} (no stored "
+            "rainflow matrix for the month's days).",
+        )
+        for s in r.spectra
+    )
+    return Section("spectra", "Rainflow cycles and S-N curves (Diering 2011 §8.1–8.2)",
+                   (about, *figures))  # fmt: skip
+
+
 def _what_if(r: MonthlyReport) -> Section:
     table = Table(
         "what_if",
@@ -593,6 +618,7 @@ SECTIONS: tuple[Callable[[MonthlyReport], Section], ...] = (
     _trend,
     _starts,
     _damage,
+    _spectra,
     _what_if,
     _steady,
     _harmonics,
