@@ -287,6 +287,16 @@ class FatigueCounting:
         self.last = {k: float(v) for k, v in d["last"].items()}
         self.counters = {c: RainflowCounter.restore(s) for c, s in d["counters"].items()}
         self.damage = {c: PhaseDamage.restore(s) for c, s in d["damage"].items()}
+        self._add_matrices()
+
+    def _add_matrices(self) -> None:
+        """Range-mean matrices for recorders restored from a checkpoint written before they
+        were kept (its pending cycles stay out of them; the cycles counted from now on go in)."""
+        bounds = self.config.stress_bounds()
+        for key, pd in self.damage.items():
+            bound = bounds.get(key.split("@")[0])
+            if pd.matrices is None and bound is not None:
+                pd.matrices = CycleMatrixDays(*matrix_edges(bound))
 
 
 def _mc_words(correction: dict[str, Any] | None) -> str:

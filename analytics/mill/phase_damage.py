@@ -165,7 +165,7 @@ class PhaseDamage:
         self._raw_f = np.empty((3, 0))
         self._raw_i = np.empty(0, dtype=np.int64)
         self._n_raw = 0
-        # damage, i_end, count, range-mean cell (of ``matrices``; 0 without)
+        # damage, i_end, count, range-mean cell (of ``matrices``; −1: none, not binned)
         self._pend: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
 
     def record(
@@ -210,7 +210,7 @@ class PhaseDamage:
         self.total.add_block(d, exact=True)
         s = self.recorder.scale
         cells = (
-            np.zeros(n, np.int64) if self.matrices is None else self.matrices.cells(r * s, m * s)
+            np.full(n, -1, np.int64) if self.matrices is None else self.matrices.cells(r * s, m * s)
         )
         self._pend.append((d, i, c.copy(), cells))
 
@@ -259,7 +259,8 @@ class PhaseDamage:
                 phase = PHASE_OF_STATE[OperatingState(st)]
                 per_day[phase] = per_day.get(phase, 0.0) + float(per_state[st])
                 if self.matrices is not None:
-                    here = states == st if sel is None else sel & (states == st)
+                    here = (states == st) & (cells >= 0)
+                    here = here if sel is None else here & sel
                     self.matrices.add(str(day), phase, cells[here], cnt[here])
 
     def _attribute_one_day(
@@ -405,7 +406,7 @@ class PhaseDamage:
         cnt = unpack_array(d["pending_count"]) if "pending_count" in d else np.ones(dmg.shape)
         # (a snapshot from before the matrices: none kept, pending cycles in no cell)
         cells = (unpack_array(d["pending_cell"], "<i8", shape=dmg.shape) if "pending_cell" in d
-                 else np.zeros(dmg.shape, np.int64))  # fmt: skip
+                 else np.full(dmg.shape, -1, np.int64))  # fmt: skip
         if dmg.size:
             pd._pend = [(dmg, i_end, cnt, cells)]
         return pd

@@ -108,3 +108,23 @@ def test_only_the_last_days_are_kept():
 def test_edges_need_a_positive_bound():
     with pytest.raises(ValueError, match="stress bound"):
         matrix_edges(0.0)
+
+
+def test_a_checkpoint_from_before_the_matrices_leaves_its_pending_cycles_out():
+    """An older snapshot (no matrices, no pending cells): the restored recorder gets matrices
+    (as FatigueCounting.load gives them) and bins only the cycles counted after the restore."""
+    pd = PhaseDamage(DamageRecorder(CURVE, scale=SCALE), T0, FS, "Africa/Johannesburg")
+    pd.record(Cycles.from_arrays(np.array([50.0]), np.array([0.0]), np.array([1.0]),
+                                 np.array([9]), np.array([10])), timeline(), 0)  # fmt: skip
+    old = json.loads(json.dumps(pd.snapshot()))
+    del old["matrices"], old["pending_cell"]
+    restored = PhaseDamage.restore(old)
+    assert restored.matrices is None
+    restored.matrices = CycleMatrixDays(*EDGES)
+    later = Cycles.from_arrays(np.array([80.0]), np.array([10.0]), np.array([0.5]),
+                               np.array([19]), np.array([20]))  # fmt: skip
+    restored.record(later, timeline(), 100)
+    restored.attribute(timeline(), 100)
+    (mat,) = _matrices(restored).values()
+    assert restored.cycle_days()["2024-01-01"]["stopped"] == 1.5  # both counted …
+    assert mat.cycles == 0.5  # … only the new one binned
