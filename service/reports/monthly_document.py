@@ -31,10 +31,12 @@ with a builder of :mod:`service.reports.figures`), and add it to
 from __future__ import annotations
 
 import functools
+import itertools
 from collections import Counter
 from collections.abc import Callable
 from functools import partial
 
+import numpy as np
 from matplotlib.figure import Figure as MplFigure
 
 from analytics.fatigue.sn_curves import SD_LOG10_N
@@ -49,6 +51,7 @@ from service.reports.figures import (
 from service.reports.life import ComponentLife
 from service.reports.month_summary import ComponentSummary
 from service.reports.monthly import MonthlyReport
+from service.reports.monthly.model import CycleSpectrum
 from service.reports.numbers import (
     HORIZON_YEARS,
     NO_FINITE_LIFE,
@@ -462,8 +465,35 @@ def _spectra(r: MonthlyReport) -> Section:
         )
         for s in r.spectra
     )
+    cells = Table(
+        "cycle_matrix",
+        columns(Column("component", "component", text=True),
+                ("range_from", "range from", "MPa"), ("range_to", "range to", "MPa"),
+                ("mean_from", "mean from", "MPa"), ("mean_to", "mean to", "MPa"),
+                ("cycles", "cycles", "1")),
+        rows([[s.component, *cell] for s in r.spectra for cell in _matrix_cells(s)]),
+        printed=False,
+    )  # fmt: skip
     return Section("spectra", "Rainflow cycles and S-N curves (Diering 2011 §8.1–8.2)",
-                   (about, *figures))  # fmt: skip
+                   (about, *figures, cells))  # fmt: skip
+
+
+def _matrix_cells(s: CycleSpectrum) -> list[list[float | None]]:
+    """The occupied cells of a component's month: range and mean bin bounds (MPa; None beyond
+    the outer edges) and cycles, for the CSV (the data behind the figure)."""
+    if not s.cells:
+        return []
+    m = s.matrix()
+    lo_r, hi_r = _bounds(m.range_edges), _bounds(m.mean_edges)
+    half = m.half_cycles
+    return [[lo_r[i][0], lo_r[i][1], hi_r[j][0], hi_r[j][1], int(half[i, j]) / 2.0]
+            for i, j in zip(*np.nonzero(half), strict=True)]  # fmt: skip
+
+
+def _bounds(edges: np.ndarray) -> list[tuple[float | None, float | None]]:
+    """Per bin (underflow, inner, overflow) its lower and upper edge (None: open)."""
+    e = [float(x) for x in edges]
+    return [(None, e[0]), *itertools.pairwise(e), (e[-1], None)]
 
 
 def _what_if(r: MonthlyReport) -> Section:

@@ -131,7 +131,8 @@ class CycleSpectrum:
     days: int
 
     def matrix(self) -> RangeMeanMatrix:
-        """The counts as a :class:`~analytics.fatigue.matrices.RangeMeanMatrix`."""
+        """The counts as a :class:`~analytics.fatigue.matrices.RangeMeanMatrix` (a component
+        with no stored matrix has no edges: check :attr:`cells` first)."""
         return sparse_matrix((self.range_edges_mpa, self.mean_edges_mpa), self.cells)
 
 

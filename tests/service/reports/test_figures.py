@@ -7,6 +7,11 @@ of :mod:`tests.service.reports.month_scene` (a store filled by the real worker).
 
 from __future__ import annotations
 
+import csv
+import io
+import math
+import zipfile
+
 import matplotlib.dates as mdates
 import numpy as np
 import pytest
@@ -20,6 +25,7 @@ from service.reports.figures import (
 )
 from service.reports.monthly import MonthlyReport, build_monthly_report
 from service.reports.monthly_document import monthly_document
+from service.reports.render.csv_tables import document_csv_zip
 from service.reports.render.html_page import document_html
 from tests.service.reports.month_scene import CONFIG, MONTH
 
@@ -112,3 +118,16 @@ def test_a_month_without_cycles_says_so_instead_of_an_empty_axis(store):
     page = document_html(monthly_document(empty))
     for comp in CONFIG.components:
         assert f"{comp}: no cycles counted in 2023-11" in page
+
+
+def test_the_csv_carries_the_cells_behind_the_matrix(report):
+    """The data behind each component's figure: its occupied cells with their bounds (MPa) and
+    cycles, summing to the month's count."""
+    with zipfile.ZipFile(io.BytesIO(document_csv_zip(monthly_document(report)))) as zf:
+        (name,) = [n for n in zf.namelist() if n.endswith("-cycle_matrix.csv")]
+        table = list(csv.DictReader(io.TextIOWrapper(zf.open(name), encoding="utf-8")))
+    for spec in report.spectra:
+        mine = [row for row in table if row["component"] == spec.component]
+        assert math.fsum(float(row["cycles [1]"]) for row in mine) == spec.cycles
+        assert all(float(row["range_from [MPa]"]) < float(row["range_to [MPa]"])
+                   for row in mine if row["range_to [MPa]"])  # fmt: skip
