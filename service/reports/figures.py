@@ -422,8 +422,7 @@ def _matrix_panel(fig: Figure, ax: Axes, m: RangeMeanMatrix) -> None:
     ax.set_xlabel("cycle mean stress (MPa)")
     ax.set_ylabel("stress range (MPa)")
     ax.grid(alpha=0.2)
-    bar = fig.colorbar(mesh, ax=ax, pad=0.02)
-    bar.set_label("cycles", fontsize=8)
+    bar = fig.colorbar(mesh, ax=ax, pad=0.02)  # (the title says what the colour counts)
     bar.ax.tick_params(labelsize=7)
     _cheap_log(bar.ax.yaxis, 5)
 
@@ -475,6 +474,5 @@ def _sn_panel(ax: Axes, spec: CycleSpectrum, m: RangeMeanMatrix) -> None:
     kind = "amplitude" if amp else "range"
     ax.set_xlabel(f"cycles N (this month: cycles with {kind} ≥ S)")
     ax.set_ylabel(f"stress {kind} S (MPa)")
-    ax.set_title("S-N curve and the month's spectrum", fontsize=9, y=1)
     ax.grid(alpha=0.3, which="major")
     ax.legend(fontsize=7, loc="upper right")

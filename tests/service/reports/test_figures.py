@@ -108,7 +108,8 @@ def test_spectrum_figure_reads_as_a_matrix_and_an_sn_curve(report):
     n = np.asarray(steps.get_xdata(), dtype=float)
     assert n.max() <= spec.cycles and np.all(np.diff(n) <= 0)  # exceedance: falls with S
     assert any(label.startswith("S-N curve") for label in lines)
-    assert "cycles" in colour_bar.get_ylabel()
+    assert "cycles per cell" in matrix_ax.get_title()
+    assert colour_bar.get_yscale() == "log"
 
 
 def test_a_month_without_cycles_says_so_instead_of_an_empty_axis(store):
