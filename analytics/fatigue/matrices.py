@@ -33,6 +33,7 @@ import math
 from typing import Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 from numpy.typing import ArrayLike
 
 from analytics.contracts import check_snapshot
@@ -119,13 +120,25 @@ class _Matrix:
         """Add ``cycles`` (a counter's view may be passed; it is only read)."""
         if len(cycles) == 0:
             return
-        x0, x1 = self._coordinates(cycles)
+        self.add_cells(self.cell_index(*self._coordinates(cycles)), _half_counts(cycles))
+
+    def cell_index(self, x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
+        """The flat cell (row bin × columns + column bin, under/overflow bins included) of each
+        pair of coordinates (signal unit): what :meth:`add_cells` books."""
         if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(x1))):
             raise ValueError("cycles hold non-finite values")
         flat = _bin_index(self._edges[0], x0) * self._counts.shape[1]
-        flat += _bin_index(self._edges[1], x1)
-        added = np.bincount(flat, weights=_half_counts(cycles), minlength=self._counts.size)
-        self._counts += added.astype(np.int64).reshape(self._counts.shape)
+        return flat + _bin_index(self._edges[1], x1)
+
+    def add_cells(self, cells: npt.ArrayLike, half_cycles: npt.ArrayLike) -> None:
+        """Add ``half_cycles`` (whole numbers ≥ 0) at the flat ``cells`` of :meth:`cell_index`."""
+        idx = np.asarray(cells, dtype=np.int64)
+        if idx.size == 0:
+            return
+        if idx.min() < 0 or idx.max() >= self._counts.size:
+            raise ValueError(f"{self._KIND}: a cell index lies outside the matrix")
+        added = np.bincount(idx, weights=half_cycles, minlength=self._counts.size)
+        self._counts += np.rint(added).astype(np.int64).reshape(self._counts.shape)
 
     def _binned_damage(
         self,

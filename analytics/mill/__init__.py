@@ -8,9 +8,13 @@ Modules (each imports only the ones listed before it)::
     results          typed results as they leave the analyzer (start/stop/barring events, a
                      steady-state window, a component's damage), read by attribute by every
                      surface
+    cycle_matrix     CycleMatrixDays: rainflow range-mean matrices of a component's counted
+                     cycles per local day and phase (stress after the stress factors, MPa;
+                     edges from the mill file's full scales), their sparse stored form
     phase_damage     PhaseTimeline, PhaseDamage: the damage and cycle recorder by operating phase
                      and local day, the phase-sum cost of a start (life's what-if), the one
-                     SECONDS_PER_YEAR of damage rates (Diering 2011 §8.3, App. D); here
+                     SECONDS_PER_YEAR of damage rates (Diering 2011 §8.3, App. D); the
+                     cycles' range-mean matrices (cycle_matrix); here
                      because it joins fatigue (cycles, Miner) with operation (states)
     report           the tables of the load report (starts per month, phase seconds, damage,
                      start cost, projections), from plain pieces

@@ -434,6 +434,13 @@ class MillAnalyzer:
         0.5), the cycles whose damage :meth:`damage_by_day` books."""
         return self._loads.cycles_by_day()
 
+    def cycle_matrices_by_day(self) -> dict[str, Any]:
+        """The rainflow range-mean matrices of the cycles :meth:`cycles_by_day` counts, per
+        component, local day and phase (stress after the stress factors, MPa; the last days
+        kept): per component ``{"range_edges", "mean_edges", "days": {day: {phase: [[cell,
+        half cycles], ...]}}}`` (:mod:`analytics.mill.cycle_matrix`)."""
+        return self._loads.matrices_by_day()
+
     def phase_seconds_by_day(self) -> dict[str, dict[str, float]]:
         """Seconds analysed per local day and phase (``stopped``, ``start``, ``run``, ``stop``,
         ``barring``, ``unknown``) so far, the current phase up to the last sample analysed; the

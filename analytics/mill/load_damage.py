@@ -37,6 +37,7 @@ from analytics.drivetrain.stress import shear_stress_from_torque
 from analytics.fatigue.miner import DamageRecorder
 from analytics.fatigue.rainflow import RainflowCounter
 from analytics.mill.app_d import AppDCost
+from analytics.mill.cycle_matrix import CycleMatrixDays, matrix_edges
 from analytics.mill.load_roles import LoadRoles
 from analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
 from analytics.mill.report import damage_table
@@ -100,6 +101,7 @@ class FatigueCounting:
         Unix epoch): each component on its own S-N curve and mean-stress correction
         (``[material.components]``, else the material's curve) with its stress scale."""
         cfg, model = self.config, self.roles.stress_model
+        bounds = cfg.stress_bounds()
         for key in self.keys():
             c = key.split("@")[0]
             rec = DamageRecorder(
@@ -107,7 +109,9 @@ class FatigueCounting:
                 scale=model.scale(c),
                 mean_correction=cfg.material.mean_correction(c),
             )
-            self.damage[key] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone)
+            bound = bounds.get(c)
+            matrices = None if bound is None else CycleMatrixDays(*matrix_edges(bound))
+            self.damage[key] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone, matrices=matrices)
 
     def stress(self, block: np.ndarray) -> dict[str, np.ndarray]:
         """Stress (MPa) of each component over a block of ring rows (NaN where missing)."""
@@ -185,6 +189,14 @@ class FatigueCounting:
         for pd in self.damage.values():
             pd.attribute(timeline, decided)
         return {comp: pd.cycle_days() for comp, pd in self.reported().items()}
+
+    def matrices_by_day(self, timeline: PhaseTimeline, decided: int) -> dict[str, Any]:
+        """Range-mean matrices of the attributed cycles per component, local day and phase (the
+        last days kept; :mod:`analytics.mill.cycle_matrix`), components without one left out."""
+        for pd in self.damage.values():
+            pd.attribute(timeline, decided)
+        out = {comp: pd.matrix_days() for comp, pd in self.reported().items()}
+        return {comp: m for comp, m in out.items() if m is not None}
 
     def summary(self) -> dict[str, dict[str, float]]:
         """Miner damage per component: ``committed``, ``pending_residue``, ``with_residue``."""
@@ -275,6 +287,16 @@ class FatigueCounting:
         self.last = {k: float(v) for k, v in d["last"].items()}
         self.counters = {c: RainflowCounter.restore(s) for c, s in d["counters"].items()}
         self.damage = {c: PhaseDamage.restore(s) for c, s in d["damage"].items()}
+        self._add_matrices()
+
+    def _add_matrices(self) -> None:
+        """Range-mean matrices for recorders restored from a checkpoint written before they
+        were kept (its pending cycles stay out of them; the cycles counted from now on go in)."""
+        bounds = self.config.stress_bounds()
+        for key, pd in self.damage.items():
+            bound = bounds.get(key.split("@")[0])
+            if pd.matrices is None and bound is not None:
+                pd.matrices = CycleMatrixDays(*matrix_edges(bound))
 
 
 def _mc_words(correction: dict[str, Any] | None) -> str:

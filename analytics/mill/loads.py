@@ -334,6 +334,11 @@ class LoadAnalysis:
         0.5), booked with the damage of :meth:`damage_by_day`."""
         return self.fatigue.cycles_by_day(self.timeline, self.sm.decided_until)
 
+    def matrices_by_day(self) -> dict[str, Any]:
+        """Range-mean matrices of the attributed cycles per component, local day and phase
+        (:meth:`~analytics.mill.load_damage.FatigueCounting.matrices_by_day`)."""
+        return self.fatigue.matrices_by_day(self.timeline, self.sm.decided_until)
+
     def damage_summary(self) -> dict[str, dict[str, float]]:
         """Miner damage per component so far: closed cycles (``committed``), what closing the
         open rainflow residue now as half cycles would add (``pending_residue``), and their sum

@@ -34,6 +34,7 @@ from analytics.fatigue import damage_kernels as _dk
 from analytics.fatigue.cycles import Cycles
 from analytics.fatigue.exact_sum import DIGITS, digits_value, fsum, hilo
 from analytics.fatigue.miner import DamageRecorder, MinerSum
+from analytics.mill.cycle_matrix import CycleMatrixDays
 from analytics.operation.operating_states import OperatingState, Transition
 from analytics.snapshot_arrays import pack_array, unpack_array
 
@@ -134,6 +135,9 @@ class PhaseDamage:
 
     ``record(cycles, timeline, decided_until)`` attributes the decided cycles and keeps the rest
     pending. ``t0_ns``/``fs`` convert stream samples to time; ``time_zone`` names the site's days.
+    ``matrices`` (optional): the range-mean matrices the attributed cycles are also binned in by
+    day and phase, at their stress after the recorder's ``scale`` (MPa;
+    :mod:`analytics.mill.cycle_matrix`).
     """
 
     def __init__(
@@ -143,6 +147,7 @@ class PhaseDamage:
         fs: float,
         time_zone: str = "UTC",
         keep_days: int = 400,
+        matrices: CycleMatrixDays | None = None,
     ) -> None:
         self.recorder = recorder
         self.t0_ns = int(t0_ns)
@@ -154,12 +159,14 @@ class PhaseDamage:
         self.by_day: dict[str, dict[str, MinerSum]] = {}
         self.total = MinerSum()
         self.cycles_by_day: dict[str, dict[str, float]] = {}
+        self.matrices = matrices
         self.batch = 4096
         # cycles not yet costed: rows range, mean, count; and stream i_end (grown on demand)
         self._raw_f = np.empty((3, 0))
         self._raw_i = np.empty(0, dtype=np.int64)
         self._n_raw = 0
-        self._pend: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # damage, i_end, count
+        # damage, i_end, count, range-mean cell (of ``matrices``; −1: none, not binned)
+        self._pend: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
 
     def record(
         self, cycles: Cycles, timeline: PhaseTimeline, decided_until: int, offset: int = 0
@@ -201,12 +208,16 @@ class PhaseDamage:
         self._n_raw = 0
         d = self.recorder.damage_of(r, m, c)
         self.total.add_block(d, exact=True)
-        self._pend.append((d, i, c.copy()))
+        s = self.recorder.scale
+        cells = (
+            np.full(n, -1, np.int64) if self.matrices is None else self.matrices.cells(r * s, m * s)
+        )
+        self._pend.append((d, i, c.copy(), cells))
 
     @property
     def oldest_pending(self) -> int | None:
         """Smallest stream ``i_end`` of a cycle not yet attributed (the timeline must keep it)."""
-        ends = [int(i.min()) for _, i, _ in self._pend]
+        ends = [int(p[1].min()) for p in self._pend]
         if self._n_raw:
             ends.append(int(self._raw_i[: self._n_raw].min()))
         return min(ends, default=None)
@@ -217,20 +228,25 @@ class PhaseDamage:
         if not self._pend:
             return
         if len(self._pend) == 1:
-            dmg, i_end, cnt = self._pend[0]
+            dmg, i_end, cnt, cells = self._pend[0]
         else:
-            dmg, i_end, cnt = (np.concatenate(parts) for parts in zip(*self._pend, strict=True))
+            dmg, i_end, cnt, cells = (np.concatenate(p) for p in zip(*self._pend, strict=True))
         ready = i_end < decided_until
         if not ready.any():
-            self._pend = [(dmg, i_end, cnt)]
+            self._pend = [(dmg, i_end, cnt, cells)]
             return
-        self._count_cycles(cnt[ready], i_end[ready], timeline)
-        if not self._attribute_one_day(dmg, i_end, timeline, decided_until, cnt):
-            self._pend = [(dmg[~ready], i_end[~ready], cnt[~ready])] if not ready.all() else []
+        self._count_cycles(cnt[ready], i_end[ready], timeline, cells[ready])
+        if not self._attribute_one_day(dmg, i_end, timeline, decided_until, cnt, cells):
+            left = ~ready
+            self._pend = [] if ready.all() else [
+                (dmg[left], i_end[left], cnt[left], cells[left])]  # fmt: skip
             self._attribute(dmg[ready], i_end[ready], timeline)
 
-    def _count_cycles(self, cnt: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline) -> None:
-        """Book the cycle counts of the decided cycles by local day and phase (as damage)."""
+    def _count_cycles(
+        self, cnt: np.ndarray, i_end: np.ndarray, timeline: PhaseTimeline, cells: np.ndarray
+    ) -> None:
+        """Book the cycle counts of the decided cycles by local day and phase (as damage), and
+        their range-mean cells (:attr:`matrices`)."""
         states = timeline.states_at(i_end)
         lo, hi = self._day(int(i_end.min())), self._day(int(i_end.max()))
         days = None if lo == hi else np.array([self._day(int(s)) for s in i_end])
@@ -242,6 +258,10 @@ class PhaseDamage:
             for st in np.flatnonzero(per_state).tolist():
                 phase = PHASE_OF_STATE[OperatingState(st)]
                 per_day[phase] = per_day.get(phase, 0.0) + float(per_state[st])
+                if self.matrices is not None:
+                    here = (states == st) & (cells >= 0)
+                    here = here if sel is None else here & sel
+                    self.matrices.add(str(day), phase, cells[here], cnt[here])
 
     def _attribute_one_day(
         self,
@@ -250,6 +270,7 @@ class PhaseDamage:
         timeline: PhaseTimeline,
         decided_until: int,
         cnt: np.ndarray,
+        cells: np.ndarray,
     ) -> bool:
         """The usual case in one compiled pass
         (:func:`analytics.fatigue.damage_kernels.attribute_split`):
@@ -272,8 +293,8 @@ class PhaseDamage:
         sums = [(st, hilo(digits_value(digits[st]))) for st in np.flatnonzero(counts).tolist()]
         if not all(math.isfinite(h) for _, (h, _) in sums):
             return False  # the checked path raises
-        left_c = cnt[i_end >= decided_until]
-        self._pend = [(left_d[:n_left], left_i[:n_left], left_c)] if n_left else []
+        left = i_end >= decided_until
+        self._pend = [(left_d[:n_left], left_i[:n_left], cnt[left], cells[left])] if n_left else []
         per_day = self.by_day.setdefault(day, {})
         for st, (h, lw) in sums:
             block = (h, lw, int(counts[st]))
@@ -335,6 +356,12 @@ class PhaseDamage:
         """Attributed cycles per local day and phase (a half cycle counts 0.5)."""
         return {d: dict(ph) for d, ph in sorted(self.cycles_by_day.items())}
 
+    def matrix_days(self) -> dict[str, Any] | None:
+        """The range-mean matrices of the attributed cycles per local day and phase (the last
+        days kept; :meth:`CycleMatrixDays.plain <analytics.mill.cycle_matrix.CycleMatrixDays.
+        plain>`), None when this component has none (no stress bound in the mill file)."""
+        return None if self.matrices is None else self.matrices.plain()
+
     # ------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
         self._compute()
@@ -349,9 +376,11 @@ class PhaseDamage:
             "by_day": {d: {p: s.snapshot() for p, s in v.items()} for d, v in self.by_day.items()},
             "total": self.total.snapshot(),
             "cycles_by_day": self.cycles_by_day,
-            "pending_damage": pack_array(_joined([d for d, _, _ in self._pend], np.float64)),
-            "pending_i_end": pack_array(_joined([i for _, i, _ in self._pend], np.int64), "<i8"),
-            "pending_count": pack_array(_joined([c for _, _, c in self._pend], np.float64)),
+            "pending_damage": pack_array(_joined([p[0] for p in self._pend], np.float64)),
+            "pending_i_end": pack_array(_joined([p[1] for p in self._pend], np.int64), "<i8"),
+            "pending_count": pack_array(_joined([p[2] for p in self._pend], np.float64)),
+            "pending_cell": pack_array(_joined([p[3] for p in self._pend], np.int64), "<i8"),
+            "matrices": None if self.matrices is None else self.matrices.snapshot(),
         }
 
     @classmethod
@@ -363,6 +392,7 @@ class PhaseDamage:
             d["fs"],
             d["time_zone"],
             d["keep_days"],
+            CycleMatrixDays.restore(d["matrices"]) if d.get("matrices") else None,
         )
         pd.by_phase = {p: MinerSum.restore(s) for p, s in d["by_phase"].items()}
         pd.by_day = {
@@ -374,8 +404,11 @@ class PhaseDamage:
         dmg = unpack_array(d["pending_damage"])
         i_end = unpack_array(d["pending_i_end"], "<i8", shape=dmg.shape)
         cnt = unpack_array(d["pending_count"]) if "pending_count" in d else np.ones(dmg.shape)
+        # (a snapshot from before the matrices: none kept, pending cycles in no cell)
+        cells = (unpack_array(d["pending_cell"], "<i8", shape=dmg.shape) if "pending_cell" in d
+                 else np.full(dmg.shape, -1, np.int64))  # fmt: skip
         if dmg.size:
-            pd._pend = [(dmg, i_end, cnt)]
+            pd._pend = [(dmg, i_end, cnt, cells)]
         return pd
 
 

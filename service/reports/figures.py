@@ -22,18 +22,23 @@ import numpy as np
 import numpy.typing as npt
 from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
+from matplotlib.colors import LogNorm
 from matplotlib.dates import AutoDateLocator, ConciseDateFormatter
 from matplotlib.figure import Figure
 from matplotlib.ticker import (
     AutoLocator,
     FixedLocator,
     FuncFormatter,
+    LogLocator,
     MaxNLocator,
     NullLocator,
     ScalarFormatter,
 )
 
+from analytics.fatigue.matrices import RangeMeanMatrix
+from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve, StressKind
 from service.reports.monthly import MonthlyReport
+from service.reports.monthly.model import CycleSpectrum
 from service.reports.render.document import fmt
 from service.reports.starts import day_starts_ns
 
@@ -43,6 +48,7 @@ __all__ = [
     "damage_figure",
     "day_positions",
     "envelope",
+    "spectrum_figure",
     "starts_figure",
     "steady_figure",
     "trend_figure",
@@ -337,3 +343,136 @@ def trend_figure(r: MonthlyReport) -> Figure | None:
     axes[0].set_title("12-month trend (worst channel's monthly mean for the steady figures)",
                       fontsize=10, y=1)  # fmt: skip
     return fig
+
+
+# ----------------------------------------------------------------------------- spectra
+def spectrum_figure(r: MonthlyReport, component: str) -> Figure | None:
+    """One component's month of rainflow cycles, two panels: the range–mean matrix (cycles per
+    cell, log colour scale; Fotopoulos 1983 ch. 3) and its S-N curve with the month's
+    cumulative range spectrum (cycles with range ≥ S, plotted as S against N; Diering 2011
+    §8.1–8.2) on the same log-log axes, the curve at the Miner limit and the Goodman-corrected
+    spectrum where configured. Stresses as counted, after the stress factors (MPa). None when
+    the month counted no cycles of the component (the document says so instead)."""
+    spec = next((s for s in r.spectra if s.component == component), None)
+    if spec is None or spec.cycles <= 0:
+        return None
+    m = spec.matrix()
+    fig = Figure(figsize=(FIG_WIDTH_IN, 3.3))
+    fig.subplots_adjust(left=0.75 / FIG_WIDTH_IN, right=1 - 0.2 / FIG_WIDTH_IN, bottom=0.55 / 3.3,
+                        top=1 - 0.4 / 3.3, wspace=0.45)  # fmt: skip
+    ax_m, ax_sn = fig.subplots(1, 2)
+    _matrix_panel(fig, ax_m, m)
+    _sn_panel(ax_sn, spec, m)
+    fig.suptitle(f"{component}: {fmt(spec.cycles)} rainflow cycles in {r.month} "
+                 f"({spec.days} days)", fontsize=10, y=0.99)  # fmt: skip
+    return fig
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _power_label(x: float, _pos: object = None) -> str:
+    """A log axis tick as plain text (10⁴, 300): mathtext labels cost ~40 ms each to lay out."""
+    if x <= 0:
+        return ""
+    e = int(np.floor(np.log10(x) + 1e-9))
+    if abs(x - 10.0**e) > 1e-6 * x:
+        return f"{x:g}"
+    return f"{x:g}" if -1 <= e <= 3 else "10" + str(e).translate(_SUPERSCRIPT)
+
+
+def _cheap_log(axis: Any, ticks: int = 6) -> None:
+    """Major decades only, labelled as plain text, no minor ticks (they are most of the cost of
+    drawing a log axis)."""
+    axis.set_major_locator(LogLocator(numticks=ticks))
+    axis.set_major_formatter(FuncFormatter(_power_label))
+    axis.set_minor_locator(NullLocator())
+
+
+def _display_ranges(edges: np.ndarray) -> np.ndarray:
+    """Range edges for a log axis: the first (0) one geometric step below the second."""
+    out = edges.astype(float).copy()
+    out[0] = out[1] ** 2 / out[2]
+    return out
+
+
+def _matrix_panel(fig: Figure, ax: Axes, m: RangeMeanMatrix) -> None:
+    """Cycles per (range, mean) cell on the inner bins, cropped to the occupied ones (an
+    out-of-scale count is named in the title); ranges on a log axis (geometric bins)."""
+    inner = m.half_cycles[:-1, 1:-1] / 2.0  # range rows from [0, e1); mean columns inside
+    rows_used = np.flatnonzero(inner.any(axis=1))
+    cols_used = np.flatnonzero(inner.any(axis=0))
+    r_edges, m_edges = _display_ranges(m.range_edges), m.mean_edges
+    title = "range–mean matrix (cycles per cell)"
+    outside = m.half_cycles.sum() / 2.0 - inner.sum()
+    if outside:
+        title += f"; {fmt(outside)} outside the full scales"
+    ax.set_title(title, fontsize=9, y=1)
+    if not rows_used.size:
+        return
+    r0, r1 = int(rows_used[0]), int(rows_used[-1]) + 1
+    c0, c1 = max(int(cols_used[0]) - 1, 0), min(int(cols_used[-1]) + 2, inner.shape[1])
+    block = np.ma.masked_equal(inner[r0:r1, c0:c1], 0.0)
+    mesh = ax.pcolormesh(m_edges[c0 : c1 + 1], r_edges[r0 : r1 + 1], block, cmap="viridis",
+                         norm=LogNorm(vmin=0.5, vmax=max(float(block.max()), 1.0)),
+                         rasterized=True)  # fmt: skip
+    ax.set_yscale("log")
+    _cheap_log(ax.yaxis)
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=5))
+    ax.set_xlabel("cycle mean stress (MPa)")
+    ax.set_ylabel("stress range (MPa)")
+    ax.grid(alpha=0.2)
+    bar = fig.colorbar(mesh, ax=ax, pad=0.02)  # (the title says what the colour counts)
+    bar.ax.tick_params(labelsize=7)
+    _cheap_log(bar.ax.yaxis, 5)
+
+
+def _exceedance(edges: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(S, N)``: cycles with range ≥ S at each lower bin edge S holding any (counts per
+    range bin, the first bin [0, e1) left out)."""
+    n = np.cumsum(counts[::-1])[::-1]
+    keep = (counts > 0) & (np.arange(counts.size) > 0)
+    return edges[keep], n[keep]
+
+
+def _sn_panel(ax: Axes, spec: CycleSpectrum, m: RangeMeanMatrix) -> None:
+    """The S-N curve (N against S, log-log) with the month's exceedance spectrum."""
+    curve = SNCurve.from_dict(spec.sn_curve)
+    per_range = m.half_cycles.sum(axis=1)[: m.range_edges.size] / 2.0  # overflow: at the top
+    per_range[-1] += m.half_cycles[-1].sum() / 2.0
+    s, n = _exceedance(m.range_edges, per_range)
+    amp = curve.kind is StressKind.AMPLITUDE
+    s_plot = s * 0.5 if amp else s
+    ax.step(n, s_plot, where="post", color="C0", linewidth=1.6, label="this month's cycles")
+    if spec.goodman_s_ut_mpa is not None:
+        g = GoodmanCorrection(spec.goodman_s_ut_mpa)
+        centres = 0.5 * (m.mean_edges[:-1] + m.mean_edges[1:])
+        means = np.concatenate([[m.mean_edges[0]], centres, [m.mean_edges[-1]]])
+        eq = (m.range_edges[:, None] * g.factor(means)[None, :]).ravel()
+        cnt = (m.half_cycles[: m.range_edges.size] / 2.0).ravel()
+        order = np.argsort(eq)
+        eq, cnt = eq[order], cnt[order]
+        keep = cnt > 0
+        n_eq = np.cumsum(cnt[::-1])[::-1]
+        ax.step(n_eq[keep], (eq * (0.5 if amp else 1.0))[keep], where="post", color="C1",
+                linestyle="--", linewidth=1.2, label="with Goodman mean correction")  # fmt: skip
+    lo = max(float(s_plot.min()) if s_plot.size else curve.S_D, 1e-3) / 2.0
+    hi = max(float(s_plot.max()) if s_plot.size else 0.0, curve.S_D) * 3.0
+    n_max = max(float(n.max()) if n.size else 1.0, curve.N_D) * 30.0
+    grid = np.geomspace(lo, hi, 200)
+    life = np.minimum(curve.cycles_to_failure(grid), n_max)
+    ax.plot(life, grid, color="#d62728", linewidth=1.4, label=f"S-N curve {curve.name}".strip())
+    if spec.miner_limit != 1.0:
+        ax.plot(np.minimum(life * spec.miner_limit, n_max), grid, color="#d62728", linestyle=":",
+                linewidth=1.2, label=f"at the Miner limit D = {fmt(spec.miner_limit)}")  # fmt: skip
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    _cheap_log(ax.xaxis)
+    _cheap_log(ax.yaxis)
+    ax.set_xlim(0.7, n_max)
+    ax.set_ylim(lo, hi)
+    kind = "amplitude" if amp else "range"
+    ax.set_xlabel(f"cycles N (this month: cycles with {kind} ≥ S)")
+    ax.set_ylabel(f"stress {kind} S (MPa)")
+    ax.grid(alpha=0.3, which="major")
+    ax.legend(fontsize=7, loc="upper right")

@@ -13,10 +13,11 @@ format shows what :func:`monthly_document` puts here, in this order (:data:`SECT
    is in section 5;
 2. remaining life (§8.2): cumulative damage against the design line (figure), the range by
    rate basis, the band from S-N scatter (50/90/97.7 % survival), what drives it; 3. the
-   12-month trend (§10.6 "long term trending"); 4. starts; 5. fatigue damage; 6. what-if
-   (App. D: one table on one start-cost basis, its assumptions above it); 7. steady-state
-   oscillation and bending (Tables 14–15, §8.1); 8. harmonics (§6.1.2, §6.2.7); 9. alarms;
-   10. data quality (§5.2.2).
+   12-month trend (§10.6 "long term trending"); 4. starts; 5. fatigue damage; 6. rainflow
+   cycles and S-N curves (per component, the month's range–mean matrix and its S-N curve with
+   the month's spectrum, or "no cycles counted"); 7. what-if (App. D: one table on one
+   start-cost basis, its assumptions above it); 8. steady-state oscillation and bending
+   (Tables 14–15, §8.1); 9. harmonics (§6.1.2, §6.2.7); 10. alarms; 11. data quality (§5.2.2).
 
 Life and damage numbers go through :mod:`service.reports.numbers` (≤ 3 significant digits; no
 lives beyond its horizon).
@@ -30,16 +31,19 @@ with a builder of :mod:`service.reports.figures`), and add it to
 from __future__ import annotations
 
 import functools
+import itertools
 from collections import Counter
 from collections.abc import Callable
 from functools import partial
 
+import numpy as np
 from matplotlib.figure import Figure as MplFigure
 
 from analytics.fatigue.sn_curves import SD_LOG10_N
 from service.reports.figures import (
     cumulative_figure,
     damage_figure,
+    spectrum_figure,
     starts_figure,
     steady_figure,
     trend_figure,
@@ -47,6 +51,7 @@ from service.reports.figures import (
 from service.reports.life import ComponentLife
 from service.reports.month_summary import ComponentSummary
 from service.reports.monthly import MonthlyReport
+from service.reports.monthly.model import CycleSpectrum
 from service.reports.numbers import (
     HORIZON_YEARS,
     NO_FINITE_LIFE,
@@ -441,6 +446,56 @@ def _damage(r: MonthlyReport) -> Section:
                    (_figure("damage", damage_figure, r), table, note, daily))  # fmt: skip
 
 
+def _spectra(r: MonthlyReport) -> Section:
+    """Per component, the month's rainflow range–mean matrix and its S-N curve with the
+    month's spectrum (:func:`~service.reports.figures.spectrum_figure`)."""
+    about = Paragraph(
+        "Each component's rainflow cycles of the month (ASTM E1049 counting): left, how many "
+        "cycles of each stress range and mean (log colour scale); right, its own S-N curve "
+        "with the month's cumulative spectrum (cycles with range ≥ S). Stresses are as "
+        "counted, after the stress factors (K_t or the fatigue factors of the component), "
+        "before any mean-stress correction (drawn dashed where the component has Goodman's); "
+        "bins fixed by the channels' full scales, so the days add up exactly.", "meta")  # fmt: skip
+    figures = tuple(
+        Figure(
+            f"spectrum_{s.component}",
+            functools.cache(partial(spectrum_figure, r, s.component)),
+            empty_text=f"{s.component}: no cycles counted in {r.month} (no stored "
+            "rainflow matrix for the month's days).",
+        )
+        for s in r.spectra
+    )
+    cells = Table(
+        "cycle_matrix",
+        columns(Column("component", "component", text=True),
+                ("range_from", "range from", "MPa"), ("range_to", "range to", "MPa"),
+                ("mean_from", "mean from", "MPa"), ("mean_to", "mean to", "MPa"),
+                ("cycles", "cycles", "1")),
+        rows([[s.component, *cell] for s in r.spectra for cell in _matrix_cells(s)]),
+        printed=False,
+    )  # fmt: skip
+    return Section("spectra", "Rainflow cycles and S-N curves (Diering 2011 §8.1–8.2)",
+                   (about, *figures, cells))  # fmt: skip
+
+
+def _matrix_cells(s: CycleSpectrum) -> list[list[float | None]]:
+    """The occupied cells of a component's month: range and mean bin bounds (MPa; None beyond
+    the outer edges) and cycles, for the CSV (the data behind the figure)."""
+    if not s.cells:
+        return []
+    m = s.matrix()
+    lo_r, hi_r = _bounds(m.range_edges), _bounds(m.mean_edges)
+    half = m.half_cycles
+    return [[lo_r[i][0], lo_r[i][1], hi_r[j][0], hi_r[j][1], int(half[i, j]) / 2.0]
+            for i, j in zip(*np.nonzero(half), strict=True)]  # fmt: skip
+
+
+def _bounds(edges: np.ndarray) -> list[tuple[float | None, float | None]]:
+    """Per bin (underflow, inner, overflow) its lower and upper edge (None: open)."""
+    e = [float(x) for x in edges]
+    return [(None, e[0]), *itertools.pairwise(e), (e[-1], None)]
+
+
 def _what_if(r: MonthlyReport) -> Section:
     table = Table(
         "what_if",
@@ -593,6 +648,7 @@ SECTIONS: tuple[Callable[[MonthlyReport], Section], ...] = (
     _trend,
     _starts,
     _damage,
+    _spectra,
     _what_if,
     _steady,
     _harmonics,

@@ -8,7 +8,8 @@ chunks and returns the events and harmonic windows completed; this adapter turns
 new steady-state windows) into
 
 * event rows (starts, stops, barring sessions),
-* records (``steady`` windows, ``harmonics`` tables),
+* records (``steady`` windows, ``harmonics`` tables, and per local day a ``cycle_matrix``:
+  each component's rainflow range-mean matrices by phase, :mod:`analytics.mill.cycle_matrix`),
 * alarm observations → alarm transitions (:mod:`alarms`), and
 * daily totals — damage and counted cycles per component and phase, seconds per operating
   phase, monitored time — taken every ``damage_every_s`` seconds of *sample* time (not wall
@@ -49,6 +50,7 @@ from alarms.observations import Observation, local_month
 from analytics.drivetrain.mill_config import MillConfig
 from analytics.drivetrain.torsional_model import NO_MODEL_NOTE
 from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
+from analytics.mill.cycle_matrix import day_records
 from analytics.mill.results import (
     AnalyzerEvent,
     ComponentDamage,
@@ -209,6 +211,17 @@ class MillJob:
         update.damage += rows
         update.phases += phases
         update.days += days
+        update.records += self._matrix_records()
+
+    def _matrix_records(self) -> list[tuple[str, int, dict[str, Any]]]:
+        """A ``cycle_matrix`` record (at the local day's midnight, replaced as the day moves)
+        for each day whose rainflow range-mean matrices changed since the last booking."""
+        out = []
+        for day, rec in day_records(self.analyzer.cycle_matrices_by_day()).items():
+            if self._booked.get(("cycle_matrix", day)) != rec:
+                self._booked[("cycle_matrix", day)] = rec
+                out.append(("cycle_matrix", local_midnight_ns(day, self._tz), rec))
+        return out
 
     def read_history(self, store: Store) -> None:
         """Take the mill's history from ``store`` (at start, and after another process
@@ -446,6 +459,12 @@ def split_local_days(lo: int, hi: int, tz: zoneinfo.ZoneInfo) -> list[tuple[str,
         out.append((day.isoformat(), lo, min(end, hi)))
         lo = min(end, hi)
     return out
+
+
+def local_midnight_ns(day: str, tz: zoneinfo.ZoneInfo) -> int:
+    """The start (ns since the epoch) of the local calendar day ``day`` (YYYY-MM-DD) in ``tz``."""
+    d = datetime.fromisoformat(day)
+    return int(datetime(d.year, d.month, d.day, tzinfo=tz).timestamp()) * 10**9
 
 
 def local_day(t_ns: int, tz: zoneinfo.ZoneInfo) -> str:

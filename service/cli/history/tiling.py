@@ -13,8 +13,11 @@ in two steps, per mill:
    2011 §6.2.8), drawn anew for every month and mill (:func:`tile_month`): each cycle copies the
    events, fills its running time with the steady windows and harmonic tables at their measured
    cadence, and adds the measured start and stop damage plus the run damage rate × running
-   seconds to the days it covers. A few data-quality events are added and every day is recorded
-   as monitored from midnight to midnight.
+   seconds to the days it covers. The rainflow range-mean matrices (``cycle_matrix`` records)
+   are tiled alike: the start's and stop's once per cycle, the running and stopped ones scaled
+   by each day's seconds in that phase (half-cycle counts rounded per cell, so a tiled month's
+   spectrum is the analysed cycle's, repeated). A few data-quality events are added and every
+   day is recorded as monitored from midnight to midnight.
 
 The mills are stored with ``simulated = true`` (:func:`build_history`), so every report, fleet
 view and alarm made from the store says it is simulated data. ``tests/bench/bench_report.py``
@@ -34,6 +37,8 @@ from typing import Any
 import numpy as np
 
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.fatigue.matrices import RangeMeanMatrix
+from analytics.mill.cycle_matrix import sparse_matrix
 from ingest.sim.blocks import scene_blocks
 from ingest.sim.scenes import get_scene, month_events
 from ingest.sim.spec import FailedStartEvent, StartEvent, StopEvent, TripEvent
@@ -115,10 +120,27 @@ class CycleTemplate:
         self.start_s, self.stop_s = phases.get("start", 0.0), phases.get("stop", 0.0)
         self.cadence_s = {k: self._cadence(v) for k, v in
                           (("steady", self.steady), ("harmonics", self.harmonics))}  # fmt: skip
+        self.phase_s = {"run": run_s, "stopped": phases.get("stopped", 0.0)}
+        self.matrices = _template_matrices(store.records(mill_id, "cycle_matrix"))
 
     @staticmethod
     def _cadence(rows: list[tuple[int, Any]]) -> float:
         return (rows[-1][0] - rows[0][0]) / 1e9 / (len(rows) - 1) if len(rows) > 1 else 60.0
+
+
+def _template_matrices(
+    records: list[tuple[int, dict[str, Any]]],
+) -> dict[str, dict[str, RangeMeanMatrix]]:
+    """Per component and phase, the range-mean matrix of the analysed cycle (its days summed)."""
+    out: dict[str, dict[str, RangeMeanMatrix]] = {}
+    for _, rec in records:
+        for comp, c in rec["components"].items():
+            edges = (c["range_edges"], c["mean_edges"])
+            per = out.setdefault(comp, {})
+            for phase, cells in c["phases"].items():
+                m = sparse_matrix(edges, cells)
+                per[phase] = per[phase] + m if phase in per else m
+    return out
 
 
 def _shift(e: EventRow, t_ns: int, failed: bool = False) -> EventRow:
@@ -138,6 +160,8 @@ class _Month:
     records: list[tuple[str, int, dict[str, Any]]]
     damage: dict[tuple[str, str, str], float]
     seconds: dict[tuple[str, str], float]
+    #: per day, the start and stop matrices of its cycles: ``(component, phase) → half cycles``
+    matrices: dict[str, dict[tuple[str, str], np.ndarray]]
 
     def split(self, a_ns: int, b_ns: int) -> list[tuple[str, float]]:
         """``[a, b)`` cut at the local midnights: ``(day, seconds)`` within the month."""
@@ -158,6 +182,7 @@ def _add_cycle(m: _Month, tpl: CycleTemplate, kind: str, t_start: int, t_stop: i
     for (comp, phase), d in tpl.phase.items():
         if phase in ("start", "stop"):
             m.damage[(comp, phase, day)] += d
+    _add_transient_matrices(m, tpl, day)
     m.seconds[("start", day)] += tpl.start_s
     m.seconds[("stop", day)] += tpl.stop_s
     if kind == "failed":
@@ -177,6 +202,16 @@ def _add_cycle(m: _Month, tpl: CycleTemplate, kind: str, t_start: int, t_stop: i
             m.records.append((name, t, {**rows[k % len(rows)][1], "t_ns": t}))
 
 
+def _add_transient_matrices(m: _Month, tpl: CycleTemplate, day: str) -> None:
+    """The analysed cycle's start and stop range-mean matrices, once more on ``day``."""
+    per_day = m.matrices.setdefault(day, {})
+    for comp, phases in tpl.matrices.items():
+        for phase in ("start", "stop"):
+            if phase in phases:
+                key = (comp, phase)
+                per_day[key] = per_day.get(key, 0) + phases[phase].half_cycles
+
+
 def tile_month(
     store: Store, tpl: CycleTemplate, config: MillConfig, month: str, *,
     days: float | None = None, seed: int = 7,
@@ -187,7 +222,7 @@ def tile_month(
     all_days = month_days(month)
     n = len(all_days) if days is None else min(int(days), len(all_days))
     t0 = month_bounds_ns(month, config.time_zone)[0]
-    m = _Month(all_days[:n], t0, [], [], defaultdict(float), defaultdict(float))
+    m = _Month(all_days[:n], t0, [], [], defaultdict(float), defaultdict(float), {})
     for kind, a, b in month_cycles(n, seed):  # (a 30-day schedule would overrun February)
         _add_cycle(m, tpl, kind, t0 + int(a * 1e9), t0 + int(b * 1e9))
     channel = _gap_channel(config)
@@ -209,7 +244,35 @@ def tile_month(
         Store.set_phases(db, phases)
         for name, t, data in m.records:
             Store.add_record(db, config.id, name, t, data)
+        for i, rec in enumerate(_matrix_records(m, tpl, phases).values()):
+            Store.add_record(db, config.id, "cycle_matrix", t0 + i * DAY_NS, rec)
     return {"events": len(m.events), "records": len(m.records), "damage_rows": len(m.damage)}
+
+
+def _matrix_records(
+    m: _Month, tpl: CycleTemplate, phases: list[PhaseRow]
+) -> dict[str, dict[str, Any]]:
+    """Per day of ``m``, its ``cycle_matrix`` record: the cycles' start and stop matrices, and
+    the template's running and stopped ones scaled by the day's seconds in those phases."""
+    seconds = {(p.phase, p.day): p.seconds for p in phases}
+    out: dict[str, dict[str, Any]] = {}
+    for day in m.days:
+        comps: dict[str, Any] = {}
+        for comp, tpl_phases in tpl.matrices.items():
+            cells: dict[str, list[list[int]]] = {}
+            for phase, mat in tpl_phases.items():
+                half = m.matrices.get(day, {}).get((comp, phase))
+                if phase in tpl.phase_s and tpl.phase_s[phase] > 0:
+                    ratio = seconds.get((phase, day), 0.0) / tpl.phase_s[phase]
+                    half = np.rint(mat.half_cycles * ratio).astype(np.int64)
+                if half is not None and half.any():
+                    flat = half.ravel()
+                    cells[phase] = [[int(i), int(flat[i])] for i in np.flatnonzero(flat)]
+            edges = next(iter(tpl_phases.values()))
+            comps[comp] = {"range_edges": edges.range_edges.tolist(),
+                           "mean_edges": edges.mean_edges.tolist(), "phases": cells}  # fmt: skip
+        out[day] = {"day": day, "components": comps}
+    return out
 
 
 def _gap_channel(config: MillConfig) -> str:

@@ -4,12 +4,15 @@ What is here:
 
 * :mod:`service.reports.monthly.build` — :func:`build_monthly_report`: the month read in one
   snapshot of the store; starts, damage by day, phase and component, the cost of a start and
-  the App. D what-if table, alarms, data quality, page 1 and the long view (life, cumulative
-  damage, trend); its module docstring lists the sections and their sources.
+  the App. D what-if table, each component's rainflow range–mean matrix of the month
+  (``spectra``, from the worker's daily ``cycle_matrix`` records), alarms, data quality,
+  page 1 and the long view (life, cumulative damage, trend); its module docstring lists the
+  sections and their sources.
 * :mod:`service.reports.monthly.model` — the report's data: one frozen dataclass per section,
   :class:`MonthlyReport`, and :func:`report_to_dict` (JSON-ready plain data).
 * :mod:`service.reports.monthly.reader` — the month read from the store, bounded on the
-  indexes (only the fields the report shows; harmonic tables one per hour).
+  indexes (only the fields the report shows; harmonic tables one per hour; the daily
+  ``cycle_matrix`` records).
 * :mod:`service.reports.monthly.trends` — the steady-state and harmonic trend sections.
 * :mod:`service.reports.monthly.what_if` — the one App. D table: the month's start-stop
   records (carried by its stop events) → damage per month, life from new and remaining life at

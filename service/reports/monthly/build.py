@@ -7,6 +7,9 @@ one the maintenance team reads each month. Its sections and their sources:
   configured warning/alarm levels (field average 20–22, §6.2.8), each start's switch-on and
   short-circuit peaks against the start-peak limits (250/300 % of rated torque, §7.2, Tables 4–6);
 * Miner damage per day, phase and component (§8.2, App. D: start, run and stop portions);
+* per component, the month's rainflow range–mean matrix (Fotopoulos 1983 ch. 3) with its S-N
+  curve, Goodman correction and Miner limit (``spectra``: the worker's daily ``cycle_matrix``
+  records summed; :mod:`analytics.mill.cycle_matrix`);
 * the cost of a start as App. D counts it (the start-stop records the month's stops carry) and
   the one App. D what-if table of damage and life against starts per month (5/day, 1/day,
   1/week, 1/month, and ``measured``: this month's start rate and running fraction; a month is
@@ -45,10 +48,14 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable
 from typing import Any
 
+import numpy as np
+
 from alarms.lifecycle import Alarm
 from alarms.times import iso_local
 from analytics.drivetrain.mill_config import MillConfig
+from analytics.fatigue.matrices import RangeMeanMatrix
 from analytics.mill.app_d import NO_COST, AppDCost
+from analytics.mill.cycle_matrix import sparse_matrix
 from analytics.operation.transients import start_peaks
 from service.reports.history import last_months, life_inputs, monthly_trend
 from service.reports.life import compute_life, local_iso, monitored_seconds
@@ -57,6 +64,7 @@ from service.reports.monthly.advice import build_advice, month_evidence
 from service.reports.monthly.model import (
     AlarmEntry,
     ComponentDamage,
+    CycleSpectrum,
     DataQuality,
     DataSource,
     MonthlyReport,
@@ -115,6 +123,7 @@ def build_monthly_report(
         trend = long_view["trend"]
         advice = build_advice(store, config, evidence, trend[-2] if len(trend) > 1 else None,
                               damage)  # fmt: skip
+        spectra = cycle_spectra(reader.cycle_matrices(), config)
     so_far = {c: v.damage for c, v in long_view["life"].components.items()}
     what_if, what_if_basis = what_if_table(cost, starts.count, covered, seconds, so_far)
     report = MonthlyReport(
@@ -144,9 +153,55 @@ def build_monthly_report(
         notes=_notes(span, starts, covered, config.simulated),
         what_if_basis=what_if_basis,
         advice=advice,
+        spectra=spectra,
     )
     log.info("monthly report %s %s: %d starts", config.id, month, starts.count)
     return report
+
+
+# ----------------------------------------------------------------------------- spectra
+def cycle_spectra(
+    records: list[tuple[int, dict[str, Any]]], config: MillConfig
+) -> list[CycleSpectrum]:
+    """Per component of the mill file, the month's range–mean matrix: the days' and phases'
+    matrices summed (exact: half-cycle counts on the same edges). A day stored on other edges
+    (the mill file's full scales changed during the month) is left out of the sum, logged."""
+    sums: dict[str, RangeMeanMatrix] = {}
+    days: Counter[str] = Counter()
+    for _, rec in records:
+        for comp, c in rec["components"].items():
+            edges = (c["range_edges"], c["mean_edges"])
+            day = sum((sparse_matrix(edges, cells) for cells in c["phases"].values()),
+                      RangeMeanMatrix(*edges))  # fmt: skip
+            have = sums.get(comp)
+            if have is not None and not _same_edges(have, day):
+                log.warning("%s %s: %s's cycle matrix is on other bin edges; left out",
+                            config.id, rec["day"], comp)  # fmt: skip
+                continue
+            sums[comp] = day if have is None else have + day
+            days[comp] += 1
+    return [_spectrum(comp, sums.get(comp), days[comp], config) for comp in config.components]
+
+
+def _same_edges(a: RangeMeanMatrix, b: RangeMeanMatrix) -> bool:
+    return bool(np.array_equal(a.range_edges, b.range_edges)
+                and np.array_equal(a.mean_edges, b.mean_edges))  # fmt: skip
+
+
+def _spectrum(comp: str, m: RangeMeanMatrix | None, days: int, config: MillConfig) -> CycleSpectrum:
+    goodman = config.material.mean_correction(comp)
+    flat = np.zeros(0, np.int64) if m is None else m.half_cycles.ravel()
+    return CycleSpectrum(
+        component=comp,
+        range_edges_mpa=[] if m is None else m.range_edges.tolist(),
+        mean_edges_mpa=[] if m is None else m.mean_edges.tolist(),
+        cells=[[int(i), int(flat[i])] for i in np.flatnonzero(flat)],
+        cycles=0.0 if m is None else m.cycles,
+        sn_curve=config.material.sn_curve(comp).to_dict(),
+        goodman_s_ut_mpa=None if goodman is None else goodman.S_ut,
+        miner_limit=config.life.miner_limit,
+        days=days,
+    )
 
 
 # ----------------------------------------------------------------------------- starts

@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from analytics.fatigue.matrices import RangeMeanMatrix
+from analytics.mill.cycle_matrix import sparse_matrix
 from service.reports.actions import Action, CarriedAction
 from service.reports.history import MonthTrend
 from service.reports.life import LifeReport
@@ -22,6 +24,7 @@ __all__ = [
     "Advice",
     "AlarmEntry",
     "ComponentDamage",
+    "CycleSpectrum",
     "DataQuality",
     "DataSource",
     "Harmonics",
@@ -103,6 +106,34 @@ class ComponentDamage:
     run_damage_per_hour: float | None
     hours_of_running_per_start: float | None
     start_stops: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class CycleSpectrum:
+    """The month's rainflow cycles of one component as a range–mean matrix (Fotopoulos 1983
+    ch. 3), with what its S-N figure needs. Stresses in MPa as counted, after the stress
+    factors (K_t or the fatigue factors the trace carries) and before any mean-stress
+    correction; the edges are the mill file's (:mod:`analytics.mill.cycle_matrix`), the counts
+    in half cycles as sparse ``[[cell, half cycles], …]`` of the matrix with its under/overflow
+    bins (:meth:`matrix`). ``sn_curve``: the component's curve
+    (:meth:`~analytics.fatigue.sn_curves.SNCurve.to_dict`); ``goodman_s_ut_mpa``: S_ut of its
+    Goodman correction (None without one); ``miner_limit``: the damage taken as failure;
+    ``days``: days of the month with a stored matrix."""
+
+    component: str
+    range_edges_mpa: list[float]
+    mean_edges_mpa: list[float]
+    cells: list[list[int]]
+    cycles: float
+    sn_curve: dict[str, Any]
+    goodman_s_ut_mpa: float | None
+    miner_limit: float
+    days: int
+
+    def matrix(self) -> RangeMeanMatrix:
+        """The counts as a :class:`~analytics.fatigue.matrices.RangeMeanMatrix` (a component
+        with no stored matrix has no edges: check :attr:`cells` first)."""
+        return sparse_matrix((self.range_edges_mpa, self.mean_edges_mpa), self.cells)
 
 
 @dataclass(frozen=True, slots=True)
@@ -277,6 +308,7 @@ class MonthlyReport:
     notes: list[str] = field(default_factory=list)
     what_if_basis: WhatIfBasis | None = None
     advice: Advice | None = None
+    spectra: list[CycleSpectrum] = field(default_factory=list)
 
     @property
     def empty(self) -> bool:

@@ -96,6 +96,12 @@ class MonthReader:
         return self.store.records(self.mill_id, "harmonics", self.start_ns, until_ns=self.end_ns,
                                   every_ns=HARMONIC_SAMPLE_NS, oldest_first=True)  # fmt: skip
 
+    def cycle_matrices(self) -> list[tuple[int, dict[str, Any]]]:
+        """The month's ``cycle_matrix`` records (one per local day: each component's rainflow
+        range-mean matrices by phase, :mod:`analytics.mill.cycle_matrix`), oldest first."""
+        return self.store.records(self.mill_id, "cycle_matrix", self.start_ns,
+                                  until_ns=self.end_ns, oldest_first=True)  # fmt: skip
+
     def count(self, kind: str) -> tuple[int, int | None, int | None]:
         """Number of records of ``kind`` in the month, first and last time (on the index)."""
         return self.store.record_stats(self.mill_id, kind, *self.window)

@@ -23,7 +23,8 @@ from tests.analytics.scene_helpers import custom, mill, run, scene
 
 
 def dump(a: LoadAnalysis) -> str:
-    by_day = {"phase_seconds_by_day": a.phase_seconds_by_day(), "cycles_by_day": a.cycles_by_day()}
+    by_day = {"phase_seconds_by_day": a.phase_seconds_by_day(), "cycles_by_day": a.cycles_by_day(),
+              "cycle_matrices_by_day": a.matrices_by_day()}  # fmt: skip
     return json.dumps(a.report() | by_day, sort_keys=True)
 
 
@@ -194,6 +195,12 @@ def test_phase_seconds_and_cycles_by_local_day_add_up_to_the_report():
     assert summed == pytest.approx(totals, rel=1e-12) and summed.keys() == totals.keys()
     for comp, per_day in a.cycles_by_day().items():
         assert set(per_day) <= set(days) and sum(per_day["2024-01-02"].values()) > 0, comp
+    matrices = a.matrices_by_day()
+    for comp, per_day in a.cycles_by_day().items():  # the matrices hold the counted cycles
+        for day, phases in per_day.items():
+            for phase, counted in phases.items():
+                cells = matrices[comp]["days"][day][phase]
+                assert sum(half for _, half in cells) == 2 * counted, (comp, day, phase)
 
 
 def test_dropouts_and_spikes_do_not_crash_counting():

@@ -93,3 +93,20 @@ def test_help_teaches_the_command():
     assert done.returncode == 0
     for words in ("--mills", "--months", "--store", "simulated", "millwatch report --store"):
         assert words in done.stdout
+
+
+def test_a_built_history_shows_each_components_cycles_and_sn_curve(built, tmp_path):
+    """The tiled months carry the analysed cycle's rainflow matrices: the report draws each
+    component's range-mean matrix and S-N figure in HTML and PDF, none says "no cycles"."""
+    store, _, _ = built
+    done = millwatch("report", "--store", store, "--mill", "sag-5200-lrs", "--month",
+                     "2024-01", "--format", "html,pdf", "--out", tmp_path)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    html = (tmp_path / "sag-5200-lrs" / "2024-01.html").read_text(encoding="utf-8")
+    for comp in ("pinion_combined", "pinion_torsion", "motor_torsion"):
+        assert f"<figure id='f-spectrum_{comp}'>" in html
+    assert "no cycles counted" not in html
+    pdf = PdfReader(tmp_path / "sag-5200-lrs" / "2024-01.pdf")
+    text = " ".join(" ".join(p.extract_text().split()) for p in pdf.pages)
+    assert "Rainflow cycles and S-N curves" in text and "no cycles counted" not in text
+    assert sum(len(p.images) for p in pdf.pages) == html.count("<figure")

@@ -180,7 +180,8 @@ def test_months_are_local_calendar_months():
 
 def test_html_is_self_contained_with_inline_plots(report):
     page = render_html(report)
-    assert page.count("<svg") == 5  # cumulative, trend, starts per day, damage per day, steady
+    # cumulative, trend, starts per day, damage per day, steady; each component's cycles
+    assert page.count("<svg") == 5 + len(report.spectra)
     for external in ("<script", "<link", "src=", 'href="http', "href='http", "@import"):
         assert external not in page
     assert not re.search(r"url\((?!#)", page)  # only references inside the SVGs

@@ -100,7 +100,8 @@ def test_same_tables_and_figures_in_both(report, rendered):
         assert (f"id='t-{t.name}'" in page) == (t.printed and bool(t.rows)), t.name
     built = [b for s in doc.sections for b in s.blocks if isinstance(b, dm.Figure)]
     drawn = [f for f in built if f.build() is not None]
-    assert page.count("<figure") == len(drawn) == 5  # cumulative, trend, starts, damage, steady
+    # cumulative, trend, starts, damage, steady, and per component its cycles and S-N curve
+    assert page.count("<figure") == len(drawn) == 5 + len(report.spectra)
     images = sum(len(p.images) for p in PdfReader(io.BytesIO(pdf)).pages)
     assert images == len(drawn)
 
