@@ -171,6 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         level=logging.WARNING - 10 * min(args.verbose, 2),
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
+    ctrl_c_stops()
     try:
         return int(args.handler(args) or 0)
     except Exception as exc:
@@ -181,6 +182,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write("millwatch: interrupted\n")
         return 130
+
+
+def ctrl_c_stops() -> None:
+    """Make Ctrl-C (SIGINT) and SIGTERM reach the command whatever the parent process left: a
+    parent that ignores SIGINT (``nohup``-style launchers, some supervisors and test runners)
+    hands the ignoring on to its children, and Python then installs no ``KeyboardInterrupt``
+    handler at all, so ``Ctrl-C stops`` would silently not (a gateway kept publishing).
+    Only in the main thread (where handlers can be set)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_IGN:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
 
 
 def _is_user_error(exc: Exception) -> bool:

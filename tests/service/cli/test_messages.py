@@ -171,3 +171,31 @@ def test_serve_prints_its_banner_then_ready_once_serving(tmp_path: Path) -> None
     assert lines[-1].startswith("millwatch serve: ready; 1 of 1 mill(s) analysed; API on "
                                 "http://127.0.0.1:")  # fmt: skip
     assert "Traceback" not in "".join(lines) + rest
+
+
+def _ignore_ctrl_c() -> None:  # (runs in the child before exec: what nohup-like parents do)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def test_ctrl_c_stops_a_gateway_whose_parent_ignored_it(tmp_path: Path) -> None:
+    """A parent that ignores SIGINT hands that on to its children, and Python then installs no
+    KeyboardInterrupt handler: ``simulate --publish`` ("Ctrl-C stops") kept publishing for ever
+    (the spool-recovery tests' gateways, launched from the test run, did not stop)."""
+    port = free_loopback_port()
+    argv = [sys.executable, "-m", "service.cli.main", "simulate", "--scene", "start-lrs",
+            "--mill", str(MILL_FILE), "--duration", "300s", "--no-progress", "--publish",
+            "--listen", tcp_endpoint(port), "--spool", str(tmp_path / "spool")]  # fmt: skip
+    proc = subprocess.Popen(argv, cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_ignore_ctrl_c)  # fmt: skip
+    try:
+        assert proc.stderr is not None
+        first = proc.stderr.readline()  # "publishing …; Ctrl-C stops" once it publishes
+        assert first.startswith("publishing "), first
+        proc.send_signal(signal.SIGINT)
+        _, rest = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
+    assert proc.returncode == 130, rest
+    assert "Traceback" not in rest, rest
