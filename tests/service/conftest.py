@@ -102,21 +102,30 @@ def serve(app, port: int) -> tuple[uvicorn.Server, threading.Thread]:
     return server, thread
 
 
+@contextlib.contextmanager
+def served_runtime(
+    settings: ServiceSettings, zenoh_port: int, duration_s: float
+) -> Iterator[LiveApi]:
+    """A started runtime on ``settings`` (listening on ``zenoh_port``), fed ``duration_s`` of
+    the Grid-like start (:func:`_feed`), its app served by uvicorn; all stopped afterwards."""
+    runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
+    runtime.start()
+    server = thread = None
+    try:
+        _feed(runtime, zenoh_port, duration_s=duration_s)
+        server, thread = serve(create_app(runtime), free_loopback_port())
+        yield LiveApi(runtime, f"http://127.0.0.1:{server.config.port}", zenoh_port)
+    finally:
+        if server is not None and thread is not None:
+            server.should_exit = True
+            thread.join(timeout=10)
+        runtime.stop()
+
+
 @pytest.fixture(scope="session")
 def live_api(tmp_path_factory) -> Iterator[LiveApi]:
     """The served app over a runtime that analysed a 120 s LRS start (and keeps running)."""
     tmp = tmp_path_factory.mktemp("api")
     zenoh_port = free_loopback_port()
-    settings = _settings(tmp, zenoh_port)
-    runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
-    runtime.start()
-    server = thread = None
-    try:
-        _feed(runtime, zenoh_port, duration_s=120.0)
-        server, thread = serve(create_app(runtime), free_loopback_port())
-        yield LiveApi(runtime, f"http://127.0.0.1:{server.config.port}", zenoh_port)
-    finally:
-        if server is not None:
-            server.should_exit = True
-            thread.join(timeout=10)
-        runtime.stop()
+    with served_runtime(_settings(tmp, zenoh_port), zenoh_port, duration_s=120.0) as live:
+        yield live

@@ -12,11 +12,8 @@ import httpx
 import pytest
 
 from ingest.zenoh_session import free_loopback_port
-from service.api.app import create_app
 from service.settings import ApiSettings, ApiUser
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
-from tests.service.conftest import API_KEY, MILL, _feed, _settings, serve
+from tests.service.conftest import API_KEY, MILL, _settings, served_runtime
 
 OPERATOR_KEY = "operator-key-0123456789"
 VIEWER_KEY = "viewer-key-0123456789ab"
@@ -36,19 +33,11 @@ def client(tmp_path_factory) -> Iterator[httpx.Client]:
              ApiUser(name="v.watch", key_file=tmp / "viewer.key", role="viewer"))  # fmt: skip
     api = ApiSettings(api_key=API_KEY, users=users, max_shelve_s=4 * 3600)
     settings = settings.model_copy(update={"api": api})
-    runtime = ServiceRuntime(settings, settings.load_mills(), MillJob)
-    runtime.start()
-    server = thread = None
-    try:
-        _feed(runtime, port, duration_s=60.0)
-        server, thread = serve(create_app(runtime), free_loopback_port())
-        with httpx.Client(base_url=f"http://127.0.0.1:{server.config.port}", timeout=20) as c:
-            yield c
-    finally:
-        if server is not None:
-            server.should_exit = True
-            thread.join(timeout=10)
-        runtime.stop()
+    with (
+        served_runtime(settings, port, duration_s=60.0) as live,
+        httpx.Client(base_url=live.url, timeout=20) as c,
+    ):
+        yield c
 
 
 @pytest.fixture(scope="module")
