@@ -119,7 +119,9 @@ files = ["{mill_file}"]
 
         def analysed() -> bool:
             status = httpx.get(f"{base}/mills/{MILL}", timeout=5).json()["status"]
-            return bool(status.get("latest_steady")) and status.get("starts_today", 0) >= 1
+            # (the start itself, not "starts today": the site's day may turn meanwhile —
+            # Africa/Johannesburg's midnight is 22:00 UTC, when this failed once)
+            return bool(status.get("latest_steady")) and status.get("last_start_ns") is not None
 
         _wait(analysed, 60, "a start and a steady window analysed")
         yield f"127.0.0.1:{api_port}"
