@@ -6,7 +6,8 @@ Acknowledge, Confirm, AddComment, TimedShelve, OneShotShelve, Unshelve, RemoveFr
 PlaceInService), one :class:`OperatorAction` each, validated when it is made:
 
 =====================  ===================================================================
-kind                   what it does (:mod:`alarms.engine` applies it; who and when recorded)
+kind                   what it does (:mod:`millwatch.alarms.engine` applies it; who and when
+recorded)
 =====================  ===================================================================
 acknowledge            someone has seen the alarm (optionally with a comment)
 confirm                after acknowledge: the operator has dealt with it (Part 9

@@ -1,9 +1,9 @@
 """The alarm engine: observations in, alarm transitions out; no I/O (the caller stores/publishes).
 
 Per condition ``(mill, rule, subject)`` the engine keeps a small tracker and at most one open
-alarm (deduplication). It applies the rule's lifecycle knobs (:mod:`alarms.rules`) on the
+alarm (deduplication). It applies the rule's lifecycle knobs (:mod:`millwatch.alarms.rules`) on the
 observations' own clock (``t_ns``), so a replay of the same observations gives the same
-transitions and the same deterministic alarm ids (:func:`alarms.lifecycle.alarm_id_for`):
+transitions and the same deterministic alarm ids (:func:`millwatch.alarms.lifecycle.alarm_id_for`):
 
 * **level** quantities — a severity is *confirmed* when every observation since the value first
   went beyond its threshold stayed beyond it for ``raise_delay_s``; the highest confirmed
@@ -21,8 +21,8 @@ transitions and the same deterministic alarm ids (:func:`alarms.lifecycle.alarm_
   and limit, ``exceed_count`` + 1, raised again if acknowledged; a ``reannunciated``
   transition the store, REST and OPC UA carry like any other).
 
-Operator actions (:meth:`AlarmEngine.act`, :mod:`alarms.actions`) apply at the caller's wall
-clock to an open alarm, or to a cleared one from its stored record (the engine keeps no cleared
+Operator actions (:meth:`AlarmEngine.act`, :mod:`millwatch.alarms.actions`) apply at the caller's
+wall clock to an open alarm, or to a cleared one from its stored record (the engine keeps no cleared
 alarm, but remembers the last :data:`CLOSED_REMEMBERED` it cleared or acted on, so actions on
 one build on each other before the store holds them). A condition removed from service is
 frozen — its observations are not judged, so it raises, escalates and clears nothing — until
@@ -49,12 +49,17 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from alarms import lifecycle
-from alarms.actions import ActionKind, ActionNotAllowedError, OperatorAction, ShelvingState
-from alarms.lifecycle import Alarm, AlarmState, Transition
-from alarms.observations import Kind, Observation
-from alarms.rules import Rule, RuleBook, Severity, build_rules
-from analytics.drivetrain.mill_config import MillConfig
+from millwatch.alarms import lifecycle
+from millwatch.alarms.actions import (
+    ActionKind,
+    ActionNotAllowedError,
+    OperatorAction,
+    ShelvingState,
+)
+from millwatch.alarms.lifecycle import Alarm, AlarmState, Transition
+from millwatch.alarms.observations import Kind, Observation
+from millwatch.alarms.rules import Rule, RuleBook, Severity, build_rules
+from millwatch.analytics.drivetrain.mill_config import MillConfig
 
 __all__ = ["SIMULATED_PREFIX", "SUPPRESSED_WHILE_STOPPED", "AlarmEngine", "UnknownAlarmError"]
 
@@ -138,7 +143,7 @@ class AlarmEngine:
 
     @classmethod
     def for_mills(cls, configs: Iterable[MillConfig]) -> AlarmEngine:
-        """An engine with :func:`alarms.rules.build_rules` for each mill."""
+        """An engine with :func:`millwatch.alarms.rules.build_rules` for each mill."""
         return cls(build_rules(c) for c in configs)
 
     # ------------------------------------------------------------------ input
@@ -185,7 +190,7 @@ class AlarmEngine:
         """Apply an operator action at ``t_ns`` (wall clock) to an open alarm, or to a
         cleared one — the newer of ``stored`` (the store's record) and the engine's memory of
         it; the transitions it recorded. Raises :class:`UnknownAlarmError` when neither knows
-        the alarm, :class:`~alarms.actions.ActionNotAllowedError` naming the state that
+        the alarm, :class:`~millwatch.alarms.actions.ActionNotAllowedError` naming the state that
         refuses it. An acknowledgement of an open alarm with a ``clear_on_ack`` rule clears
         it; a removal from service freezes its condition: no observation of it is judged, so
         it raises nothing new, until it is returned to service."""

@@ -1,5 +1,5 @@
 """Observations for the alarm engine, from what the mill analysis reports (its typed results,
-:mod:`analytics.mill.results`).
+:mod:`millwatch.analytics.mill.results`).
 
 One function per kind of analysis fact, so live (the worker, fact by fact) and offline
 (``millwatch analyze``, from the report) derive exactly the same observations:
@@ -13,7 +13,7 @@ One function per kind of analysis fact, so live (the worker, fact by fact) and o
   channel (the window's, half the per-revolution range, §8.1), ``load_sharing_imbalance_pct``
   (dual drives); channels by the mill file's names, as the window has them;
 * an unexplained spectral peak → ``unexplained_peak_hz`` (§6.2.7);
-* a harmonic window's resonance margins (:mod:`analytics.spectra.resonance`) →
+* a harmonic window's resonance margins (:mod:`millwatch.analytics.spectra.resonance`) →
   ``resonance_margin`` per channel (Fedin & Vinogradov 2018). Offline, the report's long-run
   table gives one margin per channel at the end of the record: a level with a raise delay is
   confirmed only by the live worker's windows.
@@ -24,15 +24,15 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from typing import Any
 
-from alarms.observations import Observation
-from analytics.mill.results import (
+from millwatch.alarms.observations import Observation
+from millwatch.analytics.mill.results import (
     AnalyzerEvent,
     BarringEvent,
     StartEvent,
     SteadyWindowResult,
     parse_event,
 )
-from analytics.operation.transients import start_peaks
+from millwatch.analytics.operation.transients import start_peaks
 
 __all__ = [
     "event_observations",
@@ -106,7 +106,7 @@ def resonance_observations(
     mill_id: str, margins: Iterable[dict[str, Any]], t_ns: int
 ) -> list[Observation]:
     """``resonance_margin`` per channel (dicts of
-    :class:`~analytics.spectra.resonance.ResonanceMargin`)."""
+    :class:`~millwatch.analytics.spectra.resonance.ResonanceMargin`)."""
     return [
         Observation(
             mill_id,

@@ -24,8 +24,8 @@ Transitions, each recorded with time, triggering value and threshold (:class:`Tr
 * ``cleared`` — the condition returned to normal (acknowledged or not latched), or it was
   acknowledged while normal, or acknowledged under a clear-on-acknowledgement rule.
 
-Operator actions (:mod:`alarms.actions`; ISA-18.2, OPC UA Part 9), each a transition with who
-(``by``), when (the worker's wall clock) and the ``comment`` given:
+Operator actions (:mod:`millwatch.alarms.actions`; ISA-18.2, OPC UA Part 9), each a transition with
+who (``by``), when (the worker's wall clock) and the ``comment`` given:
 
 * ``acknowledged`` (above) may carry a comment; ``commented`` — a comment alone, on any alarm,
   open or cleared (``comment_count``, ``last_comment…`` on the alarm; every comment stays in
@@ -38,24 +38,25 @@ Operator actions (:mod:`alarms.actions`; ISA-18.2, OPC UA Part 9), each a transi
 * ``removed_from_service`` / ``returned_to_service`` — :func:`set_in_service` (the engine
   freezes the condition meanwhile).
 * ``suppressed`` / ``unsuppressed`` — :func:`set_suppressed`: by design, from the mill's state
-  (:data:`alarms.engine.SUPPRESSED_WHILE_STOPPED`).
+  (:data:`millwatch.alarms.engine.SUPPRESSED_WHILE_STOPPED`).
 
 A shelved, suppressed or out-of-service alarm records as usual but is not annunciated
 (:attr:`Alarm.annunciated`). Each action refused in the alarm's state raises
-:class:`~alarms.actions.ActionNotAllowedError` naming that state, and changes nothing.
+:class:`~millwatch.alarms.actions.ActionNotAllowedError` naming that state, and changes nothing.
 
-Severity never steps down while the alarm is open (see :mod:`alarms.rules`). An alarm's
+Severity never steps down while the alarm is open (see :mod:`millwatch.alarms.rules`). An alarm's
 ``value``/``threshold`` are those of its latest offending value (raise, escalation, recurrence,
 re-annunciation) and ``value_at_raise``/``threshold_at_raise`` those it was raised with: the
 ``normal`` and ``cleared`` transitions record the value that ended the condition in the
 transition only, never over the alarm's offending value. The functions here
 mutate one :class:`Alarm` and return the :class:`Transition` they record; deciding *when* is
-:mod:`alarms.engine`'s job. Everything converts to plain JSON data (``to_dict``/``from_dict``).
+:mod:`millwatch.alarms.engine`'s job. Everything converts to plain JSON data
+(``to_dict``/``from_dict``).
 
 The records: :class:`Alarm` (an alarm's current state) and :class:`TransitionRecord` (one step of
 its history; a :class:`Transition` is that record plus the alarm right after it) are *the* alarm
-records of millwatch, defined here once. The store (``service.store``) maps them to its ``alarms``
-and ``alarm_transitions`` tables by field name, and the API's bodies (``service.api.models``) are
+records of millwatch, defined here once. The store (``millwatch.store``) maps them to its ``alarms``
+and ``alarm_transitions`` tables by field name, and the API's bodies (``millwatch.api.models``) are
 checked against their fields by a test, so a new field is added here, in a migration and in the
 API model — and that test says which is missing.
 """
@@ -67,8 +68,8 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
-from alarms.actions import ActionKind, ActionNotAllowedError, ShelvingState
-from alarms.rules import Severity
+from millwatch.alarms.actions import ActionKind, ActionNotAllowedError, ShelvingState
+from millwatch.alarms.rules import Severity
 
 __all__ = [
     "Alarm",
@@ -136,7 +137,7 @@ class Alarm:
     re-annunciated it; ``message``: the short sentence for the control room (≤ 200 characters);
     ``advice``: why it matters, what to check, and the source, in plain words.
     Operator actions (module docstring): ``confirmed``/``confirmed_at_ns``/``confirmed_by``;
-    ``shelving_state`` (:class:`~alarms.actions.ShelvingState`) with ``shelved_until_ns``
+    ``shelving_state`` (:class:`~millwatch.alarms.actions.ShelvingState`) with ``shelved_until_ns``
     (timed: wall clock) and ``shelved_by``; ``suppressed`` (by design, state-based);
     ``out_of_service`` (its condition removed from service); ``comment_count`` and the newest
     comment (``last_comment``, ``last_comment_by``, ``last_commented_ns``).
@@ -466,7 +467,7 @@ def set_in_service(
 ) -> Transition:
     """Mark the alarm's condition out of service (``in_service`` False) or back in service;
     :class:`ActionNotAllowedError` when it already is. The engine keeps the condition's own
-    flag (:class:`alarms.engine.AlarmEngine`)."""
+    flag (:class:`millwatch.alarms.engine.AlarmEngine`)."""
     if alarm.out_of_service is not in_service:
         now = "in service" if in_service else "out of service"
         raise ActionNotAllowedError(_refusal(alarm, f"already {now}", "nothing to change"))

@@ -12,7 +12,7 @@ Quantities come in two kinds (:class:`Kind`):
   and hysteresis to it.
 * **event** — a one-off occurrence (a start's peak torque, a barring session's peak, a spectral
   peak nobody can explain, a failed archive write). It raises at once; a rule-specific policy
-  clears it (:mod:`alarms.rules`).
+  clears it (:mod:`millwatch.alarms.rules`).
 
 Sources of the vocabulary: Diering 2011 §6.1 (the seven torque characteristics of a
 start/run/stop record), §6.1.3 and §6.2.8 (starts per month), §6.2.3 (barring), §6.2.4

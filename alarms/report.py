@@ -1,11 +1,12 @@
 """Alarms a recording would have raised, for ``millwatch analyze`` (Diering 2011 §10.6 reports).
 
-:func:`alarms_for_report` runs a fresh :class:`~alarms.engine.AlarmEngine` over a list of
+:func:`alarms_for_report` runs a fresh :class:`~millwatch.alarms.engine.AlarmEngine` over a list of
 observations in time order and returns the alarm history as plain data: one dict per alarm (its
-final state, :meth:`~alarms.lifecycle.Alarm.to_dict`) with its ``transitions``. Alarms still open
+final state, :meth:`~millwatch.alarms.lifecycle.Alarm.to_dict`) with its ``transitions``. Alarms
+still open
 at the end of the recording are reported open. When the observations hold start peaks but no
 ``starts_this_month``, the monthly counts are derived from the starts in the mill's time zone
-(:func:`~alarms.observations.derive_start_counts`).
+(:func:`~millwatch.alarms.observations.derive_start_counts`).
 """
 
 from __future__ import annotations
@@ -13,10 +14,10 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from alarms.engine import AlarmEngine
-from alarms.lifecycle import Transition
-from alarms.observations import Observation, derive_start_counts
-from analytics.drivetrain.mill_config import MillConfig
+from millwatch.alarms.engine import AlarmEngine
+from millwatch.alarms.lifecycle import Transition
+from millwatch.alarms.observations import Observation, derive_start_counts
+from millwatch.analytics.drivetrain.mill_config import MillConfig
 
 __all__ = ["alarms_for_report", "history"]
 

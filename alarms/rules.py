@@ -1,13 +1,14 @@
 """Alarm rules from the field evidence, one per observed quantity, configured per mill.
 
-A :class:`Rule` says when a quantity (:data:`alarms.observations.QUANTITIES`) is abnormal — one
+A :class:`Rule` says when a quantity (:data:`millwatch.alarms.observations.QUANTITIES`) is abnormal
+— one
 threshold per severity, compared *strictly* (``>`` for ``above`` rules, ``<`` for ``below``) — how
 it returns to normal, and what to tell the control room. :func:`build_rules` makes the rule book
 of one mill from ``MillConfig.alarms`` — the ``[alarms]`` section of the mill file: Diering 2011's
 thresholds and the knobs the sources say nothing about (deadbands, delays, data-quality limits,
 resonance margin, life fractions, load-sharing limits), each a named, validated field.
 
-Lifecycle knobs (:mod:`alarms.engine` applies them):
+Lifecycle knobs (:mod:`millwatch.alarms.engine` applies them):
 
 * level rules: ``raise_delay_s`` — the value must stay beyond a level that long (on the
   observation clock) before the alarm is raised or escalated to it; ``clear_delay_s`` — it must
@@ -26,7 +27,7 @@ database):
 * ``message`` — at most :data:`MESSAGE_MAX` characters as served (the ``SIMULATED DATA: ``
   prefix included), for a control-room list: what, the value against its limit (within the
   first 100 characters), where, the time of that value (site zone with its offset,
-  :func:`alarms.times.iso_local`), and one action. No document citations.
+  :func:`millwatch.alarms.times.iso_local`), and one action. No document citations.
 * ``advice`` — why it matters, what to check and the source (author and section), in plain
   words; the start-peak advice is the mill's starter's (:data:`START_ADVICE`).
 
@@ -63,7 +64,7 @@ report_delivery (event)     alarm > 0 failed attempts             1 delivery; la
 =========================== ===================================== ====================== =======
 
 Event rules re-annunciate: every offending event while the alarm is open updates the same
-alarm (:mod:`alarms.engine`).
+alarm (:mod:`millwatch.alarms.engine`).
 
 Severity never steps down while an alarm is open: an alarm that reached ``alarm`` stays an
 ``alarm`` until it clears (stepping down would chatter between levels; the transitions keep the
@@ -78,10 +79,10 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, Literal
 
-from alarms.observations import QUANTITIES, Kind, Observation, local_month
-from alarms.times import iso_local
-from analytics.drivetrain.mill_config import MillConfig, Starter
-from analytics.drivetrain.start_limits import K_ALARM, K_WARNING
+from millwatch.alarms.observations import QUANTITIES, Kind, Observation, local_month
+from millwatch.alarms.times import iso_local
+from millwatch.analytics.drivetrain.mill_config import MillConfig, Starter
+from millwatch.analytics.drivetrain.start_limits import K_ALARM, K_WARNING
 
 __all__ = ["MESSAGE_MAX", "Level", "Rule", "RuleBook", "Severity", "build_rules"]
 

@@ -1,7 +1,7 @@
 """JSON encoding of alarm transitions, as the service puts them on the mill's alarm key.
 
-Key: :func:`ingest.keys.alarm_key` (``millwatch/v1/<site>/<mill>/@alarms``; SCADA gateways
-subscribe to :func:`ingest.keys.alarm_pattern`). Encoding ``application/json``, schema
+Key: :func:`millwatch.ingest.keys.alarm_key` (``millwatch/v1/<site>/<mill>/@alarms``; SCADA gateways
+subscribe to :func:`millwatch.ingest.keys.alarm_pattern`). Encoding ``application/json``, schema
 ``millwatch.alarm.v1``. One message per transition, UTF-8 JSON object::
 
     {
@@ -16,7 +16,7 @@ subscribe to :func:`ingest.keys.alarm_pattern`). Encoding ``application/json``, 
                                             # removed_from_service | returned_to_service
         "seq": 1,                           # 1, 2, … per alarm: gaps mean a missed message
         "t_ns": 1763692440000000000,        # int64 ns since the Unix epoch, UTC
-        "time_utc": "2025-11-21T02:34:00.000Z", # RFC 3339, ms (alarms.times)
+        "time_utc": "2025-11-21T02:34:00.000Z", # RFC 3339, ms (millwatch.alarms.times)
         "severity": "alarm",                # warning | alarm | critical (after the transition)
         "state": "raised",                  # raised | acknowledged | cleared
         "value": 362.0, "threshold": 348.4, # null for acknowledgements and quiet clears
@@ -60,8 +60,8 @@ import json
 import math
 from typing import Any
 
-from alarms.lifecycle import Transition
-from alarms.times import iso_utc
+from millwatch.alarms.lifecycle import Transition
+from millwatch.alarms.times import iso_utc
 
 __all__ = [
     "ALARM_ENCODING",

@@ -14,7 +14,7 @@ Rooms (lower ones never import higher ones; nothing here imports ``ingest``, ``a
     spectra/         order-tracked harmonic spectra while running
     mill/            the per-mill composition of all of the above (MillAnalyzer)
 
-How samples flow (one :class:`~analytics.mill.analyzer.MillAnalyzer` per mill)::
+How samples flow (one :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer` per mill)::
 
     block → calibration → FrameAligner → FaultStage → tacho → rpm
           → LoadAnalysis: operating states → events (start, stop, barring), steady state,
@@ -25,6 +25,7 @@ How samples flow (one :class:`~analytics.mill.analyzer.MillAnalyzer` per mill)::
 Where things go: a counter emits facts; a new question about its facts is a new recorder in
 the counter's room (e.g. a new damage view in ``fatigue/``), not a change to a kernel. Compiled
 per-sample loops live only in ``*_kernels.py`` modules beside the plain-Python API that calls
-them. Every stateful object keeps :class:`analytics.contracts.Stateful` and checks snapshots with
-:func:`analytics.contracts.check_snapshot`.
+them. Every stateful object keeps :class:`millwatch.analytics.contracts.Stateful` and checks
+snapshots with
+:func:`millwatch.analytics.contracts.check_snapshot`.
 """

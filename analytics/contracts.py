@@ -30,7 +30,8 @@ class Stateful(Protocol):
 
     Snapshot
         :meth:`snapshot` returns the complete state as plain JSON data (dicts, lists, strings,
-        numbers, None; arrays packed by :mod:`analytics.snapshot_arrays`) carrying a ``kind``
+        numbers, None; arrays packed by :mod:`millwatch.analytics.snapshot_arrays`) carrying a
+        ``kind``
         and a ``version``; the restore of that data (a classmethod ``restore(snapshot)`` or, for
         objects built from a configuration, a method or a classmethod that also takes it)
         continues exactly where the snapshotted object stood: feeding the rest of the samples to
@@ -73,7 +74,7 @@ def check_snapshot(
 class SnapshotMismatch(ValueError):
     """A sound snapshot taken under another mill configuration that does not fit the object
     this configuration builds; the message names the mill and what differs. From
-    :meth:`HarmonicTracker.restore <analytics.spectra.tracker.HarmonicTracker.restore>`
+    :meth:`HarmonicTracker.restore <millwatch.analytics.spectra.tracker.HarmonicTracker.restore>`
     (segment length, bins, buffer or tracked lines differ) it concerns only spectra in
     progress, so a caller may start a fresh tracker instead
-    (:meth:`MillAnalyzer.restore <analytics.mill.analyzer.MillAnalyzer.restore>` does)."""
+    (:meth:`MillAnalyzer.restore <millwatch.analytics.mill.analyzer.MillAnalyzer.restore>` does)."""

@@ -3,7 +3,7 @@
 Data path::
 
     sensor gateway / sim.publisher / replay ──(spool.store, first)──gateway publisher (cache)
-        ──▶ zenoh ──▶ (recovering) subscriber ──▶ worker (service.worker)
+        ──▶ zenoh ──▶ (recovering) subscriber ──▶ worker (millwatch.worker)
         ──▶ archive.writer (raw, first) ──▶ analytics
     worker gap ──spool.query──▶ the gateway's spool (or a ``spool.forwarder`` beside it)
 
@@ -18,7 +18,8 @@ What is here (lower lines never import higher ones):
 - ``gateway``        the only user of the unstable ``zenoh.ext``: the gateway publisher that
   keeps the last ``retention`` of a channel, the worker's recovering subscriber
 - ``pacing``         when a timestamped block is due on the wall clock at ``speed`` × real time
-- ``mill_files``     reading mill configuration files (the model is in ``analytics.drivetrain``)
+- ``mill_files``     reading mill configuration files (the model is in
+  ``millwatch.analytics.drivetrain``)
 - ``archive/``       the MCAP log: writer with rotation, tail-tolerant reader, recovery, batches
 - ``spool/``         a gateway's spool on disk (blocks kept before they are published, for
   hours), recovery served from it by a zenoh queryable, the edge forwarder

@@ -20,11 +20,11 @@ every use of it lives in this module; the rest of millwatch sees:
   there (see "History only through the initial query" below).
 - :class:`RecoveringSubscriber` — the history phase, then the recovery phase (same place).
 
-A gateway given a spool (:mod:`ingest.spool`) writes each block to it in
+A gateway given a spool (:mod:`millwatch.ingest.spool`) writes each block to it in
 :meth:`GatewayPublisher.put` *before* publishing it: the cache above serves short gaps, the
 spool on disk what outlives the cache or the gateway process (``--spool DIR``). Without a
-spool it keeps its last minute in memory (:class:`ingest.spool.recent.RecentBlocks`), served
-by wire sequence number the same way: the blocks a restarted gateway published before the
+spool it keeps its last minute in memory (:class:`millwatch.ingest.spool.recent.RecentBlocks`),
+served by wire sequence number the same way: the blocks a restarted gateway published before the
 worker's link to it was up again come back from there.
 
 Measured facts this module relies on (tests/ingest/test_gateway.py):
@@ -48,7 +48,7 @@ whole mills lost). Hence :class:`RecoveringSubscriber` declares two advanced sub
 history only (no late-publisher detection, no recovery) until the initial query has certainly
 ended (:data:`HISTORY_PHASE_S`), then recovery only (no history); and the worker declares a
 mill's subscriber only when :class:`PublisherWatch` sees the mill's publishers up (bounded wait;
-see :mod:`service.worker.runtime`), so that the initial query reaches their caches.
+see :mod:`millwatch.worker.runtime`), so that the initial query reaches their caches.
 
 Zenoh's own sequence numbers (the ones recovery uses) are per publisher *instance*: a restarted
 gateway starts at 0 again and cannot be recovered across. Millwatch's loss accounting therefore
@@ -68,12 +68,12 @@ from typing import TYPE_CHECKING, Any
 import zenoh
 from zenoh import ext
 
-from ingest.spool.query import SpoolServer
-from ingest.spool.recent import RECENT_S, RecentBlocks
-from ingest.zenoh_session import block_encoding, wait_for_subscribers
+from millwatch.ingest.spool.query import SpoolServer
+from millwatch.ingest.spool.recent import RECENT_S, RecentBlocks
+from millwatch.ingest.zenoh_session import block_encoding, wait_for_subscribers
 
 if TYPE_CHECKING:  # (the spool imports nothing of this module; only the annotation here)
-    from ingest.spool.store import Spool
+    from millwatch.ingest.spool.store import Spool
 
 __all__ = [
     "DEFAULT_RETENTION_S",
@@ -194,9 +194,9 @@ def declare_gateway_publisher(
 
     ``blocks_per_s`` = sample rate / samples per block (10 for 100-sample blocks at 1 kHz).
     ``archived=True``: congestion control BLOCK, reliable (as
-    :func:`ingest.zenoh_session.declare_block_publisher`); ``False``: DROP for live views.
+    :func:`millwatch.ingest.zenoh_session.declare_block_publisher`); ``False``: DROP for live views.
     Replies to history and recovery queries always use BLOCK: a recovery must not be lossy.
-    ``spool``: every block is written to it before it is published (:mod:`ingest.spool`).
+    ``spool``: every block is written to it before it is published (:mod:`millwatch.ingest.spool`).
     """
     max_samples = cache_samples(retention_s, blocks_per_s)
     congestion = zenoh.CongestionControl.BLOCK if archived else zenoh.CongestionControl.DROP

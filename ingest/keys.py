@@ -23,7 +23,7 @@ Layout, version 1 (``/``-separated chunks)::
   therefore never receive replayed blocks by accident, and each replay run has its
   own key space (two engineers replaying the same mill do not interleave).
 
-- Alarm transitions of a mill (JSON, :mod:`alarms.wire`) go on the **verbatim** chunk
+- Alarm transitions of a mill (JSON, :mod:`millwatch.alarms.wire`) go on the **verbatim** chunk
   ``@alarms`` in place of the signal: ``*``/``**`` never match it, so telemetry consumers
   (``millwatch/v1/**``, :func:`live_pattern`) never receive alarms and alarm subscribers never
   receive telemetry. SCADA gateways subscribe to :func:`alarm_pattern` (all sites and mills:
@@ -34,7 +34,7 @@ Layout, version 1 (``/``-separated chunks)::
   each of its mills on ``…/@query/<what>`` and holds a liveliness token
   ``…/@worker/<worker>`` per mill while it runs; ``*``/``**`` never match either chunk.
 
-- Gateway spools (:func:`spool_key`, :mod:`ingest.spool`): a spool answers ``get`` for the
+- Gateway spools (:func:`spool_key`, :mod:`millwatch.ingest.spool`): a spool answers ``get`` for the
   blocks it holds of one channel on that channel's key followed by the verbatim chunk
   ``@spool`` (live and replay keys alike); ``*``/``**`` never match it, so no telemetry
   subscriber sees recovery traffic and a query reaches only the spools of that channel.
@@ -57,7 +57,7 @@ from functools import lru_cache
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # (only the annotation: keys stays importable without pydantic)
-    from analytics.drivetrain.mill_config import MillConfig
+    from millwatch.analytics.drivetrain.mill_config import MillConfig
 
 ROOT = "millwatch"
 LAYOUT_VERSION = "v1"

@@ -1,9 +1,9 @@
 """Reading mill configuration files (TOML) from disk.
 
-The model and its validation live in :mod:`analytics.drivetrain.mill_config` (pure); this module
-adds the file
-reading and turns every failure into a :class:`~analytics.drivetrain.mill_config.MillConfigError`
-whose message
+The model and its validation live in :mod:`millwatch.analytics.drivetrain.mill_config` (pure); this
+module adds the file
+reading and turns every failure into a
+:class:`~millwatch.analytics.drivetrain.mill_config.MillConfigError` whose message
 names the file and each bad field, e.g.::
 
     deploy/mills/sag1.toml: drive.reducer_ratio: must be > 0
@@ -17,7 +17,11 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from analytics.drivetrain.mill_config import MillConfig, MillConfigError, describe_validation_error
+from millwatch.analytics.drivetrain.mill_config import (
+    MillConfig,
+    MillConfigError,
+    describe_validation_error,
+)
 
 __all__ = ["MillConfigError", "load_mill_config", "load_mill_configs"]
 

@@ -7,19 +7,22 @@ This module is the library behind ``millwatch replay``; it has no command-line c
 Three parts, each usable alone:
 
 - **Sources** — :func:`collect_archive_files` expands files and directories into archive files;
-  :func:`archive_blocks` reads them as one stream of :class:`~ingest.archive.reader.ArchivedBlock`,
+  :func:`archive_blocks` reads them as one stream of
+  :class:`~millwatch.ingest.archive.reader.ArchivedBlock`,
   filtered by key pattern and log-time range and merged across writers in log-time order.
   Rotated files of one writer (``<prefix>_<stamp>Z.mcap`` in one directory) are read in file
-  order through :class:`~ingest.archive.reader.ArchiveReader` (which skips finished files outside
-  the
+  order through :class:`~millwatch.ingest.archive.reader.ArchiveReader` (which skips finished files
+  outside the
   time range from their summary); other files are read alone, front to back, torn tail
   tolerated.
 - **Keys** — :class:`KeyRemap` decides where replayed blocks go. By default each block goes to
   the replay key of its channel, ``millwatch/v1/@replay/<run>/<site>/<mill>/<signal>``, which no
-  live subscriber (``millwatch/v1/**``) can receive. Keys are built by :mod:`ingest.keys` only.
+  live subscriber (``millwatch/v1/**``) can receive. Keys are built by :mod:`millwatch.ingest.keys`
+  only.
 - **Pacing** — :class:`PacingClock` maps archive log time to wall time at ``speed`` × real time
   (or no waiting at all), and :class:`Replayer` publishes each block's payload, exactly as
-  archived, through a gateway publisher (:mod:`ingest.gateway`: BLOCK congestion control, and a
+  archived, through a gateway publisher (:mod:`millwatch.ingest.gateway`: BLOCK congestion control,
+  and a
   cache of the last ``retention_s`` of each key, so a worker restarted mid-replay recovers what
   it missed) when its time comes.
 
@@ -43,14 +46,18 @@ from typing import TYPE_CHECKING
 
 import zenoh
 
-from ingest import keys, wire
-from ingest.archive.files import MCAP_MAGIC, ArchivePosition, list_archive_files
-from ingest.archive.reader import ArchivedBlock, ArchiveReader, TailTolerantReader
-from ingest.gateway import DEFAULT_RETENTION_S, GatewayPublisher, declare_gateway_publisher
-from ingest.pacing import DEFAULT_LATE_THRESHOLD_S, PacingClock
+from millwatch.ingest import keys, wire
+from millwatch.ingest.archive.files import MCAP_MAGIC, ArchivePosition, list_archive_files
+from millwatch.ingest.archive.reader import ArchivedBlock, ArchiveReader, TailTolerantReader
+from millwatch.ingest.gateway import (
+    DEFAULT_RETENTION_S,
+    GatewayPublisher,
+    declare_gateway_publisher,
+)
+from millwatch.ingest.pacing import DEFAULT_LATE_THRESHOLD_S, PacingClock
 
 if TYPE_CHECKING:
-    from ingest.spool.store import Spool
+    from millwatch.ingest.spool.store import Spool
 
 __all__ = [
     "KeyRemap",
@@ -250,7 +257,7 @@ class KeyRemap:
 
     @classmethod
     def from_prefix(cls, prefix: str) -> KeyRemap:
-        """Parse ``--remap PREFIX``; three forms, each validated by :mod:`ingest.keys`:
+        """Parse ``--remap PREFIX``; three forms, each validated by :mod:`millwatch.ingest.keys`:
 
         - ``millwatch/v1/<site>`` — live keys, site replaced by ``<site>`` (a test site);
         - ``millwatch/v1/@replay/<run>`` — replay run ``<run>``, archived site kept;
@@ -267,8 +274,8 @@ class KeyRemap:
         raise ReplayError(f"remap prefix {prefix!r}: {_PREFIX_FORMS}")
 
     def apply(self, key: str) -> str:
-        """The output key of archived ``key``; raises :class:`ingest.keys.KeyFormatError` if
-        ``key`` is not a channel key, :class:`ReplayError` if it would land on itself live."""
+        """The output key of archived ``key``; raises :class:`millwatch.ingest.keys.KeyFormatError`
+        if ``key`` is not a channel key, :class:`ReplayError` if it would land on itself live."""
         channel = keys.parse_key(key)
         out = dataclasses.replace(channel, site=self.site or channel.site, replay_run=self.run).expr
         if out == channel.as_live().expr:
@@ -383,7 +390,7 @@ PublisherFactory = Callable[[str, float], GatewayPublisher]
 class Replayer:
     """Publish archived blocks on ``session``, paced by their log time.
 
-    ``blocks`` is any iterable of :class:`~ingest.archive.reader.ArchivedBlock` (usually
+    ``blocks`` is any iterable of :class:`~millwatch.ingest.archive.reader.ArchivedBlock` (usually
     :func:`archive_blocks`); payloads go out exactly as archived, malformed ones included
     (the receiver counts them, as it would live). ``remap`` chooses the output keys;
     ``speed`` is × real time (``None`` = as fast as possible); ``late_threshold_s`` see
@@ -392,7 +399,7 @@ class Replayer:
     ``wait_subscribers_s`` s at most are spent waiting for a subscriber to match (then the
     replay goes on regardless, with a warning). ``retention_s``: sample time each output key
     keeps for recovery (its cache is sized from the key's first block: fs / samples).
-    ``spool``: every block is written to it before it is published (:mod:`ingest.spool`).
+    ``spool``: every block is written to it before it is published (:mod:`millwatch.ingest.spool`).
 
     :meth:`pause`, :meth:`resume`, :meth:`set_speed` and :meth:`stop` may be called from any
     thread (or from ``on_progress``). One :meth:`run` per instance.

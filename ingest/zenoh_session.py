@@ -23,7 +23,7 @@ Rules this module encodes (zenoh 1.x Python API):
   ``CongestionControl.BLOCK`` and reliable transport: zenoh's default ``DROP`` lost
   63 % of messages at high rate in our tests. ``DROP`` remains available for
   best-effort live views (``archived=False``).
-- **Payloads are bytes** (the :mod:`ingest.wire` block), encoding
+- **Payloads are bytes** (the :mod:`millwatch.ingest.wire` block), encoding
   ``application/octet-stream;millwatch.block.v1``.
 - Subscriber callbacks run on zenoh threads: they must only enqueue. The wrapper of
   :func:`declare_block_subscriber` hands ``(key, payload_bytes)`` to the callback and
@@ -43,8 +43,8 @@ from collections.abc import Callable, Iterator, Sequence
 
 import zenoh
 
-from ingest.wire import FORMAT_VERSION
-from ingest.zenoh_tls import TlsFiles, tls_settings
+from millwatch.ingest.wire import FORMAT_VERSION
+from millwatch.ingest.zenoh_tls import TlsFiles, tls_settings
 
 log = logging.getLogger(__name__)
 
@@ -148,7 +148,7 @@ def build_config(
 
     ``listen``/``connect`` are zenoh endpoints such as ``tcp/127.0.0.1:7447``;
     ``loopback_only`` rejects any non-loopback endpoint (tests, single-host setups).
-    ``tls``: mutual TLS with these files (:mod:`ingest.zenoh_tls`; endpoints ``tls/…``);
+    ``tls``: mutual TLS with these files (:mod:`millwatch.ingest.zenoh_tls`; endpoints ``tls/…``);
     :class:`ZenohConfigError` naming a file that cannot be read.
     """
     if mode not in _MODES:
@@ -246,7 +246,7 @@ def block_encoding() -> zenoh.Encoding:
 def declare_block_publisher(
     session: zenoh.Session, key: str, *, archived: bool = True
 ) -> zenoh.Publisher:
-    """Publisher for wire blocks on ``key`` (build it with :mod:`ingest.keys`).
+    """Publisher for wire blocks on ``key`` (build it with :mod:`millwatch.ingest.keys`).
 
     ``archived=True`` (live gateways, replay): congestion control BLOCK, reliable —
     a slow subscriber slows the publisher instead of losing blocks.

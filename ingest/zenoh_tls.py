@@ -15,7 +15,7 @@ common name            role
 ``api``                ``millwatch api``: asks the workers, may acknowledge alarms
 =====================  =====================================================================
 
-:func:`tls_settings` is what :func:`ingest.zenoh_session.build_config` inserts for a
+:func:`tls_settings` is what :func:`millwatch.ingest.zenoh_session.build_config` inserts for a
 :class:`TlsFiles`; :func:`make_ca` and :func:`make_certificate` make the files
 (``millwatch zenoh-certs``; tests make their own the same way). Keys are ECDSA P-256, valid for
 ``days`` (default 825, the longest public CAs allow); private keys are written readable by

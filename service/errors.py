@@ -1,8 +1,8 @@
 """The service's domain errors: what went wrong, as a sentence a person understands.
 
 Services, views and reports raise these (:class:`NotFound`, :class:`Conflict`, …) with a
-``title`` and a ``detail``; they know nothing of HTTP. :mod:`service.api.errors` maps each class
-to its status code in one handler, and :mod:`service.remote.protocol` carries them across zenoh.
+``title`` and a ``detail``; they know nothing of HTTP. :mod:`millwatch.api.errors` maps each class
+to its status code in one handler, and :mod:`millwatch.remote.protocol` carries them across zenoh.
 """
 
 from __future__ import annotations

@@ -65,12 +65,12 @@ from pydantic import (
     model_validator,
 )
 
-from alarms.actions import DEFAULT_MAX_SHELVE_S
-from analytics.drivetrain.mill_config import MillConfig, describe_validation_error
-from ingest.keys import LAYOUT_VERSION, ROOT
-from ingest.mill_files import load_mill_config, load_mill_configs
-from ingest.zenoh_session import build_config
-from ingest.zenoh_tls import TlsFiles
+from millwatch.alarms.actions import DEFAULT_MAX_SHELVE_S
+from millwatch.analytics.drivetrain.mill_config import MillConfig, describe_validation_error
+from millwatch.ingest.keys import LAYOUT_VERSION, ROOT
+from millwatch.ingest.mill_files import load_mill_config, load_mill_configs
+from millwatch.ingest.zenoh_session import build_config
+from millwatch.ingest.zenoh_tls import TlsFiles
 
 __all__ = [
     "REPORT_FORMATS",
@@ -97,7 +97,7 @@ class SettingsError(ValueError):
     """Unusable service settings; the message names the file and the fields."""
 
 
-#: Monthly report formats written as files (:mod:`service.reports.files`), in render order.
+#: Monthly report formats written as files (:mod:`millwatch.reports.files`), in render order.
 REPORT_FORMATS: tuple[str, ...] = ("html", "pdf", "csv")
 
 
@@ -122,7 +122,7 @@ class _Strict(BaseModel):
 
 
 class ZenohTls(_Strict):
-    """Mutual TLS of the zenoh session (:mod:`ingest.zenoh_tls`): the files made by
+    """Mutual TLS of the zenoh session (:mod:`millwatch.ingest.zenoh_tls`): the files made by
     ``millwatch zenoh-certs`` in ``directory`` — ``ca.pem``, ``<name>.pem``, ``<name>-key.pem``
     — where ``name`` is this process's role, the certificate's common name the router's access
     control knows (``worker``, ``api``)."""
@@ -196,7 +196,7 @@ class ArchiveSettings(_Strict):
     ``max_unwritten_mb``: while the archive cannot be written (a full disk), received blocks
     wait in memory up to this many MiB (compressed) and are archived in order once it can; the
     blocks beyond are fetched again from the gateways' spools
-    (:class:`service.worker.health.WriteEpisodes`)."""
+    (:class:`millwatch.worker.health.WriteEpisodes`)."""
 
     directory: Path = Path("var/archive")
     rotate_seconds: Annotated[float, Field(gt=0)] = 3600.0
@@ -217,7 +217,7 @@ class WorkerSettings(_Strict):
     * ``queue_blocks``: bounds memory, never what is kept: the callbacks' queue before the
       archiving thread and the analysis's queue after it each hold at most this many blocks; a
       full callbacks' queue slows the zenoh link down, and an analysis that falls behind reads
-      the blocks it has no room for back from the archive (:mod:`service.worker.archive_first`).
+      the blocks it has no room for back from the archive (:mod:`millwatch.worker.archive_first`).
 
     * ``partition``: zenoh key expressions; the worker analyses exactly the configured mills
       whose live keys (``millwatch/v1/<site>/<mill>/*``) intersect one of them, e.g.
@@ -381,7 +381,7 @@ def no_password_field(data: Any, hint: str = "") -> Any:
 
 
 class MailSettings(_Strict):
-    """Mail of each monthly report (SMTP; :mod:`service.reports.mail`): one mail per mill and
+    """Mail of each monthly report (SMTP; :mod:`millwatch.reports.mail`): one mail per mill and
     month to every recipient, the PDF and HTML attached (``attach``).
 
     The password is never in this file: it is read when a mail is sent from ``password_file``
@@ -431,7 +431,7 @@ class MailSettings(_Strict):
 
 
 class ReportSettings(_Strict):
-    """Monthly reports written after each local month end (:mod:`service.reports.month_end`).
+    """Monthly reports written after each local month end (:mod:`millwatch.reports.month_end`).
 
     * ``directory``: reports go to ``<directory>/<mill>/<YYYY-MM>.<ext>``; ``formats`` which.
     * ``delay_s``: how long after the local month end (each mill's ``time_zone``) its report is
@@ -496,7 +496,7 @@ class OpcUaUser(_Strict):
 
 
 class OpcUaSettings(_Strict):
-    """The OPC UA server (:mod:`service.opcua`), off by default.
+    """The OPC UA server (:mod:`millwatch.opcua`), off by default.
 
     * ``endpoint``: ``opc.tcp://host:port/path``; loopback by default.
     * ``users``: user/password logins; ``user_certificates``: X.509 user certificates (DER or
@@ -509,11 +509,12 @@ class OpcUaSettings(_Strict):
     * ``trusted_clients_dir``: the trust list — client application certificates (or their
       CAs' certificates), DER or PEM files; a signing client whose certificate is not there is
       refused and its certificate saved in ``rejected/`` beside it (default: ``trusted/`` in
-      ``certificate_dir``; :mod:`service.opcua.trust`).
+      ``certificate_dir``; :mod:`millwatch.opcua.trust`).
     * ``update_s``: how often values are read from the backend (≤ 1 s; default 0.25 s).
     * ``login_free_failures``, ``login_lockout_s``: after this many failed logins from one
       client host, every login from it is refused for ``login_lockout_s`` (default 1 s),
-      doubled at each further failure, at most 300 s (:class:`service.opcua.access.LoginThrottle`).
+      doubled at each further failure, at most 300 s
+      (:class:`millwatch.opcua.access.LoginThrottle`).
     """
 
     enabled: bool = False

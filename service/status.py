@@ -1,8 +1,8 @@
 """A mill's status as the worker reports it: typed, defined once, read by attribute.
 
 The worker thread builds a :class:`MillStatus` per mill every refresh (``Worker.status``: the
-channel health of :mod:`service.worker.health`, the analysis of
-:meth:`MillJob.status <service.worker.mill_job.MillJob.status>`, why a mill is held; the runtime
+channel health of :mod:`millwatch.worker.health`, the analysis of
+:meth:`MillJob.status <millwatch.worker.mill_job.MillJob.status>`, why a mill is held; the runtime
 adds why it is stalled). Every surface reads that one model: REST (``GET /mills/{id}``'s
 ``status``, documented in OpenAPI), the remote protocol (:meth:`MillStatus.to_json` on the
 worker, ``model_validate`` on the API), OPC UA and ``/metrics``.
@@ -10,7 +10,7 @@ worker, ``model_validate`` on the API), OPC UA and ``/metrics``.
 Only what was set is sent (:meth:`MillStatus.to_json`: a held mill's status holds its health,
 state and reason only, as it always did; a mill without a status is ``{}``). Times are ns since
 the Unix epoch (UTC); the API adds each ``*_ns`` time as ISO-8601 beside it
-(:func:`service.api.times.with_iso`), kept as extra keys.
+(:func:`millwatch.api.times.with_iso`), kept as extra keys.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from analytics.mill.results import ComponentDamage, SteadyWindowResult
+from millwatch.analytics.mill.results import ComponentDamage, SteadyWindowResult
 
 __all__ = ["NO_STATUS", "ChannelStatus", "DataLoss", "MillHealthStatus", "MillStatus"]
 
@@ -31,7 +31,7 @@ class _Reported(BaseModel):
 
 
 class ChannelStatus(_Reported):
-    """The data path of one channel (lifetime counters; :class:`~service.worker.health.
+    """The data path of one channel (lifetime counters; :class:`~millwatch.worker.health.
     ChannelHealth`)."""
 
     blocks: int = Field(description="Blocks accepted.")
@@ -150,7 +150,7 @@ class MillStatus(_Reported):
 
     def live_damage(self) -> dict[str, dict[str, float]] | None:
         """The damage per component as the life computation takes it
-        (:func:`service.reports.history.life_inputs`'s ``live``); None without any."""
+        (:func:`millwatch.reports.history.life_inputs`'s ``live``); None without any."""
         return {c: d.model_dump() for c, d in self.damage.items()} or None
 
     @property

@@ -1,9 +1,9 @@
 """The README's "Layout" block, generated from the packages' ``__init__.py`` docstrings.
 
 Each package's docstring is its map (README "Design"); the first line of each is its one-line
-summary,
-and the README shows those lines as a tree. ``python -m tests.readme_layout`` prints the block,
-``--write`` puts it into README.md; ``tests/test_layout.py`` fails while the README is stale.
+summary, and the README shows those lines as a tree. ``python -m tests.readme_layout`` prints
+the block, ``--write`` puts it into README.md; ``tests/test_layout.py`` fails while the README
+is stale.
 """
 
 from __future__ import annotations
@@ -16,6 +16,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 PACKAGES = ("analytics", "ingest", "alarms", "service")
+#: The installed name of each folder's package (pyproject.toml's ``package-dir``).
+INSTALLED = {
+    "analytics": "millwatch.analytics",
+    "ingest": "millwatch.ingest",
+    "alarms": "millwatch.alarms",
+    "service": "millwatch",
+}
 #: Top-level folders that are not Python packages, with their one line.
 OTHER = {
     "deploy": "zenoh router configs, systemd units, plant and mill configs, Grafana, Prometheus",
@@ -34,7 +41,8 @@ def _summary(init: Path) -> str:
 def _lines(folder: Path, depth: int) -> list[str]:
     name = "  " * depth + folder.name + "/"
     lines = [f"{name:<{WIDTH}}{_summary(folder / '__init__.py')}".rstrip()]
-    for sub in sorted(p for p in folder.iterdir() if (p / "__init__.py").is_file()):
+    subs = (p for p in folder.iterdir() if (p / "__init__.py").is_file() and not p.is_symlink())
+    for sub in sorted(subs):  # service/analytics etc. are links to the top-level folders
         lines += _lines(sub, depth + 1)
     return lines
 

@@ -18,8 +18,8 @@ Modules::
     torsional_model  lumped torsional model: natural frequencies (natural_frequencies_of a
                      mill), resonance warnings, the model in words, dynamic factor meter
 
-Data flow: everything else reads a :class:`~analytics.drivetrain.mill_config.MillConfig` and
-asks these modules for rated torques, stresses and expected lines; nothing here holds samples
+Data flow: everything else reads a :class:`~millwatch.analytics.drivetrain.mill_config.MillConfig`
+and asks these modules for rated torques, stresses and expected lines; nothing here holds samples
 except the small DynamicFactorMeter. A new config field goes in ``mill_config`` (with its
 validation and a clear error naming the field); a new physical model gets its own module here.
 """

@@ -9,8 +9,8 @@ tooth-mesh frequency; Toram 2005 (Toram 2005, §5 and App. E eq. E.4) adds the g
 oscillation, a rigid-body pendulum of the charge at ``ω_n = √(m g e / I)`` (1.3–1.9 Hz on a 0.3 m
 lab mill), a line at a fixed frequency rather than an order of shaft rotation.
 
-The base orders come from :meth:`analytics.drivetrain.mill_config.MillConfig.excitation_orders`
-(cycles per
+The base orders come from
+:meth:`millwatch.analytics.drivetrain.mill_config.MillConfig.excitation_orders` (cycles per
 pinion revolution); this module adds the harmonics and the ±mill-speed sidebands of the mesh
 lines, the optional media line, evaluates them at a measured pinion speed and marks each line
 *not observable* above the telemetry bandwidth (Diering 2011 §5.1.2: 0–250 Hz) or Nyquist. Units:
@@ -25,7 +25,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
+from millwatch.analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 
 __all__ = [
     "ExpectedLine",

@@ -2,7 +2,7 @@
 
 A mill is described by one TOML file (README "Conventions"); this module holds the pydantic v2
 model and its derived kinematics. It is pure: :meth:`MillConfig.from_toml_text` parses text, the
-file is read by :func:`ingest.mill_files.load_mill_config`.
+file is read by :func:`millwatch.ingest.mill_files.load_mill_config`.
 
 Sources of the defaults (README "References"):
 
@@ -14,7 +14,7 @@ Sources of the defaults (README "References"):
   (Diering 2011 §8.1); K_t = 2 on the torque trace and the FAT 160/100 curves (Diering 2011 App. D),
 * alarm thresholds: start peak per starter type, mean + 2/3 standard deviations of its peaks,
   capped at the motor shaft's absolute limit (Diering 2011 Tables 3–11, §8.2;
-  :mod:`analytics.drivetrain.start_limits`);
+  :mod:`millwatch.analytics.drivetrain.start_limits`);
   starts/month 5 (supplier norm 3–5, §6.1.3) and 20 (field average 20–22, §6.2.8);
   steady-state oscillation range 25/45 % (Table 14: 23.6 % average, 45.4 % max);
   bending amplitude 25/43/90 MPa (§8.1); barring peak 185 % single / 314 % dual (Tables 12–13),
@@ -46,11 +46,19 @@ from pydantic import (
     model_validator,
 )
 
-from analytics.drivetrain.shaft_stress import ShaftStressModel, StressConcentration
-from analytics.drivetrain.start_limits import StartPeakLimits, shaft_limit_pct, start_peak_limits
-from analytics.drivetrain.torsional_params import TorsionalParams
-from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
-from analytics.fatigue.sn_models import SN_MODEL_PARAMETERS, SNModelParameters, build_sn_curve
+from millwatch.analytics.drivetrain.shaft_stress import ShaftStressModel, StressConcentration
+from millwatch.analytics.drivetrain.start_limits import (
+    StartPeakLimits,
+    shaft_limit_pct,
+    start_peak_limits,
+)
+from millwatch.analytics.drivetrain.torsional_params import TorsionalParams
+from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
+from millwatch.analytics.fatigue.sn_models import (
+    SN_MODEL_PARAMETERS,
+    SNModelParameters,
+    build_sn_curve,
+)
 
 __all__ = [
     "COMPONENT_KINDS",
@@ -142,8 +150,8 @@ class ShaftConfig(_Frozen):
     ``notch_sensitivity`` q turns each into K_f = 1 + q(K_t − 1) (Diering 2011 §8.1 eq. 5);
     ``stress_concentration``: ``"per_load"`` (each load its own K_f in the combined stress,
     Diering 2011 §8.1–8.2) or ``"single_kt"`` (App. D: the torsion K_f on the whole combined
-    trace; then ``kt_bending`` is unused and refused). :mod:`analytics.drivetrain.shaft_stress`
-    applies them."""
+    trace; then ``kt_bending`` is unused and refused).
+    :mod:`millwatch.analytics.drivetrain.shaft_stress` applies them."""
 
     motor_diameter_m: Positive = 0.2
     pinion_diameter_m: Positive = 0.31
@@ -220,7 +228,7 @@ class ShaftConfig(_Frozen):
 
 
 class SNModel(_Frozen):
-    """S-N model by name (:data:`analytics.fatigue.sn_models.SN_MODEL_PARAMETERS`) with
+    """S-N model by name (:data:`millwatch.analytics.fatigue.sn_models.SN_MODEL_PARAMETERS`) with
     overrides."""
 
     name: str = "shigley"
@@ -253,7 +261,8 @@ class ComponentFatigue(_Frozen):
     """One component kind's fatigue model (``[material.components.<kind>]``): its S-N curve
     (``sn``; None: the material's ``[material.sn]``) and mean-stress correction
     (``mean_stress``: ``"none"``, or ``"goodman"`` — S_eq = S/(1 − S_m/S_ut) with the material's
-    S_ut, Diering 2011 §8.1 Figure 37; :class:`~analytics.fatigue.sn_curves.GoodmanCorrection`)."""
+    S_ut, Diering 2011 §8.1 Figure 37;
+    :class:`~millwatch.analytics.fatigue.sn_curves.GoodmanCorrection`)."""
 
     sn: SNModel | None = None
     mean_stress: Literal["none", "goodman"] = "none"
@@ -391,8 +400,8 @@ class AlarmThresholds(_Frozen):
     """The ``[alarms]`` section: thresholds (source values; % are of motor rated torque, sources in
     the module docstring) and the rules' options the sources do not fix — deadbands, delays (s),
     data-quality limits, resonance margin, life fractions, load-sharing limits. Those options'
-    defaults are engineering judgement; every field names its unit. :mod:`alarms.rules` says
-    which rule uses which field."""
+    defaults are engineering judgement; every field names its unit. :mod:`millwatch.alarms.rules`
+    says which rule uses which field."""
 
     start_peak_warn_pct: Positive | None = Field(
         default=None,
@@ -414,7 +423,8 @@ class AlarmThresholds(_Frozen):
     barring_peak_pct: Positive | None = Field(
         default=None, description="None: 185 % single drive, 314 % dual drive (Tables 12-13)"
     )
-    # Rule options: engineering judgement, not source values (alarms.rules says which rule uses
+    # Rule options: engineering judgement, not source values (millwatch.alarms.rules says which
+    # rule uses
     # which). Times in s, deadbands in the rule's unit, rates per minute, fractions as named.
     # fmt: off
     raise_delay_s: NonNegative = 60.0             # a level stays beyond this long to raise …
@@ -475,7 +485,7 @@ _PRIOR_RATE = re.compile(r"^first_([1-9]\d{0,3})_days$")
 
 
 class LifeConfig(_Frozen):
-    """How remaining life is projected (``[life]`` of a mill file; :mod:`service.reports.life`).
+    """How remaining life is projected (``[life]`` of a mill file; :mod:`millwatch.reports.life`).
 
     Damage before monitoring began (Diering 2011 §8.3: a 15-year-old shaft is not new): the date
     the drivetrain was ``commissioned`` and *either* an estimated ``prior_damage`` (Miner sum,
@@ -622,7 +632,8 @@ class MillConfig(_Frozen):
 
     def _goodman_bounded(self) -> None:
         """Goodman has no answer for a cycle mean at S_ut (a block holding one is refused,
-        :class:`~analytics.fatigue.sn_curves.MeanStressError`): a component with the correction
+        :class:`~millwatch.analytics.fatigue.sn_curves.MeanStressError`): a component with the
+        correction
         must not reach S_ut within its channels' full scales (beyond them a sample is flagged
         at the rail and not counted)."""
         s_ut = self.material.s_ut_mpa
@@ -714,7 +725,7 @@ class MillConfig(_Frozen):
 
     def start_peak_limits(self) -> StartPeakLimits:
         """Start-peak set points, % of motor rated torque: the starter type's
-        (:func:`~analytics.drivetrain.start_limits.start_peak_limits`, capped at the motor
+        (:func:`~millwatch.analytics.drivetrain.start_limits.start_peak_limits`, capped at the motor
         shaft's absolute limit), each replaced by ``alarms.start_peak_warn_pct`` /
         ``alarms.start_peak_alarm_pct`` when the mill file sets it."""
         shaft = shaft_limit_pct(

@@ -38,7 +38,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from analytics.drivetrain.stress import THETA_SEED
+from millwatch.analytics.drivetrain.stress import THETA_SEED
 
 __all__ = ["ShaftStressModel", "StressConcentration", "fatigue_factor"]
 

@@ -1,8 +1,8 @@
 """Start-peak set points per starter type: what a normal start of this starter reaches.
 
 A start's peak (the larger of its switch-on and short-circuit peaks of the motor shaft, % of
-rated motor torque; :func:`analytics.operation.transients.start_peaks`) is judged against the
-starts of the same starter type, not one number for every mill (Diering 2011 §6.2.1–6.2.2: a
+rated motor torque; :func:`millwatch.analytics.operation.transients.start_peaks`) is judged against
+the starts of the same starter type, not one number for every mill (Diering 2011 §6.2.1–6.2.2: a
 Grid start averages 542 %, an E-LRS start 92 %):
 
 * **statistics** — mean and standard deviation of the switch-on and short-circuit peaks per

@@ -7,7 +7,7 @@ Sources
   bridges, §5.2.6 zero offset and gain; App. C routines 1–3 (the Matlab that does the same).
 * Diering 2011 §8.1 eqs. 6–10: von Mises mean/alternating stress, modified Goodman line, fatigue
   reserve factor (FRF); Peterson for K_t = K_f = 2.2 at the keyway. Eqs. 1–4 (S_e from the Marin
-  factors, Shigley) are :func:`analytics.fatigue.sn_curves.marin_endurance_limit`.
+  factors, Shigley) are :func:`millwatch.analytics.fatigue.sn_curves.marin_endurance_limit`.
 * Diering 2011 §8.2 eqs. 11–13: plane stress transformation (Hearn) with σ_y = 0.
 
 Units

@@ -32,7 +32,8 @@ lies 11 % below its 8.4 Hz mode — the resonance behind its measured K_H = 1.58
 2018 §2.1).
 
 A mill's model is the ``[torsional]`` table of its file
-(:class:`~analytics.drivetrain.torsional_params.TorsionalParams`): :func:`natural_frequencies_of`
+(:class:`~millwatch.analytics.drivetrain.torsional_params.TorsionalParams`):
+:func:`natural_frequencies_of`
 gives its natural frequencies to the harmonic tracker, :func:`design_resonances` the expected
 lines within ``alarms.resonance_margin_warn`` of one at rated speed, :func:`torsional_note` both
 in words (or that the file has no model).
@@ -50,10 +51,10 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
-from analytics.drivetrain.kinematics import ExpectedLine, expected_lines
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.drivetrain.torsional_params import TorsionalParams, pitch_radius_m
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.drivetrain.kinematics import ExpectedLine, expected_lines
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.torsional_params import TorsionalParams, pitch_radius_m
 
 __all__ = [
     "NO_MODEL_NOTE",
@@ -237,7 +238,8 @@ def dynamic_factor(torque: np.ndarray, nominal: float | None = None) -> float:
 class DynamicFactorMeter:
     """Streaming eq. 13 over running frames: max |T| and mean T (compensated sum), snapshot-able.
 
-    Feed only steady running samples (as :class:`analytics.spectra.tracker.HarmonicTracker`); the
+    Feed only steady running samples (as
+    :class:`millwatch.analytics.spectra.tracker.HarmonicTracker`); the
     value equals :func:`dynamic_factor` on the concatenated samples (to rounding of the mean).
     """
 

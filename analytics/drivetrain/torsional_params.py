@@ -1,9 +1,10 @@
 """The torsional parameters of a mill drive: the ``[torsional]`` table of a mill file.
 
 Fedin & Vinogradov 2018, Table 2 (and Table 1 for the pinion's pitch radius): the lumped model of
-:mod:`analytics.drivetrain.torsional_model`, every value referred to the pinion shaft. Kept apart
-from the model so that :mod:`analytics.drivetrain.mill_config` can hold it without importing the
-model (which reads the mill configuration). Units: kg·m², kg, N·m/rad, N/m, m.
+:mod:`millwatch.analytics.drivetrain.torsional_model`, every value referred to the pinion shaft.
+Kept apart
+from the model so that :mod:`millwatch.analytics.drivetrain.mill_config` can hold it without
+importing the model (which reads the mill configuration). Units: kg·m², kg, N·m/rad, N/m, m.
 """
 
 from __future__ import annotations

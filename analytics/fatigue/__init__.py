@@ -22,7 +22,8 @@ Curves and sums::
     *_kernels        compiled loops of rainflow, damage and the exact sum
 
 Damage by operating phase (a recorder that also needs the operating states) lives one room up,
-in :mod:`analytics.mill.phase_damage`, so that fatigue and operation import nothing of each other.
+in :mod:`millwatch.analytics.mill.phase_damage`, so that fatigue and operation import nothing of
+each other.
 
 Data flow: stress samples → RainflowCounter → Cycles → recorders. A new question about cycles
 is a new recorder here (keep the Stateful contract: split anywhere, snapshot/restore, bounded

@@ -16,7 +16,8 @@ field        dtype    meaning
 Sample indices convert to time with the block convention of README "Design": ``t = t0 + i·1e9/fs``
 ns.
 
-The cycles returned by :meth:`analytics.fatigue.rainflow.RainflowCounter.feed` are a *view* of the
+The cycles returned by :meth:`millwatch.analytics.fatigue.rainflow.RainflowCounter.feed` are a
+*view* of the
 counter's output buffer, valid until the next ``feed``: recorders consume them at once; call
 :meth:`Cycles.copy` to keep them. This keeps the streaming path free of per-block allocation.
 """
@@ -32,7 +33,7 @@ class Cycles:
     """Closed (or closable) rainflow cycles; see the module docstring.
 
     Stored as two row-major blocks, ``f`` = float64 ``(3, m)`` rows range/mean/count (the
-    counter's views have a fourth row, see :mod:`analytics.fatigue.rainflow_kernels`) and
+    counter's views have a fourth row, see :mod:`millwatch.analytics.fatigue.rainflow_kernels`) and
     ``i`` = int64 ``(2, m)`` rows i_start/i_end, of which the first ``n`` columns are valid; the
     field properties are views.
     """

@@ -1,11 +1,11 @@
 """Compiled passes of the Miner damage of rainflow cycles (numba). Use
-:mod:`analytics.fatigue.sn_curves`
-(:meth:`~analytics.fatigue.sn_curves.SNCurve.damage_of_ranges`) and
-:mod:`analytics.mill.phase_damage`.
+:mod:`millwatch.analytics.fatigue.sn_curves`
+(:meth:`~millwatch.analytics.fatigue.sn_curves.SNCurve.damage_of_ranges`) and
+:mod:`millwatch.analytics.mill.phase_damage`.
 
-Sources: the S-N formula of :mod:`analytics.fatigue.sn_curves` (1/N = exp(m·ln(S/S_D) − ln N_D),
-Diering 2011
-§8.2, EN 1993-1-9 §7); the exact sums of :mod:`analytics.fatigue.exact_sum`.
+Sources: the S-N formula of :mod:`millwatch.analytics.fatigue.sn_curves` (1/N = exp(m·ln(S/S_D) −
+ln N_D), Diering 2011
+§8.2, EN 1993-1-9 §7); the exact sums of :mod:`millwatch.analytics.fatigue.exact_sum`.
 
 A stopped mill's noise closes ~1000 rainflow cycles a second per mill, so the per-cycle cost of
 damage matters: these kernels do in one pass what took several numpy passes and temporaries
@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from analytics.fatigue.exact_sum_kernels import add_bits
+from millwatch.analytics.fatigue.exact_sum_kernels import add_bits
 
 __all__ = ["attribute_split", "book", "log_damage", "stresses"]
 
@@ -59,14 +59,15 @@ def log_damage(s, lq, m1, m2, ln_nd, s_l):
 
 @njit(cache=True, nogil=True)
 def book(dmg, eq, bits_d, bits_e, counts, digits):
-    """Whole-record booking (:mod:`analytics.fatigue.record_count`), in place: ``dmg`` and ``eq``
+    """Whole-record booking (:mod:`millwatch.analytics.fatigue.record_count`), in place: ``dmg``
+    and ``eq``
     are multiplied by ``counts`` (as ``np.multiply`` does) and added exactly into ``digits`` rows
     0 and 1. Returns ``(full cycles, ok)``; ``ok`` False when a value is negative, NaN, infinite
     or huge (the digits are then garbage; the caller takes a checked path).
 
     ``bits_d``/``bits_e``: ``dmg``/``eq`` viewed as int64 by the caller — a ``view`` in here
     makes numba load its array implementations with the cached code (~0.05 s, measured), which
-    ``millwatch rainflow`` need not pay (:mod:`service.kernel_preload`)."""
+    ``millwatch rainflow`` need not pay (:mod:`millwatch.kernel_preload`)."""
     full = 0
     for k in range(dmg.shape[0]):
         n = counts[k]

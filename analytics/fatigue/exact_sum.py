@@ -6,7 +6,8 @@ Shewchuk 1997): a unique float, so any exact method gives it. Here the sum is ac
 exactly in a long fixed-point accumulator (Kulisch's "long accumulator": every finite double is
 an integer number of 2⁻¹⁰⁷⁴, added into base-2³² digits, compiled), turned into a Python int and
 rounded by int / int true division, which CPython rounds correctly. Damage sums
-(:mod:`analytics.fatigue.miner`) take every rainflow cycle through it twice; ``math.fsum`` over
+(:mod:`millwatch.analytics.fatigue.miner`) take every rainflow cycle through it twice;
+``math.fsum`` over
 ``ndarray.tolist()`` cost 70–80 ns an element for damage values spread over 40 decades (a
 stopped mill's noise cycles), this ~3 ns plus a few µs a call.
 
@@ -20,7 +21,7 @@ import math
 
 import numpy as np
 
-from analytics.fatigue.exact_sum_kernels import _accumulate
+from millwatch.analytics.fatigue.exact_sum_kernels import _accumulate
 
 __all__ = ["DIGITS", "ExactSum", "digits_value", "fsum", "fsum2", "hilo"]
 
@@ -92,7 +93,8 @@ class ExactSum:
 
     For sums of non-negative finite terms such as damage increments: :meth:`add` raises
     ``ValueError`` for a NaN, infinite or huge (≥ 2⁹⁷⁷) term, after which the sum is unusable.
-    Compiled callers add into :attr:`digits` (:func:`~analytics.fatigue.exact_sum_kernels.add_bits`)
+    Compiled callers add into :attr:`digits`
+    (:func:`~millwatch.analytics.fatigue.exact_sum_kernels.add_bits`)
     and call :meth:`carry` after each call, which may add < 2³¹ terms per row.
     """
 

@@ -1,7 +1,7 @@
 """Compiled accumulation of the exact sum: doubles added as integer digits (no rounding).
 
-The plain-Python API and the method are in :mod:`analytics.fatigue.exact_sum`; compiled callers
-(:mod:`analytics.fatigue.damage_kernels`) use :func:`add_bits` directly.
+The plain-Python API and the method are in :mod:`millwatch.analytics.fatigue.exact_sum`; compiled
+callers (:mod:`millwatch.analytics.fatigue.damage_kernels`) use :func:`add_bits` directly.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ def add_bits(digits, row, u):
     """Add the float whose int64 bit pattern is ``u`` exactly into ``digits[row]`` (base 2³²,
     units of 2⁻¹⁰⁷⁴): mantissa × 2^(exponent) split over at most three digits. False (nothing
     added) for a non-finite or huge (≥ 2⁹⁷⁷) value: then math.fsum decides (its overflow rules).
-    Compiled callers (e.g. :mod:`analytics.fatigue.damage_kernels`) use it to sum several subsets in
-    one
+    Compiled callers (e.g. :mod:`millwatch.analytics.fatigue.damage_kernels`) use it to sum several
+    subsets in one
     pass."""
     ef = (u >> 52) & 0x7FF
     if ef >= 2000:

@@ -21,8 +21,8 @@ representative range: ``"upper"`` (the bin's upper edge: conservative inside the
 the configured full scale was exceeded). Mean bins are read at the same kind of representative for
 the Goodman correction. The benchmark measures the error of both against exact damage.
 
-Valley-peak matrix. :class:`~analytics.fatigue.cycles.Cycles` carry range and mean but not the
-direction of
+Valley-peak matrix. :class:`~millwatch.analytics.fatigue.cycles.Cycles` carry range and mean but
+not the direction of
 a half cycle, so :class:`FromToMatrix` bins each cycle by its valley (row, mean − range/2) and peak
 (column, mean + range/2): the from-to (Markov) matrix folded onto its upper triangle.
 """
@@ -36,16 +36,16 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import ArrayLike
 
-from analytics.contracts import check_snapshot
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["FromToMatrix", "RangeMeanMatrix", "Representative", "uniform_edges"]
 
 Representative = Literal["upper", "centre"]
 
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by millwatch.analytics.snapshot_arrays
 
 
 def uniform_edges(lo: float, hi: float, n_bins: int) -> np.ndarray:
@@ -251,7 +251,7 @@ class RangeMeanMatrix(_Matrix):
     ) -> float:
         """Miner damage estimated from the bins: each range bin read at its ``representative``
         range (and mean, for ``mean_correction``), multiplied by ``scale`` as
-        :class:`~analytics.fatigue.miner.DamageRecorder` does."""
+        :class:`~millwatch.analytics.fatigue.miner.DamageRecorder` does."""
         _check_representative(representative)
         ranges = _representatives(self.range_edges, representative, 0.0)
         means = _representatives(self.mean_edges, representative, self.mean_edges[0])

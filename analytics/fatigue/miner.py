@@ -20,8 +20,8 @@ increments is summed on its own and the block sums are accumulated with TwoSum:
   non-negative terms, and no growth with the number of blocks: 10¹⁰ increments in 10⁴ blocks come
   out to ~10⁻¹⁶ relative, where a plain float running sum drifts by up to (number of adds)·ε.
 
-:class:`DamageRecorder` turns the :class:`~analytics.fatigue.cycles.Cycles` a rainflow counter
-emits into a
+:class:`DamageRecorder` turns the :class:`~millwatch.analytics.fatigue.cycles.Cycles` a rainflow
+counter emits into a
 MinerSum for one S-N curve. State is three floats and an int, whatever the running time.
 """
 
@@ -34,10 +34,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from analytics.contracts import check_snapshot
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.exact_sum import fsum, fsum2
-from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.exact_sum import fsum, fsum2
+from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
 
 __all__ = ["DamageRecorder", "InvalidIncrementError", "MinerSum"]
 
@@ -59,7 +59,8 @@ def _two_sum(a: float, b: float) -> tuple[float, float]:
 
 def _exact_sum(x: np.ndarray) -> tuple[float, float]:
     """The exact sum of ``x`` as a double-double: fsum, and the fsum of what it left out
-    (compiled, :func:`analytics.fatigue.exact_sum.fsum2`; the same floats as :func:`math.fsum`)."""
+    (compiled, :func:`millwatch.analytics.fatigue.exact_sum.fsum2`; the same floats as
+    :func:`math.fsum`)."""
     return fsum2(x)
 
 
@@ -174,7 +175,8 @@ class DamageRecorder:
 
     ``scale`` multiplies cycle ranges *and* means before the curve is read (e.g. K_t, applied to
     the whole stress signal as in Diering 2011 App. D; a unit conversion). ``mean_correction``:
-    optional :class:`~analytics.fatigue.sn_curves.GoodmanCorrection` on the (scaled) cycle means.
+    optional :class:`~millwatch.analytics.fatigue.sn_curves.GoodmanCorrection` on the (scaled)
+    cycle means.
 
     Each block's damage is summed exactly and accumulated in a :class:`MinerSum`, so the live
     damage equals the batch damage (``curve.damage`` of all cycles, one ``fsum``) of the same

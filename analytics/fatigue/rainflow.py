@@ -24,10 +24,12 @@ accepted once the signal has come back from the extreme by *more* than ``gate``;
 dropped before counting. ``gate=0`` (default) is exact. Its damage error against exact counting is
 measured in ``tests/bench/bench_rainflow.py``.
 
-Residue closure (:mod:`analytics.fatigue.residue_modes`). :meth:`RainflowCounter.close` gives
+Residue closure (:mod:`millwatch.analytics.fatigue.residue_modes`). :meth:`RainflowCounter.close`
+gives
 the ASTM closure (``"half"``): every range left open is a half cycle. The standard ``"repeat"``
 closure (the record followed by itself) also needs the start points of the half cycles ASTM
-already emitted while running: :class:`analytics.fatigue.repeat_closure.RepeatClosure` follows a
+already emitted while running: :class:`millwatch.analytics.fatigue.repeat_closure.RepeatClosure`
+follows a
 counter for that, and :func:`count_cycles` takes ``residue="repeat"``. Every half cycle the counter
 emits carries its start value for it (:meth:`RainflowCounter.anchors`).
 """
@@ -40,12 +42,12 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
-from analytics.fatigue import rainflow_kernels as _k
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.repeat_closure import RepeatClosure
-from analytics.fatigue.residue_modes import ResidueMode
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.fatigue import rainflow_kernels as _k
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.repeat_closure import RepeatClosure
+from millwatch.analytics.fatigue.residue_modes import ResidueMode
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = [
     "NonFiniteSampleError",
@@ -57,7 +59,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _F64 = np.dtype(np.float64)
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by millwatch.analytics.snapshot_arrays
 
 
 class NonFiniteSampleError(ValueError):
@@ -178,11 +180,12 @@ class RainflowCounter:
         cycles), then every remaining range is a half cycle. The counter is not changed.
 
         ``mode`` must be ``"half"``: the standard ``"repeat"`` closure needs what the counter
-        emitted too (:class:`analytics.fatigue.repeat_closure.RepeatClosure`)."""
+        emitted too (:class:`millwatch.analytics.fatigue.repeat_closure.RepeatClosure`)."""
         if ResidueMode(mode) is not ResidueMode.HALF:
             raise ValueError(
                 "the 'repeat' closure needs the start points of the half cycles already emitted: "
-                "follow the counter with analytics.fatigue.repeat_closure.RepeatClosure, or use "
+                "follow the counter with "
+                "millwatch.analytics.fatigue.repeat_closure.RepeatClosure, or use "
                 "count_cycles(samples, residue='repeat')"
             )
         return self._close_half()
@@ -252,7 +255,7 @@ def count_cycles(
 
     ``residue="half"`` equals ``rainflow.extract_cycles`` (see the module docstring for the
     degenerate exceptions). ``residue="repeat"``: the standard count of the record followed by
-    itself, full cycles only (:class:`~analytics.fatigue.repeat_closure.RepeatClosure`).
+    itself, full cycles only (:class:`~millwatch.analytics.fatigue.repeat_closure.RepeatClosure`).
     """
     x = np.ascontiguousarray(samples, dtype=np.float64)
     counter = RainflowCounter(gate=gate, capacity=min(max(x.shape[0], 8), block_size) + 16)

@@ -1,12 +1,13 @@
 """Compiled hot loops of the continual rainflow counter (numba). Use
-:mod:`analytics.fatigue.rainflow`.
+:mod:`millwatch.analytics.fatigue.rainflow`.
 
 Two passes per block, no allocation: (1) turning-point extraction into a scratch buffer —
 branch-free for the exact case (gate 0), a candidate/hysteresis loop when a gate is set; (2) the
 ASTM E1049-85 §5.4.4 three-point stack rule over those turning points, exactly as the ``rainflow``
 package's ``extract_cycles`` applies it.
 
-State layout (owned by :class:`analytics.fatigue.rainflow.RainflowCounter`): two arrays, so that one
+State layout (owned by :class:`millwatch.analytics.fatigue.rainflow.RainflowCounter`): two arrays,
+so that one
 call passes three arguments (numba's dispatch costs ~0.1 µs per array argument, which matters at
 100-sample blocks). ``F`` is float64 ``(7, capacity)``, ``I`` is int64 ``(5, capacity)``:
 
@@ -212,7 +213,7 @@ def close_half(sv, si, n, cv, ci, out_f, out_i):
 
     Allocates nothing (the candidate comes in as arrays): a kernel that allocates makes numba
     load its array implementations when its cached code is loaded (~0.1 s, measured), which a
-    process that only counts need not pay (:mod:`service.kernel_preload`)."""
+    process that only counts need not pay (:mod:`millwatch.kernel_preload`)."""
     n, k = _stack_rule(cv, ci, cv.shape[0], sv, si, n, out_f, out_i, 0)
     for j in range(n - 1):
         _emit(out_f, out_i, k, sv[j], si[j], sv[j + 1], si[j + 1], 0.5)

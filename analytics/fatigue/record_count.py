@@ -2,17 +2,21 @@
 
 The offline path (``millwatch rainflow``): the same exact counter and damage per cycle as the
 live service, but no recorder state per block. Every per-sample and per-cycle step is compiled
-or vectorised — :class:`~analytics.fatigue.rainflow.RainflowCounter` over a chunk, the damage
-per cycle (:meth:`~analytics.fatigue.miner.DamageRecorder.block_damage`, bitwise the S-N curve's
-``damage_per_cycle``), one long exact accumulator for the Miner sum
-(:class:`~analytics.fatigue.exact_sum.ExactSum`) — so that Python runs once per chunk (tens of
+or vectorised — :class:`~millwatch.analytics.fatigue.rainflow.RainflowCounter` over a chunk, the
+damage
+per cycle (:meth:`~millwatch.analytics.fatigue.miner.DamageRecorder.block_damage`, bitwise the S-N
+curve's ``damage_per_cycle``), one long exact accumulator for the Miner sum
+(:class:`~millwatch.analytics.fatigue.exact_sum.ExactSum`) — so that Python runs once per chunk
+(tens of
 thousands of samples), not once per block or cycle. The totals do not depend on the chunking:
 the counter is exact for any split, and the damage is the correctly rounded sum of every cycle's
 damage (the float ``curve.damage`` of all cycles gives; Diering 2011 §8.2, App. D).
 
-Residue (:mod:`analytics.fatigue.residue_modes`): ``half`` books every cycle the counter emits and
+Residue (:mod:`millwatch.analytics.fatigue.residue_modes`): ``half`` books every cycle the counter
+emits and
 the ASTM closure; ``repeat`` books the counter's full cycles and the standard closure of the record
-followed by itself (:class:`~analytics.fatigue.repeat_closure.RepeatClosure`), no half cycles.
+followed by itself (:class:`~millwatch.analytics.fatigue.repeat_closure.RepeatClosure`), no half
+cycles.
 
 Units: samples in the signal's unit (MPa for damage, before ``scale``); damage dimensionless.
 """
@@ -24,21 +28,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytics.fatigue import damage_kernels as _dk
-from analytics.fatigue import exact_sum_kernels as _ek
-from analytics.fatigue import rainflow_kernels as _rk
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.exact_sum import ExactSum
-from analytics.fatigue.miner import DamageRecorder, MinerSum
-from analytics.fatigue.rainflow import RainflowCounter
-from analytics.fatigue.repeat_closure import RepeatClosure
-from analytics.fatigue.residue_modes import ResidueMode
-from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve, equivalent_cycles
+from millwatch.analytics.fatigue import damage_kernels as _dk
+from millwatch.analytics.fatigue import exact_sum_kernels as _ek
+from millwatch.analytics.fatigue import rainflow_kernels as _rk
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.exact_sum import ExactSum
+from millwatch.analytics.fatigue.miner import DamageRecorder, MinerSum
+from millwatch.analytics.fatigue.rainflow import RainflowCounter
+from millwatch.analytics.fatigue.repeat_closure import RepeatClosure
+from millwatch.analytics.fatigue.residue_modes import ResidueMode
+from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve, equivalent_cycles
 
 __all__ = ["KERNELS", "RecordCount", "RecordTotals"]
 
 #: The compiled kernels a record count calls from Python, for a process that loads them up front
-#: (``millwatch rainflow``: :mod:`service.kernel_preload`); one left out is only loaded later.
+#: (``millwatch rainflow``: :mod:`millwatch.kernel_preload`); one left out is only loaded later.
 KERNELS = (
     _rk.feed,
     _rk.close_half,
@@ -110,7 +114,7 @@ class RecordCount:
 
     def feed(self, samples: np.ndarray) -> Cycles:
         """Count one chunk; returns the cycles it booked (valid until the next call). Raises
-        :class:`~analytics.fatigue.rainflow.NonFiniteSampleError` for a NaN or infinite
+        :class:`~millwatch.analytics.fatigue.rainflow.NonFiniteSampleError` for a NaN or infinite
         sample (nothing of the chunk is counted)."""
         closed = self._counter.feed(samples)
         if self._repeat is not None:
@@ -140,9 +144,10 @@ class RecordCount:
 
     def _book(self, cycles: Cycles) -> None:
         """Add the damage and equivalent cycles of ``cycles``: one compiled pass around numpy's
-        ``log``/``exp`` (:meth:`~analytics.fatigue.sn_curves.SNCurve.damage_and_equivalent`,
-        :func:`~analytics.fatigue.damage_kernels.book`); Goodman, or a value the pass refuses,
-        takes the checked path (which raises for a bad value)."""
+        ``log``/``exp``
+        (:meth:`~millwatch.analytics.fatigue.sn_curves.SNCurve.damage_and_equivalent`,
+        :func:`~millwatch.analytics.fatigue.damage_kernels.book`); Goodman, or a value the pass
+        refuses, takes the checked path (which raises for a bad value)."""
         if not len(cycles):
             return
         if self._goodman is None:

@@ -4,9 +4,10 @@ Source: Amzallag et al., "Standardization of the rainflow counting method for fa
 Int. J. Fatigue 16 (1994) 287–293 (the four-point rule; the residue of one pass joined to itself
 and counted again closes every cycle of a repeating history); ISO 12110-2; McInnes & Meehan,
 "Equivalence of four-point and three-point rainflow cycle counting algorithms", Int. J. Fatigue
-30 (2008) 547–559. Definitions in :mod:`analytics.fatigue.residue_modes`.
+30 (2008) 547–559. Definitions in :mod:`millwatch.analytics.fatigue.residue_modes`.
 
-How it follows the streaming ASTM counter (:class:`~analytics.fatigue.rainflow.RainflowCounter`)
+How it follows the streaming ASTM counter
+(:class:`~millwatch.analytics.fatigue.rainflow.RainflowCounter`)
 without a second pass over the samples: every full cycle the three-point rule closes is a pair the
 four-point rule may remove too (on the stack each range is smaller than the one before, and the
 new point's range is at least as large). Where ASTM counts a range holding the start point as a
@@ -27,14 +28,14 @@ from typing import Protocol
 
 import numpy as np
 
-from analytics.fatigue import rainflow_kernels as _k
-from analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue import rainflow_kernels as _k
+from millwatch.analytics.fatigue.cycles import Cycles
 
 __all__ = ["RepeatClosure"]
 
 
 class _Counter(Protocol):
-    """What is read of :class:`~analytics.fatigue.rainflow.RainflowCounter` (which imports
+    """What is read of :class:`~millwatch.analytics.fatigue.rainflow.RainflowCounter` (which imports
     this module)."""
 
     def anchors(self, closed: Cycles) -> tuple[np.ndarray, np.ndarray]: ...

@@ -40,8 +40,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from analytics.fatigue import damage_kernels as _dk
-from analytics.fatigue.exact_sum import fsum
+from millwatch.analytics.fatigue import damage_kernels as _dk
+from millwatch.analytics.fatigue.exact_sum import fsum
 
 __all__ = [
     "SD_LOG10_N",
@@ -320,8 +320,8 @@ class SNCurve:
 
     def damage_of_ranges(self, ranges: np.ndarray, scale: float = 1.0) -> np.ndarray:
         """``damage_per_cycle(ranges * scale)`` (bitwise, a new array) in fewer passes: the
-        compiled passes of :mod:`analytics.fatigue.damage_kernels` around numpy's ``log`` and
-        ``exp``.
+        compiled passes of :mod:`millwatch.analytics.fatigue.damage_kernels` around numpy's ``log``
+        and ``exp``.
         ``scale`` > 0 multiplies the rainflow ranges (MPa after scaling), e.g. K_t."""
         r = np.ascontiguousarray(ranges, dtype=np.float64)
         if r.ndim != 1:

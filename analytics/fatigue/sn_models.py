@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # imported when a curve is built: the names and defaults stay light (CLI)
-    from analytics.fatigue.sn_curves import SNCurve
+    from millwatch.analytics.fatigue.sn_curves import SNCurve
 
 __all__ = ["SN_MODEL_NAMES", "SN_MODEL_PARAMETERS", "SNModelParameters", "build_sn_curve"]
 
@@ -53,7 +53,7 @@ class SNModelParameters:
 def build_sn_curve(name: str, params: SNModelParameters | None = None) -> SNCurve:
     """The S-N curve called ``name`` (see the module table); raises ``ValueError`` naming the
     known models for an unknown name."""
-    from analytics.fatigue.sn_curves import SNCurve, marin_endurance_limit
+    from millwatch.analytics.fatigue.sn_curves import SNCurve, marin_endurance_limit
 
     p = params or SNModelParameters()
     if name in ("shigley", "shigley-limit"):

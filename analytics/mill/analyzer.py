@@ -36,24 +36,24 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from analytics.contracts import SnapshotMismatch, check_snapshot
-from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
-from analytics.mill.loads import LoadAnalysis
-from analytics.mill.results import (
+from millwatch.analytics.contracts import SnapshotMismatch, check_snapshot
+from millwatch.analytics.drivetrain.mill_config import ChannelConfig, MillConfig
+from millwatch.analytics.mill.loads import LoadAnalysis
+from millwatch.analytics.mill.results import (
     BarringEvent,
     ComponentDamage,
     StartEvent,
     StopEvent,
     parse_event,
 )
-from analytics.operation.operating_states import OperatingState, Transition
-from analytics.signal.fault_stage import FaultStage, LastGood
-from analytics.signal.frame_aligner import Frame, FrameAligner
-from analytics.signal.tacho import TachoSpeed
-from analytics.spectra.facts import HarmonicWindow
-from analytics.spectra.report import harmonics_report
-from analytics.spectra.settings import stagger_for
-from analytics.spectra.tracker import HarmonicTracker
+from millwatch.analytics.operation.operating_states import OperatingState, Transition
+from millwatch.analytics.signal.fault_stage import FaultStage, LastGood
+from millwatch.analytics.signal.frame_aligner import Frame, FrameAligner
+from millwatch.analytics.signal.tacho import TachoSpeed
+from millwatch.analytics.spectra.facts import HarmonicWindow
+from millwatch.analytics.spectra.report import harmonics_report
+from millwatch.analytics.spectra.settings import stagger_for
+from millwatch.analytics.spectra.tracker import HarmonicTracker
 
 __all__ = ["DERIVED_SPEED", "AnalyzerOutput", "MillAnalyzer", "SpectraRunner"]
 
@@ -66,11 +66,11 @@ DERIVED_SPEED = "speed_from_tacho"
 MAX_CHUNK_S = 10.0
 _RUNNING = np.int8(OperatingState.RUNNING)
 _UNKNOWN = np.int8(OperatingState.UNKNOWN)
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by millwatch.analytics.snapshot_arrays
 
 
 class AnalyzerOutput:
-    """What one block completed: analyzer events (typed: :data:`~analytics.mill.results.
+    """What one block completed: analyzer events (typed: :data:`~millwatch.analytics.mill.results.
     AnalyzerEvent`) and harmonic windows (usually none), and the operating-state changes decided
     in it (``(t_ns, state label)``, oldest first; not counted by ``bool``, which tells whether
     there is anything to store)."""
@@ -99,8 +99,8 @@ def analysis_config(config: MillConfig) -> MillConfig:
 class SpectraRunner(Protocol):
     """What runs a mill's harmonic tracker for :class:`MillAnalyzer` (its ``spectra_runner``
     builds one around the tracker): fed and flushed in the analyzer's order, as
-    :meth:`HarmonicTracker.feed <analytics.spectra.tracker.HarmonicTracker.feed>` and ``flush``
-    with the same results (windows fed may come back later, from ``flush`` or the report);
+    :meth:`HarmonicTracker.feed <millwatch.analytics.spectra.tracker.HarmonicTracker.feed>` and
+    ``flush`` with the same results (windows fed may come back later, from ``flush`` or the report);
     ``drain`` returns once everything fed is analysed."""
 
     def feed(
@@ -197,8 +197,8 @@ class MillAnalyzer:
         """Many blocks at once, as :meth:`add` of each in order: block ``k`` is of channel
         ``list(config.channels)[chan[k]]``, starts at ``t0_ns[k]`` and holds ``raw[k]`` (all of
         one length, at the mill's rate). Regular runs are aligned in one go
-        (:meth:`~analytics.signal.frame_aligner.FrameAligner.push_blocks`), anything else block by
-        block — the same frames either way."""
+        (:meth:`~millwatch.analytics.signal.frame_aligner.FrameAligner.push_blocks`), anything else
+        block by block — the same frames either way."""
         names = self._aligner.channels
         scaled = [ci for ci in np.unique(chan).tolist() if self._scaled(names[ci])]
         rows = raw  # uncalibrated float rows: the aligner casts them while it gathers
@@ -219,7 +219,7 @@ class MillAnalyzer:
     def release_absent(self, channels: set[str]) -> None:
         """Stop waiting for ``channels`` (e.g. silent for a while): the aligner's oldest groups
         that lack only them become frames (NaN there) and wait for :meth:`process`
-        (:meth:`~analytics.signal.frame_aligner.FrameAligner.release_absent`)."""
+        (:meth:`~millwatch.analytics.signal.frame_aligner.FrameAligner.release_absent`)."""
         frames = self._aligner.release_absent(channels)
         if frames:
             self._queue_frames(frames)
@@ -421,7 +421,8 @@ class MillAnalyzer:
 
     def damage_summary(self) -> dict[str, ComponentDamage]:
         """Miner damage per component: ``committed``, ``pending_residue``, ``with_residue``
-        (:meth:`LoadAnalysis.damage_summary <analytics.mill.loads.LoadAnalysis.damage_summary>`)."""
+        (:meth:`LoadAnalysis.damage_summary
+        <millwatch.analytics.mill.loads.LoadAnalysis.damage_summary>`)."""
         return {c: ComponentDamage(**d) for c, d in self._loads.damage_summary().items()}
 
     def damage_by_day(self) -> dict[str, dict[str, dict[str, float]]]:
@@ -438,7 +439,7 @@ class MillAnalyzer:
         """The rainflow range-mean matrices of the cycles :meth:`cycles_by_day` counts, per
         component, local day and phase (stress after the stress factors, MPa; the last days
         kept): per component ``{"range_edges", "mean_edges", "days": {day: {phase: [[cell,
-        half cycles], ...]}}}`` (:mod:`analytics.mill.cycle_matrix`)."""
+        half cycles], ...]}}}`` (:mod:`millwatch.analytics.mill.cycle_matrix`)."""
         return self._loads.matrices_by_day()
 
     def phase_seconds_by_day(self) -> dict[str, dict[str, float]]:
@@ -467,7 +468,8 @@ class MillAnalyzer:
 
     # ------------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
-        """Complete state as plain JSON data (contract: :class:`analytics.contracts.Stateful`);
+        """Complete state as plain JSON data (contract:
+        :class:`millwatch.analytics.contracts.Stateful`);
         only between :meth:`process` calls, with no aligned frame waiting."""
         if self._queued:
             raise RuntimeError("process() the aligned frames before taking a snapshot")
@@ -491,12 +493,12 @@ class MillAnalyzer:
 
         After a configuration change that moves the harmonic tracker's geometry (pinion
         speed, tooth counts, liner count, telemetry bandwidth) its snapshot no longer fits
-        (:class:`~analytics.contracts.SnapshotMismatch`): the tracker then starts afresh —
+        (:class:`~millwatch.analytics.contracts.SnapshotMismatch`): the tracker then starts afresh —
         its
         state is only spectra in progress — while everything else (damage, rainflow residues,
         operating states, events) continues; :attr:`spectra_restarted` says why. A snapshot
         at another sample rate, or of another set of channels, raises
-        :class:`~analytics.contracts.SnapshotMismatch`: its sample counts would mean other
+        :class:`~millwatch.analytics.contracts.SnapshotMismatch`: its sample counts would mean other
         times, or its aligner would go on framing the old channels (an added channel's blocks
         ignored for good, a removed one's waited for)."""
         check_snapshot(snap, "mill_monitor", _SNAPSHOT_VERSION, "mill analyzer")
@@ -544,7 +546,7 @@ class MillAnalyzer:
 
 
 def _why_not_running(state: np.int8) -> str:
-    """The tracker's reason (:data:`~analytics.spectra.tracker.DROP_REASONS`) for segments
+    """The tracker's reason (:data:`~millwatch.analytics.spectra.tracker.DROP_REASONS`) for segments
     left incomplete when the mill shows ``state`` instead of running."""
     return "state_unknown" if state == _UNKNOWN else "run_ended"
 

@@ -31,10 +31,10 @@ data has run portions of days, which App. D's rounding to whole portions would t
 of them); on a one-start record the two differ by less than half a run portion per period
 (< 0.1 % for the 2-minute run of ``start-lrs`` over a day).
 
-:class:`AppDCounting` is the part of :class:`~analytics.mill.loads.LoadAnalysis` that owns
+:class:`AppDCounting` is the part of :class:`~millwatch.analytics.mill.loads.LoadAnalysis` that owns
 these counters and their piece of the snapshot (key ``app_d_portions``); it reads the stress of
 decided samples from the load stage's ring
-(:meth:`~analytics.mill.load_damage.FatigueCounting.stress`) and costs cycles with each
+(:meth:`~millwatch.analytics.mill.load_damage.FatigueCounting.stress`) and costs cycles with each
 component's damage recorder, so the curve, the stress factors and any mean-stress correction are
 the live path's.
 """
@@ -48,10 +48,10 @@ from typing import Any
 
 import numpy as np
 
-from analytics.fatigue.miner import DamageRecorder, MinerSum
-from analytics.fatigue.rainflow import RainflowCounter
-from analytics.operation.operating_states import OperatingState, Transition
-from analytics.signal.sample_ring import SampleRing
+from millwatch.analytics.fatigue.miner import DamageRecorder, MinerSum
+from millwatch.analytics.fatigue.rainflow import RainflowCounter
+from millwatch.analytics.operation.operating_states import OperatingState, Transition
+from millwatch.analytics.signal.sample_ring import SampleRing
 
 __all__ = [
     "APP_D_PERIODS",
@@ -198,7 +198,7 @@ _PORTION = {
 
 _BATCH = 4096
 """Cycles of a component kept before their damage is computed (one vectorised, exact pass per
-batch, as :class:`~analytics.mill.phase_damage.PhaseDamage` does: the sums are exact, so
+batch, as :class:`~millwatch.analytics.mill.phase_damage.PhaseDamage` does: the sums are exact, so
 batching does not change them)."""
 
 

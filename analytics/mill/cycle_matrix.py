@@ -2,8 +2,8 @@
 
 What an engineer reads beside the damage (Fotopoulos 1983 ch. 3, range–mean counting; ASTM
 E1049-85 §5.4.4): how many cycles of which stress range and mean the month held. Each cell is a
-:class:`~analytics.fatigue.matrices.RangeMeanMatrix` bin, counted in half cycles (int64), so
-days, phases and months add up exactly and the result does not depend on how the samples were
+:class:`~millwatch.analytics.fatigue.matrices.RangeMeanMatrix` bin, counted in half cycles (int64),
+so days, phases and months add up exactly and the result does not depend on how the samples were
 blocked.
 
 Stresses are the component's as counted, *after* the stress factors (the damage recorder's
@@ -11,7 +11,8 @@ Stresses are the component's as counted, *after* the stress factors (the damage 
 correction: the ranges and means the S-N curve is read at. The bin edges are fixed per component
 from the mill file (:func:`matrix_edges`: ranges 0 … 2·B in geometric steps, means −B … B, B the
 largest |stress| the component reaches within its channels' full scales,
-:meth:`MillConfig.stress_bounds <analytics.drivetrain.mill_config.MillConfig.stress_bounds>`),
+:meth:`MillConfig.stress_bounds
+<millwatch.analytics.drivetrain.mill_config.MillConfig.stress_bounds>`),
 never from the data; a cycle outside them lands in an under/overflow bin and is still counted.
 
 The plain form (:meth:`CycleMatrixDays.plain`, also the snapshot) is sparse: per day and phase
@@ -25,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from analytics.fatigue.matrices import RangeMeanMatrix, uniform_edges
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix, uniform_edges
 
 __all__ = [
     "MEAN_BINS",

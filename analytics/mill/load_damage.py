@@ -2,7 +2,8 @@
 
 Components (Diering 2011 §8.1–8.2), per drive side, each on its S-N curve and mean-stress
 correction (``[material.components.<kind>]``, else the material's ``[material.sn]``, no
-correction), with the fatigue factors of :mod:`analytics.drivetrain.shaft_stress` (``[shafts]``
+correction), with the fatigue factors of :mod:`millwatch.analytics.drivetrain.shaft_stress`
+(``[shafts]``
 of the mill file): ``pinion_combined`` (σ_θ at θ = ``plane_angle_deg``, default 45°, eq. 12 with
 σ_y = 0: K_f,b·σ_b·(½ + ½cos 2θ) + K_f,t·τ·sin 2θ; or App. D's one factor on the whole trace),
 ``pinion_torsion`` and ``motor_torsion`` (τ = 16T/(πd³), K_f,t), and — only when the mill file
@@ -10,16 +11,17 @@ configures it — ``pinion_bending`` (σ_b alone, App. D §3). On the critical p
 (``plane_angle_deg = "critical"``) the combined stress is counted on every θ of the grid, as
 traces ``pinion_combined@<θ>``, and each answer reports the one with the most committed damage
 (its θ in the damage table's ``plane_angle_deg``). Each counted trace has one
-:class:`~analytics.fatigue.rainflow.RainflowCounter` and one
-:class:`~analytics.mill.phase_damage.PhaseDamage` that books its cycles by phase and local day.
+:class:`~millwatch.analytics.fatigue.rainflow.RainflowCounter` and one
+:class:`~millwatch.analytics.mill.phase_damage.PhaseDamage` that books its cycles by phase and
+local day.
 
 NaN policy: for rainflow counting the last valid value is held across missing and flagged
 samples (the counter sees the signal with the gap closed: a plateau has no reversal), and
 samples before the first valid one are skipped (``lead`` counts them, so counter indices map
 back to stream samples).
 
-:class:`FatigueCounting` is the part of :class:`~analytics.mill.loads.LoadAnalysis` that owns
-these (``counters``, ``damage``, ``lead``, ``last``) and their piece of the snapshot; the
+:class:`FatigueCounting` is the part of :class:`~millwatch.analytics.mill.loads.LoadAnalysis` that
+owns these (``counters``, ``damage``, ``lead``, ``last``) and their piece of the snapshot; the
 phase timeline and how far the phases are decided are the caller's, passed in with every call.
 """
 
@@ -31,16 +33,16 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from analytics.contracts import SnapshotMismatch
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.drivetrain.stress import shear_stress_from_torque
-from analytics.fatigue.miner import DamageRecorder
-from analytics.fatigue.rainflow import RainflowCounter
-from analytics.mill.app_d import AppDCost
-from analytics.mill.cycle_matrix import CycleMatrixDays, matrix_edges
-from analytics.mill.load_roles import LoadRoles
-from analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
-from analytics.mill.report import damage_table
+from millwatch.analytics.contracts import SnapshotMismatch
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.stress import shear_stress_from_torque
+from millwatch.analytics.fatigue.miner import DamageRecorder
+from millwatch.analytics.fatigue.rainflow import RainflowCounter
+from millwatch.analytics.mill.app_d import AppDCost
+from millwatch.analytics.mill.cycle_matrix import CycleMatrixDays, matrix_edges
+from millwatch.analytics.mill.load_roles import LoadRoles
+from millwatch.analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
+from millwatch.analytics.mill.report import damage_table
 
 __all__ = ["FatigueCounting"]
 
@@ -192,7 +194,8 @@ class FatigueCounting:
 
     def matrices_by_day(self, timeline: PhaseTimeline, decided: int) -> dict[str, Any]:
         """Range-mean matrices of the attributed cycles per component, local day and phase (the
-        last days kept; :mod:`analytics.mill.cycle_matrix`), components without one left out."""
+        last days kept; :mod:`millwatch.analytics.mill.cycle_matrix`), components without one left
+        out."""
         for pd in self.damage.values():
             pd.attribute(timeline, decided)
         out = {comp: pd.matrix_days() for comp, pd in self.reported().items()}
@@ -221,8 +224,8 @@ class FatigueCounting:
         n: int,
         app_d: dict[str, AppDCost],
     ) -> dict[str, Any]:
-        """:func:`~analytics.mill.report.damage_table` after ``n`` stream samples, the cycles
-        of the decided phases attributed and the open residues closed (on copies), each
+        """:func:`~millwatch.analytics.mill.report.damage_table` after ``n`` stream samples, the
+        cycles of the decided phases attributed and the open residues closed (on copies), each
         component with the fatigue factors its stress carries in words (``stress_factors``)."""
         for pd in self.damage.values():
             pd.attribute(timeline, decided)
@@ -239,7 +242,7 @@ class FatigueCounting:
 
     def check(self, snapshot: dict[str, Any]) -> None:
         """:class:`SnapshotMismatch` when the snapshot's damage was computed with other fatigue
-        factors (:meth:`~analytics.drivetrain.shaft_stress.ShaftStressModel.refusal`)."""
+        factors (:meth:`~millwatch.analytics.drivetrain.shaft_stress.ShaftStressModel.refusal`)."""
         scales = {d["recorder"]["scale"] for d in snapshot["damage"].values()}
         why = self.roles.stress_model.refusal(snapshot.get("stress"), scales)
         if why is None:

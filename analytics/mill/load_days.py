@@ -2,7 +2,7 @@
 sample → ns since the Unix epoch → the site's local time) and the seconds of each operating
 phase, in total and per local day cut at the site's midnights (:class:`PhaseDays`).
 
-Both are parts of :class:`~analytics.mill.loads.LoadAnalysis` that own their piece of its
+Both are parts of :class:`~millwatch.analytics.mill.loads.LoadAnalysis` that own their piece of its
 snapshot (``snapshot()`` gives their keys, ``load()`` sets them back); what they derive from
 the configuration is listed in ``CONFIGURED``.
 """
@@ -14,8 +14,8 @@ import zoneinfo
 from datetime import datetime, time, timedelta
 from typing import Any
 
-from analytics.mill.phase_damage import PHASE_OF_STATE
-from analytics.operation.operating_states import OperatingState
+from millwatch.analytics.mill.phase_damage import PHASE_OF_STATE
+from millwatch.analytics.operation.operating_states import OperatingState
 
 __all__ = ["KEEP_START_DAYS", "KEEP_START_MONTHS", "PhaseDays", "StreamClock"]
 

@@ -1,12 +1,12 @@
 """Start, stop and barring events of the load stage, measured when the operating-state machine
 closes their phase, and the count of starts per local day and calendar month.
 
-:class:`EventBook` is the part of :class:`~analytics.mill.loads.LoadAnalysis` that owns the
-open phases (``open_start``, ``open_stop``, the barring session being accumulated), the kept
+:class:`EventBook` is the part of :class:`~millwatch.analytics.mill.loads.LoadAnalysis` that owns
+the open phases (``open_start``, ``open_stop``, the barring session being accumulated), the kept
 events (the last ``keep_events`` of each kind, plain JSON dicts) and the start counts, and its
 piece of the snapshot. Each phase is measured from the load stage's sample ring
-(:mod:`analytics.operation.transients`, Diering 2011 §6.1.1 Figure 20, §6.2.3, §6.2.5), which
-the caller passes in with every call (the ring is replaced on restore), with
+(:mod:`millwatch.analytics.operation.transients`, Diering 2011 §6.1.1 Figure 20, §6.2.3, §6.2.5),
+which the caller passes in with every call (the ring is replaced on restore), with
 :data:`PREROLL_S` of samples before the phase begins.
 """
 
@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.load_days import KEEP_START_DAYS, KEEP_START_MONTHS, StreamClock
-from analytics.mill.load_roles import LoadRoles
-from analytics.operation.operating_states import OperatingState, Transition
-from analytics.operation.transients import (
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.load_days import KEEP_START_DAYS, KEEP_START_MONTHS, StreamClock
+from millwatch.analytics.mill.load_roles import LoadRoles
+from millwatch.analytics.operation.operating_states import OperatingState, Transition
+from millwatch.analytics.operation.transients import (
     BarringAccumulator,
     PhaseWindow,
     TransientSettings,
@@ -30,7 +30,7 @@ from analytics.operation.transients import (
     start_peak_level,
     start_peaks,
 )
-from analytics.signal.sample_ring import SampleRing
+from millwatch.analytics.signal.sample_ring import SampleRing
 
 __all__ = ["KEEP_EVENTS", "PREROLL_S", "EventBook", "keep"]
 
@@ -156,7 +156,7 @@ class EventBook:
         return d
 
     def start_alarm(self, pct: float | None) -> str | None:
-        """The start's level (:func:`~analytics.operation.transients.start_peak_level`, as
+        """The start's level (:func:`~millwatch.analytics.operation.transients.start_peak_level`, as
         the alarm rule judges it), None when below the warning level or without a peak."""
         level = start_peak_level(pct, *self.config.start_peak_levels())
         return level if level in ("warning", "alarm") else None

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.drivetrain.shaft_stress import ShaftStressModel
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.shaft_stress import ShaftStressModel
 
 __all__ = ["LoadRoles", "component_names", "find_channel", "steady_channels"]
 
@@ -49,7 +49,7 @@ def steady_channels(config: MillConfig) -> dict[str, float | None]:
 
 def component_names(config: MillConfig) -> list[str]:
     """Damage components of a mill: combined/torsion per side (Diering 2011 §8.1–8.2; see
-    :mod:`analytics.mill.loads`)."""
+    :mod:`millwatch.analytics.mill.loads`)."""
     return config.components
 
 

@@ -1,6 +1,6 @@
 """The checkpoint format of the load stage: kind, version and key order of
-:meth:`LoadAnalysis.snapshot <analytics.mill.loads.LoadAnalysis.snapshot>`, and the reading of
-an older checkpoint.
+:meth:`LoadAnalysis.snapshot <millwatch.analytics.mill.loads.LoadAnalysis.snapshot>`, and the
+reading of an older checkpoint.
 
 Stored checkpoints hold these keys in this order (:data:`KEYS`); each part of the load stage
 gives its own keys and :func:`assemble` puts them in that order, so the JSON text is the same
@@ -13,14 +13,16 @@ from __future__ import annotations
 
 from typing import Any
 
-from analytics.contracts import check_snapshot
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.load_roles import find_channel, steady_channels
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.load_roles import find_channel, steady_channels
 
 __all__ = ["KEYS", "KIND", "VERSION", "assemble", "checked", "from_version_2"]
 
 KIND = "mill_analyzer"  # the name LoadAnalysis had when checkpoints were first written
-VERSION = 3  # 2: arrays packed by analytics.snapshot_arrays; 3: steady channels named by the
+VERSION = (
+    3  # 2: arrays packed by millwatch.analytics.snapshot_arrays; 3: steady channels named by the
+)
 #: mill file (a version-2 snapshot is renamed on restore: :func:`from_version_2`)
 #: The keys of a snapshot, in the order stored checkpoints hold them (``phase_days`` and
 #: ``app_d_portions`` added at the end: older checkpoints restore without them, and without
@@ -48,7 +50,8 @@ def assemble(config: MillConfig, *parts: dict[str, Any]) -> dict[str, Any]:
 
 def checked(config: MillConfig, snapshot: dict[str, Any]) -> dict[str, Any]:
     """``snapshot`` as version 3 (a version-2 one renamed), checked to be the load stage's of
-    ``config``'s mill (:class:`~analytics.contracts.SnapshotMismatch` or ValueError in words)."""
+    ``config``'s mill (:class:`~millwatch.analytics.contracts.SnapshotMismatch` or ValueError in
+    words)."""
     if snapshot.get("kind") == KIND and snapshot.get("version") == 2:
         snapshot = from_version_2(config, snapshot)
     check_snapshot(snapshot, KIND, VERSION)

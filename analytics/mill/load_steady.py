@@ -1,10 +1,10 @@
 """Steady-state windows of the load stage: the decided running samples go, in order, to the
-steady-state meter (:mod:`analytics.operation.steady_state`), over the mill file's torque and
-bending channels by their names in the mill file
-(:func:`~analytics.mill.load_roles.steady_channels`).
+steady-state meter (:mod:`millwatch.analytics.operation.steady_state`), over the mill file's torque
+and bending channels by their names in the mill file
+(:func:`~millwatch.analytics.mill.load_roles.steady_channels`).
 
-:class:`SteadyProgress` is the part of :class:`~analytics.mill.loads.LoadAnalysis` that owns
-the meter, how far it has been fed (``steady_until``) and the kept windows (the last
+:class:`SteadyProgress` is the part of :class:`~millwatch.analytics.mill.loads.LoadAnalysis` that
+owns the meter, how far it has been fed (``steady_until``) and the kept windows (the last
 ``keep_windows``, plain JSON dicts), and its piece of the snapshot. The sample ring and the
 phase timeline are the caller's, passed in with every call (both are replaced on restore).
 """
@@ -16,14 +16,14 @@ from typing import Any
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.load_days import StreamClock
-from analytics.mill.load_events import keep
-from analytics.mill.load_roles import LoadRoles, steady_channels
-from analytics.mill.phase_damage import PhaseTimeline
-from analytics.operation.operating_states import OperatingState
-from analytics.operation.steady_state import SteadyStateMeter, SteadyWindow
-from analytics.signal.sample_ring import SampleRing
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.load_days import StreamClock
+from millwatch.analytics.mill.load_events import keep
+from millwatch.analytics.mill.load_roles import LoadRoles, steady_channels
+from millwatch.analytics.mill.phase_damage import PhaseTimeline
+from millwatch.analytics.operation.operating_states import OperatingState
+from millwatch.analytics.operation.steady_state import SteadyStateMeter, SteadyWindow
+from millwatch.analytics.signal.sample_ring import SampleRing
 
 __all__ = ["KEEP_WINDOWS", "SteadyProgress"]
 

@@ -2,24 +2,25 @@
 steady-state metrics and fatigue damage by phase, fed with aligned multi-channel frames.
 
 Composition (README "Shape of the analytics code"): the state machine
-(:mod:`analytics.operation.operating_states`) turns speed and torque into transitions;
+(:mod:`millwatch.analytics.operation.operating_states`) turns speed and torque into transitions;
 :class:`LoadAnalysis` writes each frame to a ring buffer of the channels' rows
-(:mod:`analytics.mill.load_roles`), feeds the state machine, and hands the results to its parts,
-each of which owns its state and its piece of the snapshot:
+(:mod:`millwatch.analytics.mill.load_roles`), feeds the state machine, and hands the results to its
+parts, each of which owns its state and its piece of the snapshot:
 
-* ``clock``, ``days`` (:mod:`analytics.mill.load_days`) — stream sample → time and local day;
-  the samples of each closed phase, in total and per local day;
-* ``events`` (:mod:`analytics.mill.load_events`) — each closed phase measured from the ring
-  (:mod:`analytics.operation.transients`), starts counted per day and month;
-* ``steady`` (:mod:`analytics.mill.load_steady`) — running samples to
-  :mod:`analytics.operation.steady_state`;
-* ``fatigue`` (:mod:`analytics.mill.load_damage`) — stress, one
-  :class:`~analytics.fatigue.rainflow.RainflowCounter` and one
-  :class:`~analytics.mill.phase_damage.PhaseDamage` per component (Diering 2011 §8.1–8.2);
-* ``app_d`` (:mod:`analytics.mill.app_d`) — App. D's start-stop records and run portions per
-  component, fed with decided samples from the ring; each stop event carries its record.
+* ``clock``, ``days`` (:mod:`millwatch.analytics.mill.load_days`) — stream sample → time and local
+  day; the samples of each closed phase, in total and per local day;
+* ``events`` (:mod:`millwatch.analytics.mill.load_events`) — each closed phase measured from the
+  ring (:mod:`millwatch.analytics.operation.transients`), starts counted per day and month;
+* ``steady`` (:mod:`millwatch.analytics.mill.load_steady`) — running samples to
+  :mod:`millwatch.analytics.operation.steady_state`;
+* ``fatigue`` (:mod:`millwatch.analytics.mill.load_damage`) — stress, one
+  :class:`~millwatch.analytics.fatigue.rainflow.RainflowCounter` and one
+  :class:`~millwatch.analytics.mill.phase_damage.PhaseDamage` per component (Diering 2011 §8.1–8.2);
+* ``app_d`` (:mod:`millwatch.analytics.mill.app_d`) — App. D's start-stop records and run portions
+  per component, fed with decided samples from the ring; each stop event carries its record.
 
-The snapshot's format (kind, version, keys in order) is :mod:`analytics.mill.load_snapshot`'s.
+The snapshot's format (kind, version, keys in order) is
+:mod:`millwatch.analytics.mill.load_snapshot`'s.
 
 Missing and flagged samples (policy). NaN samples (dropouts) and samples flagged by a telemetry
 fault detector are never peaks (they are NaN in the ring). For rainflow counting the last valid
@@ -43,25 +44,30 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.app_d import AppDCounting
-from analytics.mill.load_damage import FatigueCounting
-from analytics.mill.load_days import KEEP_START_DAYS, KEEP_START_MONTHS, PhaseDays, StreamClock
-from analytics.mill.load_events import PREROLL_S, EventBook
-from analytics.mill.load_roles import LoadRoles, component_names, steady_channels
-from analytics.mill.load_snapshot import assemble, checked
-from analytics.mill.load_steady import SteadyProgress
-from analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
-from analytics.mill.report import months_table, phase_seconds
-from analytics.operation.operating_states import (
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.app_d import AppDCounting
+from millwatch.analytics.mill.load_damage import FatigueCounting
+from millwatch.analytics.mill.load_days import (
+    KEEP_START_DAYS,
+    KEEP_START_MONTHS,
+    PhaseDays,
+    StreamClock,
+)
+from millwatch.analytics.mill.load_events import PREROLL_S, EventBook
+from millwatch.analytics.mill.load_roles import LoadRoles, component_names, steady_channels
+from millwatch.analytics.mill.load_snapshot import assemble, checked
+from millwatch.analytics.mill.load_steady import SteadyProgress
+from millwatch.analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
+from millwatch.analytics.mill.report import months_table, phase_seconds
+from millwatch.analytics.operation.operating_states import (
     OperatingState,
     OperatingStateMachine,
     StateThresholds,
     Transition,
 )
-from analytics.operation.transients import TransientSettings
-from analytics.signal.frame_aligner import Frame
-from analytics.signal.sample_ring import SampleRing
+from millwatch.analytics.operation.transients import TransientSettings
+from millwatch.analytics.signal.frame_aligner import Frame
+from millwatch.analytics.signal.sample_ring import SampleRing
 
 __all__ = [
     "KEEP_START_DAYS",
@@ -80,12 +86,13 @@ class LoadAnalysis:
     """The load stage of one mill's analysis: operating states, start/stop/barring events,
     steady-state windows and fatigue damage by component, phase and day (module docstring).
 
-    It is one stage of :class:`~analytics.mill.analyzer.MillAnalyzer`, which calibrates, aligns
+    It is one stage of :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer`, which calibrates,
+    aligns
     and fault-flags the channels before it and tracks harmonics after it. ``feed(frame)`` takes
     an aligned frame (channel names of the mill config; missing channels or samples NaN;
     optional ``flags`` masks) and returns the events completed in it (plain dicts).
     :meth:`report` is plain data; :meth:`snapshot`/:meth:`restore` keep the contract of
-    :class:`analytics.contracts.Stateful`.
+    :class:`millwatch.analytics.contracts.Stateful`.
 
     Public attributes read by callers: ``n`` (stream samples fed), ``t0_ns`` (time of sample 0,
     None before the first frame), ``fs`` (Hz), ``windows``/``starts``/``stops``/``barrings``
@@ -336,7 +343,7 @@ class LoadAnalysis:
 
     def matrices_by_day(self) -> dict[str, Any]:
         """Range-mean matrices of the attributed cycles per component, local day and phase
-        (:meth:`~analytics.mill.load_damage.FatigueCounting.matrices_by_day`)."""
+        (:meth:`~millwatch.analytics.mill.load_damage.FatigueCounting.matrices_by_day`)."""
         return self.fatigue.matrices_by_day(self.timeline, self.sm.decided_until)
 
     def damage_summary(self) -> dict[str, dict[str, float]]:
@@ -353,7 +360,7 @@ class LoadAnalysis:
 
     def report(self) -> dict[str, Any]:
         """Everything measured so far, as plain JSON-ready data (tables of
-        :mod:`analytics.mill.report`)."""
+        :mod:`millwatch.analytics.mill.report`)."""
         seconds = phase_seconds(self.days.phase_samples, self.timeline, self.n, self.fs)
         ev = self.events
         failed = ev.failed_per_month()
@@ -386,8 +393,9 @@ class LoadAnalysis:
 
     # ------------------------------------------------------------ persistence
     def snapshot(self) -> dict[str, Any]:
-        """Complete state as plain JSON data (contract: :class:`analytics.contracts.Stateful`),
-        in the format of :mod:`analytics.mill.load_snapshot`.
+        """Complete state as plain JSON data (contract:
+        :class:`millwatch.analytics.contracts.Stateful`),
+        in the format of :mod:`millwatch.analytics.mill.load_snapshot`.
 
         Every attribute that changes while samples are fed is here and :meth:`_load` sets it
         back, the parts' (:attr:`PARTS`) by their own ``snapshot``/``load``; what ``__init__``

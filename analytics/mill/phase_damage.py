@@ -7,12 +7,13 @@ dominates), §6.1.3 (starts are counted per month, norm 3–5).
 
 Attribution: every rainflow cycle belongs to the phase of the sample where it *closed*, its
 ``i_end`` (the second reversal), looked up in the operating-state timeline. Transitions can be
-decided a few seconds late (:attr:`analytics.operation.operating_states.OperatingStateMachine.
+decided a few seconds late
+(:attr:`millwatch.analytics.operation.operating_states.OperatingStateMachine.
 decided_until`): cycles whose ``i_end`` is not yet decided wait in a small pending list (bounded by
 the decision delay). Days are the local calendar days of the site's time zone at ``i_end``.
 
-Sums are :class:`analytics.fatigue.miner.MinerSum` with exact block sums (attribution is batched),
-so the
+Sums are :class:`millwatch.analytics.fatigue.miner.MinerSum` with exact block sums (attribution is
+batched), so the
 result does not depend on how the samples were blocked. State is bounded: the timeline is pruned
 behind the oldest open rainflow reversal, and only the last ``keep_days`` days are kept.
 """
@@ -29,14 +30,14 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
-from analytics.fatigue import damage_kernels as _dk
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.exact_sum import DIGITS, digits_value, fsum, hilo
-from analytics.fatigue.miner import DamageRecorder, MinerSum
-from analytics.mill.cycle_matrix import CycleMatrixDays
-from analytics.operation.operating_states import OperatingState, Transition
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.fatigue import damage_kernels as _dk
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.exact_sum import DIGITS, digits_value, fsum, hilo
+from millwatch.analytics.fatigue.miner import DamageRecorder, MinerSum
+from millwatch.analytics.mill.cycle_matrix import CycleMatrixDays
+from millwatch.analytics.operation.operating_states import OperatingState, Transition
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = [
     "APP_D_SCENARIOS",
@@ -137,7 +138,7 @@ class PhaseDamage:
     pending. ``t0_ns``/``fs`` convert stream samples to time; ``time_zone`` names the site's days.
     ``matrices`` (optional): the range-mean matrices the attributed cycles are also binned in by
     day and phase, at their stress after the recorder's ``scale`` (MPa;
-    :mod:`analytics.mill.cycle_matrix`).
+    :mod:`millwatch.analytics.mill.cycle_matrix`).
     """
 
     def __init__(
@@ -273,7 +274,7 @@ class PhaseDamage:
         cells: np.ndarray,
     ) -> bool:
         """The usual case in one compiled pass
-        (:func:`analytics.fatigue.damage_kernels.attribute_split`):
+        (:func:`millwatch.analytics.fatigue.damage_kernels.attribute_split`):
         the decided cycles all closed on one local day. Books them as :meth:`_attribute` does
         (the same exact sums per state, in state order) and keeps the rest pending; False, and
         nothing changed, in any other case."""
@@ -358,7 +359,8 @@ class PhaseDamage:
 
     def matrix_days(self) -> dict[str, Any] | None:
         """The range-mean matrices of the attributed cycles per local day and phase (the last
-        days kept; :meth:`CycleMatrixDays.plain <analytics.mill.cycle_matrix.CycleMatrixDays.
+        days kept;
+        :meth:`CycleMatrixDays.plain <millwatch.analytics.mill.cycle_matrix.CycleMatrixDays.
         plain>`), None when this component has none (no stress bound in the mill file)."""
         return None if self.matrices is None else self.matrices.plain()
 

@@ -1,12 +1,13 @@
-"""The tables of a :class:`~analytics.mill.loads.LoadAnalysis` report, from plain pieces.
+"""The tables of a :class:`~millwatch.analytics.mill.loads.LoadAnalysis` report, from plain pieces.
 
 Sources: Diering 2011 §6.1.3 and §6.2.8 (starts per month against the supplier norm of 3–5;
 field average 20–22, peak 90), §8.3 and App. D (damage by phase, the cost of a start counted as
 App. D counts it, damage per month for 5 starts/day, 1/day, 1/week, 1/month;
-:mod:`analytics.mill.app_d`). Alarm levels come from the mill configuration.
+:mod:`millwatch.analytics.mill.app_d`). Alarm levels come from the mill configuration.
 
 Each function takes the counts, timelines and recorders it tabulates, not the analysis object,
-so this module sits below :mod:`analytics.mill.loads` (which calls it) and imports nothing of it.
+so this module sits below :mod:`millwatch.analytics.mill.loads` (which calls it) and imports
+nothing of it.
 A new report table goes here as one more such function, called from ``LoadAnalysis.report``.
 """
 
@@ -14,17 +15,17 @@ from __future__ import annotations
 
 from typing import Any
 
-from analytics.drivetrain.mill_config import AlarmThresholds
-from analytics.fatigue.cycles import Cycles
-from analytics.mill.app_d import NO_COST, AppDCost, app_d_projections
-from analytics.mill.phase_damage import (
+from millwatch.analytics.drivetrain.mill_config import AlarmThresholds
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.mill.app_d import NO_COST, AppDCost, app_d_projections
+from millwatch.analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
     PHASE_OF_STATE,
     PhaseDamage,
     PhaseTimeline,
 )
-from analytics.operation.operating_states import OperatingState
+from millwatch.analytics.operation.operating_states import OperatingState
 
 __all__ = [
     "STARTS_NORM_PER_MONTH",
@@ -43,8 +44,8 @@ STARTS_NORM_PER_MONTH = (3, 5)
 def starts_status(n: int, alarms: AlarmThresholds) -> str:
     """Starts of one calendar month against the norm and the configured levels: ``alarm`` above
     the alarm level, ``warning`` above the warning level (strictly above, as the alarm rules of
-    :mod:`alarms.rules` and Diering 2011 §6.1.3/§10.3 put it), ``above norm`` beyond 3–5, else
-    ``ok``."""
+    :mod:`millwatch.alarms.rules` and Diering 2011 §6.1.3/§10.3 put it), ``above norm`` beyond 3–5,
+    else ``ok``."""
     if n > alarms.starts_per_month_alarm:
         return "alarm"
     if n > alarms.starts_per_month_warn:
@@ -92,9 +93,10 @@ def damage_table(
 ) -> dict[str, Any]:
     """Per component: committed damage, what closing the rainflow ``residues`` would add, damage
     by phase and day, the cost of a start as App. D counts it (``app_d``:
-    :class:`~analytics.mill.app_d.AppDCost`) and its monthly projections (App. D's scenarios,
+    :class:`~millwatch.analytics.mill.app_d.AppDCost`) and its monthly projections (App. D's
+    scenarios,
     the mill running the rest of the month, and ``measured``: this record's start rate and
-    running fraction; :func:`~analytics.mill.app_d.app_d_projections`).
+    running fraction; :func:`~millwatch.analytics.mill.app_d.app_d_projections`).
     ``damage`` must be attributed up to the decided sample first."""
     basis = projection_basis(seconds, starts_total, elapsed_s)
     out = {}

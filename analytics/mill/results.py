@@ -1,4 +1,5 @@
-"""Typed results of a mill's analysis, as they leave :class:`~analytics.mill.analyzer.MillAnalyzer`
+"""Typed results of a mill's analysis, as they leave
+:class:`~millwatch.analytics.mill.analyzer.MillAnalyzer`
 for the worker's status and every surface that renders it (REST, OPC UA, ``/metrics``, the
 remote protocol): defined once here, read by attribute, never by string key.
 
@@ -156,7 +157,8 @@ class StopEvent(_Event):
     after_failed_start: bool
     truncated: bool
     #: The start-stop record this stop closed, as Diering 2011 App. D counts it
-    #: (:mod:`analytics.mill.app_d`): ``start_stop_s`` and ``run_s`` (s), and per component
+    #: (:mod:`millwatch.analytics.mill.app_d`): ``start_stop_s`` and ``run_s`` (s), and per
+    #: component
     #: the Miner damage of the joined start and stop portions (``start_stop``, residue closed)
     #: and of the run portions since the start (``run``); absent from stops stored before it
     #: existed, null when no start was seen before the stop.

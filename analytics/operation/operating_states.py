@@ -38,7 +38,8 @@ unknown → running/stopped speed ≥ ``speed_full`` / quiet for ``quiet_s`` (or
 Some transitions are dated back in time (decided later than they happened); the machine exposes
 ``decided_until``: the timeline before that sample is final. Consumers that attribute samples to
 phases (phase damage) wait for it. The per-sample loop is compiled
-(:mod:`analytics.operation.state_kernels`); state is a handful of scalars, snapshot as plain data.
+(:mod:`millwatch.analytics.operation.state_kernels`); state is a handful of scalars, snapshot as
+plain data.
 """
 
 from __future__ import annotations
@@ -50,8 +51,8 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
-from analytics.operation.state_kernels import (
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.operation.state_kernels import (
     _MODE,
     _N,
     _ONST,
@@ -65,11 +66,11 @@ from analytics.operation.state_kernels import (
     _UNK,
     _feed,
 )
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["OperatingState", "OperatingStateMachine", "StateThresholds", "Transition"]
 
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by millwatch.analytics.snapshot_arrays
 
 
 class OperatingState(IntEnum):

@@ -1,8 +1,9 @@
 """Compiled per-sample kernel of the operating-state machine (Diering 2011 §6.1, §6.2).
 
 The plain-Python API, the states and their thresholds are in
-:mod:`analytics.operation.operating_states`; this is its sample loop, with the layout of the state
-arrays that :class:`~analytics.operation.operating_states.OperatingStateMachine` owns and
+:mod:`millwatch.analytics.operation.operating_states`; this is its sample loop, with the layout of
+the state
+arrays that :class:`~millwatch.analytics.operation.operating_states.OperatingStateMachine` owns and
 snapshots.
 """
 

@@ -1,7 +1,7 @@
 """Compiled kernels of the steady-state meter: revolution counting and the per-revolution fold of
 extremes, sums and counts (Diering 2011 §6.2.4).
 
-The plain-Python API is :class:`analytics.operation.steady_state.SteadyStateMeter`.
+The plain-Python API is :class:`millwatch.analytics.operation.steady_state.SteadyStateMeter`.
 """
 
 from __future__ import annotations

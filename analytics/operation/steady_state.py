@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
-from analytics.operation.steady_kernels import _fold_kernel
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.operation.steady_kernels import _fold_kernel
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["SteadyStateMeter", "SteadyWindow"]
 

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from analytics.fatigue.miner import MinerSum
+from millwatch.analytics.fatigue.miner import MinerSum
 
 __all__ = [
     "BarringAccumulator",

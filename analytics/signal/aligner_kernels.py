@@ -1,7 +1,7 @@
 """Compiled kernels of the frame aligner: which channel groups a run of blocks completes, and the
 gather of their samples into frames.
 
-The plain-Python API is :class:`analytics.signal.frame_aligner.FrameAligner`.
+The plain-Python API is :class:`millwatch.analytics.signal.frame_aligner.FrameAligner`.
 """
 
 from __future__ import annotations

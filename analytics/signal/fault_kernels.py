@@ -1,6 +1,7 @@
 """Compiled per-sample kernels of the telemetry fault detector (Diering 2011 §5.2.2).
 
-The plain-Python API, the algorithm and its sources are in :mod:`analytics.signal.telemetry_faults`;
+The plain-Python API, the algorithm and its sources are in
+:mod:`millwatch.analytics.signal.telemetry_faults`;
 these functions are its hot loops (spike chains, quiet runs, the noise tracker), numba-compiled,
 with the layout of the state arrays they share with it.
 """

@@ -1,6 +1,7 @@
 """Telemetry fault flags on aligned frames: every channel checked, every channel delayed alike.
 
-Each checked channel has its own :class:`~analytics.signal.telemetry_faults.TelemetryFaultDetector`,
+Each checked channel has its own
+:class:`~millwatch.analytics.signal.telemetry_faults.TelemetryFaultDetector`,
 which decides a sample only once it has seen a few samples after it (its look-ahead). This stage
 runs them all and re-assembles the decided samples into frames that carry a boolean ``flags``
 mask per channel (True = spike, dropout, zero run or rail pin, Diering 2011 §5.2.2). Channels that
@@ -12,7 +13,8 @@ independent of how the input was framed: the detectors are block-independent and
 concatenates what they decide.
 
 What the stages after it do with the flags is :class:`LastGood`: flagged samples replaced by the
-channel's last good value (:func:`~analytics.signal.telemetry_faults.hold_last_good`), carried
+channel's last good value (:func:`~millwatch.analytics.signal.telemetry_faults.hold_last_good`),
+carried
 across frames — the analyzer's spectra and ``millwatch spectrum`` both see the held values, so a
 flagged spike neither enters the speed estimate nor breaks a running period (issue 18).
 """
@@ -23,20 +25,20 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.signal.frame_aligner import Frame
-from analytics.signal.telemetry_faults import (
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.signal.frame_aligner import Frame
+from millwatch.analytics.signal.telemetry_faults import (
     FaultCounts,
     FaultFlags,
     TelemetryFaultDetector,
     hold_last_good,
 )
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["FaultStage", "LastGood"]
 
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by millwatch.analytics.snapshot_arrays
 
 UNCHECKED_KINDS = frozenset({"tacho"})
 

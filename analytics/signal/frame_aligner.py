@@ -37,15 +37,15 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
-from analytics.signal.aligner_kernels import _emitted_groups, _gather_rows
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.signal.aligner_kernels import _emitted_groups, _gather_rows
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["MAX_PENDING", "Frame", "FrameAligner"]
 
 log = logging.getLogger(__name__)
 
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by millwatch.analytics.snapshot_arrays
 #: Default bound on pending start times (groups of blocks) before the oldest is emitted
 #: incomplete: 600 s of 100-sample blocks at 1 kHz, the gateways' default retention. Memory is
 #: taken only while channels are skewed (≈ 0.8 kB a pending 100-sample block).

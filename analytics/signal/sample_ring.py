@@ -4,7 +4,8 @@ Event measurements (a start, a stop) look back at the samples of a phase once th
 decided, a few seconds to a minute after it began; the ring keeps exactly ``capacity`` samples per
 channel whatever the running time (bounded state, README "Design"). Snapshots hold only the samples
 a
-consumer still needs, packed by :mod:`analytics.snapshot_arrays` (exact, compact, JSON-safe).
+consumer still needs, packed by :mod:`millwatch.analytics.snapshot_arrays` (exact, compact,
+JSON-safe).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["SampleRing"]
 

@@ -42,15 +42,15 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
-from analytics.signal.tacho_kernels import _EST, _LAST, _SEEN, _convert
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.signal.tacho_kernels import _EST, _LAST, _SEEN, _convert
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["TachoSpeed"]
 
 log = logging.getLogger(__name__)
 
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by millwatch.analytics.snapshot_arrays
 
 
 class TachoSpeed:
@@ -93,8 +93,8 @@ class TachoSpeed:
 
     @classmethod
     def for_channel(cls, channel: Any, fs: float, **knobs: Any) -> TachoSpeed:
-        """A converter for a :class:`analytics.drivetrain.mill_config.ChannelConfig` of kind
-        ``tacho``."""
+        """A converter for a :class:`millwatch.analytics.drivetrain.mill_config.ChannelConfig` of
+        kind ``tacho``."""
         if channel.pulses_per_rev is None:
             raise ValueError(f"channel {channel.key!r} has no pulses_per_rev")
         return cls(channel.pulses_per_rev, fs, **knobs)

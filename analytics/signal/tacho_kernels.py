@@ -1,7 +1,7 @@
 """Compiled per-sample kernel of the tacho-to-rpm converter (Diering 2011 App. C routine 5).
 
-The plain-Python API and its sources are in :mod:`analytics.signal.tacho`; this is its edge loop,
-with the layout of the state arrays it shares with it.
+The plain-Python API and its sources are in :mod:`millwatch.analytics.signal.tacho`; this is its
+edge loop, with the layout of the state arrays it shares with it.
 """
 
 from __future__ import annotations

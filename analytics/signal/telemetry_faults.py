@@ -79,8 +79,8 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import check_snapshot
-from analytics.signal.fault_kernels import (
+from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.signal.fault_kernels import (
     _C_FLAGGED,
     _C_SPIKES,
     _HIST,
@@ -91,7 +91,7 @@ from analytics.signal.fault_kernels import (
     MEDIAN_TO_SIGMA,
     _scan,
 )
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = [
     "LOOKAHEAD",
@@ -106,7 +106,7 @@ log = logging.getLogger(__name__)
 
 #: Samples of look-ahead: flags are returned this many samples after the sample arrives.
 LOOKAHEAD = 4
-_SNAPSHOT_VERSION = 2  # 2: arrays packed by analytics.snapshot_arrays
+_SNAPSHOT_VERSION = 2  # 2: arrays packed by millwatch.analytics.snapshot_arrays
 RC_10_90 = (math.acos(-0.8) - math.acos(0.8)) / math.pi
 """10–90 % rise of a raised-cosine front as a fraction of its duration (≈ 0.59)."""
 
@@ -241,8 +241,8 @@ class TelemetryFaultDetector:
 
     @classmethod
     def for_channel(cls, channel: Any, fs: float, **knobs: Any) -> TelemetryFaultDetector:
-        """A detector for a :class:`analytics.drivetrain.mill_config.ChannelConfig` with a full
-        scale."""
+        """A detector for a :class:`millwatch.analytics.drivetrain.mill_config.ChannelConfig` with
+        a full scale."""
         if channel.full_scale is None:
             raise ValueError(f"channel {channel.key!r} has no full_scale: cannot set rails")
         return cls(tuple(channel.full_scale), fs, **knobs)

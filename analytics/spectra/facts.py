@@ -80,7 +80,8 @@ class HarmonicWindow:
     ``segments`` are the (start, end) ns of the averaged segments; ``pinion_speed_rpm`` their mean
     speed (total revolutions / total time); ``resolution_hz`` the bin width at that speed;
     ``segments_dropped`` the segments begun and dropped since the previous window, per reason
-    (:data:`analytics.spectra.tracker.DROP_REASONS`; empty in tables stored before issue 18).
+    (:data:`millwatch.analytics.spectra.tracker.DROP_REASONS`; empty in tables stored before issue
+    18).
     """
 
     t_start_ns: int

@@ -1,6 +1,6 @@
 """Compiled kernels of the running-median noise floor and of the local-maxima search.
 
-The plain-Python API and its sources are in :mod:`analytics.spectra.running_median`.
+The plain-Python API and its sources are in :mod:`millwatch.analytics.spectra.running_median`.
 """
 
 from __future__ import annotations

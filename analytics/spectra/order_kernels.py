@@ -1,4 +1,4 @@
-"""Compiled per-sample kernels of the harmonic tracker (:mod:`analytics.spectra.tracker`).
+"""Compiled per-sample kernels of the harmonic tracker (:mod:`millwatch.analytics.spectra.tracker`).
 
 * :func:`demodulate` — the line demodulation of step 4 of the tracker's algorithm:
   ``X(o) = Σ x̃ₙ qₙ e^{−2πi o φₙ}`` for every tracked line order ``o`` on every channel, with

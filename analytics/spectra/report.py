@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from analytics.drivetrain.torsional_model import torsional_note
-from analytics.spectra.resonance import resonance_margins
-from analytics.spectra.tracker import HarmonicTracker, describe_segments
+from millwatch.analytics.drivetrain.torsional_model import torsional_note
+from millwatch.analytics.spectra.resonance import resonance_margins
+from millwatch.analytics.spectra.tracker import HarmonicTracker, describe_segments
 
 __all__ = ["harmonics_report"]
 
@@ -21,11 +21,11 @@ def harmonics_report(tracker: HarmonicTracker) -> dict[str, Any]:
 
     Keys: ``harmonics`` (one row per channel and expected line), ``unexplained_peaks``,
     ``resonance_margins`` (per channel, the measured excitation nearest a torsional natural
-    frequency: :mod:`analytics.spectra.resonance`), and ``summary``: ``torsional_model`` (the
-    mill's natural frequencies in words, or that its file has no model), ``segments`` (used,
+    frequency: :mod:`millwatch.analytics.spectra.resonance`), and ``summary``: ``torsional_model``
+    (the mill's natural frequencies in words, or that its file has no model), ``segments`` (used,
     as ``segments_used``), ``segments_dropped`` (count per reason, every key of
-    :data:`~analytics.spectra.tracker.DROP_REASONS`), ``segments_note`` (the same in one plain
-    sentence), and once a segment is used the running seconds, mean pinion speed, resolution
+    :data:`~millwatch.analytics.spectra.tracker.DROP_REASONS`), ``segments_note`` (the same in one
+    plain sentence), and once a segment is used the running seconds, mean pinion speed, resolution
     and tracking mode. JSON-ready.
     """
     used, dropped = tracker.segment_accounting()

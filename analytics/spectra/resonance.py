@@ -21,7 +21,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from analytics.spectra.facts import HarmonicWindow
+from millwatch.analytics.spectra.facts import HarmonicWindow
 
 __all__ = ["ResonanceMargin", "resonance_margins"]
 

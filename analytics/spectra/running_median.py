@@ -1,6 +1,7 @@
 """Running median over a sliding window with reflected ends: the harmonic tables' noise floor.
 
-:mod:`analytics.spectra.tracker` takes the noise floor of a power spectrum as the median of the
+:mod:`millwatch.analytics.spectra.tracker` takes the noise floor of a power spectrum as the median
+of the
 ``2h + 1`` bins around each bin (ends reflected, as ``np.pad(x, h, mode="reflect")``). The numpy
 form (``np.median`` over a ``sliding_window_view``) partitions a copy of every window: ~10 ms per
 channel for a 11 000-bin spectrum, most of a table's cost. This kernel keeps the window sorted and
@@ -22,7 +23,7 @@ import math
 
 import numpy as np
 
-from analytics.spectra.median_kernels import (
+from millwatch.analytics.spectra.median_kernels import (
     _local_maxima,
     _may_exceed,
     _median_at,

@@ -1,4 +1,5 @@
-"""Segment accounting and Welch sums of the harmonic tracker (:mod:`analytics.spectra.tracker`).
+"""Segment accounting and Welch sums of the harmonic tracker
+(:mod:`millwatch.analytics.spectra.tracker`).
 
 A *segment* is ``M`` whole pinion revolutions of running samples; its spectrum and demodulated
 line powers (:class:`SegmentSpectrum`) are summed into :class:`WelchSums` (one per window, one for
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 __all__ = ["DROP_REASONS", "SegmentSpectrum", "WelchSums", "describe_segments", "speed_spread"]
 

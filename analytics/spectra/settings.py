@@ -13,8 +13,8 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from analytics.drivetrain.kinematics import KinematicsOptions
-from analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.kinematics import KinematicsOptions
+from millwatch.analytics.drivetrain.mill_config import MillConfig
 
 __all__ = ["HarmonicSettings", "is_running", "stagger_for"]
 
@@ -25,7 +25,7 @@ class HarmonicSettings(BaseModel):
     ``window_s``: minimum segment length (s at rated speed; resolution ≤ 1/window_s Hz);
     ``overlap``: segment overlap fraction; ``segments_per_window``: segments averaged per window;
     ``window``: taper; ``tracking``: ``angle``/``time``/``auto`` (step 3 of
-    :mod:`analytics.spectra.tracker`);
+    :mod:`millwatch.analytics.spectra.tracker`);
     ``search_bins``: ± bins searched for an expected line's peak; ``match_bins``: ± bins within
     which a peak is explained by an expected line; ``peak_snr_db``: peak over the noise floor;
     ``min_peak_pct`` (% rated torque) / ``min_peak_mpa``: smallest unexplained peak reported;
@@ -61,7 +61,8 @@ def is_running(
     """Speed-band running test: every finite sample within ``band`` × rated speed of ``shaft``;
     False for empty or all-NaN input.
 
-    Not the analyzer's test: :class:`~analytics.mill.analyzer.MillAnalyzer` feeds the tracker
+    Not the analyzer's test: :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer` feeds the
+    tracker
     the samples the operating-state machine shows as running. ``millwatch spectrum`` uses this
     one (with its ``--band`` and ``--settle`` options) for a quick look at a recording; the two
     tests differ at the edges of a run, so the command keeps its own.

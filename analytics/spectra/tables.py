@@ -1,11 +1,11 @@
-"""Harmonic tables of the harmonic tracker (:mod:`analytics.spectra.tracker`): averaged segment
-spectra → measured expected lines and unexplained peaks (one :class:`HarmonicWindow`).
+"""Harmonic tables of the harmonic tracker (:mod:`millwatch.analytics.spectra.tracker`): averaged
+segment spectra → measured expected lines and unexplained peaks (one :class:`HarmonicWindow`).
 
 Sources: Diering 2011 §6.1.2 and §6.2.7 (expected excitation lines; peaks matching none of them,
 10–15 Hz in Figure 36, point to torsional resonance); Fedin & Vinogradov 2018 (the lumped
 torsional model whose natural frequencies an unexplained peak is compared with).
 
-:class:`HarmonicTables` reads :class:`~analytics.spectra.segments.WelchSums`:
+:class:`HarmonicTables` reads :class:`~millwatch.analytics.spectra.segments.WelchSums`:
 
 * expected lines: amplitude from the demodulated line power at the exact order (window-response
   corrected for a measured offset ε), frequency from the interpolated peak of the averaged
@@ -26,13 +26,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytics.drivetrain.kinematics import ExpectedLine
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.spectra.facts import HarmonicWindow, LineMeasurement, UnexplainedPeak
-from analytics.spectra.running_median import NoiseFloor, local_maxima
-from analytics.spectra.segments import WelchSums
-from analytics.spectra.settings import HarmonicSettings
-from analytics.spectra.tapers import interpolation_table, response_at
+from millwatch.analytics.drivetrain.kinematics import ExpectedLine
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.spectra.facts import HarmonicWindow, LineMeasurement, UnexplainedPeak
+from millwatch.analytics.spectra.running_median import NoiseFloor, local_maxima
+from millwatch.analytics.spectra.segments import WelchSums
+from millwatch.analytics.spectra.settings import HarmonicSettings
+from millwatch.analytics.spectra.tapers import interpolation_table, response_at
 
 __all__ = ["HarmonicTables", "TrackedChannel", "line_orders"]
 
@@ -112,7 +112,7 @@ class HarmonicTables:
 
     def _floor(self, power: np.ndarray) -> NoiseFloor:
         """Running median of the power spectrum over ± ``floor_bins`` bins (noise floor),
-        taken at the bins read (:class:`analytics.spectra.running_median.NoiseFloor`)."""
+        taken at the bins read (:class:`millwatch.analytics.spectra.running_median.NoiseFloor`)."""
         return NoiseFloor(power, self.settings.floor_bins)
 
     def _amplitude(self, power: float) -> float:

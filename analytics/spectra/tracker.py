@@ -6,7 +6,7 @@ none of them (10–15 Hz in Figure 36) point to torsional resonance; §6.2.4 —
 10–45 % of motor rated torque; §10.5 — simple frequency analysis for operators; Fedin & Vinogradov
 2018 eq. 12 —
 the 3× drive-gear line; Toram 2005 — the grinding-media line. The expected lines come from
-:mod:`analytics.drivetrain.kinematics`.
+:mod:`millwatch.analytics.drivetrain.kinematics`.
 
 Algorithm (:class:`HarmonicTracker`, a counter emitting :class:`HarmonicWindow` facts):
 
@@ -47,8 +47,9 @@ its state machine ignores them (issue 18), so a spike neither ends a running per
 wild speed into the pinion angle.
 
 Modules: this one streams (buffering, segmentation, segment spectra, persistence);
-:mod:`analytics.spectra.segments` holds the Welch sums and the segment accounting,
-:mod:`analytics.spectra.tables` turns averaged segments into the harmonic tables (steps 4–5).
+:mod:`millwatch.analytics.spectra.segments` holds the Welch sums and the segment accounting,
+:mod:`millwatch.analytics.spectra.tables` turns averaged segments into the harmonic tables (steps
+4–5).
 
 Knobs with measured errors (``tests/bench/bench_harmonics.py``): ``window_s``, ``overlap``,
 ``window`` (hann, blackmanharris, flattop), ``tracking``. State is bounded: buffers sized from the
@@ -68,13 +69,13 @@ from typing import Any
 
 import numpy as np
 
-from analytics.contracts import SnapshotMismatch, check_snapshot
-from analytics.drivetrain.kinematics import ExpectedLine, expected_lines
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.drivetrain.torsional_model import natural_frequencies_of
-from analytics.snapshot_arrays import pack_array, unpack_array
-from analytics.spectra.facts import HarmonicWindow
-from analytics.spectra.order_kernels import (
+from millwatch.analytics.contracts import SnapshotMismatch, check_snapshot
+from millwatch.analytics.drivetrain.kinematics import ExpectedLine, expected_lines
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.torsional_model import natural_frequencies_of
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.spectra.facts import HarmonicWindow
+from millwatch.analytics.spectra.order_kernels import (
     angle_prefix,
     center_taper,
     cosine_window,
@@ -82,22 +83,24 @@ from analytics.spectra.order_kernels import (
     power_of,
     resample,
 )
-from analytics.spectra.segments import (
+from millwatch.analytics.spectra.segments import (
     DROP_REASONS,
     SegmentSpectrum,
     WelchSums,
     describe_segments,
     speed_spread,
 )
-from analytics.spectra.settings import HarmonicSettings
-from analytics.spectra.tables import HarmonicTables, TrackedChannel, line_orders
-from analytics.spectra.tapers import COSINE_WINDOWS, window_values
+from millwatch.analytics.spectra.settings import HarmonicSettings
+from millwatch.analytics.spectra.tables import HarmonicTables, TrackedChannel, line_orders
+from millwatch.analytics.spectra.tapers import COSINE_WINDOWS, window_values
 
 __all__ = ["DROP_REASONS", "MAX_DEFER_HOPS", "HarmonicTracker", "describe_segments"]
 
 log = logging.getLogger(__name__)
 
-_SNAPSHOT_VERSION = 3  # 2: arrays packed by analytics.snapshot_arrays; 3: dropped segments
+_SNAPSHOT_VERSION = (
+    3  # 2: arrays packed by millwatch.analytics.snapshot_arrays; 3: dropped segments
+)
 _OLD_VERSIONS = (2,)  # restored with no segment dropped so far
 #: Largest deferral of a complete segment's spectrum, in hops (``stagger`` → 1): under one hop,
 #: so a segment never waits behind the next one.
@@ -124,7 +127,8 @@ class HarmonicTracker:
 
     ``natural_frequencies_hz``: the torsional natural frequencies (Hz) each unexplained peak is
     compared with; None (default): those of the mill file's ``[torsional]`` model
-    (:func:`~analytics.drivetrain.torsional_model.natural_frequencies_of`; none without one).
+    (:func:`~millwatch.analytics.drivetrain.torsional_model.natural_frequencies_of`; none without
+    one).
     """
 
     def __init__(

@@ -1,5 +1,5 @@
-"""Compiled kernels of the batch reader (:mod:`ingest.archive.batches`): byte-level scans of MCAP
-records and the packing of payloads, each a loop over bytes or records that numba compiles.
+"""Compiled kernels of the batch reader (:mod:`millwatch.ingest.archive.batches`): byte-level scans
+of MCAP records and the packing of payloads, each a loop over bytes or records that numba compiles.
 
 MCAP spec: records are ``opcode u8, length u64 (little-endian), body``; a Message body starts
 ``channel_id u16, sequence u32, log_time u64, publish_time u64``, then the data.
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ingest.archive.copy_kernels import copy_bytes
+from millwatch.ingest.archive.copy_kernels import copy_bytes
 
 __all__ = ["message_heads", "pack_ranges", "record_bounds"]
 

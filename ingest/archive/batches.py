@@ -1,7 +1,7 @@
 """Read the archive as batches of messages held in arrays (for replay at many × real time).
 
-:class:`~ingest.archive.reader.TailTolerantReader` yields one Python object per message (~5 µs
-each);
+:class:`~millwatch.ingest.archive.reader.TailTolerantReader` yields one Python object per message
+(~5 µs each);
 replaying an hour of 50 mills is 7.2 million messages. :class:`BatchReader` reads the same files
 with the same tolerance (it stops where that reader stops, at the first torn or corrupt record,
 and yields exactly the messages that reader yields) but returns each chunk's messages as one
@@ -11,8 +11,8 @@ log time and the payload's offset and length — record boundaries found by a co
 sequence u32, log_time u64, publish_time u64, data``).
 
 :func:`archive_batches` walks the files of an archive after a checkpoint position, as
-:meth:`ingest.archive.reader.ArchiveReader.blocks` does, merging consecutive chunks of a file into
-batches of at least ``min_messages``.
+:meth:`millwatch.ingest.archive.reader.ArchiveReader.blocks` does, merging consecutive chunks of a
+file into batches of at least ``min_messages``.
 """
 
 from __future__ import annotations
@@ -31,15 +31,15 @@ from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import Chunk
 
-from ingest.archive.batch_kernels import message_heads, pack_ranges, record_bounds
-from ingest.archive.files import (
+from millwatch.ingest.archive.batch_kernels import message_heads, pack_ranges, record_bounds
+from millwatch.ingest.archive.files import (
     MCAP_MAGIC,
     ArchiveError,
     ArchivePosition,
     archive_file_order,
     list_archive_files,
 )
-from ingest.archive.reader import TailTolerantBase, decompress_chunk
+from millwatch.ingest.archive.reader import TailTolerantBase, decompress_chunk
 
 __all__ = ["BatchReader", "MessageBatch", "archive_batches"]
 
@@ -55,8 +55,8 @@ _TOP_LEVEL = np.array([Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANN
 class MessageBatch:
     """Consecutive messages of one archive file: ``buf`` holds their payloads at
     ``offset[k] : offset[k] + length[k]``; ``index`` is the file order (as
-    :class:`~ingest.archive.files.ArchivePosition` counts it), ``channel`` the MCAP channel id
-    (topic
+    :class:`~millwatch.ingest.archive.files.ArchivePosition` counts it), ``channel`` the MCAP
+    channel id (topic
     in ``topics``), ``log_time`` ns since the Unix epoch (UTC)."""
 
     file: str
@@ -136,7 +136,8 @@ def _scan_records(data: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 class BatchReader(TailTolerantBase):
-    """:class:`~ingest.archive.reader.TailTolerantReader` whose :meth:`messages` yields one
+    """:class:`~millwatch.ingest.archive.reader.TailTolerantReader` whose :meth:`messages` yields
+    one
     :class:`MessageBatch` per chunk (and per unchunked message) instead of one object per
     message; the same messages, the same stopping rules and the same attributes afterwards."""
 
@@ -211,8 +212,8 @@ class BatchReader(TailTolerantBase):
     def _decompress(self, body: memoryview) -> np.ndarray:
         """The records of a Chunk record's body (MCAP spec: message start and end time u64,
         uncompressed size u64, uncompressed CRC u32, compression string, records u64-prefixed),
-        decompressed and CRC-checked as :func:`~ingest.archive.reader.decompress_chunk` does,
-        without copying the compressed bytes first."""
+        decompressed and CRC-checked as :func:`~millwatch.ingest.archive.reader.decompress_chunk`
+        does, without copying the compressed bytes first."""
         start, end, size, crc, n = _CHUNK_HEAD.unpack_from(body, 0)
         pos = _CHUNK_HEAD.size + n
         compression = bytes(body[_CHUNK_HEAD.size : pos]).decode()

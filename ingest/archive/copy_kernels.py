@@ -2,9 +2,9 @@
 
 numba compiles ``out[a:b] = buf[c:d]`` on ``uint8`` arrays to a byte-at-a-time loop: ~200 ns
 for a 420-byte block payload, the main cost of packing a batch's payloads for another process
-(:meth:`ingest.archive.batches.MessageBatch.compact`) or gathering a mill's samples
-(:mod:`service.worker.batch_lane`). :func:`copy_bytes` emits LLVM's ``memcpy`` instead (~25–50 ns),
-with the bounds checked first.
+(:meth:`millwatch.ingest.archive.batches.MessageBatch.compact`) or gathering a mill's samples
+(:mod:`millwatch.worker.batch_lane`). :func:`copy_bytes` emits LLVM's ``memcpy`` instead (~25–50
+ns), with the bounds checked first.
 """
 
 from __future__ import annotations

@@ -11,10 +11,10 @@ payload in any of those changes the bytes (CDR adds an encapsulation header and 
 length prefix). We choose **byte-identical**:
 
 - channel ``message_encoding = "millwatch.block.v1"``: message data *is* the wire
-  payload of :mod:`ingest.wire`, untouched;
+  payload of :mod:`millwatch.ingest.wire`, untouched;
 - one schema per file, name ``millwatch.block.v1``, encoding
   ``millwatch.block.v1.layout``, whose data is the human-readable byte layout (the
-  :mod:`ingest.wire` docstring), so every file documents itself.
+  :mod:`millwatch.ingest.wire` docstring), so every file documents itself.
 
 Reasons: (1) malformed blocks must be archived as received (DESIGN: "archived as-is
 if possible"), which no typed schema can hold; (2) replay and crash recovery must
@@ -22,7 +22,7 @@ feed the analyzer exactly the bytes live ingest saw, so results are identical;
 (3) a checksum of a payload means the same thing on the wire and in the archive.
 Standard MCAP tools (``mcap info``, ``mcap cat``, ``mcap.reader.make_reader``) list
 and read these files; plotting in Foxglove needs the derived export of
-:mod:`ingest.archive.foxglove_export` (``millwatch archive export``).
+:mod:`millwatch.ingest.archive.foxglove_export` (``millwatch archive export``).
 
 Time base: a message's MCAP ``log_time`` (and ``publish_time``) is the time the worker
 *received* the block (wall clock), which is what orders the log and positions checkpoints.

@@ -1,6 +1,7 @@
 """An MCAP file that Foxglove plots: samples at their sample time, beside what millwatch concluded.
 
-The archive itself is not plottable (:mod:`ingest.archive.files`: its channels carry the raw wire
+The archive itself is not plottable (:mod:`millwatch.ingest.archive.files`: its channels carry the
+raw wire
 blocks, encoding ``millwatch.block.v1``, stamped with the *receive* time). This module writes a
 derived file with the official Foxglove SDK (``foxglove-sdk``, :func:`foxglove.open_mcap`), every
 message stamped with the time it describes: MCAP ``log_time`` = ``publish_time`` = sample time
@@ -63,7 +64,7 @@ from foxglove.mcap import MCAPWriteOptions
 from foxglove.messages import Event, KeyValuePair, Log, LogLevel, Timestamp
 from google.protobuf import descriptor_pb2
 
-from analytics.spectra.facts import HarmonicWindow
+from millwatch.analytics.spectra.facts import HarmonicWindow
 
 __all__ = [
     "DAMAGE_SCHEMA",
@@ -160,7 +161,7 @@ def encode_samples(values: np.ndarray) -> list[bytes]:
 def sample_times_ns(t0_ns: int, fs: float, n: int, first: int = 0) -> np.ndarray:
     """Times (int64 ns since the epoch) of samples ``first … n-1`` of a block starting at
     ``t0_ns``: ``t0 + i·1e9/fs`` (DESIGN "Conventions"), exact integer ns for an integer rate as
-    the analyzer computes them (:meth:`analytics.mill.loads.LoadAnalysis.t_ns`)."""
+    the analyzer computes them (:meth:`millwatch.analytics.mill.loads.LoadAnalysis.t_ns`)."""
     i = np.arange(first, n, dtype=np.int64)
     if float(fs).is_integer():
         return t0_ns + (i * 1_000_000_000) // int(fs)
@@ -360,7 +361,8 @@ class FoxgloveExportWriter:
         self._log_channel(topic(mill, sub)).log(msg, log_time=t_ns)
 
     def alarm(self, mill: str, transition: dict[str, Any]) -> None:
-        """One alarm transition (``alarms.lifecycle.TransitionRecord.to_row`` plus ``rule``)."""
+        """One alarm transition (``millwatch.alarms.lifecycle.TransitionRecord.to_row`` plus
+        ``rule``)."""
         kind = str(transition["kind"])
         level = LogLevel.Info if kind == "cleared" else _LEVEL.get(
             str(transition["severity"]), LogLevel.Warning)  # fmt: skip

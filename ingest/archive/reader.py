@@ -5,7 +5,7 @@ that is incomplete (a torn tail of a killed writer, or the file being written ri
 corrupt, keeping everything before it; ``mcap``'s seeking reader would reject such a file.
 :class:`ArchiveReader` walks the files of one writer prefix in archive order, filtered by key
 pattern, log time and checkpoint position, yielding :class:`ArchivedBlock` values.
-:mod:`ingest.archive.batches` reads the same files with the same rules into arrays.
+:mod:`millwatch.ingest.archive.batches` reads the same files with the same rules into arrays.
 """
 
 from __future__ import annotations
@@ -26,15 +26,15 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Schema, Statistics
 from mcap.stream_reader import get_chunk_data_stream
 
-from ingest import wire
-from ingest.archive.files import (
+from millwatch.ingest import wire
+from millwatch.ingest.archive.files import (
     MCAP_MAGIC,
     ArchiveError,
     ArchivePosition,
     archive_file_order,
     list_archive_files,
 )
-from ingest.keys import key_matches
+from millwatch.ingest.keys import key_matches
 
 __all__ = [
     "ArchiveReader",
@@ -74,7 +74,7 @@ class ArchivedBlock:
     index: int
 
     def decode(self) -> wire.Block:
-        """Decode the payload; raises :class:`ingest.wire.WireError` if malformed."""
+        """Decode the payload; raises :class:`millwatch.ingest.wire.WireError` if malformed."""
         return wire.decode_block(self.payload)
 
     @property

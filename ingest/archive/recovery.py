@@ -1,7 +1,8 @@
 """Archive recovery: rewrite a file whose writer died into a finished, indexed MCAP file.
 
 :func:`recover_file` copies every complete message of the file (read by
-:class:`~ingest.archive.reader.TailTolerantReader`: byte-identical, same log/publish times and
+:class:`~millwatch.ingest.archive.reader.TailTolerantReader`: byte-identical, same log/publish
+times and
 sequence numbers, schemas and channels registered as they come) into a new file with summary
 and footer, drops the torn tail, and reports what was kept and dropped (:class:`RecoveryReport`).
 """
@@ -16,8 +17,8 @@ from pathlib import Path
 from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, Writer
 
-from ingest.archive.files import LIBRARY, PROFILE
-from ingest.archive.reader import RawMessage, TailTolerantReader
+from millwatch.ingest.archive.files import LIBRARY, PROFILE
+from millwatch.ingest.archive.reader import RawMessage, TailTolerantReader
 
 __all__ = ["RecoveryReport", "recover_file"]
 

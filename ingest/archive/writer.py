@@ -1,6 +1,6 @@
 """Archive writer: append raw blocks to rotating, standalone MCAP files.
 
-The file format and names are in :mod:`ingest.archive.files`.
+The file format and names are in :mod:`millwatch.ingest.archive.files`.
 
 Rotation
 --------
@@ -18,8 +18,8 @@ written when it exceeds ``chunk_size`` *or* when the oldest unwritten message is
 writer therefore loses at most about ``max_latency_s`` (default 0.1 s) of data;
 nothing is fsynced unless ``fsync=True`` (a process kill does not lose data the OS
 already holds; a power cut can). A killed writer leaves a file without summary and
-footer, which ``mcap``'s seeking reader rejects: :mod:`ingest.archive.reader` reads
-such files up to the last complete record, and :mod:`ingest.archive.recovery`
+footer, which ``mcap``'s seeking reader rejects: :mod:`millwatch.ingest.archive.reader` reads
+such files up to the last complete record, and :mod:`millwatch.ingest.archive.recovery`
 rewrites them as finished, indexed files.
 
 Failed writes (a full disk)
@@ -56,8 +56,8 @@ from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
-from ingest import wire
-from ingest.archive.files import (
+from millwatch.ingest import wire
+from millwatch.ingest.archive.files import (
     LIBRARY,
     MESSAGE_ENCODING,
     PREFIX_RE,
@@ -68,7 +68,7 @@ from ingest.archive.files import (
     ArchivePosition,
     archive_file_name,
 )
-from ingest.archive.mcap_append import MessageAppender, appender, pack_chunk_indexes
+from millwatch.ingest.archive.mcap_append import MessageAppender, appender, pack_chunk_indexes
 
 __all__ = ["ArchiveFullError", "ArchiveWriter"]
 

@@ -1,10 +1,11 @@
 """A simulated scene as the wire blocks a sensor gateway would send.
 
-The simulator (:mod:`ingest.sim.renderer`) renders chunks of engineering-unit samples per
+The simulator (:mod:`millwatch.ingest.sim.renderer`) renders chunks of engineering-unit samples per
 configured
-channel; this module cuts them into wire-format blocks (:mod:`ingest.wire`) of ``block_samples``
-samples on each channel's key (:func:`ingest.keys.channel_key`), with a sequence number per key.
-The same blocks go to the MCAP archive (``millwatch simulate --out``) or to zenoh
+channel; this module cuts them into wire-format blocks (:mod:`millwatch.ingest.wire`) of
+``block_samples``
+samples on each channel's key (:func:`millwatch.ingest.keys.channel_key`), with a sequence number
+per key. The same blocks go to the MCAP archive (``millwatch simulate --out``) or to zenoh
 (``millwatch simulate --publish``), so a simulated recording and a simulated live mill are the
 same bytes.
 
@@ -17,8 +18,8 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from ingest import keys, wire
-from ingest.sim.renderer import Scene
+from millwatch.ingest import keys, wire
+from millwatch.ingest.sim.renderer import Scene
 
 __all__ = ["SceneBlock", "scene_blocks"]
 

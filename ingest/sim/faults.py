@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.sim.spec import DropoutEvent, ResonanceEvent, SceneError, SpikesEvent
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.sim.spec import DropoutEvent, ResonanceEvent, SceneError, SpikesEvent
 
 __all__ = ["ExtraLine", "FaultPlan", "Patch", "spike_patches"]
 

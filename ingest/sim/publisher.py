@@ -4,7 +4,8 @@ This is a stand-in for a plant's sensor gateway (``millwatch simulate --publish`
 The scene is re-timed to start *now* (or at an anchor), so its samples carry current timestamps,
 and each block is published when it is complete — at ``speed`` × real time (``speed`` 60 shows
 an hour a minute; the samples' timestamps then run ahead of the wall clock by the same factor).
-Blocks go out through gateway publishers (:mod:`ingest.gateway`): congestion control BLOCK, and
+Blocks go out through gateway publishers (:mod:`millwatch.ingest.gateway`): congestion control
+BLOCK, and
 a cache of the last ``retention_s`` of each channel from which a restarted worker recovers.
 
 **Resuming as a restarted gateway would** (``anchored=True``): the scene's first sample is due
@@ -12,11 +13,11 @@ on the wall clock at the scene's ``t0`` (sample time ``t`` is due at
 ``t0 + (t - t0) / speed``). Blocks that fell due before :meth:`ScenePublisher.run` started are
 *not* published — they are lost, as for a real DAQ that was off — and the next block keeps its
 scene sequence number and timestamps. Sequence numbers are per channel and count from the
-scene's start (:func:`ingest.sim.blocks.scene_blocks`), so a gateway restarted with the same
-anchor and seed continues the numbering and the lost span is exactly the blocks that fell due
+scene's start (:func:`millwatch.ingest.sim.blocks.scene_blocks`), so a gateway restarted with the
+same anchor and seed continues the numbering and the lost span is exactly the blocks that fell due
 while it was down.
 
-**With a spool** (``spool=``, :mod:`ingest.spool`): each block is spooled before it is
+**With a spool** (``spool=``, :mod:`millwatch.ingest.spool`): each block is spooled before it is
 published, and blocks the spool already holds (published before a restart) are not published
 again, so the numbering continues from the spool's last ``seq`` per channel.
 
@@ -37,16 +38,20 @@ from typing import TYPE_CHECKING
 
 import zenoh
 
-from ingest import keys, wire
-from ingest.gateway import DEFAULT_RETENTION_S, GatewayPublisher, declare_gateway_publisher
-from ingest.pacing import PacingClock
-from ingest.sim.blocks import SceneBlock, scene_blocks
-from ingest.sim.renderer import Scene
-from ingest.sim.spec import SceneSpec
-from ingest.spool.resume import unspooled
+from millwatch.ingest import keys, wire
+from millwatch.ingest.gateway import (
+    DEFAULT_RETENTION_S,
+    GatewayPublisher,
+    declare_gateway_publisher,
+)
+from millwatch.ingest.pacing import PacingClock
+from millwatch.ingest.sim.blocks import SceneBlock, scene_blocks
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.spec import SceneSpec
+from millwatch.ingest.spool.resume import unspooled
 
 if TYPE_CHECKING:
-    from ingest.spool.store import Spool
+    from millwatch.ingest.spool.store import Spool
 
 __all__ = ["PublishReport", "ScenePublisher", "starting_now"]
 

@@ -1,9 +1,12 @@
 """The scene renderer: a mill configuration and a scene spec, rendered chunk by chunk.
 
 :class:`Scene` builds, from one seed, the pieces of a scene — per-side loads and bending
-amplitudes, the steady oscillation lines (:mod:`ingest.sim.waveforms`), the timeline of operating
-segments (:mod:`ingest.sim.timeline`), the faults (:mod:`ingest.sim.faults`) — and records what it
-put in as :class:`~ingest.sim.truth.SceneTruth`. Rendering samples ``[n0, n1)`` asks the timeline
+amplitudes, the steady oscillation lines (:mod:`millwatch.ingest.sim.waveforms`), the timeline of
+operating
+segments (:mod:`millwatch.ingest.sim.timeline`), the faults (:mod:`millwatch.ingest.sim.faults`) —
+and records what it
+put in as :class:`~millwatch.ingest.sim.truth.SceneTruth`. Rendering samples ``[n0, n1)`` asks the
+timeline
 for the drivetrain state (pu), adds the oscillation lines and extra lines, turns it into the
 configured channels in engineering units — motor and pinion torque (kN·m), pinion bending (MPa,
 once per pinion revolution), speed (rpm), tacho pulses (V) — adds noise and applies the fault
@@ -27,13 +30,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.sim.faults import FaultPlan
-from ingest.sim.seed_tables import BENDING_RANGE_MPA, IMBALANCE_PCT
-from ingest.sim.segments import BarringSegment, Kinematics, StartSegment, StopSegment
-from ingest.sim.spec import SceneParams, SceneSpec
-from ingest.sim.timeline import Timeline
-from ingest.sim.truth import (
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.sim.faults import FaultPlan
+from millwatch.ingest.sim.seed_tables import BENDING_RANGE_MPA, IMBALANCE_PCT
+from millwatch.ingest.sim.segments import BarringSegment, Kinematics, StartSegment, StopSegment
+from millwatch.ingest.sim.spec import SceneParams, SceneSpec
+from millwatch.ingest.sim.timeline import Timeline
+from millwatch.ingest.sim.truth import (
     BarringTruth,
     FaultTruth,
     HarmonicTruth,
@@ -42,7 +45,7 @@ from ingest.sim.truth import (
     StartTruth,
     StopTruth,
 )
-from ingest.sim.waveforms import RC_10_90, HarmonicSet, build_harmonics
+from millwatch.ingest.sim.waveforms import RC_10_90, HarmonicSet, build_harmonics
 
 __all__ = ["Chunk", "Scene"]
 

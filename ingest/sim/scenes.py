@@ -19,7 +19,7 @@ events::
 A mill file's ``[simulation]`` table (e.g. ``bending_range_mpa = 80`` for a misaligned pinion)
 sets that mill's scene parameters under every scene's own (:func:`with_mill_params`).
 
-Catalogue (Diering 2011 numbers behind each are in :mod:`ingest.sim.renderer`):
+Catalogue (Diering 2011 numbers behind each are in :mod:`millwatch.ingest.sim.renderer`):
 
 ``steady``            10 min of steady running,
 ``start-lrs``, ``start-grid``, ``start-elrs``
@@ -42,10 +42,14 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from analytics.drivetrain.mill_config import MillConfig, Starter, describe_validation_error
-from ingest.mill_files import load_mill_config
-from ingest.sim.renderer import Scene
-from ingest.sim.spec import (
+from millwatch.analytics.drivetrain.mill_config import (
+    MillConfig,
+    Starter,
+    describe_validation_error,
+)
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.spec import (
     BarringEvent,
     DropoutEvent,
     FailedStartEvent,

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import DriveLayout, Starter
+from millwatch.analytics.drivetrain.mill_config import DriveLayout, Starter
 
 __all__ = ["PeakStats", "draw_peak_pct", "peak_stats"]
 

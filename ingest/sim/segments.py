@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import DriveLayout, MillConfig
-from ingest.sim.seed_tables import (
+from millwatch.analytics.drivetrain.mill_config import DriveLayout, MillConfig
+from millwatch.ingest.sim.seed_tables import (
     ACCEL_TIME_S,
     BARRING_AVG_RATIO,
     BARRING_BEND_RATIO,
@@ -34,8 +34,8 @@ from ingest.sim.seed_tables import (
     draw_peak_pct,
     peak_stats,
 )
-from ingest.sim.spec import BarringEvent, FailedStartEvent, SceneParams, StartEvent
-from ingest.sim.waveforms import RC_10_90, raised_cosine, ringing, weighted_sum
+from millwatch.ingest.sim.spec import BarringEvent, FailedStartEvent, SceneParams, StartEvent
+from millwatch.ingest.sim.waveforms import RC_10_90, raised_cosine, ringing, weighted_sum
 
 __all__ = [
     "BarringSegment",

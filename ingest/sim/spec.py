@@ -1,7 +1,8 @@
 """What a scene is: the mill's condition and a timeline of operating events and faults.
 
 :class:`SceneSpec` (name, seed, duration, start time, initial state, :class:`SceneParams`, events)
-is validated by pydantic and loads from a scene file (:mod:`ingest.sim.scenes`). Operating events
+is validated by pydantic and loads from a scene file (:mod:`millwatch.ingest.sim.scenes`).
+Operating events
 (start, stop, trip, failed start, barring; Diering 2011 §6.1.1, Figures 20 and 27) change the state
 of
 the mill; fault events (telemetry spikes and dropouts, §5.2.2; an extra torsional line) are laid
@@ -15,7 +16,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from analytics.drivetrain.mill_config import Starter
+from millwatch.analytics.drivetrain.mill_config import Starter
 
 __all__ = [
     "DEFAULT_T0_NS",

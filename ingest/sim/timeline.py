@@ -5,7 +5,7 @@ open-ended segment before it (idle or run), appends the event's segment (a faile
 trip that ends it) and opens the state after it. Each segment starts at the pinion angle where its
 predecessor ended, so the angle — and with it every oscillation line and the bending — is
 continuous. An event that falls inside the previous transient, or that does not fit the state
-(a stop on a stopped mill), raises :class:`~ingest.sim.spec.SceneError`.
+(a stop on a stopped mill), raises :class:`~millwatch.ingest.sim.spec.SceneError`.
 
 :meth:`Timeline.frame` writes the drivetrain state of any sample range by asking each segment that
 overlaps it.
@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.sim.segments import (
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.sim.segments import (
     BarringSegment,
     Frame,
     IdleSegment,
@@ -29,7 +29,7 @@ from ingest.sim.segments import (
     StartSegment,
     StopSegment,
 )
-from ingest.sim.spec import OPERATING_KINDS, SceneError, SceneSpec
+from millwatch.ingest.sim.spec import OPERATING_KINDS, SceneError, SceneSpec
 
 __all__ = ["Timeline"]
 

@@ -3,8 +3,8 @@
 :class:`SceneTruth` lists every start (switch-on and short-circuit peaks per side, material-load
 peak, resonance burst; Diering 2011 §6.1.1), stop, barring session, steady oscillation line (with
 whether it is observable within the telemetry bandwidth, §5.1.2) and injected fault. The renderer
-(:class:`ingest.sim.renderer.Scene`) measures the peaks on its own noise-free signals. Times are
-int64 ns since the Unix epoch.
+(:class:`millwatch.ingest.sim.renderer.Scene`) measures the peaks on its own noise-free signals.
+Times are int64 ns since the Unix epoch.
 """
 
 from __future__ import annotations

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.sim.seed_tables import HARMONIC_WEIGHTS
-from ingest.sim.spec import SceneParams
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.sim.seed_tables import HARMONIC_WEIGHTS
+from millwatch.ingest.sim.spec import SceneParams
 
 __all__ = [
     "RC_10_90",

@@ -2,8 +2,10 @@
 
 A third-party gateway (a plant DAQ's own zenoh publisher, written to the README's "Wire
 format") keeps no spool. Run the forwarder beside it, on the same machine: it subscribes
-locally to the gateway's keys, spools every block it receives (:class:`~ingest.spool.store.Spool`)
-and answers recovery queries from the spool (:class:`~ingest.spool.query.SpoolServer`), as a
+locally to the gateway's keys, spools every block it receives
+(:class:`~millwatch.ingest.spool.store.Spool`)
+and answers recovery queries from the spool (:class:`~millwatch.ingest.spool.query.SpoolServer`),
+as a
 millwatch gateway given ``--spool`` does. It publishes nothing itself: live blocks still go from
 the gateway to the worker; only what the worker missed comes from the forwarder's spool.
 
@@ -21,8 +23,8 @@ from typing import Any
 
 import zenoh
 
-from ingest.spool.query import SpoolServer
-from ingest.spool.store import Spool
+from millwatch.ingest.spool.query import SpoolServer
+from millwatch.ingest.spool.store import Spool
 
 __all__ = ["QUEUE_BLOCKS", "SpoolForwarder"]
 

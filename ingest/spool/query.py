@@ -1,16 +1,17 @@
 """Recovery from a spool over zenoh: the gateway's queryable and the worker's client.
 
 Zenoh has the tool (DESIGN "Scale": queryables, not a home-made protocol): a spool declares a
-queryable on :func:`ingest.keys.spool_key` of each channel it holds, and answers a ``get`` with
-selector parameters ``first=<seq>;last=<seq>[;max=<n>]`` by
+queryable on :func:`millwatch.ingest.keys.spool_key` of each channel it holds, and answers a
+``get`` with selector parameters ``first=<seq>;last=<seq>[;max=<n>]`` by
 
 - one reply per block it holds in ``first..last``, in ``seq`` order, payload = the wire block
-  byte-identical, encoding the block encoding (:func:`ingest.zenoh_session.block_encoding`);
+  byte-identical, encoding the block encoding
+  (:func:`millwatch.ingest.zenoh_session.block_encoding`);
 - then one closing reply, encoding ``application/json``:
   ``{"first": …, "last": …, "through": …, "blocks": n, "dropped": d}`` — ``through`` is the last
   sequence number the answer covers (``last``, or less when ``max`` cut it short: ask again
   from ``through + 1``), ``dropped`` how many sequence numbers of ``first..through`` the spool's
-  retention removed (exact; :attr:`ingest.spool.store.Spool.dropped_blocks`).
+  retention removed (exact; :attr:`millwatch.ingest.spool.store.Spool.dropped_blocks`).
 
 Numbers in the range that are neither returned nor dropped were never spooled: the gateway was
 down when they fell due (or never sent them). A query uses no consolidation (every reply shares
@@ -32,9 +33,9 @@ from typing import Any, Protocol
 
 import zenoh
 
-from ingest.keys import parse_spool_key, spool_key
-from ingest.spool.store import SpoolRead, payload_seq
-from ingest.zenoh_session import block_encoding
+from millwatch.ingest.keys import parse_spool_key, spool_key
+from millwatch.ingest.spool.store import SpoolRead, payload_seq
+from millwatch.ingest.zenoh_session import block_encoding
 
 __all__ = ["PAGE_BLOCKS", "SpoolAnswer", "SpoolServer", "SpoolSource", "fetch_spooled"]
 
@@ -58,8 +59,8 @@ class SpoolAnswer:
 
 
 class SpoolSource(Protocol):
-    """What a :class:`SpoolServer` answers from: a :class:`~ingest.spool.store.Spool` on disk
-    or a gateway's :class:`~ingest.spool.recent.RecentBlocks` in memory."""
+    """What a :class:`SpoolServer` answers from: a :class:`~millwatch.ingest.spool.store.Spool` on
+    disk or a gateway's :class:`~millwatch.ingest.spool.recent.RecentBlocks` in memory."""
 
     on_new_key: Callable[[str], None] | None
 

@@ -5,8 +5,8 @@ through zenoh's own recovery, which follows zenoh's per-publisher sequence numbe
 gateway process restarts, its new publisher is a stranger to the worker's subscriber, and the
 blocks it published before the worker's link to it was up again were never recovered (about 2 s
 of every gateway restart, issue 26). :class:`RecentBlocks` keeps each channel's last blocks by
-their wire ``seq`` and is served by the same :class:`~ingest.spool.query.SpoolServer`
-queryable as a spool on disk, so the worker's gap fill (``service.worker.spool_recovery``) asks it
+their wire ``seq`` and is served by the same :class:`~millwatch.ingest.spool.query.SpoolServer`
+queryable as a spool on disk, so the worker's gap fill (``millwatch.worker.spool_recovery``) asks it
 by wire sequence number like any spool. Bounded: ``blocks`` per channel (a minute by default,
 :data:`RECENT_S`); what it evicted counts as dropped, exactly, for numbers this process
 published.
@@ -18,7 +18,7 @@ import threading
 from collections import deque
 from collections.abc import Callable
 
-from ingest.spool.store import SpoolRead, payload_seq
+from millwatch.ingest.spool.store import SpoolRead, payload_seq
 
 __all__ = ["RECENT_S", "RecentBlocks"]
 

@@ -1,7 +1,7 @@
 """A gateway restarted on its spool resumes where the spool ends.
 
-Every published block was spooled first (:meth:`ingest.gateway.GatewayPublisher.put`), so the
-spool's last wire ``seq`` per key is where the gateway stopped publishing. :func:`unspooled`
+Every published block was spooled first (:meth:`millwatch.ingest.gateway.GatewayPublisher.put`), so
+the spool's last wire ``seq`` per key is where the gateway stopped publishing. :func:`unspooled`
 drops what a restarted gateway's source would send again (a replay reading its files from the
 start, a scene regenerated from its anchor): its numbering continues from the spool's, and the
 worker sees no false gap and no repeat.
@@ -14,7 +14,7 @@ from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
 from typing import TypeVar
 
-from ingest.spool.store import Spool
+from millwatch.ingest.spool.store import Spool
 
 __all__ = ["unspooled"]
 

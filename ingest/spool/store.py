@@ -1,22 +1,24 @@
 """A gateway's spool on disk: every wire block, durable before it is published, by channel key
 and wire sequence number, for hours.
 
-Why a spool (issue 25): a gateway's zenoh cache (:mod:`ingest.gateway`) dies with the gateway
-process and holds minutes; a site's link can be down for hours, and a gateway PC restarts. A
+Why a spool (issue 25): a gateway's zenoh cache (:mod:`millwatch.ingest.gateway`) dies with the
+gateway process and holds minutes; a site's link can be down for hours, and a gateway PC restarts. A
 SoMat eDAQ keeps its data on board and historians spool to disk (PI buffering, Ignition
 store-and-forward); a millwatch gateway keeps a spool directory.
 
 Files
 -----
 MCAP files named and ordered like the archive's (``spool_<YYYYmmddTHHMMSS>Z[-n].mcap``,
-:mod:`ingest.archive.files`), one MCAP channel per key, message data = the wire block exactly as
+:mod:`millwatch.ingest.archive.files`), one MCAP channel per key, message data = the wire block
+exactly as
 published, log time = the wall time it was spooled (ns, UTC). Unlike the archive, a spool file is
 written **unchunked**: each message record goes to the OS (``write(2)``) before :meth:`Spool.
 append` returns, so a block is on disk before it is published and a SIGKILL loses nothing that
 went out (the archive batches 100 ms into a zstd chunk instead; a chunk per block would cost a
 chunk record, a message index and a chunk index each). Wire blocks of float samples hardly
 compress, so little is lost by that (README "Benchmarks": spool bytes per channel-hour). A
-writer killed mid-record leaves a torn tail: :class:`~ingest.archive.reader.TailTolerantReader`
+writer killed mid-record leaves a torn tail:
+:class:`~millwatch.ingest.archive.reader.TailTolerantReader`
 reads such a file up to its last complete record, as it does the archive's.
 
 Files rotate every ``rotate_seconds`` of wall time or ``rotate_bytes``, whichever comes first, so
@@ -58,8 +60,8 @@ from typing import IO, Any
 
 from mcap.writer import CompressionType, Writer
 
-from ingest import wire
-from ingest.archive.files import (
+from millwatch.ingest import wire
+from millwatch.ingest.archive.files import (
     LIBRARY,
     MESSAGE_ENCODING,
     PROFILE,
@@ -69,8 +71,8 @@ from ingest.archive.files import (
     archive_file_name,
     list_archive_files,
 )
-from ingest.archive.reader import TailTolerantReader
-from ingest.spool.runs import SeqRuns
+from millwatch.ingest.archive.reader import TailTolerantReader
+from millwatch.ingest.spool.runs import SeqRuns
 
 __all__ = [
     "DEFAULT_HOURS",

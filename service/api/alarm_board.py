@@ -2,13 +2,14 @@
 
 Control rooms poll ``/alarms`` every second or so (issue 7: p99 ≤ 20 ms at 200 requests/s from
 50 pollers). The board mirrors the store's ``alarms`` table — one record
-(:class:`~alarms.lifecycle.Alarm`) per alarm — and is fed by whoever sees transitions first:
+(:class:`~millwatch.alarms.lifecycle.Alarm`) per alarm — and is fed by whoever sees transitions
+first:
 
 * in-process (``millwatch serve``, the demo): the worker's stored transitions
-  (:attr:`service.worker.worker.Worker.on_alarms`, after their transaction committed), plus one load
-  from the store when the API starts;
-* remote (``millwatch api``): the workers' ``…/@alarms`` messages (:mod:`alarms.wire`), plus a
-  ``…/@query/alarms`` gather when the API starts and whenever a worker (re)joins.
+  (:attr:`millwatch.worker.worker.Worker.on_alarms`, after their transaction committed), plus one
+  load from the store when the API starts;
+* remote (``millwatch api``): the workers' ``…/@alarms`` messages (:mod:`millwatch.alarms.wire`),
+  plus a ``…/@query/alarms`` gather when the API starts and whenever a worker (re)joins.
 
 Merging is by the alarm's ``seq`` (it counts the alarm's transitions): a row replaces the board's
 only when its ``seq`` is higher, so the same transition arriving twice (store load and callback,
@@ -45,9 +46,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from typing import Any
 
-from alarms.lifecycle import Alarm, Transition
-from alarms.wire import decode_transition
-from service.api.times import with_iso
+from millwatch.alarms.lifecycle import Alarm, Transition
+from millwatch.alarms.wire import decode_transition
+from millwatch.api.times import with_iso
 
 __all__ = ["CURSOR_PATTERN", "AlarmBoard", "Cursor", "Listing", "row_from_dict"]
 
@@ -93,7 +94,7 @@ def _finite(value: Any) -> Any:
 
 
 def row_from_dict(data: dict[str, Any]) -> Alarm:
-    """An :class:`~alarms.lifecycle.Alarm` from its plain fields (extra keys, e.g.
+    """An :class:`~millwatch.alarms.lifecycle.Alarm` from its plain fields (extra keys, e.g.
     ``transitions``, ignored)."""
     return Alarm.from_dict({k: v for k, v in data.items() if k in _ROW_FIELDS})
 
@@ -105,7 +106,7 @@ def row_to_dict(row: Alarm) -> dict[str, Any]:
 
 def _listing_etag(rows: list[Alarm], cursor: Cursor) -> str:
     """Strong ETag of a listing: the listed ``(alarm_id, seq)`` pairs (as
-    :func:`service.api.alarm_views.etag`) and the cursor the body carries, so the tag changes
+    :func:`millwatch.api.alarm_views.etag`) and the cursor the body carries, so the tag changes
     exactly when the body would."""
     h = hashlib.blake2b(digest_size=12)
     h.update(f"{cursor};".encode())
@@ -174,7 +175,7 @@ class AlarmBoard:
         return self.merge(t.alarm for t in transitions)
 
     def apply_message(self, payload: bytes) -> int:
-        """Merge one ``…/@alarms`` message; raises :class:`alarms.wire.AlarmWireError`."""
+        """Merge one ``…/@alarms`` message; raises :class:`millwatch.alarms.wire.AlarmWireError`."""
         return self.merge([row_from_dict(decode_transition(payload)["alarm"])])
 
     # ------------------------------------------------------------------ reading

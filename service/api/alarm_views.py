@@ -9,12 +9,13 @@ Polling (SCADA/HMI every few seconds):
   (A max(``updated_ns``) + count tag misses an escalation of an older alarm: ``updated_ns`` is
   the mill's sample clock, acknowledgements are wall clock, so the max need not move.)
 * **cursor** — ``since`` = the ``cursor`` of the previous answer: a change number of the alarm
-  board, not a time (:mod:`service.api.alarm_board`), so every alarm changed after it comes back,
+  board, not a time (:mod:`millwatch.api.alarm_board`), so every alarm changed after it comes back,
   an acknowledgement of an older alarm included. :func:`alarm_list` (the store's listing, a
   reference for the board's) still filters on ``updated_ns``, sample time.
 
-Operator actions (acknowledge, confirm, comment, shelve, …: :mod:`alarms.actions`) go through the
-worker thread (:meth:`service.worker.worker.Worker.request_action`), so their transitions are
+Operator actions (acknowledge, confirm, comment, shelve, …: :mod:`millwatch.alarms.actions`) go
+through the
+worker thread (:meth:`millwatch.worker.worker.Worker.request_action`), so their transitions are
 stored and published on ``…/@alarms`` like any other and the engine is never touched from an API
 thread.
 """
@@ -26,19 +27,19 @@ import time
 from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Any
 
-from alarms.actions import (
+from millwatch.alarms.actions import (
     ActionKind,
     ActionNotAllowedError,
     InvalidActionError,
     OperatorAction,
 )
-from alarms.engine import UnknownAlarmError
-from alarms.lifecycle import Alarm, AlarmState
-from service.api.times import with_iso
-from service.errors import BadRequest, Conflict, NotFound, Unavailable
-from service.store.database import Store
-from service.worker.checkpoints import MillHeldError
-from service.worker.runtime import ServiceRuntime
+from millwatch.alarms.engine import UnknownAlarmError
+from millwatch.alarms.lifecycle import Alarm, AlarmState
+from millwatch.api.times import with_iso
+from millwatch.errors import BadRequest, Conflict, NotFound, Unavailable
+from millwatch.store.database import Store
+from millwatch.worker.checkpoints import MillHeldError
+from millwatch.worker.runtime import ServiceRuntime
 
 __all__ = [
     "ACK_TIMEOUT_S",
@@ -115,7 +116,7 @@ def apply_action(
     runtime: ServiceRuntime, store: Store, action: OperatorAction, max_shelve_s: float
 ) -> dict[str, Any]:
     """Apply an operator action through the worker thread and return the alarm as stored
-    afterwards (:meth:`service.api.backend.Backend.act`). An acknowledgement of an
+    afterwards (:meth:`millwatch.api.backend.Backend.act`). An acknowledgement of an
     acknowledged alarm without a comment changes nothing and returns it as it is."""
     row = store.alarm(action.alarm_id)
     if row is None:

@@ -3,11 +3,11 @@
 Layering (README "Design"): route → backend → store/runtime or zenoh; routes stay short, and domain
 errors become HTTP responses in one handler, as ``application/problem+json`` (RFC 9457) with a
 sentence a person understands. The app is built by :func:`create_app` from a
-:class:`~service.api.backend.Backend`: a :class:`~service.api.local_backend.LocalBackend` over a
-running :class:`~service.worker.runtime.ServiceRuntime` in this process (a runtime passed
-directly is wrapped in one), or a :class:`~service.remote.zenoh_backend.ZenohBackend` that asks
-the workers over zenoh (``millwatch api``). The routes are :func:`service.api.router.api_router`;
-:class:`~service.api.limits.RequestGuard` bounds bodies and checks the API key before a route
+:class:`~millwatch.api.backend.Backend`: a :class:`~millwatch.api.local_backend.LocalBackend` over a
+running :class:`~millwatch.worker.runtime.ServiceRuntime` in this process (a runtime passed
+directly is wrapped in one), or a :class:`~millwatch.remote.zenoh_backend.ZenohBackend` that asks
+the workers over zenoh (``millwatch api``). The routes are :func:`millwatch.api.router.api_router`;
+:class:`~millwatch.api.limits.RequestGuard` bounds bodies and checks the API key before a route
 reads anything; :class:`HeadAsGet` answers HEAD wherever GET exists. Nothing is read at import
 time.
 
@@ -29,13 +29,13 @@ from fastapi import FastAPI
 from fastapi_offline import FastAPIOffline
 from starlette.routing import Match, Router
 
-from service.api.backend import Backend
-from service.api.errors import install_problem_handlers
-from service.api.limits import ApiLimits, RenderSlots, RequestGuard, keyed_routes
-from service.api.local_backend import LocalBackend
-from service.api.router import api_router
-from service.api.routes.alarms import KEYED_ROUTES
-from service.worker.runtime import ServiceRuntime
+from millwatch.api.backend import Backend
+from millwatch.api.errors import install_problem_handlers
+from millwatch.api.limits import ApiLimits, RenderSlots, RequestGuard, keyed_routes
+from millwatch.api.local_backend import LocalBackend
+from millwatch.api.router import api_router
+from millwatch.api.routes.alarms import KEYED_ROUTES
+from millwatch.worker.runtime import ServiceRuntime
 
 __all__ = ["HeadAsGet", "create_app"]
 
@@ -48,8 +48,8 @@ Asgi = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 def create_app(source: ServiceRuntime | Backend, limits: ApiLimits | None = None) -> FastAPI:
     """The API over a backend, or over a runtime in this process; ``limits`` (default
-    :class:`~service.api.limits.ApiLimits`): body size, concurrent report renders
-    (:mod:`service.api.limits`, checked before any route runs)."""
+    :class:`~millwatch.api.limits.ApiLimits`): body size, concurrent report renders
+    (:mod:`millwatch.api.limits`, checked before any route runs)."""
     limits = ApiLimits() if limits is None else limits
     backend: Backend = LocalBackend(source) if isinstance(source, ServiceRuntime) else source
     app = FastAPIOffline(  # /docs and /redoc load their assets from this app, not a CDN

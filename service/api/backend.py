@@ -2,16 +2,16 @@
 
 Two implementations (README "Scale"):
 
-* :class:`service.api.local_backend.LocalBackend` — the runtime in this process answers
+* :class:`millwatch.api.local_backend.LocalBackend` — the runtime in this process answers
   (``millwatch serve``, the demo): store reads, the worker's status snapshot, operator actions
   (:meth:`Backend.act`) through the worker thread.
-* :class:`service.remote.zenoh_backend.ZenohBackend` — workers elsewhere answer through zenoh
+* :class:`millwatch.remote.zenoh_backend.ZenohBackend` — workers elsewhere answer through zenoh
   queryables (``millwatch api``); each worker itself answers with a :class:`LocalBackend`, so the
   remote API returns the same bodies and the same errors.
 
 Routes stay thin: they validate parameters, call one method, and shape the HTTP response.
-Errors are :mod:`service.api.errors` exceptions in both cases (across zenoh as problem JSON:
-:mod:`service.remote.protocol`).
+Errors are :mod:`millwatch.api.errors` exceptions in both cases (across zenoh as problem JSON:
+:mod:`millwatch.remote.protocol`).
 """
 
 from __future__ import annotations
@@ -21,21 +21,21 @@ from typing import Any, Protocol
 
 from prometheus_client import CollectorRegistry
 
-from alarms.actions import OperatorAction
-from analytics.drivetrain.mill_config import MillConfig
-from service.api.alarm_board import AlarmBoard
-from service.api.identity import ApiKeys
-from service.api.journal import JournalPage, JournalQuery
-from service.reports.life import LifeReport
-from service.reports.monthly import MonthlyReport
-from service.reports.starts import MonthStarts
-from service.status import MillStatus
+from millwatch.alarms.actions import OperatorAction
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.alarm_board import AlarmBoard
+from millwatch.api.identity import ApiKeys
+from millwatch.api.journal import JournalPage, JournalQuery
+from millwatch.reports.life import LifeReport
+from millwatch.reports.monthly import MonthlyReport
+from millwatch.reports.starts import MonthStarts
+from millwatch.status import MillStatus
 
 __all__ = ["Backend"]
 
 
 class Backend(Protocol):
-    """The answers the REST API needs; every method raises :mod:`service.api.errors` errors."""
+    """The answers the REST API needs; every method raises :mod:`millwatch.api.errors` errors."""
 
     @property
     def mills(self) -> Mapping[str, MillConfig]: ...
@@ -47,7 +47,7 @@ class Backend(Protocol):
 
     @property
     def api_keys(self) -> ApiKeys:
-        """Every key that may reach the API, and whose it is (:mod:`service.api.identity`)."""
+        """Every key that may reach the API, and whose it is (:mod:`millwatch.api.identity`)."""
         ...
 
     def alarm_board(self) -> AlarmBoard: ...
@@ -80,12 +80,12 @@ class Backend(Protocol):
     def alarm(self, alarm_id: str) -> dict[str, Any]: ...
 
     def act(self, action: OperatorAction) -> dict[str, Any]:
-        """Apply an operator action (:mod:`alarms.actions`; ``action.user`` is the
+        """Apply an operator action (:mod:`millwatch.alarms.actions`; ``action.user`` is the
         authenticated user: the caller checked the key or the OPC UA session) through the
         alarm's worker, stored and published like any transition; the alarm's detail
-        afterwards (the ``GET /alarms/{id}`` body). Raises :class:`~service.errors.NotFound`
-        for an unknown alarm, :class:`~service.errors.Conflict` when the alarm's state refuses
-        the action (the detail names the state), :class:`~service.errors.BadRequest` for a
+        afterwards (the ``GET /alarms/{id}`` body). Raises :class:`~millwatch.errors.NotFound`
+        for an unknown alarm, :class:`~millwatch.errors.Conflict` when the alarm's state refuses
+        the action (the detail names the state), :class:`~millwatch.errors.BadRequest` for a
         shelve expiry in the past or beyond ``[api] max_shelve_s``."""
         ...
 
@@ -101,5 +101,5 @@ class Backend(Protocol):
 
     def alarm_journal(self, query: JournalQuery) -> JournalPage:
         """Stored alarm transitions in journal order, at most ``query.limit + 1``, and the
-        mills that did not answer (``GET /alarms/journal``, :mod:`service.api.journal`)."""
+        mills that did not answer (``GET /alarms/journal``, :mod:`millwatch.api.journal`)."""
         ...

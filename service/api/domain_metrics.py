@@ -1,7 +1,7 @@
 """Domain gauges for Grafana and Prometheus alerting: what the mill is doing, not the plumbing.
 
 Per mill (labels ``mill`` and ``component`` or ``channel``), from the worker's status and the
-remaining-life computation (:mod:`service.reports.life`):
+remaining-life computation (:mod:`millwatch.reports.life`):
 
 =============================================== ===============================================
 ``millwatch_damage_ratio``                      Miner damage so far incl. the estimated prior
@@ -34,8 +34,8 @@ remaining-life computation (:mod:`service.reports.life`):
                                                 the worker's ``stale_after_s``
 =============================================== ===============================================
 
-Every value is read by attribute from what already computed it (:class:`~service.status.
-MillStatus`, the :class:`~service.reports.life.LifeReport`); a gauge whose value is not known
+Every value is read by attribute from what already computed it (:class:`~millwatch.status.
+MillStatus`, the :class:`~millwatch.reports.life.LifeReport`); a gauge whose value is not known
 (no start yet, a single drive, an unreachable mill) has no series rather than a made-up one.
 
 The life computation reads the store, so :class:`LifeCache` keeps each mill's answer for
@@ -53,10 +53,10 @@ from typing import Any
 
 from prometheus_client.core import GaugeMetricFamily, Metric
 
-from analytics.mill.results import SteadyWindowResult
-from analytics.operation.operating_states import OperatingState
-from service.reports.life import LifeReport
-from service.status import NO_STATUS, MillStatus
+from millwatch.analytics.mill.results import SteadyWindowResult
+from millwatch.analytics.operation.operating_states import OperatingState
+from millwatch.reports.life import LifeReport
+from millwatch.status import NO_STATUS, MillStatus
 
 __all__ = ["MILL_STATES", "LifeCache", "domain_families"]
 
@@ -67,7 +67,7 @@ MILL_STATES = (*(s.label for s in OperatingState), "held", "unreachable")
 
 
 class LifeCache:
-    """Each mill's life answer (``fetch(mill)``, a :class:`~service.reports.life.LifeReport`),
+    """Each mill's life answer (``fetch(mill)``, a :class:`~millwatch.reports.life.LifeReport`),
     kept ``ttl_s`` seconds; ``None`` while it cannot be computed (logged once per mill)."""
 
     def __init__(self, fetch: Callable[[str], LifeReport], ttl_s: float = 60.0) -> None:
@@ -193,7 +193,7 @@ def _life(
 def _steady(
     osc: GaugeMetricFamily, bending: GaugeMetricFamily, mill: str, window: SteadyWindowResult
 ) -> None:
-    """The latest steady-state window, as :func:`alarms.from_analysis.window_observations`
+    """The latest steady-state window, as :func:`millwatch.alarms.from_analysis.window_observations`
     reads it (the window's bending amplitude: half the per-revolution range); channels by the
     mill file's names."""
     for channel, value in sorted(window.range_pct.items()):

@@ -1,6 +1,6 @@
 """The one place the service's domain errors become HTTP responses.
 
-Services raise domain errors (:mod:`service.errors`: :class:`NotFound`, :class:`Conflict`, …)
+Services raise domain errors (:mod:`millwatch.errors`: :class:`NotFound`, :class:`Conflict`, …)
 carrying a ``title`` and a ``detail`` sentence a person understands;
 :func:`install_problem_handlers`
 maps each class to its status code and answers ``application/problem+json`` (RFC 9457). FastAPI's
@@ -20,7 +20,7 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from service.errors import (
+from millwatch.errors import (
     ApiError,
     BadRequest,
     Conflict,

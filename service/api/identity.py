@@ -1,6 +1,6 @@
 """Who acts: the REST API's keys and the identity each one stands for.
 
-Two kinds of key (``[api]`` settings, :class:`service.settings.ApiSettings`):
+Two kinds of key (``[api]`` settings, :class:`millwatch.settings.ApiSettings`):
 
 * per-user keys (``[[api.users]]``): the key names its user; every action is recorded as that
   user (``acked_by``, ``confirmed_by``, a transition's ``by``). A body's ``by`` that names
@@ -11,7 +11,7 @@ Two kinds of key (``[api]`` settings, :class:`service.settings.ApiSettings`):
   key of their own to know who did what.
 
 :class:`ApiKeys` resolves a key in constant time per configured key
-(``hmac.compare_digest``); :class:`service.api.limits.RequestGuard` refuses a request on an
+(``hmac.compare_digest``); :class:`millwatch.api.limits.RequestGuard` refuses a request on an
 action route before its body is read (401 without a known key, 403 for a viewer or when no key
 is configured), and the routes take the :class:`ApiIdentity` as a dependency.
 """
@@ -23,8 +23,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Literal
 
-from service.errors import BadRequest, Forbidden, Unauthorized
-from service.settings import ApiSettings, SettingsError
+from millwatch.errors import BadRequest, Forbidden, Unauthorized
+from millwatch.settings import ApiSettings, SettingsError
 
 __all__ = ["MIN_USER_KEY_CHARS", "SHARED_IDENTITY", "ApiIdentity", "ApiKeys"]
 

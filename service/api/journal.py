@@ -1,6 +1,6 @@
 """The alarm journal: every stored transition of the alarms, in time order, by mill and time.
 
-``GET /alarms/journal?mill=&from=&to=&after=&limit=`` (:mod:`service.api.routes.journal`)
+``GET /alarms/journal?mill=&from=&to=&after=&limit=`` (:mod:`millwatch.api.routes.journal`)
 answers the ISA-18.2 alarm journal from the store's ``alarm_transitions`` table, each
 transition with its alarm's mill, rule, subject, quantity and unit beside it — every column a
 transition has (who acknowledged, a comment), whatever the kind (raised, acknowledged,
@@ -13,11 +13,11 @@ cleared, …). ``/alarms`` is the alarms' *current* state; this is their *histor
 * **Time** — ``from`` ≤ ``t_ns`` < ``to`` (integer ns UTC or ISO-8601). A transition's time is
   the mill's sample time, an acknowledgement's the wall clock: the journal is history by time,
   not a feed of changes (an entry stored late with an earlier time lands on an earlier page).
-  To follow changes, poll ``/alarms`` with its change cursor (:mod:`service.api.alarm_board`).
+  To follow changes, poll ``/alarms`` with its change cursor (:mod:`millwatch.api.alarm_board`).
 * **Where it comes from** — in process, the store (:func:`journal_entries`, one query; no index
   on time: a year of 200 000 transitions scans in about 0.1 s). Under ``millwatch api`` each
   mill's worker answers its own entries (the ``journal`` question of
-  :mod:`service.remote.protocol`), at most ``limit + 1`` each, and the API merges them in order
+  :mod:`millwatch.remote.protocol`), at most ``limit + 1`` each, and the API merges them in order
   (:func:`merge_pages`); mills whose worker does not answer are listed in ``unreachable``, so a
   partial journal says so.
 """
@@ -30,10 +30,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from alarms.lifecycle import TransitionRecord
-from service.api.times import with_iso
-from service.store.database import Store
-from service.store.records import from_row
+from millwatch.alarms.lifecycle import TransitionRecord
+from millwatch.api.times import with_iso
+from millwatch.store.database import Store
+from millwatch.store.records import from_row
 
 __all__ = [
     "ALARM_COLUMNS",
@@ -102,8 +102,8 @@ class JournalPage:
 
 def journal_entries(store: Store, query: JournalQuery) -> list[dict[str, Any]]:
     """The store's entries of ``query``, in journal order, at most ``limit + 1``: each
-    transition's own fields (:class:`~alarms.lifecycle.TransitionRecord`'s, whatever they are)
-    and its alarm's :data:`ALARM_COLUMNS`."""
+    transition's own fields (:class:`~millwatch.alarms.lifecycle.TransitionRecord`'s, whatever they
+    are) and its alarm's :data:`ALARM_COLUMNS`."""
     after = query.after
     rows = store.alarm_journal(
         query.mill_id, query.from_ns, query.to_ns,

@@ -6,8 +6,8 @@ requests held every worker thread, so ``/health`` waited 39 s.
 
 * :class:`RequestGuard` (an ASGI middleware, outermost): a declared ``Content-Length`` above
   ``max_body_bytes`` is answered 413 before a byte of the body is read; an action route, which
-  needs an operator's key (``X-API-Key``, :data:`service.api.routes.alarms.API_KEY`;
-  :mod:`service.api.identity`), is answered 401 (no known key) or 403 (a viewer's key, or none
+  needs an operator's key (``X-API-Key``, :data:`millwatch.api.routes.alarms.API_KEY`;
+  :mod:`millwatch.api.identity`), is answered 401 (no known key) or 403 (a viewer's key, or none
   configured) *before* its body is read; a body streamed without a length is counted as it
   arrives and cut at the limit (413). Bodies under the limit go through untouched.
 * :class:`RenderSlots`: at most ``renders`` report renders at once; one more is answered at once
@@ -29,10 +29,10 @@ from typing import Any
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import JSONResponse
 
-from service.api.errors import PROBLEM, status_of
-from service.api.identity import ApiKeys
-from service.errors import ApiError, Unavailable
-from service.settings import ApiSettings
+from millwatch.api.errors import PROBLEM, status_of
+from millwatch.api.identity import ApiKeys
+from millwatch.errors import ApiError, Unavailable
+from millwatch.settings import ApiSettings
 
 __all__ = ["ApiLimits", "RenderSlots", "RequestGuard", "TooBusy", "keyed_routes", "limits_of"]
 
@@ -122,7 +122,7 @@ def keyed_routes(routes: Iterable[tuple[str, str]]) -> list[tuple[re.Pattern[str
 
 class RequestGuard:
     """The ASGI middleware of the module docstring. ``keys``: the configured keys
-    (:class:`~service.api.identity.ApiKeys`: none, or a viewer's key, answers 403 on a keyed
+    (:class:`~millwatch.api.identity.ApiKeys`: none, or a viewer's key, answers 403 on a keyed
     route; a missing or unknown key 401); ``keyed``: the routes that need one, from
     :func:`keyed_routes`."""
 

@@ -1,12 +1,12 @@
-"""The :class:`~service.api.backend.Backend` over a runtime in this process.
+"""The :class:`~millwatch.api.backend.Backend` over a runtime in this process.
 
 Used by the in-process API (``millwatch serve``, the demo) and by every worker to answer zenoh
-queries (:mod:`service.remote.queryables`), so a remote API returns what an in-process one would.
+queries (:mod:`millwatch.remote.queryables`), so a remote API returns what an in-process one would.
 Reads go to the store (read-only connections) and to ``runtime.status``, the snapshot the worker
 thread refreshes every 0.5 s; operator actions (acknowledge, confirm, comment, shelve, …) go
 through the worker thread.
 
-The alarm board (:mod:`service.api.alarm_board`) is fed by the runtime's stored transitions (it
+The alarm board (:mod:`millwatch.api.alarm_board`) is fed by the runtime's stored transitions (it
 registers on ``runtime.alarm_listeners``) and loaded once from the store when the store is open.
 """
 
@@ -17,14 +17,14 @@ from typing import Any
 
 from prometheus_client import CollectorRegistry
 
-from alarms.actions import ActionKind, OperatorAction
-from alarms.lifecycle import Transition
-from service.api.alarm_board import AlarmBoard, row_from_dict
-from service.api.alarm_views import alarm_detail, apply_action
-from service.api.identity import ApiKeys
-from service.api.journal import JournalPage, JournalQuery, journal_entries
-from service.api.metrics import metrics_registry
-from service.api.mill_views import (
+from millwatch.alarms.actions import ActionKind, OperatorAction
+from millwatch.alarms.lifecycle import Transition
+from millwatch.api.alarm_board import AlarmBoard, row_from_dict
+from millwatch.api.alarm_views import alarm_detail, apply_action
+from millwatch.api.identity import ApiKeys
+from millwatch.api.journal import JournalPage, JournalQuery, journal_entries
+from millwatch.api.metrics import metrics_registry
+from millwatch.api.mill_views import (
     config_of,
     mill_detail,
     mill_life,
@@ -35,13 +35,13 @@ from service.api.mill_views import (
     site_mills,
     store_of,
 )
-from service.reports.fleet import FleetMill, build_fleet, fleet_entry, fleet_to_dict
-from service.reports.life import LifeReport
-from service.reports.monthly import MonthlyReport
-from service.reports.starts import MonthStarts
-from service.status import NO_STATUS, MillStatus
-from service.worker.partition import worker_identity
-from service.worker.runtime import MILL_CHECKS, ServiceRuntime
+from millwatch.reports.fleet import FleetMill, build_fleet, fleet_entry, fleet_to_dict
+from millwatch.reports.life import LifeReport
+from millwatch.reports.monthly import MonthlyReport
+from millwatch.reports.starts import MonthStarts
+from millwatch.status import NO_STATUS, MillStatus
+from millwatch.worker.partition import worker_identity
+from millwatch.worker.runtime import MILL_CHECKS, ServiceRuntime
 
 __all__ = ["LocalBackend"]
 
@@ -96,7 +96,7 @@ class LocalBackend:
     # ------------------------------------------------------------------ mills
     def status(self, mill_id: str) -> MillStatus:
         """The worker's status snapshot of one mill (404 for a mill not analysed here;
-        :data:`~service.status.NO_STATUS` before the worker reported it)."""
+        :data:`~millwatch.status.NO_STATUS` before the worker reported it)."""
         config_of(self.mills, mill_id)
         return self.runtime.status.get(mill_id, NO_STATUS)
 
@@ -150,7 +150,7 @@ class LocalBackend:
         return mill_monthly_report(self.runtime, mill_id, month)
 
     def fleet_mill(self, mill_id: str) -> FleetMill:
-        """One mill's fleet line (:func:`service.reports.fleet.fleet_entry`)."""
+        """One mill's fleet line (:func:`millwatch.reports.fleet.fleet_entry`)."""
         config = config_of(self.mills, mill_id)
         board = self.alarm_board()
         return fleet_entry(store_of(self.runtime), config, time.time_ns(),
@@ -158,7 +158,7 @@ class LocalBackend:
                            open_alarms=[a for a in board.rows(mill_id) if a.open])  # fmt: skip
 
     def fleet(self, site: str) -> dict[str, Any]:
-        """The site's mills side by side, in visit order (:mod:`service.reports.fleet`)."""
+        """The site's mills side by side, in visit order (:mod:`millwatch.reports.fleet`)."""
         mills = site_mills(self.mills, site)
         lines = [self.fleet_mill(m) for m in mills]
         zone = next(iter(mills.values())).time_zone

@@ -9,13 +9,13 @@ analyzer or iterates a dict the worker mutates. Open alarms are counted from the
 Names follow Prometheus conventions: ``millwatch_`` prefix, unit suffixes, ``_total`` counters.
 The domain gauges (damage and its rate, remaining life, oscillation range, bending amplitude,
 starts this month and today, the last start's peak, imbalance, stale channels, channel lag, one
-0/1 series per mill state) are :mod:`service.api.domain_metrics`. Known counters start at 0:
+0/1 series per mill state) are :mod:`millwatch.api.domain_metrics`. Known counters start at 0:
 each reporting channel has a decode-error series per kind, each mill an open-alarm series per
 severity, so sums and ``rate()`` over them read 0, never "no data".
 
 ``millwatch api`` (no worker in the process) exports the same per-mill families
 (:func:`mill_families`, :func:`open_alarms`) from what the workers answer over zenoh:
-:mod:`service.remote.metrics`.
+:mod:`millwatch.remote.metrics`.
 """
 
 from __future__ import annotations
@@ -27,14 +27,14 @@ from prometheus_client import CollectorRegistry
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
-from alarms.lifecycle import Alarm
-from alarms.rules import Severity
-from ingest.wire import WireError
-from service.api.domain_metrics import LifeCache, domain_families
-from service.api.mill_views import mill_life
-from service.reports.life import LifeReport
-from service.status import NO_STATUS, MillStatus
-from service.worker.runtime import ServiceRuntime
+from millwatch.alarms.lifecycle import Alarm
+from millwatch.alarms.rules import Severity
+from millwatch.api.domain_metrics import LifeCache, domain_families
+from millwatch.api.mill_views import mill_life
+from millwatch.ingest.wire import WireError
+from millwatch.reports.life import LifeReport
+from millwatch.status import NO_STATUS, MillStatus
+from millwatch.worker.runtime import ServiceRuntime
 
 __all__ = ["RuntimeCollector", "metrics_registry", "mill_families", "open_alarms"]
 
@@ -103,7 +103,7 @@ class RuntimeCollector(Collector):
 
     def _write_faults(self) -> Iterator[Metric]:
         """Failed write attempts per target and whether each is writable now
-        (:class:`service.worker.health.WriteEpisodes`), and the blocks the archive refused
+        (:class:`millwatch.worker.health.WriteEpisodes`), and the blocks the archive refused
         meanwhile."""
         faults = self.runtime.write_faults()
         failures = CounterMetricFamily(
@@ -181,7 +181,7 @@ def mill_families(
     mills: Iterable[str], status: Mapping[str, MillStatus], life: LifeSource = lambda mill: None
 ) -> Iterator[Metric]:
     """Decode errors, missing blocks, samples and whether held per mill, from the workers'
-    statuses, and the domain gauges (:mod:`service.api.domain_metrics`: damage and remaining
+    statuses, and the domain gauges (:mod:`millwatch.api.domain_metrics`: damage and remaining
     life from ``life``, the rest from the statuses)."""
     yield from domain_families(mills, status, life)
     errors = CounterMetricFamily(

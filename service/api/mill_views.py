@@ -1,8 +1,8 @@
 """What the per-mill endpoints answer: life, starts of a month, latest spectrum.
 
-The service layer between the routes (:mod:`service.api.routes.mills`) and the store/runtime: it
+The service layer between the routes (:mod:`millwatch.api.routes.mills`) and the store/runtime: it
 finds
-the mill (or raises :class:`~service.api.errors.NotFound` naming it and the mills that exist),
+the mill (or raises :class:`~millwatch.api.errors.NotFound` naming it and the mills that exist),
 reads the store, and reads live values only from ``runtime.status`` — the snapshot the worker
 thread refreshes every 0.5 s — never from the analyzer itself.
 """
@@ -13,15 +13,15 @@ import time
 from collections.abc import Mapping
 from typing import Any
 
-from analytics.drivetrain.mill_config import MillConfig
-from service.errors import NotFound, Unavailable
-from service.reports.history import life_inputs
-from service.reports.life import LifeReport, compute_life
-from service.reports.monthly import MonthlyReport, build_monthly_report
-from service.reports.starts import MonthStarts, current_month, starts_in_month
-from service.status import NO_STATUS, MillStatus
-from service.store.database import Store
-from service.worker.runtime import ServiceRuntime
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.errors import NotFound, Unavailable
+from millwatch.reports.history import life_inputs
+from millwatch.reports.life import LifeReport, compute_life
+from millwatch.reports.monthly import MonthlyReport, build_monthly_report
+from millwatch.reports.starts import MonthStarts, current_month, starts_in_month
+from millwatch.status import NO_STATUS, MillStatus
+from millwatch.store.database import Store
+from millwatch.worker.runtime import ServiceRuntime
 
 __all__ = [
     "UNREACHABLE",
@@ -120,7 +120,7 @@ def store_of(runtime: ServiceRuntime) -> Store:
 
 
 def mill_life(runtime: ServiceRuntime, mill_id: str) -> LifeReport:
-    """Damage so far and remaining life per component (:mod:`service.reports.life`), with the
+    """Damage so far and remaining life per component (:mod:`millwatch.reports.life`), with the
     worker's live damage (closed cycles not yet stored, the open residue)."""
     config = mill_config(runtime, mill_id)
     store = store_of(runtime)
@@ -149,7 +149,7 @@ def mill_starts(runtime: ServiceRuntime, mill_id: str, month: str | None) -> Mon
 
 def mill_monthly_report(runtime: ServiceRuntime, mill_id: str, month: str | None) -> MonthlyReport:
     """The monthly report of ``month`` (default: the mill's current month,
-    :func:`mill_month`); a malformed month is a :class:`~service.reports.starts.MonthError`
+    :func:`mill_month`); a malformed month is a :class:`~millwatch.reports.starts.MonthError`
     (422)."""
     config = mill_config(runtime, mill_id)
     month = month or mill_month(runtime, config)

@@ -1,9 +1,10 @@
 """Response and request bodies of the mill, spectrum and alarm endpoints, for the OpenAPI schema
 (with examples) and for validating what the API sends. Units are in the field names. ``/life``,
 ``/starts`` and ``/sites/{site}/fleet`` answer the typed results of their producers, defined
-once there (:class:`service.reports.life.LifeReport`, :class:`service.reports.starts.MonthStarts`
-— re-exported here with its :class:`~service.reports.starts.StartOut` —,
-:class:`service.reports.fleet.FleetView`)."""
+once there (:class:`millwatch.reports.life.LifeReport`,
+:class:`millwatch.reports.starts.MonthStarts`
+— re-exported here with its :class:`~millwatch.reports.starts.StartOut` —,
+:class:`millwatch.reports.fleet.FleetView`)."""
 
 from __future__ import annotations
 
@@ -13,9 +14,9 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from pydantic.config import JsonDict
 
-from alarms.actions import COMMENT_MAX_CHARS, USER_MAX_CHARS
-from service.reports.starts import MonthStarts, StartOut
-from service.status import MillStatus
+from millwatch.alarms.actions import COMMENT_MAX_CHARS, USER_MAX_CHARS
+from millwatch.reports.starts import MonthStarts, StartOut
+from millwatch.status import MillStatus
 
 __all__ = [
     "AckBody",

@@ -1,18 +1,18 @@
-"""The one router of the REST API: every resource's routes (:mod:`service.api.routes`), included
-in one place. :func:`service.api.app.create_app` includes only this."""
+"""The one router of the REST API: every resource's routes (:mod:`millwatch.api.routes`), included
+in one place. :func:`millwatch.api.app.create_app` includes only this."""
 
 from __future__ import annotations
 
 from fastapi import APIRouter
 
-from service.api.backend import Backend
-from service.api.limits import RenderSlots
-from service.api.routes.alarms import alarms_router
-from service.api.routes.health import health_router
-from service.api.routes.journal import journal_router
-from service.api.routes.metrics import metrics_router
-from service.api.routes.mills import mills_router
-from service.api.routes.reports import reports_router
+from millwatch.api.backend import Backend
+from millwatch.api.limits import RenderSlots
+from millwatch.api.routes.alarms import alarms_router
+from millwatch.api.routes.health import health_router
+from millwatch.api.routes.journal import journal_router
+from millwatch.api.routes.metrics import metrics_router
+from millwatch.api.routes.mills import mills_router
+from millwatch.api.routes.reports import reports_router
 
 __all__ = ["api_router"]
 

@@ -2,7 +2,7 @@
 
 The API's times are int64 nanoseconds since the Unix epoch, UTC (exact, sortable, the poll
 cursor). :func:`with_iso` adds beside each ``<name>_ns`` an ``<name>`` with the same instant as
-ISO-8601 UTC in the one form of every surface (:func:`alarms.times.iso_utc`:
+ISO-8601 UTC in the one form of every surface (:func:`millwatch.alarms.times.iso_utc`:
 ``2024-05-01T10:40:00.123Z``, milliseconds; the exact instant is the ``_ns`` beside it), the
 convention of ``/life``'s ``evaluated_at_ns``/``evaluated_at``. :func:`ns_of` turns a query time
 given as ISO-8601 (``since=`` of ``/alarms``, which takes integer ns too) into ns.
@@ -16,7 +16,7 @@ from typing import Annotated, Any
 
 from pydantic import BeforeValidator
 
-from alarms.times import iso_utc
+from millwatch.alarms.times import iso_utc
 
 __all__ = ["IsoTime", "ns_of", "with_iso"]
 

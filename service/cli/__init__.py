@@ -2,7 +2,7 @@
 
 The ``millwatch`` command line: one module per sub-command, composed by ``main``.
 
-* ``main`` — :func:`~service.cli.main.main` (the console script and ``python -m service.cli``):
+* ``main`` — :func:`~millwatch.cli.main.main` (the console script and ``python -m millwatch.cli``):
   builds the parser from ``COMMANDS``, sets up logging, turns user errors into one line, exit 2.
 * one module per sub-command, each with ``add_parser(subparsers)`` that registers it and sets
   its handler: ``demo``, ``rainflow``, ``simulate``, ``spectrum``, ``replay``, ``archive``,
@@ -23,9 +23,9 @@ another's imports (FastAPI, matplotlib, zenoh). A command that should answer ``-
 (``rainflow``) keeps its module to argparse and light helpers and imports the rest in its
 handler; ``tests/service/cli/test_startup.py`` checks what ``--help`` imports.
 
-Commands only compose: they read settings and files, build objects from ``service.worker``,
-``service.api``, ``service.remote`` (and ``analytics`` / ``ingest`` for the offline ones) and run
-them; no analysis lives here. A new command: a new module with ``add_parser`` (its ``help=``
-line), and one line in ``main.COMMANDS``: ``Command("name", "service.cli.name", "the same help
+Commands only compose: they read settings and files, build objects from ``millwatch.worker``,
+``millwatch.api``, ``millwatch.remote`` (and ``analytics`` / ``ingest`` for the offline ones) and
+run them; no analysis lives here. A new command: a new module with ``add_parser`` (its ``help=``
+line), and one line in ``main.COMMANDS``: ``Command("name", "millwatch.cli.name", "the same help
 line")`` (a test checks that the two lines agree).
 """

@@ -1,9 +1,9 @@
-"""``python -m service.cli``: the ``millwatch`` command line (:func:`service.cli.main.main`)."""
+"""``python -m millwatch.cli``: the ``millwatch`` command line (:func:`millwatch.cli.main.main`)."""
 
 from __future__ import annotations
 
 import sys
 
-from service.cli.main import main
+from millwatch.cli.main import main
 
 sys.exit(main())

@@ -2,8 +2,8 @@
 
 Reads MCAP files, or every ``*.mcap`` file of a directory in name order (rotated archive files
 sort by time), as the worker's recovery replays them
-(:mod:`service.worker.offline_analysis`: batches, admission by sequence number, calibration,
-aligned frames) into one :class:`~analytics.mill.analyzer.MillAnalyzer` per mill given:
+(:mod:`millwatch.worker.offline_analysis`: batches, admission by sequence number, calibration,
+aligned frames) into one :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer` per mill given:
 operating states, starts (switch-on and short-circuit peaks, rise times), stops, barring,
 starts per month against the norm (Diering 2011 §6.1.3), steady-state metrics, fatigue damage per
 component and phase (§8.2, App. D), harmonics (§6.2.7) and the alarms they raise.
@@ -31,16 +31,16 @@ from typing import Any
 
 from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
-from alarms.from_analysis import report_observations
-from alarms.report import alarms_for_report
-from alarms.times import iso_utc
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.analyzer import MillAnalyzer
-from ingest import wire
-from ingest.archive.reader import RawMessage
-from ingest.mill_files import load_mill_config
-from service.worker.admission import BlockAdmission
-from service.worker.offline_analysis import ReadingStats, analyze_files
+from millwatch.alarms.from_analysis import report_observations
+from millwatch.alarms.report import alarms_for_report
+from millwatch.alarms.times import iso_utc
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.ingest import wire
+from millwatch.ingest.archive.reader import RawMessage
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.worker.admission import BlockAdmission
+from millwatch.worker.offline_analysis import ReadingStats, analyze_files
 
 __all__ = ["add_parser", "analyze_recording", "plan_jobs", "recording_files", "run_jobs"]
 
@@ -61,7 +61,7 @@ def recording_files(path: Path) -> list[Path]:
 
 class _Blocks:
     """The Foxglove export's admission of one mill's archive messages, as analyze admits them
-    (:class:`~service.worker.admission.BlockAdmission`): ``(channel, block)`` of a new
+    (:class:`~millwatch.worker.admission.BlockAdmission`): ``(channel, block)`` of a new
     block, None for anything else (counted)."""
 
     def __init__(self, config: MillConfig) -> None:
@@ -76,7 +76,7 @@ def analyze_recording(
     files: list[Path], config: MillConfig, *, progress: bool = False, spectra: bool = True
 ) -> tuple[MillAnalyzer, dict[str, Any]]:
     """Run the mill analyzer over the recording (one process); returns it and reading
-    statistics (:func:`service.worker.offline_analysis.analyze_files`)."""
+    statistics (:func:`millwatch.worker.offline_analysis.analyze_files`)."""
     total = sum(p.stat().st_size for p in files)
     with _bar(total, config.id, progress) as bar:
         sink, read = analyze_files(files, [config], spectra=spectra, advance=bar.update)

@@ -7,7 +7,7 @@ mill's worker for everything else with a zenoh ``get`` (``[api] query_timeout_s`
 The mills it serves are those of ``[mills]``: a mill no live worker holds is answered
 ``unreachable`` (``/mills``) or 503 (its other routes). Run as many as you need, anywhere that
 reaches the router. With ``[opcua] enabled`` it also serves OPC UA, gathered from the workers
-the same way (:mod:`service.opcua`).
+the same way (:mod:`millwatch.opcua`).
 """
 
 from __future__ import annotations
@@ -19,15 +19,15 @@ from pathlib import Path
 
 import uvicorn
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.zenoh_session import build_config, open_session
-from service.api.app import create_app
-from service.api.identity import ApiKeys
-from service.api.limits import limits_of
-from service.cli.serve import AnnouncingServer, check_api_port, check_secrets, run_until_signal
-from service.opcua.launch import start_opcua
-from service.remote.zenoh_backend import ZenohBackend
-from service.settings import ServiceSettings, load_service_settings
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.app import create_app
+from millwatch.api.identity import ApiKeys
+from millwatch.api.limits import limits_of
+from millwatch.cli.serve import AnnouncingServer, check_api_port, check_secrets, run_until_signal
+from millwatch.ingest.zenoh_session import build_config, open_session
+from millwatch.opcua.launch import start_opcua
+from millwatch.remote.zenoh_backend import ZenohBackend
+from millwatch.settings import ServiceSettings, load_service_settings
 
 __all__ = ["add_parser", "serve_api"]
 

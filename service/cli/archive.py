@@ -35,11 +35,11 @@ from pathlib import Path
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
-from alarms.times import iso_utc
-from ingest.archive.files import MCAP_MAGIC, ArchiveError
-from ingest.archive.reader import TailTolerantReader
-from ingest.archive.recovery import recover_file
-from service.cli.args import duration_seconds, utc_time_ns
+from millwatch.alarms.times import iso_utc
+from millwatch.cli.args import duration_seconds, utc_time_ns
+from millwatch.ingest.archive.files import MCAP_MAGIC, ArchiveError
+from millwatch.ingest.archive.reader import TailTolerantReader
+from millwatch.ingest.archive.recovery import recover_file
 
 __all__ = ["ArchiveCommandError", "FileInfo", "add_parser", "file_info"]
 
@@ -255,10 +255,10 @@ def _add_export(actions: argparse._SubParsersAction) -> None:
 
 def _export(args: argparse.Namespace) -> int:
     # heavy imports here, not at module level: 'millwatch --help' must not pay for them
-    from ingest.mill_files import load_mill_config
-    from service.cli.analyze import _Blocks, recording_files
-    from service.export.foxglove import export_archive
-    from service.worker.offline_analysis import export_files
+    from millwatch.cli.analyze import _Blocks, recording_files
+    from millwatch.export.foxglove import export_archive
+    from millwatch.ingest.mill_files import load_mill_config
+    from millwatch.worker.offline_analysis import export_files
 
     if args.out.exists() and not args.force:
         raise ArchiveCommandError(f"--out {args.out}: file exists; remove it or add --force")

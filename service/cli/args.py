@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # (imported when used: the TLS module loads cryptography)
-    from ingest.zenoh_tls import TlsFiles
+    from millwatch.ingest.zenoh_tls import TlsFiles
 
 __all__ = [
     "add_tls_arguments",
@@ -115,7 +115,7 @@ def add_tls_arguments(group: argparse._ActionsContainer, name_help: str) -> None
 def tls_files(args: argparse.Namespace, default_name: str | None) -> TlsFiles | None:
     """The TLS files ``--tls-dir``/``--tls-name`` name (None without ``--tls-dir``);
     :class:`ValueError` when no name is given and there is no default."""
-    from ingest.zenoh_tls import TlsFiles
+    from millwatch.ingest.zenoh_tls import TlsFiles
 
     if args.tls_dir is None:
         return None

@@ -31,18 +31,23 @@ from pathlib import Path
 
 import uvicorn
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.api.app import create_app
-from service.api.local_backend import LocalBackend
-from service.cli.args import positive_float, positive_int
-from service.cli.serve import AnnouncingServer, check_api_port, run_until_signal
-from service.opcua.launch import start_opcua, trust_directories
-from service.settings import ServiceSettings
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.app import create_app
+from millwatch.api.local_backend import LocalBackend
+from millwatch.cli.args import positive_float, positive_int
+from millwatch.cli.serve import AnnouncingServer, check_api_port, run_until_signal
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.opcua.launch import start_opcua, trust_directories
+from millwatch.settings import ServiceSettings
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 
 __all__ = ["add_parser"]
 

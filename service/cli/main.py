@@ -6,7 +6,7 @@ status 2 (1 is left for "ran, but found a problem").
 
 Start-up: only the module of the command being run is imported (:data:`COMMANDS` names each
 module by its dotted path and holds the one line ``millwatch --help`` lists). ``millwatch --help``
-imports no command module at all, ``millwatch rainflow ...`` only :mod:`service.cli.rainflow`; a
+imports no command module at all, ``millwatch rainflow ...`` only :mod:`millwatch.cli.rainflow`; a
 command that needs FastAPI or zenoh no longer makes every other command pay for importing them.
 """
 
@@ -23,7 +23,7 @@ from typing import NamedTuple
 __all__ = ["COMMANDS", "Command", "build_parser", "main"]
 
 #: Errors a user can fix from the message alone: printed without a traceback (the commands'
-#: own, e.g. :class:`~service.cli.signal_files.SignalFileError`, are ``ValueError``\ s), and
+#: own, e.g. :class:`~millwatch.cli.signal_files.SignalFileError`, are ``ValueError``\ s), and
 #: those of :data:`MODULE_ERRORS`. Not ``KeyError``: a missing key is a programming error (its
 #: message is only the key, e.g. ``'start_cost'``), shown with its traceback; a command that
 #: looks up what a user named raises a ``ValueError`` naming what exists.
@@ -32,9 +32,9 @@ USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError)
 #: User errors defined in modules a command imports, as ``(module, class)``: looked up, not
 #: imported, when a command fails (a command that raised one has imported its module).
 MODULE_ERRORS = (
-    ("ingest.archive.files", "ArchiveError"),
-    ("service.store.migrations", "StoreError"),
-    ("ingest.spool.store", "SpoolError"),
+    ("millwatch.ingest.archive.files", "ArchiveError"),
+    ("millwatch.store.migrations", "StoreError"),
+    ("millwatch.ingest.spool.store", "SpoolError"),
 )
 
 
@@ -52,72 +52,72 @@ class Command(NamedTuple):
 COMMANDS = (
     Command(
         "demo",
-        "service.cli.demo",
+        "millwatch.cli.demo",
         "run everything on loopback with simulated mills: worker, gateways, REST API",
     ),
     Command(
         "rainflow",
-        "service.cli.rainflow",
+        "millwatch.cli.rainflow",
         "rainflow count and Miner damage of a recorded signal (.npy or .csv)",
     ),
     Command(
         "simulate",
-        "service.cli.simulate",
+        "millwatch.cli.simulate",
         "simulate a mill (scene) to an MCAP file with ground truth",
     ),
     Command(
         "spectrum",
-        "service.cli.spectrum",
+        "millwatch.cli.spectrum",
         "PSD of the running portions of a recording with the expected lines marked",
     ),
     Command(
         "replay",
-        "service.cli.replay",
+        "millwatch.cli.replay",
         "re-publish archived MCAP blocks to zenoh with their original pacing",
     ),
     Command(
         "spool",
-        "service.cli.edge.spool",
+        "millwatch.cli.edge.spool",
         "edge forwarder: spool a third-party gateway's blocks on disk and serve recovery",
     ),
     Command(
         "archive",
-        "service.cli.archive",
+        "millwatch.cli.archive",
         "inspect MCAP archive files, recover files a crash left unfinished",
     ),
     Command(
         "serve",
-        "service.cli.serve",
+        "millwatch.cli.serve",
         "run a worker (zenoh ingest, archive, analysis, store, queryables) and the REST API",
     ),
     Command(
         "router",
-        "service.cli.router",
+        "millwatch.cli.router",
         "run a zenoh router (for workers, gateways and the API) where zenohd is absent",
     ),
     Command(
         "zenoh-certs",
-        "service.cli.edge.zenoh_certs",
+        "millwatch.cli.edge.zenoh_certs",
         "make a CA and the certificates of the router, workers, API and gateways (mTLS)",
     ),
     Command(
         "api",
-        "service.cli.api",
+        "millwatch.cli.api",
         "run the REST API alone; it asks the workers over zenoh (scale-out)",
     ),
     Command(
         "analyze",
-        "service.cli.analyze",
+        "millwatch.cli.analyze",
         "analyse an MCAP recording: starts, stops, barring, steady state, damage by phase",
     ),
     Command(
         "report",
-        "service.cli.report",
+        "millwatch.cli.report",
         "write one mill's monthly report (HTML, PDF, CSV) from a store file",
     ),
     Command(
         "history",
-        "service.cli.history.command",
+        "millwatch.cli.history.command",
         "write N months of simulated history for mill files into a store (reports, fleet)",
     ),
 )

@@ -2,7 +2,8 @@
 
 The signal is read in large chunks (a ``.npy`` file memory-mapped, never loaded whole) and goes
 through the same exact counter and damage per cycle as live data, compiled or vectorised per
-chunk (:mod:`analytics.fatigue.record_count`), so the result of any ``--block-size`` is the batch
+chunk (:mod:`millwatch.analytics.fatigue.record_count`), so the result of any ``--block-size`` is
+the batch
 result (ASTM E1049-85; Diering 2011 §8.2 and App. D). The residue is closed at the end: ``half``
 (ASTM, the default) or ``repeat`` (the record followed by itself, full cycles only; see
 ``--residue``).
@@ -10,7 +11,7 @@ result (ASTM E1049-85; Diering 2011 §8.2 and App. D). The residue is closed at 
 Start-up: the module imports argparse and light helpers only, so ``millwatch rainflow --help``
 imports no numpy or numba; the functions that count import what they use when they run. Counting
 then loads the kernels' cached machine code without starting numba's compiler
-(:mod:`service.kernel_preload`), and a fresh process asks OpenBLAS for one thread (counting
+(:mod:`millwatch.kernel_preload`), and a fresh process asks OpenBLAS for one thread (counting
 uses no BLAS); neither changes a result. Measured in the README ("Command line").
 """
 
@@ -27,17 +28,17 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
-from analytics.fatigue.residue_modes import RESIDUE_MODE_HELP, ResidueMode
-from analytics.fatigue.sn_models import APP_D_S_UT, SN_MODEL_NAMES
-from service.cli.args import non_negative_float, positive_float, positive_int
+from millwatch.analytics.fatigue.residue_modes import RESIDUE_MODE_HELP, ResidueMode
+from millwatch.analytics.fatigue.sn_models import APP_D_S_UT, SN_MODEL_NAMES
+from millwatch.cli.args import non_negative_float, positive_float, positive_int
 
 if TYPE_CHECKING:  # numpy and the counter are imported by the functions that count
     import numpy as np
 
-    from analytics.fatigue.cycles import Cycles
-    from analytics.fatigue.record_count import RecordCount
-    from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
-    from service.cli.signal_files import ArraySource, SignalSource
+    from millwatch.analytics.fatigue.cycles import Cycles
+    from millwatch.analytics.fatigue.record_count import RecordCount
+    from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
+    from millwatch.cli.signal_files import ArraySource, SignalSource
 
     Source = SignalSource | ArraySource
 
@@ -167,8 +168,8 @@ def run_rainflow(
 ) -> RainflowSummary:
     """Count ``source`` in chunks of ``block_size``; write every cycle to ``cycles_out`` if
     given."""
-    from analytics.fatigue.record_count import KERNELS, RecordCount
-    from service.kernel_preload import preload
+    from millwatch.analytics.fatigue.record_count import KERNELS, RecordCount
+    from millwatch.kernel_preload import preload
 
     preload(KERNELS)
     count = RecordCount(
@@ -200,8 +201,8 @@ def run_rainflow(
 
 
 def _feed(count: RecordCount, chunk: np.ndarray, source: Source) -> Cycles:
-    from analytics.fatigue.rainflow import NonFiniteSampleError
-    from service.cli.signal_files import SignalFileError
+    from millwatch.analytics.fatigue.rainflow import NonFiniteSampleError
+    from millwatch.cli.signal_files import SignalFileError
 
     try:
         return count.feed(chunk)
@@ -247,9 +248,9 @@ def _progress(source: Source, enabled: bool) -> Iterator[Any]:
 
 def _main(args: argparse.Namespace) -> int:
     _one_blas_thread()
-    from analytics.fatigue.sn_curves import GoodmanCorrection
-    from analytics.fatigue.sn_models import SNModelParameters, build_sn_curve
-    from service.cli.signal_files import open_signal
+    from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection
+    from millwatch.analytics.fatigue.sn_models import SNModelParameters, build_sn_curve
+    from millwatch.cli.signal_files import open_signal
 
     params = SNModelParameters(S_ut=args.s_ut, S_e=args.s_e, fat=args.fat)
     curve = build_sn_curve(args.sn_model, params)
@@ -283,7 +284,7 @@ def _one_blas_thread() -> None:
 
 @contextmanager
 def _maybe_open(path: Path | None) -> Iterator[IO[str] | None]:
-    from service.cli.signal_files import SignalFileError
+    from millwatch.cli.signal_files import SignalFileError
 
     if path is None:
         yield None

@@ -50,13 +50,15 @@ from pathlib import Path
 import zenoh
 from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
-from alarms.times import iso_utc
-from ingest import keys
-from ingest.archive.files import ArchiveError
-from ingest.archive.reader import ArchivedBlock
-from ingest.gateway import DEFAULT_RETENTION_S
-from ingest.keys import KeyFormatError
-from ingest.replay import (
+from millwatch.alarms.times import iso_utc
+from millwatch.cli.args import duration_seconds, non_negative_float, positive_float, utc_time_ns
+from millwatch.cli.edge.spool import add_spool_arguments, open_spool, spool_summary
+from millwatch.ingest import keys
+from millwatch.ingest.archive.files import ArchiveError
+from millwatch.ingest.archive.reader import ArchivedBlock
+from millwatch.ingest.gateway import DEFAULT_RETENTION_S
+from millwatch.ingest.keys import KeyFormatError
+from millwatch.ingest.replay import (
     KeyRemap,
     Replayer,
     ReplayError,
@@ -65,12 +67,10 @@ from ingest.replay import (
     archive_blocks,
     collect_archive_files,
 )
-from ingest.spool.query import SpoolServer
-from ingest.spool.resume import unspooled
-from ingest.spool.store import Spool, payload_seq
-from ingest.zenoh_session import build_config, open_session
-from service.cli.args import duration_seconds, non_negative_float, positive_float, utc_time_ns
-from service.cli.edge.spool import add_spool_arguments, open_spool, spool_summary
+from millwatch.ingest.spool.query import SpoolServer
+from millwatch.ingest.spool.resume import unspooled
+from millwatch.ingest.spool.store import Spool, payload_seq
+from millwatch.ingest.zenoh_session import build_config, open_session
 
 __all__ = ["add_parser", "default_run_name", "key_pattern", "utc_time_ns"]
 
@@ -101,7 +101,7 @@ def run_name(text: str) -> str:
 
 
 def remap_prefix(text: str) -> KeyRemap:
-    """``--remap PREFIX`` parsed by :meth:`ingest.replay.KeyRemap.from_prefix`."""
+    """``--remap PREFIX`` parsed by :meth:`millwatch.ingest.replay.KeyRemap.from_prefix`."""
     try:
         return KeyRemap.from_prefix(text)
     except ReplayError as exc:

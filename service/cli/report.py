@@ -88,11 +88,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     # Imports here: 'millwatch --help' must not pay for the store, pydantic models or renderers.
-    from service.settings import REPORT_FORMATS, parse_formats
+    from millwatch.settings import REPORT_FORMATS, parse_formats
 
     store_path, out, formats = args.store, args.out, REPORT_FORMATS
     if args.config is not None:
-        from service.settings import load_service_settings
+        from millwatch.settings import load_service_settings
 
         settings = load_service_settings(args.config)
         store_path = store_path or settings.store.path
@@ -102,7 +102,7 @@ def _main(args: argparse.Namespace) -> int:
     out = out or DEFAULT_OUT
     if args.format is not None:
         formats = parse_formats(args.format)
-    from service.reports.starts import month_days
+    from millwatch.reports.starts import month_days
 
     month_days(args.month)  # MonthError naming the value, before anything is opened
     if not store_path.is_file():
@@ -119,11 +119,11 @@ def _write_fleet(
     store_path: Path, site: str, month: str, formats: tuple[str, ...], out: Path
 ) -> int:
     """The fleet report of ``site`` as of the end of ``month`` (UTC), from the store alone."""
-    from service.reports.files import EXTENSIONS, report_path, write_atomic
-    from service.reports.fleet import fleet_to_dict, store_fleet
-    from service.reports.fleet_document import render_fleet
-    from service.reports.starts import month_bounds_ns
-    from service.store.database import Store
+    from millwatch.reports.files import EXTENSIONS, report_path, write_atomic
+    from millwatch.reports.fleet import fleet_to_dict, store_fleet
+    from millwatch.reports.fleet_document import render_fleet
+    from millwatch.reports.starts import month_bounds_ns
+    from millwatch.store.database import Store
 
     with Store(store_path) as store:
         view = fleet_to_dict(store_fleet(store, site, month_bounds_ns(month, "UTC")[1]))
@@ -136,9 +136,9 @@ def _write_fleet(
 
 
 def _write(store_path: Path, mill_id: str, month: str, formats: tuple[str, ...], out: Path) -> int:
-    from analytics.drivetrain.mill_config import MillConfig
-    from service.reports.month_end import has_data, write_report
-    from service.store.database import Store
+    from millwatch.analytics.drivetrain.mill_config import MillConfig
+    from millwatch.reports.month_end import has_data, write_report
+    from millwatch.store.database import Store
 
     with Store(store_path) as store:
         known = {m["mill_id"]: m["config"] for m in store.mills()}

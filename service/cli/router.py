@@ -17,8 +17,8 @@ from pathlib import Path
 
 import zenoh
 
-from ingest.zenoh_session import build_config, open_session
-from service.cli.serve import wait_for_signal
+from millwatch.cli.serve import wait_for_signal
+from millwatch.ingest.zenoh_session import build_config, open_session
 
 __all__ = ["DEFAULT_LISTEN", "add_parser", "router_config"]
 

@@ -6,7 +6,7 @@ it, stores results in SQLite and checkpoints. Its mills are the configured ones 
 zenoh (``…/@query/<what>``) while holding a liveliness token per mill, so ``millwatch api``
 elsewhere can serve them too. SIGTERM or SIGINT (Ctrl-C) stops it cleanly: tokens withdrawn,
 final checkpoint, archive file finished, zenoh session closed. With ``[opcua] enabled`` it also
-serves the mills' values and alarms over OPC UA (:mod:`service.opcua`).
+serves the mills' values and alarms over OPC UA (:mod:`millwatch.opcua`).
 
 Start-up: the settings, every mill file, the archive/store/report directories and the API's
 port are checked before the banner (an error is one line naming file, field and value, exit 2);
@@ -28,20 +28,20 @@ from pathlib import Path
 
 import uvicorn
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.zenoh_session import build_config, try_open
-from service.api.app import create_app
-from service.api.identity import ApiKeys
-from service.api.limits import limits_of
-from service.api.local_backend import LocalBackend
-from service.opcua.launch import start_opcua
-from service.remote.queryables import WorkerQueryables
-from service.settings import ServiceSettings, SettingsError, check_writable, load_service_settings
-from service.store.database import Store
-from service.store.migrations import StoreError
-from service.worker.mill_job import MillJob
-from service.worker.partition import check_exclusive, partition_mills, worker_identity
-from service.worker.runtime import ServiceRuntime
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.app import create_app
+from millwatch.api.identity import ApiKeys
+from millwatch.api.limits import limits_of
+from millwatch.api.local_backend import LocalBackend
+from millwatch.ingest.zenoh_session import build_config, try_open
+from millwatch.opcua.launch import start_opcua
+from millwatch.remote.queryables import WorkerQueryables
+from millwatch.settings import ServiceSettings, SettingsError, check_writable, load_service_settings
+from millwatch.store.database import Store
+from millwatch.store.migrations import StoreError
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.partition import check_exclusive, partition_mills, worker_identity
+from millwatch.worker.runtime import ServiceRuntime
 
 __all__ = [
     "AnnouncingServer",

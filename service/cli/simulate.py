@@ -53,21 +53,8 @@ from typing import cast
 
 from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest import wire
-from ingest.archive.writer import ArchiveWriter
-from ingest.gateway import DEFAULT_RETENTION_S
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import SceneBlock, scene_blocks
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.renderer import Scene
-from ingest.sim.scenes import get_scene, list_scenes, load_scene_file
-from ingest.sim.spec import SceneSpec
-from ingest.spool.query import SpoolServer
-from ingest.spool.store import Spool, SpoolError
-from ingest.zenoh_session import build_config, open_session
-from ingest.zenoh_tls import gateway_name
-from service.cli.args import (
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.cli.args import (
     add_tls_arguments,
     duration_seconds,
     positive_float,
@@ -75,7 +62,20 @@ from service.cli.args import (
     tls_files,
     utc_time_ns,
 )
-from service.cli.edge.spool import add_spool_arguments, open_spool, spool_summary
+from millwatch.cli.edge.spool import add_spool_arguments, open_spool, spool_summary
+from millwatch.ingest import wire
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.gateway import DEFAULT_RETENTION_S
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import SceneBlock, scene_blocks
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.scenes import get_scene, list_scenes, load_scene_file
+from millwatch.ingest.sim.spec import SceneSpec
+from millwatch.ingest.spool.query import SpoolServer
+from millwatch.ingest.spool.store import Spool, SpoolError
+from millwatch.ingest.zenoh_session import build_config, open_session
+from millwatch.ingest.zenoh_tls import gateway_name
 
 __all__ = ["add_parser", "build_scene", "simulate_to_archive"]
 

@@ -1,11 +1,11 @@
 """``millwatch spectrum``: the steady-state torque spectrum of a recording, expected lines marked.
 
 Reads one MCAP recording (``millwatch simulate --out`` or the ingest archive; its blocks admitted
-as ``millwatch analyze`` admits them: :mod:`service.worker.admission`), keeps only the
+as ``millwatch analyze`` admits them: :mod:`millwatch.worker.admission`), keeps only the
 running portions (pinion speed within the running band for ``--settle`` seconds: a plain
-speed-band test, :func:`analytics.spectra.settings.is_running`, not the analyzer's operating-state
-machine, whose run edges differ), feeds them to
-:class:`analytics.spectra.tracker.HarmonicTracker`
+speed-band test, :func:`millwatch.analytics.spectra.settings.is_running`, not the analyzer's
+operating-state machine, whose run edges differ), feeds them to
+:class:`millwatch.analytics.spectra.tracker.HarmonicTracker`
 (order-tracked Welch PSD, see that module) and renders one PSD panel per torque/bending channel
 with the drivetrain's expected excitation lines marked and labelled — Diering 2011 §6.2.7, Figures
 35–36, with Diering 2011's colours (mill speed orange, pinion speed blue, liner passing green, motor
@@ -37,19 +37,19 @@ from typing import Any
 
 import numpy as np
 
-from analytics.drivetrain.kinematics import ExpectedLine
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.signal.fault_stage import FaultStage, LastGood
-from analytics.signal.frame_aligner import Frame
-from analytics.signal.telemetry_faults import FaultCounts
-from analytics.spectra.report import harmonics_report
-from analytics.spectra.settings import HarmonicSettings, is_running
-from analytics.spectra.tracker import HarmonicTracker
-from ingest import wire
-from ingest.archive.reader import TailTolerantReader
-from ingest.mill_files import load_mill_config
-from service.cli.args import non_negative_float, positive_float
-from service.worker.admission import BlockAdmission
+from millwatch.analytics.drivetrain.kinematics import ExpectedLine
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.signal.fault_stage import FaultStage, LastGood
+from millwatch.analytics.signal.frame_aligner import Frame
+from millwatch.analytics.signal.telemetry_faults import FaultCounts
+from millwatch.analytics.spectra.report import harmonics_report
+from millwatch.analytics.spectra.settings import HarmonicSettings, is_running
+from millwatch.analytics.spectra.tracker import HarmonicTracker
+from millwatch.cli.args import non_negative_float, positive_float
+from millwatch.ingest import wire
+from millwatch.ingest.archive.reader import TailTolerantReader
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.worker.admission import BlockAdmission
 
 __all__ = ["TrackedRecording", "add_parser", "plot_spectrum", "track_recording"]
 
@@ -116,7 +116,7 @@ def recording_frames(
     path: Path, config: MillConfig, names: list[str], frame_s: float = 1.0
 ) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
     """(t0_ns, frame) of channels ``names`` of ``config`` from one MCAP file, in time order,
-    of the blocks ``millwatch analyze`` admits (:class:`~service.worker.admission.BlockAdmission`:
+    of the blocks ``millwatch analyze`` admits (:class:`~millwatch.worker.admission.BlockAdmission`:
     live keys or a replay run's; malformed blocks and repeats counted and skipped)."""
     admission = BlockAdmission([config], replayed=True, warn_foreign=False)
     asm = _Assembler(tuple(names), float(config.sample_rate_hz))

@@ -3,13 +3,13 @@ concluded (``millwatch archive export``).
 
 Composition: archive messages are read in order and admitted by the caller's ``admit`` (the
 decoding and admission of ``millwatch analyze``, passed in by the command); the samples of the
-span go to :class:`ingest.archive.foxglove_export.FoxgloveExportWriter` stamped with their
-sample time; the same blocks feed the real :class:`~analytics.mill.analyzer.MillAnalyzer` (from a
-context before and after the span, so the operating state is known when the span begins and
+span go to :class:`millwatch.ingest.archive.foxglove_export.FoxgloveExportWriter` stamped with their
+sample time; the same blocks feed the real :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer`
+(from a context before and after the span, so the operating state is known when the span begins and
 events that cross its end are measured whole), whose state changes, events (with start peaks),
 steady-state windows (per channel, by the mill file's names), harmonic lines and damage are
 written on the same timeline; the alarms are those
-``millwatch analyze`` reports (:func:`alarms.report.alarms_for_report`).
+``millwatch analyze`` reports (:func:`millwatch.alarms.report.alarms_for_report`).
 
 Times: the span selects by *sample* time (wire block ``t0``), not by the archive's MCAP log
 time, which is the time the worker received the block. Files are skipped unread when their
@@ -33,21 +33,21 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type information
 
-from alarms.from_analysis import report_observations
-from alarms.report import alarms_for_report
-from alarms.times import iso_utc
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
-from ingest import keys, wire
-from ingest.archive.files import ArchiveError
-from ingest.archive.foxglove_export import (
+from millwatch.alarms.from_analysis import report_observations
+from millwatch.alarms.report import alarms_for_report
+from millwatch.alarms.times import iso_utc
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
+from millwatch.ingest import keys, wire
+from millwatch.ingest.archive.files import ArchiveError
+from millwatch.ingest.archive.foxglove_export import (
     ExportCounts,
     FoxgloveExportWriter,
     envelopes,
     sample_time_ns,
     sample_times_ns,
 )
-from ingest.archive.reader import RawMessage, TailTolerantReader, finished_statistics
+from millwatch.ingest.archive.reader import RawMessage, TailTolerantReader, finished_statistics
 
 __all__ = [
     "Admit",
@@ -523,7 +523,7 @@ def export_archive(
     such mill in the archive: lists the mills found; nothing in the span: lists the spans the
     archive holds). A failed export leaves no file behind. ``feed(export, files, advance)``:
     another way to read the files into the export, admitting as ``admit_for`` does (the
-    command's batch reading, :func:`service.worker.offline_analysis.export_files`); default:
+    command's batch reading, :func:`millwatch.worker.offline_analysis.export_files`); default:
     message by message through ``admit_for(config)``."""
     if start_ns is not None and end_ns is not None and end_ns <= start_ns:
         raise ValueError(f"--end {iso_utc(end_ns)} is not after --start {iso_utc(start_ns)}")

@@ -7,7 +7,7 @@
 * :class:`AccessRules` (an asyncua permission ruleset, consulted for every request): anonymous
   sessions may browse, read, subscribe, read history and call ConditionRefresh(2) — a
   view-only display must resynchronise — but no Write and no other method; logged-in users may
-  call methods, and each operator method checks the role itself (:mod:`service.opcua.methods`:
+  call methods, and each operator method checks the role itself (:mod:`millwatch.opcua.methods`:
   viewers get ``BadUserAccessDenied``). Writes of millwatch's variables are refused anyway:
   they are read-only (AccessLevel CurrentRead).
 * The rule check runs in the task that then serves the request, so it records the session's user
@@ -40,7 +40,7 @@ from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, User,
 from asyncua.server.user_managers import UserManager
 from asyncua.ua.ua_binary import struct_from_binary
 
-from service.opcua.ua_types import nid
+from millwatch.opcua.ua_types import nid
 
 __all__ = [
     "ANONYMOUS_METHODS",

@@ -8,20 +8,20 @@ NodeId equal to its path below ``Millwatch``, e.g. ``ns=2;s=rustenburg/sag-5200-
         <mill>/                         object of type MillType (ns=<ns>;s=MillType); event
                                         notifier; SourceNode of the mill's alarm events
           Drive, Starter                properties from the mill file
-          State, StaleChannels, …       the points of :mod:`service.opcua.values`
+          State, StaleChannels, …       the points of :mod:`millwatch.opcua.values`
           SteadyState/<channel>/…       folders are made from the points' paths
           Components/<component>/…
           Channels/<channel>/…
           Alarms/                       one condition object per open alarm
-                                        (:mod:`service.opcua.conditions`)
+                                        (:mod:`millwatch.opcua.conditions`)
 
 The notifiers (EventNotifier SubscribeToEvents and HistoryRead) nest as the folders do
 (``Server``, ``Millwatch``, site, mill): a subscription to any of them receives the alarm
 events of the mills below it, and ConditionRefresh and HistoryRead answer for it. Variables are
 read-only (AccessLevel CurrentRead), typed (Double, UInt64, String, Boolean, DateTime,
 String[]), and those with a unit carry an ``EngineeringUnits`` property
-(:mod:`service.opcua.units`); those with a unit and a range of normal operation
-(:func:`~service.opcua.values.eu_range`) are ``AnalogItemType`` with an ``EURange`` (Part 8
+(:mod:`millwatch.opcua.units`); those with a unit and a range of normal operation
+(:func:`~millwatch.opcua.values.eu_range`) are ``AnalogItemType`` with an ``EURange`` (Part 8
 §5.3.2). Every value carries a SourceTimestamp — the sample time it belongs to (the steady
 window's, or the mill's latest analysed sample) — and a ServerTimestamp (when the server took
 it). :meth:`MillNodes.apply` writes only the points whose value changed since the last write
@@ -36,10 +36,10 @@ from typing import Any
 
 from asyncua import Node, Server, ua
 
-from analytics.drivetrain.mill_config import MillConfig
-from service.opcua.ua_types import nid, stamped, status
-from service.opcua.units import UNECE_URI, UNITS, unit_id
-from service.opcua.values import Kind, Point, ns_to_datetime
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.opcua.ua_types import nid, stamped, status
+from millwatch.opcua.units import UNECE_URI, UNITS, unit_id
+from millwatch.opcua.values import Kind, Point, ns_to_datetime
 
 __all__ = ["MILL_TYPE", "NAMESPACE_URI", "MillNodes", "mill_type", "root_folder", "site_folder"]
 

@@ -1,6 +1,6 @@
 """millwatch alarms as OPC UA Alarms & Conditions (Part 9): condition objects, events, refresh.
 
-Each open alarm of the alarm board (:mod:`service.api.alarm_board`, the one behind
+Each open alarm of the alarm board (:mod:`millwatch.api.alarm_board`, the one behind
 ``GET /alarms``) is a condition object under its mill's ``Alarms`` folder, its ConditionId the
 NodeId ``<site>/<mill>/Alarms/<alarm id>``, of type ``ExclusiveLevelAlarmType`` (a limit alarm:
 the alarm has a limit, its ``HighLimit``) or ``AlarmConditionType`` (no limit), instantiated
@@ -41,7 +41,7 @@ two markers pass whatever the item's where clause (a filter for conditions would
 Only the calling session's own subscriptions are refreshed (another's:
 ``BadSubscriptionIdInvalid``).
 
-The operator methods are in :mod:`service.opcua.methods`; they call
+The operator methods are in :mod:`millwatch.opcua.methods`; they call
 :meth:`Conditions.act`, which goes through the backend's ``act`` (what the REST actions call)
 and sends the condition's new event.
 """
@@ -62,15 +62,15 @@ from asyncua import Node, Server, ua
 from asyncua.common import events
 from asyncua.common.instantiate_util import instantiate
 
-from alarms.actions import OperatorAction, ShelvingState
-from alarms.lifecycle import Alarm
-from alarms.rules import Severity
-from service.errors import ApiError, BadRequest, Conflict, GatewayTimeout, NotFound, Unavailable
-from service.opcua.access import SESSION
-from service.opcua.address_space import MillNodes
-from service.opcua.ua_types import nid, stamped, status
-from service.opcua.units import UNITS
-from service.opcua.values import ns_to_datetime
+from millwatch.alarms.actions import OperatorAction, ShelvingState
+from millwatch.alarms.lifecycle import Alarm
+from millwatch.alarms.rules import Severity
+from millwatch.errors import ApiError, BadRequest, Conflict, GatewayTimeout, NotFound, Unavailable
+from millwatch.opcua.access import SESSION
+from millwatch.opcua.address_space import MillNodes
+from millwatch.opcua.ua_types import nid, stamped, status
+from millwatch.opcua.units import UNITS
+from millwatch.opcua.values import ns_to_datetime
 
 __all__ = ["INPUT_PATHS", "SEVERITY", "Act", "Conditions"]
 
@@ -92,7 +92,7 @@ INPUT_PATHS: dict[str, str] = {
 """The mill variable (path under the mill) a rule's alarm watches: its ``InputNode``."""
 
 Act = Callable[[OperatorAction], Awaitable[dict[str, Any]]]
-"""``act(action)``: the backend's operator action (raises :mod:`service.errors`)."""
+"""``act(action)``: the backend's operator action (raises :mod:`millwatch.errors`)."""
 
 _BAD = {
     NotFound: ua.StatusCodes.BadNodeIdUnknown,
@@ -164,7 +164,7 @@ class Conditions:
         self.events_sent = 0
         self.method_handlers: Callable[[str], Callable[..., Any]] | None = None
         """The handler of a method by browse name, bound to each instance's method copies
-        (set by :class:`~service.opcua.methods.ConditionMethods`)."""
+        (set by :class:`~millwatch.opcua.methods.ConditionMethods`)."""
 
     @classmethod
     async def create(

@@ -6,7 +6,7 @@
   the board that was open at some time in the requested span): one event per transition
   (raised, escalated, acknowledged, confirmed, commented, shelved, cleared, …) with its time,
   severity, message, state, user (ClientUserId) and comment, the fields of
-  :mod:`service.opcua.conditions` where a transition says them, and EventId
+  :mod:`millwatch.opcua.conditions` where a transition says them, and EventId
   ``<alarm id>:<seq>``. Oldest first (newest first when StartTime is after EndTime), at most
   ``NumValuesPerNode`` (0: :data:`MAX_EVENTS`) per answer; a ContinuationPoint when more
   follow (the same request with it returns the next page).
@@ -25,10 +25,10 @@ from typing import Any
 from asyncua import ua
 from asyncua.server.history import HistoryManager
 
-from alarms.lifecycle import Alarm, AlarmState
-from alarms.rules import Severity
-from service.opcua.conditions import SEVERITY
-from service.opcua.ua_types import nid, status
+from millwatch.alarms.lifecycle import Alarm, AlarmState
+from millwatch.alarms.rules import Severity
+from millwatch.opcua.conditions import SEVERITY
+from millwatch.opcua.ua_types import nid, status
 
 __all__ = ["MAX_EVENTS", "AlarmHistory", "transition_events"]
 

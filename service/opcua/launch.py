@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from service.api.backend import Backend
-from service.settings import ServiceSettings
+from millwatch.api.backend import Backend
+from millwatch.settings import ServiceSettings
 
 if TYPE_CHECKING:
-    from service.opcua.server import OpcUaServer
+    from millwatch.opcua.server import OpcUaServer
 
 __all__ = ["start_opcua", "trust_directories"]
 
@@ -26,10 +26,10 @@ def trust_directories(settings: ServiceSettings) -> tuple[Path, Path]:
 
 def start_opcua(backend: Backend, settings: ServiceSettings) -> OpcUaServer | None:
     """The started server over ``backend`` (its certificate beside the store), or None when
-    ``[opcua]`` is not enabled; :class:`~service.opcua.server.OpcUaError` if it cannot start."""
+    ``[opcua]`` is not enabled; :class:`~millwatch.opcua.server.OpcUaError` if it cannot start."""
     if not settings.opcua.enabled:
         return None
-    from service.opcua.server import OpcUaServer
+    from millwatch.opcua.server import OpcUaServer
 
     server = OpcUaServer(backend, settings.opcua, settings.store.path.parent)
     server.start()

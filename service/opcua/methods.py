@@ -16,7 +16,7 @@ TimedShelve(ShelvingTime ms)                its ShelvingState    ``shelve_timed`
   (ShelvedStateMachineType)                                      ShelvingTime)
 OneShotShelve() / Unshelve()                its ShelvingState    ``shelve_one_shot`` /
                                                                  ``unshelve``
-ConditionRefresh(SubscriptionId),           the ConditionType    :meth:`~service.opcua.
+ConditionRefresh(SubscriptionId),           the ConditionType    :meth:`~millwatch.opcua.
 ConditionRefresh2(SubscriptionId, ItemId)   object               conditions.Conditions.refresh`
 ==========================================  ===================  ================================
 
@@ -44,11 +44,11 @@ from typing import Any
 from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User
 
-from alarms.actions import ActionKind, OperatorAction, ShelvingState
-from alarms.lifecycle import Alarm, AlarmState
-from service.opcua.access import CALLER, OPERATOR, Logins
-from service.opcua.conditions import Act, Conditions
-from service.opcua.ua_types import nid, status
+from millwatch.alarms.actions import ActionKind, OperatorAction, ShelvingState
+from millwatch.alarms.lifecycle import Alarm, AlarmState
+from millwatch.opcua.access import CALLER, OPERATOR, Logins
+from millwatch.opcua.conditions import Act, Conditions
+from millwatch.opcua.ua_types import nid, status
 
 __all__ = ["ConditionMethods"]
 

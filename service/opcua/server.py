@@ -1,8 +1,8 @@
 """The OPC UA server: asyncua in its own thread, mirroring a backend's answers.
 
 :class:`OpcUaServer` runs an asyncio loop in a thread (``millwatch-opcua``) that serves
-``[opcua] endpoint`` and keeps the address space (:mod:`service.opcua.address_space`) equal to
-what the :class:`~service.api.backend.Backend` answers — the REST API's backend, so it is the
+``[opcua] endpoint`` and keeps the address space (:mod:`millwatch.opcua.address_space`) equal to
+what the :class:`~millwatch.api.backend.Backend` answers — the REST API's backend, so it is the
 runtime in this process under ``millwatch serve`` and the workers over zenoh under
 ``millwatch api``:
 
@@ -10,13 +10,13 @@ runtime in this process under ``millwatch serve`` and the workers over zenoh und
   mill ``life`` and ``starts`` (a backend call may block on SQLite or zenoh, so calls run on
   one helper thread, never on the loop) and writes only the values that changed;
 * every :data:`ALARM_EVERY_S` it looks at the alarm board's version and sends the condition
-  events of the alarms that changed (:mod:`service.opcua.conditions`);
+  events of the alarms that changed (:mod:`millwatch.opcua.conditions`);
 * the Part 9 methods (Acknowledge, Confirm, AddComment, shelving, Enable/Disable) call the
   backend's ``act`` as the OPC UA user; ConditionRefresh answers any session
-  (:mod:`service.opcua.methods`, :mod:`service.opcua.access`);
-* HistoryRead of alarm events is answered from the store (:mod:`service.opcua.history`; its
+  (:mod:`millwatch.opcua.methods`, :mod:`millwatch.opcua.access`);
+* HistoryRead of alarm events is answered from the store (:mod:`millwatch.opcua.history`; its
   backend calls on a thread of their own, never delaying the value updates);
-* a signing client's certificate must be in the trust list (:mod:`service.opcua.trust`);
+* a signing client's certificate must be in the trust list (:mod:`millwatch.opcua.trust`);
 * BuildInfo names millwatch and its version (:data:`PRODUCT_URI`).
 
 A backend error on one mill (its worker gone, a timeout) leaves that mill's values as they were
@@ -42,13 +42,13 @@ from typing import Any, TypeVar
 
 from asyncua import Server, ua
 
-import service
-from alarms.actions import OperatorAction
-from service.api.backend import Backend
-from service.api.mill_views import mill_summary
-from service.api.models import MillSummary
-from service.errors import ApiError
-from service.opcua.access import (
+import millwatch
+from millwatch.alarms.actions import OperatorAction
+from millwatch.api.backend import Backend
+from millwatch.api.mill_views import mill_summary
+from millwatch.api.models import MillSummary
+from millwatch.errors import ApiError
+from millwatch.opcua.access import (
     AccessRules,
     Login,
     Logins,
@@ -56,21 +56,21 @@ from service.opcua.access import (
     certificate_names,
     record_client_address,
 )
-from service.opcua.address_space import (
+from millwatch.opcua.address_space import (
     NAMESPACE_URI,
     MillNodes,
     mill_type,
     root_folder,
     site_folder,
 )
-from service.opcua.certificate import APPLICATION_URI, ensure_certificate
-from service.opcua.conditions import Conditions
-from service.opcua.history import AlarmHistory
-from service.opcua.methods import ConditionMethods
-from service.opcua.trust import ClientTrust
-from service.opcua.ua_types import nid
-from service.opcua.values import Point, mill_points
-from service.settings import OpcUaSettings, OpcUaUser, SettingsError
+from millwatch.opcua.certificate import APPLICATION_URI, ensure_certificate
+from millwatch.opcua.conditions import Conditions
+from millwatch.opcua.history import AlarmHistory
+from millwatch.opcua.methods import ConditionMethods
+from millwatch.opcua.trust import ClientTrust
+from millwatch.opcua.ua_types import nid
+from millwatch.opcua.values import Point, mill_points
+from millwatch.settings import OpcUaSettings, OpcUaUser, SettingsError
 
 __all__ = ["ALARM_EVERY_S", "PRODUCT_URI", "OpcUaError", "OpcUaServer", "OpcUaStats"]
 
@@ -260,7 +260,7 @@ class OpcUaServer:
 
     def _gather_points(self) -> dict[str, dict[str, Point]]:
         """Every mill's points (on the helper thread): the state, stale channels and hold of
-        each mill as ``GET /mills/{id}`` says them (:func:`~service.api.mill_views.mill_summary`
+        each mill as ``GET /mills/{id}`` says them (:func:`~millwatch.api.mill_views.mill_summary`
         of its status; a mill whose worker is gone is ``unreachable``). A mill whose answers
         equal the last ones is left out."""
         statuses = self._ask("*", "status", self.backend.mill_statuses)
@@ -343,7 +343,7 @@ async def _build_info(server: Server) -> None:
         version = importlib.metadata.version("millwatch")
     except importlib.metadata.PackageNotFoundError:
         version = "unknown"
-    built = datetime.fromtimestamp(Path(service.__file__).stat().st_mtime, UTC)
+    built = datetime.fromtimestamp(Path(millwatch.__file__).stat().st_mtime, UTC)
     await server.set_build_info(PRODUCT_URI, "millwatch", "millwatch", version, version, built)
 
 

@@ -1,10 +1,10 @@
 """What the OPC UA server shows of a mill: the backend's answers flattened to named points.
 
 Pure: the backend's answers in — the mill's line of ``GET /mills`` and its status
-(:class:`~service.status.MillStatus`), ``/mills/{id}/life``
-(:class:`~service.reports.life.LifeReport`) and ``/mills/{id}/starts``
-(:class:`~service.reports.starts.MonthStarts`), all read by attribute (the same
-:class:`~service.api.backend.Backend` answers as REST) —
+(:class:`~millwatch.status.MillStatus`), ``/mills/{id}/life``
+(:class:`~millwatch.reports.life.LifeReport`) and ``/mills/{id}/starts``
+(:class:`~millwatch.reports.starts.MonthStarts`), all read by attribute (the same
+:class:`~millwatch.api.backend.Backend` answers as REST) —
 ``{path: Point}`` out. A path is the browse
 path under the mill's node (``SteadyState/motor_torque/RangePct``); it is also the string part of
 the variable's NodeId, so a SCADA tag list can be written from this table:
@@ -48,13 +48,13 @@ from datetime import UTC, datetime
 from enum import Enum
 from typing import Any
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.loads import steady_channels
-from analytics.mill.results import SteadyWindowResult
-from service.api.models import MillSummary
-from service.reports.life import ComponentLife, LifeReport, Projection
-from service.reports.starts import MonthStarts
-from service.status import NO_STATUS, MillHealthStatus, MillStatus
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.loads import steady_channels
+from millwatch.analytics.mill.results import SteadyWindowResult
+from millwatch.api.models import MillSummary
+from millwatch.reports.life import ComponentLife, LifeReport, Projection
+from millwatch.reports.starts import MonthStarts
+from millwatch.status import NO_STATUS, MillHealthStatus, MillStatus
 
 __all__ = ["Kind", "Point", "eu_range", "mill_points", "ns_to_datetime"]
 

@@ -1,8 +1,8 @@
 """Prometheus metrics of ``millwatch api``: gathered from the workers over zenoh at scrape time.
 
-No worker runs in the API process, so the families of :mod:`service.api.metrics` are rebuilt
-from what the workers answer (``status``, :mod:`service.remote.protocol`): the same per-mill
-families (:func:`~service.api.metrics.mill_families`) and open alarms (from the API's alarm
+No worker runs in the API process, so the families of :mod:`millwatch.api.metrics` are rebuilt
+from what the workers answer (``status``, :mod:`millwatch.remote.protocol`): the same per-mill
+families (:func:`~millwatch.api.metrics.mill_families`) and open alarms (from the API's alarm
 board), the worker counters with a ``worker`` label, and ``millwatch_mill_reachable`` per mill.
 """
 
@@ -15,20 +15,20 @@ from prometheus_client import CollectorRegistry
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
-from analytics.drivetrain.mill_config import MillConfig
-from service.api.alarm_board import AlarmBoard
-from service.api.domain_metrics import LifeCache
-from service.api.metrics import mill_families, open_alarms
-from service.api.mill_views import UNREACHABLE
-from service.remote.protocol import StatusAnswer
-from service.reports.life import LifeReport
-from service.status import MillStatus
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.alarm_board import AlarmBoard
+from millwatch.api.domain_metrics import LifeCache
+from millwatch.api.metrics import mill_families, open_alarms
+from millwatch.api.mill_views import UNREACHABLE
+from millwatch.remote.protocol import StatusAnswer
+from millwatch.reports.life import LifeReport
+from millwatch.status import MillStatus
 
 __all__ = ["RemoteCollector", "StatusSource", "remote_registry"]
 
 
 class StatusSource(Protocol):
-    """What the collector needs of :class:`~service.remote.zenoh_backend.ZenohBackend`."""
+    """What the collector needs of :class:`~millwatch.remote.zenoh_backend.ZenohBackend`."""
 
     @property
     def mills(self) -> Mapping[str, MillConfig]: ...

@@ -1,18 +1,18 @@
 """The zenoh query protocol between the API and the workers, stated once for both ends.
 
-The worker's end is :mod:`service.remote.queryables`, the API's end
-:mod:`service.remote.zenoh_backend`; both take the names, argument shapes and encodings from
+The worker's end is :mod:`millwatch.remote.queryables`, the API's end
+:mod:`millwatch.remote.zenoh_backend`; both take the names, argument shapes and encodings from
 here. A question about a mill is a zenoh ``get`` on ``millwatch/v1/<site>/<mill>/@query/<what>``
-(:func:`ingest.keys.query_key`) with its arguments as a JSON object in the payload:
+(:func:`millwatch.ingest.keys.query_key`) with its arguments as a JSON object in the payload:
 
 =========  ======================  ==============================================
 what       arguments               answer
 =========  ======================  ==============================================
 status     —                       :class:`StatusAnswer`: ``{"status": MillStatus,
                                    "worker": <info>}``
-life       —                       :class:`~service.reports.life.LifeReport`
+life       —                       :class:`~millwatch.reports.life.LifeReport`
                                    (``life_to_dict``, ``life_from_dict``)
-starts     ``month`` (optional)    :class:`~service.reports.starts.MonthStarts`
+starts     ``month`` (optional)    :class:`~millwatch.reports.starts.MonthStarts`
 spectrum   —                       ``GET /mills/{id}/spectrum`` body
 report     ``month`` (optional)    the monthly report as JSON (``report_to_dict``)
 alarms     —                       the mill's alarms (rows, most recent first)
@@ -20,11 +20,11 @@ alarm      ``alarm_id``            ``GET /alarms/{id}`` body
 ack        ``alarm_id``, ``by``,   the alarm after acknowledgement
            ``t_ns``, ``mac``
 act        ``alarm_id``, ``kind``, the alarm after the operator action
-           ``user``, ``comment``,  (:class:`alarms.actions.OperatorAction`)
+           ``user``, ``comment``,  (:class:`millwatch.alarms.actions.OperatorAction`)
            ``shelve_until_ns``,
            ``t_ns``, ``mac``
 journal    ``from_ns``, ``to_ns``, the mill's alarm journal entries, at most
-           ``after``, ``limit``    ``limit + 1`` (:mod:`service.api.journal`)
+           ``after``, ``limit``    ``limit + 1`` (:mod:`millwatch.api.journal`)
 =========  ======================  ==============================================
 
 An ``ack`` changes state, so it is signed (:func:`ack_args`, checked by :func:`checked_ack`): the
@@ -37,7 +37,7 @@ is answered 401 and changes nothing; a worker without ``api_key`` refuses every 
 key itself never travels. Within the window a captured ack can be replayed only as itself (the
 same alarm, the same person), which acknowledging again does not change.
 
-An ``act`` (every operator action: :mod:`alarms.actions`) is signed the same way
+An ``act`` (every operator action: :mod:`millwatch.alarms.actions`) is signed the same way
 (:func:`act_args`, :func:`checked_act`) over everything it carries — the alarm, the action's
 kind, the user, the comment, the shelve expiry and the time — under its own domain
 (``millwatch-act-v1``), so a captured request cannot be replayed as another action, for another
@@ -45,10 +45,10 @@ user, with another comment or expiry, nor as an ``ack`` (nor an ``ack`` as an ``
 
 Answers are UTF-8 JSON (:data:`JSON`); a typed answer is sent as its model's JSON data and
 read back with ``model_validate`` (:class:`StatusAnswer`, ``MonthStarts``; the life report, a
-dataclass, through its ``TypeAdapter``: :func:`~service.reports.life.life_from_dict`), so a
+dataclass, through its ``TypeAdapter``: :func:`~millwatch.reports.life.life_from_dict`), so a
 field renamed on one end is a validation error naming it, not a silent null. Errors are
 ``reply_err`` with problem JSON (``status``, ``title``, ``detail``): :func:`problem_of` on the
-worker, :func:`problem_from` on the API, which raises the same :mod:`service.api.errors`
+worker, :func:`problem_from` on the API, which raises the same :mod:`millwatch.api.errors`
 exception, so the remote API answers what an in-process one would. A new question is a member of
 :class:`Question`, an entry in the worker's ``ANSWERS`` and a method of the backend that asks it.
 """
@@ -65,11 +65,11 @@ from typing import Any
 
 from pydantic import BaseModel, Field
 
-from alarms.actions import ActionKind, InvalidActionError, OperatorAction
-from service.api.errors import error_for_status, status_of
-from service.api.journal import INT64_MAX, JournalKey, JournalQuery
-from service.errors import ApiError, BadRequest, Forbidden, Unauthorized
-from service.status import MillStatus
+from millwatch.alarms.actions import ActionKind, InvalidActionError, OperatorAction
+from millwatch.api.errors import error_for_status, status_of
+from millwatch.api.journal import INT64_MAX, JournalKey, JournalQuery
+from millwatch.errors import ApiError, BadRequest, Forbidden, Unauthorized
+from millwatch.status import MillStatus
 
 __all__ = [
     "ACK_WINDOW_S",
@@ -272,7 +272,8 @@ def _action_of(args: dict[str, Any]) -> OperatorAction:
 
 
 def checked_act(key: str | None, args: dict[str, Any], now_ns: int | None = None) -> OperatorAction:
-    """The :class:`~alarms.actions.OperatorAction` of an ``act`` signed with ``key`` within
+    """The :class:`~millwatch.alarms.actions.OperatorAction` of an ``act`` signed with ``key``
+    within
     :data:`ACK_WINDOW_S` of ``now_ns``; errors as :func:`checked_ack`, and
     :class:`BadRequest` for an action that is malformed."""
     if not key:
@@ -330,7 +331,7 @@ def problem_of(exc: ApiError) -> bytes:
 
 
 def problem_from(payload: bytes) -> ApiError | None:
-    """The :mod:`service.api.errors` error a worker's ``reply_err`` describes, or None when the
+    """The :mod:`millwatch.api.errors` error a worker's ``reply_err`` describes, or None when the
     payload is not problem JSON (zenoh's own errors, e.g. ``Timeout``)."""
     try:
         body = json.loads(payload.decode("utf-8"))

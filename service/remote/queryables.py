@@ -2,22 +2,24 @@
 
 For every mill it analyses, a worker declares
 
-* a **queryable** on ``millwatch/v1/<site>/<mill>/@query/*`` (:func:`ingest.keys.query_key`),
-  answering with the JSON its :class:`~service.api.local_backend.LocalBackend` returns — the same
+* a **queryable** on ``millwatch/v1/<site>/<mill>/@query/*``
+  (:func:`millwatch.ingest.keys.query_key`),
+  answering with the JSON its :class:`~millwatch.api.local_backend.LocalBackend` returns — the same
   bodies an in-process API returns — or with ``reply_err`` carrying problem JSON
-  (:func:`service.remote.protocol.problem_of`);
+  (:func:`millwatch.remote.protocol.problem_of`);
 * a **liveliness token** ``millwatch/v1/<site>/<mill>/@worker/<worker>``
-  (:func:`ingest.keys.worker_token_key`): the API knows which mills have a live worker, and
-  learns within milliseconds when a worker process dies (its TCP connection closes; a hung host
+  (:func:`millwatch.ingest.keys.worker_token_key`): the API knows which mills have a live worker,
+  and learns within milliseconds when a worker process dies (its TCP connection closes; a hung host
   is bounded by the zenoh lease, 10 s by default).
 
 What can be asked, with which arguments, and how answers and errors are encoded:
-:mod:`service.remote.protocol` (the API's end, :mod:`service.remote.zenoh_backend`, reads the
+:mod:`millwatch.remote.protocol` (the API's end, :mod:`millwatch.remote.zenoh_backend`, reads the
 same module). :data:`ANSWERS` says how this worker answers each question.
 
 Trust: ``ack`` and ``act`` (every operator action) change state, so the worker answers them only
-when they are signed with the shared ``[api] api_key`` (:func:`service.remote.protocol.checked_ack`,
-:func:`~service.remote.protocol.checked_act`); an unsigned ``get`` on ``…/@query/ack`` or
+when they are signed with the shared ``[api] api_key``
+(:func:`millwatch.remote.protocol.checked_ack`,
+:func:`~millwatch.remote.protocol.checked_act`); an unsigned ``get`` on ``…/@query/ack`` or
 ``…/@query/act`` is a 401 and changes nothing. The router's access control
 (``deploy/zenoh/router.json5``) also lets only the ``api`` certificate ask ``…/@query/*``.
 
@@ -35,12 +37,12 @@ from typing import Any
 
 import zenoh
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.keys import query_key, query_pattern, worker_token_key
-from service.api.alarm_board import row_to_dict
-from service.api.local_backend import LocalBackend
-from service.errors import ApiError, NotFound, Unavailable
-from service.remote.protocol import (
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.alarm_board import row_to_dict
+from millwatch.api.local_backend import LocalBackend
+from millwatch.errors import ApiError, NotFound, Unavailable
+from millwatch.ingest.keys import query_key, query_pattern, worker_token_key
+from millwatch.remote.protocol import (
     JSON,
     Question,
     StatusAnswer,
@@ -53,9 +55,9 @@ from service.remote.protocol import (
     month_of,
     problem_of,
 )
-from service.reports.fleet import fleet_mill_to_dict
-from service.reports.life import life_to_dict
-from service.reports.monthly import report_to_dict
+from millwatch.reports.fleet import fleet_mill_to_dict
+from millwatch.reports.life import life_to_dict
+from millwatch.reports.monthly import report_to_dict
 
 __all__ = ["ANSWERS", "WorkerQueryables"]
 
@@ -104,7 +106,7 @@ ANSWERS: dict[Question, Answer] = {
     Question.FLEET: lambda b, m, _: fleet_mill_to_dict(b.fleet_mill(m)),
     Question.JOURNAL: lambda b, m, a: b.alarm_journal(journal_query_of(a, m)).entries,
 }
-"""How a worker answers each :class:`~service.remote.protocol.Question`."""
+"""How a worker answers each :class:`~millwatch.remote.protocol.Question`."""
 
 
 def _arguments(query: zenoh.Query) -> dict[str, Any]:

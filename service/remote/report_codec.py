@@ -1,8 +1,8 @@
 """The monthly report back from its JSON: how the API renders a report a remote worker built.
 
-A worker answers ``…/@query/report`` with :func:`service.reports.monthly.report_to_dict` (plain
+A worker answers ``…/@query/report`` with :func:`millwatch.reports.monthly.report_to_dict` (plain
 JSON: non-finite floats as ``null``, tuples as lists, plus the derived ``empty`` flag). The API
-rebuilds the :class:`~service.reports.monthly.MonthlyReport` with :func:`report_from_dict` and
+rebuilds the :class:`~millwatch.reports.monthly.MonthlyReport` with :func:`report_from_dict` and
 renders HTML, CSV or PDF itself, so the rendering cost lands on the API process, not on the
 worker that analyses the mills.
 
@@ -21,7 +21,7 @@ import types
 import typing
 from typing import Any
 
-from service.reports.monthly import MonthlyReport
+from millwatch.reports.monthly import MonthlyReport
 
 __all__ = ["ReportDecodeError", "report_from_dict"]
 

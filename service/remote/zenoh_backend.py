@@ -1,27 +1,29 @@
-"""The :class:`~service.api.backend.Backend` of ``millwatch api``: the workers answer over zenoh.
+"""The :class:`~millwatch.api.backend.Backend` of ``millwatch api``: the workers answer over zenoh.
 
 The API process holds no store and analyses nothing; it can run anywhere that reaches the zenoh
 router, and as many copies as needed. It keeps three things in memory:
 
 * **which worker holds which mill** — a liveliness subscriber (with history) on
-  ``millwatch/v1/*/*/@worker/*`` (:func:`ingest.keys.worker_token_pattern`). When a worker dies
+  ``millwatch/v1/*/*/@worker/*`` (:func:`millwatch.ingest.keys.worker_token_pattern`). When a
+  worker dies
   its tokens vanish (measured: a SIGKILLed worker's tokens were gone at the API within 5 ms on
   127.0.0.1; a frozen host is bounded by the zenoh lease, 10 s by default), and its mills are
   answered ``unreachable`` at once, without waiting for a query timeout;
-* **the alarm board** (:mod:`service.api.alarm_board`) — fed by the workers' ``…/@alarms`` messages,
+* **the alarm board** (:mod:`millwatch.api.alarm_board`) — fed by the workers' ``…/@alarms``
+  messages,
   and gathered with one ``get`` on ``…/@query/alarms`` at start and whenever a worker (re)joins;
 * the **last status** each worker sent about itself (name, partition), to name it in errors.
 
 Everything else is a zenoh ``get`` on the mill's ``…/@query/<what>`` key (the questions, their
-arguments and encodings: :mod:`service.remote.protocol`; the worker's end:
-:mod:`service.remote.queryables`), with an explicit timeout (``api.query_timeout_s``, default 10
+arguments and encodings: :mod:`millwatch.remote.protocol`; the worker's end:
+:mod:`millwatch.remote.queryables`), with an explicit timeout (``api.query_timeout_s``, default 10
 s):
 a worker that does not answer in time is a 504 naming the mill, the worker and its partition,
 never a hang. Errors the worker raised come back as ``reply_err`` problem JSON and are raised
-again as the same :mod:`service.api.errors` exceptions, so the API answers what an in-process
+again as the same :mod:`millwatch.api.errors` exceptions, so the API answers what an in-process
 one would. ``GET /mills`` and ``/ready`` gather every mill's status with one ``get`` on
 ``millwatch/v1/*/*/@query/status``; ``GET /alarms/journal`` without a mill gathers every mill's
-``…/@query/journal`` page and merges them in time order (:func:`service.api.journal.merge_pages`).
+``…/@query/journal`` page and merges them in time order (:func:`millwatch.api.journal.merge_pages`).
 """
 
 from __future__ import annotations
@@ -38,11 +40,21 @@ import zenoh
 from prometheus_client import CollectorRegistry
 from pydantic import ValidationError
 
-from alarms.actions import DEFAULT_MAX_SHELVE_S, ActionKind, InvalidActionError, OperatorAction
-from alarms.times import iso_utc
-from alarms.wire import AlarmWireError
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.keys import (
+from millwatch.alarms.actions import (
+    DEFAULT_MAX_SHELVE_S,
+    ActionKind,
+    InvalidActionError,
+    OperatorAction,
+)
+from millwatch.alarms.times import iso_utc
+from millwatch.alarms.wire import AlarmWireError
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.alarm_board import AlarmBoard, row_from_dict
+from millwatch.api.identity import ApiKeys
+from millwatch.api.journal import JournalPage, JournalQuery, merge_pages
+from millwatch.api.mill_views import config_of, mill_detail, mill_summary, site_mills
+from millwatch.errors import BadRequest, Forbidden, GatewayTimeout, NotFound, Unavailable
+from millwatch.ingest.keys import (
     KeyFormatError,
     alarm_pattern,
     parse_query_key,
@@ -51,13 +63,8 @@ from ingest.keys import (
     query_pattern,
     worker_token_pattern,
 )
-from service.api.alarm_board import AlarmBoard, row_from_dict
-from service.api.identity import ApiKeys
-from service.api.journal import JournalPage, JournalQuery, merge_pages
-from service.api.mill_views import config_of, mill_detail, mill_summary, site_mills
-from service.errors import BadRequest, Forbidden, GatewayTimeout, NotFound, Unavailable
-from service.remote.metrics import remote_registry
-from service.remote.protocol import (
+from millwatch.remote.metrics import remote_registry
+from millwatch.remote.protocol import (
     Question,
     StatusAnswer,
     act_args,
@@ -68,12 +75,12 @@ from service.remote.protocol import (
     month_args,
     problem_from,
 )
-from service.remote.report_codec import ReportDecodeError, report_from_dict
-from service.reports.fleet import build_fleet, fleet_mill_from_dict, fleet_to_dict
-from service.reports.life import LifeReport, life_from_dict
-from service.reports.monthly import MonthlyReport
-from service.reports.starts import MonthStarts
-from service.status import MillStatus
+from millwatch.remote.report_codec import ReportDecodeError, report_from_dict
+from millwatch.reports.fleet import build_fleet, fleet_mill_from_dict, fleet_to_dict
+from millwatch.reports.life import LifeReport, life_from_dict
+from millwatch.reports.monthly import MonthlyReport
+from millwatch.reports.starts import MonthStarts
+from millwatch.status import MillStatus
 
 __all__ = ["DEFAULT_TIMEOUT_S", "ZenohBackend"]
 
@@ -356,7 +363,7 @@ class ZenohBackend:
     def act(self, action: OperatorAction) -> dict[str, Any]:
         """Ask the alarm's worker to apply an operator action (the route checked the key, the
         OPC UA server the session's user), signed with ``api_key`` over the whole action
-        (:func:`~service.remote.protocol.act_args`); :class:`Forbidden` without one."""
+        (:func:`~millwatch.remote.protocol.act_args`); :class:`Forbidden` without one."""
         if not self.api_key:
             raise Forbidden("Alarm actions disabled", "This API has no api.api_key configured, "
                             "so it cannot sign alarm actions for the workers.")  # fmt: skip

@@ -32,7 +32,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
-from service.reports.numbers import sig
+from millwatch.reports.numbers import sig
 
 __all__ = [
     "BENDING_LEVELS_MPA",

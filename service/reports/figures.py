@@ -1,10 +1,10 @@
 """The monthly report's plots, drawn with matplotlib's object API (no pyplot state).
 
-Each builder takes a :class:`~service.reports.monthly.MonthlyReport` and returns a figure or
-``None`` when the month has nothing to plot; :mod:`service.reports.monthly_document` places them
+Each builder takes a :class:`~millwatch.reports.monthly.MonthlyReport` and returns a figure or
+``None`` when the month has nothing to plot; :mod:`millwatch.reports.monthly_document` places them
 in the document, and the renderers save them (SVG in HTML, vector SVG in the PDF).
 matplotlib's rcParams are one per process and read while drawing: renderers build and save
-figures holding :data:`service.reports.render.document.MPL_LOCK`, so concurrent requests cannot
+figures holding :data:`millwatch.reports.render.document.MPL_LOCK`, so concurrent requests cannot
 leak settings into one another.
 
 Plots cost most of a report's time, so they are kept cheap: fixed margins instead of a layout
@@ -35,12 +35,12 @@ from matplotlib.ticker import (
     ScalarFormatter,
 )
 
-from analytics.fatigue.matrices import RangeMeanMatrix
-from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve, StressKind
-from service.reports.monthly import MonthlyReport
-from service.reports.monthly.model import CycleSpectrum
-from service.reports.render.document import fmt
-from service.reports.starts import day_starts_ns
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
+from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve, StressKind
+from millwatch.reports.monthly import MonthlyReport
+from millwatch.reports.monthly.model import CycleSpectrum
+from millwatch.reports.render.document import fmt
+from millwatch.reports.starts import day_starts_ns
 
 __all__ = [
     "FIG_WIDTH_IN",

@@ -18,24 +18,24 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from service.settings import REPORT_FORMATS as FORMATS
+from millwatch.settings import REPORT_FORMATS as FORMATS
 
 if TYPE_CHECKING:
-    from service.reports.monthly import MonthlyReport
+    from millwatch.reports.monthly import MonthlyReport
 
 __all__ = ["EXTENSIONS", "FORMATS", "render_files", "report_path", "write_atomic"]
 
-#: File extension of each format (:data:`service.settings.REPORT_FORMATS`); ``csv`` is a zip of
-#: tidy tables, one CSV per table (:mod:`service.reports.render.csv_tables`).
+#: File extension of each format (:data:`millwatch.settings.REPORT_FORMATS`); ``csv`` is a zip of
+#: tidy tables, one CSV per table (:mod:`millwatch.reports.render.csv_tables`).
 EXTENSIONS: dict[str, str] = {"html": "html", "pdf": "pdf", "csv": "zip"}
 
 
 def render_files(report: MonthlyReport, formats: Iterable[str] = FORMATS) -> dict[str, bytes]:
     """The report rendered in each of ``formats``: file extension → bytes."""
-    from service.reports.monthly_document import monthly_document
-    from service.reports.render.csv_tables import document_csv_zip
-    from service.reports.render.html_page import document_html
-    from service.reports.render.pdf_pages import document_pdf
+    from millwatch.reports.monthly_document import monthly_document
+    from millwatch.reports.render.csv_tables import document_csv_zip
+    from millwatch.reports.render.html_page import document_html
+    from millwatch.reports.render.pdf_pages import document_pdf
 
     doc = monthly_document(report)  # one document for every format
     out: dict[str, bytes] = {}

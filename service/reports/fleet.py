@@ -3,9 +3,9 @@
 Diering 2011 §10.6 asks for long-term trending across the plant; §8.3 says bending and starts per
 month drive fatigue. Per mill (:class:`FleetMill`, built where the mill's store is —
 :func:`fleet_entry`, by the worker that analyses it): life consumed and the remaining-life range
-of the governing component (the one life computation, :mod:`service.reports.life`), starts per
+of the governing component (the one life computation, :mod:`millwatch.reports.life`), starts per
 finished month, steady-state oscillation range and bending amplitude per month (the worst
-channel's mean, from :func:`service.reports.history.monthly_trend`), open alarms on the
+channel's mean, from :func:`millwatch.reports.history.monthly_trend`), open alarms on the
 machine's condition, and apart the open alarms of the monitoring itself (:data:`IT_RULES`:
 data, storage, report delivery), which never rank a mill. :func:`build_fleet` (pure) puts the
 mills of a site in visit order (:data:`VISIT_RULE`) with the reason for each place;
@@ -25,16 +25,16 @@ from typing import Any
 
 from pydantic import ConfigDict, with_config
 
-from alarms.engine import SIMULATED_PREFIX
-from alarms.lifecycle import Alarm
-from analytics.drivetrain.mill_config import MillConfig
-from service.reports.history import last_months, life_inputs, monthly_trend
-from service.reports.life import compute_life, local_iso, years_range_text
-from service.reports.numbers import NO_FINITE_LIFE
-from service.reports.plain import plain
-from service.reports.starts import current_month
-from service.status import NO_STATUS, MillStatus
-from service.store.database import Store
+from millwatch.alarms.engine import SIMULATED_PREFIX
+from millwatch.alarms.lifecycle import Alarm
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.reports.history import last_months, life_inputs, monthly_trend
+from millwatch.reports.life import compute_life, local_iso, years_range_text
+from millwatch.reports.numbers import NO_FINITE_LIFE
+from millwatch.reports.plain import plain
+from millwatch.reports.starts import current_month
+from millwatch.status import NO_STATUS, MillStatus
+from millwatch.store.database import Store
 
 __all__ = [
     "FLEET_MONTHS",
@@ -61,8 +61,8 @@ VISIT_RULE = (
     "change the order"
 )
 
-#: Alarm rules about the monitoring system, not the machine (:mod:`alarms.rules`): listed as
-#: IT problems of a mill, never ranked with its mechanical condition.
+#: Alarm rules about the monitoring system, not the machine (:mod:`millwatch.alarms.rules`): listed
+#: as IT problems of a mill, never ranked with its mechanical condition.
 IT_RULES = frozenset({
     "report_delivery", "store_write_failures", "archive_write_failures", "analysis_lag",
     "stale_channel", "sequence_gaps", "implausible_blocks", "spike_rate",

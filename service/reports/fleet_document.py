@@ -1,7 +1,7 @@
 """The fleet report: all mills of a site side by side (issue 17 "which mill to visit first"),
-as a :class:`~service.reports.render.document.Document` rendered like the monthly report.
+as a :class:`~millwatch.reports.render.document.Document` rendered like the monthly report.
 
-Built from the plain answer of ``GET /sites/{site}/fleet`` (:func:`service.reports.fleet.
+Built from the plain answer of ``GET /sites/{site}/fleet`` (:func:`millwatch.reports.fleet.
 fleet_to_dict`), so it reads the same in process and under ``millwatch api``. Sections: the
 visit order with its reasons (the machine's condition), the monitoring system's own open
 alarms apart (for IT), life consumed and the remaining range per mill (Diering 2011 §8.2),
@@ -14,9 +14,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from service.reports.numbers import end_date_text, years_text
-from service.reports.render.csv_tables import document_csv_zip
-from service.reports.render.document import (
+from millwatch.reports.numbers import end_date_text, years_text
+from millwatch.reports.render.csv_tables import document_csv_zip
+from millwatch.reports.render.document import (
     Column,
     Document,
     Paragraph,
@@ -24,8 +24,8 @@ from service.reports.render.document import (
     Table,
     rows,
 )
-from service.reports.render.html_page import document_html
-from service.reports.render.pdf_pages import document_pdf
+from millwatch.reports.render.html_page import document_html
+from millwatch.reports.render.pdf_pages import document_pdf
 
 __all__ = ["fleet_document", "render_fleet"]
 

@@ -5,16 +5,16 @@ monitored time (a few hundred a month), start counts per month (``count(*)`` on 
 index), the mill's monitored time per day (one row a day), and one steady-state window per
 :data:`TREND_SAMPLE_NS` (3 hours) for the monthly oscillation and bending trend (chosen on the
 index, the fields extracted by SQLite). Call inside
-:meth:`~service.store.database.Store.read_snapshot` to see one state of the store.
+:meth:`~millwatch.store.database.Store.read_snapshot` to see one state of the store.
 
-* :func:`life_inputs` — what :func:`~service.reports.life.compute_life` needs as of a time
+* :func:`life_inputs` — what :func:`~millwatch.reports.life.compute_life` needs as of a time
   (now for ``GET /mills/{id}/life``, a month's end for the report): the one life computation;
   :class:`LifeLedger` — the same history held in memory by the worker for its alarm.
 * :func:`monthly_trend` — starts, damage per component, oscillation range and bending amplitude
   per local calendar month (Diering 2011 §10.6 "long term trending").
-Monitored time is :func:`service.reports.life.monitored_seconds` of the store's coverage
+Monitored time is :func:`millwatch.reports.life.monitored_seconds` of the store's coverage
 everywhere (page 1 of the report, the trend, remaining life). Seconds per operating phase are
-the analyzer's own, stored per day (:meth:`~service.store.database.Store.phase_seconds`), not
+the analyzer's own, stored per day (:meth:`~millwatch.store.database.Store.phase_seconds`), not
 re-derived from events.
 """
 
@@ -29,13 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.app_d import cost_from_records
-from analytics.mill.phase_damage import phase_totals
-from service.reports.life import LifeInputs, midnight_ns, monitored_seconds
-from service.reports.starts import month_bounds_ns
-from service.store.database import Store
-from service.store.records import DamageRow, PhaseRow
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.app_d import cost_from_records
+from millwatch.analytics.mill.phase_damage import phase_totals
+from millwatch.reports.life import LifeInputs, midnight_ns, monitored_seconds
+from millwatch.reports.starts import month_bounds_ns
+from millwatch.store.database import Store
+from millwatch.store.records import DamageRow, PhaseRow
 
 __all__ = [
     "TREND_SAMPLE_NS",
@@ -60,7 +60,7 @@ class LifeLedger:
     report); the worker keeps one per mill, read from the store once at start and given each
     row it stores (:meth:`add`, with the store's own rule: a day's row is replaced, a day's
     span widened, a start counted once), so its ``remaining_life`` alarm is computed by
-    :func:`~service.reports.life.compute_life` from the same inputs ``/life`` reads — the same
+    :func:`~millwatch.reports.life.compute_life` from the same inputs ``/life`` reads — the same
     answer, without reading the store at every damage interval."""
 
     def __init__(self, config: MillConfig) -> None:
@@ -94,9 +94,10 @@ class LifeLedger:
         starts: Iterable[int] = (),
         stops: Iterable[tuple[int, Mapping[str, Any] | None]] = (),
     ) -> None:
-        """Rows as the store takes them (:class:`~service.store.database.Store`'s
+        """Rows as the store takes them (:class:`~millwatch.store.database.Store`'s
         ``set_damage``, ``set_phases``, ``extend_days``; start events by time; stop events by
-        time with the App. D start-stop record they carry, :mod:`analytics.mill.app_d`)."""
+        time with the App. D start-stop record they carry,
+        :mod:`millwatch.analytics.mill.app_d`)."""
         for r in rows:
             self._rows[(r.component, r.phase, r.day)] = r
         for p in phases:
@@ -167,7 +168,7 @@ def life_inputs(
     last_sample_ns: int | None = None,
 ) -> LifeInputs:
     """What the life of ``config``'s mill is computed from
-    (:func:`service.reports.life.compute_life`), as the store holds it before ``until_ns``;
+    (:func:`millwatch.reports.life.compute_life`), as the store holds it before ``until_ns``;
     ``live`` and ``last_sample_ns``: the worker's damage summary and analysed position (only
     when evaluating now: then data time, not the wall clock, bounds it — a replay or a gateway
     clock ahead of ours is not cut off)."""

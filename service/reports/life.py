@@ -1,12 +1,13 @@
 """Remaining fatigue life per component, with its honesty built in: one computation for
 ``GET /mills/{id}/life``, the monthly report, the fleet view, the ``remaining_life`` alarm
 (the worker computes it with :func:`compute_life` from the same history,
-:class:`~service.reports.history.LifeLedger`) and the ``millwatch_remaining_life_years`` gauge.
+:class:`~millwatch.reports.history.LifeLedger`) and the ``millwatch_remaining_life_years`` gauge.
 
 Basis (Diering 2011 §8.2: rainflow + Palmgren–Miner on the configured S-N curve, failure at the
 Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
 
-* **damage before monitoring** (``[life]`` of the mill file, :class:`~analytics.drivetrain.
+* **damage before monitoring** (``[life]`` of the mill file,
+  :class:`~millwatch.analytics.drivetrain.
   mill_config.LifeConfig`): an estimated prior damage per component (``estimated``), or the
   damage rate of the first N days of monitoring applied from commissioning to the start of
   monitoring (``first_N_days``; only once the minimum history is there), or none (``none``:
@@ -22,7 +23,7 @@ Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
   ``rate_window_days`` local days, the whole monitored time, and the worst local calendar month
   with at least :data:`WORST_MONTH_MIN_DAYS` days monitored. A rate is the stored damage of its
   period per year of *monitored* time in it: per local day, from its first to its last analysed
-  sample (the store's coverage, :meth:`~service.store.database.Store.mill_days`), so a
+  sample (the store's coverage, :meth:`~millwatch.store.database.Store.mill_days`), so a
   telemetry outage of days does not dilute the rate (gaps within a day are not subtracted);
   :func:`monitored_seconds` is the one computation of monitored time (the monthly report's
   page 1 and trend use it too).
@@ -30,17 +31,17 @@ Miner limit D = 1; App. D: start, run and stop portions, what-if start rates):
   ``9999-12-31`` with ``end_date_capped`` true (practically unlimited).
 * **S-N scatter** (``life_band``): remaining life at 50, 90 and 97.7 % survival over the same
   rate range, the configured curve taken as the design curve two standard deviations of
-  log N below the mean (:data:`analytics.fatigue.sn_curves.SD_LOG10_N`; BS 7608 / IIW); its
-  end dates only within :data:`service.reports.numbers.HORIZON_YEARS`.
+  log N below the mean (:data:`millwatch.analytics.fatigue.sn_curves.SD_LOG10_N`; BS 7608 / IIW);
+  its end dates only within :data:`millwatch.reports.numbers.HORIZON_YEARS`.
 * **what drives it**: monitored damage by phase (store names: ``start``, ``run``, ``stop``,
   ``barring``, ``stopped``, ``unknown``) and by component; life at the App. D start rates
   (5/day, 1/day, 1/week, 1/month per 4-week month) from the cost of a start as App. D
-  counts it (the stops' start-stop records, :mod:`analytics.mill.app_d`; a store written
-  before them: the phase sums, :func:`analytics.mill.phase_damage.start_cost`).
+  counts it (the stops' start-stop records, :mod:`millwatch.analytics.mill.app_d`; a store written
+  before them: the phase sums, :func:`millwatch.analytics.mill.phase_damage.start_cost`).
 
 Pure: :class:`LifeInputs` (rows, coverage, counts) in, :class:`LifeReport` (frozen dataclasses,
 JSON-ready through :func:`life_to_dict`) out. The store is read by
-:mod:`service.reports.history`.
+:mod:`millwatch.reports.history`.
 """
 
 from __future__ import annotations
@@ -56,19 +57,19 @@ from typing import Any
 
 from pydantic import ConfigDict, TypeAdapter, with_config
 
-from alarms.times import iso_local
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.app_d import APP_D_PERIODS, AppDCost, app_d_month
-from analytics.mill.phase_damage import (
+from millwatch.alarms.times import iso_local
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.app_d import APP_D_PERIODS, AppDCost, app_d_month
+from millwatch.analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
     SECONDS_PER_YEAR,
     project_monthly_damage,
     start_cost,
 )
-from service.reports.numbers import NO_FINITE_LIFE, finite_life, years_range_text
-from service.reports.plain import plain
-from service.store.records import DamageRow
+from millwatch.reports.numbers import NO_FINITE_LIFE, finite_life, years_range_text
+from millwatch.reports.plain import plain
+from millwatch.store.records import DamageRow
 
 __all__ = [
     "LIFE_ADAPTER",
@@ -111,7 +112,7 @@ class LifeInputs:
     counted them; ``live``: the worker's damage summary
     per component (``committed``, ``pending_residue``), only when evaluating now; ``app_d``:
     App. D's start-stop records and run portions per component over the monitored time (the
-    stops' records, :mod:`analytics.mill.app_d`), the basis of the what-if lives."""
+    stops' records, :mod:`millwatch.analytics.mill.app_d`), the basis of the what-if lives."""
 
     config: MillConfig
     rows: list[DamageRow]
@@ -232,7 +233,7 @@ class LifeBand:
     """Greatest remaining life (at the lowest damage rate), years; null without a rate."""
     end_date_earliest: str | None
     """Local date at the least life, YYYY-MM-DD; null when the life is beyond the horizon
-    (:data:`service.reports.numbers.HORIZON_YEARS`) or not given."""
+    (:data:`millwatch.reports.numbers.HORIZON_YEARS`) or not given."""
     end_date_latest: str | None
     """Local date at the greatest life, YYYY-MM-DD; null when beyond the horizon or not
     given."""
@@ -394,7 +395,7 @@ def life_from_dict(data: Any) -> LifeReport:
 
 
 def local_iso(t_ns: int | None, tz: zoneinfo.ZoneInfo) -> str | None:
-    """:func:`alarms.times.iso_local` of ``t_ns`` in ``tz``, None for None."""
+    """:func:`millwatch.alarms.times.iso_local` of ``t_ns`` in ``tz``, None for None."""
     return None if t_ns is None else iso_local(t_ns, tz)
 
 
@@ -615,7 +616,7 @@ def _component(
 
 SURVIVALS = (0.5, 0.9, NormalDist().cdf(2.0))
 """Survival probabilities of the life band: 50 %, 90 % and 97.7 % (the design curve's own,
-mean − 2 standard deviations of log N; :data:`analytics.fatigue.sn_curves.SD_LOG10_N`)."""
+mean − 2 standard deviations of log N; :data:`millwatch.analytics.fatigue.sn_curves.SD_LOG10_N`)."""
 
 
 def _band(ctx: _Ctx, comp: str, damage: float, projections: list[Projection]) -> list[LifeBand]:

@@ -3,7 +3,7 @@
 Standard library only (:mod:`smtplib`, :mod:`email`). The connection is upgraded with STARTTLS
 before anything else is said when ``starttls`` is on (the default; the server's certificate is
 checked against the system's CAs or ``ca_file``), then the sender logs in when a ``username``
-is set. The password comes from :meth:`~service.settings.MailSettings.password` at send time
+is set. The password comes from :meth:`~millwatch.settings.MailSettings.password` at send time
 and is never logged nor put in an error message (smtplib's debug output is never switched on).
 
 Errors are :class:`MailError`, whose message names the server and the step that failed (connect,
@@ -24,7 +24,7 @@ from email.utils import formatdate, make_msgid
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from service.settings import MailSettings
+    from millwatch.settings import MailSettings
 
 __all__ = ["MIME_TYPES", "MailError", "report_message", "send_message"]
 
@@ -55,14 +55,14 @@ def report_message(
     """The mail of one mill's report of ``month``: a short plain-text body saying what is
     attached and where the files are kept, and the files of the formats ``mail.attach`` found
     in ``files`` (file extension → bytes: the ``csv`` format is the ``zip`` file of its tables,
-    :data:`~service.reports.files.EXTENSIONS`) as attachments named ``<mill>-<YYYY-MM>.<ext>``."""
+    :data:`~millwatch.reports.files.EXTENSIONS`) as attachments named ``<mill>-<YYYY-MM>.<ext>``."""
     msg = EmailMessage()
     msg["Subject"] = f"millwatch monthly report {month}: mill {mill_id} ({site})"
     msg["From"] = mail.sender
     msg["To"] = ", ".join(mail.recipients)
     msg["Date"] = formatdate(localtime=False)
     msg["Message-ID"] = make_msgid(domain=mail.sender.rsplit("@", 1)[-1])
-    from service.reports.files import EXTENSIONS
+    from millwatch.reports.files import EXTENSIONS
 
     attached = [EXTENSIONS[f] for f in mail.attach if EXTENSIONS[f] in files]
     lines = [

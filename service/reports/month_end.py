@@ -2,14 +2,14 @@
 
 Diering 2011 §10.6 asks that "reports should be automatically generated and distributed to site
 management". :class:`MonthEndJob` runs in its own thread in ``millwatch serve`` and the demo
-(started by :class:`~service.worker.runtime.ServiceRuntime`), never in the worker thread:
+(started by :class:`~millwatch.worker.runtime.ServiceRuntime`), never in the worker thread:
 
 * every ``check_every_s`` (and at once on start) it looks, per mill, at the finished local
   calendar months (the mill's ``time_zone``) of the last ``catch_up_months``, ``delay_s`` after
   their end: a month with stored data whose files are missing (or whose mail receipt is, when
   mail is configured) is *due*. A service that was down at month end therefore catches up when
   it starts, and one that restarts does nothing twice: files are written atomically
-  (:func:`~service.reports.files.write_atomic`), so a file that exists is complete, and a mail
+  (:func:`~millwatch.reports.files.write_atomic`), so a file that exists is complete, and a mail
   leaves a receipt ``<YYYY-MM>.mailed.json`` beside the files once the server took it.
 * reports are built and rendered by ``jobs`` processes started for the run (``spawn``, lowered
   priority, one per core by default), several mills at once, so the worker's real-time path
@@ -19,7 +19,7 @@ management". :class:`MonthEndJob` runs in its own thread in ``millwatch serve`` 
   ``backoff_s`` doubled each time (at most ``backoff_max_s``). What still fails is logged with
   its cause, kept in :meth:`status` (``GET /reports/status``) and raised as the
   ``report_delivery`` alarm of the mill (``alarm`` sink: the worker's
-  :meth:`~service.worker.worker.Worker.request_observations`, so it is stored, shown by
+  :meth:`~millwatch.worker.worker.Worker.request_observations`, so it is stored, shown by
   ``GET /alarms`` and published like any alarm). The month is tried again after
   ``retry_failed_after_s``; a later success sends a clean observation (the latched alarm then
   waits for an acknowledgement). A mail the server took for some recipients and refused for
@@ -42,14 +42,14 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from alarms.observations import Observation
-from analytics.drivetrain.mill_config import MillConfig
-from service.reports.files import EXTENSIONS, render_files, report_path, write_atomic
-from service.reports.starts import current_month, month_bounds_ns, month_days
-from service.store.database import Store
+from millwatch.alarms.observations import Observation
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.reports.files import EXTENSIONS, render_files, report_path, write_atomic
+from millwatch.reports.starts import current_month, month_bounds_ns, month_days
+from millwatch.store.database import Store
 
 if TYPE_CHECKING:
-    from service.settings import ReportSettings
+    from millwatch.settings import ReportSettings
 
 __all__ = ["Failure", "MonthEndJob", "RunSummary", "due_months", "write_report"]
 
@@ -95,7 +95,7 @@ def write_report(
 ) -> dict[str, str]:
     """Build ``config``'s mill's report of ``month`` from ``store``, render it in ``formats``
     and write each file atomically under ``directory``; extension → path written."""
-    from service.reports.monthly import build_monthly_report
+    from millwatch.reports.monthly import build_monthly_report
 
     (directory / config.id).mkdir(parents=True, exist_ok=True)  # fails before the work if it must
     report = build_monthly_report(store, config, month)
@@ -383,7 +383,7 @@ class MonthEndJob:
 
     # ------------------------------------------------------------------ mail
     def _mail_round(self, tasks: list[tuple[str, str]]) -> dict[tuple[str, str], str | None]:
-        from service.reports.mail import report_message, send_message
+        from millwatch.reports.mail import report_message, send_message
 
         mail = self.settings.mail
         assert mail is not None

@@ -1,7 +1,7 @@
 """Page 1 of the monthly report and its long view: the summary site management reads, the
 cumulative damage against design life, built from the month's sections, the life computation
-(:mod:`service.reports.life`, evaluated at the month's end) and the monthly trend
-(:mod:`service.reports.history`).
+(:mod:`millwatch.reports.life`, evaluated at the month's end) and the monthly trend
+(:mod:`millwatch.reports.history`).
 
 Plain, typed, JSON-ready data (Diering 2011 §10.6: "automatic reports … long term trending"):
 
@@ -22,10 +22,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import date, timedelta
 
-from analytics.mill.phase_damage import SECONDS_PER_YEAR
-from service.reports.history import MonthTrend
-from service.reports.life import LifeReport, midnight_ns
-from service.store.records import DamageRow
+from millwatch.analytics.mill.phase_damage import SECONDS_PER_YEAR
+from millwatch.reports.history import MonthTrend
+from millwatch.reports.life import LifeReport, midnight_ns
+from millwatch.store.records import DamageRow
 
 __all__ = [
     "ComponentSummary",

@@ -1,4 +1,4 @@
-"""The monthly damage report as a :class:`~service.reports.render.document.Document`: what it
+"""The monthly damage report as a :class:`~millwatch.reports.render.document.Document`: what it
 says, once.
 
 Diering 2011 §10.6 asks for "automatic reports"; issue 17 for one content in three renderings. Every
@@ -7,7 +7,7 @@ format shows what :func:`monthly_document` puts here, in this order (:data:`SECT
 1. **Summary** (page 1 of the PDF, top of the HTML; one line per component, so a dual-drive
    mill's summary fits the page too): life consumed to date and the remaining range per
    component (or why there is none), what drives the damage in words and the recommended
-   actions with last month's (§10, §6–§8; :mod:`service.reports.actions`), starts against the
+   actions with last month's (§10, §6–§8; :mod:`millwatch.reports.actions`), starts against the
    3–5 norm (§6.1.3), the worst start against the start-peak levels (§7.2), alarms raised, what
    changed since last month (an unmonitored month shown as such); the month's damage by phase
    is in section 5;
@@ -19,12 +19,12 @@ format shows what :func:`monthly_document` puts here, in this order (:data:`SECT
    start-cost basis, its assumptions above it); 8. steady-state oscillation and bending
    (Tables 14–15, §8.1); 9. harmonics (§6.1.2, §6.2.7); 10. alarms; 11. data quality (§5.2.2).
 
-Life and damage numbers go through :mod:`service.reports.numbers` (≤ 3 significant digits; no
+Life and damage numbers go through :mod:`millwatch.reports.numbers` (≤ 3 significant digits; no
 lives beyond its horizon).
 
 Adding a section: write ``def _name(r: MonthlyReport) -> Section`` with its paragraphs, tables
 (each a unique ``name``: it becomes a CSV table) and figures (``_figure(name, builder, r)``
-with a builder of :mod:`service.reports.figures`), and add it to
+with a builder of :mod:`millwatch.reports.figures`), and add it to
 :data:`SECTIONS`. HTML, PDF and CSV follow without a change.
 """
 
@@ -39,8 +39,8 @@ from functools import partial
 import numpy as np
 from matplotlib.figure import Figure as MplFigure
 
-from analytics.fatigue.sn_curves import SD_LOG10_N
-from service.reports.figures import (
+from millwatch.analytics.fatigue.sn_curves import SD_LOG10_N
+from millwatch.reports.figures import (
     cumulative_figure,
     damage_figure,
     spectrum_figure,
@@ -48,18 +48,18 @@ from service.reports.figures import (
     steady_figure,
     trend_figure,
 )
-from service.reports.life import ComponentLife
-from service.reports.month_summary import ComponentSummary
-from service.reports.monthly import MonthlyReport
-from service.reports.monthly.model import CycleSpectrum
-from service.reports.numbers import (
+from millwatch.reports.life import ComponentLife
+from millwatch.reports.month_summary import ComponentSummary
+from millwatch.reports.monthly import MonthlyReport
+from millwatch.reports.monthly.model import CycleSpectrum
+from millwatch.reports.numbers import (
     HORIZON_YEARS,
     NO_FINITE_LIFE,
     end_date_text,
     years_range_text,
     years_text,
 )
-from service.reports.render.document import (
+from millwatch.reports.render.document import (
     Cell,
     Column,
     Document,
@@ -146,7 +146,7 @@ def _summary_table(r: MonthlyReport) -> Table:
 
 def _remaining_text(c: ComponentSummary) -> str:
     """Page 1's remaining life of a component in one cell: the range over the rate bases
-    (``31–38 years``, :data:`~service.reports.numbers.NO_FINITE_LIFE`) or why there is none."""
+    (``31–38 years``, :data:`~millwatch.reports.numbers.NO_FINITE_LIFE`) or why there is none."""
     if c.remaining_life_years_min is None:
         return c.life_reason or "no projection"
     return years_range_text(c.remaining_life_years_min, c.remaining_life_years_max)
@@ -207,7 +207,7 @@ def _life_status(r: MonthlyReport) -> Paragraph:
 
 
 def _drivers(r: MonthlyReport) -> tuple[Paragraph, ...]:
-    """What drives the damage, in words (:func:`service.reports.actions.drivers`)."""
+    """What drives the damage, in words (:func:`millwatch.reports.actions.drivers`)."""
     if r.advice is None:
         return ()
     return (Paragraph("What drives the damage: " + " ".join(r.advice.drivers), "meta"),)
@@ -448,7 +448,7 @@ def _damage(r: MonthlyReport) -> Section:
 
 def _spectra(r: MonthlyReport) -> Section:
     """Per component, the month's rainflow range–mean matrix and its S-N curve with the
-    month's spectrum (:func:`~service.reports.figures.spectrum_figure`)."""
+    month's spectrum (:func:`~millwatch.reports.figures.spectrum_figure`)."""
     about = Paragraph(
         "Each component's rainflow cycles of the month (ASTM E1049 counting): left, how many "
         "cycles of each stress range and mean (log colour scale); right, its own S-N curve "
@@ -518,7 +518,7 @@ def _what_if(r: MonthlyReport) -> Section:
 
 
 def _what_if_basis(r: MonthlyReport) -> tuple[Paragraph, ...]:
-    """The assumptions beside the table (:class:`~service.reports.monthly.model.WhatIfBasis`)."""
+    """The assumptions beside the table (:class:`~millwatch.reports.monthly.model.WhatIfBasis`)."""
     b = r.what_if_basis
     if b is None:
         return ()

@@ -1,17 +1,17 @@
-"""The monthly report in each format: its document (:mod:`service.reports.monthly_document`)
-rendered as HTML, PDF or CSV tables (:mod:`service.reports.render`).
+"""The monthly report in each format: its document (:mod:`millwatch.reports.monthly_document`)
+rendered as HTML, PDF or CSV tables (:mod:`millwatch.reports.render`).
 
 These are the calls of the API's ``FORMATS``; the month-end files
-(:mod:`service.reports.files`) build the document once and render it in every format.
+(:mod:`millwatch.reports.files`) build the document once and render it in every format.
 """
 
 from __future__ import annotations
 
-from service.reports.monthly import MonthlyReport
-from service.reports.monthly_document import monthly_document
-from service.reports.render.csv_tables import document_csv_table, document_csv_zip
-from service.reports.render.html_page import document_html
-from service.reports.render.pdf_pages import document_pdf
+from millwatch.reports.monthly import MonthlyReport
+from millwatch.reports.monthly_document import monthly_document
+from millwatch.reports.render.csv_tables import document_csv_table, document_csv_zip
+from millwatch.reports.render.html_page import document_html
+from millwatch.reports.render.pdf_pages import document_pdf
 
 __all__ = ["render_csv", "render_csv_table", "render_html", "render_pdf"]
 

@@ -7,7 +7,7 @@
 * lives beyond :data:`HORIZON_YEARS` read :data:`NO_FINITE_LIFE` — a number of centuries says
   nothing more than "not at these loads" — and carry no end date.
 
-Pure string functions; the figures and tables of :mod:`service.reports.monthly_document` and the
+Pure string functions; the figures and tables of :mod:`millwatch.reports.monthly_document` and the
 fleet view call them for every life and damage they show.
 """
 

@@ -2,12 +2,12 @@
 count against the supplier norm and the configured warning/alarm levels (Diering 2011 §6.1.3,
 §6.2.8,
 §7.2). The one place that owns both: ``GET /mills/{id}/starts`` and the monthly report
-(:mod:`service.reports.monthly`) use the same month bounds, the same norm and the same statuses.
+(:mod:`millwatch.reports.monthly`) use the same month bounds, the same norm and the same statuses.
 
 A month is ``YYYY-MM`` in the site's time zone; its bounds are the local midnights of its first
 day and of the next month's first day, converted to UTC ns, so a start at 23:30 local time on the
 last day counts in that month whatever the UTC date. Statuses are *strictly above* the levels, as
-the alarm rules (:mod:`alarms.rules`) decide.
+the alarm rules (:mod:`millwatch.alarms.rules`) decide.
 """
 
 from __future__ import annotations
@@ -21,13 +21,13 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from alarms.times import iso_local, iso_utc
-from analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
-from analytics.mill.report import STARTS_NORM_PER_MONTH, starts_status
-from analytics.operation.transients import start_peak_level, start_peaks
-from service.errors import BadRequest
-from service.store.database import Store
-from service.store.records import EventRow
+from millwatch.alarms.times import iso_local, iso_utc
+from millwatch.analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
+from millwatch.analytics.mill.report import STARTS_NORM_PER_MONTH, starts_status
+from millwatch.analytics.operation.transients import start_peak_level, start_peaks
+from millwatch.errors import BadRequest
+from millwatch.store.database import Store
+from millwatch.store.records import EventRow
 
 __all__ = [
     "MONTH_PATTERN",
@@ -99,8 +99,8 @@ def month_bounds_ns(month: str, time_zone: str) -> tuple[int, int]:
 
 def peak_status(start: Mapping[str, Any], levels: tuple[float, float]) -> str:
     """A start's peak (% rated motor torque, the larger of switch-on and short-circuit:
-    :func:`~analytics.operation.transients.start_peaks`) against the start-peak levels
-    (:func:`~analytics.operation.transients.start_peak_level`, as the ``start_peak`` alarm
+    :func:`~millwatch.analytics.operation.transients.start_peaks`) against the start-peak levels
+    (:func:`~millwatch.analytics.operation.transients.start_peak_level`, as the ``start_peak`` alarm
     judges it): ``alarm``, ``warning``, ``ok``, ``n/a`` without a peak. ``start``: a start
     event's data; ``levels``: (warning, alarm) %, :meth:`MillConfig.start_peak_levels`."""
     peak = max(start_peaks(start).values(), default=None)

@@ -20,12 +20,12 @@ Design notes:
   crash is idempotent.
 * A failed write (a full disk: ``database or disk is full``) rolls its transaction back and
   raises; the worker keeps what it wanted to write and tries again
-  (:meth:`service.worker.worker.Worker.commit`). A store file deleted while the service runs
+  (:meth:`millwatch.worker.worker.Worker.commit`). A store file deleted while the service runs
   is noticed (:meth:`Store.file_state`) and written again whole from the open connection
   (:meth:`Store.restore_file`: SQLite's online backup), so nothing stored is lost with it.
-* Opening a file migrates it (:mod:`service.store.migrations`); rows are mapped by column name
-  (:mod:`service.store.records`); the JSON ``records`` are read column-wise by
-  :mod:`service.store.sampler`.
+* Opening a file migrates it (:mod:`millwatch.store.migrations`); rows are mapped by column name
+  (:mod:`millwatch.store.records`); the JSON ``records`` are read column-wise by
+  :mod:`millwatch.store.sampler`.
 """
 
 from __future__ import annotations
@@ -40,12 +40,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from alarms.lifecycle import Alarm, TransitionRecord
-from analytics.mill.phase_damage import phase_totals
-from service.store import migrations, sampler
-from service.store.checkpoint_seal import CheckpointDamaged, Opened, seal, unseal
-from service.store.migrations import StoreError
-from service.store.records import (
+from millwatch.alarms.lifecycle import Alarm, TransitionRecord
+from millwatch.analytics.mill.phase_damage import phase_totals
+from millwatch.store import migrations, sampler
+from millwatch.store.checkpoint_seal import CheckpointDamaged, Opened, seal, unseal
+from millwatch.store.migrations import StoreError
+from millwatch.store.records import (
     DamageRow,
     EventRow,
     PhaseRow,
@@ -74,7 +74,7 @@ _TRANSITION_INSERT = (
 
 @dataclass(frozen=True)
 class RefusedCheckpoint:
-    """A kept checkpoint that is not intact (:mod:`service.store.checkpoint_seal`): its part
+    """A kept checkpoint that is not intact (:mod:`millwatch.store.checkpoint_seal`): its part
     (mill), row id, when it was written (ns UTC) and what is wrong with it."""
 
     part: str
@@ -263,7 +263,7 @@ class Store:
         archive ``position`` it covers (inside :meth:`transaction`), and drop all but the newest
         :data:`CHECKPOINTS_KEPT` of that part. Parts are written one by one, each in a small
         transaction, so no write holds the store for long. The state is sealed with its
-        checksum (:func:`~service.store.checkpoint_seal.seal`). Returns the state's size in
+        checksum (:func:`~millwatch.store.checkpoint_seal.seal`). Returns the state's size in
         bytes."""
         text, where = json.dumps(state), json.dumps(position)
         db.execute(
@@ -284,8 +284,8 @@ class Store:
         transitions: Sequence[TransitionRecord],
         alarms: Sequence[Alarm],
     ) -> None:
-        """Record alarm transitions (a :class:`~alarms.lifecycle.Transition` is one) and set the
-        alarms' current state (inside
+        """Record alarm transitions (a :class:`~millwatch.alarms.lifecycle.Transition` is one) and
+        set the alarms' current state (inside
         :meth:`transaction`). Idempotent: ids and ``seq`` are deterministic, so the archive
         tail replayed after a crash rewrites the same rows; an older state never overwrites a
         newer one (higher ``seq`` wins)."""
@@ -338,7 +338,7 @@ class Store:
         """Alarm transitions with ``from_ns`` ≤ ``t_ns`` < ``to_ns`` (of one mill, or all),
         after the position ``after`` = ``(t_ns, alarm_id, seq)``, in that order, at most
         ``limit``; each row has the transition's columns and its alarm's ``mill_id``, ``rule``,
-        ``subject``, ``quantity``, ``unit`` and ``simulated`` (``service.api.journal``)."""
+        ``subject``, ``quantity``, ``unit`` and ``simulated`` (``millwatch.api.journal``)."""
         picked = ", ".join(f"t.{c}" for c in columns(TransitionRecord))
         sql = (f"SELECT {picked}, a.mill_id, a.rule, a.subject, a.quantity, a.unit, a.simulated "
                "FROM alarm_transitions t JOIN alarms a ON a.alarm_id = t.alarm_id "
@@ -464,7 +464,7 @@ class Store:
         """Seconds per operating phase of a mill, summed over the local days in ``[since_day,
         until_day]`` (``YYYY-MM-DD``, both included; all days when not given): every phase
         the analyzer knows, 0 for one not seen, as ``millwatch analyze`` reports them
-        (:func:`~analytics.mill.phase_damage.phase_totals`)."""
+        (:func:`~millwatch.analytics.mill.phase_damage.phase_totals`)."""
         sql = "SELECT phase, seconds FROM phase_daily WHERE mill_id = ?"
         args: list[Any] = [mill_id]
         for clause, value in (("day >= ?", since_day), ("day <= ?", until_day)):
@@ -604,7 +604,7 @@ class Store:
         where absent. The object keys are read from the first record of each hour and checked
         on every record in the same pass; a second pass reads them all only if some record
         has others. Records SQLite's JSON refuses (``NaN`` and ``Infinity``, which Python's
-        json writes) are decoded in Python (:mod:`service.store.sampler`)."""
+        json writes) are decoded in Python (:mod:`millwatch.store.sampler`)."""
         where, args = sampler.record_window(mill_id, kind, since_ns, until_ns)
         return sampler.record_columns(self._query, where, args, fields, objects)
 
@@ -615,7 +615,7 @@ class Store:
         """``(t_ns, [value at each key path])`` of the records of one kind in ``window``
         (``[since, until)`` ns; only the first record of each ``every_ns`` interval, found by
         one index seek per interval), oldest first; SQLite extracts the values in one parse
-        per record (:func:`service.store.sampler.record_values`)."""
+        per record (:func:`millwatch.store.sampler.record_values`)."""
         where, args = sampler.record_window(mill_id, kind, *window, every_ns)
         return sampler.record_values(self._query, where, args, paths)
 
@@ -651,7 +651,7 @@ class Store:
         return self._reader().execute(sql, args).fetchall()
 
     def _query_rows(self, sql: str, args: tuple[Any, ...]) -> list[sqlite3.Row]:
-        """Rows addressable by column name (:func:`service.store.records.from_row`)."""
+        """Rows addressable by column name (:func:`millwatch.store.records.from_row`)."""
         cursor = self._reader().cursor()
         cursor.row_factory = sqlite3.Row
         return cursor.execute(sql, args).fetchall()

@@ -3,7 +3,7 @@
 ``MIGRATIONS[i]`` brings the schema from version ``i`` to ``i + 1`` (SQLite's ``user_version``);
 :func:`migrate` applies the missing ones, each in its own transaction, and refuses a file written
 by a newer millwatch. A new table or column is a new entry at the end, never an edit of an old
-one. The alarm tables' columns are the fields of :mod:`alarms.lifecycle`'s records
+one. The alarm tables' columns are the fields of :mod:`millwatch.alarms.lifecycle`'s records
 (``tests/service/store/test_alarms.py`` checks it).
 """
 
@@ -43,7 +43,7 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             id INTEGER PRIMARY KEY, created_ns INTEGER NOT NULL, position_json TEXT NOT NULL,
             state_json TEXT NOT NULL)""",
     ),
-    (  # 1 → 2: alarms (current state per alarm) and their transitions (alarms.lifecycle)
+    (  # 1 → 2: alarms (current state per alarm) and their transitions (millwatch.alarms.lifecycle)
         """CREATE TABLE alarms (
             alarm_id TEXT PRIMARY KEY, mill_id TEXT NOT NULL, rule TEXT NOT NULL,
             subject TEXT NOT NULL, quantity TEXT NOT NULL, unit TEXT NOT NULL,
@@ -91,7 +91,7 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "ALTER TABLE alarms ADD COLUMN exceed_count INTEGER NOT NULL DEFAULT 1",
         "ALTER TABLE alarms ADD COLUMN advice TEXT NOT NULL DEFAULT ''",
     ),
-    (  # 7 → 8: operator actions (alarms.actions): confirmation, shelving, suppression by
+    (  # 7 → 8: operator actions (millwatch.alarms.actions): confirmation, shelving, suppression by
         # design, out of service, comments — on the alarm, and each transition's comment
         "ALTER TABLE alarms ADD COLUMN confirmed INTEGER NOT NULL DEFAULT 0",
         "ALTER TABLE alarms ADD COLUMN confirmed_at_ns INTEGER",

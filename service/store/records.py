@@ -3,13 +3,14 @@
 A row type is a dataclass whose field names are its table's column names: the column list of
 an ``INSERT`` or ``SELECT`` is derived from :func:`dataclasses.fields`, and a row comes back
 through :class:`sqlite3.Row` by name, never by position, so a field added to the record and to
-the table (a migration in :mod:`service.store.migrations`) needs no edit here.
+the table (a migration in :mod:`millwatch.store.migrations`) needs no edit here.
 
 Values are converted by the field's type hint where SQLite has no such type: ``bool`` is stored
 as 0/1 and read back as ``bool``; an :class:`~enum.Enum` is stored as its value and rebuilt.
 
-Row types: the alarm records are :mod:`alarms.lifecycle`'s (:class:`~alarms.lifecycle.Alarm`,
-:class:`~alarms.lifecycle.TransitionRecord`); the worker's rows are defined here
+Row types: the alarm records are :mod:`millwatch.alarms.lifecycle`'s
+(:class:`~millwatch.alarms.lifecycle.Alarm`,
+:class:`~millwatch.alarms.lifecycle.TransitionRecord`); the worker's rows are defined here
 (:class:`EventRow`, :class:`DamageRow`, :class:`PhaseRow`).
 """
 

@@ -4,9 +4,9 @@
 (``data_json``). A month's report needs a few scalars of thousands of them: here SQLite extracts
 them (``json_extract``, ``json_each``), so a month of windows is read without decoding each one.
 The functions take a read query (the store passes its reader's) and are
-exposed as :meth:`~service.store.database.Store.record_keys`,
-:meth:`~service.store.database.Store.record_fields` and
-:meth:`~service.store.database.Store.record_columns`.
+exposed as :meth:`~millwatch.store.database.Store.record_keys`,
+:meth:`~millwatch.store.database.Store.record_fields` and
+:meth:`~millwatch.store.database.Store.record_columns`.
 
 Records SQLite's JSON refuses (``NaN`` and ``Infinity``, which Python's json writes) are decoded
 in Python and merged in, so the answer is the same as decoding every record.
@@ -137,7 +137,7 @@ def record_columns(
     objects: Sequence[Sequence[str]],
 ) -> tuple[list[list[str]], list[tuple[Any, ...]]]:
     """``(keys, rows)`` of the records in ``where``: see
-    :meth:`service.store.database.Store.record_columns`. The object keys are read from the
+    :meth:`millwatch.store.database.Store.record_columns`. The object keys are read from the
     first record of each hour and checked on every record in the same pass; a second pass reads
     them all only if some record has others."""
     odd = _unparsable(query, where, args)

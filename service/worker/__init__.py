@@ -20,7 +20,7 @@ Modules, low to high (a module imports only those above it):
   receive time: ``implausible_reason``), lifetime counters (checkpointed), losses, staleness,
   rates, latency; the archive's and the store's write-failure episodes (``WriteEpisodes``:
   ``/ready``, metric, alarms, one log line per episode).
-* ``admission`` — :class:`~service.worker.admission.BlockAdmission`, the one decision whether a
+* ``admission`` — :class:`~millwatch.worker.admission.BlockAdmission`, the one decision whether a
   block is analysed (route by key, decode, sequence, plausibility) and its counters, for the
   live worker, its replay and offline analysis alike; ``IngressGate``, what a zenoh callback
   may queue at all (no oversize payloads, no keys of no configured channel).
@@ -30,28 +30,28 @@ Modules, low to high (a module imports only those above it):
 * ``batch_lane`` — many blocks as arrays (archive replay, a live backlog): repeats dropped and
   counted, regular runs admitted at once, the rest block by block — through the worker's public
   methods (``BlockSink``).
-* ``worker`` — :class:`~service.worker.worker.Worker`: routing, the block path above, commits,
+* ``worker`` — :class:`~millwatch.worker.worker.Worker`: routing, the block path above, commits,
   checkpoints, restoring them (held mills), acknowledgements, status; the ``MillPipeline``
   Protocol a mill's analysis meets.
-* ``mill_job`` — :class:`~service.worker.mill_job.MillJob`, the worker's unit per mill: the
+* ``mill_job`` — :class:`~millwatch.worker.mill_job.MillJob`, the worker's unit per mill: the
   analyzer plus alarms, turned into store rows.
 * ``parallel_replay`` — a long archive tail replayed by several processes, mills split.
 * ``offline_analysis`` — ``millwatch analyze``: archive files through the batch lane into the
   mills' analyzers, with no store (the replay path's cost per sample); ``export_files`` reads
   the same way into a Foxglove export (``millwatch archive export``).
-* ``recovery`` — :func:`~service.worker.recovery.recover`: restore checkpoints, replay the
+* ``recovery`` — :func:`~millwatch.worker.recovery.recover`: restore checkpoints, replay the
   archive tail (one process or several), then go live.
-* ``spool_recovery`` — :class:`~service.worker.spool_recovery.SpoolRecovery`: a gap a live
-  block reveals is first fetched from the gateways' spools (:mod:`ingest.spool`) and handled in
-  sequence order before that block (the worker's ``before_live`` hook).
-  :class:`~service.worker.spool_recovery.CatchUp`: in ``millwatch serve``, a mill
+* ``spool_recovery`` — :class:`~millwatch.worker.spool_recovery.SpoolRecovery`: a gap a live
+  block reveals is first fetched from the gateways' spools (:mod:`millwatch.ingest.spool`) and
+  handled in sequence order before that block (the worker's ``before_live`` hook).
+  :class:`~millwatch.worker.spool_recovery.CatchUp`: in ``millwatch serve``, a mill
   whose live block reveals a gap is caught up from the spools on a thread of its own, its
   channels page by page together, its live blocks held meanwhile; the other mills flow.
 * ``archive_first`` — the archive is the log and the analysis tails it: an archiving thread
   writes every block first; the analysis takes them from a bounded feed and, behind, reads
   them back from the archive (batch lane) until caught up; lag and backlog.
 * ``drain_watch`` — whether each mill's blocks are still being analysed (``/ready``).
-* ``runtime`` — :class:`~service.worker.runtime.ServiceRuntime` owns the resources (store,
+* ``runtime`` — :class:`~millwatch.worker.runtime.ServiceRuntime` owns the resources (store,
   archive, zenoh session, archiving and worker threads), starts them in order and closes them
   in reverse.
 

@@ -3,8 +3,10 @@ analysis, made the same way by the live worker, its archive replay and offline a
 
 For each message (a zenoh key and a payload)::
 
-    route the key (ingest.keys.ChannelRoutes) ─ no given mill's channel ─▶ foreign: counted by key
-    decode the payload (ingest.wire) ──────────── malformed ─▶ the channel's decode errors by kind
+    route the key (millwatch.ingest.keys.ChannelRoutes) ─ no given mill's channel ─▶ foreign:
+    counted by key
+    decode the payload (millwatch.ingest.wire) ──────────── malformed ─▶ the channel's decode
+    errors by kind
     the channel's sequence (ChannelHealth.accept) ─ repeat ─▶ the channel's duplicates / replays
                                                   ─ implausible ─▶ counted by reason, reported
                                                     to ``on_implausible``
@@ -12,21 +14,21 @@ For each message (a zenoh key and a payload)::
         loss (gap) or clock-fault episode it reveals
 
 :class:`BlockAdmission` holds the counters (lifetime totals per channel in
-:class:`~service.worker.health.MillHealth`, foreign blocks per key prefix — the key without its
+:class:`~millwatch.worker.health.MillHealth`, foreign blocks per key prefix — the key without its
 last segment, so a flood of made-up keys under a mill's prefix is one count and one log line)
 and logs each kind once per key (foreign: once per prefix). An implausible block
-(:func:`~service.worker.health.implausible_reason`: judged by its content against the channel's
+(:func:`~millwatch.worker.health.implausible_reason`: judged by its content against the channel's
 history and its receive time, whoever sent it) is counted by reason, logged once per key and
 reason, and handed to ``on_implausible`` (the worker stores and alarms it); it never reaches
 the analysis and never moves the channel's state.
 
 What a caller does with an admission is its own: the worker stores a gap or a clock fault
 as a data-quality event and holds back a held mill's blocks; offline analysis only analyses.
-The batch lane's regular runs (:mod:`service.worker.batch_lane`) are admitted by the same rule
-at once: repeats found by :meth:`~service.worker.health.ChannelHealth.repeats_in` are dropped and
+The batch lane's regular runs (:mod:`millwatch.worker.batch_lane`) are admitted by the same rule
+at once: repeats found by :meth:`~millwatch.worker.health.ChannelHealth.repeats_in` are dropped and
 counted (:meth:`BlockAdmission.count_repeats`), the rest tested with
-:meth:`~service.worker.health.ChannelHealth.follows_on` then counted with
-:meth:`~service.worker.health.ChannelHealth.observe_run`.
+:meth:`~millwatch.worker.health.ChannelHealth.follows_on` then counted with
+:meth:`~millwatch.worker.health.ChannelHealth.observe_run`.
 
 **Before the queue** (:class:`IngressGate`, in ``millwatch serve``'s zenoh callbacks): a
 subscriber on a mill's keys (``millwatch/v1/<site>/<mill>/*``) receives whatever any peer puts
@@ -46,10 +48,10 @@ from collections import Counter
 from collections.abc import Callable, Iterable
 from typing import NamedTuple
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.keys import ChannelRoutes
-from ingest.wire import Block, WireError, decode_block
-from service.worker.health import DEFAULT_LIMITS, AdmissionLimits, Loss, MillHealth
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.keys import ChannelRoutes
+from millwatch.ingest.wire import Block, WireError, decode_block
+from millwatch.worker.health import DEFAULT_LIMITS, AdmissionLimits, Loss, MillHealth
 
 __all__ = ["Admitted", "BlockAdmission", "Implausible", "IngressGate", "key_prefix"]
 
@@ -71,7 +73,7 @@ class Admitted(NamedTuple):
 
 class Implausible(NamedTuple):
     """An implausible block of a mill's configured channel: ``reason`` (one of
-    :data:`service.worker.health.IMPLAUSIBLE`), its ``seq`` and ``t0_ns`` as sent, and when it
+    :data:`millwatch.worker.health.IMPLAUSIBLE`), its ``seq`` and ``t0_ns`` as sent, and when it
     was received (``recv_ns``; ns UTC)."""
 
     mill_id: str
@@ -90,7 +92,7 @@ def key_prefix(key: str) -> str:
 class BlockAdmission:
     """Routing, decoding and sequencing of the blocks of the given mills, with their counters
     (see the module docstring). ``replayed``: keys of a replay run count as their live keys
-    (:class:`~ingest.keys.ChannelRoutes`; offline tools), never for the live worker.
+    (:class:`~millwatch.ingest.keys.ChannelRoutes`; offline tools), never for the live worker.
     ``warn_foreign``: log a foreign key once at WARNING (a key of no configured mill on the
     worker's subscription is a configuration mistake); offline tools given some of a
     recording's mills skip the others' keys by design, at DEBUG. ``limits``: what is plausible
@@ -126,7 +128,8 @@ class BlockAdmission:
         return sum(self.foreign.values())
 
     def malformed(self) -> Counter[str]:
-        """Malformed blocks of the given mills by kind (:attr:`ingest.wire.WireError.kind`)."""
+        """Malformed blocks of the given mills by kind
+        (:attr:`millwatch.ingest.wire.WireError.kind`)."""
         out: Counter[str] = Counter()
         for mill in self.health.values():
             for channel in mill.channels.values():

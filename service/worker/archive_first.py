@@ -4,27 +4,27 @@ Two threads share the work ``millwatch serve`` does with each received block:
 
 * the **archiving thread** (:meth:`ArchiveFirst.run_archiving`) drains the subscriber
   callbacks' queue, hands a mill whose live block reveals a sequence gap to a catch-up thread
-  (:mod:`service.worker.spool_recovery`: the span from the gateways' spools first, then the mill's
+  (:mod:`millwatch.worker.spool_recovery`: the span from the gateways' spools first, then the mill's
   held live blocks), and writes every other block to the archive at once — nothing it does
   depends on the analysis;
 * the **analysis thread** (:meth:`ArchiveFirst.step`) takes the blocks in archive order: from a
   bounded queue in memory (the *feed*) while it keeps up, and — when it falls behind, i.e. the
   feed is full when the archiving thread offers the next block — from the archive itself, the
-  way crash recovery replays it (:class:`~service.worker.batch_lane.BatchLane` over
-  :func:`~ingest.archive.batches.archive_batches`), from the position of the first block the
-  feed refused.
+  way crash recovery replays it (:class:`~millwatch.worker.batch_lane.BatchLane` over
+  :func:`~millwatch.ingest.archive.batches.archive_batches`), from the position of the first block
+  the feed refused.
 
 Switching back: each pass over the archive ends at a position the archiving thread flushed; when
 what was archived after it fits comfortably in the feed, the analysis asks the archiving thread,
 under the lock its writes hold, for the position of its last write and to feed it the blocks
 after it again; it reads the archive up to that position and then takes the feed. Every block
 so reaches the analysis exactly once and in archive order (the per-channel sequence admission,
-:mod:`service.worker.admission`, would drop a repeat anyway). Memory stays bounded by the two
+:mod:`millwatch.worker.admission`, would drop a repeat anyway). Memory stays bounded by the two
 queues (``[worker] queue_blocks`` each) and one archive batch.
 
 The analysis's position in the archive — just past the last block it took — is what a
 checkpoint must store (:attr:`Worker.analysed_position
-<service.worker.worker.Worker.analysed_position>`), not the writer's: after a crash the archive
+<millwatch.worker.worker.Worker.analysed_position>`), not the writer's: after a crash the archive
 is replayed from there, the blocks archived but not yet analysed included.
 
 The lag (receive time of the newest archived block minus that of the last analysed one; 0 when
@@ -42,14 +42,14 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
-from ingest.archive.batches import MessageBatch, archive_batches
-from ingest.archive.files import ArchivePosition, archive_file_order
-from ingest.archive.writer import ArchiveWriter
-from ingest.spool.store import payload_seq
-from ingest.wire import block_span_ns
-from service.worker.batch_lane import BatchLane
-from service.worker.block_queue import BlockQueue, QueuedBlock
-from service.worker.health import (
+from millwatch.ingest.archive.batches import MessageBatch, archive_batches
+from millwatch.ingest.archive.files import ArchivePosition, archive_file_order
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.spool.store import payload_seq
+from millwatch.ingest.wire import block_span_ns
+from millwatch.worker.batch_lane import BatchLane
+from millwatch.worker.block_queue import BlockQueue, QueuedBlock
+from millwatch.worker.health import (
     DEFAULT_LIMITS,
     AdmissionLimits,
     MillHealth,
@@ -58,7 +58,7 @@ from service.worker.health import (
     last_block,
     lead_ns,
 )
-from service.worker.worker import BATCH_BLOCKS, Worker
+from millwatch.worker.worker import BATCH_BLOCKS, Worker
 
 __all__ = ["ArchiveFirst", "ArchivedSeqs", "SharedArchive"]
 
@@ -74,9 +74,9 @@ LOG_EVERY_S = 60.0
 
 
 class SharedArchive:
-    """An :class:`~ingest.archive.writer.ArchiveWriter` behind a lock, so the archiving thread
-    writes while the analysis thread flushes it for a checkpoint; and the archive's write
-    failures as episodes (:attr:`health`, :class:`service.worker.health.WriteEpisodes`).
+    """An :class:`~millwatch.ingest.archive.writer.ArchiveWriter` behind a lock, so the archiving
+    thread writes while the analysis thread flushes it for a checkpoint; and the archive's write
+    failures as episodes (:attr:`health`, :class:`millwatch.worker.health.WriteEpisodes`).
 
     While the archive cannot be written, blocks wait in the writer's memory (bounded:
     ``[archive] max_unwritten_mb``) and are written in order once it can; the blocks beyond that
@@ -216,7 +216,7 @@ class ArchivedSeqs(dict[str, _Channels]):
 
     def note(self, route: tuple[str, str] | None, payload: bytes, recv_ns: int) -> None:
         """A block of ``route`` (mill, channel) received at ``recv_ns`` was archived; an
-        implausible one (:func:`~service.worker.health.implausible_payload`) moves nothing."""
+        implausible one (:func:`~millwatch.worker.health.implausible_payload`) moves nothing."""
         seq = payload_seq(payload) if route is not None else None
         if route is None or seq is None:
             return
@@ -245,8 +245,8 @@ class ArchiveFirst:
 
     ``incoming``: the subscriber callbacks' queue; ``capacity``: the feed's bound (blocks);
     ``before_live``: called with each live block before it is archived; False means it took
-    the block (the catch-up of a gap, :mod:`service.worker.spool_recovery`, whose recovered and held
-    blocks come back through :meth:`archive_block`); ``route``: key → (mill, channel).
+    the block (the catch-up of a gap, :mod:`millwatch.worker.spool_recovery`, whose recovered and
+    held blocks come back through :meth:`archive_block`); ``route``: key → (mill, channel).
     """
 
     def __init__(

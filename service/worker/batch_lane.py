@@ -1,24 +1,24 @@
 """The worker's fast lane for many blocks at once: archive replay after a crash, and a live
 backlog (the gateways' caches delivering an outage, :meth:`BatchLane.handle_queued`).
 
-:meth:`service.worker.worker.Worker.handle` costs ~25 µs a block in Python (decode, health, routing,
-alignment); replaying an hour of 50 mills is 7.2 million blocks. :class:`BatchLane` takes a
-:class:`~ingest.archive.batches.MessageBatch` and, per mill, treats the blocks as arrays when
-they are *regular* once their repeats are dropped — every block well-formed at the mill's rate,
+:meth:`millwatch.worker.worker.Worker.handle` costs ~25 µs a block in Python (decode, health,
+routing, alignment); replaying an hour of 50 mills is 7.2 million blocks. :class:`BatchLane` takes a
+:class:`~millwatch.ingest.archive.batches.MessageBatch` and, per mill, treats the blocks as arrays
+when they are *regular* once their repeats are dropped — every block well-formed at the mill's rate,
 all of one length and dtype, and each channel's new blocks following on from the last one seen
 (no gap, no clock fault, nothing implausible). Repeats (a sequence number not beyond the highest
 one before it: the overlap every recovery brings, of its history with the archive) are found
 per channel at once
-(:meth:`~service.worker.health.ChannelHealth.repeats_in`), counted by kind exactly as the
+(:meth:`~millwatch.worker.health.ChannelHealth.repeats_in`), counted by kind exactly as the
 admission counts them one by one (``BlockSink.repeated``) and dropped. Then the health counters
 move in one step per channel, the samples are gathered in one step, and the
 mill's aligner takes them all at once (``Worker.accept_regular`` →
-:meth:`analytics.mill.analyzer.MillAnalyzer.add_blocks`, which itself falls back block by block
-when the timing is not regular). A mill with anything irregular in the batch — a malformed or
+:meth:`millwatch.analytics.mill.analyzer.MillAnalyzer.add_blocks`, which itself falls back block by
+block when the timing is not regular). A mill with anything irregular in the batch — a malformed or
 foreign block, a gap, a clock fault — goes block by block through ``Worker.handle`` in arrival
 order instead, so every count, data-quality event and sample is exactly what block-by-block
 handling gives: a run is regular by the admission rule itself
-(:meth:`~service.worker.health.ChannelHealth.follows_on`, see :mod:`service.worker.admission`).
+(:meth:`~millwatch.worker.health.ChannelHealth.follows_on`, see :mod:`millwatch.worker.admission`).
 Blocks on keys of no configured mill go through ``Worker.handle`` too (they are only counted).
 A held mill's blocks move its health counters either way but never reach its pipeline (the
 worker's ``accept_regular`` and ``handle`` see to that).
@@ -37,14 +37,14 @@ from typing import Protocol
 import numpy as np
 from numba import njit
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.archive.batches import MessageBatch
-from ingest.archive.copy_kernels import copy_bytes
-from ingest.archive.files import ArchivePosition
-from ingest.wire import DType, decode_headers
-from service.worker.block_queue import QueuedBlock
-from service.worker.checkpoints import covers
-from service.worker.health import DUPLICATE, ChannelHealth, MillHealth, lead_ns
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.archive.batches import MessageBatch
+from millwatch.ingest.archive.copy_kernels import copy_bytes
+from millwatch.ingest.archive.files import ArchivePosition
+from millwatch.ingest.wire import DType, decode_headers
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.checkpoints import covers
+from millwatch.worker.health import DUPLICATE, ChannelHealth, MillHealth, lead_ns
 
 __all__ = [
     "REPLAY_BLOCKS_PER_MILL",
@@ -59,7 +59,8 @@ log = logging.getLogger(__name__)
 _NUMPY = {int(d): d.numpy for d in DType}
 #: Archived blocks per configured mill between two commits of a replay (about 40 s of a
 #: four-channel mill in 100-sample blocks): the worker analyses what it queued at each commit,
-#: so every mill's analyzer is then fed whole chunks of ``analytics.mill.analyzer.MAX_CHUNK_S``.
+#: so every mill's analyzer is then fed whole chunks of
+#: ``millwatch.analytics.mill.analyzer.MAX_CHUNK_S``.
 #: Measured (50 mills, 300 s, one core): 20 000 blocks a commit 430 µs of CPU per mill-second,
 #: 80 000 blocks 383 µs; no gain beyond. Results do not depend on it.
 REPLAY_BLOCKS_PER_MILL = 1600
@@ -76,7 +77,7 @@ def replay_batch_blocks(mills: int) -> int:
 
 
 class BlockSink(Protocol):
-    """What the lane needs of :class:`~service.worker.worker.Worker` (its public methods)."""
+    """What the lane needs of :class:`~millwatch.worker.worker.Worker` (its public methods)."""
 
     @property
     def mills(self) -> Mapping[str, MillConfig]: ...
@@ -98,8 +99,8 @@ class BlockSink(Protocol):
 
 
 def queued_batch(items: Sequence[QueuedBlock]) -> MessageBatch:
-    """Queued blocks as one :class:`~ingest.archive.batches.MessageBatch` (payloads back to back,
-    receive times as log times; no archive file: nothing in it is covered by a checkpoint).
+    """Queued blocks as one :class:`~millwatch.ingest.archive.batches.MessageBatch` (payloads back
+    to back, receive times as log times; no archive file: nothing in it is covered by a checkpoint).
     Per block only list building: a few hundred ns a block, against ~25 µs of
     ``Worker.handle``."""
     topics: dict[str, int] = {}
@@ -181,8 +182,8 @@ class BatchLane:
         self, batch: MessageBatch, covered: dict[str, ArchivePosition | None] | None = None
     ) -> tuple[int, int]:
         """Handle the messages of ``batch`` in order, except those a mill's checkpoint in
-        ``covered`` already holds (see :func:`service.worker.checkpoints.covers`); returns (handled,
-        skipped)."""
+        ``covered`` already holds (see :func:`millwatch.worker.checkpoints.covers`); returns
+        (handled, skipped)."""
         uniq, inverse = np.unique(batch.channel, return_inverse=True)
         routes = [self.worker.route(batch.topics[int(c)]) for c in uniq.tolist()]
         mill_of = np.array([-1 if r is None else self.mills.index(r[0]) for r in routes])
@@ -268,8 +269,8 @@ class BatchLane:
         self, mill_id: str, chan: np.ndarray, head: np.ndarray, step: int, recv: np.ndarray
     ) -> dict[int, tuple[np.ndarray, np.ndarray]] | None:
         """Per channel index: its blocks' positions and their repeat codes
-        (:meth:`~service.worker.health.ChannelHealth.repeats_in`) — or None when a channel's
-        new blocks do not follow on (:meth:`~service.worker.health.ChannelHealth.follows_on`)."""
+        (:meth:`~millwatch.worker.health.ChannelHealth.repeats_in`) — or None when a channel's
+        new blocks do not follow on (:meth:`~millwatch.worker.health.ChannelHealth.follows_on`)."""
         health = self.worker.health[mill_id].channels
         names = self._channels[mill_id]
         runs = {}
@@ -290,8 +291,8 @@ def _observe(
     head: np.ndarray, raw: np.ndarray, recv: tuple[dict[int, int], np.ndarray], n: int,
     fs: float,
 ) -> None:  # fmt: skip
-    """:meth:`~service.worker.health.ChannelHealth.observe` of each block, per channel at once
-    (:meth:`~service.worker.health.ChannelHealth.observe_run`); ``recv``: each channel's last
+    """:meth:`~millwatch.worker.health.ChannelHealth.observe` of each block, per channel at once
+    (:meth:`~millwatch.worker.health.ChannelHealth.observe_run`); ``recv``: each channel's last
     receive time in the batch (ns; its last block, a repeat or not), and each block's (as
     ``head``)."""
     last_recv, block_recv = recv

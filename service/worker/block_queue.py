@@ -3,7 +3,7 @@
 A zenoh subscriber callback runs on a zenoh thread: it only *offers* ``(key, payload, receive
 time)`` here, and the worker drains the queue in batches. :meth:`BlockQueue.offer` never
 blocks: when the queue is full the block is dropped and counted. :meth:`BlockQueue.put` (the
-service's archiving thread, :mod:`service.worker.archive_first`) waits for room instead — up to
+service's archiving thread, :mod:`millwatch.worker.archive_first`) waits for room instead — up to
 ``wait_s``, so a full queue pushes back on the zenoh link (publishers use congestion control
 BLOCK) rather than losing blocks — and only then drops and counts. A drop is never silent: a
 warning is logged at most once per ``warn_every_s``; queue depth and drops are exported through

@@ -18,7 +18,7 @@ worker: left out of the positions the replay starts from and out of the schedule
 checkpointed, so its last good checkpoint stays as it is until the configuration is reverted.
 
 A *damaged* checkpoint is another matter: every checkpoint is stored with a SHA-256 checksum
-(:mod:`service.store.checkpoint_seal`) and verified before it is parsed, and one that is
+(:mod:`millwatch.store.checkpoint_seal`) and verified before it is parsed, and one that is
 truncated, changed or not JSON is refused (:func:`refusal_message` names the mill, the
 checkpoint and the store file). The mill then starts from its previous kept checkpoint, or — if
 none of its kept checkpoints is intact — from nothing, replaying the archive from its start
@@ -33,9 +33,9 @@ from collections.abc import Callable, Iterable
 import numpy as np
 import numpy.typing as npt
 
-from alarms.times import iso_utc
-from ingest.archive.files import ArchivePosition, archive_file_order
-from service.store.database import CheckpointChoice, RefusedCheckpoint
+from millwatch.alarms.times import iso_utc
+from millwatch.ingest.archive.files import ArchivePosition, archive_file_order
+from millwatch.store.database import CheckpointChoice, RefusedCheckpoint
 
 __all__ = [
     "CheckpointRestoreError",

@@ -6,7 +6,7 @@ still answered ready. :class:`DrainWatch` looks at what the worker's status show
 arriving for it but its analysed samples did not move for ``stall_after_s`` seconds of wall
 time. A mill that receives nothing (stopped gateway, outage) is not stalled: staleness says that.
 A silent channel does not stall the others either: the worker stops waiting for it after
-``stale_after_s`` (:meth:`service.worker.worker.Worker.check_staleness`), so the default bound is
+``stale_after_s`` (:meth:`millwatch.worker.worker.Worker.check_staleness`), so the default bound is
 twice that.
 """
 
@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-from service.status import MillStatus
+from millwatch.status import MillStatus
 
 __all__ = ["DrainWatch"]
 

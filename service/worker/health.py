@@ -35,7 +35,7 @@ fault (below).
 
 Non-finite samples (NaN, ±inf) are telemetry faults, not data: counted here
 (``nonfinite_samples``) and flagged as dropouts by the analysis
-(:mod:`analytics.signal.telemetry_faults`), which never counts them as loads.
+(:mod:`millwatch.analytics.signal.telemetry_faults`), which never counts them as loads.
 
 The counters are lifetime totals: the worker checkpoints them with the mill
 (:meth:`ChannelHealth.counters` / :meth:`ChannelHealth.restore_counters`) and the archive tail
@@ -44,21 +44,22 @@ replayed after the checkpoint counts the rest, so a restart neither forgets nor 
 A channel is *stale* when nothing arrived for ``stale_after_s`` seconds of wall time
 (:meth:`ChannelHealth.stale`, for the status). The worker's own judgement — data-quality events,
 the ``stale_channel`` alarm, releasing the other channels — also counts blocks still queued and
-never the time it was not listening (:meth:`service.worker.worker.Worker.silence_ns`).
+never the time it was not listening (:meth:`millwatch.worker.worker.Worker.silence_ns`).
 
 Writes that fail and heal by themselves (issue 26) — :class:`WriteEpisodes`, one per target
 (``archive``, ``store``). A full disk, a store file deleted: the service keeps what it could
-not write and writes it again, in order, once it can (the archive: :mod:`ingest.archive.writer`
-"Failed writes" and :class:`~service.worker.archive_first.SharedArchive`; the store:
-:meth:`service.worker.worker.Worker.commit` and :meth:`~service.worker.worker.Worker.check_store`).
-What the rest of the service sees of it:
+not write and writes it again, in order, once it can (the archive:
+:mod:`millwatch.ingest.archive.writer`
+"Failed writes" and :class:`~millwatch.worker.archive_first.SharedArchive`; the store:
+:meth:`millwatch.worker.worker.Worker.commit` and
+:meth:`~millwatch.worker.worker.Worker.check_store`). What the rest of the service sees of it:
 
 * whether the target could be written at its last attempt (:attr:`WriteEpisodes.ok`), for
   ``/ready`` — which so turns 503 while a disk is full and 200 again, by itself, once the
   first write after it succeeds;
 * the failed attempts (:attr:`WriteEpisodes.failures`, lifetime), for the metric
   ``millwatch_write_failures_total{target}`` and the data-quality alarms
-  ``archive_write_failures`` and ``store_write_failures`` (:mod:`alarms.rules`);
+  ``archive_write_failures`` and ``store_write_failures`` (:mod:`millwatch.alarms.rules`);
 * the log: one ERROR line when an episode starts (what failed, what is kept meanwhile) and one
   WARNING line when it ends (how long it lasted, the failed attempts, what was written late) —
   never a line per attempt, however many thousand an episode has.
@@ -76,7 +77,7 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
-from ingest.wire import Block, block_span_ns
+from millwatch.ingest.wire import Block, block_span_ns
 
 __all__ = [
     "DEFAULT_LIMITS",

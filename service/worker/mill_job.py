@@ -1,5 +1,5 @@
-"""The worker's unit for one mill: its :class:`~analytics.mill.analyzer.MillAnalyzer` plus its
-alarm engine, with the analysis turned into rows for the store. It reads the analyzer only
+"""The worker's unit for one mill: its :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer`
+plus its alarm engine, with the analysis turned into rows for the store. It reads the analyzer only
 through the analyzer's public reading API.
 
 The worker adds a batch's blocks (:meth:`MillJob.add_block` / ``add_blocks``: aligned
@@ -9,7 +9,8 @@ new steady-state windows) into
 
 * event rows (starts, stops, barring sessions),
 * records (``steady`` windows, ``harmonics`` tables, and per local day a ``cycle_matrix``:
-  each component's rainflow range-mean matrices by phase, :mod:`analytics.mill.cycle_matrix`),
+  each component's rainflow range-mean matrices by phase,
+  :mod:`millwatch.analytics.mill.cycle_matrix`),
 * alarm observations → alarm transitions (:mod:`alarms`), and
 * daily totals — damage and counted cycles per component and phase, seconds per operating
   phase, monitored time — taken every ``damage_every_s`` seconds of *sample* time (not wall
@@ -17,14 +18,14 @@ new steady-state windows) into
   blocks were batched; :meth:`MillJob.book` takes them at any moment too (the worker does with
   each checkpoint, so a clean stop books every analysed sample),
 * ``remaining_life_years`` observations every ``life_every_s`` of sample time (at a damage
-  interval): :func:`~service.reports.life.compute_life` on the mill's stored history (read
+  interval): :func:`~millwatch.reports.life.compute_life` on the mill's stored history (read
   once, :meth:`MillJob.read_history`) plus the rows this job booked since
-  (:class:`~service.reports.history.LifeLedger`), with the analyzer's live damage — what
+  (:class:`~millwatch.reports.history.LifeLedger`), with the analyzer's live damage — what
   ``GET /mills/{id}/life`` answers on the same data, and
 * a ``spectra_restarted`` data-quality event per tracked channel when a restore had to start
   the spectra afresh (the mill's configuration moved their geometry since the checkpoint; see
-  :meth:`MillAnalyzer.restore <analytics.mill.analyzer.MillAnalyzer.restore>`), stored with the
-  next results, at the checkpoint's sample time.
+  :meth:`MillAnalyzer.restore <millwatch.analytics.mill.analyzer.MillAnalyzer.restore>`), stored
+  with the next results, at the checkpoint's sample time.
 
 Everything is derived from the samples alone, so replaying the archive tail after a crash
 reproduces the same rows, which the store writes idempotently.
@@ -39,34 +40,34 @@ from typing import Any
 
 import numpy as np
 
-from alarms.engine import AlarmEngine
-from alarms.from_analysis import (
+from millwatch.alarms.engine import AlarmEngine
+from millwatch.alarms.from_analysis import (
     event_observations,
     peak_observations,
     resonance_observations,
     window_observations,
 )
-from alarms.observations import Observation, local_month
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.drivetrain.torsional_model import NO_MODEL_NOTE
-from analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
-from analytics.mill.cycle_matrix import day_records
-from analytics.mill.results import (
+from millwatch.alarms.observations import Observation, local_month
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.torsional_model import NO_MODEL_NOTE
+from millwatch.analytics.mill.analyzer import AnalyzerOutput, MillAnalyzer
+from millwatch.analytics.mill.cycle_matrix import day_records
+from millwatch.analytics.mill.results import (
     AnalyzerEvent,
     ComponentDamage,
     StartEvent,
     SteadyWindowResult,
     StopEvent,
 )
-from analytics.spectra.resonance import resonance_margins
-from analytics.spectra.settings import stagger_for
-from ingest.wire import Block
-from service.reports.history import LifeLedger
-from service.reports.life import LifeReport, compute_life
-from service.status import MillStatus
-from service.store.database import Store
-from service.store.records import DamageRow, EventRow, PhaseRow
-from service.worker.worker import MillUpdate
+from millwatch.analytics.spectra.resonance import resonance_margins
+from millwatch.analytics.spectra.settings import stagger_for
+from millwatch.ingest.wire import Block
+from millwatch.reports.history import LifeLedger
+from millwatch.reports.life import LifeReport, compute_life
+from millwatch.status import MillStatus
+from millwatch.store.database import Store
+from millwatch.store.records import DamageRow, EventRow, PhaseRow
+from millwatch.worker.worker import MillUpdate
 
 __all__ = ["MillJob", "split_local_days"]
 
@@ -89,8 +90,8 @@ EVENTS_KEPT = 20
 
 
 class MillJob:
-    """The worker's unit for one mill (a :class:`~service.worker.worker.MillPipeline`): feeds
-    the mill's :class:`~analytics.mill.analyzer.MillAnalyzer`, runs its alarms and returns
+    """The worker's unit for one mill (a :class:`~millwatch.worker.worker.MillPipeline`): feeds
+    the mill's :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer`, runs its alarms and returns
     store rows; see the module docstring."""
 
     def __init__(
@@ -292,7 +293,7 @@ class MillJob:
         return split_local_days(first, now, self._tz)
 
     def life(self) -> LifeReport:
-        """Remaining life now (:func:`~service.reports.life.compute_life`) from the mill's
+        """Remaining life now (:func:`~millwatch.reports.life.compute_life`) from the mill's
         stored history and this job's rows (:attr:`ledger`) with the analyzer's live damage:
         the inputs ``GET /mills/{id}/life`` reads once the rows are stored."""
         t_ns = self.analyzer.next_sample_ns
@@ -382,7 +383,7 @@ class MillJob:
 
     def _starts_today(self) -> dict[str, Any]:
         """``starts_today`` (the site's local day of the last analysed sample) and the latest
-        start's peak and time, for :class:`~service.status.MillStatus`."""
+        start's peak and time, for :class:`~millwatch.status.MillStatus`."""
         a, out = self.analyzer, dict[str, Any]()
         if a.next_sample_ns is not None:
             out["starts_today"] = a.starts_on_day(local_day(int(a.next_sample_ns), self._tz))

@@ -1,16 +1,16 @@
 """Offline analysis of archive files (``millwatch analyze``): the replay path, with no store.
 
-The files' messages are read as batches (:class:`~ingest.archive.batches.BatchReader`: one
+The files' messages are read as batches (:class:`~millwatch.ingest.archive.batches.BatchReader`: one
 compiled scan per chunk, no Python object per message) and handed to the worker's
-:class:`~service.worker.batch_lane.BatchLane`. Its regular runs reach each mill's analyzer as
-arrays (:meth:`~analytics.mill.analyzer.MillAnalyzer.add_blocks`); anything irregular — a
+:class:`~millwatch.worker.batch_lane.BatchLane`. Its regular runs reach each mill's analyzer as
+arrays (:meth:`~millwatch.analytics.mill.analyzer.MillAnalyzer.add_blocks`); anything irregular — a
 malformed block, a gap, a repeat, a clock fault — goes block by block through
-:meth:`OfflineSink.handle`, with the live worker's admission (:mod:`service.worker.admission`:
-the same :class:`~service.worker.admission.BlockAdmission`, counters and all, taking a replay
+:meth:`OfflineSink.handle`, with the live worker's admission (:mod:`millwatch.worker.admission`:
+the same :class:`~millwatch.worker.admission.BlockAdmission`, counters and all, taking a replay
 run's keys as their live ones), calibration and alignment. At each of the lane's
 commits every analyzer analyses what it was given as contiguous chunks of
-:data:`~analytics.mill.analyzer.MAX_CHUNK_S`. So an archive analysed here gives the results the
-live worker and a replay give for the same blocks, at the replay's cost per sample.
+:data:`~millwatch.analytics.mill.analyzer.MAX_CHUNK_S`. So an archive analysed here gives the
+results the live worker and a replay give for the same blocks, at the replay's cost per sample.
 
 :func:`analyze_files` runs the mills of one process; ``millwatch analyze --jobs N`` splits the
 mills over N processes, each with its own :func:`analyze_files` (a file named after a mill, as
@@ -30,20 +30,20 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.analyzer import MillAnalyzer
-from analytics.spectra.facts import HarmonicWindow
-from analytics.spectra.tracker import HarmonicTracker
-from ingest.archive.batches import BatchReader, MessageBatch
-from ingest.archive.files import ArchiveError
-from ingest.wire import decode_headers
-from service.worker.admission import BlockAdmission
-from service.worker.batch_lane import BatchLane
-from service.worker.block_queue import QueuedBlock
-from service.worker.health import MillHealth
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.analytics.spectra.facts import HarmonicWindow
+from millwatch.analytics.spectra.tracker import HarmonicTracker
+from millwatch.ingest.archive.batches import BatchReader, MessageBatch
+from millwatch.ingest.archive.files import ArchiveError
+from millwatch.ingest.wire import decode_headers
+from millwatch.worker.admission import BlockAdmission
+from millwatch.worker.batch_lane import BatchLane
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.health import MillHealth
 
 if TYPE_CHECKING:  # (the export imports the Foxglove SDK: analyze does not need it)
-    from service.export.foxglove import SpanExport
+    from millwatch.export.foxglove import SpanExport
 
 __all__ = [
     "BackgroundSpectra",
@@ -64,8 +64,8 @@ BATCH_MESSAGES = 20_000
 @dataclass
 class ReadingStats:
     """What reading the recording met, over all its mills: files read, blocks on keys of no
-    given mill, malformed blocks by kind (:attr:`ingest.wire.WireError.kind`, as the worker's
-    channel health counts them), files read only up to a torn or corrupt record."""
+    given mill, malformed blocks by kind (:attr:`millwatch.ingest.wire.WireError.kind`, as the
+    worker's channel health counts them), files read only up to a torn or corrupt record."""
 
     files: list[str] = field(default_factory=list)
     foreign_blocks: int = 0
@@ -84,11 +84,12 @@ _Samples = dict[str, np.ndarray]  # channel → samples of one frame
 
 
 class BackgroundSpectra:
-    """A mill's :class:`~analytics.spectra.tracker.HarmonicTracker` fed by a thread of its own,
-    in the order the analyzer feeds it (so with the same results): the spectra — about two
+    """A mill's :class:`~millwatch.analytics.spectra.tracker.HarmonicTracker` fed by a thread of
+    its own, in the order the analyzer feeds it (so with the same results): the spectra — about two
     thirds of the work of a running mill — overlap the rest of the analysis on another core.
     For an offline analysis only, which reads the tracker's windows from its report at the end:
-    :meth:`feed` returns no windows. A :class:`~analytics.mill.analyzer.SpectraRunner`, given to
+    :meth:`feed` returns no windows. A :class:`~millwatch.analytics.mill.analyzer.SpectraRunner`,
+    given to
     the analyzer as its ``spectra_runner`` (it drains the runner before it reads the tracker)."""
 
     def __init__(self, tracker: HarmonicTracker, depth: int = 32) -> None:
@@ -115,7 +116,9 @@ class BackgroundSpectra:
         self, t0_ns: int, fs: float, frame: _Samples, running: bool, why: str = "run_ended"
     ) -> list[HarmonicWindow]:
         """Queue one frame (copied: the analyzer's arrays are its own) and return at once
-        (``why``: as the tracker's :meth:`~analytics.spectra.tracker.HarmonicTracker.feed`)."""
+        (``why``: as the tracker's
+        :meth:`~millwatch.analytics.spectra.tracker.HarmonicTracker.feed`).
+        """
         self._raise()
         self._todo.put((t0_ns, fs, {k: v.copy() for k, v in frame.items()}, running, why))
         return []
@@ -166,9 +169,9 @@ class _AdmittingSink:
 
 
 class OfflineSink(_AdmittingSink):
-    """The :class:`~service.worker.batch_lane.BlockSink` of an offline analysis: the
+    """The :class:`~millwatch.worker.batch_lane.BlockSink` of an offline analysis: the
     :class:`BlockAdmission` of the given mills feeding each mill's
-    :class:`~analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
+    :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
 
     def __init__(
         self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
@@ -368,9 +371,9 @@ def analyze_files(
 
 
 class _SpanSink(_AdmittingSink):
-    """The :class:`~service.worker.batch_lane.BlockSink` of a Foxglove export: the
+    """The :class:`~millwatch.worker.batch_lane.BlockSink` of a Foxglove export: the
     :class:`BlockAdmission` of one mill feeding a
-    :class:`~service.export.foxglove.SpanExport` (regular runs as arrays, the rest block by
+    :class:`~millwatch.export.foxglove.SpanExport` (regular runs as arrays, the rest block by
     block)."""
 
     def __init__(self, config: MillConfig, export: SpanExport) -> None:
@@ -394,7 +397,7 @@ class _SpanSink(_AdmittingSink):
 
 def _wanted(batch: MessageBatch, export: SpanExport) -> MessageBatch:
     """The messages of ``batch`` the export needs: blocks whose header times touch the span
-    and its context (:meth:`~service.export.foxglove.SpanExport.wanted_blocks`), and every
+    and its context (:meth:`~millwatch.export.foxglove.SpanExport.wanted_blocks`), and every
     malformed one (admission counts it); the rest stay undecoded. An open span needs all."""
     if export.lo is None and export.hi is None:
         return batch

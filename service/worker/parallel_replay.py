@@ -1,29 +1,29 @@
 """Replay of the archive tail by several processes, the mills split between them.
 
 A worker that starts (or restarts after a crash) replays the archive after its mills'
-checkpoints before going live (:func:`service.worker.recovery.recover`, which chooses between one
+checkpoints before going live (:func:`millwatch.worker.recovery.recover`, which chooses between one
 process and several with :func:`replay_jobs`). The mills are independent of each other, so a
 long tail is replayed faster by several processes, each analysing a share of the mills (issue 5:
 an hour of 50 mills replayed at ≥ 50× real time):
 
 * the worker process reads each batch of archived messages once
-  (:func:`ingest.archive.batches.archive_batches`), replays the first group of mills itself
-  (a smaller one: reading is its extra work) and sends each job process the messages of its
-  mills, packed (:meth:`~ingest.archive.batches.MessageBatch.compact`), through a pipe; one
-  sender thread per job, batches queued, so a job goes on while the worker analyses;
+  (:func:`millwatch.ingest.archive.batches.archive_batches`), replays the first group of mills
+  itself (a smaller one: reading is its extra work) and sends each job process the messages of its
+  mills, packed (:meth:`~millwatch.ingest.archive.batches.MessageBatch.compact`), through a pipe;
+  one sender thread per job, batches queued, so a job goes on while the worker analyses;
 * each job process (started with ``spawn``: the worker already holds zenoh's threads, which a
   ``fork`` would not carry over) builds its mills' pipelines with the worker's factory, restores
-  their newest checkpoints, and runs the same :class:`~service.worker.batch_lane.BatchLane` and
-  :class:`~service.worker.worker.Worker` code as a single-process replay, with its own connection
+  their newest checkpoints, and runs the same :class:`~millwatch.worker.batch_lane.BatchLane` and
+  :class:`~millwatch.worker.worker.Worker` code as a single-process replay, with its own connection
   to the same store (SQLite WAL: the jobs' transactions take turns);
 * at the end each job sends back its mills' pipeline snapshots (the JSON of a checkpoint), their
   channel health and the alarm transitions it stored; the worker adopts them
-  (:meth:`~service.worker.worker.Worker.adopt_replayed`), so its pipelines hold exactly the state
+  (:meth:`~millwatch.worker.worker.Worker.adopt_replayed`), so its pipelines hold exactly the state
   a single-process replay leaves (restoring a snapshot continues bitwise, as crash recovery relies
   on), and hands the transitions to ``on_alarms``.
 
 Blocks on keys of no configured mill stay with the worker (they are only counted), and so do
-held mills' (:attr:`service.worker.worker.Worker.held`: their checkpoints could not be restored):
+held mills' (:attr:`millwatch.worker.worker.Worker.held`: their checkpoints could not be restored):
 they are in no job's group, so no job tries to restore them, and the worker's own lane observes
 their health without analysing them. A job that fails stops the replay with
 :class:`ReplayJobError` naming its mills; what it stored before stays in the store, as after a
@@ -49,14 +49,14 @@ from typing import Any
 
 import numpy as np
 
-from alarms.lifecycle import Transition
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.archive.batches import MessageBatch
-from ingest.archive.files import ArchivePosition, archive_file_order, list_archive_files
-from service.store.database import Store
-from service.worker.batch_lane import BatchLane, replay_batch_blocks
-from service.worker.health import DEFAULT_LIMITS, AdmissionLimits, MillHealth
-from service.worker.worker import MillPipeline, Worker
+from millwatch.alarms.lifecycle import Transition
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.archive.batches import MessageBatch
+from millwatch.ingest.archive.files import ArchivePosition, archive_file_order, list_archive_files
+from millwatch.store.database import Store
+from millwatch.worker.batch_lane import BatchLane, replay_batch_blocks
+from millwatch.worker.health import DEFAULT_LIMITS, AdmissionLimits, MillHealth
+from millwatch.worker.worker import MillPipeline, Worker
 
 __all__ = ["ParallelReplay", "ReplayJobError", "replay_jobs", "split_mills", "tail_bytes"]
 
@@ -66,7 +66,7 @@ log = logging.getLogger(__name__)
 #: (~0.7 s of imports) pays only for a tail of more than ~a minute of 50 mills.
 PARALLEL_MIN_BYTES = 32 * 2**20
 #: Packed batches waiting per job (each about half of
-#: :func:`~service.worker.batch_lane.replay_batch_blocks` / jobs blocks, ~9 MB for 50 mills on two
+#: :func:`~millwatch.worker.batch_lane.replay_batch_blocks` / jobs blocks, ~9 MB for 50 mills on two
 #: processes): enough for a job to go on while the reading process analyses its own share.
 #: Measured (50 mills, 1 h, two processes): 4 → 40.7–41.2 s, 8 → 39.7–40.1 s, 12 → 39.3–40.4 s.
 QUEUED_BATCHES = 8

@@ -2,7 +2,7 @@
 
 A worker's ``[worker] partition`` is a list of zenoh key expressions. The worker analyses exactly
 the configured mills whose live key expression (``millwatch/v1/<site>/<mill>/*``, see
-:func:`ingest.keys.mill_pattern`) *intersects* one of them, using zenoh's own
+:func:`millwatch.ingest.keys.mill_pattern`) *intersects* one of them, using zenoh's own
 :meth:`zenoh.KeyExpr.intersects`, so a partition means what it would mean to a zenoh subscriber:
 ``millwatch/v1/rustenburg/**`` is every mill of site ``rustenburg``,
 ``millwatch/v1/*/sag-5200-lrs/**`` one mill wherever it is. An empty partition keeps every
@@ -10,7 +10,8 @@ configured mill (one worker does it all). A partition entry that matches no conf
 an error naming it: a typo would otherwise leave mills unanalysed without a word.
 
 Two workers must not analyse the same mill: :func:`check_exclusive` asks the router for the
-mills' liveliness tokens (:func:`ingest.keys.worker_token_key`) before a worker declares its own.
+mills' liveliness tokens (:func:`millwatch.ingest.keys.worker_token_key`) before a worker declares
+its own.
 """
 
 from __future__ import annotations
@@ -19,9 +20,14 @@ import socket
 
 import zenoh
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.keys import mill_pattern, parse_worker_token_key, worker_name, worker_token_pattern
-from service.settings import ServiceSettings, SettingsError
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.keys import (
+    mill_pattern,
+    parse_worker_token_key,
+    worker_name,
+    worker_token_pattern,
+)
+from millwatch.settings import ServiceSettings, SettingsError
 
 __all__ = ["check_exclusive", "partition_mills", "worker_identity"]
 

@@ -4,16 +4,16 @@ README "Persistence and recovery". :func:`recover` runs once, before the worker 
 and uses only the worker's public methods:
 
 1. find each mill's newest intact checkpoint in the store and restore it
-   (:meth:`~service.worker.worker.Worker.restore_checkpoints`; a mill whose checkpoint cannot be
-   restored is *held* by the worker, see :mod:`service.worker.worker`); damaged ones (their
-   checksum, :mod:`service.store.checkpoint_seal`) are refused, logged and stored as
-   data-quality events (:meth:`~service.worker.worker.Worker.refuse_checkpoints`): the mill
+   (:meth:`~millwatch.worker.worker.Worker.restore_checkpoints`; a mill whose checkpoint cannot be
+   restored is *held* by the worker, see :mod:`millwatch.worker.worker`); damaged ones (their
+   checksum, :mod:`millwatch.store.checkpoint_seal`) are refused, logged and stored as
+   data-quality events (:meth:`~millwatch.worker.worker.Worker.refuse_checkpoints`): the mill
    starts from its previous kept checkpoint, or replays the archive from its start;
 2. read the archive from the earliest restored position (:func:`~.checkpoints.earliest`; from the
    archive's start when a mill has none) in batches of messages held in arrays;
-3. replay them through :class:`~service.worker.batch_lane.BatchLane` in this process, or — for a
+3. replay them through :class:`~millwatch.worker.batch_lane.BatchLane` in this process, or — for a
    long tail, when the caller says how the pipelines are built — with several processes, the
-   analysed mills split between them (:mod:`service.worker.parallel_replay`), whose final
+   analysed mills split between them (:mod:`millwatch.worker.parallel_replay`), whose final
    snapshots the worker then adopts; each mill skips the blocks its checkpoint already holds, so
    both ways leave exactly what an uninterrupted run would;
 4. spread the mills' next checkpoint turns over one interval from now.
@@ -24,14 +24,14 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.archive.batches import MessageBatch, archive_batches
-from ingest.archive.files import ArchivePosition
-from ingest.archive.reader import ArchiveReader
-from service.worker.batch_lane import BatchLane, replay_batch_blocks
-from service.worker.checkpoints import earliest
-from service.worker.parallel_replay import ParallelReplay, replay_jobs, split_mills, tail_bytes
-from service.worker.worker import MillPipeline, Worker
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.archive.batches import MessageBatch, archive_batches
+from millwatch.ingest.archive.files import ArchivePosition
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.worker.batch_lane import BatchLane, replay_batch_blocks
+from millwatch.worker.checkpoints import earliest
+from millwatch.worker.parallel_replay import ParallelReplay, replay_jobs, split_mills, tail_bytes
+from millwatch.worker.worker import MillPipeline, Worker
 
 __all__ = ["recover"]
 

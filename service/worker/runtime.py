@@ -10,25 +10,27 @@ order of start-up matters:
    queue is full, so the zenoh link pushes back, never dropping while the analysis lags; the
    archiving thread hands a mill whose live block reveals a gap to a catch-up thread that
    fetches the span from the gateways' spools while the other mills flow,
-   :mod:`service.worker.spool_recovery`, and archives every other block at once,
-   :mod:`service.worker.archive_first`) with the recovering subscriber
-   (:func:`ingest.gateway.declare_recovering_subscriber`), one per mill, declared as soon as a
-   gateway publisher of each of the mill's channels is up (:class:`ingest.gateway.PublisherWatch`;
+   :mod:`millwatch.worker.spool_recovery`, and archives every other block at once,
+   :mod:`millwatch.worker.archive_first`) with the recovering subscriber
+   (:func:`millwatch.ingest.gateway.declare_recovering_subscriber`), one per mill, declared as soon
+   as a gateway publisher of each of the mill's channels is up
+   (:class:`millwatch.ingest.gateway.PublisherWatch`;
    at most ``[worker] gateway_wait_s`` later with whatever is up, in a background thread): its
    gateways' caches are fetched from a little before the mill's last archived block
    (:func:`history_seconds`), so the blocks published while this worker was down or recovering
    come first, in sequence order, then live ones; what the archive already holds comes again
    and is dropped as a repeat (its sequence number is not new). Declaring before the gateways
    are up would leave their caches to zenoh's late-publisher detection, whose replies race the
-   live blocks and were lost whole (issue 16, :mod:`ingest.gateway`);
+   live blocks and were lost whole (issue 16, :mod:`millwatch.ingest.gateway`);
 5. start the worker thread, which analyses the archived blocks (from memory while it keeps
-   up, read back from the archive when it fell behind: :mod:`service.worker.archive_first`);
+   up, read back from the archive when it fell behind: :mod:`millwatch.worker.archive_first`);
 6. start the month-end report job in its own thread (``[reports]``,
-   :mod:`service.reports.month_end`): it catches up on finished months without reports, and
+   :mod:`millwatch.reports.month_end`): it catches up on finished months without reports, and
    raises its failures as alarms through the worker thread.
 
 A connect endpoint that is down does not stop the start (peer mode: zenoh retries it in the
-background, see :mod:`ingest.zenoh_session`); ``/ready`` says which endpoints are not connected.
+background, see :mod:`millwatch.ingest.zenoh_session`); ``/ready`` says which endpoints are not
+connected.
 
 Shutdown (SIGTERM/SIGINT via :meth:`stop`): stop the report job (between reports), undeclare
 the subscribers, let the archiving thread archive what they queued, stop the worker thread after
@@ -50,29 +52,39 @@ from typing import Any
 
 import zenoh
 
-from alarms.actions import ActionKind, OperatorAction
-from alarms.lifecycle import Transition
-from alarms.observations import Observation
-from alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.gateway import PublisherWatch, RecoveringSubscriber, declare_recovering_subscriber
-from ingest.keys import ChannelRoutes, alarm_key, live_pattern, mill_channel_keys, mill_pattern
-from ingest.spool.query import fetch_spooled
-from ingest.zenoh_session import build_config, connected_peers, open_retrying
-from service.reports.month_end import MonthEndJob
-from service.settings import ServiceSettings
-from service.status import MillStatus
-from service.store.database import Store
-from service.worker.admission import IngressGate
-from service.worker.archive_first import PUT_WAIT_S, ArchivedSeqs, ArchiveFirst, SharedArchive
-from service.worker.block_queue import BlockQueue
-from service.worker.drain_watch import DrainWatch
-from service.worker.health import AdmissionLimits, MillHealth
-from service.worker.recovery import recover
-from service.worker.spool_recovery import QUERY_TIMEOUT_S, CatchUp
-from service.worker.worker import ActionRequest, MillPipeline, Worker
+from millwatch.alarms.actions import ActionKind, OperatorAction
+from millwatch.alarms.lifecycle import Transition
+from millwatch.alarms.observations import Observation
+from millwatch.alarms.wire import ALARM_ENCODING, ALARM_SCHEMA, encode_transition
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.gateway import (
+    PublisherWatch,
+    RecoveringSubscriber,
+    declare_recovering_subscriber,
+)
+from millwatch.ingest.keys import (
+    ChannelRoutes,
+    alarm_key,
+    live_pattern,
+    mill_channel_keys,
+    mill_pattern,
+)
+from millwatch.ingest.spool.query import fetch_spooled
+from millwatch.ingest.zenoh_session import build_config, connected_peers, open_retrying
+from millwatch.reports.month_end import MonthEndJob
+from millwatch.settings import ServiceSettings
+from millwatch.status import MillStatus
+from millwatch.store.database import Store
+from millwatch.worker.admission import IngressGate
+from millwatch.worker.archive_first import PUT_WAIT_S, ArchivedSeqs, ArchiveFirst, SharedArchive
+from millwatch.worker.block_queue import BlockQueue
+from millwatch.worker.drain_watch import DrainWatch
+from millwatch.worker.health import AdmissionLimits, MillHealth
+from millwatch.worker.recovery import recover
+from millwatch.worker.spool_recovery import QUERY_TIMEOUT_S, CatchUp
+from millwatch.worker.worker import ActionRequest, MillPipeline, Worker
 
 __all__ = ["ARCHIVE_PREFIX", "MILL_CHECKS", "ServiceRuntime"]
 
@@ -445,7 +457,7 @@ class ServiceRuntime:
         write succeeded: a full disk turns them false, and the first write that succeeds once
         space returns turns them true again; ``write_faults`` says since when and why), fresh
         data, every mill analysed (``held_mills``: why a held mill is not; see
-        :mod:`service.worker.worker`)."""
+        :mod:`millwatch.worker.worker`)."""
         stale = {m: s.stale_channels for m, s in self.status.items()}
         held = {m: s.held_reason for m, s in self.status.items() if s.held_reason}
         flags = {
@@ -476,7 +488,7 @@ class ServiceRuntime:
 
     def write_faults(self) -> dict[str, dict[str, Any]]:
         """The archive's and the store's write episodes
-        (:class:`~service.worker.health.WriteEpisodes`): per target, since when writes fail
+        (:class:`~millwatch.worker.health.WriteEpisodes`): per target, since when writes fail
         (None: they succeed), why, failed attempts."""
         out = {}
         if self.ingest is not None:

@@ -1,16 +1,17 @@
 """Gaps filled from the gateways' spools, before the block that reveals them.
 
-Zenoh's recovery (:mod:`ingest.gateway`) fetches what the worker missed from a gateway's cache in
-memory; what the cache no longer holds — a link down longer than its retention, a gateway
+Zenoh's recovery (:mod:`millwatch.ingest.gateway`) fetches what the worker missed from a gateway's
+cache in memory; what the cache no longer holds — a link down longer than its retention, a gateway
 restarted while the worker was down, a worker restarted after its gateways' caches moved on —
 shows as a sequence gap on the channel: a live block whose wire ``seq`` is beyond the last
-accepted one plus one (:class:`~service.worker.health.ChannelHealth`; at start, the last one is
+accepted one plus one (:class:`~millwatch.worker.health.ChannelHealth`; at start, the last one is
 the checkpoint's, so the span between it and the first live block is such a gap too).
 
 :class:`SpoolRecovery` is called for each live block *before* that block is archived (by
-:meth:`~service.worker.worker.Worker.handle`, or in ``millwatch serve`` by the archiving thread,
-:mod:`service.worker.archive_first`). When the block would open a gap, it asks the spools of
-the channel (:func:`ingest.spool.query.fetch_spooled`) for the missing range and hands what they
+:meth:`~millwatch.worker.worker.Worker.handle`, or in ``millwatch serve`` by the archiving thread,
+:mod:`millwatch.worker.archive_first`). When the block would open a gap, it asks the spools of
+the channel (:func:`millwatch.ingest.spool.query.fetch_spooled`) for the missing range and hands
+what they
 hold to the worker's own block path (archive first, then admission and analysis), in ``seq``
 order; then the block itself goes on as usual. So recovered blocks come before newer ones, the
 archive stays in sequence order, and the analysis sees the channel as if nothing had been
@@ -19,7 +20,7 @@ exceeded: the spool's exact count is logged; the gateway down, so never publishe
 gap the block reveals: counted, stored and alarmed by the existing loss accounting, with its
 exact count.
 
-An implausible block (:func:`~service.worker.health.implausible_payload`: a forged sequence
+An implausible block (:func:`~millwatch.worker.health.implausible_payload`: a forged sequence
 number, a jump beyond what its receive time allows) asks nothing: the admission drops it (a
 query for 2^63 blocks would be its damage).
 
@@ -39,9 +40,10 @@ thread calls :class:`CatchUp` before it archives each live block:
   the next gap fetches them again), while the other mills' blocks are archived as they come;
 * the thread reads the mill's spooled blocks in **rounds**: each round asks every channel of the
   mill for the next :data:`PAGE_BLOCKS` sequence numbers after its last archived one, and
-  archives what comes back (:meth:`~service.worker.archive_first.ArchiveFirst.archive_block`:
+  archives what comes back (:meth:`~millwatch.worker.archive_first.ArchiveFirst.archive_block`:
   archive first, then the analysis), so the channels advance together — the analysis's frame
-  aligner (:mod:`analytics.signal.frame_aligner`) holds at most a page of one channel waiting
+  aligner (:mod:`millwatch.analytics.signal.frame_aligner`) holds at most a page of one channel
+  waiting
   for the others, far inside its bound, and the frames equal those of a worker that never lost
   the link. A channel's catch-up ends at the block before its revealing live block, or — for a
   channel whose live blocks have not arrived yet — when its spools hold nothing further;
@@ -68,10 +70,10 @@ from typing import TYPE_CHECKING, Protocol
 
 import zenoh
 
-from ingest.spool.query import SpoolAnswer, fetch_spooled
-from ingest.spool.store import payload_seq
-from service.worker.block_queue import QueuedBlock
-from service.worker.health import (
+from millwatch.ingest.spool.query import SpoolAnswer, fetch_spooled
+from millwatch.ingest.spool.store import payload_seq
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.health import (
     DEFAULT_LIMITS,
     AdmissionLimits,
     ChannelPosition,
@@ -80,7 +82,7 @@ from service.worker.health import (
 )
 
 if TYPE_CHECKING:
-    from service.worker.worker import Worker
+    from millwatch.worker.worker import Worker
 
 __all__ = [
     "CATCH_UP_THREADS",
@@ -102,8 +104,8 @@ QUERY_TIMEOUT_S = 10.0
 #: Holes of one fill whose causes are asked one by one (more: left without a cause split).
 MAX_HOLES = 100
 
-#: ``(channel key, first seq, last seq) -> answer``: :func:`ingest.spool.query.fetch_spooled`
-#: on the worker's session.
+#: ``(channel key, first seq, last seq) -> answer``:
+#: :func:`millwatch.ingest.spool.query.fetch_spooled` on the worker's session.
 Fetch = Callable[[str, int, int], SpoolAnswer]
 
 
@@ -120,7 +122,7 @@ class LossCauses(dict[tuple[str, str, int, int], int]):
     """Why each span the spools could not fill is missing: ``(mill, channel, first seq, last
     seq)`` → how many of those sequence numbers the spools' retention dropped (the rest were
     never spooled: the gateway was down). Written by the gap fills, read once by the worker's
-    loss accounting (:meth:`~service.worker.worker.Worker.handle`), which stores the split in
+    loss accounting (:meth:`~millwatch.worker.worker.Worker.handle`), which stores the split in
     the ``sequence_gap`` event."""
 
     def record(
@@ -168,7 +170,7 @@ class SpoolRecovery:
     """Fills sequence gaps from spools (module docstring). ``route``: key → (mill, channel) or
     None; ``health``: the last sequence number of each mill's channels (the worker's channel
     health, or in ``millwatch serve`` what was archived:
-    :class:`~service.worker.archive_first.ArchivedSeqs`); ``handle``: the worker's block path
+    :class:`~millwatch.worker.archive_first.ArchivedSeqs`); ``handle``: the worker's block path
     for a block to archive and analyse. Counters: ``recovered`` blocks, ``dropped`` (what spools
     said retention removed), ``queries`` per channel key."""
 
@@ -273,7 +275,7 @@ _NOTHING = SpoolAnswer([], 0, False)
 class CatchUp:
     """See the module docstring. ``fetch``, ``route``, ``seqs`` (the last *archived* sequence
     number per mill and channel) and ``handle`` (archive and offer one block) as for
-    :class:`~service.worker.spool_recovery.SpoolRecovery`; ``mill_keys``: each mill's live
+    :class:`~millwatch.worker.spool_recovery.SpoolRecovery`; ``mill_keys``: each mill's live
     channel keys; ``can_fill``: whether a fill may start now (not while the archive cannot be
     written: the channel's first block after reveals the gap again). Call with each live
     block: True means "archive it now", False "taken".

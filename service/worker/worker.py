@@ -8,13 +8,13 @@ Data path for every received block (README "Data flow")::
           → store (one transaction per batch)
 
 In ``millwatch serve`` the archive is written first by a thread of its own and the analysis
-tails it (:mod:`service.worker.archive_first`): the worker then gets blocks already archived
+tails it (:mod:`millwatch.worker.archive_first`): the worker then gets blocks already archived
 (``handle(…, archive=False)``), from memory while it keeps up and from the archive when it fell
 behind, and a checkpoint stores the analysis's position (:attr:`Worker.analysed_position`), not
 the writer's.
 
 A replay of the archive reads it in batches of messages held in arrays and hands them to
-:class:`~service.worker.batch_lane.BatchLane`, which gives each mill's regular blocks to
+:class:`~millwatch.worker.batch_lane.BatchLane`, which gives each mill's regular blocks to
 :meth:`Worker.accept_regular` as arrays (their repeats counted through :meth:`Worker.repeated`)
 and anything irregular to :meth:`Worker.handle`. A live backlog takes the same lane: a step
 whose batch holds runs of :data:`LANE_MIN_RUN` blocks of a mill (the gateways' caches
@@ -27,14 +27,14 @@ nothing of it was received for ``stale_after_s`` while this worker listened
 (:meth:`Worker.silence_ns`): never while a restarted worker's recovery is still arriving.
 
 Recovery (README "Persistence and recovery"): every ``checkpoint_seconds`` each mill is
-checkpointed — the mills' turns spread over the interval (:mod:`service.worker.checkpoints`), so no
-step stalls for all of them at once: the worker flushes the archive, takes the archive position
+checkpointed — the mills' turns spread over the interval (:mod:`millwatch.worker.checkpoints`), so
+no step stalls for all of them at once: the worker flushes the archive, takes the archive position
 and snapshots the mill's pipeline *in the same thread that processes blocks*, so the snapshot
 covers exactly the mill's blocks before the position, and stores it in a small transaction of
 its own, with the mill's running daily totals up to its last analysed sample
 (:meth:`MillPipeline.book`): live, the store lags the analysis by at most one interval, and the
 final checkpoint of a clean stop books every analysed sample. After a crash
-:func:`service.worker.recovery.recover` restores every mill's newest
+:func:`millwatch.worker.recovery.recover` restores every mill's newest
 checkpoint (:meth:`Worker.restore_checkpoints`) and re-reads the archive from the earliest of
 their positions through the same path (without archiving again), skipping for each mill the
 blocks its checkpoint already holds, so the results equal an uninterrupted run; only blocks that
@@ -54,7 +54,7 @@ written meanwhile (it must not cover results the store does not hold, nor blocks
 has not written: :meth:`Worker.checkpoint`) and acknowledgements wait; a deleted store file is
 written anew from the open connection (:meth:`Worker.check_store`). The episodes are
 :attr:`Worker.store_health` (``/ready``, metrics, the ``store_write_failures`` alarm, one log
-line at each end: :class:`~service.worker.health.WriteEpisodes`).
+line at each end: :class:`~millwatch.worker.health.WriteEpisodes`).
 
 Bad input never stops the worker: an undecodable block is archived, counted per channel and kind
 and logged once per kind; a block whose key belongs to no configured mill is archived and counted.
@@ -66,7 +66,7 @@ first of each channel and reason, then at most one a minute of receive time) and
 Every unrecoverable loss raises the ``sequence_gaps`` alarm at once with its count (gaps the
 gateways' caches or spools fill never reach the admission as gaps).
 Which blocks are analysed — routing, decoding, sequence numbers, clock faults — is decided by
-:class:`~service.worker.admission.BlockAdmission`, as for a replay and offline analysis.
+:class:`~millwatch.worker.admission.BlockAdmission`, as for a replay and offline analysis.
 """
 
 from __future__ import annotations
@@ -83,22 +83,22 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from alarms.actions import ActionKind, OperatorAction
-from alarms.engine import AlarmEngine
-from alarms.lifecycle import Transition
-from alarms.observations import Observation
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.archive.files import ArchivePosition
-from ingest.keys import mill_channel_keys
-from ingest.wire import Block
-from service.status import MillHealthStatus, MillStatus
-from service.store.database import CheckpointChoice, Store
-from service.store.migrations import StoreError
-from service.store.records import DamageRow, EventRow, PhaseRow
-from service.worker.admission import BlockAdmission, Implausible
-from service.worker.batch_lane import BatchLane
-from service.worker.block_queue import BlockQueue, QueuedBlock
-from service.worker.checkpoints import (
+from millwatch.alarms.actions import ActionKind, OperatorAction
+from millwatch.alarms.engine import AlarmEngine
+from millwatch.alarms.lifecycle import Transition
+from millwatch.alarms.observations import Observation
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.archive.files import ArchivePosition
+from millwatch.ingest.keys import mill_channel_keys
+from millwatch.ingest.wire import Block
+from millwatch.status import MillHealthStatus, MillStatus
+from millwatch.store.database import CheckpointChoice, Store
+from millwatch.store.migrations import StoreError
+from millwatch.store.records import DamageRow, EventRow, PhaseRow
+from millwatch.worker.admission import BlockAdmission, Implausible
+from millwatch.worker.batch_lane import BatchLane
+from millwatch.worker.block_queue import BlockQueue, QueuedBlock
+from millwatch.worker.checkpoints import (
     STEP_BUDGET_S,
     CheckpointRestoreError,
     CheckpointSchedule,
@@ -106,7 +106,7 @@ from service.worker.checkpoints import (
     fallback,
     refusal_message,
 )
-from service.worker.health import (
+from millwatch.worker.health import (
     DEFAULT_LIMITS,
     AdmissionLimits,
     LatencyReservoir,
@@ -165,11 +165,12 @@ class MillUpdate:
 
 @dataclass(frozen=True)
 class ActionRequest:
-    """An operator action (:class:`alarms.actions.OperatorAction`: acknowledge, confirm,
+    """An operator action (:class:`millwatch.alarms.actions.OperatorAction`: acknowledge, confirm,
     comment, shelve, …) asked for by another thread (the API, the OPC UA server), applied by the
     worker thread in :meth:`Worker.step`; ``done`` gets the stored transitions, or the engine's
-    exception (:class:`alarms.engine.UnknownAlarmError` for an alarm neither the engine nor
-    the store knows, :class:`alarms.actions.ActionNotAllowedError` naming the state that
+    exception (:class:`millwatch.alarms.engine.UnknownAlarmError` for an alarm neither the engine
+    nor
+    the store knows, :class:`millwatch.alarms.actions.ActionNotAllowedError` naming the state that
     refuses it)."""
 
     mill_id: str
@@ -178,8 +179,9 @@ class ActionRequest:
 
 
 class ArchiveLog(Protocol):
-    """Where blocks are archived: an :class:`~ingest.archive.writer.ArchiveWriter`, or the one
-    the service's archiving thread shares (:class:`~service.worker.archive_first.SharedArchive`)."""
+    """Where blocks are archived: an :class:`~millwatch.ingest.archive.writer.ArchiveWriter`, or
+    the one the service's archiving thread shares
+    (:class:`~millwatch.worker.archive_first.SharedArchive`)."""
 
     def write(self, key: str, payload: bytes, log_time_ns: int) -> None: ...
 
@@ -244,14 +246,14 @@ class Worker:
         self.archive = archive
         self.checkpoint_seconds = checkpoint_seconds
         self._clock = clock
-        #: Routing, decoding, sequencing and their counters (:mod:`service.worker.admission`).
+        #: Routing, decoding, sequencing and their counters (:mod:`millwatch.worker.admission`).
         self.admission = BlockAdmission(mills.values(), limits=limits)
         self.admission.on_implausible = self._implausible
         #: Per (mill, channel, reason): receive time of the last implausible-block event and
         #: the blocks dropped since (bounded: configured channels × reasons).
         self._implausible_events: dict[tuple[str, str, str], tuple[int, int]] = {}
         self.archive_errors = 0
-        #: Failure episodes of the store's writes (:class:`service.worker.health.WriteEpisodes`).
+        #: Failure episodes of the store's writes (:class:`millwatch.worker.health.WriteEpisodes`).
         self.store_health = WriteEpisodes("store")
         self._store_tried = -float("inf")
         self._store_problem: str | None = None
@@ -290,15 +292,15 @@ class Worker:
         for pipeline in pipelines.values():
             pipeline.read_history(store)
         #: Just past the last block analysed, when the analysis tails the archive
-        #: (:mod:`service.worker.archive_first`): what a checkpoint stores; None: the archive's
+        #: (:mod:`millwatch.worker.archive_first`): what a checkpoint stores; None: the archive's
         #: flushed position (this thread writes the archive, so the analysis is there too).
         self.analysed_position: ArchivePosition | None = None
         #: Called with each live block before it is archived: fills its channel's gap first
-        #: (:class:`~service.worker.spool_recovery.SpoolRecovery`, the gateways' spools).
+        #: (:class:`~millwatch.worker.spool_recovery.SpoolRecovery`, the gateways' spools).
         self.before_live: Callable[[QueuedBlock], object] | None = None
         #: ``(mill, channel, first seq, last seq)`` → blocks of that span the spools' retention
         #: dropped (the rest never spooled), from the gap fills
-        #: (:class:`~service.worker.spool_recovery.LossCauses`); read once by the loss.
+        #: (:class:`~millwatch.worker.spool_recovery.LossCauses`); read once by the loss.
         self.loss_causes: dict[tuple[str, str, int, int], int] = {}
         #: The batch lane a backlog takes (its counters: blocks by path).
         self.lane = BatchLane(self, min_run=LANE_MIN_RUN)
@@ -436,7 +438,7 @@ class Worker:
         about once a second. These are wall-clock facts: they are not replayed from the archive.
 
         ``received``: the newest receive time (ns) per zenoh key of blocks received, analysed
-        yet or not (:attr:`BlockQueue.received <service.worker.block_queue.BlockQueue.received>`);
+        yet or not (:attr:`BlockQueue.received <millwatch.worker.block_queue.BlockQueue.received>`);
         silence is judged on those and on what this worker handled, see :meth:`silence_ns`."""
         now = self._clock()
         archive_failures = self.archive_errors - self._archive_errors_reported
@@ -583,7 +585,7 @@ class Worker:
         for blocks the archiving thread already wrote). A batch that holds runs of
         :data:`LANE_MIN_RUN` blocks of a mill (a backlog: the gateways' caches delivering an
         outage, a burst) is archived first, then handed to the batch lane
-        (:meth:`~service.worker.batch_lane.BatchLane.handle_queued`: the same admission, counts
+        (:meth:`~millwatch.worker.batch_lane.BatchLane.handle_queued`: the same admission, counts
         and analysis), which takes those mills' runs as arrays and the others block by block;
         a live batch of a few blocks per mill stays block by block, where the lane's work per
         mill costs more than it saves."""
@@ -776,7 +778,7 @@ class Worker:
 
     def _checkpoint_due(self) -> None:
         """Checkpoint the mills whose turn has come: at least one, then as many as fit in
-        :data:`~service.worker.checkpoints.STEP_BUDGET_S` (the rest at the next steps)."""
+        :data:`~millwatch.worker.checkpoints.STEP_BUDGET_S` (the rest at the next steps)."""
         due = self._schedule.due()
         if not due:
             return

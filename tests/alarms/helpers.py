@@ -7,10 +7,10 @@ from pathlib import Path
 from typing import Any
 from zoneinfo import ZoneInfo
 
-from alarms.engine import AlarmEngine
-from alarms.lifecycle import Transition
-from alarms.observations import Observation
-from analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
+from millwatch.alarms.engine import AlarmEngine
+from millwatch.alarms.lifecycle import Transition
+from millwatch.alarms.observations import Observation
+from millwatch.analytics.drivetrain.mill_config import AlarmThresholds, MillConfig
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 NS = 1_000_000_000

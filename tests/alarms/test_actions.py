@@ -1,5 +1,5 @@
-"""Operator actions (:mod:`alarms.actions`) on the engine: acknowledge with a comment, confirm,
-comment (open and cleared alarms), timed and one-shot shelve with expiry, unshelve, out of
+"""Operator actions (:mod:`millwatch.alarms.actions`) on the engine: acknowledge with a comment,
+confirm, comment (open and cleared alarms), timed and one-shot shelve with expiry, unshelve, out of
 service, suppression by design while the mill is stopped — each rule of state, and the
 invariants any sequence of actions and observations keeps."""
 
@@ -11,15 +11,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from alarms.actions import (
+from millwatch.alarms.actions import (
     ActionKind,
     ActionNotAllowedError,
     InvalidActionError,
     OperatorAction,
     ShelvingState,
 )
-from alarms.engine import AlarmEngine, UnknownAlarmError
-from alarms.lifecycle import Alarm, Transition
+from millwatch.alarms.engine import AlarmEngine, UnknownAlarmError
+from millwatch.alarms.lifecycle import Alarm, Transition
 from tests.alarms.helpers import NS, T0, engine, feed, kinds, obs
 
 A = ActionKind

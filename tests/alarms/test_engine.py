@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from alarms.engine import AlarmEngine, UnknownAlarmError
+from millwatch.alarms.engine import AlarmEngine, UnknownAlarmError
 from tests.alarms.helpers import NS, T0, engine, feed, kinds, mill, obs
 
 

@@ -15,15 +15,15 @@ from typing import Any
 
 import pytest
 
-from alarms.engine import AlarmEngine
-from alarms.from_analysis import report_observations
-from alarms.observations import Observation
-from alarms.report import alarms_for_report
-from alarms.rules import MESSAGE_MAX, build_rules
-from analytics.drivetrain.mill_config import MillConfig, Starter
-from analytics.mill.analyzer import MillAnalyzer
-from ingest.mill_files import load_mill_config
-from ingest.sim.scenes import get_scene
+from millwatch.alarms.engine import AlarmEngine
+from millwatch.alarms.from_analysis import report_observations
+from millwatch.alarms.observations import Observation
+from millwatch.alarms.report import alarms_for_report
+from millwatch.alarms.rules import MESSAGE_MAX, build_rules
+from millwatch.analytics.drivetrain.mill_config import MillConfig, Starter
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.scenes import get_scene
 from tests.alarms.helpers import T0
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"

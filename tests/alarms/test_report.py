@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 
-from alarms import alarms_for_report
-from alarms.observations import derive_start_counts, local_month
+from millwatch.alarms import alarms_for_report
+from millwatch.alarms.observations import derive_start_counts, local_month
 from tests.alarms.helpers import NS, T0, mill, obs
 
 

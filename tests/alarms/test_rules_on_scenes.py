@@ -12,12 +12,12 @@ from pathlib import Path
 
 import pytest
 
-from alarms.from_analysis import report_observations
-from alarms.report import alarms_for_report
-from analytics.drivetrain.mill_config import MillConfig, SimulationConfig, Starter
-from analytics.mill.analyzer import MillAnalyzer
-from ingest.mill_files import load_mill_config
-from ingest.sim.scenes import get_scene
+from millwatch.alarms.from_analysis import report_observations
+from millwatch.alarms.report import alarms_for_report
+from millwatch.analytics.drivetrain.mill_config import MillConfig, SimulationConfig, Starter
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.scenes import get_scene
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 SAG = load_mill_config(MILLS / "sag-5200-lrs.toml")

@@ -8,7 +8,7 @@ from datetime import UTC, datetime, timedelta
 from hypothesis import given
 from hypothesis import strategies as st
 
-from alarms.times import iso_local, iso_utc
+from millwatch.alarms.times import iso_local, iso_utc
 
 T = 1714560000000000000  # 2024-05-01T10:40:00Z
 NS_RANGE = st.integers(0, 2**63 - 1)

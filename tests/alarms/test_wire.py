@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from alarms.wire import ALARM_SCHEMA, AlarmWireError, decode_transition, encode_transition
+from millwatch.alarms.wire import ALARM_SCHEMA, AlarmWireError, decode_transition, encode_transition
 from tests.alarms.helpers import engine, feed
 
 

@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.loads import LoadAnalysis
-from analytics.signal.frame_aligner import Frame
-from ingest.mill_files import load_mill_config
-from ingest.sim.renderer import Scene
-from ingest.sim.scenes import get_scene
-from ingest.sim.spec import SceneSpec
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.loads import LoadAnalysis
+from millwatch.analytics.signal.frame_aligner import Frame
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.sim.spec import SceneSpec
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-import analytics
+import millwatch.analytics
 
-ROOT = Path(analytics.__file__).resolve().parent
+ROOT = Path(millwatch.analytics.__file__).resolve().parent
 NUMBA = re.compile(r"\b(numba|njit)\b")
 
 

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from analytics.snapshot_arrays import pack_array, unpack_array
+from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
 
 
 def _through_json(packed: dict) -> dict:

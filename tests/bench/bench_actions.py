@@ -19,10 +19,10 @@ from pathlib import Path
 
 import httpx
 
-from ingest.zenoh_session import free_loopback_port
-from service.api.app import create_app
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.api.app import create_app
+from millwatch.ingest.zenoh_session import free_loopback_port
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 from tests.service.conftest import API_KEY, _feed, _settings, serve
 
 

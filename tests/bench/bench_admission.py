@@ -4,9 +4,9 @@ Run::
 
     .venv/bin/python tests/bench/bench_admission.py [--blocks 100000] [--repeat 5]
 
-:meth:`service.worker.health.ChannelHealth.accept` of ``--blocks`` regular 100-sample blocks
+:meth:`millwatch.worker.health.ChannelHealth.accept` of ``--blocks`` regular 100-sample blocks
 one by one (the live worker's path), and
-:meth:`~service.worker.health.ChannelHealth.follows_on` of the same blocks as one run (the
+:meth:`~millwatch.worker.health.ChannelHealth.follows_on` of the same blocks as one run (the
 batch lane's test); best of ``--repeat``, µs a block. What the rule costs: run the same script
 on the tree before it (``git archive 50878d5 | tar -x -C /tmp/before`` and
 ``PYTHONPATH=/tmp/before .venv/bin/python tests/bench/bench_admission.py``).
@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from ingest.wire import Unit, decode_block, encode_block
-from service.worker.health import ChannelHealth
+from millwatch.ingest.wire import Unit, decode_block, encode_block
+from millwatch.worker.health import ChannelHealth
 
 STEP_NS = 100_000_000  # 100 samples at 1 kHz
 T0_NS = 1_790_000_000 * 10**9

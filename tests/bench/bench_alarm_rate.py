@@ -31,13 +31,13 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from alarms.engine import AlarmEngine
-from alarms.from_analysis import report_observations
-from alarms.lifecycle import Transition
-from alarms.observations import derive_start_counts
-from analytics.mill.analyzer import MillAnalyzer
-from ingest.mill_files import load_mill_config
-from ingest.sim.scenes import get_scene
+from millwatch.alarms.engine import AlarmEngine
+from millwatch.alarms.from_analysis import report_observations
+from millwatch.alarms.lifecycle import Transition
+from millwatch.alarms.observations import derive_start_counts
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.scenes import get_scene
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 NS = 1_000_000_000

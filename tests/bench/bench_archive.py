@@ -5,9 +5,9 @@ Run (defaults shown; ``--json`` prints the same numbers as JSON)::
     .venv/bin/python tests/bench/bench_archive.py --samples 2000000 --seconds 600 --mills 10
 
 Part 1 writes and reads ``--samples`` samples (4 channels of a mill) as 100- and 1000-sample
-blocks of float32 and float64 through :class:`ingest.archive.writer.ArchiveWriter` (zstd chunks,
-default
-settings) and :class:`ingest.archive.reader.ArchiveReader`: blocks/s, payload MB/s and the
+blocks of float32 and float64 through :class:`millwatch.ingest.archive.writer.ArchiveWriter` (zstd
+chunks, default
+settings) and :class:`millwatch.ingest.archive.reader.ArchiveReader`: blocks/s, payload MB/s and the
 compression
 ratio (payload bytes / file bytes). The signals are torque-like, not noise: mean torque at 70 %
 of rated with oscillations at pinion speed, tooth mesh and a drivetrain torsional mode, 0.3 %
@@ -33,11 +33,11 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from ingest import keys, wire
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.replay import KeyRemap, Replayer, archive_blocks, collect_archive_files
-from ingest.zenoh_session import (
+from millwatch.ingest import keys, wire
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.replay import KeyRemap, Replayer, archive_blocks, collect_archive_files
+from millwatch.ingest.zenoh_session import (
     build_config,
     declare_block_publisher,
     declare_block_subscriber,

@@ -7,7 +7,7 @@ their gateways: ``ball-dual-lrs`` (mill B, 8 channels) publishes live in real ti
 is down for ``--hours`` of sample time — the gateway spools those blocks without publishing
 them (written here as fast as the disk takes them, as a gateway would have over the outage) —
 then publishes live again. The first live block after the outage reveals the gap; the worker
-catches mill A up from the spool (``service.worker.spool_recovery``). Measured:
+catches mill A up from the spool (``millwatch.worker.spool_recovery``). Measured:
 
 - **arrival**: the seconds the worker's catch-up took (its own log line) and the outage's
   sample time over it (× real time per mill); every block of A in the archive, in sequence
@@ -41,18 +41,23 @@ from pathlib import Path
 import httpx
 import numpy as np
 
-from ingest import wire
-from ingest.archive.reader import ArchiveReader
-from ingest.gateway import GatewayPublisher, declare_gateway_publisher
-from ingest.keys import mill_channel_keys
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import SceneBlock, scene_blocks
-from ingest.sim.publisher import starting_now
-from ingest.sim.scenes import get_scene
-from ingest.spool.query import SpoolServer
-from ingest.spool.store import Spool, payload_seq
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.worker.runtime import ARCHIVE_PREFIX
+from millwatch.ingest import wire
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.gateway import GatewayPublisher, declare_gateway_publisher
+from millwatch.ingest.keys import mill_channel_keys
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import SceneBlock, scene_blocks
+from millwatch.ingest.sim.publisher import starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.spool.query import SpoolServer
+from millwatch.ingest.spool.store import Spool, payload_seq
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.worker.runtime import ARCHIVE_PREFIX
 
 ROOT = Path(__file__).resolve().parents[2]
 A = load_mill_config(ROOT / "deploy" / "mills" / "sag-5200-lrs.toml")
@@ -175,7 +180,7 @@ def run(hours: float, pre_s: float, post_s: float) -> None:
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         with log.open("wb") as out:
             serve = subprocess.Popen(
-                [sys.executable, "-m", "service.cli", "serve", "--config",
+                [sys.executable, "-m", "millwatch.cli", "serve", "--config",
                  str(settings(d, port, api_port))],
                 stdout=out, stderr=subprocess.STDOUT, cwd=ROOT, env=env,
             )  # fmt: skip

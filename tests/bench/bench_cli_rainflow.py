@@ -18,7 +18,7 @@ Both give the same cycle count and the same damage (checked: the run fails other
 
 ``--stages``: where one process spends its time, step by step (wall and CPU of a fresh
 interpreter beside ``--millwatch``, ``--runs`` times, median): the imports, the kernels loaded
-from the cache up front (:mod:`service.kernel_preload`, as the command does) or not (numba's
+from the cache up front (:mod:`millwatch.kernel_preload`, as the command does) or not (numba's
 ordinary path, which initialises its compiler on the first call: the first chunk's row), and the
 counting and damage of the file in 64 Ki chunks (``RecordCount``, what the command runs).
 ``OPENBLAS_NUM_THREADS=1`` in both, as the command sets it.
@@ -45,7 +45,7 @@ import numpy as np
 import rainflow
 from bench_rainflow import FS, running
 
-from analytics.fatigue.sn_models import build_sn_curve
+from millwatch.analytics.fatigue.sn_models import build_sn_curve
 
 KT = 2.0
 
@@ -99,11 +99,11 @@ import numpy as np
 mark("import numpy")
 import numba
 mark("import numba")
-from analytics.fatigue.record_count import KERNELS, RecordCount
-from analytics.fatigue.sn_models import build_sn_curve
+from millwatch.analytics.fatigue.record_count import KERNELS, RecordCount
+from millwatch.analytics.fatigue.sn_models import build_sn_curve
 mark("import the counter and its kernels' modules")
 if sys.argv[2] == "preload":
-    from service.kernel_preload import preload
+    from millwatch.kernel_preload import preload
     preload(KERNELS)
     mark("preload the cached kernels (runtime started)")
 x = np.load(sys.argv[1], mmap_mode="r")

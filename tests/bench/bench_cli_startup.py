@@ -3,7 +3,8 @@
 Each command is started ``--runs`` times as its own process; the table gives the median wall
 time and the median CPU time of the child (user + system, the steadier figure on a shared
 machine). ``python -c pass`` is the floor (the interpreter alone). The console script is the
-``millwatch`` beside this interpreter (``[project.scripts]``), ``-m`` is ``python -m service.cli``.
+``millwatch`` beside this interpreter (``[project.scripts]``), ``-m`` is ``python
+-m millwatch.cli``.
 
     .venv/bin/python tests/bench/bench_cli_startup.py [--runs 21] [--json]
 """
@@ -22,13 +23,13 @@ from pathlib import Path
 
 SCRIPT = Path(sys.executable).parent / "millwatch"
 
-_MODULE = [sys.executable, "-m", "service.cli"]
+_MODULE = [sys.executable, "-m", "millwatch.cli"]
 CASES: dict[str, list[str]] = {
     "python -c pass (floor)": [sys.executable, "-c", "pass"],
     "millwatch --help": [str(SCRIPT), "--help"],
     "millwatch rainflow --help": [str(SCRIPT), "rainflow", "--help"],
-    "python -m service.cli --help": [*_MODULE, "--help"],
-    "python -m service.cli rainflow --help": [*_MODULE, "rainflow", "--help"],
+    "python -m millwatch.cli --help": [*_MODULE, "--help"],
+    "python -m millwatch.cli rainflow --help": [*_MODULE, "rainflow", "--help"],
 }
 
 

@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from analytics.signal.telemetry_faults import TelemetryFaultDetector
-from ingest.mill_files import load_mill_config
-from ingest.sim.renderer import Scene
-from ingest.sim.scenes import get_scene
+from millwatch.analytics.signal.telemetry_faults import TelemetryFaultDetector
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.scenes import get_scene
 
 log = logging.getLogger("bench_faults")
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "ball-dual-lrs.toml"

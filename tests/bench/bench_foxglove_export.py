@@ -8,9 +8,9 @@ Simulates ``--seconds`` of the ``steady`` scene (steady running) and the 220 s `
 scene (stopped, start, running, stop, rocking) at 1 kHz on the 4 channels of
 ``deploy/mills/sag-5200-lrs.toml`` (100-sample float32 blocks) into MCAP archives with the real
 writer (``millwatch simulate``), then exports each whole recording
-in-process (:func:`service.export.foxglove.export_archive`: the analyzer, the alarms and the
+in-process (:func:`millwatch.export.foxglove.export_archive`: the analyzer, the alarms and the
 Foxglove writer; no progress bar) once with every sample and once with ``--no-samples``, each
-read as the command reads (``batches``: :func:`service.worker.offline_analysis.export_files`,
+read as the command reads (``batches``: :func:`millwatch.worker.offline_analysis.export_files`,
 regular runs as arrays) and message by message (``blocks``, the reading before). Prints
 wall and CPU seconds (CPU: every thread of the process, the SDK's compression threads included;
 the steadier figure on a shared machine), both per mill-hour of data (÷ analysed s × 3600),
@@ -25,12 +25,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.mill_files import load_mill_config
-from service.cli.analyze import _Blocks
-from service.cli.main import main as millwatch
-from service.export.foxglove import Admit, Feed, export_archive
-from service.worker.offline_analysis import export_files
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.cli.analyze import _Blocks
+from millwatch.cli.main import main as millwatch
+from millwatch.export.foxglove import Admit, Feed, export_archive
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.worker.offline_analysis import export_files
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 

@@ -16,9 +16,9 @@ import sys
 
 import numpy as np
 
-from ingest import keys, wire
-from ingest.gateway import declare_gateway_publisher
-from ingest.zenoh_session import build_config, open_session
+from millwatch.ingest import keys, wire
+from millwatch.ingest.gateway import declare_gateway_publisher
+from millwatch.ingest.zenoh_session import build_config, open_session
 
 RATE = 10.0  # blocks/s
 CONFIGS = [(1, 4), (5, 4), (10, 4), (10, 16)]  # (minutes, channels)

@@ -30,14 +30,14 @@ from typing import Any
 
 import numpy as np
 
-from analytics.mill.analyzer import MillAnalyzer
-from analytics.spectra.facts import HarmonicWindow
-from analytics.spectra.settings import HarmonicSettings
-from analytics.spectra.tracker import HarmonicTracker
-from ingest.mill_files import load_mill_config
-from ingest.sim.renderer import Scene
-from ingest.sim.scenes import get_scene
-from ingest.sim.spec import SceneParams, SpikesEvent
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.analytics.spectra.facts import HarmonicWindow
+from millwatch.analytics.spectra.settings import HarmonicSettings
+from millwatch.analytics.spectra.tracker import HarmonicTracker
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.sim.spec import SceneParams, SpikesEvent
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 DURATION_S = 180.0

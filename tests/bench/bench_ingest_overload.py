@@ -4,7 +4,7 @@ the analysis catches up (not a test; issue 25).
     .venv/bin/python tests/bench/bench_ingest_overload.py --mill ball-dual-lrs --hours 3
 
 1. The archive-first ingest alone, in this process: the archiving thread's work for each block
-   (:meth:`service.worker.archive_first.ArchiveFirst.take`: MCAP write, feed or fall behind) on
+   (:meth:`millwatch.worker.archive_first.ArchiveFirst.take`: MCAP write, feed or fall behind) on
    real 100-sample float32 blocks with no analysis taking any; CPU time of the thread, so
    blocks/s per core.
 2. End to end, real processes on 127.0.0.1: ``millwatch simulate --out`` of the scene, then one
@@ -33,17 +33,17 @@ from pathlib import Path
 
 import httpx
 
-from ingest.archive.reader import TailTolerantReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.spool.store import payload_seq
-from ingest.wire import DType
-from ingest.zenoh_session import free_loopback_port, tcp_endpoint
-from service.worker.archive_first import ArchivedSeqs, ArchiveFirst, SharedArchive
-from service.worker.block_queue import BlockQueue, QueuedBlock
-from service.worker.health import MillHealth
+from millwatch.ingest.archive.reader import TailTolerantReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.spool.store import payload_seq
+from millwatch.ingest.wire import DType
+from millwatch.ingest.zenoh_session import free_loopback_port, tcp_endpoint
+from millwatch.worker.archive_first import ArchivedSeqs, ArchiveFirst, SharedArchive
+from millwatch.worker.block_queue import BlockQueue, QueuedBlock
+from millwatch.worker.health import MillHealth
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -95,7 +95,7 @@ def end_to_end(args: argparse.Namespace, d: Path) -> dict[str, float | int]:
     lab = d / "lab.toml"
     lab.write_text(mill_file.read_text().replace(f'site = "{config.site}"', 'site = "lab"', 1))
     recording = d / "rec.mcap"
-    run = [python, "-m", "service.cli.main"]
+    run = [python, "-m", "millwatch.cli.main"]
     subprocess.run([*run, "simulate", "--scene", "steady", "--mill", str(lab), "--duration",
                     f"{args.hours * 3600:g}s", "--out", str(recording), "--dtype", "float32",
                     "--no-progress"], cwd=root, check=True)  # fmt: skip

@@ -6,7 +6,7 @@ Starts the real service in this process (runtime over zenoh on 127.0.0.1, SQLite
 thread) with the three deploy mills, feeds each one simulated 60 s start (its own starter's
 scene) so every family has values, then scrapes the app's ``/metrics`` route in process
 (Starlette's TestClient: the route, the collectors and the text encoding; no network). The first
-scrape computes each mill's remaining life (:mod:`service.reports.life`, reads the store); the
+scrape computes each mill's remaining life (:mod:`millwatch.reports.life`, reads the store); the
 next ones take it from the cache (60 s). Prints one row per kind of scrape: count, median and
 max wall time, and the exposition's size and number of samples.
 """
@@ -21,14 +21,19 @@ from pathlib import Path
 
 from fastapi.testclient import TestClient
 
-from analytics.drivetrain.mill_config import Starter
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.api.app import create_app
-from service.settings import ServiceSettings
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.analytics.drivetrain.mill_config import Starter
+from millwatch.api.app import create_app
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.settings import ServiceSettings
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 
 MILLS = sorted((Path(__file__).resolve().parents[2] / "deploy" / "mills").glob("*.toml"))
 SCENES = {Starter.GRID: "start-grid", Starter.LRS: "start-lrs", Starter.E_LRS: "start-elrs"}

@@ -9,7 +9,7 @@ The store holds a real month for every mill, made fast and said so:
    under the ids ``mill-01`` … ``mill-NN`` (a copy of the configuration under each id): every
    mill's month is the same real data.
 
-Then :class:`~service.reports.month_end.MonthEndJob` runs once, its clock in February, as the
+Then :class:`~millwatch.reports.month_end.MonthEndJob` runs once, its clock in February, as the
 service runs it (render processes at low priority, ``--jobs`` of them, 0 = one per core), and
 writes HTML, PDF and CSV for every mill. Printed: the job's wall time against the target, the
 CPU time of the render processes (``RUSAGE_CHILDREN``: the steadier figure on a shared
@@ -35,10 +35,10 @@ from typing import Any
 
 from bench_report import MILL, MONTH, Template, analyse_cycle, tile  # (this script's folder)
 
-from ingest.mill_files import load_mill_config
-from service.reports.month_end import MonthEndJob
-from service.settings import ReportSettings
-from service.store.database import Store
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.reports.month_end import MonthEndJob
+from millwatch.settings import ReportSettings
+from millwatch.store.database import Store
 
 TARGET_S = 60.0
 #: The job's clock: 6 h into February (UTC), long after January's end and the delay.

@@ -5,7 +5,7 @@
 Starts the real service in this process (runtime over zenoh on 127.0.0.1, SQLite store, worker
 thread) with ``--mills`` copies of the 5.2 MW mill, feeds each one simulated LRS start
 (``--feed-seconds`` of data, so life, starts, health and alarms are real answers), then runs the
-OPC UA server over the service's real :class:`~service.api.local_backend.LocalBackend`, with
+OPC UA server over the service's real :class:`~millwatch.api.local_backend.LocalBackend`, with
 one change: every mill's ``health.missing_blocks_total`` is replaced, once a second (mills
 staggered over the second), by the time of that change in ms since the bench started — a value
 that "the store" changed at a known instant. A client in another process (its CPU not counted)
@@ -37,15 +37,20 @@ from typing import Any
 
 import numpy as np
 
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.api.local_backend import LocalBackend
-from service.opcua.server import OpcUaServer
-from service.settings import OpcUaSettings, ServiceSettings
-from service.status import MillStatus
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.api.local_backend import LocalBackend
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.opcua.server import OpcUaServer
+from millwatch.settings import OpcUaSettings, ServiceSettings
+from millwatch.status import MillStatus
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 T0 = time.time()

@@ -8,7 +8,7 @@ condition with its ShelvingState and ConfirmedState) and then acknowledged (an u
 children written, its event sent). The alarm rows are made here, as the alarm board would hand
 them over (this measures the OPC UA side only). The first condition of a type is made by
 asyncua's ``instantiate`` and recorded; the others from that blueprint
-(:meth:`service.opcua.conditions.Conditions._instantiate`).
+(:meth:`millwatch.opcua.conditions.Conditions._instantiate`).
 """
 
 from __future__ import annotations
@@ -23,16 +23,16 @@ from pathlib import Path
 
 from asyncua import Server, ua
 
-from alarms.lifecycle import Alarm, AlarmState
-from alarms.rules import Severity
-from service.opcua.address_space import (
+from millwatch.alarms.lifecycle import Alarm, AlarmState
+from millwatch.alarms.rules import Severity
+from millwatch.opcua.address_space import (
     NAMESPACE_URI,
     MillNodes,
     mill_type,
     root_folder,
     site_folder,
 )
-from service.opcua.conditions import Conditions
+from millwatch.opcua.conditions import Conditions
 from tests.service.conftest import _settings
 
 

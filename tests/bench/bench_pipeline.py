@@ -26,16 +26,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from ingest import keys
-from ingest.archive.writer import ArchiveWriter
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.wire import DType
-from service.store.database import Store
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import BATCH_BLOCKS, Worker
+from millwatch.ingest import keys
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import DType
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import BATCH_BLOCKS, Worker
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 

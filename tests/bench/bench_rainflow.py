@@ -37,12 +37,12 @@ import numpy as np
 import rainflow
 from numba import njit
 
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.matrices import RangeMeanMatrix, uniform_edges
-from analytics.fatigue.miner import DamageRecorder
-from analytics.fatigue.rainflow import RainflowCounter, count_cycles
-from analytics.fatigue.repeat_closure import RepeatClosure
-from analytics.fatigue.sn_models import build_sn_curve
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix, uniform_edges
+from millwatch.analytics.fatigue.miner import DamageRecorder
+from millwatch.analytics.fatigue.rainflow import RainflowCounter, count_cycles
+from millwatch.analytics.fatigue.repeat_closure import RepeatClosure
+from millwatch.analytics.fatigue.sn_models import build_sn_curve
 
 FS = 1000.0
 RATED_MPA = 48.2  # pinion shaft shear stress at rated torque

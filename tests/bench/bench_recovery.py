@@ -42,13 +42,18 @@ from pathlib import Path
 
 import httpx
 
-from ingest.archive.reader import ArchiveReader
-from ingest.mill_files import load_mill_config
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.wire import WireError, decode_block
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.worker.runtime import ARCHIVE_PREFIX
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import WireError, decode_block
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.worker.runtime import ARCHIVE_PREFIX
 
 ROOT = Path(__file__).resolve().parents[2]
 MILL = ROOT / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -102,7 +107,7 @@ def start_serve(settings: Path, log: Path) -> subprocess.Popen[bytes]:
     """``millwatch -v serve`` (INFO log, so ``serve.log`` shows when it subscribed)."""
     with log.open("ab") as out:
         return subprocess.Popen(
-            [sys.executable, "-m", "service.cli.main", "-v", "serve", "--config", str(settings)],
+            [sys.executable, "-m", "millwatch.cli.main", "-v", "serve", "--config", str(settings)],
             cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
         )  # fmt: skip
 

@@ -16,7 +16,7 @@
    mill's analyzer fed long contiguous chunks, alarms, store) into a fresh store, once per
    ``--jobs`` entry: 1 = the worker process alone (the figures per core), N = N replay processes
    with the mills split between them (0 = one per available core;
-   :mod:`service.worker.parallel_replay`),
+   :mod:`millwatch.worker.parallel_replay`),
    and reports CPU seconds of all processes (``os.times``: this one and its finished children —
    robust on a shared machine), wall seconds, × real time (recording seconds / replay seconds,
    all mills together), and the cost of only reading the archive in batches (+ decoding the
@@ -44,20 +44,20 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from ingest import keys
-from ingest.archive.batches import archive_batches
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import SceneBlock, scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.wire import DType, decode_headers
-from service.store.database import Store
-from service.worker.batch_lane import replay_batch_blocks
-from service.worker.mill_job import MillJob
-from service.worker.parallel_replay import replay_jobs
-from service.worker.recovery import recover
-from service.worker.worker import Worker
+from millwatch.ingest import keys
+from millwatch.ingest.archive.batches import archive_batches
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import SceneBlock, scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import DType, decode_headers
+from millwatch.store.database import Store
+from millwatch.worker.batch_lane import replay_batch_blocks
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.parallel_replay import replay_jobs
+from millwatch.worker.recovery import recover
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[2] / "deploy" / "mills" / "sag-5200-lrs.toml"
 PREFIX = "replay-bench"

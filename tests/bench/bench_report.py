@@ -1,13 +1,14 @@
 """Benchmark: build a month's damage report, then render it in every format (target ≤ 1 s each).
 
 Simulating and analysing a whole month takes long, so the store is filled in two steps, by the
-functions of ``millwatch history build`` (:mod:`service.cli.history.tiling`):
+functions of ``millwatch history build`` (:mod:`millwatch.cli.history.tiling`):
 
 1. one representative stop-to-stop cycle (LRS start, ``--run-min`` minutes of steady running,
    stop) is simulated and analysed through the real pipeline (``Worker.handle``, in process),
    giving real start/stop events, steady windows, harmonic tables and daily damage rows;
 2. those rows are tiled over the local calendar month on the schedule of the ``month`` scene
-   (:func:`ingest.sim.scenes.month_events`: ~84 cycles, failed starts, trips; Diering 2011 §6.2.8):
+   (:func:`millwatch.ingest.sim.scenes.month_events`: ~84 cycles, failed starts, trips; Diering
+   2011 §6.2.8):
    each cycle copies the events, fills its running time with the steady windows and harmonic
    tables at their measured cadence, and adds the measured start/stop damage plus the run damage
    rate × running hours to its day. A handful of data-quality events are added, and each day is
@@ -38,14 +39,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ingest.mill_files import load_mill_config
-from ingest.sim.spec import DEFAULT_T0_NS
-from service.api.routes.reports import FORMATS
-from service.cli.history.tiling import CycleTemplate, analyse_cycle, tile_month
-from service.reports.history import last_months
-from service.reports.monthly import build_monthly_report
-from service.reports.starts import month_bounds_ns
-from service.store.database import Store
+from millwatch.api.routes.reports import FORMATS
+from millwatch.cli.history.tiling import CycleTemplate, analyse_cycle, tile_month
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.spec import DEFAULT_T0_NS
+from millwatch.reports.history import last_months
+from millwatch.reports.monthly import build_monthly_report
+from millwatch.reports.starts import month_bounds_ns
+from millwatch.store.database import Store
 
 Template = CycleTemplate  # bench_month_end.py imports these names from here
 
@@ -95,10 +96,10 @@ PARTS = {
 
 def long_view_parts(store: Store, config: Any) -> dict[str, Any]:
     """The report's long-view sections alone (what reading the history costs)."""
-    from service.reports.history import life_inputs, monthly_trend
-    from service.reports.life import compute_life
-    from service.reports.monthly import build as m
-    from service.reports.monthly.reader import MonthReader
+    from millwatch.reports.history import life_inputs, monthly_trend
+    from millwatch.reports.life import compute_life
+    from millwatch.reports.monthly import build as m
+    from millwatch.reports.monthly.reader import MonthReader
 
     end = month_bounds_ns(MONTH, config.time_zone)[1]
     reader = MonthReader(store, config, MONTH)

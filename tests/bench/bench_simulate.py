@@ -15,9 +15,9 @@ import argparse
 import time
 from pathlib import Path
 
-from ingest.mill_files import load_mill_configs
-from ingest.sim.renderer import Scene
-from ingest.sim.scenes import get_scene
+from millwatch.ingest.mill_files import load_mill_configs
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.scenes import get_scene
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 

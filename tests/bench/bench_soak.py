@@ -45,14 +45,14 @@ from typing import Any
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import SceneBlock, scene_blocks
-from ingest.sim.scenes import get_scene
-from service.store.database import Store
-from service.worker.block_queue import BlockQueue
-from service.worker.mill_job import MillJob
-from service.worker.worker import BATCH_BLOCKS, Worker
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import SceneBlock, scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import BlockQueue
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import BATCH_BLOCKS, Worker
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 CONFIG_FILES = ("sag-5200-lrs.toml", "ball-dual-lrs.toml", "rod-1100-grid.toml")

@@ -23,20 +23,20 @@ from collections.abc import Callable
 from itertools import islice
 from pathlib import Path
 
-from ingest import wire
-from ingest.gateway import declare_gateway_publisher
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import SceneBlock, scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.spool.store import Spool
-from ingest.zenoh_session import (
+from millwatch.cli.simulate import DEFAULT_MILL
+from millwatch.ingest import wire
+from millwatch.ingest.gateway import declare_gateway_publisher
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import SceneBlock, scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.spool.store import Spool
+from millwatch.ingest.zenoh_session import (
     build_config,
     declare_block_subscriber,
     free_loopback_port,
     open_session,
     tcp_endpoint,
 )
-from service.cli.simulate import DEFAULT_MILL
 
 CONFIG = load_mill_config(DEFAULT_MILL)
 CHANNELS = len(CONFIG.channels)

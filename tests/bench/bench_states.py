@@ -6,7 +6,7 @@ Run::
 
 Simulates the ``month`` scene (Diering 2011 §6.2.8: ~90 switch-ons a month, failed starts, trips,
 barring after long stops, telemetry spikes and dropouts) for ``--days`` days, feeds it through
-:class:`analytics.mill.loads.LoadAnalysis` in 1 s frames and compares with the simulator's
+:class:`millwatch.analytics.mill.loads.LoadAnalysis` in 1 s frames and compares with the simulator's
 truth: missed and false starts, stops and barring sessions (matched within 1 s), switch-on and
 short-circuit peak errors (% of motor rated torque), 10–90 % rise-time errors (ms), trip/stop
 classification. Then the cost per frame of a stopped and of a running mill (100-sample frames).
@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from analytics.mill.loads import LoadAnalysis
-from analytics.signal.frame_aligner import Frame
-from ingest.mill_files import load_mill_config
-from ingest.sim.renderer import Scene
-from ingest.sim.scenes import get_scene
-from ingest.sim.spec import SceneSpec
+from millwatch.analytics.mill.loads import LoadAnalysis
+from millwatch.analytics.signal.frame_aligner import Frame
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.sim.spec import SceneSpec
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 TOL_NS = 1_000_000_000

@@ -1,4 +1,5 @@
-"""Gateway retention and recovery (ingest.gateway) and start-up without peers, on real zenoh.
+"""Gateway retention and recovery (millwatch.ingest.gateway) and start-up without peers, on real
+zenoh.
 
 Only 127.0.0.1 endpoints, multicast scouting off; every loop bounded in count and time.
 """
@@ -15,8 +16,9 @@ import numpy as np
 import pytest
 import zenoh
 
-from ingest import keys, wire
-from ingest.gateway import (
+from millwatch.cli.simulate import DEFAULT_MILL
+from millwatch.ingest import keys, wire
+from millwatch.ingest.gateway import (
     RECOVERY_QUERY_S,
     GatewayPublisher,
     PublisherWatch,
@@ -24,11 +26,11 @@ from ingest.gateway import (
     declare_gateway_publisher,
     declare_recovering_subscriber,
 )
-from ingest.mill_files import load_mill_config
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.renderer import Scene
-from ingest.sim.scenes import get_scene
-from ingest.zenoh_session import (
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.zenoh_session import (
     build_config,
     connected_peers,
     declare_block_subscriber,
@@ -36,7 +38,6 @@ from ingest.zenoh_session import (
     open_session,
     tcp_endpoint,
 )
-from service.cli.simulate import DEFAULT_MILL
 
 T0 = 1_763_767_800_000_000_000
 WAIT_S = 5.0

@@ -12,7 +12,7 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ingest.keys import (
+from millwatch.ingest.keys import (
     ChannelKey,
     KeyFormatError,
     Side,
@@ -161,7 +161,7 @@ def test_no_formatted_keys_outside_the_keys_module() -> None:
 
 
 def test_channel_key_takes_the_mill_config_segment():
-    from ingest.keys import channel_key
+    from millwatch.ingest.keys import channel_key
 
     assert (
         channel_key("plant", "m1", "pinion_torque_nbs") == "millwatch/v1/plant/m1/pinion_torque_nbs"
@@ -180,7 +180,7 @@ def test_partial_chunk_wildcards_are_refused_not_silently_unmatched(pattern):
 
 # ---------------------------------------------------------------- alarm keys
 def test_alarm_key_layout_and_parse():
-    from ingest.keys import alarm_key, alarm_pattern, parse_alarm_key
+    from millwatch.ingest.keys import alarm_key, alarm_pattern, parse_alarm_key
 
     key = alarm_key("rustenburg", "sag-5200-lrs")
     assert key == "millwatch/v1/rustenburg/sag-5200-lrs/@alarms"
@@ -204,7 +204,7 @@ def test_alarm_key_layout_and_parse():
 
 
 def test_telemetry_and_alarm_subscriptions_never_see_each_other():
-    from ingest.keys import alarm_key, alarm_pattern
+    from millwatch.ingest.keys import alarm_key, alarm_pattern
 
     key = alarm_key("s", "m")
     telemetry = build_key("s", "m", "speed")
@@ -218,8 +218,8 @@ def test_telemetry_and_alarm_subscriptions_never_see_each_other():
 def test_the_key_map_of_a_mill_file_both_ways():
     """:func:`mill_channel_keys` and :class:`ChannelRoutes` are inverse; a replay run's key is
     its channel only where asked for (offline tools), never for the live worker."""
-    from ingest.keys import ChannelRoutes, mill_channel_keys
-    from ingest.mill_files import load_mill_config
+    from millwatch.ingest.keys import ChannelRoutes, mill_channel_keys
+    from millwatch.ingest.mill_files import load_mill_config
 
     config = load_mill_config(REPO / "deploy" / "mills" / "ball-dual-lrs.toml")
     by_name = mill_channel_keys(config)

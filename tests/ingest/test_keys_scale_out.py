@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import zenoh
 
-from ingest.keys import (
+from millwatch.ingest.keys import (
     KeyFormatError,
     key_matches,
     live_pattern,

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from analytics.drivetrain.mill_config import MillConfigError
-from ingest.mill_files import load_mill_config, load_mill_configs
+from millwatch.analytics.drivetrain.mill_config import MillConfigError
+from millwatch.ingest.mill_files import load_mill_config, load_mill_configs
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 

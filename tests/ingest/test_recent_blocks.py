@@ -1,6 +1,6 @@
 """A gateway without a spool keeps its last blocks in memory, answered by wire seq like a
-spool (ingest.spool.recent): what it holds in order, what it evicted counted exactly, and over
-zenoh on 127.0.0.1 through the gateway publisher's own queryable."""
+spool (millwatch.ingest.spool.recent): what it holds in order, what it evicted counted exactly, and
+over zenoh on 127.0.0.1 through the gateway publisher's own queryable."""
 
 from __future__ import annotations
 
@@ -10,12 +10,17 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ingest import wire
-from ingest.gateway import declare_gateway_publisher
-from ingest.spool.query import fetch_spooled
-from ingest.spool.recent import RecentBlocks
-from ingest.spool.store import payload_seq
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
+from millwatch.ingest import wire
+from millwatch.ingest.gateway import declare_gateway_publisher
+from millwatch.ingest.spool.query import fetch_spooled
+from millwatch.ingest.spool.recent import RecentBlocks
+from millwatch.ingest.spool.store import payload_seq
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
 
 KEY = "millwatch/v1/lab/m1/motor_torque"
 

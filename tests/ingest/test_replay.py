@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 import zenoh
 
-from ingest import keys, wire
-from ingest.archive.files import list_archive_files
-from ingest.archive.reader import ArchivedBlock
-from ingest.archive.writer import ArchiveWriter
-from ingest.gateway import GatewayPublisher
-from ingest.pacing import PacingClock, PacingError
-from ingest.replay import (
+from millwatch.ingest import keys, wire
+from millwatch.ingest.archive.files import list_archive_files
+from millwatch.ingest.archive.reader import ArchivedBlock
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.gateway import GatewayPublisher
+from millwatch.ingest.pacing import PacingClock, PacingError
+from millwatch.ingest.replay import (
     KeyRemap,
     PublisherFactory,
     Replayer,
@@ -35,7 +35,7 @@ from ingest.replay import (
     archive_blocks,
     collect_archive_files,
 )
-from ingest.zenoh_session import (
+from millwatch.ingest.zenoh_session import (
     build_config,
     declare_block_publisher,
     declare_block_subscriber,

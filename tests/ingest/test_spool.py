@@ -1,4 +1,5 @@
-"""The gateway spool (ingest.spool): runs, files, index across reopen and SIGKILL, retention with
+"""The gateway spool (millwatch.ingest.spool): runs, files, index across reopen and SIGKILL,
+retention with
 its exact dropped count, recovery over a real zenoh queryable on 127.0.0.1, the forwarder.
 
 Blocks come from the simulator (``scene_blocks`` of a catalogue scene), as a gateway sends them.
@@ -21,19 +22,24 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ingest import keys
-from ingest.archive.files import list_archive_files
-from ingest.archive.reader import TailTolerantReader
-from ingest.gateway import declare_gateway_publisher
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import SceneBlock, scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.spool.forwarder import SpoolForwarder
-from ingest.spool.query import SpoolServer, fetch_spooled
-from ingest.spool.runs import SeqRuns
-from ingest.spool.store import PREFIX, Spool, SpoolError, SpoolRead, payload_seq
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.cli.simulate import DEFAULT_MILL
+from millwatch.cli.simulate import DEFAULT_MILL
+from millwatch.ingest import keys
+from millwatch.ingest.archive.files import list_archive_files
+from millwatch.ingest.archive.reader import TailTolerantReader
+from millwatch.ingest.gateway import declare_gateway_publisher
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import SceneBlock, scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.spool.forwarder import SpoolForwarder
+from millwatch.ingest.spool.query import SpoolServer, fetch_spooled
+from millwatch.ingest.spool.runs import SeqRuns
+from millwatch.ingest.spool.store import PREFIX, Spool, SpoolError, SpoolRead, payload_seq
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = load_mill_config(DEFAULT_MILL)
@@ -117,7 +123,7 @@ def test_a_killed_writer_leaves_a_file_read_up_to_its_last_complete_record(tmp_p
     """A real SIGKILL of a process appending, then a torn tail on top (a kill mid-write)."""
     script = (
         "import sys, time\n"
-        "from ingest.spool.store import Spool\n"
+        "from millwatch.ingest.spool.store import Spool\n"
         "from tests.ingest.test_spool import BLOCKS\n"
         "spool = Spool(sys.argv[1])\n"
         "for b in BLOCKS[:100]:\n"

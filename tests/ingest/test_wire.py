@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from ingest import wire
-from ingest.wire import (
+from millwatch.ingest import wire
+from millwatch.ingest.wire import (
     BadHeaderValue,
     BadMagic,
     DType,
@@ -194,7 +194,7 @@ def test_decode_is_fast_enough_for_8000_blocks_per_second() -> None:
 
 
 def test_units_are_found_by_their_config_symbol():
-    from ingest.wire import Unit
+    from millwatch.ingest.wire import Unit
 
     assert Unit.from_symbol("kN·m") is Unit.KILONEWTON_METRE
     assert Unit.from_symbol("MPa") is Unit.MEGAPASCAL

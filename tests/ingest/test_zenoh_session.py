@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import zenoh
 
-from ingest import keys, wire
-from ingest.zenoh_session import (
+from millwatch.ingest import keys, wire
+from millwatch.ingest.zenoh_session import (
     ZenohConfigError,
     build_config,
     declare_block_publisher,

@@ -1,8 +1,9 @@
 """Hostile payloads for one channel, made from the valid blocks sent on it (issue 16 item 5).
 
-*Malformed* kinds are payloads :func:`ingest.wire.decode_block` must reject with a
-:class:`~ingest.wire.WireError` of a known kind (:data:`MALFORMED` maps each kind to it) — except
-``nonfinite``: the wire format counts NaN/±inf samples in :attr:`~ingest.wire.Block.n_nonfinite`
+*Malformed* kinds are payloads :func:`millwatch.ingest.wire.decode_block` must reject with a
+:class:`~millwatch.ingest.wire.WireError` of a known kind (:data:`MALFORMED` maps each kind to it)
+— except ``nonfinite``: the wire format counts NaN/±inf samples in
+:attr:`~millwatch.ingest.wire.Block.n_nonfinite`
 instead of rejecting them, so that kind is a copy of an already-sent block (same sequence number
 and t0) with its samples replaced by NaN/±inf; a worker must drop it as not new.
 
@@ -18,7 +19,7 @@ year 2100 — sent before the real block of that number, which must still be ana
 
 >>> import random
 >>> import numpy as np
->>> from ingest.wire import Unit, decode_block, encode_block
+>>> from millwatch.ingest.wire import Unit, decode_block, encode_block
 >>> ch = HostileChannel(random.Random(1))
 >>> ch.sent(encode_block(np.zeros(4), 10**18, 1000.0, 7, Unit.RPM))
 >>> decode_block(ch.make("duplicate")).seq
@@ -36,7 +37,7 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from ingest.wire import (
+from millwatch.ingest.wire import (
     HEADER,
     HEADER_SIZE,
     MAGIC,
@@ -76,7 +77,7 @@ KINDS = (*MALFORMED, *WELL_FORMED, *FORGED)
 #: 2100-01-01T00:00:00Z in ns since the Unix epoch.
 YEAR_2100_NS = 4_102_444_800 * 10**9
 _HOUR_NS = 3600 * 10**9
-# header field offsets (see ingest.wire)
+# header field offsets (see millwatch.ingest.wire)
 _VERSION, _HEADER_LEN, _FS, _DTYPE, _UNIT, _N = 4, 6, 16, 32, 33, 36
 
 

@@ -26,12 +26,12 @@ from typing import Any
 
 import httpx
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.analyzer import MillAnalyzer
-from ingest.archive.reader import ArchiveReader
-from ingest.wire import WireError, decode_block
-from service.store.database import Store
-from service.worker.runtime import ARCHIVE_PREFIX
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.wire import WireError, decode_block
+from millwatch.store.database import Store
+from millwatch.worker.runtime import ARCHIVE_PREFIX
 
 ROOT = Path(__file__).resolve().parents[2]
 MILL_FILE = ROOT / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -60,7 +60,7 @@ def wait(predicate: Callable[[], Any], timeout_s: float, every_s: float = 0.1) -
 
 def millwatch(*args: str | Path) -> subprocess.Popen[bytes]:
     """``millwatch ARGS`` started (its output in the caller's hands)."""
-    return subprocess.Popen([sys.executable, "-m", "service.cli.main", *map(str, args)], cwd=ROOT,
+    return subprocess.Popen([sys.executable, "-m", "millwatch.cli.main", *map(str, args)], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
 
 
@@ -106,7 +106,7 @@ class Processes:
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         with path.open("wb") as log:
             cap = None if memory_bytes is None else functools.partial(_cap_memory, memory_bytes)
-            proc = subprocess.Popen([sys.executable, "-m", "service.cli.main", *args], cwd=ROOT,
+            proc = subprocess.Popen([sys.executable, "-m", "millwatch.cli.main", *args], cwd=ROOT,
                                     stdout=log, stderr=subprocess.STDOUT, env=env,
                                     preexec_fn=cap)  # fmt: skip
         self.procs[name] = proc
@@ -289,7 +289,7 @@ def data_quality(directory: Path) -> list[dict[str, Any]]:
 def clean_report(directory: Path, scene_args: tuple[str, ...] = SCENE_ARGS) -> dict[str, Any]:
     """``millwatch analyze --json`` of the scene written by ``millwatch simulate --out``."""
     recording = directory / "clean.mcap"
-    run = [sys.executable, "-m", "service.cli.main"]
+    run = [sys.executable, "-m", "millwatch.cli.main"]
     subprocess.run([*run, "simulate", *scene_args, "--out", str(recording)], cwd=ROOT,
                    check=True, capture_output=True, timeout=120)  # fmt: skip
     mill = scene_args[scene_args.index("--mill") + 1]

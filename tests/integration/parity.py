@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.mill_config import MillConfig
 
 PHASE_OF_STATE = {
     "running": "run",
@@ -264,7 +264,7 @@ def store_figures(
     rows: Mapping[str, Any], seconds: Mapping[str, float], phases: Iterable[str]
 ) -> Figures:
     """The store's figures: ``rows`` from :func:`store_rows`, ``seconds`` the phase seconds
-    as the store's one reading of them gives (``service.reports.history.life_inputs``)."""
+    as the store's one reading of them gives (``millwatch.reports.history.life_inputs``)."""
     values: dict[str, float | None] = {f"damage/{c}/{p}": v for (c, p), v in rows["damage"].items()}
     with_zero_phases(values, phases, {c for c, _ in rows["damage"]})
     values |= {f"seconds/{p}": v for p, v in seconds.items()}

@@ -27,11 +27,16 @@ from typing import Any
 
 import pytest
 
-from ingest.keys import channel_key, mill_pattern
-from ingest.mill_files import load_mill_config
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.store.database import Store
-from service.worker.runtime import ARCHIVE_PREFIX
+from millwatch.ingest.keys import channel_key, mill_pattern
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.store.database import Store
+from millwatch.worker.runtime import ARCHIVE_PREFIX
 from tests.integration.hostile import FORGED
 from tests.integration.live import (
     MILL,
@@ -161,7 +166,7 @@ def _after_checks(
         broken["log_lines"] = f"{len(lines)} lines"
     files = sorted((directory / "archive").glob(f"{ARCHIVE_PREFIX}*.mcap"))
     out = subprocess.run(
-        [sys.executable, "-m", "service.cli.main", "analyze", *map(str, files), "--mill",
+        [sys.executable, "-m", "millwatch.cli.main", "analyze", *map(str, files), "--mill",
          str(MILL_FILE), "--json", "--no-progress"],
         cwd=ROOT, capture_output=True, timeout=120,
     )  # fmt: skip

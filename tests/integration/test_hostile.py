@@ -1,6 +1,6 @@
 """The hostile payload generator makes what each kind says: malformed kinds raise the
-:class:`~ingest.wire.WireError` of their kind, well-formed ones decode with a sequence number
-already sent (and, for clock faults, a t0 that contradicts it)."""
+:class:`~millwatch.ingest.wire.WireError` of their kind, well-formed ones decode with a sequence
+number already sent (and, for clock faults, a t0 that contradicts it)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import random
 import numpy as np
 import pytest
 
-from ingest.wire import DType, Unit, WireError, decode_block, encode_block
+from millwatch.ingest.wire import DType, Unit, WireError, decode_block, encode_block
 from tests.integration import hostile
 from tests.integration.hostile import (
     FORGED,

@@ -17,12 +17,13 @@ from typing import Any
 
 import pytest
 
-from ingest.mill_files import load_mill_config
-from ingest.pacing import PacingClock
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.publisher import starting_now
-from ingest.wire import DType
-from ingest.zenoh_session import (
+from millwatch.cli.simulate import build_scene
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.pacing import PacingClock
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.publisher import starting_now
+from millwatch.ingest.wire import DType
+from millwatch.ingest.zenoh_session import (
     build_config,
     declare_block_publisher,
     free_loopback_port,
@@ -30,7 +31,6 @@ from ingest.zenoh_session import (
     tcp_endpoint,
     wait_for_subscribers,
 )
-from service.cli.simulate import build_scene
 from tests.integration.hostile import MALFORMED, WELL_FORMED, HostileChannel, kind_cycle
 from tests.integration.live import (
     DURATION_S,

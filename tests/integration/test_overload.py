@@ -4,7 +4,7 @@ Two shipped mills (a single and a dual drive), a 5-minute scene each, recorded b
 simulate --out`` at site ``lab`` and replayed by one ``millwatch replay --max`` into a
 ``millwatch serve`` whose in-memory queues hold only :data:`QUEUE_BLOCKS` blocks: far faster
 than the worker analyses, so its analysis falls behind and reads the blocks it has no room for
-back from the archive (``service.worker.archive_first``). Then:
+back from the archive (``millwatch.worker.archive_first``). Then:
 
 * the archive holds every block replayed (counted message by message against the recordings);
 * once caught up (``millwatch_queue_depth_blocks`` 0, every sample analysed, the lag 0), the
@@ -22,13 +22,13 @@ from typing import Any
 
 import pytest
 
-from analytics.signal.telemetry_faults import LOOKAHEAD
-from ingest.archive.reader import ArchiveReader, TailTolerantReader
-from ingest.mill_files import load_mill_config
-from ingest.zenoh_session import free_loopback_port, tcp_endpoint
-from service.reports.history import life_inputs
-from service.store.database import Store
-from service.worker.runtime import ARCHIVE_PREFIX
+from millwatch.analytics.signal.telemetry_faults import LOOKAHEAD
+from millwatch.ingest.archive.reader import ArchiveReader, TailTolerantReader
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.zenoh_session import free_loopback_port, tcp_endpoint
+from millwatch.reports.history import life_inputs
+from millwatch.store.database import Store
+from millwatch.worker.runtime import ARCHIVE_PREFIX
 from tests.integration.live import ROOT, Api, Processes, finish, millwatch, wait
 from tests.integration.parity import (
     analyze_figures,

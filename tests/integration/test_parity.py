@@ -41,11 +41,11 @@ from typing import Any
 
 import pytest
 
-from analytics.signal.telemetry_faults import LOOKAHEAD
-from ingest.mill_files import load_mill_config
-from ingest.zenoh_session import free_loopback_port, tcp_endpoint
-from service.reports.history import life_inputs
-from service.store.database import Store
+from millwatch.analytics.signal.telemetry_faults import LOOKAHEAD
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.zenoh_session import free_loopback_port, tcp_endpoint
+from millwatch.reports.history import life_inputs
+from millwatch.store.database import Store
 from tests.integration.live import ROOT, Api, Processes, finish, millwatch, wait
 from tests.integration.parity import (
     PHASE_OF_STATE,

@@ -21,10 +21,15 @@ from typing import Any
 import httpx
 import pytest
 
-from ingest.mill_files import load_mill_config
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 PROMETHEUS_DIR = ROOT / "deploy" / "prometheus"
@@ -107,7 +112,7 @@ files = ["{mill_file}"]
 """, encoding="utf-8")  # fmt: skip
     log = tmp / "serve.log"
     with log.open("w") as out:
-        command = [sys.executable, "-m", "service.cli.main", "serve", "--config", str(config)]
+        command = [sys.executable, "-m", "millwatch.cli.main", "serve", "--config", str(config)]
         proc = subprocess.Popen(command, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT)
     base = f"http://127.0.0.1:{api_port}"
     try:

@@ -27,9 +27,9 @@ from typing import Any
 
 import pytest
 
-from analytics.signal.telemetry_faults import LOOKAHEAD
-from ingest.mill_files import load_mill_config
-from ingest.zenoh_session import free_loopback_port, tcp_endpoint
+from millwatch.analytics.signal.telemetry_faults import LOOKAHEAD
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.zenoh_session import free_loopback_port, tcp_endpoint
 from tests.integration.live import (
     BLOCK_NS,
     BLOCKS_PER_CHANNEL,
@@ -222,7 +222,7 @@ def test_a_restarted_gateway_loses_a_span_reported_once_with_its_exact_count(tmp
         # process starts up it publishes late rather than skips); and it ends exactly where the
         # restarted gateway's own log says it resumed — its first blocks, published before the
         # worker's link to it was up again, come back from its recent blocks in memory
-        # (ingest.spool.recent; they were lost before, issue 26).
+        # (millwatch.ingest.spool.recent; they were lost before, issue 26).
         due = lambda seq: plant.anchor_ns + seq * BLOCK_NS / plant.speed  # noqa: E731
         block_wall_ns = BLOCK_NS / plant.speed
         for c, (first, final, n) in span.items():
@@ -251,8 +251,8 @@ def test_a_restarted_gateway_loses_a_span_reported_once_with_its_exact_count(tmp
 
 
 def resumed_at(gateway_log: list[str]) -> int:
-    """The first sequence number a restarted gateway published, from its own log (``ingest.sim
-    .publisher``: "… are not published (lost); next sequence N")."""
+    """The first sequence number a restarted gateway published, from its own log
+    (``millwatch.ingest.sim .publisher``: "… are not published (lost); next sequence N")."""
     found = [m.group(1) for line in gateway_log if (m := re.search(r"next sequence (\d+)", line))]
     assert found, gateway_log[-20:]  # (the restart logs it as a warning: it skipped blocks)
     return int(found[-1])

@@ -26,11 +26,11 @@ from typing import Any
 
 import pytest
 
-from ingest.archive.files import list_archive_files
-from ingest.archive.reader import TailTolerantReader
-from ingest.mill_files import load_mill_config
-from ingest.spool.store import PREFIX, Spool, payload_seq
-from ingest.zenoh_session import free_loopback_port, tcp_endpoint
+from millwatch.ingest.archive.files import list_archive_files
+from millwatch.ingest.archive.reader import TailTolerantReader
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.spool.store import PREFIX, Spool, payload_seq
+from millwatch.ingest.zenoh_session import free_loopback_port, tcp_endpoint
 from tests.integration.live import (
     MILL_FILE,
     Api,

@@ -31,11 +31,11 @@ from typing import Any
 
 import pytest
 
-from ingest.archive.reader import ArchiveReader
-from ingest.mill_files import load_mill_config
-from ingest.wire import WireError, decode_block
-from ingest.zenoh_session import free_loopback_port, tcp_endpoint
-from service.worker.runtime import ARCHIVE_PREFIX
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.wire import WireError, decode_block
+from millwatch.ingest.zenoh_session import free_loopback_port, tcp_endpoint
+from millwatch.worker.runtime import ARCHIVE_PREFIX
 from tests.integration.live import (
     BLOCKS_PER_CHANNEL,
     DURATION_S,

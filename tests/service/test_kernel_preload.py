@@ -1,4 +1,4 @@
-"""service.kernel_preload: the cached kernels run without numba's compiler registries, and
+"""millwatch.kernel_preload: the cached kernels run without numba's compiler registries, and
 count exactly as the ``rainflow`` package does (cycles bitwise, the same damage).
 
 Each check runs in fresh processes with a numba cache of its own (``NUMBA_CACHE_DIR``): the first
@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 import rainflow
 
-from analytics.fatigue.sn_models import build_sn_curve
-from service import kernel_preload
-from service.kernel_preload import preload
+from millwatch import kernel_preload
+from millwatch.analytics.fatigue.sn_models import build_sn_curve
+from millwatch.kernel_preload import preload
 
 #: numba's release is one the preload was checked with (else it must load nothing).
 CHECKED = ".".join(numba.__version__.split(".")[:2]) in kernel_preload.CHECKED_NUMBA
@@ -35,9 +35,9 @@ import rainflow
 from hypothesis import assume, given, settings, strategies as st
 from hypothesis.extra.numpy import arrays
 
-from analytics.fatigue.record_count import KERNELS, RecordCount
-from analytics.fatigue.sn_models import build_sn_curve
-from service.kernel_preload import preload
+from millwatch.analytics.fatigue.record_count import KERNELS, RecordCount
+from millwatch.analytics.fatigue.sn_models import build_sn_curve
+from millwatch.kernel_preload import preload
 
 installed = preload(KERNELS)
 curve = build_sn_curve("shigley")
@@ -75,7 +75,7 @@ json.dump({{"installed": installed, "compiler": "numba.np.arraymath" in sys.modu
 #: One ``millwatch rainflow`` run in-process; the modules it loaded go to stderr.
 _CLI = """
 import sys
-from service.cli.main import main
+from millwatch.cli.main import main
 main({argv!r})
 sys.stderr.write("\\n".join(sorted(sys.modules)))
 """
@@ -128,16 +128,16 @@ def test_cli_rainflow_preloads_and_matches_the_rainflow_package(numba_cache, tmp
 
 
 def test_a_numba_release_not_checked_is_left_alone(monkeypatch, caplog):
-    from analytics.fatigue.record_count import KERNELS
+    from millwatch.analytics.fatigue.record_count import KERNELS
 
-    caplog.set_level("DEBUG", logger="service.kernel_preload")
+    caplog.set_level("DEBUG", logger="millwatch.kernel_preload")
     monkeypatch.setattr(kernel_preload, "CHECKED_NUMBA", frozenset({"0.0"}))
     assert kernel_preload.preload(KERNELS) == 0
     assert "is not one preloading was checked with" in caplog.text
 
 
 def test_what_is_not_a_cached_kernel_is_skipped(caplog):
-    caplog.set_level("DEBUG", logger="service.kernel_preload")
+    caplog.set_level("DEBUG", logger="millwatch.kernel_preload")
     assert preload([len, object()]) == 0
     assert "not preloaded" in caplog.text
 
@@ -146,7 +146,7 @@ def test_a_kernel_with_no_cache_is_left_to_numba(tmp_path: Path):
     script = tmp_path / "plus_one.py"
     script.write_text(
         "from numba import njit\n"
-        "from service.kernel_preload import preload\n"
+        "from millwatch.kernel_preload import preload\n"
         "@njit(cache=True)\n"
         "def plus_one(a):\n"
         "    return a + 1\n"

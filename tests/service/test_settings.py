@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from service.api.identity import ApiIdentity, ApiKeys
-from service.settings import ServiceSettings, SettingsError, load_service_settings
+from millwatch.api.identity import ApiIdentity, ApiKeys
+from millwatch.settings import ServiceSettings, SettingsError, load_service_settings
 
 MILLS = Path(__file__).resolve().parents[2] / "deploy" / "mills"
 

@@ -10,16 +10,16 @@ from pathlib import Path
 import pytest
 from pydantic import ValidationError
 
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from service.api.times import with_iso
-from service.remote.protocol import StatusAnswer, decode, encode
-from service.status import NO_STATUS, MillStatus
-from service.store.database import Store
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import HELD, Worker
+from millwatch.api.times import with_iso
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.remote.protocol import StatusAnswer, decode, encode
+from millwatch.status import NO_STATUS, MillStatus
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import HELD, Worker
 
 MILL = load_mill_config(Path(__file__).resolve().parents[2] / "deploy/mills/ball-dual-lrs.toml")
 

@@ -1,14 +1,14 @@
 """Routes of the alarms: ``GET /alarms`` (ETag/cursor polling), ``GET /alarms/{id}``, and the
-operator actions (``X-API-Key``; :mod:`alarms.actions`): ``POST /alarms/{id}/ack``,
+operator actions (``X-API-Key``; :mod:`millwatch.alarms.actions`): ``POST /alarms/{id}/ack``,
 ``…/confirm``, ``…/comment``, ``…/shelve``, ``…/unshelve``, ``…/out-of-service``,
 ``…/in-service``.
 
 ``GET /alarms`` is an ``async`` route answered from the in-memory alarm board
-(:mod:`service.api.alarm_board`): no SQLite and no threadpool hop per poll, the body and ETag made
-once per board version. The others go to the :class:`~service.api.backend.Backend` (the store
+(:mod:`millwatch.api.alarm_board`): no SQLite and no threadpool hop per poll, the body and ETag made
+once per board version. The others go to the :class:`~millwatch.api.backend.Backend` (the store
 in process, the mill's worker over zenoh); the key is checked here, in the API process (and by
-:class:`~service.api.limits.RequestGuard` before the body is read), and names the acting user
-(:mod:`service.api.identity`)."""
+:class:`~millwatch.api.limits.RequestGuard` before the body is read), and names the acting user
+(:mod:`millwatch.api.identity`)."""
 
 from __future__ import annotations
 
@@ -20,14 +20,14 @@ from fastapi import APIRouter, Depends, Header, Query, Request, Response, Securi
 from fastapi.security import APIKeyHeader
 from pydantic import Field, StringConstraints
 
-from alarms.actions import ActionKind, InvalidActionError, OperatorAction
-from service.api.alarm_board import CURSOR_PATTERN, Cursor
-from service.api.alarm_views import STATE_PATTERN, matches, parse_states
-from service.api.backend import Backend
-from service.api.errors import problem_responses
-from service.api.identity import ApiIdentity
-from service.api.mill_views import config_of
-from service.api.models import (
+from millwatch.alarms.actions import ActionKind, InvalidActionError, OperatorAction
+from millwatch.api.alarm_board import CURSOR_PATTERN, Cursor
+from millwatch.api.alarm_views import STATE_PATTERN, matches, parse_states
+from millwatch.api.backend import Backend
+from millwatch.api.errors import problem_responses
+from millwatch.api.identity import ApiIdentity
+from millwatch.api.mill_views import config_of
+from millwatch.api.models import (
     AckBody,
     ActionBody,
     AlarmDetail,
@@ -35,9 +35,9 @@ from service.api.models import (
     CommentBody,
     ShelveBody,
 )
-from service.api.routes.params import AlarmId
-from service.api.times import IsoTime, ns_of, with_iso
-from service.errors import BadRequest
+from millwatch.api.routes.params import AlarmId
+from millwatch.api.times import IsoTime, ns_of, with_iso
+from millwatch.errors import BadRequest
 
 __all__ = ["ACTION_PATHS", "API_KEY", "KEYED_ROUTES", "alarms_router"]
 
@@ -59,7 +59,7 @@ ACTION_PATHS = {
     ActionKind.RETURN_TO_SERVICE: "/alarms/{alarm_id}/in-service",
 }
 """The path of each action (both shelves share ``…/shelve``, told apart by the body)."""
-#: The routes that take :data:`API_KEY`: :class:`~service.api.limits.RequestGuard` checks the key
+#: The routes that take :data:`API_KEY`: :class:`~millwatch.api.limits.RequestGuard` checks the key
 #: for them before their body is read (the route's own check documents it in OpenAPI).
 KEYED_ROUTES = tuple(("POST", path) for path in ACTION_PATHS.values())
 INT64_MAX = 2**63 - 1
@@ -159,7 +159,7 @@ _WHO = (
 def _operator(
     request: Request, api_key: Annotated[str | None, Security(API_KEY)] = None
 ) -> ApiIdentity:
-    """The identity of an operator's key (:meth:`~service.api.identity.ApiKeys.operator`)."""
+    """The identity of an operator's key (:meth:`~millwatch.api.identity.ApiKeys.operator`)."""
     backend: Backend = request.app.state.backend
     return backend.api_keys.operator(api_key)
 

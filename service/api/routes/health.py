@@ -9,8 +9,8 @@ from typing import Any
 from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 
-from service.api.backend import Backend
-from service.api.times import with_iso
+from millwatch.api.backend import Backend
+from millwatch.api.times import with_iso
 
 __all__ = ["health_router"]
 

@@ -1,7 +1,7 @@
 """Route of the alarm journal: ``GET /alarms/journal`` — every stored transition of the alarms,
-in time order, by mill and time, a page at a time (:mod:`service.api.journal`).
+in time order, by mill and time, a page at a time (:mod:`millwatch.api.journal`).
 
-Included before :mod:`service.api.routes.alarms`, whose ``/alarms/{alarm_id}`` would otherwise
+Included before :mod:`millwatch.api.routes.alarms`, whose ``/alarms/{alarm_id}`` would otherwise
 take ``journal`` for an alarm id."""
 
 from __future__ import annotations
@@ -12,19 +12,19 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query
 from pydantic import Field
 
-from service.api.backend import Backend
-from service.api.errors import problem_responses
-from service.api.journal import (
+from millwatch.api.backend import Backend
+from millwatch.api.errors import problem_responses
+from millwatch.api.journal import (
     INT64_MAX,
     JOURNAL_KEY_PATTERN,
     JournalKey,
     JournalQuery,
     journal_body,
 )
-from service.api.mill_views import config_of
-from service.api.models import AlarmJournal
-from service.api.routes.params import MILL_ID_PATTERN
-from service.api.times import IsoTime, ns_of
+from millwatch.api.mill_views import config_of
+from millwatch.api.models import AlarmJournal
+from millwatch.api.routes.params import MILL_ID_PATTERN
+from millwatch.api.times import IsoTime, ns_of
 
 __all__ = ["JOURNAL_LIMIT", "journal_router"]
 

@@ -1,8 +1,8 @@
 """Routes of the mills: ``GET /mills``, ``/mills/{id}`` and one mill's analysis: ``/life``,
 ``/starts``, ``/spectrum``; the mills of a site side by side: ``/sites/{site}/fleet``. The
-work is done by the :class:`~service.api.backend.Backend` (in
-process: :mod:`service.api.mill_views`; remote: a worker over zenoh); the monthly report has its
-own module (:mod:`service.api.routes.reports`)."""
+work is done by the :class:`~millwatch.api.backend.Backend` (in
+process: :mod:`millwatch.api.mill_views`; remote: a worker over zenoh); the monthly report has its
+own module (:mod:`millwatch.api.routes.reports`)."""
 
 from __future__ import annotations
 
@@ -10,14 +10,14 @@ from typing import Any
 
 from fastapi import APIRouter
 
-from service.api.backend import Backend
-from service.api.errors import problem_responses
-from service.api.models import MillDetail, MillSummary, Spectrum
-from service.api.routes.params import MillId, Month, Site
-from service.api.times import with_iso
-from service.reports.fleet import FleetView
-from service.reports.life import LifeReport, life_to_dict
-from service.reports.starts import MonthStarts
+from millwatch.api.backend import Backend
+from millwatch.api.errors import problem_responses
+from millwatch.api.models import MillDetail, MillSummary, Spectrum
+from millwatch.api.routes.params import MillId, Month, Site
+from millwatch.api.times import with_iso
+from millwatch.reports.fleet import FleetView
+from millwatch.reports.life import LifeReport, life_to_dict
+from millwatch.reports.starts import MonthStarts
 
 __all__ = ["mills_router"]
 

@@ -10,7 +10,7 @@ from typing import Annotated
 
 from fastapi import Path, Query
 
-from service.reports.starts import MONTH_PATTERN
+from millwatch.reports.starts import MONTH_PATTERN
 
 __all__ = ["MILL_ID_PATTERN", "AlarmId", "MillId", "Month", "Site"]
 

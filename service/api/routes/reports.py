@@ -3,31 +3,32 @@
 ``GET /mills/{mill_id}/reports/monthly?month=YYYY-MM&format=json|html|csv|pdf[&table=NAME]``
 
 ``GET /sites/{site}/reports/fleet?format=json|html|csv|pdf``: the fleet report, every mill of a
-site side by side (:mod:`service.reports.fleet_document`, from the same answer as
+site side by side (:mod:`millwatch.reports.fleet_document`, from the same answer as
 ``GET /sites/{site}/fleet``).
 
-``GET /reports/status``: the month-end report job of each worker (:mod:`service.reports.month_end`):
+``GET /reports/status``: the month-end report job of each worker
+(:mod:`millwatch.reports.month_end`):
 where reports go, the last run (due, written, mailed, failed), the failures waiting for their
 next try with their cause, each mill's newest complete month.
 
 * ``month``: the site's local calendar month; default: the mill's current one (that of its
   last analysed sample).
 * ``json`` is the report's data, every ``*_ns`` time with its ISO-8601 UTC twin beside it (as
-  every JSON answer of the API: :func:`service.api.times.with_iso`).
+  every JSON answer of the API: :func:`millwatch.api.times.with_iso`).
 * ``format``: wins when given; otherwise the ``Accept`` header chooses (``text/html``,
   ``text/csv`` or ``application/zip``, ``application/pdf``, ``application/json``; anything else
   gives JSON).
 * ``csv`` is every table of the report as tidy CSV, one file per table, in a zip; with
   ``table=NAME`` (implies ``format=csv``) the one table as ``text/csv``.
-* Errors are ``application/problem+json`` through :mod:`service.api.errors`: 422 for a
+* Errors are ``application/problem+json`` through :mod:`millwatch.api.errors`: 422 for a
   malformed month, an unknown format or table, or a table with another format (the detail
   names the value and, for a table, the valid names), 404 for an unknown mill, 503 while the
   store is not open.
 
-Layering (README "Design"): the route only parses and dispatches; :mod:`service.reports.monthly`
+Layering (README "Design"): the route only parses and dispatches; :mod:`millwatch.reports.monthly`
 reads
 the store and the renderers turn the plain report into bytes. :func:`reports_router` is included
-by :func:`service.api.router.api_router`.
+by :func:`millwatch.api.router.api_router`.
 """
 
 from __future__ import annotations
@@ -40,14 +41,14 @@ from typing import Annotated, Any, Literal, Protocol
 from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 
-from service.api.errors import problem_responses
-from service.api.limits import ApiLimits, RenderSlots
-from service.api.routes.params import MillId, Month, Site
-from service.api.times import with_iso
-from service.errors import BadRequest
-from service.reports.fleet_document import render_fleet
-from service.reports.monthly import MonthlyReport, report_to_dict
-from service.reports.monthly_formats import (
+from millwatch.api.errors import problem_responses
+from millwatch.api.limits import ApiLimits, RenderSlots
+from millwatch.api.routes.params import MillId, Month, Site
+from millwatch.api.times import with_iso
+from millwatch.errors import BadRequest
+from millwatch.reports.fleet_document import render_fleet
+from millwatch.reports.monthly import MonthlyReport, report_to_dict
+from millwatch.reports.monthly_formats import (
     render_csv,
     render_csv_table,
     render_html,
@@ -76,7 +77,7 @@ TableName = Annotated[
 
 
 class ReportSource(Protocol):
-    """What the route needs of a :class:`~service.api.backend.Backend`."""
+    """What the route needs of a :class:`~millwatch.api.backend.Backend`."""
 
     def monthly_report(self, mill_id: str, month: str | None) -> MonthlyReport: ...
 
@@ -101,7 +102,7 @@ def negotiate(fmt: str | None, accept: str | None) -> str:
 
 def reports_router(backend: ReportSource, renders: RenderSlots | None = None) -> APIRouter:
     """The monthly report route; ``backend`` builds the report (a
-    :class:`~service.api.backend.Backend`: in process, or a worker over zenoh); at most
+    :class:`~millwatch.api.backend.Backend`: in process, or a worker over zenoh); at most
     ``renders`` reports are built and rendered at once, one more is a 503 with Retry-After."""
     router = APIRouter(tags=["reports"])
     slots = RenderSlots(ApiLimits()) if renders is None else renders

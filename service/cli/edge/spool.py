@@ -21,13 +21,13 @@ import logging
 import sys
 from pathlib import Path
 
-from ingest.keys import live_pattern, mill_pattern
-from ingest.mill_files import load_mill_config
-from ingest.spool.forwarder import SpoolForwarder
-from ingest.spool.store import DEFAULT_HOURS, DEFAULT_MAX_MB, Spool
-from ingest.zenoh_session import build_config, open_session
-from ingest.zenoh_tls import gateway_name
-from service.cli.args import add_tls_arguments, positive_float, tls_files
+from millwatch.cli.args import add_tls_arguments, positive_float, tls_files
+from millwatch.ingest.keys import live_pattern, mill_pattern
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.spool.forwarder import SpoolForwarder
+from millwatch.ingest.spool.store import DEFAULT_HOURS, DEFAULT_MAX_MB, Spool
+from millwatch.ingest.zenoh_session import build_config, open_session
+from millwatch.ingest.zenoh_tls import gateway_name
 
 __all__ = ["add_parser", "add_spool_arguments", "open_spool", "spool_summary"]
 
@@ -129,7 +129,7 @@ def _one_mill(args: argparse.Namespace) -> str | None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from service.cli.serve import wait_for_signal  # (not for simulate's and replay's options)
+    from millwatch.cli.serve import wait_for_signal  # (not for simulate's and replay's options)
 
     patterns = _patterns(args)
     spool = open_spool(args)

@@ -1,7 +1,7 @@
 """``millwatch zenoh-certs DIR``: a CA and one certificate per role for zenoh over mutual TLS.
 
 Makes, in ``DIR`` (e.g. ``/etc/millwatch/tls``), what ``deploy/zenoh/router.json5`` and the
-``[zenoh.tls]`` of the workers and the API read (:mod:`ingest.zenoh_tls`):
+``[zenoh.tls]`` of the workers and the API read (:mod:`millwatch.ingest.zenoh_tls`):
 
 * ``ca.pem``, ``ca-key.pem`` — the site's CA, made once (an existing CA is kept: certificates
   signed by it stay valid). Keep ``ca-key.pem`` off the other hosts.
@@ -22,8 +22,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ingest.mill_files import load_mill_config, load_mill_configs
-from ingest.zenoh_tls import DEFAULT_DAYS, gateway_name, make_ca, make_certificate
+from millwatch.ingest.mill_files import load_mill_config, load_mill_configs
+from millwatch.ingest.zenoh_tls import DEFAULT_DAYS, gateway_name, make_ca, make_certificate
 
 __all__ = ["add_parser", "role_names"]
 

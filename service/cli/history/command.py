@@ -6,7 +6,7 @@ given mill files into a store file (the SQLite file ``millwatch serve`` and ``mi
 report`` use) in a minute or two instead of the hours a full simulation takes: per mill one
 stop-to-stop cycle (start with the mill's starter, some minutes of running, stop) is simulated
 and analysed through the real pipeline, and its results are repeated over each month on a
-schedule of ~84 starts a month, failed starts and trips (:mod:`service.cli.history.tiling`).
+schedule of ~84 starts a month, failed starts and trips (:mod:`millwatch.cli.history.tiling`).
 
 The mills are stored as simulated: every report, fleet view and alarm made from this store
 says "simulated data". Never mix it with a plant's store.
@@ -103,10 +103,10 @@ def _bar() -> Callable[[int, int, str], None]:
 
 
 def _build(args: argparse.Namespace) -> int:
-    from ingest.mill_files import load_mill_config
-    from service.cli.history.tiling import build_history
-    from service.reports.history import last_months
-    from service.reports.starts import month_days
+    from millwatch.cli.history.tiling import build_history
+    from millwatch.ingest.mill_files import load_mill_config
+    from millwatch.reports.history import last_months
+    from millwatch.reports.starts import month_days
 
     last = args.last or _last_finished_month()
     month_days(last)  # MonthError naming the value

@@ -5,11 +5,12 @@ in two steps, per mill:
 
 1. one representative stop-to-stop cycle (a start with the mill's own starter, ``run_min``
    minutes of steady running, a stop) is simulated and analysed through the real pipeline
-   (:class:`~service.worker.worker.Worker`, in process): real start/stop events, steady-state
+   (:class:`~millwatch.worker.worker.Worker`, in process): real start/stop events, steady-state
    windows, harmonic tables, damage per component and phase, phase seconds
    (:class:`CycleTemplate`);
 2. its results are tiled over each local calendar month on the schedule of the ``month`` scene
-   (:func:`ingest.sim.scenes.month_events`: ~84 cycles a month, failed starts, trips; Diering
+   (:func:`millwatch.ingest.sim.scenes.month_events`: ~84 cycles a month, failed starts, trips;
+   Diering
    2011 §6.2.8), drawn anew for every month and mill (:func:`tile_month`): each cycle copies the
    events, fills its running time with the steady windows and harmonic tables at their measured
    cadence, and adds the measured start and stop damage plus the run damage rate × running
@@ -22,7 +23,7 @@ in two steps, per mill:
 The mills are stored with ``simulated = true`` (:func:`build_history`), so every report, fleet
 view and alarm made from the store says it is simulated data. ``tests/bench/bench_report.py``
 and ``bench_month_end.py`` fill their stores with the same functions. (Here, beside the command,
-not in :mod:`service.reports`: it drives the worker, and the worker uses the reports.)
+not in :mod:`millwatch.reports`: it drives the worker, and the worker uses the reports.)
 """
 
 from __future__ import annotations
@@ -36,18 +37,18 @@ from typing import Any
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.fatigue.matrices import RangeMeanMatrix
-from analytics.mill.cycle_matrix import sparse_matrix
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene, month_events
-from ingest.sim.spec import FailedStartEvent, StartEvent, StopEvent, TripEvent
-from service.reports.starts import month_bounds_ns, month_days
-from service.store.database import Store
-from service.store.records import DamageRow, EventRow, PhaseRow
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
+from millwatch.analytics.mill.cycle_matrix import sparse_matrix
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene, month_events
+from millwatch.ingest.sim.spec import FailedStartEvent, StartEvent, StopEvent, TripEvent
+from millwatch.reports.starts import month_bounds_ns, month_days
+from millwatch.store.database import Store
+from millwatch.store.records import DamageRow, EventRow, PhaseRow
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import Worker
 
 __all__ = [
     "CycleTemplate",

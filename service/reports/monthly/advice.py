@@ -1,19 +1,19 @@
 """Page 1's words: what drives the damage and the recommended actions, this month's and last
-month's carried (:mod:`service.reports.actions` holds the rules; this module gathers their
+month's carried (:mod:`millwatch.reports.actions` holds the rules; this module gathers their
 evidence from the report's sections and, for last month, from the store)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.operation.transients import start_peaks
-from service.reports.actions import Evidence, carry, drivers, recommend
-from service.reports.history import MonthTrend
-from service.reports.monthly.model import Advice, ComponentDamage, Harmonics, Starts, Steady
-from service.reports.monthly.reader import MonthReader
-from service.reports.monthly.trends import harmonics_section
-from service.store.database import Store
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.operation.transients import start_peaks
+from millwatch.reports.actions import Evidence, carry, drivers, recommend
+from millwatch.reports.history import MonthTrend
+from millwatch.reports.monthly.model import Advice, ComponentDamage, Harmonics, Starts, Steady
+from millwatch.reports.monthly.reader import MonthReader
+from millwatch.reports.monthly.trends import harmonics_section
+from millwatch.store.database import Store
 
 __all__ = ["Advice", "build_advice", "month_evidence"]
 

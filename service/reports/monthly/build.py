@@ -9,21 +9,21 @@ one the maintenance team reads each month. Its sections and their sources:
 * Miner damage per day, phase and component (§8.2, App. D: start, run and stop portions);
 * per component, the month's rainflow range–mean matrix (Fotopoulos 1983 ch. 3) with its S-N
   curve, Goodman correction and Miner limit (``spectra``: the worker's daily ``cycle_matrix``
-  records summed; :mod:`analytics.mill.cycle_matrix`);
+  records summed; :mod:`millwatch.analytics.mill.cycle_matrix`);
 * the cost of a start as App. D counts it (the start-stop records the month's stops carry) and
   the one App. D what-if table of damage and life against starts per month (5/day, 1/day,
   1/week, 1/month, and ``measured``: this month's start rate and running fraction; a month is
-  4 weeks as App. D counts it), with its assumptions (:mod:`service.reports.monthly.what_if`);
+  4 weeks as App. D counts it), with its assumptions (:mod:`millwatch.reports.monthly.what_if`);
 * page 1's words: what drives the damage and the recommended actions, last month's carried
-  (``advice``: :mod:`service.reports.monthly.advice`, :mod:`service.reports.actions`);
+  (``advice``: :mod:`millwatch.reports.monthly.advice`, :mod:`millwatch.reports.actions`);
 * steady-state oscillation range (Tables 14–15) and pinion bending amplitude (§8.1) trends,
 * harmonic line trends and unexplained spectral peaks (§6.1.2, §6.2.7),
 * the month's alarms and data-quality events (§5.2.2);
-* page 1, the summary (:class:`~service.reports.month_summary.ReportSummary`), the remaining
-  life evaluated at the month's end (``life``: :mod:`service.reports.life`, the same
+* page 1, the summary (:class:`~millwatch.reports.month_summary.ReportSummary`), the remaining
+  life evaluated at the month's end (``life``: :mod:`millwatch.reports.life`, the same
   computation as ``GET /mills/{id}/life``), the cumulative damage against the design life
   (``cumulative``) and the 12-month trend (``trend``:
-  :class:`~service.reports.history.MonthTrend`);
+  :class:`~millwatch.reports.history.MonthTrend`);
 * ``simulated``: the mill's data come from the simulator (the report must say so).
 
 The month is the site's calendar month (``MillConfig.time_zone``). Nothing is invented: an empty
@@ -34,7 +34,7 @@ report states the store file and the first/last times of the results it read. It
 one snapshot of the store, bounded to the month on the indexes, and only what it shows: SQLite
 extracts the few fields of each steady-state window (a month holds tens of thousands), harmonic
 tables are sampled hourly. Month bounds, the starts norm and the statuses come from
-:mod:`service.reports.starts`, shared with ``GET /mills/{id}/starts``.
+:mod:`millwatch.reports.starts`, shared with ``GET /mills/{id}/starts``.
 """
 
 from __future__ import annotations
@@ -50,18 +50,18 @@ from typing import Any
 
 import numpy as np
 
-from alarms.lifecycle import Alarm
-from alarms.times import iso_local
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.fatigue.matrices import RangeMeanMatrix
-from analytics.mill.app_d import NO_COST, AppDCost
-from analytics.mill.cycle_matrix import sparse_matrix
-from analytics.operation.transients import start_peaks
-from service.reports.history import last_months, life_inputs, monthly_trend
-from service.reports.life import compute_life, local_iso, monitored_seconds
-from service.reports.month_summary import SummaryStart, build_cumulative, build_summary
-from service.reports.monthly.advice import build_advice, month_evidence
-from service.reports.monthly.model import (
+from millwatch.alarms.lifecycle import Alarm
+from millwatch.alarms.times import iso_local
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
+from millwatch.analytics.mill.app_d import NO_COST, AppDCost
+from millwatch.analytics.mill.cycle_matrix import sparse_matrix
+from millwatch.analytics.operation.transients import start_peaks
+from millwatch.reports.history import last_months, life_inputs, monthly_trend
+from millwatch.reports.life import compute_life, local_iso, monitored_seconds
+from millwatch.reports.month_summary import SummaryStart, build_cumulative, build_summary
+from millwatch.reports.monthly.advice import build_advice, month_evidence
+from millwatch.reports.monthly.model import (
     AlarmEntry,
     ComponentDamage,
     CycleSpectrum,
@@ -71,19 +71,19 @@ from service.reports.monthly.model import (
     StartRow,
     Starts,
 )
-from service.reports.monthly.reader import MonthReader, results_span
-from service.reports.monthly.trends import harmonics_section, steady_section
-from service.reports.monthly.what_if import month_cost, what_if_table
-from service.reports.numbers import sig
-from service.reports.starts import (
+from millwatch.reports.monthly.reader import MonthReader, results_span
+from millwatch.reports.monthly.trends import harmonics_section, steady_section
+from millwatch.reports.monthly.what_if import month_cost, what_if_table
+from millwatch.reports.numbers import sig
+from millwatch.reports.starts import (
     STARTS_NORM_PER_MONTH,
     MonthError,
     count_starts,
     month_bounds_ns,
     peak_status,
 )
-from service.store.database import Store
-from service.store.records import DamageRow, EventRow
+from millwatch.store.database import Store
+from millwatch.store.records import DamageRow, EventRow
 
 __all__ = [
     "STARTS_NORM_PER_MONTH",

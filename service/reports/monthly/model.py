@@ -1,8 +1,9 @@
 """The monthly damage report's data: plain frozen dataclasses, one per section, and the
 report itself (:class:`MonthlyReport`), with :func:`report_to_dict` for JSON.
 
-Built from the store by :mod:`service.reports.monthly.build` (the steady-state and harmonic sections
-by :mod:`service.reports.monthly.trends`); rendered by :mod:`service.reports.monthly_document`.
+Built from the store by :mod:`millwatch.reports.monthly.build` (the steady-state and harmonic
+sections
+by :mod:`millwatch.reports.monthly.trends`); rendered by :mod:`millwatch.reports.monthly_document`.
 Units are in each field's docstring or name (``_ns`` UTC nanoseconds, ``_pct`` percent of rated
 torque, ``_mpa`` MPa); damage is a Miner sum (dimensionless).
 """
@@ -12,13 +13,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from analytics.fatigue.matrices import RangeMeanMatrix
-from analytics.mill.cycle_matrix import sparse_matrix
-from service.reports.actions import Action, CarriedAction
-from service.reports.history import MonthTrend
-from service.reports.life import LifeReport
-from service.reports.month_summary import CumulativeDamage, ReportSummary
-from service.reports.plain import finite_or_none, plain
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
+from millwatch.analytics.mill.cycle_matrix import sparse_matrix
+from millwatch.reports.actions import Action, CarriedAction
+from millwatch.reports.history import MonthTrend
+from millwatch.reports.life import LifeReport
+from millwatch.reports.month_summary import CumulativeDamage, ReportSummary
+from millwatch.reports.plain import finite_or_none, plain
 
 __all__ = [
     "Advice",
@@ -94,7 +95,7 @@ class Starts:
 @dataclass(frozen=True, slots=True)
 class ComponentDamage:
     """Damage of one component: per day and phase, per phase, the month's total; the cost of
-    a start as Diering 2011 App. D counts it (§8.3; :mod:`analytics.mill.app_d`) from the
+    a start as Diering 2011 App. D counts it (§8.3; :mod:`millwatch.analytics.mill.app_d`) from the
     start-stop records the month's stops closed (``start_stops`` of them)."""
 
     component: str
@@ -113,11 +114,12 @@ class CycleSpectrum:
     """The month's rainflow cycles of one component as a range–mean matrix (Fotopoulos 1983
     ch. 3), with what its S-N figure needs. Stresses in MPa as counted, after the stress
     factors (K_t or the fatigue factors the trace carries) and before any mean-stress
-    correction; the edges are the mill file's (:mod:`analytics.mill.cycle_matrix`), the counts
+    correction; the edges are the mill file's (:mod:`millwatch.analytics.mill.cycle_matrix`), the
+    counts
     in half cycles as sparse ``[[cell, half cycles], …]`` of the matrix with its under/overflow
     bins (:meth:`matrix`). ``sn_curve``: the component's curve
-    (:meth:`~analytics.fatigue.sn_curves.SNCurve.to_dict`); ``goodman_s_ut_mpa``: S_ut of its
-    Goodman correction (None without one); ``miner_limit``: the damage taken as failure;
+    (:meth:`~millwatch.analytics.fatigue.sn_curves.SNCurve.to_dict`); ``goodman_s_ut_mpa``: S_ut of
+    its Goodman correction (None without one); ``miner_limit``: the damage taken as failure;
     ``days``: days of the month with a stored matrix."""
 
     component: str
@@ -131,8 +133,8 @@ class CycleSpectrum:
     days: int
 
     def matrix(self) -> RangeMeanMatrix:
-        """The counts as a :class:`~analytics.fatigue.matrices.RangeMeanMatrix` (a component
-        with no stored matrix has no edges: check :attr:`cells` first)."""
+        """The counts as a :class:`~millwatch.analytics.fatigue.matrices.RangeMeanMatrix` (a
+        component with no stored matrix has no edges: check :attr:`cells` first)."""
         return sparse_matrix((self.range_edges_mpa, self.mean_edges_mpa), self.cells)
 
 
@@ -268,7 +270,7 @@ class DataQuality:
 
 @dataclass(frozen=True, slots=True)
 class Advice:
-    """Page 1's words (:mod:`service.reports.actions`): what drives the damage (``drivers``,
+    """Page 1's words (:mod:`millwatch.reports.actions`): what drives the damage (``drivers``,
     sentences), this month's recommended ``actions`` with their evidence and source, and last
     month's (``previous_month``) carried with their status (done, still open, not checked)."""
 

@@ -3,7 +3,7 @@
 :class:`MonthReader` reads in time bounds on the store's indexes and only what the report shows:
 SQLite extracts the few fields of each steady-state window (a month holds tens of thousands) as
 columns (:class:`SteadyRows`), harmonic tables are sampled one per hour
-(:data:`HARMONIC_SAMPLE_NS`). Month bounds and days come from :mod:`service.reports.starts`.
+(:data:`HARMONIC_SAMPLE_NS`). Month bounds and days come from :mod:`millwatch.reports.starts`.
 Times are ns UTC; days are the site's local calendar days.
 """
 
@@ -14,10 +14,10 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from analytics.drivetrain.mill_config import MillConfig
-from service.reports.starts import day_starts_ns, month_bounds_ns, month_days
-from service.store.database import Store
-from service.store.records import DamageRow, EventRow
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.reports.starts import day_starts_ns, month_bounds_ns, month_days
+from millwatch.store.database import Store
+from millwatch.store.records import DamageRow, EventRow
 
 __all__ = [
     "HARMONIC_SAMPLE_NS",
@@ -98,7 +98,8 @@ class MonthReader:
 
     def cycle_matrices(self) -> list[tuple[int, dict[str, Any]]]:
         """The month's ``cycle_matrix`` records (one per local day: each component's rainflow
-        range-mean matrices by phase, :mod:`analytics.mill.cycle_matrix`), oldest first."""
+        range-mean matrices by phase, :mod:`millwatch.analytics.mill.cycle_matrix`), oldest
+        first."""
         return self.store.records(self.mill_id, "cycle_matrix", self.start_ns,
                                   until_ns=self.end_ns, oldest_first=True)  # fmt: skip
 

@@ -1,6 +1,6 @@
 """The monthly report's trend sections: steady-state oscillation range and bending amplitude
 (Diering 2011 Tables 14–15, §8.1), harmonic line trends and unexplained spectral peaks (§6.1.2,
-§6.2.7), from the rows :class:`~service.reports.monthly.reader.MonthReader` reads.
+§6.2.7), from the rows :class:`~millwatch.reports.monthly.reader.MonthReader` reads.
 
 :func:`steady_section` gives one point per steady window and daily means and maxima per
 channel; :func:`harmonics_section` gives daily median amplitudes of the detected fundamental
@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from analytics.drivetrain.mill_config import MillConfig
-from service.reports.monthly.model import (
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.reports.monthly.model import (
     Harmonics,
     LineTrend,
     PeakSummary,
@@ -26,7 +26,7 @@ from service.reports.monthly.model import (
     SteadyDay,
     SteadyPoint,
 )
-from service.reports.monthly.reader import MonthReader, SteadyRows, local_datetime
+from millwatch.reports.monthly.reader import MonthReader, SteadyRows, local_datetime
 
 __all__ = ["harmonics_section", "steady_section"]
 

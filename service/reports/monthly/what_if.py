@@ -1,10 +1,11 @@
 """The monthly report's one App. D table: damage per 4-week month, life from new and remaining
 life at App. D's start rates and at the month as measured, on one start-cost basis.
 
-Basis (Diering 2011 App. D, :mod:`analytics.mill.app_d`): the start-stop records the month's
+Basis (Diering 2011 App. D, :mod:`millwatch.analytics.mill.app_d`): the start-stop records the
+month's
 stops closed (start and stop portions joined, residue counted) and their run portions (steady
 running only), summed per component; the remaining life starts from the damage so far at the
-month's end (:mod:`service.reports.life`), so it is never longer than the life from new.
+month's end (:mod:`millwatch.reports.life`), so it is never longer than the life from new.
 """
 
 from __future__ import annotations
@@ -12,16 +13,16 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from analytics.mill.app_d import (
+from millwatch.analytics.mill.app_d import (
     APP_D_PERIODS,
     NO_COST,
     AppDCost,
     app_d_month,
     cost_from_records,
 )
-from analytics.mill.phase_damage import MONTH_S, SECONDS_PER_YEAR
-from service.reports.monthly.model import WhatIfBasis, WhatIfRow
-from service.store.records import EventRow
+from millwatch.analytics.mill.phase_damage import MONTH_S, SECONDS_PER_YEAR
+from millwatch.reports.monthly.model import WhatIfBasis, WhatIfRow
+from millwatch.store.records import EventRow
 
 __all__ = ["month_cost", "what_if_table"]
 

@@ -1,22 +1,22 @@
 """A report as a document, rendered alike as HTML, PDF and tidy CSV tables.
 
 One content, three renderings (issue 17): what a report says is built once as a
-:class:`~service.reports.render.document.Document` (for the monthly report:
-:mod:`service.reports.monthly_document`), and each renderer is generic over it, so the formats
+:class:`~millwatch.reports.render.document.Document` (for the monthly report:
+:mod:`millwatch.reports.monthly_document`), and each renderer is generic over it, so the formats
 cannot diverge — same sections, tables, figures and numbers (formatted once).
 
 What is here:
 
-* :mod:`service.reports.render.document` — the model: sections of paragraphs, tables (header row
+* :mod:`millwatch.reports.render.document` — the model: sections of paragraphs, tables (header row
   of columns with units, raw cells, column groups for wide tables) and figures; number
   formatting; the lock held while matplotlib draws.
-* :mod:`service.reports.render.html_page` — one self-contained HTML page (inline SVG plots, CSS
+* :mod:`millwatch.reports.render.html_page` — one self-contained HTML page (inline SVG plots, CSS
   that fits and prints tables on A4).
-* :mod:`service.reports.render.pdf_pages` — an A4 PDF with fpdf2 (pure Python): running header,
-  page numbers, figures as images; :mod:`service.reports.render.pdf_table` typesets its tables
-  (wrapped cells, repeated headers, never cut), :mod:`service.reports.render.pdf_fonts` gives it
+* :mod:`millwatch.reports.render.pdf_pages` — an A4 PDF with fpdf2 (pure Python): running header,
+  page numbers, figures as images; :mod:`millwatch.reports.render.pdf_table` typesets its tables
+  (wrapped cells, repeated headers, never cut), :mod:`millwatch.reports.render.pdf_fonts` gives it
   DejaVu Sans from matplotlib's own fonts.
-* :mod:`service.reports.render.csv_tables` — every table as tidy CSV (header row with units),
+* :mod:`millwatch.reports.render.csv_tables` — every table as tidy CSV (header row with units),
   zipped or one by name.
 
 Data flow: ``Document`` → renderer → ``str``/``bytes``. Nothing here knows a report's data: a new

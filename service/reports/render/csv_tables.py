@@ -1,7 +1,7 @@
 """A report document's tables as tidy CSV: one table per file (Diering 2011 §10.6 "automatic
 reports").
 
-Every table of the :class:`~service.reports.render.document.Document` — the printed ones and the
+Every table of the :class:`~millwatch.reports.render.document.Document` — the printed ones and the
 data behind the figures (``printed=False``: starts per day, damage per day, component and phase) —
 becomes one CSV document (RFC 4180, ``\\r\\n`` line ends, UTF-8): a header row of column names
 with their units (``switch_on_pct [% rated]``, ``damage [1]``), then one row per table row, so
@@ -11,7 +11,7 @@ precision (``repr`` of floats), booleans as ``true``/``false``, missing values a
 * :func:`document_csv_zip` — every table in one zip (``<mill>-<month>-<table>.csv``), the API's
   ``format=csv``;
 * :func:`document_csv_table` — one table by name, ``format=csv&table=NAME``; an unknown name is
-  a :class:`~service.errors.BadRequest` (422) that lists the valid ones.
+  a :class:`~millwatch.errors.BadRequest` (422) that lists the valid ones.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import csv
 import io
 import zipfile
 
-from service.errors import BadRequest
-from service.reports.render.document import Cell, Document, Table
+from millwatch.errors import BadRequest
+from millwatch.reports.render.document import Cell, Document, Table
 
 __all__ = ["document_csv_table", "document_csv_zip", "table_csv"]
 

@@ -1,8 +1,8 @@
 """A report as a document: sections of paragraphs, tables and figures that every format renders.
 
 One content, three renderings (issue 17): a report is turned into a :class:`Document` once
-(:mod:`service.reports.monthly_document`); HTML (:mod:`service.reports.render.html_page`),
-PDF (:mod:`service.reports.render.pdf_pages`) and CSV (:mod:`service.reports.render.csv_tables`)
+(:mod:`millwatch.reports.monthly_document`); HTML (:mod:`millwatch.reports.render.html_page`),
+PDF (:mod:`millwatch.reports.render.pdf_pages`) and CSV (:mod:`millwatch.reports.render.csv_tables`)
 are generic over it, so they carry the same sections, tables, figures and numbers. Numbers are
 formatted here, once (:func:`fmt`, :meth:`Table.text_rows`); CSV takes the raw values at full
 precision.
@@ -28,8 +28,8 @@ from typing import Literal
 
 from matplotlib.figure import Figure as MplFigure
 
-from alarms.times import iso_local
-from service.reports.numbers import sig
+from millwatch.alarms.times import iso_local
+from millwatch.reports.numbers import sig
 
 __all__ = [
     "MAX_CHARS",
@@ -70,14 +70,15 @@ NBSP = "\u00a0"
 
 
 def fmt(x: float | None, digits: int = 3) -> str:
-    """A number as a person reads it: :func:`service.reports.numbers.sig` (``digits``
+    """A number as a person reads it: :func:`millwatch.reports.numbers.sig` (``digits``
     significant digits, thousands separators, ``1.23×10⁻⁷`` when very small or large, a true
     minus sign, ``–`` for none or not-a-number)."""
     return sig(None if x is None else float(x), digits)
 
 
 def local_time(t_ns: int | None, time_zone: str) -> str:
-    """:func:`alarms.times.iso_local` of ``t_ns`` in the site's time zone, ``–`` for none."""
+    """:func:`millwatch.alarms.times.iso_local` of ``t_ns`` in the site's time zone, ``–`` for
+    none."""
     return "–" if t_ns is None else iso_local(t_ns, time_zone)
 
 

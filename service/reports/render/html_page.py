@@ -1,12 +1,12 @@
 """A report document as one self-contained HTML page (Diering 2011 §10.6 "automatic reports").
 
-Generic over :class:`~service.reports.render.document.Document`: sections, tables and figures
-are the document's, numbers as :meth:`~service.reports.render.document.Table.text_rows`
+Generic over :class:`~millwatch.reports.render.document.Document`: sections, tables and figures
+are the document's, numbers as :meth:`~millwatch.reports.render.document.Table.text_rows`
 formatted them, so the page says what the PDF says. Inline CSS, plots as inline SVG (text kept
 as text), no external URL, no script.
 
 Tables fit the page: a table wider than the document's column limit is shown as column groups
-(:meth:`~service.reports.render.document.Table.parts`), identifiers may break after ``_``
+(:meth:`~millwatch.reports.render.document.Table.parts`), identifiers may break after ``_``
 (``<wbr>``), wide tables use a smaller font, and a table that still does not fit scrolls on
 screen rather than being cut. For print: A4 pages, header rows repeated on each page, rows and
 figures not split, the summary alone on page 1.
@@ -20,7 +20,7 @@ import logging
 
 import matplotlib
 
-from service.reports.render.document import (
+from millwatch.reports.render.document import (
     MINUS,
     MPL_LOCK,
     STATUS_WORDS,
@@ -62,7 +62,8 @@ figure svg{max-height:235mm;width:auto}}
 #: Tables with at least this many columns use the smaller font.
 WIDE_COLUMNS = 7
 #: Cells this short stay on one line (a time, a number, an identifier); longer text wraps. The
-#: column groups of :meth:`~service.reports.render.document.Table.parts` keep a row within the page.
+#: column groups of :meth:`~millwatch.reports.render.document.Table.parts` keep a row within the
+#: page.
 NOWRAP_CHARS = 24
 
 

@@ -1,14 +1,14 @@
 """A report document as an A4 PDF, typeset with fpdf2 (pure Python: installs with pip alone).
 
-Generic over :class:`~service.reports.render.document.Document`, like
-:mod:`service.reports.render.html_page`: the same sections, tables, figures and formatted numbers.
+Generic over :class:`~millwatch.reports.render.document.Document`, like
+:mod:`millwatch.reports.render.html_page`: the same sections, tables, figures and formatted numbers.
 
 * Page template: a running header with the mill, site and month on every page, ``page n of N``
   and the report's name in the footer; 15 mm margins.
-* Text: DejaVu Sans embedded (subset, :mod:`service.reports.render.pdf_fonts`), so minus signs,
+* Text: DejaVu Sans embedded (subset, :mod:`millwatch.reports.render.pdf_fonts`), so minus signs,
   ≤, μ, σ print as themselves. Body 9.5 pt, tables 7.5 pt (6.5 pt at the least).
-* Tables: :mod:`service.reports.render.pdf_table` — wrapped cells, header row repeated on each page,
-  rows never split, wide tables as column groups; no text is ever cut.
+* Tables: :mod:`millwatch.reports.render.pdf_table` — wrapped cells, header row repeated on each
+  page, rows never split, wide tables as column groups; no text is ever cut.
 * Figures: drawn by matplotlib's Agg at 120 dpi (~150 dpi on the page) and placed at the text
   width; a figure starts a new page rather than being split or squeezed. (Vector SVG through
   fpdf2's SVG reader cost ~0.3 s a figure, twice the drawing itself.)
@@ -26,9 +26,9 @@ from fpdf import FPDF
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from PIL import Image
 
-from service.reports.render.document import MPL_LOCK, Document, Figure, Paragraph, Section, Table
-from service.reports.render.pdf_fonts import FONT_FAMILY, font_files
-from service.reports.render.pdf_table import PT_MM, TableWriter
+from millwatch.reports.render.document import MPL_LOCK, Document, Figure, Paragraph, Section, Table
+from millwatch.reports.render.pdf_fonts import FONT_FAMILY, font_files
+from millwatch.reports.render.pdf_table import PT_MM, TableWriter
 
 __all__ = ["document_pdf"]
 

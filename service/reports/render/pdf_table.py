@@ -8,7 +8,7 @@ pre-wrapped lines, which is ~30× faster and lets the column widths follow the c
    column gets its minimum and the rest of the page is shared in proportion to what each still
    wants. When even the minimums do not fit, the font steps down from :data:`TABLE_PT` to
    :data:`MIN_TABLE_PT`, and then the table is split into more column groups
-   (:meth:`~service.reports.render.document.Table.parts`, the key columns repeated);
+   (:meth:`~millwatch.reports.render.document.Table.parts`, the key columns repeated);
 2. lines (:func:`wrap`): greedy word wrap; a word wider than its column (only possible in a
    one-column part) is broken between characters rather than cut;
 3. pages (:class:`TableWriter`): a row never splits; before a row that does not fit, a new page
@@ -24,7 +24,7 @@ from typing import Any
 
 from fpdf import FPDF
 
-from service.reports.render.document import Table
+from millwatch.reports.render.document import Table
 
 __all__ = ["MIN_TABLE_PT", "STATUS_RGB", "TABLE_PT", "TableWriter", "fit", "wrap"]
 

@@ -8,15 +8,15 @@ from pathlib import Path
 
 import pytest
 
-from analytics.drivetrain.kinematics import (
+from millwatch.analytics.drivetrain.kinematics import (
     KinematicsOptions,
     expected_lines,
     media_oscillation_hz,
     pinion_rpm,
     shaft_speeds_rpm,
 )
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.mill_files import load_mill_config
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.mill_files import load_mill_config
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 

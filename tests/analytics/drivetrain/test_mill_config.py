@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from pydantic import ValidationError
 
-from analytics.drivetrain.mill_config import (
+from millwatch.analytics.drivetrain.mill_config import (
     DriveLayout,
     MillConfig,
     Starter,
@@ -173,7 +173,7 @@ def test_rated_torque_formula() -> None:
 
 
 def test_material_sn_curve_uses_the_material_marin_limit():
-    from analytics.drivetrain.mill_config import MaterialConfig
+    from millwatch.analytics.drivetrain.mill_config import MaterialConfig
 
     material = MaterialConfig()
     curve = material.sn_curve()

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from pydantic import BaseModel
 
-from analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.mill_config import MillConfig
 
 ROOT = Path(__file__).resolve().parents[3]
 SOURCE = ("analytics", "ingest", "alarms", "service")

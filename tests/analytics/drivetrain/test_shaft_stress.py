@@ -17,12 +17,12 @@ import rainflow
 from hypothesis import given
 from hypothesis import strategies as st
 
-from analytics.drivetrain.mill_config import MillConfig, ShaftConfig
-from analytics.drivetrain.shaft_stress import ShaftStressModel, fatigue_factor
-from analytics.mill.loads import LoadAnalysis
-from analytics.signal.frame_aligner import Frame
-from ingest.sim.renderer import Scene
-from ingest.sim.scenes import get_scene
+from millwatch.analytics.drivetrain.mill_config import MillConfig, ShaftConfig
+from millwatch.analytics.drivetrain.shaft_stress import ShaftStressModel, fatigue_factor
+from millwatch.analytics.mill.loads import LoadAnalysis
+from millwatch.analytics.signal.frame_aligner import Frame
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.scenes import get_scene
 from tests.analytics.scene_helpers import mill
 
 

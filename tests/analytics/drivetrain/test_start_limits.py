@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from analytics.drivetrain.start_limits import (
+from millwatch.analytics.drivetrain.start_limits import (
     START_PEAK_STATS,
     shaft_limit_pct,
     start_peak_limits,

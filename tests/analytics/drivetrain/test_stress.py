@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from analytics.drivetrain.stress import (
+from millwatch.analytics.drivetrain.stress import (
     THETA_SEED,
     ChannelCalibration,
     ShuntCalibration,
@@ -29,7 +29,7 @@ from analytics.drivetrain.stress import (
     von_mises_mean,
     zero_offset,
 )
-from analytics.fatigue.sn_curves import marin_endurance_limit
+from millwatch.analytics.fatigue.sn_curves import marin_endurance_limit
 
 stress = st.floats(-1e3, 1e3, allow_nan=False)
 diameter = st.floats(0.05, 1.0)

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from analytics.drivetrain.kinematics import ExpectedLine
-from analytics.drivetrain.torsional_model import (
+from millwatch.analytics.drivetrain.kinematics import ExpectedLine
+from millwatch.analytics.drivetrain.torsional_model import (
     SEED_001_MILLS,
     DynamicFactorMeter,
     TorsionalModel,
@@ -166,13 +166,13 @@ def test_dynamic_factor_meter_streams_and_restores() -> None:
 def test_the_shipped_mills_carry_a_model_in_words():
     from pathlib import Path
 
-    from analytics.drivetrain.torsional_model import (
+    from millwatch.analytics.drivetrain.torsional_model import (
         NO_MODEL_NOTE,
         design_resonances,
         natural_frequencies_of,
         torsional_note,
     )
-    from ingest.mill_files import load_mill_config
+    from millwatch.ingest.mill_files import load_mill_config
 
     mills = Path(__file__).resolve().parents[3] / "deploy" / "mills"
     for path in sorted(mills.glob("*.toml")):

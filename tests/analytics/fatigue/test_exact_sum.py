@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.fatigue.exact_sum import ExactSum, fsum, fsum2
+from millwatch.analytics.fatigue.exact_sum import ExactSum, fsum, fsum2
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 

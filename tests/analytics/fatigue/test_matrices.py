@@ -9,10 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.matrices import FromToMatrix, RangeMeanMatrix, uniform_edges
-from analytics.fatigue.rainflow import RainflowCounter, count_cycles
-from analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.matrices import FromToMatrix, RangeMeanMatrix, uniform_edges
+from millwatch.analytics.fatigue.rainflow import RainflowCounter, count_cycles
+from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
 
 FULL_SCALE = 300.0  # MPa, the sensor's configured range: bins never come from the data
 RANGE_EDGES = uniform_edges(0.0, 2 * FULL_SCALE, 60)

@@ -12,10 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.miner import DamageRecorder, InvalidIncrementError, MinerSum
-from analytics.fatigue.rainflow import RainflowCounter, count_cycles
-from analytics.fatigue.sn_curves import (
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.miner import DamageRecorder, InvalidIncrementError, MinerSum
+from millwatch.analytics.fatigue.rainflow import RainflowCounter, count_cycles
+from millwatch.analytics.fatigue.sn_curves import (
     GoodmanCorrection,
     MeanStressError,
     SNCurve,
@@ -59,7 +59,7 @@ def test_tiny_increments_are_not_lost_on_a_large_total() -> None:
 
 @settings(
     deadline=None
-)  # the first example loads the compiled exact sum (analytics.fatigue.exact_sum)
+)  # the first example loads the compiled exact sum (millwatch.analytics.fatigue.exact_sum)
 @given(st.lists(st.floats(0.0, 1e300), max_size=200), st.integers(1, 50))
 def test_exact_blocks_give_the_exact_sum_for_any_blocking(values: list[float], size: int) -> None:
     total = MinerSum()

@@ -16,9 +16,9 @@ import rainflow
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.rainflow import NonFiniteSampleError, RainflowCounter, count_cycles
-from analytics.fatigue.repeat_closure import RepeatClosure
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.rainflow import NonFiniteSampleError, RainflowCounter, count_cycles
+from millwatch.analytics.fatigue.repeat_closure import RepeatClosure
 
 # ---------------------------------------------------------------- helpers
 

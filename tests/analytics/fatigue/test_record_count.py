@@ -11,12 +11,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.miner import DamageRecorder
-from analytics.fatigue.rainflow import NonFiniteSampleError, count_cycles
-from analytics.fatigue.record_count import RecordCount
-from analytics.fatigue.sn_curves import GoodmanCorrection, equivalent_cycles
-from analytics.fatigue.sn_models import build_sn_curve
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.miner import DamageRecorder
+from millwatch.analytics.fatigue.rainflow import NonFiniteSampleError, count_cycles
+from millwatch.analytics.fatigue.record_count import RecordCount
+from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, equivalent_cycles
+from millwatch.analytics.fatigue.sn_models import build_sn_curve
 
 CURVES = {name: build_sn_curve(name) for name in ("shigley", "fat-normal")}
 

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from analytics.fatigue.rainflow import count_cycles
-from analytics.fatigue.sn_curves import (
+from millwatch.analytics.fatigue.rainflow import count_cycles
+from millwatch.analytics.fatigue.sn_curves import (
     GoodmanCorrection,
     MeanStressError,
     SNCurve,
@@ -292,7 +292,7 @@ def test_life_factor_shifts_the_design_curve_along_log_n():
     """S-N scatter (BS 7608 / IIW design curves: mean − 2 SD of log10 N, SD 0.2 by default)."""
     from statistics import NormalDist
 
-    from analytics.fatigue.sn_curves import SD_LOG10_N
+    from millwatch.analytics.fatigue.sn_curves import SD_LOG10_N
 
     c = SNCurve(m1=5.0, S_D=100.0, N_D=1e6)
     assert c.sd_log10_N == SD_LOG10_N == 0.2 and c.sd_below_mean == 2.0

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from analytics.fatigue.sn_models import SN_MODEL_NAMES, SNModelParameters, build_sn_curve
+from millwatch.analytics.fatigue.sn_models import SN_MODEL_NAMES, SNModelParameters, build_sn_curve
 
 
 def test_app_d_defaults_give_the_section_1_endurance_limit():

@@ -9,11 +9,11 @@ from re import compile as re_compile
 import numpy as np
 import pytest
 
-from analytics.contracts import SnapshotMismatch
-from analytics.drivetrain.mill_config import ChannelConfig
-from analytics.mill.analyzer import DERIVED_SPEED, MillAnalyzer, analysis_config
-from ingest.mill_files import load_mill_config
-from ingest.sim.scenes import get_scene
+from millwatch.analytics.contracts import SnapshotMismatch
+from millwatch.analytics.drivetrain.mill_config import ChannelConfig
+from millwatch.analytics.mill.analyzer import DERIVED_SPEED, MillAnalyzer, analysis_config
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.scenes import get_scene
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 
@@ -99,7 +99,13 @@ def _queued_report(config, scene, names, rng, max_batch: int) -> str:
 def test_long_chunks_give_the_block_by_block_report_bitwise():
     """Starts, stops, barring, faults, steady windows, damage and spectra: the analysis of
     chunks up to MAX_CHUNK_S equals the analysis block by block (random batching)."""
-    from ingest.sim.spec import BarringEvent, DropoutEvent, SpikesEvent, StartEvent, TripEvent
+    from millwatch.ingest.sim.spec import (
+        BarringEvent,
+        DropoutEvent,
+        SpikesEvent,
+        StartEvent,
+        TripEvent,
+    )
 
     rng = np.random.default_rng(3)
     for mill, drop_rpm in (("sag-5200-lrs.toml", False), ("ball-dual-lrs.toml", True)):
@@ -162,7 +168,7 @@ def test_restore_after_a_pinion_speed_change_restarts_only_the_spectra(caplog):
     snap = json.loads(json.dumps(first.snapshot()))
     assert first.state == "running" and first._harmonics.counters["running_samples"] > 0
 
-    with caplog.at_level("WARNING", logger="analytics.mill.analyzer"):
+    with caplog.at_level("WARNING", logger="millwatch.analytics.mill.analyzer"):
         second = MillAnalyzer.restore(_faster(config), snap)
     again = json.loads(json.dumps(second.snapshot()))
     for part in ("aligner", "faults", "tacho", "analyzer", "last_good"):  # all but the spectra
@@ -284,7 +290,7 @@ def test_speed_spikes_leave_line_frequencies_within_002_hz_and_drop_no_segment()
     drift and 13 telemetry spike bursts on the speed channel. Every torque line of every window
     within 0.02 Hz and 1 % of the truth, the long-run table as without the spikes, no segment
     dropped and no 'unknown' state."""
-    from ingest.sim.spec import SceneParams, SpikesEvent
+    from millwatch.ingest.sim.spec import SceneParams, SpikesEvent
 
     config = load_mill_config(MILLS / "sag-5200-lrs.toml")
     drift = SceneParams(speed_drift_pct=1.0).model_dump()
@@ -335,7 +341,7 @@ def _true_revs(scene, a_ns: int, b_ns: int) -> float:
 
 
 def test_a_speed_dropout_and_a_stop_are_the_reasons_segments_are_dropped():
-    from ingest.sim.spec import DropoutEvent, StopEvent
+    from millwatch.ingest.sim.spec import DropoutEvent, StopEvent
 
     config = load_mill_config(MILLS / "sag-5200-lrs.toml")
     events = (DropoutEvent(at_s=35.0, duration_s=0.5, channels=("speed",)), StopEvent(at_s=80.0))

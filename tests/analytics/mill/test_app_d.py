@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 import rainflow
 
-from analytics.fatigue.sn_curves import SNCurve, StressKind
-from analytics.mill.app_d import (
+from millwatch.analytics.fatigue.sn_curves import SNCurve, StressKind
+from millwatch.analytics.mill.app_d import (
     APP_D_PERIODS,
     AppDCost,
     app_d_month,
     app_d_projections,
 )
-from analytics.mill.loads import LoadAnalysis
+from millwatch.analytics.mill.loads import LoadAnalysis
 from tests.analytics.scene_helpers import run, scene
 
 
@@ -126,7 +126,7 @@ def test_app_d_month_arithmetic():
 def test_snapshot_round_trip_keeps_the_portions():
     sc = scene("start-lrs")
     data = sc.render(0, sc.n_samples)
-    from analytics.signal.frame_aligner import Frame
+    from millwatch.analytics.signal.frame_aligner import Frame
 
     whole = LoadAnalysis(sc.config)
     split = LoadAnalysis(sc.config)
@@ -158,9 +158,9 @@ def test_the_stop_records_sum_to_the_cost_when_the_recording_begins_running():
     """A recording that begins running (no start seen) books its steady running in the first
     stop's record (``start_stops`` 0), so the records a store keeps sum to what the analyzer
     states: the report and ``analyze`` give one cost of a start (the parity test's scene)."""
-    from analytics.mill.app_d import cost_from_records
-    from analytics.signal.frame_aligner import Frame
-    from ingest.sim.scenes import get_scene
+    from millwatch.analytics.mill.app_d import cost_from_records
+    from millwatch.analytics.signal.frame_aligner import Frame
+    from millwatch.ingest.sim.scenes import get_scene
     from tests.analytics.scene_helpers import mill
 
     sc = get_scene("steady", mill("sag-5200-lrs"), seed=11, duration_s=215.0,

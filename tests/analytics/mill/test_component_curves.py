@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 import rainflow
 
-from analytics.contracts import SnapshotMismatch
-from analytics.drivetrain.mill_config import MillConfig, MillConfigError
-from analytics.mill.loads import LoadAnalysis
-from ingest.mill_files import load_mill_config
+from millwatch.analytics.contracts import SnapshotMismatch
+from millwatch.analytics.drivetrain.mill_config import MillConfig, MillConfigError
+from millwatch.analytics.mill.loads import LoadAnalysis
+from millwatch.ingest.mill_files import load_mill_config
 from tests.analytics.drivetrain.test_shaft_stress import analysed, scene_data, start_scene
 from tests.analytics.scene_helpers import mill
 
@@ -130,7 +130,7 @@ def test_a_snapshot_on_other_curves_is_refused_in_words():
     sc = start_scene()
     a = LoadAnalysis(mill("sag-5200-lrs"))
     a_data = scene_data()
-    from analytics.signal.frame_aligner import Frame
+    from millwatch.analytics.signal.frame_aligner import Frame
 
     a.feed(Frame(sc.t_ns(0), sc.fs, {k: v[:5000] for k, v in a_data.items()}))
     snap = a.snapshot()
@@ -237,7 +237,7 @@ def test_the_critical_plane_reports_the_plane_of_most_damage_on_its_grid():
     assert cfg.shafts.stress_model().plane_angles_deg() == tuple(range(-75, 90, 15))
     sc, data = start_scene(), scene_data()
     a = LoadAnalysis(cfg)
-    from analytics.signal.frame_aligner import Frame
+    from millwatch.analytics.signal.frame_aligner import Frame
 
     for lo in range(0, sc.n_samples, 1000):
         hi = min(lo + 1000, sc.n_samples)
@@ -255,7 +255,7 @@ def test_the_critical_plane_reports_the_plane_of_most_damage_on_its_grid():
 def test_the_critical_plane_continues_exactly_after_a_restore():
     cfg = critical(mill("sag-5200-lrs"), step=30.0)
     sc, data = start_scene(), scene_data()
-    from analytics.signal.frame_aligner import Frame
+    from millwatch.analytics.signal.frame_aligner import Frame
 
     def feed(a: LoadAnalysis, lo: int, hi: int) -> None:
         for b in range(lo, hi, 1000):
@@ -311,8 +311,8 @@ def test_goodman_is_refused_where_the_full_scales_reach_the_ultimate_strength():
 def test_app_d_on_the_critical_plane_costs_each_component_on_its_governing_plane():
     """App. D's portions are counted on every plane; the stop event's record and the start
     cost name components (not planes), the governing plane's, as the damage table does."""
-    from analytics.signal.frame_aligner import Frame
-    from ingest.sim.scenes import get_scene
+    from millwatch.analytics.signal.frame_aligner import Frame
+    from millwatch.ingest.sim.scenes import get_scene
 
     sc = get_scene("start-lrs", critical(mill("sag-5200-lrs"), step=30.0), seed=0)
     data = sc.render(0, sc.n_samples)

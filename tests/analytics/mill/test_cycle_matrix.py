@@ -1,4 +1,4 @@
-"""The per-day range-mean matrices of counted cycles (analytics.mill.cycle_matrix) as
+"""The per-day range-mean matrices of counted cycles (millwatch.analytics.mill.cycle_matrix) as
 PhaseDamage books them: counts equal the cycles', days add up to the whole record, the same
 however the cycles are split, and through a snapshot."""
 
@@ -13,14 +13,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.matrices import RangeMeanMatrix
-from analytics.fatigue.miner import DamageRecorder
-from analytics.fatigue.sn_curves import SNCurve
-from analytics.mill.cycle_matrix import CycleMatrixDays, matrix_edges, sparse_matrix
-from analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
-from analytics.operation.operating_states import OperatingState as S
-from analytics.operation.operating_states import Transition
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
+from millwatch.analytics.fatigue.miner import DamageRecorder
+from millwatch.analytics.fatigue.sn_curves import SNCurve
+from millwatch.analytics.mill.cycle_matrix import CycleMatrixDays, matrix_edges, sparse_matrix
+from millwatch.analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
+from millwatch.analytics.operation.operating_states import OperatingState as S
+from millwatch.analytics.operation.operating_states import Transition
 
 CURVE = SNCurve(m1=5.0, S_D=100.0, N_D=1e6)
 T0 = 1_704_067_200 * 10**9 - 2 * 3600 * 10**9  # 00:00 in Johannesburg

@@ -9,16 +9,16 @@ import re
 import numpy as np
 import pytest
 
-from analytics.contracts import SnapshotMismatch
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.mill.load_snapshot import assemble
-from analytics.mill.loads import (
+from millwatch.analytics.contracts import SnapshotMismatch
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.mill.load_snapshot import assemble
+from millwatch.analytics.mill.loads import (
     KEEP_START_DAYS,
     KEEP_START_MONTHS,
     LoadAnalysis,
     component_names,
 )
-from analytics.signal.frame_aligner import Frame
+from millwatch.analytics.signal.frame_aligner import Frame
 from tests.analytics.scene_helpers import custom, mill, run, scene
 
 
@@ -265,8 +265,8 @@ def test_empty_frames_are_fine():
 
 
 def test_starts_status_is_strictly_above_the_levels_like_the_alarm_rules():
-    from analytics.drivetrain.mill_config import AlarmThresholds
-    from analytics.mill.report import starts_status
+    from millwatch.analytics.drivetrain.mill_config import AlarmThresholds
+    from millwatch.analytics.mill.report import starts_status
 
     levels = AlarmThresholds()  # warning above 5, alarm above 20 (Diering 2011 §6.1.3, §10.3)
     assert [starts_status(n, levels) for n in (4, 5, 6, 20, 21)] == [

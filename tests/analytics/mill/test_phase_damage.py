@@ -11,10 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
-from analytics.fatigue.cycles import Cycles
-from analytics.fatigue.miner import DamageRecorder
-from analytics.fatigue.sn_curves import SNCurve
-from analytics.mill.phase_damage import (
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.miner import DamageRecorder
+from millwatch.analytics.fatigue.sn_curves import SNCurve
+from millwatch.analytics.mill.phase_damage import (
     APP_D_SCENARIOS,
     MONTH_S,
     PhaseDamage,
@@ -23,8 +23,8 @@ from analytics.mill.phase_damage import (
     project_monthly_damage,
     start_cost,
 )
-from analytics.operation.operating_states import OperatingState as S
-from analytics.operation.operating_states import Transition
+from millwatch.analytics.operation.operating_states import OperatingState as S
+from millwatch.analytics.operation.operating_states import Transition
 
 CURVE = SNCurve(m1=5.0, S_D=100.0, N_D=1e6)
 T0 = 1_704_067_200 * 10**9  # 2024-01-01T00:00Z = 02:00 in Johannesburg

@@ -9,8 +9,8 @@ import json
 import pytest
 from pydantic import ValidationError
 
-from analytics.mill.analyzer import MillAnalyzer
-from analytics.mill.results import (
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.analytics.mill.results import (
     BarringEvent,
     StartEvent,
     SteadyWindowResult,

@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from analytics.operation.operating_states import OperatingState as S
-from analytics.operation.operating_states import OperatingStateMachine
+from millwatch.analytics.operation.operating_states import OperatingState as S
+from millwatch.analytics.operation.operating_states import OperatingStateMachine
 from tests.analytics.scene_helpers import custom, scene, state_inputs
 
 FS = 1000.0

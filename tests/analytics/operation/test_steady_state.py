@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from analytics.operation.steady_state import SteadyStateMeter
+from millwatch.analytics.operation.steady_state import SteadyStateMeter
 
 FS = 1000.0
 REV = 2.0 / FS  # 2 revolutions per second at rated speed

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from analytics.operation.transients import BarringAccumulator, rise_time_ms
-from ingest.sim.waveforms import RC_10_90
+from millwatch.analytics.operation.transients import BarringAccumulator, rise_time_ms
+from millwatch.ingest.sim.waveforms import RC_10_90
 from tests.analytics.scene_helpers import custom, run, scene
 
 FS = 1000.0

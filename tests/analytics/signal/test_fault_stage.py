@@ -10,11 +10,11 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.signal.fault_stage import FaultStage, LastGood
-from analytics.signal.frame_aligner import Frame
-from analytics.signal.telemetry_faults import TelemetryFaultDetector, hold_last_good
-from ingest.mill_files import load_mill_config
-from ingest.sim.scenes import get_scene
+from millwatch.analytics.signal.fault_stage import FaultStage, LastGood
+from millwatch.analytics.signal.frame_aligner import Frame
+from millwatch.analytics.signal.telemetry_faults import TelemetryFaultDetector, hold_last_good
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.scenes import get_scene
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 

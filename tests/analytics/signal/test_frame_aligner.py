@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytics.signal.frame_aligner import FrameAligner
+from millwatch.analytics.signal.frame_aligner import FrameAligner
 
 FS = 1000.0
 T0 = 10**18
@@ -93,7 +93,7 @@ def test_released_absent_channels_do_not_hold_the_others():
 def test_snapshot_restore_keeps_pending_blocks():
     import json
 
-    from analytics.signal.frame_aligner import FrameAligner
+    from millwatch.analytics.signal.frame_aligner import FrameAligner
 
     a = FrameAligner(["x", "y"], 1000.0)
     assert a.push("x", 0, 1000.0, np.arange(10.0)) == []

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 
-from analytics.signal.sample_ring import SampleRing
+from millwatch.analytics.signal.sample_ring import SampleRing
 
 
 def test_write_read_wraps_and_bounds():

@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.signal.tacho import TachoSpeed
-from ingest.mill_files import load_mill_config
-from ingest.sim.scenes import get_scene
+from millwatch.analytics.signal.tacho import TachoSpeed
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.scenes import get_scene
 
 
 @cache

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.fatigue.rainflow import count_cycles
-from analytics.signal.telemetry_faults import (
+from millwatch.analytics.fatigue.rainflow import count_cycles
+from millwatch.analytics.signal.telemetry_faults import (
     LOOKAHEAD,
     RC_10_90,
     FaultCounts,
@@ -21,9 +21,9 @@ from analytics.signal.telemetry_faults import (
     TelemetryFaultDetector,
     hold_last_good,
 )
-from ingest.mill_files import load_mill_config
-from ingest.sim.scenes import get_scene, scene_spec
-from ingest.sim.spec import SpikesEvent
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.scenes import get_scene, scene_spec
+from millwatch.ingest.sim.spec import SpikesEvent
 
 FS = (-100.0, 300.0)
 

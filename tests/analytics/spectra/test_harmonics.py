@@ -10,17 +10,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analytics.contracts import SnapshotMismatch
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.spectra.facts import HarmonicWindow
-from analytics.spectra.report import harmonics_report
-from analytics.spectra.settings import HarmonicSettings, is_running, stagger_for
-from analytics.spectra.tapers import window_response
-from analytics.spectra.tracker import HarmonicTracker, _spread
-from ingest.mill_files import load_mill_config
-from ingest.sim.renderer import Scene
-from ingest.sim.scenes import get_scene
-from ingest.sim.spec import SceneParams
+from millwatch.analytics.contracts import SnapshotMismatch
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.spectra.facts import HarmonicWindow
+from millwatch.analytics.spectra.report import harmonics_report
+from millwatch.analytics.spectra.settings import HarmonicSettings, is_running, stagger_for
+from millwatch.analytics.spectra.tapers import window_response
+from millwatch.analytics.spectra.tracker import HarmonicTracker, _spread
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.sim.spec import SceneParams
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 DRIFT = SceneParams(speed_drift_pct=1.0).model_dump()  # ±1 % speed drift

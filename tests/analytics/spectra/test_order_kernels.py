@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from analytics.spectra.order_kernels import (
+from millwatch.analytics.spectra.order_kernels import (
     _BLOCK,
     _block_rows,
     angle_prefix,
@@ -16,7 +16,7 @@ from analytics.spectra.order_kernels import (
     power_of,
     resample,
 )
-from analytics.spectra.tapers import COSINE_WINDOWS, window_values
+from millwatch.analytics.spectra.tapers import COSINE_WINDOWS, window_values
 
 SAG_ORDERS = np.array([1 / 13, 1.0, 30 / 13, 3.0, 5.65, 285 / 13, 22.0, 287 / 13, 571 / 13,
                        44.0, 573 / 13, 857 / 13, 66.0, 859 / 13])  # fmt: skip

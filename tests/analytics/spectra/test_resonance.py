@@ -11,11 +11,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.drivetrain.torsional_model import natural_frequencies_of
-from analytics.spectra.facts import HarmonicWindow
-from analytics.spectra.resonance import resonance_margins
-from analytics.spectra.settings import HarmonicSettings
-from analytics.spectra.tracker import HarmonicTracker
+from millwatch.analytics.drivetrain.torsional_model import natural_frequencies_of
+from millwatch.analytics.spectra.facts import HarmonicWindow
+from millwatch.analytics.spectra.resonance import resonance_margins
+from millwatch.analytics.spectra.settings import HarmonicSettings
+from millwatch.analytics.spectra.tracker import HarmonicTracker
 from tests.analytics.spectra.test_harmonics import config, scene, seconds, track
 
 

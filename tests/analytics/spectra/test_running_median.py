@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from analytics.spectra.running_median import (
+from millwatch.analytics.spectra.running_median import (
     NoiseFloor,
     local_maxima,
     running_median,

@@ -13,12 +13,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analytics.drivetrain.torsional_model import torsional_note
-from analytics.spectra.facts import HarmonicWindow
-from analytics.spectra.report import harmonics_report
-from analytics.spectra.settings import HarmonicSettings
-from analytics.spectra.tracker import DROP_REASONS, HarmonicTracker, describe_segments
-from ingest.mill_files import load_mill_config
+from millwatch.analytics.drivetrain.torsional_model import torsional_note
+from millwatch.analytics.spectra.facts import HarmonicWindow
+from millwatch.analytics.spectra.report import harmonics_report
+from millwatch.analytics.spectra.settings import HarmonicSettings
+from millwatch.analytics.spectra.tracker import DROP_REASONS, HarmonicTracker, describe_segments
+from millwatch.ingest.mill_files import load_mill_config
 
 CONFIG = load_mill_config(Path(__file__).resolve().parents[3] / "deploy/mills/sag-5200-lrs.toml")
 SETTINGS = HarmonicSettings(segments_per_window=2)

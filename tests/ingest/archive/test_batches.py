@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from mcap.writer import CompressionType, Writer
 
-from ingest import keys, wire
-from ingest.archive.batches import BatchReader, MessageBatch, archive_batches
-from ingest.archive.files import ArchivePosition
-from ingest.archive.mcap_append import appender, pack_chunk_indexes
-from ingest.archive.reader import ArchiveReader, TailTolerantReader
-from ingest.archive.writer import ArchiveWriter
+from millwatch.ingest import keys, wire
+from millwatch.ingest.archive.batches import BatchReader, MessageBatch, archive_batches
+from millwatch.ingest.archive.files import ArchivePosition
+from millwatch.ingest.archive.mcap_append import appender, pack_chunk_indexes
+from millwatch.ingest.archive.reader import ArchiveReader, TailTolerantReader
+from millwatch.ingest.archive.writer import ArchiveWriter
 
 T0 = 1_763_767_800_000_000_000
 SIGNALS = ("motor_torque", "pinion_torque", "pinion_bending", "speed")

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numba import njit
 
-from ingest.archive.copy_kernels import copy_bytes
+from millwatch.ingest.archive.copy_kernels import copy_bytes
 
 
 @njit(cache=False)

@@ -14,7 +14,7 @@ from hypothesis.extra import numpy as hnp
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from ingest.archive.foxglove_export import (
+from millwatch.ingest.archive.foxglove_export import (
     DAMAGE_SCHEMA,
     ENVELOPE_SCHEMA,
     SAMPLE_SCHEMA,

@@ -21,12 +21,12 @@ import numpy as np
 import pytest
 from mcap.reader import NonSeekingReader, make_reader
 
-from ingest import keys, wire
-from ingest.archive import files as archive
-from ingest.archive.files import ArchivePosition
-from ingest.archive.reader import ArchiveReader, TailTolerantReader
-from ingest.archive.recovery import recover_file
-from ingest.archive.writer import ArchiveWriter
+from millwatch.ingest import keys, wire
+from millwatch.ingest.archive import files as archive
+from millwatch.ingest.archive.files import ArchivePosition
+from millwatch.ingest.archive.reader import ArchiveReader, TailTolerantReader
+from millwatch.ingest.archive.recovery import recover_file
+from millwatch.ingest.archive.writer import ArchiveWriter
 
 log = logging.getLogger(__name__)
 REPO = Path(__file__).resolve().parents[3]
@@ -230,8 +230,8 @@ def test_writer_rejects_bad_arguments(tmp_path: Path) -> None:
 CHILD = """
 import os, sys, time
 import numpy as np
-from ingest import keys, wire
-from ingest.archive import writer as archive
+from millwatch.ingest import keys, wire
+from millwatch.ingest.archive import writer as archive
 directory, chunk_size, latency = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 names = [keys.build_key("s1", "m1", s) for s in ("motor_torque", "pinion_torque", "speed")]
 writer = archive.ArchiveWriter(directory, "m1", chunk_size=chunk_size,

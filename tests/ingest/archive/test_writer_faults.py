@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ingest import keys, wire
-from ingest.archive import writer as writer_module
-from ingest.archive.batches import BatchReader
-from ingest.archive.files import list_archive_files
-from ingest.archive.reader import ArchiveReader, TailTolerantReader
-from ingest.archive.writer import ArchiveFullError, ArchiveWriter
+from millwatch.ingest import keys, wire
+from millwatch.ingest.archive import writer as writer_module
+from millwatch.ingest.archive.batches import BatchReader
+from millwatch.ingest.archive.files import list_archive_files
+from millwatch.ingest.archive.reader import ArchiveReader, TailTolerantReader
+from millwatch.ingest.archive.writer import ArchiveFullError, ArchiveWriter
 
 T0 = 1_763_767_800_000_000_000
 MS = 1_000_000

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ingest import keys
-from ingest.sim.renderer import Scene
+from millwatch.ingest import keys
+from millwatch.ingest.sim.renderer import Scene
 
 
 def channel_samples(scene: Scene) -> dict[str, np.ndarray]:

@@ -8,21 +8,21 @@ from collections import defaultdict
 
 import numpy as np
 
-from ingest.keys import mill_pattern
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.spool.store import Spool
-from ingest.wire import DType, decode_block
-from ingest.zenoh_session import (
+from millwatch.cli.simulate import DEFAULT_MILL
+from millwatch.ingest.keys import mill_pattern
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.spool.store import Spool
+from millwatch.ingest.wire import DType, decode_block
+from millwatch.ingest.zenoh_session import (
     build_config,
     declare_block_subscriber,
     free_loopback_port,
     open_session,
     tcp_endpoint,
 )
-from service.cli.simulate import DEFAULT_MILL
 from tests.ingest.sim.scene_samples import channel_samples
 
 

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ingest.mill_files import load_mill_config
-from ingest.sim.scenes import get_scene, list_scenes, load_scene_file, scene_spec
-from ingest.sim.spec import SceneError
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.scenes import get_scene, list_scenes, load_scene_file, scene_spec
+from millwatch.ingest.sim.spec import SceneError
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 REQUIRED = {

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ingest.mill_files import load_mill_config
-from ingest.sim.renderer import Scene
-from ingest.sim.seed_tables import draw_peak_pct
-from ingest.sim.spec import (
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.renderer import Scene
+from millwatch.ingest.sim.seed_tables import draw_peak_pct
+from millwatch.ingest.sim.spec import (
     BarringEvent,
     DropoutEvent,
     FailedStartEvent,

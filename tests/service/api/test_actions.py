@@ -11,8 +11,8 @@ from datetime import UTC, datetime, timedelta
 import httpx
 import pytest
 
-from ingest.zenoh_session import free_loopback_port
-from service.settings import ApiSettings, ApiUser
+from millwatch.ingest.zenoh_session import free_loopback_port
+from millwatch.settings import ApiSettings, ApiUser
 from tests.service.conftest import API_KEY, MILL, _settings, served_runtime
 
 OPERATOR_KEY = "operator-key-0123456789"

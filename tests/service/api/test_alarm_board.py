@@ -8,11 +8,11 @@ import random
 
 import pytest
 
-from alarms.lifecycle import Alarm, Transition
-from alarms.wire import encode_transition
-from service.api.alarm_board import AlarmBoard
-from service.api.alarm_views import alarm_list
-from service.store.database import Store
+from millwatch.alarms.lifecycle import Alarm, Transition
+from millwatch.alarms.wire import encode_transition
+from millwatch.api.alarm_board import AlarmBoard
+from millwatch.api.alarm_views import alarm_list
+from millwatch.store.database import Store
 from tests.alarms.helpers import NS, T0, engine, feed
 from tests.service.store.test_alarms import _write
 

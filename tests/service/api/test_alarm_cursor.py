@@ -4,7 +4,7 @@ the interleaving of raises, acknowledgements (of old alarms too), re-annunciatio
 duplicate deliveries, mills whose sample clocks lag each other, and a restart of the API.
 
 The alarm records come from the lifecycle functions that make them in the engine
-(:mod:`alarms.lifecycle`); the board is the one ``/alarms`` answers from."""
+(:mod:`millwatch.alarms.lifecycle`); the board is the one ``/alarms`` answers from."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from fastapi.testclient import TestClient
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from alarms.lifecycle import (
+from millwatch.alarms.lifecycle import (
     Alarm,
     AlarmState,
     Transition,
@@ -27,14 +27,14 @@ from alarms.lifecycle import (
     raise_alarm,
     reannunciate,
 )
-from alarms.rules import Severity
-from service.api.alarm_board import AlarmBoard, Cursor, row_to_dict
-from service.api.app import create_app
-from service.api.times import with_iso
-from service.settings import ServiceSettings
-from service.store.database import Store
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.alarms.rules import Severity
+from millwatch.api.alarm_board import AlarmBoard, Cursor, row_to_dict
+from millwatch.api.app import create_app
+from millwatch.api.times import with_iso
+from millwatch.settings import ServiceSettings
+from millwatch.store.database import Store
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 from tests.alarms.helpers import NS, T0
 
 MILLS = ("m1", "m2", "m3")

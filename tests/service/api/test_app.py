@@ -14,15 +14,20 @@ import httpx
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from alarms.times import iso_utc
-from ingest.keys import alarm_pattern
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.api.app import create_app
-from service.api.domain_metrics import MILL_STATES
-from service.reports.starts import current_month
-from service.settings import ServiceSettings
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.alarms.times import iso_utc
+from millwatch.api.app import create_app
+from millwatch.api.domain_metrics import MILL_STATES
+from millwatch.ingest.keys import alarm_pattern
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.reports.starts import current_month
+from millwatch.settings import ServiceSettings
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 from tests.service.conftest import API_KEY, MILL, held_runtime, serve
 
 pytestmark = pytest.mark.slow
@@ -318,7 +323,7 @@ def test_openapi_documents_problems_examples_and_the_api_key(client):
     assert "304" in spec["paths"]["/alarms"]["get"]["responses"]
     for name in ("LifeReport", "FleetView", "MonthStarts", "Spectrum", "AlarmList"):
         assert spec["components"]["schemas"][name].get("examples"), name
-    # the mill's status is documented field by field (one typed model, service.status)
+    # the mill's status is documented field by field (one typed model, millwatch.status)
     schemas = spec["components"]["schemas"]
     detail = next(s for n, s in schemas.items() if n.startswith("MillDetail"))
     assert detail["properties"]["status"]["$ref"].split("/")[-1].startswith("MillStatus")
@@ -464,7 +469,7 @@ def test_status_gauges_read_the_status_and_life_and_counters_start_at_zero(clien
     """Starts today, last start peak, imbalance, stale channels and damage rates are the
     status's and the life answer's values; every channel has a decode-error series per kind
     from the start (0 here: the simulator sends none), so a dashboard's sum over it is 0."""
-    from service.api.metrics import DECODE_ERROR_KINDS
+    from millwatch.api.metrics import DECODE_ERROR_KINDS
 
     scraped = _scrape(client)
     status = live_api.runtime.status[MILL]

@@ -1,4 +1,4 @@
-"""The alarm journal (:mod:`service.api.journal`): the store's transitions in time order with
+"""The alarm journal (:mod:`millwatch.api.journal`): the store's transitions in time order with
 their alarm's identity, filtered by mill and time, paged without repeats or gaps, and the
 per-mill pages of several workers merged into what one store would answer. The transitions come
 from the alarm engine fed observations of two mills."""
@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from alarms.engine import AlarmEngine
-from alarms.lifecycle import Transition
-from service.api.journal import (
+from millwatch.alarms.engine import AlarmEngine
+from millwatch.alarms.lifecycle import Transition
+from millwatch.api.journal import (
     ALARM_COLUMNS,
     JournalKey,
     JournalPage,
@@ -20,7 +20,7 @@ from service.api.journal import (
     journal_entries,
     merge_pages,
 )
-from service.store.database import Store
+from millwatch.store.database import Store
 from tests.alarms.helpers import NS, T0, feed, mill, with_alarms
 from tests.service.store.test_alarms import _write
 

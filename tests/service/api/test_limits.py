@@ -1,4 +1,4 @@
-"""What one client can cost the API (:mod:`service.api.limits`), on a real uvicorn on 127.0.0.1
+"""What one client can cost the API (:mod:`millwatch.api.limits`), on a real uvicorn on 127.0.0.1
 (fixture ``live_api``): a 100 MB body is refused before it is read, the key before any body,
 and a burst of PDF report requests neither queues nor blocks ``/health``."""
 
@@ -13,7 +13,7 @@ from urllib.parse import urlsplit
 import httpx
 import pytest
 
-from service.api.limits import ApiLimits
+from millwatch.api.limits import ApiLimits
 from tests.service.conftest import API_KEY, MILL
 
 pytestmark = pytest.mark.slow

@@ -1,17 +1,17 @@
 """One alarm record: the API's alarm bodies and the store's tables carry exactly the fields of
-:mod:`alarms.lifecycle`'s records, so a field added to the record and missed in the API model or
-in a migration fails here, naming it."""
+:mod:`millwatch.alarms.lifecycle`'s records, so a field added to the record and missed in the API
+model or in a migration fails here, naming it."""
 
 from __future__ import annotations
 
 import sqlite3
 
-from alarms.lifecycle import Alarm, TransitionRecord
-from analytics.drivetrain.mill_config import MillConfig
-from service.api.models import ALARM_EXAMPLE, AlarmDetail, AlarmOut, TransitionOut
-from service.api.routes.params import MILL_ID_PATTERN
-from service.store.database import Store
-from service.store.records import columns
+from millwatch.alarms.lifecycle import Alarm, TransitionRecord
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.models import ALARM_EXAMPLE, AlarmDetail, AlarmOut, TransitionOut
+from millwatch.api.routes.params import MILL_ID_PATTERN
+from millwatch.store.database import Store
+from millwatch.store.records import columns
 
 
 def _iso_beside_ns(names: tuple[str, ...]) -> tuple[str, ...]:

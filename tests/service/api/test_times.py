@@ -7,8 +7,8 @@ from datetime import UTC, datetime
 from hypothesis import given
 from hypothesis import strategies as st
 
-from alarms.times import iso_utc
-from service.api.times import ns_of, with_iso
+from millwatch.alarms.times import iso_utc
+from millwatch.api.times import ns_of, with_iso
 
 T = 1714560000000000000  # 2024-05-01T10:40:00Z
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from ingest.mill_files import load_mill_config
-from service.cli.main import main
+from millwatch.cli.main import main
+from millwatch.ingest.mill_files import load_mill_config
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 
@@ -87,13 +87,13 @@ def test_recording_of_another_mill(recording, capsys):
 
 # ---------------------------------------------------------------- the archive as the plant sent it
 def _messages(path: Path) -> list:
-    from ingest.archive.reader import TailTolerantReader
+    from millwatch.ingest.archive.reader import TailTolerantReader
 
     return list(TailTolerantReader(path).messages())
 
 
 def _write(directory: Path, prefix: str, messages: list) -> Path:
-    from ingest.archive.writer import ArchiveWriter
+    from millwatch.ingest.archive.writer import ArchiveWriter
 
     with ArchiveWriter(directory, prefix) as archive:
         for m in messages:
@@ -114,7 +114,7 @@ def _analyze(paths: list[Path], *extra: str) -> dict:
 
 
 def _t0(msg) -> int:
-    from ingest import wire
+    from millwatch.ingest import wire
 
     return wire.decode_block(msg.payload).t0_ns
 
@@ -228,8 +228,8 @@ def test_a_file_that_is_no_mcap_is_named(recording, tmp_path, capsys):
 
 def test_spectra_on_a_thread_of_their_own_give_the_same_report(recording):
     """With a core to spare the spectra run on their own thread: the same report, bitwise."""
-    from ingest.mill_files import load_mill_config
-    from service.cli.analyze import plan_jobs, run_jobs
+    from millwatch.cli.analyze import plan_jobs, run_jobs
+    from millwatch.ingest.mill_files import load_mill_config
 
     config = load_mill_config(MILL)
     inline = plan_jobs([recording[0]], [config], 1, cores=1)
@@ -253,7 +253,7 @@ def test_a_progress_bar_on_a_terminal(recording):
 
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # 100 columns
-    cmd = [sys.executable, "-m", "service.cli", "analyze", str(recording[0]), "--mill", str(MILL)]
+    cmd = [sys.executable, "-m", "millwatch.cli", "analyze", str(recording[0]), "--mill", str(MILL)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=slave)
     os.close(slave)
     seen = b""

@@ -10,9 +10,9 @@ import pytest
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 
-from ingest.archive.files import MCAP_MAGIC, list_archive_files
-from ingest.archive.writer import ArchiveWriter
-from service.cli.main import main
+from millwatch.cli.main import main
+from millwatch.ingest.archive.files import MCAP_MAGIC, list_archive_files
+from millwatch.ingest.archive.writer import ArchiveWriter
 from tests.ingest.test_replay import KEYS, T0, write_archive
 
 RECORD_HEAD = struct.Struct("<BQ")

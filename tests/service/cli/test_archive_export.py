@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ingest.mill_files import load_mill_config
-from service.cli.analyze import analyze_recording
-from service.cli.main import main
+from millwatch.cli.analyze import analyze_recording
+from millwatch.cli.main import main
+from millwatch.ingest.mill_files import load_mill_config
 from tests.service.export.recorded import (
     MILL,
     MILLS,

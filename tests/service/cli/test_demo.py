@@ -16,7 +16,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from ingest.zenoh_session import free_loopback_port
+from millwatch.ingest.zenoh_session import free_loopback_port
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[3]
 def test_demo_serves_simulated_mills_and_stops_by_itself(tmp_path):
     port, opcua_port = free_loopback_port(), free_loopback_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "service.cli.main", "demo", "--mills", "1", "--speed", "20",
+        [sys.executable, "-m", "millwatch.cli.main", "demo", "--mills", "1", "--speed", "20",
          "--minutes", "0.3", "--port", str(port), "--dir", str(tmp_path),
          "--opcua-port", str(opcua_port)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

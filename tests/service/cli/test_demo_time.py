@@ -10,20 +10,20 @@ from collections import defaultdict
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ingest.keys import mill_pattern
-from ingest.mill_files import load_mill_config
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.wire import decode_block
-from ingest.zenoh_session import (
+from millwatch.cli.demo import plant_time_line, replay_start_ns
+from millwatch.cli.simulate import DEFAULT_MILL
+from millwatch.ingest.keys import mill_pattern
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import decode_block
+from millwatch.ingest.zenoh_session import (
     build_config,
     declare_block_subscriber,
     free_loopback_port,
     open_session,
     tcp_endpoint,
 )
-from service.cli.demo import plant_time_line, replay_start_ns
-from service.cli.simulate import DEFAULT_MILL
 
 NOW_NS = 1_790_000_000_000_000_000
 

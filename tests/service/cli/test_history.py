@@ -18,7 +18,7 @@ DUAL = MILLS / "ball-dual-lrs.toml"
 
 
 def millwatch(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "service.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "millwatch.cli", *map(str, args)],
                           capture_output=True, text=True, timeout=300, check=False)  # fmt: skip
 
 

@@ -1,5 +1,6 @@
-"""The command line starts the three ways it is documented: ``python -m service.cli``,
-``python -m service.cli.main`` and the ``millwatch`` console script (``service.cli.main:main``)."""
+"""The command line starts the three ways it is documented: ``python -m millwatch.cli``,
+``python -m millwatch.cli.main`` and the ``millwatch`` console script
+(``millwatch.cli.main:main``)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from service.cli.main import COMMANDS, _command_named, build_parser, main
+from millwatch.cli.main import COMMANDS, _command_named, build_parser, main
 
 
-@pytest.mark.parametrize("module", ["service.cli", "service.cli.main"])
+@pytest.mark.parametrize("module", ["millwatch.cli", "millwatch.cli.main"])
 def test_python_dash_m_runs_the_command_line(module: str) -> None:
     done = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True,
                           text=True, timeout=120, check=False)  # fmt: skip
@@ -51,7 +52,7 @@ def test_the_command_is_the_first_word_not_an_option(argv: list[str], command: s
 def test_the_errors_looked_up_by_module_exist() -> None:
     import importlib
 
-    from service.cli.main import MODULE_ERRORS
+    from millwatch.cli.main import MODULE_ERRORS
 
     for module, name in MODULE_ERRORS:
         assert issubclass(getattr(importlib.import_module(module), name), Exception)
@@ -64,7 +65,7 @@ def test_a_key_error_is_a_programming_error_shown_with_its_traceback(
     not ``millwatch: error: 'start_cost'``; a user's mistake still reads as one line."""
     import numpy as np
 
-    import service.cli.rainflow as rainflow
+    import millwatch.cli.rainflow as rainflow
 
     signal = tmp_path / "x.npy"
     np.save(signal, np.sin(np.linspace(0.0, 20.0, 500)) * 100.0)

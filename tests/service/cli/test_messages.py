@@ -14,14 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from ingest.zenoh_session import free_loopback_port, tcp_endpoint
+from millwatch.ingest.zenoh_session import free_loopback_port, tcp_endpoint
 
 ROOT = Path(__file__).resolve().parents[3]
 MILL_FILE = ROOT / "deploy" / "mills" / "sag-5200-lrs.toml"
 
 
 def _run(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "service.cli.main", *args], cwd=ROOT,
+    return subprocess.run([sys.executable, "-m", "millwatch.cli.main", *args], cwd=ROOT,
                           capture_output=True, text=True, timeout=timeout)  # fmt: skip
 
 
@@ -152,7 +152,7 @@ def test_simulate_publish_on_a_busy_port_is_one_line(tmp_path: Path) -> None:
 
 def test_serve_prints_its_banner_then_ready_once_serving(tmp_path: Path) -> None:
     settings = _settings(tmp_path, MILL_FILE)
-    argv = [sys.executable, "-m", "service.cli.main", "serve", "--config", str(settings)]
+    argv = [sys.executable, "-m", "millwatch.cli.main", "serve", "--config", str(settings)]
     proc = subprocess.Popen(argv, cwd=ROOT, stderr=subprocess.PIPE, text=True)
     lines: list[str] = []
     try:
@@ -182,7 +182,7 @@ def test_ctrl_c_stops_a_gateway_whose_parent_ignored_it(tmp_path: Path) -> None:
     KeyboardInterrupt handler: ``simulate --publish`` ("Ctrl-C stops") kept publishing for ever
     (the spool-recovery tests' gateways, launched from the test run, did not stop)."""
     port = free_loopback_port()
-    argv = [sys.executable, "-m", "service.cli.main", "simulate", "--scene", "start-lrs",
+    argv = [sys.executable, "-m", "millwatch.cli.main", "simulate", "--scene", "start-lrs",
             "--mill", str(MILL_FILE), "--duration", "300s", "--no-progress", "--publish",
             "--listen", tcp_endpoint(port), "--spool", str(tmp_path / "spool")]  # fmt: skip
     proc = subprocess.Popen(argv, cwd=ROOT, stderr=subprocess.PIPE, text=True,

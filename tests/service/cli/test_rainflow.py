@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import rainflow
 
-from analytics.fatigue.rainflow import count_cycles
-from analytics.fatigue.sn_models import build_sn_curve
-from service.cli.main import main
+from millwatch.analytics.fatigue.rainflow import count_cycles
+from millwatch.analytics.fatigue.sn_models import build_sn_curve
+from millwatch.cli.main import main
 
 
 @pytest.fixture
@@ -149,7 +149,7 @@ def test_console_script_runs_and_prints_a_readable_summary(npy):
         [
             sys.executable,
             "-m",
-            "service.cli.main",
+            "millwatch.cli.main",
             "rainflow",
             str(npy),
             "--sn-model",
@@ -166,7 +166,7 @@ def test_console_script_runs_and_prints_a_readable_summary(npy):
 def test_a_fresh_process_asks_openblas_for_one_thread_unless_the_user_chose(npy):
     code = (
         "import os, sys\n"
-        "from service.cli.main import main\n"
+        "from millwatch.cli.main import main\n"
         "main(['rainflow', sys.argv[1], '--json'])\n"
         "print(os.environ['OPENBLAS_NUM_THREADS'])\n"
     )

@@ -1,7 +1,7 @@
 """``millwatch replay``: time arguments, a real replay over loopback zenoh, and clear errors.
 
-The command runs in-process (``service.cli.main.main``) and dials the test's listening session on a
-free 127.0.0.1 port; it never touches the default endpoint. Every wait is bounded.
+The command runs in-process (``millwatch.cli.main.main``) and dials the test's listening session on
+a free 127.0.0.1 port; it never touches the default endpoint. Every wait is bounded.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from ingest import keys
-from service.cli.main import main
-from service.cli.replay import default_run_name, utc_time_ns
+from millwatch.cli.main import main
+from millwatch.cli.replay import default_run_name, utc_time_ns
+from millwatch.ingest import keys
 from tests.ingest.test_replay import KEYS, MS, T0, by_key, leftovers, loopback, write_archive
 
 ISO_T0 = "2025-11-21T23:30:00Z"

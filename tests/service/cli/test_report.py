@@ -22,7 +22,7 @@ def store_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def millwatch(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "service.cli", "report", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "millwatch.cli", "report", *map(str, args)],
                           capture_output=True, text=True, timeout=180, check=False)  # fmt: skip
 
 

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from ingest.archive.reader import ArchiveReader, TailTolerantReader
-from ingest.spool.store import Spool
-from ingest.wire import decode_block
-from ingest.zenoh_session import free_loopback_port
-from service.cli.main import main
-from service.cli.simulate import DEFAULT_MILL, build_scene
+from millwatch.cli.main import main
+from millwatch.cli.simulate import DEFAULT_MILL, build_scene
+from millwatch.ingest.archive.reader import ArchiveReader, TailTolerantReader
+from millwatch.ingest.spool.store import Spool
+from millwatch.ingest.wire import decode_block
+from millwatch.ingest.zenoh_session import free_loopback_port
 from tests.ingest.sim.scene_samples import channel_samples
 
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from service.cli.main import main
-from service.cli.simulate import DEFAULT_MILL
+from millwatch.cli.main import main
+from millwatch.cli.simulate import DEFAULT_MILL
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -55,9 +55,9 @@ def test_flagged_speed_spikes_neither_end_the_run_nor_move_the_lines(tmp_path, c
     telemetry spike bursts on the speed channel. The spikes are flagged and held, so no segment
     is dropped and every line is within 0.02 Hz of the same record without them (before: 11 of
     13 segments dropped as 'run ended', girth mesh +0.13 Hz)."""
-    from analytics.spectra.report import harmonics_report
-    from ingest.mill_files import load_mill_config
-    from service.cli.spectrum import track_recording
+    from millwatch.analytics.spectra.report import harmonics_report
+    from millwatch.cli.spectrum import track_recording
+    from millwatch.ingest.mill_files import load_mill_config
 
     scene = f"""mill = "{DEFAULT_MILL}"
 seed = 11

@@ -26,7 +26,7 @@ HEAVY = {
 
 _LIST_MODULES = """
 import sys
-from service.cli.main import main
+from millwatch.cli.main import main
 try:
     main({argv!r})
 except SystemExit as exit_:
@@ -51,17 +51,22 @@ def modules_loaded_by(argv: list[str]) -> set[str]:
 def test_help_imports_nothing_heavy(argv: list[str]) -> None:
     loaded = modules_loaded_by(argv)
     assert {m for m in loaded if m.split(".")[0] in HEAVY} == set()
-    assert "service.cli.main" in loaded
+    assert "millwatch.cli.main" in loaded
 
 
 def test_help_imports_no_command_module_and_a_command_only_its_own() -> None:
-    assert not {m for m in modules_loaded_by(["--help"]) if m.startswith("service.cli.")} - {
-        "service.cli.main"
+    assert not {m for m in modules_loaded_by(["--help"]) if m.startswith("millwatch.cli.")} - {
+        "millwatch.cli.main"
     }
-    commands = {m for m in modules_loaded_by(["rainflow", "--help"]) if m.startswith("service.")}
+    lower = ("millwatch.analytics", "millwatch.ingest", "millwatch.alarms")
+    commands = {
+        m
+        for m in modules_loaded_by(["rainflow", "--help"])
+        if m.startswith("millwatch.") and not m.startswith(lower)
+    }
     assert commands == {
-        "service.cli",
-        "service.cli.main",
-        "service.cli.rainflow",
-        "service.cli.args",
+        "millwatch.cli",
+        "millwatch.cli.main",
+        "millwatch.cli.rainflow",
+        "millwatch.cli.args",
     }

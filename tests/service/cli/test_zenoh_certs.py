@@ -9,7 +9,7 @@ from pathlib import Path
 from cryptography import x509
 from cryptography.x509.oid import NameOID
 
-from service.cli.main import main
+from millwatch.cli.main import main
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 

@@ -13,12 +13,12 @@ import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest import keys, wire
-from ingest.archive.reader import TailTolerantReader
-from service.cli.analyze import _Blocks
-from service.cli.main import main
-from service.export.foxglove import Admit
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.cli.analyze import _Blocks
+from millwatch.cli.main import main
+from millwatch.export.foxglove import Admit
+from millwatch.ingest import keys, wire
+from millwatch.ingest.archive.reader import TailTolerantReader
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 MILL = MILLS / "sag-5200-lrs.toml"

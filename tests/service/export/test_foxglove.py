@@ -1,4 +1,4 @@
-"""``service.export.foxglove``: the export over a directory of rotated archive files (only the
+"""``millwatch.export.foxglove``: the export over a directory of rotated archive files (only the
 files a span needs are read) and in the units of the mill's calibration."""
 
 from __future__ import annotations
@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ingest import wire
-from ingest.archive.reader import TailTolerantReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.mill_files import load_mill_config
-from service.cli.analyze import recording_files
-from service.export.foxglove import export_archive
+from millwatch.cli.analyze import recording_files
+from millwatch.export.foxglove import export_archive
+from millwatch.ingest import wire
+from millwatch.ingest.archive.reader import TailTolerantReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.mill_files import load_mill_config
 from tests.service.export.recorded import (
     MILL,
     T0,
@@ -91,7 +91,7 @@ def test_the_commands_batch_reading_writes_what_block_by_block_writes(recording,
     ``offline_analysis.export_files``): every topic holds exactly the messages, in the same
     order, that the block-by-block reading writes, for a span with edges inside blocks and a
     context (and with a gap and a repeat in the archive, which take the block-by-block path)."""
-    from service.worker.offline_analysis import export_files
+    from millwatch.worker.offline_analysis import export_files
 
     messages = list(TailTolerantReader(recording[0]).messages())
     with ArchiveWriter(tmp_path / "archive", "sag") as writer:

@@ -18,17 +18,22 @@ import httpx
 import pytest
 from asyncua import Client, ua
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.api.app import create_app
-from service.api.local_backend import LocalBackend
-from service.opcua.server import OpcUaServer
-from service.settings import OpcUaSettings
-from service.status import NO_STATUS
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.app import create_app
+from millwatch.api.local_backend import LocalBackend
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.opcua.server import OpcUaServer
+from millwatch.settings import OpcUaSettings
+from millwatch.status import NO_STATUS
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 from tests.integration.live import wait as wait_until
 from tests.service.conftest import MILL, _settings, serve
 

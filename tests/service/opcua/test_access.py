@@ -10,7 +10,7 @@ from asyncua.common.utils import Buffer
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.ua.ua_binary import struct_to_binary
 
-from service.opcua.access import CALLER, OPERATOR, VIEWER, AccessRules, Login, Logins
+from millwatch.opcua.access import CALLER, OPERATOR, VIEWER, AccessRules, Login, Logins
 
 LOGINS = [Login("op", "pw-1", OPERATOR), Login("hmi", "pw-2", VIEWER)]
 CERT = b"\x30\x82user-certificate-der"

@@ -1,5 +1,5 @@
 """Failed OPC UA logins are throttled per client host, and logged with its address a few times
-per episode (:class:`service.opcua.access.LoginThrottle`): unit rules on a fake clock, and a real
+per episode (:class:`millwatch.opcua.access.LoginThrottle`): unit rules on a fake clock, and a real
 asyncua client against a server of its own on 127.0.0.1 (its own, because a lockout of
 127.0.0.1 would refuse the other tests' logins)."""
 
@@ -15,12 +15,12 @@ from pathlib import Path
 import pytest
 from asyncua import Client, ua
 
-from ingest.mill_files import load_mill_config
-from ingest.zenoh_session import build_config, free_loopback_port, open_session
-from service.opcua.access import LoginThrottle
-from service.opcua.server import OpcUaServer
-from service.remote.zenoh_backend import ZenohBackend
-from service.settings import OpcUaSettings
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.zenoh_session import build_config, free_loopback_port, open_session
+from millwatch.opcua.access import LoginThrottle
+from millwatch.opcua.server import OpcUaServer
+from millwatch.remote.zenoh_backend import ZenohBackend
+from millwatch.settings import OpcUaSettings
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 USER, PASSWORD = "operator", "right-password-1"
@@ -37,7 +37,7 @@ class Clock:
 def test_a_host_is_locked_out_after_free_failures_with_doubling_lockouts(caplog):
     clock = Clock()
     throttle = LoginThrottle(free=3, lockout_s=1.0, max_lockout_s=4.0, quiet_s=60.0, clock=clock)
-    with caplog.at_level(logging.WARNING, logger="service.opcua.access"):
+    with caplog.at_level(logging.WARNING, logger="millwatch.opcua.access"):
         for _ in range(3):
             assert not throttle.locked("10.0.0.9")
             throttle.failed("10.0.0.9", "user 'x'")
@@ -63,7 +63,7 @@ def test_an_episode_ends_after_a_quiet_period(caplog):
     throttle = LoginThrottle(free=2, lockout_s=1.0, quiet_s=30.0, clock=clock)
     throttle.failed("h", "user 'x'")
     clock.now += 31.0
-    with caplog.at_level(logging.WARNING, logger="service.opcua.access"):
+    with caplog.at_level(logging.WARNING, logger="millwatch.opcua.access"):
         assert not throttle.locked("h")
         throttle.failed("h", "user 'x'")  # a new episode: not locked after one failure
     assert not throttle.locked("h")
@@ -112,7 +112,7 @@ def test_failed_logins_over_opcua_are_throttled_and_logged_with_the_address(
 ):
     with (
         _server(tmp_path, monkeypatch) as endpoint,
-        caplog.at_level(logging.WARNING, logger="service.opcua.access"),
+        caplog.at_level(logging.WARNING, logger="millwatch.opcua.access"),
     ):
         t0 = time.monotonic()
         wrong = [asyncio.run(_login(endpoint, f"guess-{i}")) for i in range(12)]
@@ -126,7 +126,7 @@ def test_failed_logins_over_opcua_are_throttled_and_logged_with_the_address(
     assert all(code == ua.StatusCodes.BadUserAccessDenied for code in wrong)
     assert right_while_locked == ua.StatusCodes.BadUserAccessDenied
     assert right_after is None and elapsed < 12.0
-    lines = [r.getMessage() for r in caplog.records if r.name == "service.opcua.access"]
+    lines = [r.getMessage() for r in caplog.records if r.name == "millwatch.opcua.access"]
     assert all("127.0.0.1" in line for line in lines), lines
     # 12 wrong passwords (+1 right one refused while locked): first failure, lockouts, summary
     assert 3 <= len(lines) <= 5, lines

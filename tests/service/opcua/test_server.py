@@ -18,13 +18,13 @@ from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-from alarms.actions import COMMENT_MAX_CHARS
-from service.api.local_backend import LocalBackend
-from service.opcua.address_space import NAMESPACE_URI
-from service.opcua.conditions import SEVERITY
-from service.opcua.server import OpcUaError, OpcUaServer
-from service.opcua.units import UNITS, unit_id
-from service.settings import OpcUaSettings
+from millwatch.alarms.actions import COMMENT_MAX_CHARS
+from millwatch.api.local_backend import LocalBackend
+from millwatch.opcua.address_space import NAMESPACE_URI
+from millwatch.opcua.conditions import SEVERITY
+from millwatch.opcua.server import OpcUaError, OpcUaServer
+from millwatch.opcua.units import UNITS, unit_id
+from millwatch.settings import OpcUaSettings
 from tests.service.conftest import API_KEY, MILL
 from tests.service.opcua.conftest import (
     MILL_B,

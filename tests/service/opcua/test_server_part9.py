@@ -20,8 +20,8 @@ from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-from service.opcua.address_space import MILL_TYPE, NAMESPACE_URI
-from service.opcua.server import PRODUCT_URI
+from millwatch.opcua.address_space import MILL_TYPE, NAMESPACE_URI
+from millwatch.opcua.server import PRODUCT_URI
 from tests.service.conftest import MILL
 from tests.service.opcua.conftest import (
     MILL_B,

@@ -24,7 +24,7 @@ from cryptography import x509
 from cryptography.hazmat.primitives import hashes
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from service.opcua.trust import ClientTrust
+from millwatch.opcua.trust import ClientTrust
 
 APP = ua.ApplicationDescription(ApplicationUri="urn:millwatch:test:scada")
 

@@ -3,7 +3,7 @@ None (never a made-up number), units per channel kind.
 
 The bodies come from the real producers: a dual-drive scene (a start, then steady running long
 enough to close steady-state windows) analysed by the real worker into a real store, and the
-REST views of :mod:`service.api.mill_views` over them — so a key the analyzer does not produce
+REST views of :mod:`millwatch.api.mill_views` over them — so a key the analyzer does not produce
 cannot pass here (it once did: the steady-state points read ``BadWaitingForInitialData`` for
 ever, keyed by names the analyzer never used)."""
 
@@ -18,23 +18,23 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.sim.spec import StartEvent
-from service.api.domain_metrics import domain_families
-from service.api.mill_views import mill_detail
-from service.api.models import MillSummary
-from service.opcua.address_space import datavalue
-from service.opcua.values import Kind, Point, mill_points, ns_to_datetime
-from service.remote.protocol import encode
-from service.reports.history import life_inputs
-from service.reports.life import compute_life, life_from_dict, life_to_dict
-from service.reports.starts import MonthStarts, current_month, starts_in_month
-from service.store.database import Store
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+from millwatch.api.domain_metrics import domain_families
+from millwatch.api.mill_views import mill_detail
+from millwatch.api.models import MillSummary
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.sim.spec import StartEvent
+from millwatch.opcua.address_space import datavalue
+from millwatch.opcua.values import Kind, Point, mill_points, ns_to_datetime
+from millwatch.remote.protocol import encode
+from millwatch.reports.history import life_inputs
+from millwatch.reports.life import compute_life, life_from_dict, life_to_dict
+from millwatch.reports.starts import MonthStarts, current_month, starts_in_month
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import Worker
 
 MILL = load_mill_config(Path(__file__).resolve().parents[3] / "deploy/mills/ball-dual-lrs.toml")
 STEADY = [n for n, c in MILL.channels.items() if c.kind in ("torque", "bending")]
@@ -140,7 +140,7 @@ def test_every_channel_and_component_has_its_points_with_units():
 # ----------------------------------------------------------------------------- typed answers
 def test_life_and_starts_cross_the_remote_protocol_unchanged(answers):
     """The worker sends the typed answers as their JSON data, the API reads them back with the
-    same models (:mod:`service.remote.protocol`): nothing lost, nothing renamed on the way."""
+    same models (:mod:`millwatch.remote.protocol`): nothing lost, nothing renamed on the way."""
     life, starts = answers["life"], answers["starts"]
     back = life_from_dict(json.loads(encode(answers["life_body"])))
     assert life_to_dict(back) == answers["life_body"]

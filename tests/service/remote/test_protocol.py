@@ -1,4 +1,4 @@
-"""Signed acknowledgements (:func:`service.remote.protocol.checked_ack`): what a worker accepts;
+"""Signed acknowledgements (:func:`millwatch.remote.protocol.checked_ack`): what a worker accepts;
 the journal question's arguments."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from service.api.journal import JournalKey, JournalQuery
-from service.errors import BadRequest, Forbidden, Unauthorized
-from service.remote.protocol import (
+from millwatch.api.journal import JournalKey, JournalQuery
+from millwatch.errors import BadRequest, Forbidden, Unauthorized
+from millwatch.remote.protocol import (
     ACK_WINDOW_S,
     BY_MAX_CHARS,
     ack_args,

@@ -1,7 +1,7 @@
 """Scale-out on zenoh (issue 8), end to end on 127.0.0.1: a router (``millwatch router``), two
 workers (``millwatch serve --no-api``) partitioning the three example mills by site, simulated
 gateways publishing through the router, and the REST API in this process over
-:class:`~service.remote.zenoh_backend.ZenohBackend`.
+:class:`~millwatch.remote.zenoh_backend.ZenohBackend`.
 
 Checked: every mill is analysed by exactly one worker (one answer per mill to a gathered query;
 each worker's store holds only its mills), the API sees all of them, and SIGKILLing one worker
@@ -26,14 +26,19 @@ from pathlib import Path
 import httpx
 import pytest
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.keys import query_pattern
-from ingest.mill_files import load_mill_configs
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.api.app import create_app
-from service.remote.zenoh_backend import ZenohBackend
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.api.app import create_app
+from millwatch.ingest.keys import query_pattern
+from millwatch.ingest.mill_files import load_mill_configs
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.remote.zenoh_backend import ZenohBackend
 from tests.service.conftest import serve
 
 pytestmark = pytest.mark.slow
@@ -77,7 +82,7 @@ class Processes:
     def start(self, name: str, *args: str) -> subprocess.Popen[bytes]:
         log = (self.directory / f"{name}.log").open("wb")
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        proc = subprocess.Popen([sys.executable, "-m", "service.cli.main", *args], cwd=ROOT,
+        proc = subprocess.Popen([sys.executable, "-m", "millwatch.cli.main", *args], cwd=ROOT,
                                 stdout=log, stderr=subprocess.STDOUT, env=env)  # fmt: skip
         self.procs[name] = proc
         return proc

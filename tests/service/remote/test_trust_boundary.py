@@ -1,6 +1,6 @@
 """The shipped router config (``deploy/zenoh/router.json5``: mutual TLS, access control by the
 certificate's common name) on 127.0.0.1, its listen endpoint and certificate files swapped for a
-test port and a test CA made by :mod:`ingest.zenoh_tls` — the access control as shipped.
+test port and a test CA made by :mod:`millwatch.ingest.zenoh_tls` — the access control as shipped.
 
 Roles, as millwatch's own code uses the keys: a gateway (advanced publisher with cache), a
 worker (recovering subscriber, publisher watch, a queryable on ``…/@query/*``, its liveliness
@@ -21,8 +21,14 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from ingest.gateway import PublisherWatch, declare_gateway_publisher, declare_recovering_subscriber
-from ingest.keys import (
+from millwatch.cli.main import main
+from millwatch.cli.router import router_config
+from millwatch.ingest.gateway import (
+    PublisherWatch,
+    declare_gateway_publisher,
+    declare_recovering_subscriber,
+)
+from millwatch.ingest.keys import (
     alarm_key,
     alarm_pattern,
     channel_key,
@@ -33,11 +39,9 @@ from ingest.keys import (
     worker_token_key,
     worker_token_pattern,
 )
-from ingest.mill_files import load_mill_configs
-from ingest.zenoh_session import build_config, free_loopback_port, try_open
-from ingest.zenoh_tls import TlsFiles, gateway_name, make_certificate, tls_settings
-from service.cli.main import main
-from service.cli.router import router_config
+from millwatch.ingest.mill_files import load_mill_configs
+from millwatch.ingest.zenoh_session import build_config, free_loopback_port, try_open
+from millwatch.ingest.zenoh_tls import TlsFiles, gateway_name, make_certificate, tls_settings
 
 pytestmark = pytest.mark.slow
 

@@ -1,7 +1,7 @@
-"""The REST API over zenoh (:class:`~service.remote.zenoh_backend.ZenohBackend`) answers what the
+"""The REST API over zenoh (:class:`~millwatch.remote.zenoh_backend.ZenohBackend`) answers what the
 in-process API answers: the same bodies, ETags and errors, because the worker's queryables
-(:mod:`service.remote.queryables`) answer with the same
-:class:`~service.api.local_backend.LocalBackend`.
+(:mod:`millwatch.remote.queryables`) answer with the same
+:class:`~millwatch.api.local_backend.LocalBackend`.
 Also: acknowledgements over zenoh, a hung worker is a 504 within the timeout (never a hang),
 a worker that left is a 503 naming it. Everything on 127.0.0.1."""
 
@@ -18,24 +18,29 @@ import httpx
 import pytest
 import zenoh
 
-from alarms.actions import ActionKind, OperatorAction
-from ingest.keys import query_key, worker_token_key
-from ingest.mill_files import load_mill_config
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.api.app import create_app
-from service.api.local_backend import LocalBackend
-from service.api.times import with_iso
-from service.errors import Unavailable
-from service.remote.protocol import ack_args, act_args
-from service.remote.queryables import WorkerQueryables
-from service.remote.report_codec import report_from_dict
-from service.remote.zenoh_backend import ZenohBackend
-from service.reports.monthly import report_to_dict
-from service.settings import ServiceSettings
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.alarms.actions import ActionKind, OperatorAction
+from millwatch.api.app import create_app
+from millwatch.api.local_backend import LocalBackend
+from millwatch.api.times import with_iso
+from millwatch.errors import Unavailable
+from millwatch.ingest.keys import query_key, worker_token_key
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.remote.protocol import ack_args, act_args
+from millwatch.remote.queryables import WorkerQueryables
+from millwatch.remote.report_codec import report_from_dict
+from millwatch.remote.zenoh_backend import ZenohBackend
+from millwatch.reports.monthly import report_to_dict
+from millwatch.settings import ServiceSettings
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 from tests.service.conftest import held_runtime, serve
 
 pytestmark = pytest.mark.slow
@@ -442,8 +447,8 @@ def test_opcua_over_zenoh_shows_what_the_remote_api_answers(pair, tmp_path):
 
     from asyncua import Client, ua
 
-    from service.opcua.server import OpcUaServer
-    from service.settings import OpcUaSettings
+    from millwatch.opcua.server import OpcUaServer
+    from millwatch.settings import OpcUaSettings
 
     (tmp_path / "pw").write_text("pw-1\n")
     endpoint = f"opc.tcp://127.0.0.1:{free_loopback_port()}/millwatch"

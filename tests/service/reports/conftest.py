@@ -7,8 +7,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from service.reports.monthly import MonthlyReport, build_monthly_report
-from service.store.database import Store
+from millwatch.reports.monthly import MonthlyReport, build_monthly_report
+from millwatch.store.database import Store
 from tests.service.reports.month_scene import CONFIG, MONTH, fill_store
 
 

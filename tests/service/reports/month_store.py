@@ -12,16 +12,16 @@ from collections.abc import Iterable
 from datetime import UTC, datetime
 from pathlib import Path
 
-from analytics.drivetrain.mill_config import MillConfig
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.publisher import starting_now
-from ingest.sim.scenes import get_scene
-from ingest.sim.spec import StartEvent, StopEvent
-from service.store.database import Store
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.publisher import starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.sim.spec import StartEvent, StopEvent
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import Worker
 
 MILLS_DIR = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 

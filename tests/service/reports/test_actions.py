@@ -8,7 +8,7 @@ import dataclasses
 
 import pytest
 
-from service.reports.actions import (
+from millwatch.reports.actions import (
     BENDING_LEVELS_MPA,
     GEAR_ERROR_LINE_PCT,
     Evidence,

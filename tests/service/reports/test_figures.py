@@ -17,16 +17,16 @@ import numpy as np
 import pytest
 from matplotlib.colors import LogNorm
 
-from service.reports.figures import (
+from millwatch.reports.figures import (
     DAMAGE_LINES,
     cumulative_figure,
     spectrum_figure,
     trend_figure,
 )
-from service.reports.monthly import MonthlyReport, build_monthly_report
-from service.reports.monthly_document import monthly_document
-from service.reports.render.csv_tables import document_csv_zip
-from service.reports.render.html_page import document_html
+from millwatch.reports.monthly import MonthlyReport, build_monthly_report
+from millwatch.reports.monthly_document import monthly_document
+from millwatch.reports.render.csv_tables import document_csv_zip
+from millwatch.reports.render.html_page import document_html
 from tests.service.reports.month_scene import CONFIG, MONTH
 
 

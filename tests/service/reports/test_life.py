@@ -22,30 +22,34 @@ from fastapi.testclient import TestClient
 from pydantic import ValidationError
 from pypdf import PdfReader
 
-from alarms.engine import SIMULATED_PREFIX
-from alarms.lifecycle import Alarm, AlarmState, Severity
-from analytics.drivetrain.mill_config import LifeConfig, MillConfig, describe_validation_error
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.sim.spec import StartEvent, StopEvent
-from service.api.errors import install_problem_handlers
-from service.api.local_backend import LocalBackend
-from service.api.routes.mills import mills_router
-from service.api.routes.reports import FORMATS, reports_router
-from service.remote.report_codec import report_from_dict
-from service.reports.fleet import build_fleet, fleet_entry, fleet_mill_from_dict, fleet_to_dict
-from service.reports.fleet_document import render_fleet
-from service.reports.history import life_inputs
-from service.reports.life import LifeInputs, LifeReport, compute_life, life_to_dict
-from service.reports.monthly import build_monthly_report, report_to_dict
-from service.reports.numbers import sig
-from service.settings import ServiceSettings
-from service.store.database import Store
-from service.store.records import DamageRow
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+from millwatch.alarms.engine import SIMULATED_PREFIX
+from millwatch.alarms.lifecycle import Alarm, AlarmState, Severity
+from millwatch.analytics.drivetrain.mill_config import (
+    LifeConfig,
+    MillConfig,
+    describe_validation_error,
+)
+from millwatch.api.errors import install_problem_handlers
+from millwatch.api.local_backend import LocalBackend
+from millwatch.api.routes.mills import mills_router
+from millwatch.api.routes.reports import FORMATS, reports_router
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.sim.spec import StartEvent, StopEvent
+from millwatch.remote.report_codec import report_from_dict
+from millwatch.reports.fleet import build_fleet, fleet_entry, fleet_mill_from_dict, fleet_to_dict
+from millwatch.reports.fleet_document import render_fleet
+from millwatch.reports.history import life_inputs
+from millwatch.reports.life import LifeInputs, LifeReport, compute_life, life_to_dict
+from millwatch.reports.monthly import build_monthly_report, report_to_dict
+from millwatch.reports.numbers import sig
+from millwatch.settings import ServiceSettings
+from millwatch.store.database import Store
+from millwatch.store.records import DamageRow
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 SIM = load_mill_config(MILL)  # simulated = true, commissioned 2011-06-01, first_90_days
@@ -134,7 +138,7 @@ def test_life_band_from_the_s_n_scatter(store):
 def test_what_if_lives_rest_on_app_d_s_start_stop_records(store):
     """``/life``'s what-if: App. D's cost of a start from the stops' records since monitoring
     began (the same arithmetic as the analyzer's monthly projection)."""
-    from analytics.mill.app_d import APP_D_PERIODS, app_d_month
+    from millwatch.analytics.mill.app_d import APP_D_PERIODS, app_d_month
 
     inputs = life_inputs(store, SIM_T, _ns("2024-03-01"))
     stops = [e for e in store.events(SIM.id, "stop") if e.data.get("app_d")]
@@ -432,8 +436,8 @@ def _check_fleet_report(client: TestClient, fleet: dict, simulated: bool) -> Non
 def test_alarms_of_simulated_data_say_so_and_others_do_not(store):
     stored = store.alarms(mill_id=SIM.id)  # the LRS starts of these scenes stay below 310 %
     assert all(a.simulated and a.message.startswith(SIMULATED_PREFIX) for a in stored)
-    from alarms.engine import AlarmEngine
-    from alarms.observations import Observation
+    from millwatch.alarms.engine import AlarmEngine
+    from millwatch.alarms.observations import Observation
 
     for config, simulated in ((SIM, True), (REAL, False)):
         engine = AlarmEngine.for_mills([config])

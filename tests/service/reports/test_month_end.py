@@ -20,14 +20,14 @@ import trustme
 from aiosmtpd.controller import Controller
 from aiosmtpd.smtp import AuthResult, LoginPassword
 
-from alarms.observations import Observation
-from ingest.zenoh_session import free_loopback_port
-from service.reports.month_end import MonthEndJob, due_months
-from service.settings import ReportSettings
-from service.store.database import Store
-from service.worker.block_queue import BlockQueue
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+from millwatch.alarms.observations import Observation
+from millwatch.ingest.zenoh_session import free_loopback_port
+from millwatch.reports.month_end import MonthEndJob, due_months
+from millwatch.settings import ReportSettings
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import BlockQueue
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import Worker
 from tests.service.reports.month_store import fill, mill, utc_ns
 
 A = mill("sag-5200-lrs")

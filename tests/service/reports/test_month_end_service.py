@@ -10,11 +10,11 @@ import time
 import zoneinfo
 from datetime import UTC, datetime, timedelta
 
-from ingest.zenoh_session import free_loopback_port, tcp_endpoint
-from service.api.local_backend import LocalBackend
-from service.settings import ServiceSettings
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.api.local_backend import LocalBackend
+from millwatch.ingest.zenoh_session import free_loopback_port, tcp_endpoint
+from millwatch.settings import ServiceSettings
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 from tests.service.reports.month_store import MILLS_DIR, fill, mill
 
 A = mill("sag-5200-lrs")

@@ -19,15 +19,15 @@ import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
-from service.api.errors import install_problem_handlers
-from service.api.mill_views import mill_monthly_report
-from service.api.routes.reports import reports_router
-from service.reports.figures import day_positions, envelope
-from service.reports.monthly import MonthError, build_monthly_report, report_to_dict
-from service.reports.monthly_formats import render_csv, render_csv_table, render_html, render_pdf
-from service.reports.starts import month_bounds_ns, month_days
-from service.store.database import Store
-from service.store.records import EventRow
+from millwatch.api.errors import install_problem_handlers
+from millwatch.api.mill_views import mill_monthly_report
+from millwatch.api.routes.reports import reports_router
+from millwatch.reports.figures import day_positions, envelope
+from millwatch.reports.monthly import MonthError, build_monthly_report, report_to_dict
+from millwatch.reports.monthly_formats import render_csv, render_csv_table, render_html, render_pdf
+from millwatch.reports.starts import month_bounds_ns, month_days
+from millwatch.store.database import Store
+from millwatch.store.records import EventRow
 from tests.service.reports.month_scene import CONFIG, MONTH
 
 
@@ -260,7 +260,7 @@ def test_route_errors_are_problem_json(client, path, params, status, named):
 
 def test_the_life_what_if_and_the_report_table_share_one_basis(store):
     """The life section's App. D lives rest on the same start-stop records as the table."""
-    from analytics.drivetrain.mill_config import LifeConfig
+    from millwatch.analytics.drivetrain.mill_config import LifeConfig
 
     relaxed = CONFIG.model_copy(update={"life": LifeConfig(min_monitoring_days=0, min_starts=0)})
     report = build_monthly_report(store, relaxed, MONTH)

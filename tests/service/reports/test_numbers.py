@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as hst
 
-from service.reports.numbers import (
+from millwatch.reports.numbers import (
     HORIZON_YEARS,
     NO_FINITE_LIFE,
     end_date_text,

@@ -17,15 +17,15 @@ from hypothesis import given
 from hypothesis import strategies as st
 from pypdf import PdfReader
 
-from service.reports.monthly import build_monthly_report
-from service.reports.monthly_document import monthly_document
-from service.reports.render import document as dm
-from service.reports.render.csv_tables import document_csv_zip
-from service.reports.render.document import Column, Document, Paragraph, Section, Table
-from service.reports.render.html_page import document_html
-from service.reports.render.pdf_fonts import font_files
-from service.reports.render.pdf_pages import document_pdf
-from service.reports.render.pdf_table import wrap
+from millwatch.reports.monthly import build_monthly_report
+from millwatch.reports.monthly_document import monthly_document
+from millwatch.reports.render import document as dm
+from millwatch.reports.render.csv_tables import document_csv_zip
+from millwatch.reports.render.document import Column, Document, Paragraph, Section, Table
+from millwatch.reports.render.html_page import document_html
+from millwatch.reports.render.pdf_fonts import font_files
+from millwatch.reports.render.pdf_pages import document_pdf
+from millwatch.reports.render.pdf_table import wrap
 from tests.service.reports.month_scene import CONFIG, MONTH
 
 

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from analytics.drivetrain.mill_config import AlarmThresholds
-from ingest.mill_files import load_mill_config
-from service.api.errors import status_of
-from service.errors import BadRequest
-from service.reports.starts import (
+from millwatch.analytics.drivetrain.mill_config import AlarmThresholds
+from millwatch.api.errors import status_of
+from millwatch.errors import BadRequest
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.reports.starts import (
     MonthError,
     count_starts,
     current_month,

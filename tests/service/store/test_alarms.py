@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import sqlite3
 
-from alarms.actions import ActionKind, OperatorAction
-from alarms.lifecycle import Alarm, Transition, TransitionRecord
-from service.store.database import Store
-from service.store.migrations import MIGRATIONS, SCHEMA_VERSION
-from service.store.records import EventRow
+from millwatch.alarms.actions import ActionKind, OperatorAction
+from millwatch.alarms.lifecycle import Alarm, Transition, TransitionRecord
+from millwatch.store.database import Store
+from millwatch.store.migrations import MIGRATIONS, SCHEMA_VERSION
+from millwatch.store.records import EventRow
 from tests.alarms.helpers import NS, T0, engine, feed
 
 

@@ -11,8 +11,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from service.store.checkpoint_seal import CheckpointDamaged, seal, unseal
-from service.store.database import Store
+from millwatch.store.checkpoint_seal import CheckpointDamaged, seal, unseal
+from millwatch.store.database import Store
 
 POSITION = json.dumps({"file": "millwatch_20261126T000000Z.mcap", "index": 812})
 STATE = json.dumps({"pipelines": {"m1": {"damage": [1.25e-9, 3.0e-7], "samples": 96754}}})

@@ -7,9 +7,9 @@ import threading
 
 import pytest
 
-from service.store.database import CHECKPOINTS_KEPT, Store
-from service.store.migrations import SCHEMA_VERSION, StoreError
-from service.store.records import DamageRow, EventRow
+from millwatch.store.database import CHECKPOINTS_KEPT, Store
+from millwatch.store.migrations import SCHEMA_VERSION, StoreError
+from millwatch.store.records import DamageRow, EventRow
 
 
 def test_a_new_file_gets_the_current_schema_in_wal_mode(tmp_path):

@@ -9,8 +9,8 @@ import math
 
 import pytest
 
-from service.store.database import Store
-from service.store.records import DamageRow, EventRow
+from millwatch.store.database import Store
+from millwatch.store.records import DamageRow, EventRow
 
 HOUR = 3_600 * 10**9
 MIN = 60 * 10**9

@@ -12,21 +12,21 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.keys import build_key, to_replay
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.wire import Block, DType, Unit, decode_block, encode_block
-from service.store.database import Store
-from service.worker.admission import BlockAdmission
-from service.worker.block_queue import QueuedBlock
-from service.worker.health import ChannelHealth
-from service.worker.mill_job import MillJob
-from service.worker.offline_analysis import analyze_files
-from service.worker.recovery import recover
-from service.worker.worker import Worker
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.keys import build_key, to_replay
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import Block, DType, Unit, decode_block, encode_block
+from millwatch.store.database import Store
+from millwatch.worker.admission import BlockAdmission
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.health import ChannelHealth
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.offline_analysis import analyze_files
+from millwatch.worker.recovery import recover
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 BASE = load_mill_config(MILL)

@@ -1,4 +1,4 @@
-"""The analysis tails the archive (service.worker.archive_first): with an analysis slower than
+"""The analysis tails the archive (millwatch.worker.archive_first): with an analysis slower than
 the blocks arrive, every block is archived at once; the analysis takes them from memory, then —
 behind — from the archive, then from memory again once caught up, each block exactly once and
 in order, with the results of a worker that handled every block in turn; a checkpoint stores
@@ -14,19 +14,19 @@ from typing import Any
 import numpy as np
 import pytest
 
-from ingest.archive.batches import MessageBatch
-from ingest.archive.reader import ArchiveReader, TailTolerantReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.wire import Block, decode_block
-from service.store.database import Store
-from service.worker import archive_first
-from service.worker.archive_first import ArchivedSeqs, ArchiveFirst, SharedArchive
-from service.worker.block_queue import BlockQueue, QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+from millwatch.ingest.archive.batches import MessageBatch
+from millwatch.ingest.archive.reader import ArchiveReader, TailTolerantReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import Block, decode_block
+from millwatch.store.database import Store
+from millwatch.worker import archive_first
+from millwatch.worker.archive_first import ArchivedSeqs, ArchiveFirst, SharedArchive
+from millwatch.worker.block_queue import BlockQueue, QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 CONFIG = load_mill_config(MILL)

@@ -12,20 +12,20 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ingest.archive.batches import archive_batches
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.keys import build_key
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.wire import DType, decode_block, encode_block
-from service.store.database import Store
-from service.worker.batch_lane import BatchLane, queued_batch
-from service.worker.block_queue import BlockQueue, QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.recovery import recover
-from service.worker.worker import Worker
+from millwatch.ingest.archive.batches import archive_batches
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.keys import build_key
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import DType, decode_block, encode_block
+from millwatch.store.database import Store
+from millwatch.worker.batch_lane import BatchLane, queued_batch
+from millwatch.worker.block_queue import BlockQueue, QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.recovery import recover
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 BASE = load_mill_config(MILL)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 import threading
 
-from service.worker.block_queue import BlockQueue
+from millwatch.worker.block_queue import BlockQueue
 
 
 def test_blocks_come_out_in_arrival_order_in_batches():

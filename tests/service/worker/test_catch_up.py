@@ -1,4 +1,4 @@
-"""A mill's long gap is caught up from its spools on a thread of its own (service.worker
+"""A mill's long gap is caught up from its spools on a thread of its own (millwatch.worker
 .catch_up): its channels page by page together, its live blocks held and then released in
 order, the other mills' blocks archived meanwhile, and the results equal to a worker that
 never lost the link."""
@@ -9,19 +9,19 @@ import threading
 import time
 from pathlib import Path
 
-from ingest.archive.writer import ArchiveWriter
-from ingest.keys import mill_channel_keys
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.publisher import starting_now
-from ingest.sim.scenes import get_scene
-from ingest.spool.query import SpoolAnswer
-from ingest.spool.store import Spool, payload_seq
-from service.store.database import Store
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.spool_recovery import CatchUp
-from service.worker.worker import Worker
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.keys import mill_channel_keys
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.publisher import starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.spool.query import SpoolAnswer
+from millwatch.ingest.spool.store import Spool, payload_seq
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.spool_recovery import CatchUp
+from millwatch.worker.worker import Worker
 from tests.service.worker.test_spool_recovery import BLOCKS, CONFIG, _run, _worker
 
 ROOT = Path(__file__).resolve().parents[3]

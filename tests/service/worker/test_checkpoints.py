@@ -10,22 +10,22 @@ from typing import Any
 
 import pytest
 
-from analytics.drivetrain.mill_config import ChannelConfig, MillConfig
-from analytics.spectra.tracker import HarmonicTracker
-from ingest.archive.files import ArchivePosition
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.publisher import starting_now
-from ingest.sim.scenes import get_scene
-from ingest.wire import decode_block
-from service.store.database import Store
-from service.worker.block_queue import BlockQueue, QueuedBlock
-from service.worker.checkpoints import CheckpointSchedule, MillHeldError, covers, earliest
-from service.worker.mill_job import MillJob
-from service.worker.recovery import recover
-from service.worker.worker import Worker
+from millwatch.analytics.drivetrain.mill_config import ChannelConfig, MillConfig
+from millwatch.analytics.spectra.tracker import HarmonicTracker
+from millwatch.ingest.archive.files import ArchivePosition
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.publisher import starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import decode_block
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import BlockQueue, QueuedBlock
+from millwatch.worker.checkpoints import CheckpointSchedule, MillHeldError, covers, earliest
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.recovery import recover
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 BASE = load_mill_config(MILL)
@@ -171,7 +171,7 @@ def test_steps_checkpoint_one_mill_at_a_time_spread_over_the_interval(tmp_path) 
 
 
 def test_the_live_analyzer_keeps_few_windows_yet_every_one_is_stored(monkeypatch) -> None:
-    monkeypatch.setattr("service.worker.mill_job.WINDOWS_KEPT", 2)
+    monkeypatch.setattr("millwatch.worker.mill_job.WINDOWS_KEPT", 2)
     config = CONFIGS["mill-a"]
     scene = get_scene("steady", config, seed=2, duration_s=330.0)
     pipeline = MillJob(config)
@@ -244,7 +244,7 @@ def test_recovery_after_a_pinion_speed_change_keeps_damage_and_restarts_spectra(
         assert sum(r.damage for r in at_crash) > 0.0
 
         second = _one_mill(store, None, FASTER)
-        with caplog.at_level(logging.WARNING, logger="analytics.mill.analyzer"):
+        with caplog.at_level(logging.WARNING, logger="millwatch.analytics.mill.analyzer"):
             assert recover(second, ArchiveReader(tmp_path / "archive", "w")) > 0
         assert "mill 'mill-a'" in caplog.text and "spectra restart" in caplog.text
         # the day's damage was not overwritten by a partial total from a fresh analyzer
@@ -293,7 +293,7 @@ def test_a_checkpoint_that_cannot_be_restored_holds_the_mill_naming_it_and_the_w
         _crash_after_a_checkpoint(tmp_path, store, blocks)
         ((position, _),) = store.latest_checkpoints().values()
         second = _one_mill(store, None, edited)
-        with caplog.at_level(logging.ERROR, logger="service.worker.worker"):
+        with caplog.at_level(logging.ERROR, logger="millwatch.worker.worker"):
             assert recover(second, ArchiveReader(tmp_path / "archive", "w")) == 0  # all held
     text = second.held["mill-a"]
     assert text.startswith(
@@ -370,7 +370,7 @@ def test_a_held_mill_is_archived_not_analysed_never_checkpointed_and_loses_nothi
         now = [blocks[-1].recv_ns + 3600 * 10**9]  # an hour later
         second = _two_mills(store, ArchiveWriter(archive, "w"), WITHOUT_BENDING,
                             clock=lambda: now[0])  # fmt: skip
-        with caplog.at_level(logging.ERROR, logger="service.worker.worker"):
+        with caplog.at_level(logging.ERROR, logger="millwatch.worker.worker"):
             replayed = recover(second, ArchiveReader(archive, "w"))
         assert list(second.held) == ["mill-a"] and len(caplog.records) == 1
         # from mill-b's position: the held mill does not pull the replay back to its own
@@ -455,7 +455,7 @@ def test_a_damaged_checkpoint_is_refused_and_the_mill_falls_back_losing_nothing(
         _damage_rows(store, "mill-a", how)
 
         second = _worker(store, ArchiveWriter(tmp_path / "archive", "w"))
-        with caplog.at_level(logging.ERROR, logger="service.worker.worker"):
+        with caplog.at_level(logging.ERROR, logger="millwatch.worker.worker"):
             replayed = recover(second, ArchiveReader(tmp_path / "archive", "w"))
         start = min(cuts) if len(how) == 1 else 0
         of_b = sum(

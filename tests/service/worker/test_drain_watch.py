@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from service.status import ChannelStatus, MillHealthStatus, MillStatus
-from service.worker.drain_watch import DrainWatch
-from service.worker.health import ChannelHealth
+from millwatch.status import ChannelStatus, MillHealthStatus, MillStatus
+from millwatch.worker.drain_watch import DrainWatch
+from millwatch.worker.health import ChannelHealth
 
 
 def status(blocks: int, samples: int, held: str | None = None) -> MillStatus:

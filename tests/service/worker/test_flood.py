@@ -10,17 +10,17 @@ from pathlib import Path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from analytics.drivetrain.mill_config import LifeConfig, MillConfig
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.keys import build_key, channel_key
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from service.store.database import Store
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+from millwatch.analytics.drivetrain.mill_config import LifeConfig, MillConfig
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.keys import build_key, channel_key
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 CONFIG = load_mill_config(MILL)

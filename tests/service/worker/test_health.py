@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ingest.wire import Unit, decode_block, encode_block
-from service.worker.health import ChannelHealth, MillHealth
+from millwatch.ingest.wire import Unit, decode_block, encode_block
+from millwatch.worker.health import ChannelHealth, MillHealth
 
 
 def block(seq: int, t0: int = 0, n: int = 100, bad: int = 0):
@@ -79,7 +79,7 @@ def test_a_mill_lists_its_stale_channels():
 
 
 def test_per_minute_rate_over_the_last_minute():
-    from service.worker.health import PerMinute
+    from millwatch.worker.health import PerMinute
 
     meter = PerMinute()
     s = 1_000_000_000
@@ -92,7 +92,7 @@ def test_per_minute_rate_over_the_last_minute():
 def test_latency_reservoir_reports_quantiles_of_the_kept_blocks():
     from types import SimpleNamespace
 
-    from service.worker.health import LatencyReservoir
+    from millwatch.worker.health import LatencyReservoir
 
     r = LatencyReservoir(size=4)
     assert r.quantiles()["blocks"] == 0
@@ -160,7 +160,7 @@ def test_a_long_outage_and_a_late_spool_are_plausible():
 
 
 def test_a_clock_ahead_within_max_ahead_is_plausible_and_the_limit_is_configurable():
-    from service.worker.health import AdmissionLimits
+    from millwatch.worker.health import AdmissionLimits
 
     h = _history()
     assert h.accept(block(10, t0=NOW + 59 * 10**9), recv_ns=NOW).implausible is None

@@ -16,16 +16,16 @@ from typing import Any
 import numpy as np
 import pytest
 
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.wire import HEADER, decode_block, encode_block
-from service.store.database import Store
-from service.worker.batch_lane import BatchLane, queued_batch
-from service.worker.block_queue import QueuedBlock
-from service.worker.health import MAX_SEQ
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import HEADER, decode_block, encode_block
+from millwatch.store.database import Store
+from millwatch.worker.batch_lane import BatchLane, queued_batch
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.health import MAX_SEQ
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 CONFIG = load_mill_config(MILL)
@@ -190,14 +190,14 @@ def test_the_forgeries_are_what_they_say():
 
 def test_the_archiving_threads_positions_skip_a_forged_block():
     """What the spool recovery asks is judged by the archiving thread's positions
-    (:class:`~service.worker.archive_first.ArchivedSeqs`): a forged block is archived, but it
+    (:class:`~millwatch.worker.archive_first.ArchivedSeqs`): a forged block is archived, but it
     never becomes a channel's last archived block, so the real blocks after it still reveal and
     fill their gaps."""
-    from service.worker.archive_first import ArchivedSeqs
-    from service.worker.health import MillHealth
+    from millwatch.worker.archive_first import ArchivedSeqs
+    from millwatch.worker.health import MillHealth
 
     seqs = ArchivedSeqs.of({CONFIG.id: MillHealth.for_channels(list(CONFIG.channels))})
-    from ingest.keys import ChannelRoutes
+    from millwatch.ingest.keys import ChannelRoutes
 
     first = GOOD[0]
     route = ChannelRoutes([CONFIG]).route(first.key)

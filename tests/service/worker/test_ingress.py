@@ -7,9 +7,9 @@ import logging
 import threading
 from pathlib import Path
 
-from ingest.keys import ChannelRoutes, channel_key
-from ingest.mill_files import load_mill_config
-from service.worker.admission import IngressGate
+from millwatch.ingest.keys import ChannelRoutes, channel_key
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.worker.admission import IngressGate
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 CONFIG = load_mill_config(MILL)
@@ -29,7 +29,7 @@ def test_configured_keys_up_to_the_size_limit_pass():
 
 def test_a_flood_of_made_up_keys_is_one_count_and_one_log_line(caplog):
     gate = _gate()
-    with caplog.at_level(logging.WARNING, logger="service.worker.admission"):
+    with caplog.at_level(logging.WARNING, logger="millwatch.worker.admission"):
         assert not any(gate.admit(f"{PREFIX}/junk{k}", b"MWBK") for k in range(5000))
     assert gate.unknown == {PREFIX: 5000} and gate.oversize == {}
     assert len(caplog.records) == 1 and PREFIX in caplog.records[0].getMessage()
@@ -38,7 +38,7 @@ def test_a_flood_of_made_up_keys_is_one_count_and_one_log_line(caplog):
 def test_an_oversize_block_is_refused_even_on_a_configured_key(caplog):
     gate = _gate()
     key = channel_key(CONFIG.site, CONFIG.id, next(iter(CONFIG.channels.values())).key)
-    with caplog.at_level(logging.WARNING, logger="service.worker.admission"):
+    with caplog.at_level(logging.WARNING, logger="millwatch.worker.admission"):
         assert not gate.admit(key, bytes(40 * 2**20))  # the 40 MB block of issue 26
         assert not gate.admit(key, bytes(4097))
     assert gate.oversize == {PREFIX: 2} and gate.refused == 2

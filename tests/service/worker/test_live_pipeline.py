@@ -10,16 +10,21 @@ from pathlib import Path
 
 import pytest
 
-from analytics.mill.analyzer import MillAnalyzer
-from ingest.keys import alarm_pattern
-from ingest.sim.publisher import ScenePublisher, starting_now
-from ingest.sim.scenes import get_scene
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.cli.analyze import analyze_recording, recording_files
-from service.settings import ServiceSettings
-from service.store.database import Store
-from service.worker.mill_job import MillJob
-from service.worker.runtime import ServiceRuntime
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.cli.analyze import analyze_recording, recording_files
+from millwatch.ingest.keys import alarm_pattern
+from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.settings import ServiceSettings
+from millwatch.store.database import Store
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.runtime import ServiceRuntime
 
 MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
 

@@ -13,16 +13,16 @@ from pathlib import Path
 
 import pytest
 
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.spectra.tracker import HarmonicTracker
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from service.store.database import Store
-from service.worker import parallel_replay
-from service.worker.mill_job import MillJob
-from service.worker.parallel_replay import ReplayJobError, replay_jobs, split_mills
-from service.worker.recovery import recover
-from service.worker.worker import Worker
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.spectra.tracker import HarmonicTracker
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.store.database import Store
+from millwatch.worker import parallel_replay
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.parallel_replay import ReplayJobError, replay_jobs, split_mills
+from millwatch.worker.recovery import recover
+from millwatch.worker.worker import Worker
 from tests.service.worker.test_batch_lane import BASE, CONFIGS, _items, _state
 from tests.service.worker.test_checkpoints import _damage_rows
 

@@ -6,11 +6,16 @@ from pathlib import Path
 
 import pytest
 
-from ingest.keys import worker_token_key
-from ingest.mill_files import load_mill_configs
-from ingest.zenoh_session import build_config, free_loopback_port, open_session, tcp_endpoint
-from service.settings import ServiceSettings, SettingsError, load_service_settings
-from service.worker.partition import check_exclusive, partition_mills, worker_identity
+from millwatch.ingest.keys import worker_token_key
+from millwatch.ingest.mill_files import load_mill_configs
+from millwatch.ingest.zenoh_session import (
+    build_config,
+    free_loopback_port,
+    open_session,
+    tcp_endpoint,
+)
+from millwatch.settings import ServiceSettings, SettingsError, load_service_settings
+from millwatch.worker.partition import check_exclusive, partition_mills, worker_identity
 
 MILLS = load_mill_configs(Path(__file__).resolve().parents[3] / "deploy" / "mills")
 

@@ -16,14 +16,15 @@ from pathlib import Path
 
 import pytest
 
-from analytics.mill.analyzer import MillAnalyzer
-from ingest.archive.reader import ArchiveReader
-from ingest.keys import channel_key
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.publisher import starting_now
-from ingest.sim.scenes import get_scene
-from ingest.wire import DType
-from ingest.zenoh_session import (
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.cli.analyze import analyze_recording, recording_files
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.keys import channel_key
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.publisher import starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import DType
+from millwatch.ingest.zenoh_session import (
     build_config,
     declare_block_publisher,
     free_loopback_port,
@@ -31,10 +32,9 @@ from ingest.zenoh_session import (
     tcp_endpoint,
     wait_for_subscribers,
 )
-from service.cli.analyze import analyze_recording, recording_files
-from service.settings import load_service_settings
-from service.store.database import Store
-from service.worker.runtime import ARCHIVE_PREFIX
+from millwatch.settings import load_service_settings
+from millwatch.store.database import Store
+from millwatch.worker.runtime import ARCHIVE_PREFIX
 
 ROOT = Path(__file__).resolve().parents[3]
 MILL = ROOT / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -54,7 +54,8 @@ def write_settings(tmp_path: Path, port: int) -> Path:
 
 def start_worker(settings: Path) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "service.cli.main", "serve", "--config", str(settings), "--no-api"],
+        [sys.executable, "-m", "millwatch.cli.main", "serve", "--config", str(settings),
+         "--no-api"],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
     )  # fmt: skip
 

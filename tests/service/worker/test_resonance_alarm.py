@@ -10,14 +10,14 @@ import logging
 from functools import cache
 from pathlib import Path
 
-from alarms.lifecycle import Transition
-from analytics.drivetrain.mill_config import MillConfig
-from analytics.drivetrain.torsional_model import NO_MODEL_NOTE, natural_frequencies_of
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.wire import decode_block
-from service.worker.mill_job import MillJob
+from millwatch.alarms.lifecycle import Transition
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.torsional_model import NO_MODEL_NOTE, natural_frequencies_of
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.wire import decode_block
+from millwatch.worker.mill_job import MillJob
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 SAG = load_mill_config(MILL)
@@ -85,7 +85,7 @@ def test_steady_running_keeps_its_margin():
 
 
 def test_a_mill_without_a_model_says_so_once(caplog):
-    with caplog.at_level(logging.INFO, logger="service.worker.mill_job"):
+    with caplog.at_level(logging.INFO, logger="millwatch.worker.mill_job"):
         job, transitions = run(NO_MODEL, "resonance", 100.0)
     said = [r for r in caplog.records if NO_MODEL_NOTE in r.getMessage()]
     assert len(said) == 1 and NO_MODEL.id in said[0].getMessage()

@@ -1,5 +1,5 @@
 """A worker fills a gap from the gateway's spool before the block that reveals it
-(service.worker.spool_recovery): archive in sequence order, the same results as a worker that
+(millwatch.worker.spool_recovery): archive in sequence order, the same results as a worker that
 missed nothing, and what the spool does not hold counted as before, with its exact count."""
 
 from __future__ import annotations
@@ -8,19 +8,19 @@ import json
 import time
 from pathlib import Path
 
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.publisher import starting_now
-from ingest.sim.scenes import get_scene
-from ingest.spool.query import SpoolAnswer
-from ingest.spool.store import Spool, payload_seq
-from service.store.database import Store
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.spool_recovery import SpoolRecovery
-from service.worker.worker import Worker
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.publisher import starting_now
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.spool.query import SpoolAnswer
+from millwatch.ingest.spool.store import Spool, payload_seq
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.spool_recovery import SpoolRecovery
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 CONFIG = load_mill_config(MILL)

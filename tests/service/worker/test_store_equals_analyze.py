@@ -1,6 +1,6 @@
 """Store = analyze: one scene through the real worker into a real SQLite store, and the same
-blocks through a :class:`~analytics.mill.analyzer.MillAnalyzer` offline. After a clean stop
-(the worker's final checkpoint) the store holds the analyzer's own seconds per phase (stopped
+blocks through a :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer` offline. After a clean
+stop (the worker's final checkpoint) the store holds the analyzer's own seconds per phase (stopped
 and the running before the first start included), damage and counted cycles per component and
 phase; live, each checkpoint books the analysis so far. And remaining life is one computation:
 the ``remaining_life`` alarm's value, ``/life``, the monthly report's rates and the
@@ -16,24 +16,24 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from alarms.observations import Observation
-from analytics.mill.analyzer import MillAnalyzer
-from analytics.signal.fault_stage import FaultStage
-from analytics.spectra.settings import stagger_for
-from ingest import keys
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import SceneBlock, scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.sim.spec import StartEvent, StopEvent
-from ingest.wire import decode_block
-from service.api.domain_metrics import domain_families
-from service.reports.history import life_inputs
-from service.reports.life import compute_life
-from service.reports.monthly import build_monthly_report
-from service.store.database import Store
-from service.worker.block_queue import QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.worker import Worker
+from millwatch.alarms.observations import Observation
+from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.analytics.signal.fault_stage import FaultStage
+from millwatch.analytics.spectra.settings import stagger_for
+from millwatch.api.domain_metrics import domain_families
+from millwatch.ingest import keys
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import SceneBlock, scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.sim.spec import StartEvent, StopEvent
+from millwatch.ingest.wire import decode_block
+from millwatch.reports.history import life_inputs
+from millwatch.reports.life import compute_life
+from millwatch.reports.monthly import build_monthly_report
+from millwatch.store.database import Store
+from millwatch.worker.block_queue import QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.worker import Worker
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
 CONFIG = load_mill_config(MILL)

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from functools import cache
 
-from alarms.lifecycle import Transition
-from service.worker.mill_job import MillJob
+from millwatch.alarms.lifecycle import Transition
+from millwatch.worker.mill_job import MillJob
 from tests.alarms.helpers import with_alarms
 from tests.service.worker.test_resonance_alarm import SAG, run
 

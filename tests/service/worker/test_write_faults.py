@@ -4,7 +4,7 @@ real archive and a real SQLite store:
 * the archive's disk fills while blocks arrive (``os.pwrite`` as on a full file system, the
   writer module's only: :class:`tests.ingest.archive.test_writer_faults.Disk`) and frees again:
   what fits in the writer's memory is written late, the rest is refused and fetched again from
-  a gateway's spool (:class:`~service.worker.spool_recovery.SpoolRecovery`); every block ends
+  a gateway's spool (:class:`~millwatch.worker.spool_recovery.SpoolRecovery`); every block ends
   up archived once, in order, and analysed once, in order;
 * the store is full (its transactions fail as SQLite's do: ``database or disk is full``) while
   a start is analysed: the batches wait and are stored when the store takes writes again — the
@@ -27,23 +27,23 @@ from pathlib import Path
 
 import pytest
 
-from ingest.archive import writer as writer_module
-from ingest.archive.reader import ArchiveReader
-from ingest.archive.writer import ArchiveWriter
-from ingest.mill_files import load_mill_config
-from ingest.sim.blocks import scene_blocks
-from ingest.sim.scenes import get_scene
-from ingest.spool.query import SpoolAnswer
-from ingest.wire import decode_block
-from service.store.database import Store
-from service.worker import health
-from service.worker import worker as worker_module
-from service.worker.archive_first import ArchivedSeqs, ArchiveFirst, SharedArchive
-from service.worker.block_queue import BlockQueue, QueuedBlock
-from service.worker.mill_job import MillJob
-from service.worker.recovery import recover
-from service.worker.spool_recovery import SpoolRecovery
-from service.worker.worker import Worker
+from millwatch.ingest.archive import writer as writer_module
+from millwatch.ingest.archive.reader import ArchiveReader
+from millwatch.ingest.archive.writer import ArchiveWriter
+from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
+from millwatch.ingest.spool.query import SpoolAnswer
+from millwatch.ingest.wire import decode_block
+from millwatch.store.database import Store
+from millwatch.worker import health
+from millwatch.worker import worker as worker_module
+from millwatch.worker.archive_first import ArchivedSeqs, ArchiveFirst, SharedArchive
+from millwatch.worker.block_queue import BlockQueue, QueuedBlock
+from millwatch.worker.mill_job import MillJob
+from millwatch.worker.recovery import recover
+from millwatch.worker.spool_recovery import SpoolRecovery
+from millwatch.worker.worker import Worker
 from tests.ingest.archive.test_writer_faults import Disk
 
 MILL = Path(__file__).resolve().parents[3] / "deploy" / "mills" / "sag-5200-lrs.toml"
@@ -52,7 +52,7 @@ BLOCKS = [
     QueuedBlock(b.key, b.payload, b.t_end_ns)
     for b in scene_blocks(get_scene("start-lrs", CONFIG, seed=3, duration_s=40.0))
 ]
-EPISODE_LOGGER = "service.worker.health"
+EPISODE_LOGGER = "millwatch.worker.health"
 
 
 @pytest.fixture
