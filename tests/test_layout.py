@@ -193,3 +193,15 @@ def test_no_circle_between_rooms():
             _room(d) for d in deps if _room(d) != _room(name)
         )
     assert _cycles(rooms) == []
+
+
+def test_pyproject_lists_every_package():
+    """A wheel holds only the packages pyproject.toml lists (``package-dir`` maps them), so a new
+    sub-package missing from the list would work in a checkout and be absent once installed."""
+    import tomllib
+
+    listed = set(
+        tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
+    packages = {name for name, path in MODULES.items() if path.name == "__init__.py"}
+    assert listed == packages
