@@ -127,3 +127,35 @@ def test_no_monthly_start_rate_from_minutes_of_record(report):
         assert "at least 7 days" in basis["measured_note"]
         assert d["monthly_projection"]["measured"] is None
         assert d["monthly_projection"]["1/month"] is not None
+
+
+def test_progress_follows_the_analysis_not_the_reading(recording, monkeypatch):
+    """The bar's bytes are credited as their samples are analysed: it never runs ahead of the
+    analysis (reading a small file is over before the analysis begins), moves in steps, and
+    ends at the file's size."""
+    from millwatch.analytics.mill.analyzer import MillAnalyzer
+    from millwatch.ingest.mill_files import load_mill_config
+    from millwatch.worker.offline_analysis import analyze_files
+
+    analysed = [0]
+    frame = MillAnalyzer._frame
+
+    def counting(self, f, out):  # the samples entering the analysis proper
+        analysed[0] += len(f)
+        return frame(self, f, out)
+
+    monkeypatch.setattr(MillAnalyzer, "_frame", counting)
+    seen: list[tuple[int, int]] = []
+    done = [0]
+
+    def advance(n: int) -> None:
+        done[0] += n
+        seen.append((done[0], analysed[0]))
+
+    sink, _ = analyze_files([recording], [load_mill_config(MILL)], advance=advance)
+    sink.close()
+    size, samples = recording.stat().st_size, analysed[0]
+    assert samples == 330_000 and done[0] == size
+    assert len(seen) >= 10
+    for shown, at in seen:
+        assert shown / size <= at / samples + 0.02, (shown, at)
