@@ -164,8 +164,9 @@ def projection_basis(seconds: dict[str, float], starts: int, elapsed_s: float) -
     outside = elapsed_s - seconds.get("start", 0.0) - seconds.get("stop", 0.0)
     note = None
     if elapsed_s < MIN_MEASURED_HISTORY_S:
+        days = MIN_MEASURED_HISTORY_S / 86_400.0
         note = (f"not projected: the record covers {elapsed_s / 86_400.0:.3g} days; a measured "
-                f"start rate needs at least {MIN_MEASURED_HISTORY_S / 86_400.0:g} days")  # fmt: skip
+                f"start rate needs at least {days:g} days")  # fmt: skip
     long_enough = note is None
     return {
         "month_days": MONTH_S / 86_400.0,

@@ -348,9 +348,12 @@ def _steady_lines(windows: list[dict[str, Any]]) -> list[str]:
         return ["  steady-state windows: none"]
     lines = [f"  steady-state windows: {len(windows)} (min / median / max over the windows; "
              "range = mean of the per-revolution maxima minus minima)"]  # fmt: skip
-    rows = [("range", "range_pct", "% rated motor torque"),
-            ("mean", "mean_pct", "% rated motor torque"),
-            ("amplitude", "bending_amplitude_mpa", "MPa (half the range per revolution)")]  # fmt: skip
+    pct = "% rated motor torque"
+    rows = [
+        ("range", "range_pct", pct),
+        ("mean", "mean_pct", pct),
+        ("amplitude", "bending_amplitude_mpa", "MPa (half the range per revolution)"),
+    ]
     for what, key, unit in rows:
         for ch in windows[0].get(key, {}):
             got = _spread([w[key].get(ch, math.nan) for w in windows])
@@ -400,7 +403,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             'speed (measured, README Benchmarks "Offline analysis"): a week of one mill, running\n'
             "74 % of the time, at about 1,200-1,400x real time per core with every analysis on\n"
             "(1,750x on two cores); --no-spectra skips the harmonic spectra, more than half the\n"
-            "work, for questions about starts, stops and damage: about 2,900-3,000x."
+            "work, for questions about starts, stops and damage: about 2,900-3,000x.\n"
+            "\n"
+            "output: times in site time with their offset (the zone in the header); events in\n"
+            "time order (--json: 'events', beside 'starts', 'stops', 'barring'); a data-quality\n"
+            "line. Steady-state oscillation range (range_pct): the mean of the per-revolution\n"
+            "maxima minus the mean of the minima (Diering 2011 App. C routine 4), not the\n"
+            "peak-to-peak a scene's truth gives (motor_oscillation_pct), which is larger. The\n"
+            "'measured' monthly projection needs at least 7 days of record (else null, why)."
         ),
     )
     p.add_argument("recording", type=Path, nargs="+", metavar="RECORDING",

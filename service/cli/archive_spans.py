@@ -40,10 +40,12 @@ class ChannelSamples:
             self.last_sample_ns = last if self.last_sample_ns is None else max(
                 self.last_sample_ns, last)  # fmt: skip
         self.samples += n
-        for seen, value in ((self.rates_hz, float(block.fs)), (self.dtypes, block.dtype.name.lower()),
-                            (self.units, block.unit.symbol)):  # fmt: skip
-            if value not in seen:
-                seen.append(value)
+        if float(block.fs) not in self.rates_hz:
+            self.rates_hz.append(float(block.fs))
+        kinds = ((self.dtypes, block.dtype.name.lower()), (self.units, block.unit.symbol))
+        for seen, name in kinds:
+            if name not in seen:
+                seen.append(name)
 
 
 class SampleSpans:

@@ -159,3 +159,28 @@ def test_progress_follows_the_analysis_not_the_reading(recording, monkeypatch):
     assert len(seen) >= 10
     for shown, at in seen:
         assert shown / size <= at / samples + 0.02, (shown, at)
+
+
+def test_both_definitions_of_the_oscillation_range_are_stated_where_printed(
+    recording, report, tmp_path, capsys
+):
+    """The truth's oscillation range is a peak-to-peak, the analyzer's a per-revolution mean:
+    each says so where it is printed (truth JSON, the result model's field, --help, summary)."""
+    from millwatch.analytics.mill.results import SteadyWindowResult
+
+    truth = tmp_path / "truth.json"
+    out = tmp_path / "s.mcap"
+    assert main(["simulate", "--scene", "steady", "--duration", "2s", "--out", str(out),
+                 "--truth", str(truth), "--no-progress"]) == 0  # fmt: skip
+    said = json.loads(truth.read_text())["definitions"]
+    assert "peak-to-peak" in said["constants.motor_oscillation_pct"]
+    assert "per-revolution" in said["constants.motor_oscillation_pct"]
+    field = SteadyWindowResult.model_fields["range_pct"].description or ""
+    assert "per-revolution" in field and "peak-to-peak" in field
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["analyze", "--help"])
+    helptext = " ".join(capsys.readouterr().out.split())
+    assert "mean of the per-revolution maxima minus the mean of the minima" in helptext
+    assert "peak-to-peak a scene's truth gives" in helptext
+    assert "range = mean of the per-revolution maxima minus minima" in _run(recording)
