@@ -14,9 +14,7 @@ The ``millwatch`` command line: one module per sub-command, composed by ``main``
 * ``edge/`` — commands run beside the gateways: ``spool`` (the edge forwarder, and the
   ``--spool`` options of ``simulate`` and ``replay``); ``zenoh-certs`` (mTLS certificates).
 * ``args`` — argument types that name the rule a value broke; ``signal_files`` — ``.npy`` /
-  ``.csv`` signals read in blocks, for the offline commands; ``archive_spans`` — what an archive
-  file's block headers say of their samples (sample-time span, rate, dtype, unit), for
-  ``archive info``.
+  ``.csv`` signals read in blocks, for the offline commands.
 
 Start-up. ``main.COMMANDS`` names each command's module as a dotted path with the one line
 ``millwatch --help`` lists; only the module of the command being run (or asked for ``--help``) is

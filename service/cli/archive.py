@@ -38,11 +38,11 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
 from millwatch.alarms.times import iso_utc
-from millwatch.cli.archive_spans import ChannelSamples, SampleSpans
 from millwatch.cli.args import duration_seconds, utc_time_ns
 from millwatch.ingest.archive.files import MCAP_MAGIC, ArchiveError
 from millwatch.ingest.archive.reader import TailTolerantReader
 from millwatch.ingest.archive.recovery import recover_file
+from millwatch.ingest.archive.sample_spans import ChannelSamples, SampleSpans
 
 __all__ = ["ArchiveCommandError", "FileInfo", "add_parser", "file_info"]
 

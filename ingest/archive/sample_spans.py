@@ -1,4 +1,4 @@
-"""What the blocks of an archive file say of their samples, per key: for ``archive info``.
+"""What the blocks of an archive file say of their samples, per key (``millwatch archive info``).
 
 An archive's MCAP log time is when the worker *received* a block; the block's own header
 (README "Wire format") says when its samples were taken (``t0``, sample i at ``t0 + i/fs``), at
