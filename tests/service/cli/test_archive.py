@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 from millwatch.cli.main import main
 from millwatch.ingest.archive.files import MCAP_MAGIC, list_archive_files
 from millwatch.ingest.archive.writer import ArchiveWriter
-from tests.ingest.test_replay import KEYS, T0, write_archive
+from tests.ingest.test_replay import KEYS, MS, T0, write_archive
 
 RECORD_HEAD = struct.Struct("<BQ")
 
@@ -189,3 +189,23 @@ def test_info_gives_each_channels_sample_time_span_rate_dtype_and_unit(
     assert main(["archive", "info", str(out)]) == 0
     text = capsys.readouterr().out
     assert "(sample time), 5000 samples at 1000 Hz, float32, kN·m" in text
+
+
+def test_info_counts_blocks_whose_header_does_not_decode(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tests.ingest.test_replay import payload
+
+    key = KEYS[0]
+    with ArchiveWriter(tmp_path, "bad") as writer:
+        for i in range(3):
+            writer.write(key, payload(i), T0 + i)
+        writer.write(key, b"MWBK but nothing else", T0 + 3)
+    (path,) = list_archive_files(tmp_path, "bad")
+    assert main(["archive", "info", str(path), "--json"]) == 0
+    (info,) = json.loads(capsys.readouterr().out)
+    span = info["samples_by_channel"][key]
+    assert span["undecodable_blocks"] == 1 and span["samples"] == 30
+    assert span["first_sample_ns"] == T0 and span["last_sample_ns"] == T0 + 4 * MS + 9 * MS
+    assert main(["archive", "info", str(path)]) == 0
+    assert "; 1 blocks undecodable" in capsys.readouterr().out
