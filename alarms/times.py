@@ -17,8 +17,9 @@ it wherever a program needs it (the text is *truncated* to the millisecond, neve
 moment). An explicit offset, never a zone abbreviation (``SAST`` is not unique and not
 parseable), so the control room's clock time and the instant are both in the text. Which zone
 is the surface's choice and stays it: UTC where machines or engineers across sites compare
-(REST, the alarm wire, archives, exports, ``analyze``), the site's zone where the plant reads
-(alarm messages, monthly reports, ``/life``).
+(REST, the alarm wire, archives, exports), the site's zone where the plant reads (alarm
+messages, monthly reports, ``/life``, ``analyze``'s summary, which prints its events beside
+the alarm messages and names the zone in its header).
 
 It lives in ``alarms`` because that is the lowest package that writes moments as text (alarm
 messages and the alarm wire); ``service`` imports it from here (``analytics`` writes no

@@ -58,7 +58,7 @@ from millwatch.analytics.mill.load_roles import LoadRoles, component_names, stea
 from millwatch.analytics.mill.load_snapshot import assemble, checked
 from millwatch.analytics.mill.load_steady import SteadyProgress
 from millwatch.analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
-from millwatch.analytics.mill.report import months_table, phase_seconds
+from millwatch.analytics.mill.report import events_in_time_order, months_table, phase_seconds
 from millwatch.analytics.operation.operating_states import (
     OperatingState,
     OperatingStateMachine,
@@ -384,6 +384,7 @@ class LoadAnalysis:
             "starts": list(ev.starts),
             "stops": list(ev.stops),
             "barring": list(ev.barrings),
+            "events": events_in_time_order(list(ev.starts), list(ev.stops), list(ev.barrings)),
             "starts_per_day": dict(sorted(ev.starts_per_day.items())),
             "starts_per_month": months_table(ev.starts_per_month, failed, cfg.alarms),
             "steady_state": list(self.steady.windows),

@@ -28,8 +28,10 @@ from millwatch.analytics.mill.phase_damage import (
 from millwatch.analytics.operation.operating_states import OperatingState
 
 __all__ = [
+    "MIN_MEASURED_HISTORY_S",
     "STARTS_NORM_PER_MONTH",
     "damage_table",
+    "events_in_time_order",
     "months_table",
     "phase_seconds",
     "projection_basis",
@@ -39,6 +41,21 @@ __all__ = [
 
 STARTS_NORM_PER_MONTH = (3, 5)
 """Supplier norm for starts per month (Diering 2011 §6.1.3)."""
+
+MIN_MEASURED_HISTORY_S = 7 * 86_400.0
+"""Shortest record (s of samples) whose start rate and running fraction are projected to a
+month (the ``measured`` projection): a week, the middle of App. D's periods (Diering 2011
+App. D: a day, a week, a 4-week month). Starts come days apart (field average 20–22 a month,
+§6.1.3): a shorter record turns one start into thousands a month (one start in 220 s: 10,996);
+below it the projection is null with the reason beside it."""
+
+
+def events_in_time_order(*kinds: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Starts, stops and barring sessions (the analyzer's event dicts, each with ``event`` and
+    ``t_ns``) merged into one list in time order; events at the same time keep the order of
+    ``kinds``. The dicts are the same objects: one name per quantity."""
+    merged = [(e["t_ns"], k, i, e) for k, events in enumerate(kinds) for i, e in enumerate(events)]
+    return [e for *_, e in sorted(merged, key=lambda m: m[:3])]
 
 
 def starts_status(n: int, alarms: AlarmThresholds) -> str:
@@ -141,12 +158,24 @@ def start_cost_fields(cost: AppDCost) -> dict[str, Any]:
 def projection_basis(seconds: dict[str, float], starts: int, elapsed_s: float) -> dict[str, Any]:
     """The assumptions of the monthly projections, printed beside them: a month of 4 weeks,
     App. D's scenarios with the mill running the rest of the month, and the measured start
-    rate (per 4-week month) and running fraction (running / time outside starts and stops)."""
+    rate (per 4-week month) and running fraction (running / time outside starts and stops) —
+    both null, with ``measured_note`` saying why, for a record shorter than
+    :data:`MIN_MEASURED_HISTORY_S`."""
     outside = elapsed_s - seconds.get("start", 0.0) - seconds.get("stop", 0.0)
+    note = None
+    if elapsed_s < MIN_MEASURED_HISTORY_S:
+        days = MIN_MEASURED_HISTORY_S / 86_400.0
+        note = (f"not projected: the record covers {elapsed_s / 86_400.0:.3g} days; a measured "
+                f"start rate needs at least {days:g} days")  # fmt: skip
+    long_enough = note is None
     return {
         "month_days": MONTH_S / 86_400.0,
         "scenarios": "App. D: k start-stop records per day, week or 4-week month, the mill "
         "running the rest of the time; measured: this record's start rate and running fraction",
-        "measured_starts_per_month": starts / elapsed_s * MONTH_S if elapsed_s > 0 else None,
-        "measured_running_fraction": seconds.get("run", 0.0) / outside if outside > 0 else None,
+        "measured_min_history_days": MIN_MEASURED_HISTORY_S / 86_400.0,
+        "measured_starts_per_month": starts / elapsed_s * MONTH_S if long_enough else None,
+        "measured_running_fraction": seconds.get("run", 0.0) / outside
+        if long_enough and outside > 0
+        else None,
+        "measured_note": note,
     }

@@ -55,11 +55,14 @@ class SteadyWindowResult(BaseModel):
     mean: dict[str, float] = Field(description="Mean per channel: kN·m or MPa.")
     range_per_rev: dict[str, float] = Field(
         description="Range per revolution per channel (mean of the per-revolution maxima minus "
-        "mean of the minima): kN·m or MPa."
+        "mean of the minima, Diering 2011 App. C routine 4): kN·m or MPa."
     )
     mean_pct: dict[str, float] = Field(description="Mean per torque channel, % rated torque.")
     range_pct: dict[str, float] = Field(
-        description="Oscillation range per torque channel, % of rated motor torque."
+        description="Oscillation range per torque channel, % of rated motor torque: "
+        "range_per_rev (mean of the per-revolution maxima minus mean of the minima), not the "
+        "peak-to-peak over the window; a simulated scene's truth (motor_oscillation_pct) is "
+        "that peak-to-peak of the noise-free oscillation, which is larger."
     )
     bending_amplitude_mpa: dict[str, float] = Field(
         default_factory=dict, description="Bending amplitude per bending channel, MPa."

@@ -14,6 +14,8 @@ What is here:
 - ``batches``        ``BatchReader``, ``archive_batches``: the same messages as arrays (fast replay)
 - ``batch_kernels``  compiled record scans and payload packing for ``batches``
 - ``copy_kernels``   ``copy_bytes``: a bounds-checked ``memcpy`` usable inside compiled code
+- ``sample_spans``   ``SampleSpans``: what a file's blocks say of their samples, per key (first
+                     and last *sample* time, count, rate, dtype, unit; ``millwatch archive info``)
 - ``foxglove_export`` ``FoxgloveExportWriter``: a derived MCAP file Foxglove plots — samples
                      and analysis results as protobuf topics stamped with *sample* time (the
                      archive's log time is receive time: ``files``)

@@ -179,19 +179,26 @@ class Scene:
             if c.kind in ("torque", "bending")
         }
         faults = FaultPlan(self.config, self.fs, self.spec.events, telemetry, rng)
+        # the truth lists what the samples hold: a scene cut short (--duration) drops the rest
+        end = self.n_samples
         for line in faults.lines:
+            if line.n_start >= end:
+                continue
             self.truth.extra_lines.append(
                 {
                     "t_ns": self.t_ns(line.n_start),
-                    "end_t_ns": self.t_ns(line.n_end),
+                    "end_t_ns": self.t_ns(min(line.n_end, end)),
                     "frequency_hz": line.frequency_hz,
                     "amplitude_pct": line.amplitude_pct,
                 }
             )
         for q in faults.patches:
+            if q.sample >= end:
+                continue
             kind = "dropout" if np.isnan(q.values[0]) else "spike"
+            count = min(len(q.values), end - q.sample)
             self.truth.faults.append(
-                FaultTruth(kind, q.channel, q.sample, len(q.values), self.t_ns(q.sample))
+                FaultTruth(kind, q.channel, q.sample, count, self.t_ns(q.sample))
             )
         return faults
 

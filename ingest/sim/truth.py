@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 __all__ = [
+    "DEFINITIONS",
     "BarringTruth",
     "FaultTruth",
     "HarmonicTruth",
@@ -103,9 +104,34 @@ class FaultTruth:
     t_ns: int
 
 
+#: What the truth's quantities that the analyzer measures differently mean (README
+#: "Oscillation range, two definitions"), written into every truth file beside them.
+DEFINITIONS = {
+    "constants.motor_oscillation_pct": (
+        "steady torque oscillation range of the motor shaft, % of rated motor torque: the "
+        "peak-to-peak (maximum minus minimum) of the noise-free oscillation over its whole "
+        "period (girth-teeth pinion revolutions), the value the simulator scales its lines to "
+        "(Diering 2011 Table 14). The analyzer's steady-state range_pct is another quantity: "
+        "the mean of the per-revolution maxima minus the mean of the per-revolution minima "
+        "(App. C routine 4), smaller"
+    ),
+    "constants.pinion_oscillation_pct": (
+        "as motor_oscillation_pct, for the pinion shaft's torque, % of rated pinion torque "
+        "(the motor's times the reducer ratio): peak-to-peak over the whole period"
+    ),
+    "constants.bending_range_mpa": (
+        "pinion bending range, MPa: twice the amplitude of the once-per-revolution bending "
+        "(noise-free); the analyzer's range_per_rev of the bending channel measures the same"
+    ),
+    "harmonics.motor_amplitude_knm": "amplitude of one line = half its range, kN·m",
+}
+"""What :data:`DEFINITIONS` explains, by its path in the truth JSON."""
+
+
 @dataclass
 class SceneTruth:
-    """What the scene put into the signals."""
+    """What the scene put into the signals (``definitions``: what its quantities mean where
+    the analyzer measures them otherwise, :data:`DEFINITIONS`)."""
 
     mill_id: str
     scene: str
@@ -120,6 +146,7 @@ class SceneTruth:
     faults: list[FaultTruth] = field(default_factory=list)
     extra_lines: list[dict[str, float]] = field(default_factory=list)
     constants: dict[str, float] = field(default_factory=dict)
+    definitions: dict[str, str] = field(default_factory=lambda: dict(DEFINITIONS))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready)."""

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import multiprocessing
 import os
 import queue
@@ -33,7 +34,7 @@ from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type info
 
 from millwatch.alarms.from_analysis import report_observations
 from millwatch.alarms.report import alarms_for_report
-from millwatch.alarms.times import iso_utc
+from millwatch.alarms.times import iso_local
 from millwatch.analytics.drivetrain.mill_config import MillConfig
 from millwatch.analytics.mill.analyzer import MillAnalyzer
 from millwatch.ingest import wire
@@ -285,25 +286,90 @@ def _count(value: int | dict[str, Any], words: str) -> str:
     return f"{number} {words} ({', '.join(f'{k}: {v}' for k, v in value.items())})"
 
 
+def _event_line(e: dict[str, Any], zone: str) -> str:
+    """One start, stop or barring session, its time in site time."""
+    at = iso_local(e["t_ns"], zone)
+    if e["event"] == "start":
+        return (f"  {at}  start{' FAILED' if e['failed'] else ''}: switch-on "
+                f"{_fmt(e['switch_on_peak_pct'])} %, short-circuit "
+                f"{_fmt(e['short_circuit_peak_pct'])} %, rise 10-90 "
+                f"{_fmt(e['rise_time_10_90_ms'])} ms, accel {_fmt(e['accel_s'])} s")  # fmt: skip
+    if e["event"] == "stop":
+        return (f"  {at}  {e['kind']}: rocking peak {_fmt(e['rocking_peak_pct'])} % for "
+                f"{_fmt(e['rocking_s'])} s")  # fmt: skip
+    return (f"  {at}  barring: peak {e['peak_pct']:.1f} %, average {e['average_pct']:.1f} %, "
+            f"{e['duration_s']:.0f} s")  # fmt: skip
+
+
+def _time_basis(report: dict[str, Any]) -> str:
+    """The header's statement of the one time basis of the summary: the site's zone."""
+    zone = report["time_zone"]
+    t = report["t0_ns"]
+    offset = "" if t is None else f", UTC{iso_local(t, zone)[23:]} at the first sample"
+    return f"times in site time, {zone}{offset}"
+
+
+#: The summary's words for a channel's fault counts (``data_quality.faults``), in order.
+_FAULTS = {"spikes": "spikes", "dropouts": "dropouts (NaN/inf runs)",
+           "zero_runs": "zero runs", "rail_hits": "rail hits"}  # fmt: skip
+
+
+def _data_quality_line(report: dict[str, Any]) -> str:
+    """Flagged samples per channel and why (the fault detector's counts: held at the last
+    valid value for counting, left out of steady-state values), then the gaps filled with NaN."""
+    dq = report["data_quality"]
+    flagged = {ch: c for ch, c in dq["faults"].items() if c["flagged_samples"]}
+    parts = []
+    for ch, c in flagged.items():
+        why = ", ".join(f"{c[k]:,} {w}" for k, w in _FAULTS.items() if c[k])
+        parts.append(f"{ch} {c['flagged_samples']:,} ({why or 'flagged'})")
+    total = sum(c["flagged_samples"] for c in flagged.values())
+    text = (f"{total:,} flagged samples, held at the last valid value for counting: "
+            + "; ".join(parts)) if parts else "no flagged samples"  # fmt: skip
+    gaps = (f"{dq['gap_samples']:,} samples of gaps (NaN) from {dq['missing_blocks']:,} missing "
+            "blocks" if dq["gap_samples"] or dq["missing_blocks"] else "no gaps")  # fmt: skip
+    late = f"; {dq['late_blocks']:,} blocks too late to align" if dq["late_blocks"] else ""
+    return f"  data quality: {text}; {gaps}{late}"
+
+
+def _spread(values: list[float]) -> str:
+    """``min / median / max`` of the finite ``values`` (— when none)."""
+    v = sorted(x for x in values if math.isfinite(x))
+    if not v:
+        return "—"
+    mid = len(v) // 2
+    median = v[mid] if len(v) % 2 else (v[mid - 1] + v[mid]) / 2
+    return f"{v[0]:.1f} / {median:.1f} / {v[-1]:.1f}"
+
+
+def _steady_lines(windows: list[dict[str, Any]]) -> list[str]:
+    """The steady-state windows: how many, and the spread of their values over the windows."""
+    if not windows:
+        return ["  steady-state windows: none"]
+    lines = [f"  steady-state windows: {len(windows)} (min / median / max over the windows; "
+             "range = mean of the per-revolution maxima minus minima)"]  # fmt: skip
+    pct = "% rated motor torque"
+    rows = [
+        ("range", "range_pct", pct),
+        ("mean", "mean_pct", pct),
+        ("amplitude", "bending_amplitude_mpa", "MPa (half the range per revolution)"),
+    ]
+    for what, key, unit in rows:
+        for ch in windows[0].get(key, {}):
+            got = _spread([w[key].get(ch, math.nan) for w in windows])
+            lines.append(f"    {ch} {what}: {got} {unit}")
+    return lines
+
+
 def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
     lines = [f"mill {report['mill']} ({report['site']}): {report['samples']} samples, "
-             f"state now {report['state']}"]  # fmt: skip
-    for s in report["starts"]:
-        lines.append(
-            f"  start {iso_utc(s['t_ns'])}{' FAILED' if s['failed'] else ''}: switch-on "
-            f"{_fmt(s['switch_on_peak_pct'])} %, short-circuit {_fmt(s['short_circuit_peak_pct'])}"
-            f" %, rise 10-90 {_fmt(s['rise_time_10_90_ms'])} ms, accel {_fmt(s['accel_s'])} s"
-        )
-    for s in report["stops"]:
-        lines.append(f"  {s['kind']:5} {iso_utc(s['t_ns'])}: rocking peak "
-                     f"{_fmt(s['rocking_peak_pct'])} % for {_fmt(s['rocking_s'])} s")  # fmt: skip
-    for b in report["barring"]:
-        lines.append(f"  barring {iso_utc(b['t_ns'])}: peak {b['peak_pct']:.1f} %, average "
-                     f"{b['average_pct']:.1f} %, {b['duration_s']:.0f} s")  # fmt: skip
+             f"state now {report['state']}; {_time_basis(report)}"]  # fmt: skip
+    lines.append(_data_quality_line(report))
+    lines += [_event_line(e, report["time_zone"]) for e in report["events"]]
     for month, m in report["starts_per_month"].items():
         lines.append(f"  starts {month}: {m['starts']} ({m['failed_starts']} failed), "
                      f"norm {m['norm'][0]}-{m['norm'][1]}: {m['status']}")  # fmt: skip
-    lines.append(f"  steady-state windows: {len(report['steady_state'])}")
+    lines += _steady_lines(report["steady_state"])
     for comp, d in report["damage"].items():
         lines += _damage_lines(comp, d)
     summary = report["summary"]
@@ -337,7 +403,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             'speed (measured, README Benchmarks "Offline analysis"): a week of one mill, running\n'
             "74 % of the time, at about 1,200-1,400x real time per core with every analysis on\n"
             "(1,750x on two cores); --no-spectra skips the harmonic spectra, more than half the\n"
-            "work, for questions about starts, stops and damage: about 2,900-3,000x."
+            "work, for questions about starts, stops and damage: about 2,900-3,000x.\n"
+            "\n"
+            "output: times in site time with their offset (the zone in the header); events in\n"
+            "time order (--json: 'events', beside 'starts', 'stops', 'barring'); a data-quality\n"
+            "line. Steady-state oscillation range (range_pct): the mean of the per-revolution\n"
+            "maxima minus the mean of the minima (Diering 2011 App. C routine 4), not the\n"
+            "peak-to-peak a scene's truth gives (motor_oscillation_pct), which is larger. The\n"
+            "'measured' monthly projection needs at least 7 days of record (else null, why)."
         ),
     )
     p.add_argument("recording", type=Path, nargs="+", metavar="RECORDING",

@@ -1,8 +1,10 @@
 """``millwatch archive``: look into MCAP archive files and repair the ones a crash left open.
 
 ``archive info FILE...`` prints, per file: finished (summary and footer written) or not,
-channels with message counts, the log-time range (UTC) and, for an unfinished file, the torn
-bytes after the last complete record. The counts are of the messages actually readable: every
+channels with message counts, the log-time range (UTC: when the blocks were *received*), per
+channel the sample-time span (first and last sample, from the blocks' own headers), sample
+count, rate, sample type and unit, and, for an unfinished file, the torn bytes after the last
+complete record. The counts are of the messages actually readable: every
 file is read front to back (every chunk decompressed and CRC-checked, ~1 s per 100 MB), and a
 finished file's summary is only compared with them — a file whose summary claims messages it
 does not hold (a writer that counted writes a full disk refused) is reported with both
@@ -40,6 +42,7 @@ from millwatch.cli.args import duration_seconds, utc_time_ns
 from millwatch.ingest.archive.files import MCAP_MAGIC, ArchiveError
 from millwatch.ingest.archive.reader import TailTolerantReader
 from millwatch.ingest.archive.recovery import recover_file
+from millwatch.ingest.archive.sample_spans import ChannelSamples, SampleSpans
 
 __all__ = ["ArchiveCommandError", "FileInfo", "add_parser", "file_info"]
 
@@ -50,7 +53,8 @@ class ArchiveCommandError(ValueError):
 
 @dataclass(frozen=True)
 class FileInfo:
-    """What ``archive info`` reports of one file; log times in ns since the epoch (UTC)."""
+    """What ``archive info`` reports of one file; log (receive) times in ns since the epoch
+    (UTC); ``samples_by_channel``: what the blocks' headers say of their samples, per key."""
 
     path: str
     finished: bool
@@ -62,6 +66,7 @@ class FileInfo:
     error: str | None = None
     #: The message count the file's summary states (None: no summary).
     summary_messages: int | None = None
+    samples_by_channel: dict[str, ChannelSamples] = field(default_factory=dict)
 
     @property
     def truthful(self) -> bool:
@@ -106,9 +111,11 @@ def _from_summary(path: Path) -> FileInfo | None:
 def _from_scan(path: Path) -> FileInfo:
     reader = TailTolerantReader(path)
     counts = Counter[str]()
+    spans = SampleSpans()
     first = last = None
     for msg in reader.messages():
         counts[msg.key] += 1
+        spans.add(msg.key, msg.payload)
         t = msg.log_time_ns
         first = t if first is None else min(first, t)
         last = t if last is None else max(last, t)
@@ -116,6 +123,7 @@ def _from_scan(path: Path) -> FileInfo:
         path=str(path), finished=reader.finished, messages=reader.message_count,
         messages_by_channel=dict(sorted(counts.items())), first_log_time_ns=first,
         last_log_time_ns=last, torn_bytes=reader.torn_bytes, error=reader.error,
+        samples_by_channel=spans.sorted(),
     )  # fmt: skip
 
 
@@ -148,7 +156,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     actions = p.add_subparsers(title="actions", metavar="ACTION", required=True)
-    info = actions.add_parser("info", help="finished or not, channels, counts, time range")
+    info = actions.add_parser("info", help="finished or not, channels, counts, receive time "
+                              "range; per channel sample-time span, rate, dtype, unit")  # fmt: skip
     info.add_argument("files", nargs="+", type=Path, metavar="FILE", help=".mcap archive file")
     info.add_argument("--json", action="store_true", help="print a JSON list")
     info.set_defaults(handler=_info)
@@ -317,11 +326,26 @@ def _describe(info: FileInfo) -> str:
         span = (info.last_log_time_ns - info.first_log_time_ns) / 1e9
     lines = [
         f"{info.path}: {state}",
-        f"  {info.messages} messages on {len(info.messages_by_channel)} channels, "
-        f"{_iso(info.first_log_time_ns)} .. {_iso(info.last_log_time_ns)} ({span:.3f} s)",
+        f"  {info.messages} messages on {len(info.messages_by_channel)} channels, received "
+        f"{_iso(info.first_log_time_ns)} .. {_iso(info.last_log_time_ns)} ({span:.3f} s, "
+        "log time)",
     ]
-    lines += [f"    {key}  {n}" for key, n in info.messages_by_channel.items()]
+    for key, n in info.messages_by_channel.items():
+        lines.append(f"    {key}  {n}")
+        if key in info.samples_by_channel:
+            lines.append(f"      {_samples(info.samples_by_channel[key])}")
     return "\n".join(lines) + "\n"
+
+
+def _samples(c: ChannelSamples) -> str:
+    """One channel's samples in words: sample-time span, count, rate, dtype, unit."""
+    bad = f"; {c.undecodable_blocks} blocks undecodable" if c.undecodable_blocks else ""
+    if c.first_sample_ns is None or c.last_sample_ns is None:
+        return f"no samples{bad}"
+    rate = ", ".join(f"{r:g}" for r in c.rates_hz)
+    return (f"samples {_iso(c.first_sample_ns)} .. {_iso(c.last_sample_ns)} (sample time), "
+            f"{c.samples} samples at {rate} Hz, {', '.join(c.dtypes)}, "
+            f"{', '.join(c.units)}{bad}")  # fmt: skip
 
 
 def _recover(args: argparse.Namespace) -> int:

@@ -8,6 +8,13 @@ result (ASTM E1049-85; Diering 2011 §8.2 and App. D). The residue is closed at 
 (ASTM, the default) or ``repeat`` (the record followed by itself, full cycles only; see
 ``--residue``).
 
+Non-finite samples (NaN, ±inf: lost telemetry) are treated as the analyzer treats missing and
+flagged samples (:mod:`millwatch.analytics.mill.load_damage`, "NaN policy"): the last finite
+value is held across them (a plateau has no reversal), and those before the first finite value
+are skipped; the summary counts them. ``--mill M.toml`` takes the S-N curve, mean-stress
+correction and stress factor from the mill file, as the analyzer does: the material's curve,
+or with ``--component`` that component's curve, correction and K_f.
+
 Start-up: the module imports argparse and light helpers only, so ``millwatch rainflow --help``
 imports no numpy or numba; the functions that count import what they use when they run. Counting
 then loads the kernels' cached machine code without starting numba's compiler
@@ -36,7 +43,6 @@ if TYPE_CHECKING:  # numpy and the counter are imported by the functions that co
     import numpy as np
 
     from millwatch.analytics.fatigue.cycles import Cycles
-    from millwatch.analytics.fatigue.record_count import RecordCount
     from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
     from millwatch.cli.signal_files import ArraySource, SignalSource
 
@@ -59,7 +65,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "examples:\n"
             "  millwatch rainflow stress.npy --json\n"
             "  millwatch rainflow log.csv --column pinion_stress --kt 2 --sn-model shigley-limit\n"
-            "  millwatch rainflow stress.npy --cycles-out cycles.csv --residue repeat"
+            "  millwatch rainflow stress.npy --cycles-out cycles.csv --residue repeat\n"
+            "  millwatch rainflow tau.npy --mill deploy/mills/sag-5200-lrs.toml "
+            "--component pinion_torsion"
         ),
     )
     p.add_argument("input", type=Path, help="signal file: .npy (1-D) or .csv with a header row")
@@ -85,24 +93,40 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     _add_sn_options(p)
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
-    p.add_argument("--cycles-out", type=Path, help="write every cycle to this CSV file")
+    p.add_argument("--cycles-out", type=Path, metavar="FILE.csv",
+                   help="write every cycle to this CSV file: range_before_kt, mean_before_kt "
+                        "(the input signal's units, before the stress factor), count (1 or "
+                        "0.5), i_start, i_end (input rows from 0), range_after_kt, "
+                        "mean_after_kt (times --kt or the --component's K_f: the stress the "
+                        "S-N curve is entered with, before any Goodman correction)")  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     p.set_defaults(handler=_main)
 
 
 def _add_sn_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("S-N curve (stress in MPa)")
+    g = p.add_argument_group(
+        "S-N curve (stress in MPa)",
+        "from the mill file with --mill (as the analyzer: the material's [material.sn], or with "
+        "--component that component's curve, mean-stress correction and K_f); else from the "
+        "options below (not both)",
+    )
+    g.add_argument("--mill", type=Path, metavar="M.toml",
+                   help="mill file whose S-N curve, correction and factor to use")  # fmt: skip
+    g.add_argument("--component", metavar="KIND",
+                   help="with --mill: the damage component whose stress the signal is, as the "
+                        "analyzer counts it before its factor (nominal tau or sigma_b; "
+                        "pinion_combined: the combined trace) — pinion_combined, pinion_torsion, "
+                        "motor_torsion or pinion_bending, a side suffix allowed: its curve, "
+                        "correction and K_f")  # fmt: skip
     g.add_argument(
         "--sn-model",
         choices=SN_MODEL_NAMES,
-        default="shigley",
         help="S-N model (default: shigley, Diering 2011 App. D section 1)",
     )
     g.add_argument(
         "--s-ut",
         type=positive_float,
-        default=APP_D_S_UT,
-        help="ultimate tensile strength, MPa (shigley models)",
+        help=f"ultimate tensile strength, MPa (shigley models; default {APP_D_S_UT:g})",
     )
     g.add_argument(
         "--s-e",
@@ -117,8 +141,8 @@ def _add_sn_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--kt",
         type=positive_float,
-        default=1.0,
-        help="stress concentration factor applied to the signal (App. D uses K_t = 2)",
+        help="stress concentration factor applied to the signal (default 1; App. D uses "
+        "K_t = 2; with --component: the component's K_f)",
     )
     g.add_argument("--goodman", action="store_true", help="Goodman mean-stress correction")
     g.add_argument(
@@ -151,6 +175,12 @@ class RainflowSummary:
     gate: float
     scale: float
     sn_curve: dict[str, Any]
+    #: NaN/±inf samples: held at the last finite value, or skipped before the first one.
+    nonfinite_samples: int = 0
+    #: Of those, the ones before the first finite sample (skipped, not counted).
+    leading_nonfinite_skipped: int = 0
+    #: The stress factor and correction in words, with ``--mill`` (None without).
+    stress_factors: str | None = None
 
 
 def run_rainflow(
@@ -165,9 +195,10 @@ def run_rainflow(
     n_ref: float = 2e6,
     cycles_out: IO[str] | None = None,
     progress: bool = False,
+    stress_factors: str | None = None,
 ) -> RainflowSummary:
-    """Count ``source`` in chunks of ``block_size``; write every cycle to ``cycles_out`` if
-    given."""
+    """Count ``source`` in chunks of ``block_size``, non-finite samples held as the analyzer
+    holds them (:class:`_HoldLastFinite`); write every cycle to ``cycles_out`` if given."""
     from millwatch.analytics.fatigue.record_count import KERNELS, RecordCount
     from millwatch.kernel_preload import preload
 
@@ -175,16 +206,17 @@ def run_rainflow(
     count = RecordCount(
         curve, scale=scale, goodman=goodman, gate=gate, residue=residue, capacity=block_size
     )
-    writer = _CycleWriter(cycles_out)
+    writer = _CycleWriter(cycles_out, scale)
+    hold = _HoldLastFinite()
     with _progress(source, progress) as bar:
         for chunk in source.blocks(block_size):
-            writer.write(_feed(count, chunk, source))
+            writer.write(count.feed(hold(chunk)), hold.lead)
             bar.update(chunk.shape[0])
     closing, totals = count.close()
-    writer.write(closing)
+    writer.write(closing, hold.lead)
     return RainflowSummary(
         input=str(source.path),
-        samples=totals.samples,
+        samples=totals.samples + hold.lead,
         full_cycles=totals.full_cycles,
         half_cycles=totals.half_cycles,
         damage=totals.damage,
@@ -197,34 +229,68 @@ def run_rainflow(
         gate=gate,
         scale=scale,
         sn_curve=curve.to_dict(),
+        nonfinite_samples=hold.held + hold.lead,
+        leading_nonfinite_skipped=hold.lead,
+        stress_factors=stress_factors,
     )
 
 
-def _feed(count: RecordCount, chunk: np.ndarray, source: Source) -> Cycles:
-    from millwatch.analytics.fatigue.rainflow import NonFiniteSampleError
-    from millwatch.cli.signal_files import SignalFileError
+class _HoldLastFinite:
+    """The analyzer's NaN policy on a recorded signal (:mod:`millwatch.analytics.mill.
+    load_damage`): each non-finite sample takes the last finite value (a plateau: no reversal,
+    no cycle); those before the first finite sample are dropped (``lead`` of them, so a cycle's
+    counter index + ``lead`` is its input row). ``held`` counts the samples filled."""
 
-    try:
-        return count.feed(chunk)
-    except NonFiniteSampleError as exc:
-        where = f"row {exc.index + 1}" if source.column else f"sample {exc.index}"
-        raise SignalFileError(
-            f"{source.path}: {where} is {exc.value!r}. Rainflow needs finite samples; clean or "
-            "cut the record first (millwatch never interpolates bad telemetry silently)."
-        ) from exc
+    def __init__(self) -> None:
+        self.last = math.nan
+        self.lead = 0
+        self.held = 0
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        import numpy as np
+
+        ok = np.isfinite(x)
+        if ok.all():
+            if x.size:
+                self.last = float(x[-1])
+            return x
+        idx = np.where(ok, np.arange(x.shape[0]), -1)
+        np.maximum.accumulate(idx, out=idx)
+        if math.isnan(self.last):
+            lead = int(np.count_nonzero(idx < 0))
+            self.lead += lead
+            out = x[idx[lead:]]
+            self.held += int(np.count_nonzero(~ok)) - lead
+        else:
+            out = np.where(idx >= 0, x[np.maximum(idx, 0)], self.last)
+            self.held += int(np.count_nonzero(~ok))
+        if out.size:
+            self.last = float(out[-1])
+        return out
+
+
+#: ``--cycles-out`` columns: the signal's cycle before the stress factor, then after it.
+CYCLE_COLUMNS = ("range_before_kt", "mean_before_kt", "count", "i_start", "i_end",
+                 "range_after_kt", "mean_after_kt")  # fmt: skip
 
 
 class _CycleWriter:
-    """``range,mean,count,i_start,i_end`` rows at full precision (repr of float64)."""
+    """:data:`CYCLE_COLUMNS` rows at full precision (repr of float64): range and mean of the
+    input signal, count, input rows, then range and mean times the stress factor ``scale``."""
 
-    def __init__(self, out: IO[str] | None) -> None:
+    def __init__(self, out: IO[str] | None, scale: float) -> None:
         self._csv = csv.writer(out, lineterminator="\n") if out is not None else None
+        self._scale = scale
         if self._csv is not None:
-            self._csv.writerow(["range", "mean", "count", "i_start", "i_end"])
+            self._csv.writerow(CYCLE_COLUMNS)
 
-    def write(self, cycles: Cycles) -> None:
-        if self._csv is not None and len(cycles):
-            self._csv.writerows(cycles.as_tuples())
+    def write(self, cycles: Cycles, lead: int) -> None:
+        if self._csv is None or not len(cycles):
+            return
+        k = self._scale
+        self._csv.writerows(
+            (r, m, c, a + lead, b + lead, r * k, m * k) for r, m, c, a, b in cycles.as_tuples()
+        )
 
 
 class _NoBar:
@@ -252,9 +318,16 @@ def _main(args: argparse.Namespace) -> int:
     from millwatch.analytics.fatigue.sn_models import SNModelParameters, build_sn_curve
     from millwatch.cli.signal_files import open_signal
 
-    params = SNModelParameters(S_ut=args.s_ut, S_e=args.s_e, fat=args.fat)
-    curve = build_sn_curve(args.sn_model, params)
-    goodman = GoodmanCorrection(args.s_ut) if args.goodman else None
+    if args.mill is not None:
+        curve, goodman, scale, factors = _from_mill(args)
+    else:
+        if args.component is not None:
+            raise ValueError("--component needs --mill (the mill file defines the components)")
+        s_ut = APP_D_S_UT if args.s_ut is None else args.s_ut
+        params = SNModelParameters(S_ut=s_ut, S_e=args.s_e, fat=args.fat)
+        curve = build_sn_curve(args.sn_model or "shigley", params)
+        goodman = GoodmanCorrection(s_ut) if args.goodman else None
+        scale, factors = (1.0 if args.kt is None else args.kt), None
     source = open_signal(args.input, args.column)
     with _maybe_open(args.cycles_out) as out:
         summary = run_rainflow(
@@ -263,14 +336,47 @@ def _main(args: argparse.Namespace) -> int:
             block_size=args.block_size,
             gate=args.gate,
             residue=ResidueMode(args.residue),
-            scale=args.kt,
+            scale=scale,
             goodman=goodman,
             n_ref=args.n_ref,
             cycles_out=out,
             progress=not args.no_progress and sys.stderr.isatty(),
+            stress_factors=factors,
         )
     _print_summary(summary, as_json=args.json)
     return 0
+
+
+def _from_mill(args: argparse.Namespace) -> tuple[SNCurve, GoodmanCorrection | None, float, str]:
+    """The S-N curve, mean-stress correction, stress factor and their description that the
+    analyzer uses for ``--component`` of ``--mill`` (without ``--component``: the material's
+    curve, no correction, ``--kt``). S-N options beside ``--mill`` are refused: one source."""
+    from millwatch.analytics.drivetrain.mill_config import FATIGUE_KINDS
+    from millwatch.ingest.mill_files import load_mill_config
+
+    given = [f"--{n.replace('_', '-')}" for n in ("sn_model", "s_ut", "s_e", "fat")
+             if getattr(args, n) is not None] + (["--goodman"] if args.goodman else [])  # fmt: skip
+    if given:
+        raise ValueError(f"{', '.join(given)}: the mill file given with --mill sets the S-N "
+                         "curve and its correction; give one or the other")  # fmt: skip
+    try:
+        config = load_mill_config(args.mill)
+    except ValueError as exc:
+        raise ValueError(f"--mill {exc}") from exc
+    comp = args.component
+    if comp is None:
+        kt = 1.0 if args.kt is None else args.kt
+        return config.material.sn_curve(), None, kt, f"K_t {kt:g} (--kt), the material's S-N curve"
+    if not comp.startswith(FATIGUE_KINDS):
+        raise ValueError(f"--component {comp!r}: not a damage component; one of "
+                         f"{', '.join(FATIGUE_KINDS)} (a drive side suffix allowed)")  # fmt: skip
+    if args.kt is not None:
+        raise ValueError("--kt: with --component the stress factor is the component's K_f "
+                         "from the mill file; drop --kt")  # fmt: skip
+    model = config.shafts.stress_model()
+    mean = config.material.mean_correction(comp)
+    words = f"{comp}: {model.describe(comp)}" + (", Goodman" if mean is not None else "")
+    return config.material.sn_curve(comp), mean, model.scale(comp), words
 
 
 def _one_blas_thread() -> None:
@@ -306,8 +412,14 @@ def _print_summary(s: RainflowSummary, *, as_json: bool) -> None:
         out.write("\n")
         return
     life = math.inf if s.damage == 0 else 1.0 / s.damage
+    held = ""
+    if s.nonfinite_samples:
+        held = (f"  non-finite   {s.nonfinite_samples} samples (NaN/inf): held at the last finite "
+                f"value, as the analyzer holds missing samples ({s.leading_nonfinite_skipped} "
+                "before the first finite one skipped)\n")  # fmt: skip
+    factors = f"  stress factor  {s.stress_factors}\n" if s.stress_factors else ""
     out.write(
-        f"{s.input}: {s.samples} samples\n"
+        f"{s.input}: {s.samples} samples\n{held}{factors}"
         f"  cycles       {s.full_cycles} full, {s.half_cycles} half (residue: {s.residue_mode})\n"
         f"  damage       {s.damage:.6e} (Miner sum; {s.damage_residue:.3e} from the residue)\n"
         f"  repeats to failure  {life:.4g}\n"

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 import numpy as np
 
 from millwatch.analytics.drivetrain.mill_config import MillConfig
-from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.analytics.mill.analyzer import MAX_CHUNK_S, MillAnalyzer
 from millwatch.analytics.spectra.facts import HarmonicWindow
 from millwatch.analytics.spectra.tracker import HarmonicTracker
 from millwatch.ingest.archive.batches import BatchReader, MessageBatch
@@ -46,6 +46,7 @@ if TYPE_CHECKING:  # (the export imports the Foxglove SDK: analyze does not need
     from millwatch.export.foxglove import SpanExport
 
 __all__ = [
+    "AnalysisProgress",
     "BackgroundSpectra",
     "OfflineSink",
     "ReadingStats",
@@ -177,6 +178,8 @@ class OfflineSink(_AdmittingSink):
         self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
     ) -> None:
         super().__init__(configs)
+        #: Told after each step of analysis (:meth:`commit`), e.g. an :class:`AnalysisProgress`.
+        self.on_step: Callable[[], None] = lambda: None
         self._background: list[BackgroundSpectra] = []
         # each mill's spectra on a thread of their own
         runner = self._background_spectra if spectra and background else None
@@ -204,10 +207,24 @@ class OfflineSink(_AdmittingSink):
         self.analyzers[mill_id].add_blocks(chan, t0_ns, raw)
 
     def commit(self) -> None:
-        """Analyse what each mill was given since the last commit (long contiguous chunks)."""
+        """Analyse what each mill was given since the last commit, in steps of
+        :data:`~millwatch.analytics.mill.analyzer.MAX_CHUNK_S` (the chunks ``process`` takes
+        anyway: the same results), telling :attr:`on_step` after each."""
         for analyzer in self.analyzers.values():
-            if analyzer.backlog:
-                analyzer.process()
+            step = round(MAX_CHUNK_S * analyzer.config.sample_rate_hz)
+            while analyzer.backlog:
+                before = analyzer.backlog
+                analyzer.process(until=analyzer.samples + step)
+                self.on_step()
+                if analyzer.backlog >= before:  # (nothing taken: let process() decide)
+                    analyzer.process()
+                    break
+
+    def analysed_share(self) -> float:
+        """Samples analysed / samples aligned so far, over every mill (1 before any)."""
+        done = sum(a.samples for a in self.analyzers.values())
+        waiting = sum(a.backlog for a in self.analyzers.values())
+        return done / (done + waiting) if done + waiting else 1.0
 
     def finish(self) -> None:
         """End of the recording: every analyzer emits what its stages still hold."""
@@ -237,28 +254,64 @@ class OfflineSink(_AdmittingSink):
         }
 
 
-def _batches(
-    path: Path, stats: ReadingStats, advance: Callable[[int], None]
-) -> Iterator[MessageBatch]:
-    """The file's messages in batches of at least :data:`BATCH_MESSAGES`; ``advance(bytes)``
-    as the reader moves through the file."""
+class AnalysisProgress:
+    """``advance(bytes)`` as the *analysis* moves through the recording, not the reading (which
+    runs ahead on its own thread, and for a small recording is over before the analysis has
+    begun): the bytes of the batches handed to the analyzers, times the share of their samples
+    analysed (:meth:`OfflineSink.analysed_share`), updated at each step of analysis; the
+    remainder when the analysis ends (:meth:`finish`)."""
+
+    def __init__(self, sink: OfflineSink, advance: Callable[[int], None]) -> None:
+        self._sink = sink
+        self._advance = advance
+        self._handed = 0
+        self._shown = 0
+        sink.on_step = self.update
+
+    def handed(self, nbytes: int) -> None:
+        """A batch of ``nbytes`` of the files went to the analyzers (aligned, not analysed)."""
+        self._handed += nbytes
+        self.update()
+
+    def update(self) -> None:
+        now = int(self._handed * self._sink.analysed_share())
+        if now > self._shown:
+            self._advance(now - self._shown)
+            self._shown = now
+
+    def finish(self, total: int) -> None:
+        """The analysis is over: the bar reaches ``total`` bytes."""
+        if total > self._shown:
+            self._advance(total - self._shown)
+            self._shown = total
+
+
+def _batches(path: Path, stats: ReadingStats) -> Iterator[tuple[MessageBatch, int]]:
+    """The file's messages in batches of at least :data:`BATCH_MESSAGES`, each with the bytes
+    of the file read for it (the last one's: to the end of the file)."""
     reader = BatchReader(path, empty_ok=True)
     group: list[MessageBatch] = []
+    ready: tuple[MessageBatch, int] | None = None  # a full batch, and the bytes read for it
     size = done = 0
     try:
         for batch in reader.messages():
             group.append(batch)
             size += len(batch)
             if size >= BATCH_MESSAGES:
-                yield MessageBatch.concat(group)
-                group, size = [], 0
-                advance(reader.valid_bytes - done)
+                if ready is not None:
+                    yield ready
+                ready = (MessageBatch.concat(group), reader.valid_bytes - done)
                 done = reader.valid_bytes
+                group, size = [], 0
     except (ArchiveError, OSError) as exc:
         raise ValueError(f"RECORDING {path}: {exc}") from exc
+    rest = path.stat().st_size - done  # the last batch takes the bytes to the file's end
     if group:
-        yield MessageBatch.concat(group)
-    advance(path.stat().st_size - done)
+        if ready is not None:
+            yield ready
+        yield MessageBatch.concat(group), rest
+    elif ready is not None:
+        yield ready[0], ready[1] + rest
     if reader.error:
         log.warning("%s: %s (read up to it)", path, reader.error)
         stats.unreadable_tails[str(path)] = reader.error
@@ -278,14 +331,15 @@ def _ours(batch: MessageBatch, sink: _AdmittingSink) -> tuple[MessageBatch, Coun
 
 
 def _sink_batches(
-    files: Sequence[Path], sink: _AdmittingSink, stats: ReadingStats, advance: Callable[[int], None]
-) -> Iterator[tuple[Path, MessageBatch, Counter[str]]]:
-    """(file, the messages of a batch on the sink's mills' keys, the others per key) of ``files``
-    in order, read a batch or two ahead by a thread (:class:`_ReadAhead`)."""
-    read = ((path, batch) for path in files for batch in _batches(path, stats, advance))
+    files: Sequence[Path], sink: _AdmittingSink, stats: ReadingStats
+) -> Iterator[tuple[Path, MessageBatch, Counter[str], int]]:
+    """(file, the messages of a batch on the sink's mills' keys, the others per key, the bytes
+    of the file read for the batch) of ``files`` in order, read a batch or two ahead by a
+    thread (:class:`_ReadAhead`)."""
+    read = ((path, *batch) for path in files for batch in _batches(path, stats))
     with _ReadAhead(read) as ahead:
-        for path, batch in ahead:
-            yield (path, *_ours(batch, sink))
+        for path, batch, nbytes in ahead:
+            yield (path, *_ours(batch, sink), nbytes)
 
 
 class _ReadAhead(Generic[_T]):
@@ -353,17 +407,21 @@ def analyze_files(
     job's share counts them); ``background``: each mill's spectra on a thread of its own
     (:class:`BackgroundSpectra`: for cores that would idle otherwise). Returns the sink (its
     analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and what reading
-    met. The files are read a batch or two ahead by a thread (:func:`_sink_batches`)."""
+    met. The files are read a batch or two ahead by a thread (:func:`_sink_batches`);
+    ``advance`` follows the analysis (:class:`AnalysisProgress`), the files' sizes in all."""
     sink = OfflineSink(configs, spectra=spectra, background=background)
+    progress = AnalysisProgress(sink, advance)
     lane = BatchLane(sink)
     stats = ReadingStats()
-    for path, ours, foreign in _sink_batches(files, sink, stats, advance):
+    for path, ours, foreign, nbytes in _sink_batches(files, sink, stats):
         if path not in uncounted:
             for key, blocks in foreign.items():
                 sink.admission.count_foreign(key, blocks)
         if len(ours):
             lane.replay(ours)
+        progress.handed(nbytes)
     sink.finish()
+    progress.finish(sum(p.stat().st_size for p in files))
     stats.files = [str(p) for p in files if p not in uncounted]
     stats.foreign_blocks = sink.admission.foreign_blocks
     stats.malformed_blocks = sink.admission.malformed()
@@ -421,8 +479,9 @@ def export_files(
     context are skipped on their header times, undecoded."""
     sink = _SpanSink(config, export)
     lane = BatchLane(sink)
-    for _, ours, _ in _sink_batches(files, sink, ReadingStats(), advance):
+    for _, ours, _, nbytes in _sink_batches(files, sink, ReadingStats()):
         if len(ours):
             ours = _wanted(ours, export)
         if len(ours):
             lane.replay(ours)
+        advance(nbytes)

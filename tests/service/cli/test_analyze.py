@@ -65,7 +65,8 @@ def test_analyze_directory_and_summary(recording, capsys):
     out, _ = recording
     assert main(["analyze", str(out.parent), "--mill", str(MILL)]) == 0
     text = capsys.readouterr().out
-    assert "start 2024-01-01" in text and "damage pinion_combined" in text
+    assert "2024-01-01T02:00:05" in text and "  start:" in text  # site time (UTC+02:00)
+    assert "damage pinion_combined" in text
 
 
 @pytest.mark.parametrize(

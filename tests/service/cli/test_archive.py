@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 from millwatch.cli.main import main
 from millwatch.ingest.archive.files import MCAP_MAGIC, list_archive_files
 from millwatch.ingest.archive.writer import ArchiveWriter
-from tests.ingest.test_replay import KEYS, T0, write_archive
+from tests.ingest.test_replay import KEYS, MS, T0, write_archive
 
 RECORD_HEAD = struct.Struct("<BQ")
 
@@ -159,3 +159,53 @@ def test_archive_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixt
         assert main(["archive", *args]) == 2
         assert message in capsys.readouterr().err
     assert existing.read_bytes() == b"keep me"
+
+
+def test_info_gives_each_channels_sample_time_span_rate_dtype_and_unit(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The log time is when a block was received; info also says what the blocks hold: the
+    first and last sample time, the count, the rate, the sample type and the unit."""
+    from millwatch.cli.simulate import DEFAULT_MILL
+    from millwatch.ingest.mill_files import load_mill_config
+
+    out, truth = tmp_path / "s.mcap", tmp_path / "t.json"
+    assert main(["simulate", "--scene", "steady", "--duration", "5s", "--dtype", "float32",
+                 "--out", str(out), "--truth", str(truth), "--no-progress"]) == 0  # fmt: skip
+    t0 = json.loads(truth.read_text())["t0_ns"]
+    capsys.readouterr()
+    assert main(["archive", "info", str(out), "--json"]) == 0
+    (info,) = json.loads(capsys.readouterr().out)
+    config = load_mill_config(DEFAULT_MILL)
+    spans = info["samples_by_channel"]
+    assert len(spans) == len(config.channels)
+    for name, ch in config.channels.items():
+        (span,) = [v for k, v in spans.items() if k.endswith(f"/{name}")]
+        assert span["first_sample_ns"] == t0
+        assert span["last_sample_ns"] == t0 + 4_999_000_000  # sample 4999 at 1 kHz
+        assert span["samples"] == 5000 and span["rates_hz"] == [1000.0]
+        assert span["dtypes"] == ["float32"] and span["units"] == [ch.units]
+    assert info["first_log_time_ns"] > t0  # received when a block was complete
+    assert main(["archive", "info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "(sample time), 5000 samples at 1000 Hz, float32, kN·m" in text
+
+
+def test_info_counts_blocks_whose_header_does_not_decode(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tests.ingest.test_replay import payload
+
+    key = KEYS[0]
+    with ArchiveWriter(tmp_path, "bad") as writer:
+        for i in range(3):
+            writer.write(key, payload(i), T0 + i)
+        writer.write(key, b"MWBK but nothing else", T0 + 3)
+    (path,) = list_archive_files(tmp_path, "bad")
+    assert main(["archive", "info", str(path), "--json"]) == 0
+    (info,) = json.loads(capsys.readouterr().out)
+    span = info["samples_by_channel"][key]
+    assert span["undecodable_blocks"] == 1 and span["samples"] == 30
+    assert span["first_sample_ns"] == T0 and span["last_sample_ns"] == T0 + 4 * MS + 9 * MS
+    assert main(["archive", "info", str(path)]) == 0
+    assert "; 1 blocks undecodable" in capsys.readouterr().out

@@ -66,11 +66,13 @@ def test_cycles_out_has_every_cycle_at_full_precision(capsys, tmp_path, npy, str
     run_json(capsys, str(npy), "--cycles-out", str(out), "--block-size", "333")
     with out.open() as f:
         rows = list(csv.DictReader(f))
-    assert list(rows[0]) == ["range", "mean", "count", "i_start", "i_end"]
+    assert list(rows[0]) == ["range_before_kt", "mean_before_kt", "count", "i_start", "i_end",
+                             "range_after_kt", "mean_after_kt"]  # fmt: skip
     got = [
-        (float(r["range"]), float(r["mean"]), float(r["count"]), int(r["i_start"]), int(r["i_end"]))
+        (float(r["range_before_kt"]), float(r["mean_before_kt"]), float(r["count"]),
+         int(r["i_start"]), int(r["i_end"]))
         for r in rows
-    ]
+    ]  # fmt: skip
     assert got == [
         (float(a), float(b), c, i, j) for a, b, c, i, j in rainflow.extract_cycles(stress)
     ]
@@ -93,7 +95,8 @@ def test_repeat_residue_is_the_standard_closure_full_cycles_only(capsys, tmp_pat
     reference = count_cycles(stress, residue="repeat")
     assert (repeat["full_cycles"], repeat["half_cycles"]) == (len(reference), 0)
     with out.open() as f:
-        rows = sorted((float(r["range"]), float(r["mean"])) for r in csv.DictReader(f))
+        rows = sorted((float(r["range_before_kt"]), float(r["mean_before_kt"]))
+                      for r in csv.DictReader(f))  # fmt: skip
     assert rows == sorted(zip(reference.range.tolist(), reference.mean.tolist(), strict=True))
     curve = build_sn_curve("shigley")
     assert repeat["damage"] == curve.damage(reference.range, reference.count)
@@ -118,7 +121,6 @@ def test_csv_blocks_parse_quoted_values_and_name_a_blank_line(capsys, tmp_path, 
         ("a,b\n1,2\n", ["--column", "stress"], "no column 'stress'; columns are: a, b"),
         ("a,b\n1,2\n", [], "needs --column NAME; columns are: a, b"),
         ("a,b\n1,2\n3,oops\n", ["--column", "b"], "line 3, column 'b': 'oops' is not a number"),
-        ("a,b\n1,2\n3,nan\n5,6\n", ["--column", "b"], "row 2 is nan"),
     ],
 )
 def test_csv_errors_name_file_column_and_row(capsys, tmp_path, content, argv, message):
@@ -183,3 +185,82 @@ def test_a_fresh_process_asks_openblas_for_one_thread_unless_the_user_chose(npy)
             check=True,
         )
         assert done.stdout.splitlines()[-1] == expected
+
+
+def test_cycles_out_names_the_ranges_before_and_after_the_stress_factor(capsys, tmp_path, npy):
+    out = tmp_path / "cycles.csv"
+    summary = run_json(capsys, str(npy), "--kt", "2", "--cycles-out", str(out))
+    with out.open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == summary["full_cycles"] + summary["half_cycles"]
+    for r in rows:
+        assert float(r["range_after_kt"]) == 2 * float(r["range_before_kt"])
+        assert float(r["mean_after_kt"]) == 2 * float(r["mean_before_kt"])
+
+
+def test_non_finite_samples_are_held_as_the_analyzer_holds_them(capsys, tmp_path, stress):
+    """NaN and inf take the last finite value; those before the first finite one are
+    skipped; the cycles' rows are the input's rows."""
+    x = stress.copy()
+    x[:5] = np.nan
+    x[1000:1040] = np.nan
+    x[7000] = np.inf
+    path = tmp_path / "gappy.npy"
+    np.save(path, x)
+    out = tmp_path / "cycles.csv"
+    summary = run_json(capsys, str(path), "--cycles-out", str(out))
+    held = x[5:].copy()
+    for i in range(1, held.shape[0]):  # bounded: one pass
+        if not np.isfinite(held[i]):
+            held[i] = held[i - 1]
+    ref = list(rainflow.extract_cycles(held))
+    assert summary["samples"] == len(x)
+    assert summary["nonfinite_samples"] == 46 and summary["leading_nonfinite_skipped"] == 5
+    assert summary["damage"] == build_sn_curve("shigley").damage(
+        np.array([c[0] for c in ref]), [c[2] for c in ref]
+    )
+    with out.open() as f:
+        rows = [(float(r["range_before_kt"]), int(r["i_start"])) for r in csv.DictReader(f)]
+    assert rows == [(float(c[0]), c[3] + 5) for c in ref]
+    assert main(["rainflow", str(path)]) == 0
+    assert "46 samples (NaN/inf): held at the last finite value" in capsys.readouterr().out
+
+
+MILLS = Path(__file__).resolve().parents[3] / "deploy" / "mills"
+MILL = MILLS / "ball-dual-lrs.toml"  # torsion on FAT 100 shear, Goodman on the combined stress
+
+
+def test_mill_file_gives_the_analyzers_curve_correction_and_factor(capsys, npy, stress):
+    from millwatch.ingest.mill_files import load_mill_config
+
+    rod = MILLS / "rod-1100-grid.toml"  # the default material (820M17, S_ut 980 MPa)
+    own = run_json(capsys, str(npy), "--mill", str(rod))
+    assert own["sn_curve"] == load_mill_config(rod).material.sn_curve().to_dict()
+    assert own["sn_curve"] != run_json(capsys, str(npy))["sn_curve"]  # App. D's S_ut 850 MPa
+    config = load_mill_config(MILL)
+    ref = list(rainflow.extract_cycles(stress))
+    for comp in ("pinion_torsion_bs", "motor_torsion_nbs"):
+        got = run_json(capsys, str(npy), "--mill", str(MILL), "--component", comp)
+        kf = config.shafts.stress_model().scale(comp)
+        curve = config.material.sn_curve(comp)
+        assert got["scale"] == kf and kf != 1.0 and curve.name != own["sn_curve"]["name"]
+        assert got["sn_curve"] == curve.to_dict()
+        want = curve.damage(np.array([c[0] for c in ref]) * kf, [c[2] for c in ref])
+        assert got["damage"] == pytest.approx(want, rel=1e-12)
+        assert got["stress_factors"] == f"{comp}: K_f {kf:g} on torsion"
+    combined = run_json(capsys, str(npy), "--mill", str(MILL), "--component", "pinion_combined")
+    assert combined["stress_factors"].endswith(", Goodman")
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--mill", str(MILL), "--sn-model", "shigley"], "--sn-model: the mill file"),
+        (["--mill", str(MILL), "--component", "pinion_torsion", "--kt", "2"], "--kt: with"),
+        (["--mill", str(MILL), "--component", "shaft"], "--component 'shaft': not a damage"),
+        (["--component", "pinion_torsion"], "--component needs --mill"),
+    ],
+)
+def test_mill_options_refuse_a_second_source(capsys, npy, argv, message):
+    assert main(["rainflow", str(npy), *argv]) == 2
+    assert message in capsys.readouterr().err

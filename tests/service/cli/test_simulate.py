@@ -117,3 +117,19 @@ def test_a_spool_of_another_run_is_refused_naming_it(tmp_path, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert str(spool) in err and "its own spool directory" in err
+
+
+@pytest.mark.parametrize("name", ["telemetry-faults", "resonance"])
+def test_truth_of_a_shortened_scene_lists_only_what_its_samples_hold(name):
+    """--duration cuts the scene: its truth lists no fault or extra line beyond the cut."""
+    full = build_scene(name, None, seed=0, duration_s=None).truth
+    cut = build_scene(name, None, seed=0, duration_s=100.0)
+    truth, end_ns = cut.truth, cut.t_ns(cut.n_samples)
+    beyond = [f for f in full.faults if f.sample >= cut.n_samples] + [
+        x for x in full.extra_lines if x["end_t_ns"] > end_ns
+    ]
+    assert beyond  # the catalogue scene has some after 100 s
+    assert all(f.sample + f.count <= cut.n_samples and f.t_ns < end_ns for f in truth.faults)
+    assert all(x["t_ns"] < end_ns and x["end_t_ns"] <= end_ns for x in truth.extra_lines)
+    kept = [f for f in full.faults if f.sample + f.count <= cut.n_samples]
+    assert [f for f in truth.faults if f.sample + f.count <= cut.n_samples] == kept
