@@ -30,7 +30,7 @@ blocks, so it is analysed as a live gap (counted, NaN); NaN values are kept (cou
 as dropouts, as live). A time off the grid or going backwards is an error naming the row.
 Blocks: 100 samples (--block-samples), sequence numbers from the recording's start, float64."""
 
-_FORMATS = """formats (values in engineering units; a signal per mill channel, named as the channel):
+_FORMATS = """formats (engineering units; a signal per mill channel, named as the channel):
   .csv   a header line; first column 'time' in s since 1970-01-01T00:00:00Z (UTC):
            time,motor_torque,pinion_torque,pinion_bending,speed
            1704067200.000,0.0,0.0,0.12,0.0

@@ -38,8 +38,8 @@ class SceneData:
 
 def make_scene(directory: Path, mill: Path = DEFAULT_MILL) -> SceneData:
     config = load_mill_config(mill)
-    scene = get_scene("start-lrs", config, seed=3, duration_s=SCENE_S,
-                      events=[{"kind": "start", "at_s": 1.0}, {"kind": "stop", "at_s": 25.0}])  # fmt: skip
+    events = [{"kind": "start", "at_s": 1.0}, {"kind": "stop", "at_s": 25.0}]
+    scene = get_scene("start-lrs", config, seed=3, duration_s=SCENE_S, events=events)
     out = directory / "scene.mcap"
     simulate_to_archive(scene, out)
     (chunk,) = scene.chunks(SCENE_S)
