@@ -8,7 +8,7 @@ Data flow::
 
     FILE ──<format> reader──▶ SourceTrack per signal (file's names, its own timing)
          ──recording──▶ Recording: mill channels (``--map``), runs on the mill's sample grid
-         ──to_mcap──▶ wire blocks (raw = exact inverse of the mill file's calibration),
+         ──to_mcap──▶ wire blocks (raw = the inverse of the mill file's calibration),
                       sequence numbers on the block grid (a gap = missing blocks) ──▶ MCAP
 
 What is here:

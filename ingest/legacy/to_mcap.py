@@ -2,14 +2,20 @@
 would have sent, written to an MCAP file like ``millwatch simulate --out``.
 
 **Values.** A file holds calibrated engineering units; a block holds *raw* samples, which the
-analyzer calibrates with the mill file's ``value = gain·(raw − offset)`` (float64). So each
-value ``v`` is written as the float64 ``raw`` for which that float64 expression gives back
-``v`` exactly: :func:`uncalibrate` starts from ``v/gain + offset`` and tries the four floats
-either side of it. With the identity calibration (``gain = 1``, ``offset = 0``: every mill file
-in ``deploy/mills``) ``raw = v``, bit for bit. Otherwise nearly every value has an exact ``raw``;
-one that has none (a value far below ``gain·offset``'s rounding step, e.g. 10⁻¹⁸ kN·m with an
-offset of 10) gets the nearest, within one rounding step of ``gain·offset``, and the import
-counts them (:attr:`ImportReport.inexact`). Blocks are float64: nothing is rounded to float32.
+analyzer calibrates with the mill file's ``value = gain·(raw − offset)`` in float64. Each value
+``v`` is written as a float64 ``raw`` (blocks are float64: nothing is rounded to float32):
+
+- with the identity calibration (``gain = 1``, ``offset = 0``; every mill file in
+  ``deploy/mills``) ``raw = v``, and the analyzer sees the file's values bit for bit;
+- otherwise :func:`uncalibrate` takes ``v/gain + offset`` and, where the float64 expression
+  does not give ``v`` back exactly, the float among the :data:`MAX_ULPS` either side of it
+  that comes closest. An exact ``raw`` does not always exist (``gain·x`` in float64 skips
+  values when ``gain``'s mantissa is not a power of two, and ``raw − offset`` is rounded to the
+  spacing of ``raw``): over 410,000 values of torque-like size (±2,000 and ±1) and nine
+  calibrations (gains 1.7·10⁻³ to 524, offsets to 3.2·10⁴) 0–46 % of the values had none, and
+  every value came back within 2 units in the last place of the larger of ``|v|`` and
+  ``|gain·offset|`` (relative error ≤ 4.4·10⁻¹⁶; ``tests/ingest/legacy/test_to_mcap.py``
+  checks the bound). The import counts such values (:attr:`ImportReport.inexact`).
 
 **Blocks.** Blocks of ``block_samples`` (default 100, as the simulator and gateways send) on a
 grid from the recording's first sample: block ``j`` holds grid samples ``[j·B, (j+1)·B)``, starts

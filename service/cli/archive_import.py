@@ -19,10 +19,11 @@ __all__ = ["add_import_parser", "mapping_pair"]
 _HELP = """Import a legacy recording as the blocks a plant gateway would have sent for it.
 
 The format is chosen by the file's extension. Values are taken as calibrated engineering units
-(kN·m, MPa, rpm, V) and written so that the analyzer, which calibrates every raw sample with
-the mill file's gain·(raw − offset), gets exactly those values back (float64, bit for bit; with
-gain 1 and offset 0 the values themselves). Signals are the mill file's channels by name
-([channels.<name>]); --map names the others, --ignore leaves signals out.
+(kN·m, MPa, rpm, V) and written as float64 raw samples from which the analyzer's calibration,
+gain·(raw − offset) of the mill file, gives them back: bit for bit with gain 1 and offset 0
+(the values themselves), otherwise to within 2 units in the last place (float64 has no exact
+inverse for every value; the summary counts those that differ). Signals are the mill file's
+channels by name ([channels.<name>]); --map names the others, --ignore leaves signals out.
 
 Time: the recording must be sampled at the mill file's sample_rate_hz (nothing is resampled).
 A jump of whole sample periods in the time stamps (.csv, .mf4) is a gap: written as missing
@@ -148,7 +149,8 @@ def _summary(args: argparse.Namespace, recording: Any, report: Any) -> str:
         f"  samples {iso_utc(report.start_ns)} .. {iso_utc(report.end_ns)} (sample time, UTC), "
         f"{recording.fs:g} Hz, {report.blocks} blocks of {args.block_samples}",
         f"  {report.samples} samples, {report.nan_samples} NaN (the file's and padding), "
-        f"{gaps} gap(s), {report.inexact} without an exact raw value",
+        f"{gaps} gap(s), {report.inexact} values given back by the calibration to within 2 ulp "
+        "rather than exactly",
         f"analyse: millwatch analyze {args.out} --mill {args.mill}",
     ]
     return "\n".join(lines) + "\n"
