@@ -22,7 +22,7 @@ README "Open the archive in Foxglove" lists the topics and suggests Plot panel p
 
 ``archive import FILE --mill MILL.toml --out OUT.mcap [--map SIGNAL=CHANNEL]`` writes a legacy
 recording (.csv, .mat, .tdms, .mf4, .h5; calibrated engineering units) as the blocks a gateway
-would have sent (:mod:`millwatch.cli.archive_import`, :mod:`millwatch.ingest.legacy`).
+would have sent (:mod:`millwatch.cli.legacy.archive_import`, :mod:`millwatch.ingest.legacy`).
 """
 
 from __future__ import annotations
@@ -40,8 +40,8 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
 from millwatch.alarms.times import iso_utc
-from millwatch.cli.archive_import import add_import_parser
 from millwatch.cli.args import duration_seconds, utc_time_ns
+from millwatch.cli.legacy.archive_import import add_import_parser
 from millwatch.ingest.archive.files import MCAP_MAGIC, ArchiveError
 from millwatch.ingest.archive.reader import TailTolerantReader
 from millwatch.ingest.archive.recovery import recover_file

@@ -77,4 +77,4 @@ def test_help_loads_no_reader():
     readers = {"nptdms", "asammdf", "h5py"}
     assert {m for m in loaded if m.split(".")[0] in readers} == set()
     assert not {m for m in loaded if m.startswith("millwatch.ingest.legacy")}
-    assert "millwatch.cli.archive_import" in loaded
+    assert "millwatch.cli.legacy.archive_import" in loaded
