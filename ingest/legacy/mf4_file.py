@@ -42,7 +42,8 @@ def read_mf4(path: Path, start_ns: int | None = None) -> list[SourceTrack]:
         t0 = start_ns
         if t0 is None:
             t0 = datetime_ns(mdf.header.start_time, f"{path}: header start time")
-        return [t for signal in mdf.iter_channels() if (t := _track(path, signal, t0))]
+        tracks = (_track(path, signal, t0) for signal in mdf.iter_channels())
+        return [t for t in tracks if t is not None]
 
 
 def _track(path: Path, signal: Any, start_ns: int) -> SourceTrack | None:

@@ -109,5 +109,11 @@ def read_recording(
     path = Path(path)
     tracks = read_tracks(path, start_ns=start_ns, advance=advance)
     names = [t.name for t in tracks]
+    doubled = sorted({n for n in names if names.count(n) > 1})
+    if doubled:
+        raise LegacyFileError(
+            f"{path}: signal name(s) {', '.join(doubled)} appear more than "
+            "once (e.g. in two channel groups): rename them in the file"
+        )
     channels = assign_channels(str(path), names, config, mapping, ignore, allow_missing)
     return build(str(path), tracks, config, channels)

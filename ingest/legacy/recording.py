@@ -239,7 +239,10 @@ def _timestamped_runs(
         step = float(np.median(np.diff(rel)))
         if not step > 0 or abs(step * fs - 1.0) > STEP_TOLERANCE:
             got = 1.0 / step if step > 0 else float("nan")
-            raise LegacyFileError(_rate_message(where, got, fs) + " (its median time step)")
+            raise LegacyFileError(
+                _rate_message(where, got, fs) + f" (its median time step is {step:g} s; times "
+                "are in seconds)"
+            )
     pos = rel * fs
     k = np.rint(pos)
     off = np.abs(pos - k)

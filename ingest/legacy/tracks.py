@@ -89,7 +89,10 @@ def epoch_seconds_ns(value: object, where: str) -> int:
         raise LegacyFileError(f"{where}: {text!r} is not a finite time")
     ns = int((seconds * _NS_PER_S).to_integral_value())
     if not 0 <= ns <= _INT64_MAX:
-        raise LegacyFileError(f"{where}: {text} s is before 1970 or beyond the year 2262")
+        raise LegacyFileError(
+            f"{where}: {text} s is before 1970 or beyond the year 2262 (times are in seconds, "
+            "not ms or ns)"
+        )
     return ns
 
 

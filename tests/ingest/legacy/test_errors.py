@@ -148,3 +148,31 @@ def test_channels_may_start_at_different_times_on_one_grid(scene, tmp_path):
     path = _tdms_with_late_speed(tmp_path / "y.tdms", scene, 0.2505)
     message = _refused(path, scene.config)
     assert "speed: starts 0.250500000 s after" in message and "0.50 sample periods off" in message
+
+
+def test_times_not_in_seconds_are_named(scene, tmp_path):
+    data, times = _short(scene)
+    path = tmp_path / "x.csv"
+    write_csv(path, data, times)
+    ms = path.read_text().splitlines()
+    rows = [ms[0]] + [f"{1704067200 + i},{r.split(',', 1)[1]}" for i, r in enumerate(ms[1:])]
+    path.write_text("\n".join(rows) + "\n")  # a logger's ms counted as s: 1 s steps
+    message = _refused(path, scene.config)
+    assert "sampled at 1 Hz" in message
+    assert "median time step is 1 s; times are in seconds" in message
+    rows = [ms[0]] + [f"{1704067200000 + i},{r.split(',', 1)[1]}" for i, r in enumerate(ms[1:])]
+    path.write_text("\n".join(rows) + "\n")  # ms since the epoch
+    assert "beyond the year 2262 (times are in seconds" in _refused(path, scene.config)
+
+
+def test_a_signal_name_twice_is_named(scene, tmp_path):
+    from asammdf import MDF, Signal
+
+    mdf = MDF(version="4.10")
+    t = np.arange(10) / 1000.0
+    mdf.append([Signal(np.zeros(10), t, name="speed")])
+    mdf.append([Signal(np.ones(10), t, name="speed")])
+    mdf.save(tmp_path / "x.mf4", overwrite=True)
+    mdf.close()
+    assert "signal name(s) speed appear more than once" in _refused(tmp_path / "x.mf4",
+                                                                     scene.config)  # fmt: skip
