@@ -20,8 +20,8 @@ B, FS = 100, 1000.0
 
 def _live(scene, data: dict[str, np.ndarray], lost: range, out: Path) -> Path:
     """The gateway's recording of ``data``: 100-sample float64 blocks, sequence number j, the
-    blocks ``lost`` never sent."""
-    channel_keys = keys.mill_channel_keys(scene.config)
+    blocks ``lost`` never sent; channels not in ``data`` never send."""
+    channel_keys = {c: k for c, k in keys.mill_channel_keys(scene.config).items() if c in data}
     units = {n: wire.Unit.from_symbol(c.units) for n, c in scene.config.channels.items()}
     n = scene.times_ns.shape[0]
     with ArchiveWriter(out.parent, "live", rotate_seconds=1e12, rotate_bytes=2**62,
@@ -38,8 +38,8 @@ def _live(scene, data: dict[str, np.ndarray], lost: range, out: Path) -> Path:
     return out
 
 
-def _imported(source: Path, scene, out: Path) -> Path:
-    write_mcap(read_recording(source, scene.config), scene.config, out)
+def _imported(source: Path, scene, out: Path, **kw) -> Path:
+    write_mcap(read_recording(source, scene.config, **kw), scene.config, out)
     return out
 
 
@@ -91,3 +91,13 @@ def test_nan_samples_stay_nan_and_are_counted_as_live(scene, tmp_path):
         faults["pinion_bending"]["dropouts"] >= 1
         and faults["pinion_bending"]["flagged_samples"] >= 250
     )
+
+
+def test_a_channel_allowed_missing_is_a_channel_that_never_sends(scene, tmp_path):
+    data = {c: x for c, x in scene.data.items() if c != "pinion_bending"}
+    source = write_h5(tmp_path / "three.h5", data, scene.t0_ns, FS)
+    imported = _imported(source, scene, tmp_path / "imported.mcap", allow_missing=True)
+    live = _live(scene, data, range(0), tmp_path / "live.mcap")
+    assert messages(imported) == messages(live)
+    report = _same_analysis(imported, live, scene.config)
+    assert report["data_quality"]["missing_blocks"] == 300  # every bending block, counted
