@@ -4,6 +4,7 @@ the command line, reports what the simulator's own recording reports; errors are
 from __future__ import annotations
 
 import json
+import sys
 
 import pytest
 
@@ -78,3 +79,13 @@ def test_help_loads_no_reader():
     assert {m for m in loaded if m.split(".")[0] in readers} == set()
     assert not {m for m in loaded if m.startswith("millwatch.ingest.legacy")}
     assert "millwatch.cli.legacy.archive_import" in loaded
+
+
+def test_a_terminal_sees_progress_bars(scene, tmp_path, capsys, monkeypatch):
+    source = write_csv(tmp_path / "run.csv", scene.data, scene.times_ns)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main(["archive", "import", str(source), "--mill", MILL, "--out",
+                 str(tmp_path / "run.mcap")]) == 0  # fmt: skip
+    bars = capsys.readouterr().err.replace("\r", "\n")
+    assert "import: read: 100%" in bars and "import: write: 100%" in bars
+    assert "120k/120k" in bars  # samples: 30 s of 4 channels at 1 kHz
