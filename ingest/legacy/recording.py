@@ -76,7 +76,7 @@ class Recording:
         if float(self.fs).is_integer():
             q, r = np.divmod(k, int(self.fs))
             return self.t0_ns + q * _NS_PER_S + (r * _NS_PER_S) // int(self.fs)
-        return self.t0_ns + np.rint(k * (1e9 / self.fs)).astype(np.int64)
+        return self.t0_ns + np.rint(k * 1e9 / self.fs).astype(np.int64)
 
     @property
     def n_grid(self) -> int:

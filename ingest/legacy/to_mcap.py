@@ -14,8 +14,9 @@ analyzer calibrates with the mill file's ``value = gain·(raw − offset)`` in f
   spacing of ``raw``): over 410,000 values of torque-like size (±2,000 and ±1) and nine
   calibrations (gains 1.7·10⁻³ to 524, offsets to 3.2·10⁴) 0–46 % of the values had none, and
   every value came back within 2 units in the last place of the larger of ``|v|`` and
-  ``|gain·offset|`` (relative error ≤ 4.4·10⁻¹⁶; ``tests/ingest/legacy/test_to_mcap.py``
-  checks the bound). The import counts such values (:attr:`ImportReport.inexact`).
+  ``|gain·offset|`` (≤ 4.4·10⁻¹⁶ of that; ``tests/ingest/legacy/test_to_mcap.py`` checks the
+  bound for gains of 10⁻⁶ to 10⁶, offsets to ±10⁶ and values of 10⁻¹² to 10⁷). The import
+  counts such values (:attr:`ImportReport.inexact`).
 
 **Blocks.** Blocks of ``block_samples`` (default 100, as the simulator and gateways send) on a
 grid from the recording's first sample: block ``j`` holds grid samples ``[j·B, (j+1)·B)``, starts
