@@ -176,3 +176,12 @@ def test_a_signal_name_twice_is_named(scene, tmp_path):
     mdf.close()
     assert "signal name(s) speed appear more than once" in _refused(tmp_path / "x.mf4",
                                                                      scene.config)  # fmt: skip
+
+
+def test_start_replaces_a_files_own_but_not_csv_times(scene, tmp_path):
+    data, times = _short(scene)
+    csv_path = write_csv(tmp_path / "x.csv", data, times)
+    assert "--start does not apply" in _refused(csv_path, scene.config, start_ns=scene.t0_ns)
+    later = scene.t0_ns + 86_400_000_000_000
+    mf4_path = write_mf4(tmp_path / "x.mf4", data, times, scene.t0_ns)
+    assert read_recording(mf4_path, scene.config, start_ns=later).t0_ns == later
