@@ -184,15 +184,21 @@ def write_mcap(
         raise LegacyFileError(f"--out {out}: file exists; remove it or add --force")
     report = ImportReport(start_ns=recording.t0_ns, end_ns=int(recording.t_ns(recording.n_grid)))
     prefix = f"import-{os.getpid()}"
-    with ArchiveWriter(
+    writer = ArchiveWriter(
         out.parent, prefix, rotate_seconds=_NO_ROTATION_S, rotate_bytes=_NO_ROTATION_BYTES,
         max_latency_s=None,
-    ) as writer:  # fmt: skip
-        for block in recording_blocks(recording, config, block_samples=block_samples,
-                                      report=report):  # fmt: skip
-            writer.write(block.key, block.payload, block.t_end_ns)
-            if advance is not None:
-                advance(block.n_samples)
-    files = list(writer.files_written)
-    files[0].replace(out)
+    )  # fmt: skip
+    try:
+        with writer:
+            blocks = recording_blocks(recording, config, block_samples=block_samples, report=report)
+            for block in blocks:
+                writer.write(block.key, block.payload, block.t_end_ns)
+                if advance is not None:
+                    advance(block.n_samples)
+    except BaseException:  # (Ctrl-C too) no half-written file is left beside --out
+        for path in writer.files_written:
+            path.unlink(missing_ok=True)
+        raise
+    (written,) = writer.files_written
+    written.replace(out)
     return report

@@ -122,3 +122,20 @@ def test_blocks_follow_the_grid_with_gaps_and_late_channels(scene):
     assert [j for j, _ in got["pinion_torque"]] == list(range(1, 10))
     last = got["speed"][-1]
     assert last[0] == 9 and np.array_equal(last[1], x[900:955])
+
+
+def test_an_interrupted_import_leaves_no_file(scene, tmp_path):
+    recording = read_recording(write_h5(tmp_path / "rec.h5", scene.data, scene.t0_ns, 1000.0),
+                               scene.config)  # fmt: skip
+    out = tmp_path / "out" / "imported.mcap"
+    out.parent.mkdir()
+    written = []
+
+    def advance(n: int) -> None:
+        written.append(n)
+        if len(written) == 500:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_mcap(recording, scene.config, out, advance=advance)
+    assert list(out.parent.iterdir()) == []
