@@ -25,12 +25,15 @@ What is here (lower lines never import higher ones):
   hours), recovery served from it by a zenoh queryable, the edge forwarder
 - ``replay``         archived blocks back onto zenoh, byte-identical, paced, on replay keys
 - ``sim/``           the scene simulator: synthetic telemetry with ground truth, published live
+- ``legacy/``        legacy recordings (CSV, .mat, TDMS, MF4, HDF5) as the blocks a gateway
+  would have sent (``millwatch archive import``)
 
 Where a new thing goes:
 
 - a new wire version → ``wire`` (``FORMAT_VERSION``, the layout in its docstring, the decoder;
   archived blocks keep the bytes and version they arrived with),
 - a new key kind (tag, pattern) → ``keys`` and nowhere else: no f-string keys outside it,
+- a new legacy file format → a reader in ``legacy/`` (its map says how),
 - a new scene → ``sim/scenes.py`` (catalogue) or a scene file; a new event kind →
   ``sim/spec.py`` plus its segment (``sim/segments.py``) or fault (``sim/faults.py``),
 - compiled code → a ``*_kernels.py`` module beside its user.

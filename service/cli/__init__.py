@@ -11,6 +11,8 @@ The ``millwatch`` command line: one module per sub-command, composed by ``main``
   ``analyze``, ``report`` (one monthly report, or a site's fleet report, from a store file, on
   demand), ``history`` (``history/``: ``command`` — ``history build``, N simulated months into a new
   store file —, and ``tiling``, the library that makes them, also used by the report benches).
+* ``legacy/`` — ``archive import`` (``archive_import``): a legacy recording (CSV, .mat, TDMS,
+  MF4, HDF5) as MCAP; registered by ``archive``.
 * ``edge/`` — commands run beside the gateways: ``spool`` (the edge forwarder, and the
   ``--spool`` options of ``simulate`` and ``replay``); ``zenoh-certs`` (mTLS certificates).
 * ``args`` — argument types that name the rule a value broke; ``signal_files`` — ``.npy`` /

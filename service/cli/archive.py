@@ -21,6 +21,10 @@ message stamped with its *sample* time, a per-block min/max/mean overview, and b
 millwatch concluded over the span — operating state, starts (with their peaks), stops and
 barring, Miner damage per component since the span start, alarms — on the same timeline.
 README "Open the archive in Foxglove" lists the topics and suggests Plot panel paths.
+
+``archive import FILE --mill MILL.toml --out OUT.mcap [--map SIGNAL=CHANNEL]`` writes a legacy
+recording (.csv, .mat, .tdms, .mf4, .h5; calibrated engineering units) as the blocks a gateway
+would have sent (:mod:`millwatch.cli.legacy.archive_import`, :mod:`millwatch.ingest.legacy`).
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from mcap.reader import make_reader
 
 from millwatch.alarms.times import iso_utc
 from millwatch.cli.args import duration_seconds, utc_time_ns
+from millwatch.cli.legacy.archive_import import add_import_parser
 from millwatch.ingest.archive.files import MCAP_MAGIC, ArchiveError
 from millwatch.ingest.archive.reader import TailTolerantReader
 from millwatch.ingest.archive.recovery import recover_file
@@ -168,6 +173,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     recover.set_defaults(handler=_recover)
     _add_export(actions)
+    add_import_parser(actions)
 
 
 _EXPORT_HELP = """Write a span of one mill of the archive as an MCAP file that Foxglove plots.
