@@ -38,9 +38,11 @@ import numpy as np
 
 from millwatch.analytics.contracts import SnapshotMismatch, check_snapshot
 from millwatch.analytics.drivetrain.mill_config import ChannelConfig, MillConfig
+from millwatch.analytics.fatigue.cycle_log import CycleLog
 from millwatch.analytics.mill.loads import LoadAnalysis
 from millwatch.analytics.mill.results import (
     BarringEvent,
+    ComponentCycles,
     ComponentDamage,
     StartEvent,
     StopEvent,
@@ -128,6 +130,9 @@ class MillAnalyzer:
     thread (a :class:`SpectraRunner` around the tracker, e.g. a background thread of an offline
     analysis); the results are the same, and the analyzer drains it before it reads the
     tracker (report, snapshot).
+
+    ``keep_cycles``: keep every closed rainflow cycle of every component for :meth:`cycles`
+    (memory grows with the record: an offline analysis's choice, never the worker's).
     """
 
     def __init__(
@@ -136,6 +141,7 @@ class MillAnalyzer:
         *,
         spectra: bool = True,
         spectra_runner: Callable[[HarmonicTracker], SpectraRunner] | None = None,
+        keep_cycles: bool = False,
     ) -> None:
         self.config = config
         #: Whether running samples feed the harmonic tracker (False: an offline question that
@@ -147,6 +153,8 @@ class MillAnalyzer:
         self._faults = FaultStage(config)
         self._tacho = self._tacho_stage(fs)
         self._loads = LoadAnalysis(self.analysis_config)
+        if keep_cycles:  # every cycle, for :meth:`cycles` (unbounded: offline analyses only)
+            self._loads.fatigue.cycle_log = CycleLog()
         # mills started together compute their spectra at different samples (issue 5 latency)
         self._harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
         #: What feeds the tracker: the tracker itself, or the runner built around it
@@ -441,6 +449,20 @@ class MillAnalyzer:
         kept): per component ``{"range_edges", "mean_edges", "days": {day: {phase: [[cell,
         half cycles], ...]}}}`` (:mod:`millwatch.analytics.mill.cycle_matrix`)."""
         return self._loads.matrices_by_day()
+
+    def cycles(self, component: str) -> ComponentCycles:
+        """Every closed rainflow cycle of ``component`` so far (a name of :meth:`damage_summary`),
+        its stress after the stress factors (MPa); only with ``keep_cycles`` (RuntimeError
+        otherwise; ValueError naming the components for an unknown one)."""
+        cycles, scale = self._loads.fatigue.logged_cycles(component)
+        return ComponentCycles(
+            component=component,
+            range_mpa=cycles.range * scale,
+            mean_mpa=cycles.mean * scale,
+            count=cycles.count.copy(),
+            t_ns=self._loads.clock.times_ns(cycles.i_end),
+            stress_factor=scale,
+        )
 
     def phase_seconds_by_day(self) -> dict[str, dict[str, float]]:
         """Seconds analysed per local day and phase (``stopped``, ``start``, ``run``, ``stop``,

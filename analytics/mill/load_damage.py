@@ -36,6 +36,8 @@ import numpy as np
 from millwatch.analytics.contracts import SnapshotMismatch
 from millwatch.analytics.drivetrain.mill_config import MillConfig
 from millwatch.analytics.drivetrain.stress import shear_stress_from_torque
+from millwatch.analytics.fatigue.cycle_log import CycleLog
+from millwatch.analytics.fatigue.cycles import Cycles
 from millwatch.analytics.fatigue.miner import DamageRecorder
 from millwatch.analytics.fatigue.rainflow import RainflowCounter
 from millwatch.analytics.mill.app_d import AppDCost
@@ -52,7 +54,8 @@ T = TypeVar("T")
 class FatigueCounting:
     """Rainflow counters and damage recorders of a mill's components (module docstring)."""
 
-    CONFIGURED = frozenset({"config", "roles", "fs"})
+    #: ``cycle_log``: the caller's choice to keep every cycle (an offline analysis), not state.
+    CONFIGURED = frozenset({"config", "roles", "fs", "cycle_log"})
 
     def __init__(self, config: MillConfig, roles: LoadRoles, fs: float) -> None:
         self.config = config
@@ -63,6 +66,8 @@ class FatigueCounting:
         self.damage: dict[str, PhaseDamage] = {}
         self.lead = dict.fromkeys(keys, 0)
         self.last = dict.fromkeys(keys, math.nan)
+        #: Every cycle of every trace, when a caller asks for them (:meth:`logged_cycles`).
+        self.cycle_log: CycleLog | None = None
 
     def keys(self) -> list[str]:
         """The counted traces: each component, the combined one on every plane of the critical
@@ -148,6 +153,8 @@ class FatigueCounting:
             filled = self._hold(comp, x)
             cycles = self.counters[comp].feed(filled)
             self.damage[comp].record(cycles, timeline, decided, offset=self.lead[comp])
+            if self.cycle_log is not None:
+                self.cycle_log.record(comp, cycles, offset=self.lead[comp])
 
     def _hold(self, comp: str, x: np.ndarray) -> np.ndarray:
         """The NaN policy: hold the last valid value; skip samples before the first one."""
@@ -167,6 +174,18 @@ class FatigueCounting:
         if out.size:
             self.last[comp] = float(out[-1])
         return out
+
+    def logged_cycles(self, component: str) -> tuple[Cycles, float]:
+        """The closed cycles of ``component``'s counted trace (:meth:`chosen`) kept by
+        :attr:`cycle_log` (stream sample indices; MPa of the counted stress) and the stress
+        factor its damage recorder multiplies them by (``scale``: K_t or the fatigue factors)."""
+        if self.cycle_log is None:
+            raise RuntimeError("cycles are kept only when asked for before the first sample")
+        key = self.chosen().get(component)
+        if key is None:
+            raise ValueError(f"no component {component!r}: this mill counts "
+                             f"{', '.join(self.roles.components)}")  # fmt: skip
+        return self.cycle_log.cycles(key), self.damage[key].recorder.scale
 
     def oldest_needed(self, decided: int) -> int:
         """Oldest stream sample whose phase an open residue or a pending cycle still needs."""

@@ -174,14 +174,20 @@ class OfflineSink(_AdmittingSink):
     :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
 
     def __init__(
-        self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
+        self,
+        configs: Sequence[MillConfig],
+        *,
+        spectra: bool = True,
+        background: bool = False,
+        keep_cycles: bool = False,
     ) -> None:
         super().__init__(configs)
         self._background: list[BackgroundSpectra] = []
         # each mill's spectra on a thread of their own
         runner = self._background_spectra if spectra and background else None
         self.analyzers = {
-            c.id: MillAnalyzer(c, spectra=spectra, spectra_runner=runner) for c in configs
+            c.id: MillAnalyzer(c, spectra=spectra, spectra_runner=runner, keep_cycles=keep_cycles)
+            for c in configs
         }
 
     def _background_spectra(self, tracker: HarmonicTracker) -> BackgroundSpectra:
@@ -347,14 +353,16 @@ def analyze_files(
     advance: Callable[[int], None] = lambda _: None,
     uncounted: frozenset[Path] = frozenset(),
     background: bool = False,
+    keep_cycles: bool = False,
 ) -> tuple[OfflineSink, ReadingStats]:
     """Analyse ``configs``' mills over ``files`` (in order, one stream); ``advance(bytes)``
     reports progress; blocks of no given mill in ``uncounted`` files are not counted (another
     job's share counts them); ``background``: each mill's spectra on a thread of its own
-    (:class:`BackgroundSpectra`: for cores that would idle otherwise). Returns the sink (its
+    (:class:`BackgroundSpectra`: for cores that would idle otherwise); ``keep_cycles``: each
+    analyzer keeps every rainflow cycle (``MillAnalyzer.cycles``). Returns the sink (its
     analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and what reading
     met. The files are read a batch or two ahead by a thread (:func:`_sink_batches`)."""
-    sink = OfflineSink(configs, spectra=spectra, background=background)
+    sink = OfflineSink(configs, spectra=spectra, background=background, keep_cycles=keep_cycles)
     lane = BatchLane(sink)
     stats = ReadingStats()
     for path, ours, foreign in _sink_batches(files, sink, stats, advance):
