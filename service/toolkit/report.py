@@ -48,6 +48,8 @@ class MillReport(BaseModel):
     mill: str
     site: str
     samples: int = Field(description="Stream samples analysed.")
+    t0_ns: int | None = Field(description="Time of the first sample (ns, UTC).")
+    t_end_ns: int | None = Field(description="Time just past the last sample (ns, UTC).")
     starts: list[StartEvent]
     stops: list[StopEvent]
     barring: list[BarringEvent]
