@@ -2,7 +2,9 @@
 
 * ``archive`` — :func:`read_archive`: an MCAP recording's calibrated samples as a DataFrame
   (UTC DatetimeIndex, one column per channel of the mill file), read as ``millwatch analyze``
-  reads them (:mod:`millwatch.worker.offline_samples`).
+  reads them (``samples``).
+* ``samples`` — the reading behind it: the offline analysis's batches, admission, the
+  analyzer's calibration and frame alignment, keeping the samples.
 * ``analysis`` — :func:`analyze`: the offline analysis ``millwatch analyze`` runs (the same
   functions), returned as an :class:`AnalysisResult` of DataFrames (events, damage, steady
   state, harmonics) with each component's rainflow cycles and range–mean matrix.

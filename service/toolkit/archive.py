@@ -9,8 +9,8 @@ import pandas as pd
 
 from millwatch.cli.analyze import recording_files
 from millwatch.ingest.mill_files import load_mill_config
+from millwatch.toolkit.samples import read_samples
 from millwatch.toolkit.tables import utc
-from millwatch.worker.offline_samples import read_samples
 
 __all__ = ["read_archive", "recording_paths"]
 

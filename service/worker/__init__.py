@@ -39,8 +39,6 @@ Modules, low to high (a module imports only those above it):
 * ``offline_analysis`` — ``millwatch analyze``: archive files through the batch lane into the
   mills' analyzers, with no store (the replay path's cost per sample); ``export_files`` reads
   the same way into a Foxglove export (``millwatch archive export``).
-* ``offline_samples`` — an archive's calibrated samples read the same way, aligned as the
-  analyzer aligns them (``millwatch.read_archive``).
 * ``recovery`` — :func:`~millwatch.worker.recovery.recover`: restore checkpoints, replay the
   archive tail (one process or several), then go live.
 * ``spool_recovery`` — :class:`~millwatch.worker.spool_recovery.SpoolRecovery`: a gap a live

@@ -23,6 +23,8 @@ from millwatch.analytics.mill.analyzer import MillAnalyzer
 from millwatch.analytics.signal.frame_aligner import Frame, FrameAligner
 from millwatch.worker.batch_lane import BatchLane
 from millwatch.worker.block_queue import QueuedBlock
+
+# (the offline analysis's own reading path and sink base, so the samples are admitted as there)
 from millwatch.worker.offline_analysis import ReadingStats, _AdmittingSink, _sink_batches
 
 __all__ = ["MillSamples", "read_samples"]
