@@ -38,6 +38,9 @@ class DamageRow(BaseModel):
     with_residue: float
     phases: dict[str, float] = Field(description="Damage of the attributed cycles per phase.")
     stress_factors: str = Field(description="The fatigue factors of the stress, in words.")
+    plane_angle_deg: float | None = Field(
+        default=None, description="On a critical-plane search: the plane with the most damage."
+    )
 
 
 class MillReport(BaseModel):

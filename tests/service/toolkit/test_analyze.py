@@ -11,11 +11,15 @@ import pandas as pd
 import pytest
 
 import millwatch
+from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
 from millwatch.analytics.fatigue.miner import DamageRecorder
+from millwatch.analytics.mill.cycle_matrix import sparse_matrix
 from millwatch.analytics.mill.results import StartEvent
 from millwatch.cli.main import main
 from millwatch.ingest.mill_files import load_mill_config
 from millwatch.toolkit.tables import events_table
+from millwatch.worker.offline_analysis import analyze_files
 from tests.service.toolkit.conftest import MILL
 
 
@@ -92,6 +96,17 @@ def test_steady_windows_and_harmonics_are_the_json_ones(result, cli_json):
             assert row["frequency_hz"] == h["frequency_hz"]
 
 
+def miner_sum(config: MillConfig, component: str, cycles: pd.DataFrame) -> float:
+    """Miner's sum of ``cycles`` on the component's S-N curve and mean-stress correction, at
+    stress factor 1 (the cycles' stress is after the factors already)."""
+    material = config.material
+    recorder = DamageRecorder(
+        material.sn_curve(component), scale=1.0, mean_correction=material.mean_correction(component)
+    )
+    r, m, c = (cycles[k].to_numpy() for k in ("range", "mean", "count"))
+    return math.fsum(recorder.damage_of(r, m, c))
+
+
 @pytest.mark.parametrize("component", ["pinion_combined", "pinion_torsion", "motor_torsion"])
 def test_cycles_are_what_the_damage_is_computed_from(result, component):
     """Miner's sum over the cycles, on the component's curve at factor 1 (their stress is
@@ -99,13 +114,7 @@ def test_cycles_are_what_the_damage_is_computed_from(result, component):
     cycles = result.cycles(component)
     assert list(cycles.columns) == ["range", "mean", "count", "t"]
     assert set(np.unique(cycles["count"])) <= {0.5, 1.0} and (cycles["range"] >= 0).all()
-    config = load_mill_config(MILL)
-    material = config.material
-    recorder = DamageRecorder(
-        material.sn_curve(component), scale=1.0, mean_correction=material.mean_correction(component)
-    )
-    r, m, c = (cycles[k].to_numpy() for k in ("range", "mean", "count"))
-    damage = math.fsum(recorder.damage_of(r, m, c))
+    damage = miner_sum(load_mill_config(MILL), component, cycles)
     assert damage == pytest.approx(result.damage_totals.loc[component, "committed"], rel=1e-9)
     t, report = cycles["t"], result.report
     assert str(t.dt.tz) == "UTC"
@@ -133,3 +142,41 @@ def test_an_unknown_component_is_named(result):
 def test_a_recording_without_the_mill_is_named(start_recording):
     with pytest.raises(ValueError, match="no blocks of mill 'ball-dual-lrs'"):
         millwatch.analyze([start_recording], mill=MILL.parent / "ball-dual-lrs.toml")
+
+
+def test_the_matrix_is_the_analyzers_own_daily_matrices_summed(result, start_recording):
+    """The worker's per-day and per-phase matrices of the same analysis, added up, hold the
+    same counts in the same cells (a record within the days they keep)."""
+    config = load_mill_config(MILL)
+    sink, _ = analyze_files([start_recording], [config])
+    analyzer = sink.analyzers[config.id]
+    analyzer.report()  # (attributes the decided cycles, as the report does)
+    own = analyzer.cycle_matrices_by_day()
+    assert set(own) == set(result.damage.index)
+    for comp, plain in own.items():
+        edges = (plain["range_edges"], plain["mean_edges"])
+        total = RangeMeanMatrix(*edges)
+        for phases in plain["days"].values():
+            for cells in phases.values():
+                total = total + sparse_matrix(edges, cells)
+        assert np.array_equal(result.matrix(comp).to_numpy(), total.half_cycles / 2.0), comp
+        assert list(result.matrix(comp).index.left[1:]) == list(total.range_edges)
+
+
+def test_on_the_critical_plane_the_cycles_are_those_of_the_plane_reported(tmp_path):
+    """A dual drive searching the critical plane: each component's cycles are its reported
+    plane's (their Miner sum is its committed damage), the matrix holds them all."""
+    text = (MILL.parent / "ball-dual-lrs.toml").read_text(encoding="utf-8")
+    mill = tmp_path / "critical.toml"
+    mill.write_text(text.replace("plane_angle_deg = 45.0", 'plane_angle_deg = "critical"', 1))
+    rec = tmp_path / "dual.mcap"
+    assert main(["simulate", "--scene", "start-lrs", "--mill", str(mill), "--duration", "60s",
+                 "--out", str(rec), "--no-progress"]) == 0  # fmt: skip
+    result = millwatch.analyze([rec], mill=mill)
+    config = load_mill_config(mill)
+    assert result.report.damage["pinion_combined_bs"].plane_angle_deg is not None
+    for comp in result.damage.index:
+        cycles = result.cycles(comp)
+        committed = result.damage_totals.loc[comp, "committed"]
+        assert miner_sum(config, comp, cycles) == pytest.approx(committed, rel=1e-9)
+        assert result.matrix(comp).to_numpy().sum() == cycles["count"].sum()
