@@ -39,6 +39,7 @@ import numpy as np
 from millwatch.analytics.contracts import SnapshotMismatch, check_snapshot
 from millwatch.analytics.drivetrain.mill_config import ChannelConfig, MillConfig
 from millwatch.analytics.fatigue.cycle_log import CycleLog
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
 from millwatch.analytics.mill.loads import LoadAnalysis
 from millwatch.analytics.mill.results import (
     BarringEvent,
@@ -131,8 +132,9 @@ class MillAnalyzer:
     analysis); the results are the same, and the analyzer drains it before it reads the
     tracker (report, snapshot).
 
-    ``keep_cycles``: keep every closed rainflow cycle of every component for :meth:`cycles`
-    (memory grows with the record: an offline analysis's choice, never the worker's).
+    ``cycle_log``: records each component's cycles over the whole record for
+    :meth:`record_matrix` and (if it keeps them) :meth:`cycles` — an offline analysis's choice,
+    never the worker's (:class:`~millwatch.analytics.fatigue.cycle_log.CycleLog`).
     """
 
     def __init__(
@@ -141,7 +143,7 @@ class MillAnalyzer:
         *,
         spectra: bool = True,
         spectra_runner: Callable[[HarmonicTracker], SpectraRunner] | None = None,
-        keep_cycles: bool = False,
+        cycle_log: CycleLog | None = None,
     ) -> None:
         self.config = config
         #: Whether running samples feed the harmonic tracker (False: an offline question that
@@ -153,8 +155,7 @@ class MillAnalyzer:
         self._faults = FaultStage(config)
         self._tacho = self._tacho_stage(fs)
         self._loads = LoadAnalysis(self.analysis_config)
-        if keep_cycles:  # every cycle, for :meth:`cycles` (unbounded: offline analyses only)
-            self._loads.fatigue.cycle_log = CycleLog()
+        self._loads.fatigue.cycle_log = cycle_log  # (a whole record's: offline analyses only)
         # mills started together compute their spectra at different samples (issue 5 latency)
         self._harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
         #: What feeds the tracker: the tracker itself, or the runner built around it
@@ -452,9 +453,11 @@ class MillAnalyzer:
 
     def cycles(self, component: str) -> ComponentCycles:
         """Every closed rainflow cycle of ``component`` so far (a name of :meth:`damage_summary`),
-        its stress after the stress factors (MPa); only with ``keep_cycles`` (RuntimeError
-        otherwise; ValueError naming the components for an unknown one)."""
-        cycles, scale = self._loads.fatigue.logged_cycles(component)
+        its stress after the stress factors (MPa); only with a ``cycle_log`` that keeps them
+        (RuntimeError otherwise; ValueError naming the components for an unknown one)."""
+        cycles, _, scale = self._loads.fatigue.logged(component)
+        if cycles is None:
+            raise RuntimeError("the analyzer's cycle log keeps no cycles (keep_cycles=False)")
         return ComponentCycles(
             component=component,
             range_mpa=cycles.range * scale,
@@ -463,6 +466,12 @@ class MillAnalyzer:
             t_ns=self._loads.clock.times_ns(cycles.i_end),
             stress_factor=scale,
         )
+
+    def record_matrix(self, component: str) -> RangeMeanMatrix | None:
+        """The range–mean matrix of every cycle ``component`` closed so far (MPa after the
+        stress factors, the bins of :meth:`cycle_matrices_by_day`; None for a component without
+        a stress bound); only with a ``cycle_log`` (RuntimeError otherwise)."""
+        return self._loads.fatigue.logged(component)[1]
 
     def phase_seconds_by_day(self) -> dict[str, dict[str, float]]:
         """Seconds analysed per local day and phase (``stopped``, ``start``, ``run``, ``stop``,

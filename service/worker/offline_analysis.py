@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 import numpy as np
 
 from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.fatigue.cycle_log import CycleLog
 from millwatch.analytics.mill.analyzer import MillAnalyzer
 from millwatch.analytics.spectra.facts import HarmonicWindow
 from millwatch.analytics.spectra.tracker import HarmonicTracker
@@ -179,14 +180,19 @@ class OfflineSink(_AdmittingSink):
         *,
         spectra: bool = True,
         background: bool = False,
-        keep_cycles: bool = False,
+        cycle_log: Callable[[], CycleLog] | None = None,
     ) -> None:
         super().__init__(configs)
         self._background: list[BackgroundSpectra] = []
         # each mill's spectra on a thread of their own
         runner = self._background_spectra if spectra and background else None
         self.analyzers = {
-            c.id: MillAnalyzer(c, spectra=spectra, spectra_runner=runner, keep_cycles=keep_cycles)
+            c.id: MillAnalyzer(
+                c,
+                spectra=spectra,
+                spectra_runner=runner,
+                cycle_log=None if cycle_log is None else cycle_log(),
+            )
             for c in configs
         }
 
@@ -353,16 +359,17 @@ def analyze_files(
     advance: Callable[[int], None] = lambda _: None,
     uncounted: frozenset[Path] = frozenset(),
     background: bool = False,
-    keep_cycles: bool = False,
+    cycle_log: Callable[[], CycleLog] | None = None,
 ) -> tuple[OfflineSink, ReadingStats]:
     """Analyse ``configs``' mills over ``files`` (in order, one stream); ``advance(bytes)``
     reports progress; blocks of no given mill in ``uncounted`` files are not counted (another
     job's share counts them); ``background``: each mill's spectra on a thread of its own
-    (:class:`BackgroundSpectra`: for cores that would idle otherwise); ``keep_cycles``: each
-    analyzer keeps every rainflow cycle (``MillAnalyzer.cycles``). Returns the sink (its
-    analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and what reading
-    met. The files are read a batch or two ahead by a thread (:func:`_sink_batches`)."""
-    sink = OfflineSink(configs, spectra=spectra, background=background, keep_cycles=keep_cycles)
+    (:class:`BackgroundSpectra`: for cores that would idle otherwise); ``cycle_log``: makes
+    each analyzer's record of its cycles (``MillAnalyzer.cycles``, ``record_matrix``). Returns
+    the sink (its analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and
+    what reading met. The files are read a batch or two ahead by a thread
+    (:func:`_sink_batches`)."""
+    sink = OfflineSink(configs, spectra=spectra, background=background, cycle_log=cycle_log)
     lane = BatchLane(sink)
     stats = ReadingStats()
     for path, ours, foreign in _sink_batches(files, sink, stats, advance):

@@ -4,10 +4,12 @@ copied), with sample indices shifted by the offset given."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from millwatch.analytics.fatigue.cycle_log import CycleLog
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
 from millwatch.analytics.fatigue.rainflow import RainflowCounter
 
 signals = st.lists(st.floats(-100, 100, allow_nan=False), min_size=0, max_size=300)
@@ -27,6 +29,24 @@ def test_the_log_holds_the_cycles_of_the_whole_signal_however_split(x, cuts, off
     assert np.array_equal(got.i_start, whole.i_start + offset)
     assert np.array_equal(got.i_end, whole.i_end + offset)
     assert np.array_equal(log.cycles("trace").range, whole.range)  # read twice: the same
+
+
+@settings(max_examples=40, deadline=None)
+@given(signals, st.lists(st.integers(0, 300), max_size=4), st.sampled_from([1.0, 2.2]))
+def test_the_matrix_holds_every_cycle_at_its_scaled_range_and_mean(x, cuts, scale):
+    x = np.asarray(x, dtype=np.float64)
+    whole = RainflowCounter().feed(x).copy()
+    want = RangeMeanMatrix(np.linspace(0.0, 500.0, 11), np.linspace(-250.0, 250.0, 6))
+    want.add_cells(want.cell_index(whole.range * scale, whole.mean * scale),
+                   np.rint(whole.count * 2.0))  # fmt: skip
+    log, counter = CycleLog(keep_cycles=False), RainflowCounter()
+    log.bin("trace", RangeMeanMatrix(want.range_edges, want.mean_edges), scale)
+    for part in np.split(x, sorted(c for c in cuts if c <= x.size)):
+        log.record("trace", counter.feed(part))
+    assert log.matrix("trace") == want and log.matrix("other") is None
+    assert log.matrix("trace").cycles == float(whole.count.sum())
+    with pytest.raises(RuntimeError, match="keep_cycles=False"):
+        log.cycles("trace")
 
 
 def test_a_trace_never_recorded_has_no_cycles():

@@ -25,7 +25,7 @@ from tests.service.toolkit.conftest import MILL
 
 @pytest.fixture(scope="module")
 def result(start_recording) -> millwatch.AnalysisResult:
-    return millwatch.analyze([str(start_recording)], mill=str(MILL))
+    return millwatch.analyze([str(start_recording)], mill=str(MILL), cycles=True)
 
 
 @pytest.fixture
@@ -137,6 +137,19 @@ def test_the_matrix_holds_every_cycle(result, component):
 def test_an_unknown_component_is_named(result):
     with pytest.raises(ValueError, match=r"no component 'gearbox'.*pinion_combined"):
         result.cycles("gearbox")
+    with pytest.raises(ValueError, match=r"no component 'gearbox'.*pinion_combined"):
+        result.matrix("gearbox")
+
+
+def test_without_cycles_the_matrix_is_the_same_and_cycles_say_how(result, start_recording):
+    light = millwatch.analyze([start_recording], mill=MILL, spectra=False)
+    for comp in result.damage.index:
+        assert light.matrix(comp).equals(result.matrix(comp))
+    with pytest.raises(ValueError, match=r"analyze\(\.\.\., cycles=True\)"):
+        light.cycles("pinion_combined")
+    # states, events and damage do not depend on the spectra (as --no-spectra)
+    assert light.damage.equals(result.damage) and light.events.equals(result.events)
+    assert light.harmonics.empty
 
 
 def test_a_recording_without_the_mill_is_named(start_recording):
@@ -148,7 +161,7 @@ def test_the_matrix_is_the_analyzers_own_daily_matrices_summed(result, start_rec
     """The worker's per-day and per-phase matrices of the same analysis, added up, hold the
     same counts in the same cells (a record within the days they keep)."""
     config = load_mill_config(MILL)
-    sink, _ = analyze_files([start_recording], [config])
+    sink, _ = analyze_files([start_recording], [config])  # (no cycle log)
     analyzer = sink.analyzers[config.id]
     analyzer.report()  # (attributes the decided cycles, as the report does)
     own = analyzer.cycle_matrices_by_day()
@@ -172,7 +185,7 @@ def test_on_the_critical_plane_the_cycles_are_those_of_the_plane_reported(tmp_pa
     rec = tmp_path / "dual.mcap"
     assert main(["simulate", "--scene", "start-lrs", "--mill", str(mill), "--duration", "60s",
                  "--out", str(rec), "--no-progress"]) == 0  # fmt: skip
-    result = millwatch.analyze([rec], mill=mill)
+    result = millwatch.analyze([rec], mill=mill, cycles=True)
     config = load_mill_config(mill)
     assert result.report.damage["pinion_combined_bs"].plane_angle_deg is not None
     for comp in result.damage.index:
