@@ -49,4 +49,4 @@ def read_archive(paths: str | Path | Sequence[str | Path], mill: str | Path) -> 
         raise ValueError(f"channel(s) {named} of mill file {mill} have no blocks in the "
                          "recording: check the mill file's channel keys")  # fmt: skip
     index = pd.DatetimeIndex(utc(got.t_ns), name="t")
-    return pd.DataFrame(got.values, index=index, columns=list(config.channels))
+    return pd.DataFrame(got.values.T, index=index, columns=got.channels, copy=False)

@@ -14,6 +14,7 @@ telemetry-fault flags), on a contiguous time grid.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,16 +31,17 @@ from millwatch.worker.offline_analysis import ReadingStats, _AdmittingSink, _sin
 __all__ = ["MillSamples", "read_samples"]
 
 
+@dataclass(frozen=True)
 class MillSamples:
     """One mill's samples: ``t_ns`` (int64 ns since the Unix epoch, UTC, every sample of a
-    contiguous grid at the mill's rate) and per channel of the mill file, in its order,
-    float64 values in engineering units (NaN in gaps and missing blocks); ``missing``: the
-    channels of the file of which the recording holds no block."""
+    contiguous grid at the mill's rate), ``values`` (float64, one column per channel of the
+    mill file in ``channels``' order, in engineering units, NaN in gaps and missing blocks) and
+    ``missing``: the channels of the file of which the recording holds no block."""
 
-    def __init__(self, t_ns: np.ndarray, values: dict[str, np.ndarray], missing: list[str]):
-        self.t_ns = t_ns
-        self.values = values
-        self.missing = missing
+    t_ns: np.ndarray
+    values: np.ndarray
+    channels: list[str]
+    missing: list[str]
 
 
 class _SampleSink(_AdmittingSink):
@@ -49,6 +51,8 @@ class _SampleSink(_AdmittingSink):
         super().__init__([config])
         self._calibration = MillAnalyzer(config, spectra=False)  # calibrated(): its conversion
         self._names = list(config.channels)
+        self._scaled = {k for k, ch in enumerate(config.channels.values())
+                        if (ch.gain, ch.offset) != (1.0, 0.0)}  # fmt: skip
         self.aligner = FrameAligner(self._names, float(config.sample_rate_hz))
         self.frames: list[Frame] = []
 
@@ -66,8 +70,9 @@ class _SampleSink(_AdmittingSink):
         """A run of regular blocks: calibrated per channel, aligned at once when it can be."""
         rows = np.array(raw, dtype=np.float64)
         for ci in np.unique(chan).tolist():
-            sel = chan == ci
-            rows[sel] = self._calibration.calibrated(self._names[ci], rows[sel])
+            if ci in self._scaled:  # (the identity's rows stay as they are)
+                sel = chan == ci
+                rows[sel] = self._calibration.calibrated(self._names[ci], rows[sel])
         frames = self.aligner.push_blocks(chan, t0_ns, rows)
         if frames is None:  # not a run the aligner takes at once: block by block
             frames = []
@@ -93,12 +98,15 @@ def read_samples(files: Sequence[Path], config: MillConfig) -> MillSamples:
     if not frames:
         raise ValueError(f"RECORDING {' '.join(map(str, files))}: no blocks of mill "
                          f"{config.id!r} found")  # fmt: skip
-    fs = sink.aligner.fs
+    fs, names = sink.aligner.fs, sink.aligner.channels
+    n = sum(len(f) for f in frames)
+    values = np.empty((len(names), n))
+    for j, c in enumerate(names):  # (one copy into the result per channel)
+        np.concatenate([f.data[c] for f in frames], out=values[j])
     t_ns = np.concatenate([_times(f.t0_ns, fs, len(f)) for f in frames])
-    values = {c: np.concatenate([f.data[c] for f in frames]) for c in sink.aligner.channels}
     health = sink.health[config.id].channels
     missing = [c for c in config.channels if c not in health or health[c].blocks == 0]
-    return MillSamples(t_ns, values, missing)
+    return MillSamples(t_ns, values, list(names), missing)
 
 
 def _times(t0_ns: int, fs: float, n: int) -> np.ndarray:
