@@ -26,11 +26,11 @@ Composition: the service around the analytics — commands, worker, store, API, 
   (module ``__getattr__``), so that a command never imports pandas.
 
 Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote`` / ``export``; ``toolkit`` →
-``worker`` and ``cli.analyze`` (the same analysis); ``worker`` →
-``store``; ``api`` → ``store``, ``reports``, and the ``worker`` runtime it serves; ``remote``
-sits between ``api`` and the workers. A new command goes in ``cli/``, a new route in
-``api/routes/``, a new report in ``reports/``, a new stored table in ``store/``, a new export
-format in ``export/``.
+``worker`` and ``cli.analyze`` (the same analysis, the same report); ``worker`` → ``store``;
+``api`` → ``store``, ``reports``, and the ``worker`` runtime it serves; ``remote`` sits between
+``api`` and the workers. A new command goes in ``cli/``, a new route in ``api/routes/``, a new
+report in ``reports/``, a new stored table in ``store/``, a new export format in ``export/``, a
+new notebook function in ``toolkit/`` (and the re-export below).
 """
 
 from typing import TYPE_CHECKING, Any

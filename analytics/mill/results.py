@@ -9,8 +9,8 @@ remote protocol): defined once here, read by attribute, never by string key.
 * :class:`ComponentDamage` — the Miner damage of one component so far (closed cycles, and what
   closing the open rainflow residue now would add);
 * :class:`ComponentCycles` — every closed rainflow cycle of one component (kept only when an
-  offline analysis asks: ``MillAnalyzer(keep_cycles=True)``), at the stress the S-N curve is read
-  at;
+  offline analysis gives the analyzer a :class:`~millwatch.analytics.fatigue.cycle_log.CycleLog`
+  that keeps them), at the stress the S-N curve is read at;
 * :data:`AnalyzerEvent` — a start (:class:`StartEvent`, with a :class:`PeakResult` per drive
   side), stop (:class:`StopEvent`) or barring session (:class:`BarringEvent`), told apart by
   ``event`` (Diering 2011 §6.1.1 Figure 20, §6.2.3, §6.2.5); :func:`parse_event` reads one.
