@@ -52,7 +52,8 @@ def scalar_fields(model: type[BaseModel]) -> list[str]:
     out = []
     for name, info in model.model_fields.items():
         ann = info.annotation
-        args = typing.get_args(ann) if isinstance(ann, types.UnionType) else (ann,)
+        union = typing.get_origin(ann) in (typing.Union, types.UnionType)
+        args = typing.get_args(ann) if union else (ann,)
         if all(a in _SCALARS for a in args):
             out.append(name)
     return out
