@@ -12,7 +12,10 @@ import pytest
 import millwatch
 from millwatch.ingest import wire
 from millwatch.ingest.archive.reader import TailTolerantReader
+from millwatch.ingest.archive.writer import ArchiveWriter
 from millwatch.ingest.mill_files import load_mill_config
+from millwatch.ingest.sim.blocks import scene_blocks
+from millwatch.ingest.sim.scenes import get_scene
 from tests.service.toolkit.conftest import MILL
 
 #: Calibrations the recording was not made with: (channel, gain, offset).
@@ -79,3 +82,24 @@ def test_a_recording_without_the_mill_is_named(start_recording, tmp_path):
     other = Path(MILL).parent / "ball-dual-lrs.toml"
     with pytest.raises(ValueError, match="no blocks of mill"):
         millwatch.read_archive([start_recording], mill=other)
+
+
+def test_a_gap_is_nan_rows_and_a_repeat_adds_none(tmp_path):
+    """Blocks lost from every channel are NaN rows on the grid (as the live path gives them to
+    the analyzer); a block archived twice is admitted once."""
+    config = load_mill_config(MILL)
+    scene = get_scene("start-lrs", config, seed=1, duration_s=20.0)
+    blocks = list(scene_blocks(scene, block_samples=100))
+    lost = blocks[400:408]  # two 100-sample blocks of each of the 4 channels
+    kept = blocks[:400] + blocks[408:]
+    kept.insert(100, kept[99])  # the same block again
+    with ArchiveWriter(tmp_path / "archive", "gap") as writer:
+        for b in kept:
+            writer.write(b.key, b.payload, b.t_end_ns)
+    df = millwatch.read_archive([tmp_path / "archive"], mill=MILL)
+    assert len(df) == 20_000 and (np.diff(df.index.asi8) == 1_000_000).all()
+    t0 = min(wire.decode_block(b.payload).t0_ns for b in lost)
+    gap = (df.index >= pd.Timestamp(t0, unit="ns", tz="UTC")) & (
+        df.index < pd.Timestamp(t0 + 200_000_000, unit="ns", tz="UTC"))  # fmt: skip
+    assert gap.sum() == 200
+    assert df[gap].isna().all().all() and not df[~gap].isna().any().any()
