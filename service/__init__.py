@@ -21,10 +21,33 @@ Composition: the service around the analytics — commands, worker, store, API, 
 * ``reports/`` — the monthly damage report, life and starts summaries, and their renderers.
 * ``export/`` — the archive for other tools: a span of a mill as an MCAP file Foxglove plots,
   with the analyzer's and alarm rules' conclusions (``millwatch archive export``).
+* ``toolkit/`` — the notebook API: ``millwatch.read_archive`` (a recording's calibrated samples)
+  and ``millwatch.analyze`` (``millwatch analyze`` as DataFrames), re-exported here lazily
+  (module ``__getattr__``), so that a command never imports pandas.
 
-Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote`` / ``export``; ``worker`` →
-``store``; ``api`` → ``store``, ``reports``, and the ``worker`` runtime it serves; ``remote``
-sits between ``api`` and the workers. A new command goes in ``cli/``, a new route in
-``api/routes/``, a new report in ``reports/``, a new stored table in ``store/``, a new export
-format in ``export/``.
+Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote`` / ``export``; ``toolkit`` →
+``worker`` and ``cli.analyze`` (the same analysis, the same report); ``worker`` → ``store``;
+``api`` → ``store``, ``reports``, and the ``worker`` runtime it serves; ``remote`` sits between
+``api`` and the workers. A new command goes in ``cli/``, a new route in ``api/routes/``, a new
+report in ``reports/``, a new stored table in ``store/``, a new export format in ``export/``, a
+new notebook function in ``toolkit/`` (and the re-export below).
 """
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # (for the type checker; at run time __getattr__ below imports them)
+    from millwatch.toolkit import AnalysisResult, analyze, read_archive
+
+__all__ = ["AnalysisResult", "analyze", "read_archive"]
+
+_TOOLKIT = frozenset(__all__)
+
+
+def __getattr__(name: str) -> Any:
+    """``millwatch.read_archive``, ``millwatch.analyze``, ``millwatch.AnalysisResult``: imported
+    from :mod:`millwatch.toolkit` on first use (pandas and the analysis load only then)."""
+    if name in _TOOLKIT:
+        from millwatch import toolkit
+
+        return getattr(toolkit, name)
+    raise AttributeError(f"module 'millwatch' has no attribute {name!r}")

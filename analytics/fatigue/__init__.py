@@ -12,6 +12,8 @@ Recorders (consume Cycles; combine freely, as pyLife's detectors and recorders d
     miner            MinerSum, DamageRecorder: Palmgren-Miner damage on one S-N curve, exact
     matrices         RangeMeanMatrix, FromToMatrix: cycle histograms with configured bins
     record_count     RecordCount: a whole record in large chunks — cycles, exact damage, totals
+    cycle_log        CycleLog: a whole record's range–mean matrix per trace, and on request
+                     every cycle (unbounded: offline analyses only)
 
 Curves and sums::
 

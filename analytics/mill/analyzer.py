@@ -38,9 +38,12 @@ import numpy as np
 
 from millwatch.analytics.contracts import SnapshotMismatch, check_snapshot
 from millwatch.analytics.drivetrain.mill_config import ChannelConfig, MillConfig
+from millwatch.analytics.fatigue.cycle_log import CycleLog
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
 from millwatch.analytics.mill.loads import LoadAnalysis
 from millwatch.analytics.mill.results import (
     BarringEvent,
+    ComponentCycles,
     ComponentDamage,
     StartEvent,
     StopEvent,
@@ -128,6 +131,10 @@ class MillAnalyzer:
     thread (a :class:`SpectraRunner` around the tracker, e.g. a background thread of an offline
     analysis); the results are the same, and the analyzer drains it before it reads the
     tracker (report, snapshot).
+
+    ``cycle_log``: records each component's cycles over the whole record for
+    :meth:`record_matrix` and (if it keeps them) :meth:`cycles` — an offline analysis's choice,
+    never the worker's (:class:`~millwatch.analytics.fatigue.cycle_log.CycleLog`).
     """
 
     def __init__(
@@ -136,6 +143,7 @@ class MillAnalyzer:
         *,
         spectra: bool = True,
         spectra_runner: Callable[[HarmonicTracker], SpectraRunner] | None = None,
+        cycle_log: CycleLog | None = None,
     ) -> None:
         self.config = config
         #: Whether running samples feed the harmonic tracker (False: an offline question that
@@ -147,6 +155,7 @@ class MillAnalyzer:
         self._faults = FaultStage(config)
         self._tacho = self._tacho_stage(fs)
         self._loads = LoadAnalysis(self.analysis_config)
+        self._loads.fatigue.cycle_log = cycle_log  # (a whole record's: offline analyses only)
         # mills started together compute their spectra at different samples (issue 5 latency)
         self._harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
         #: What feeds the tracker: the tracker itself, or the runner built around it
@@ -441,6 +450,28 @@ class MillAnalyzer:
         kept): per component ``{"range_edges", "mean_edges", "days": {day: {phase: [[cell,
         half cycles], ...]}}}`` (:mod:`millwatch.analytics.mill.cycle_matrix`)."""
         return self._loads.matrices_by_day()
+
+    def cycles(self, component: str) -> ComponentCycles:
+        """Every closed rainflow cycle of ``component`` so far (a name of :meth:`damage_summary`),
+        its stress after the stress factors (MPa); only with a ``cycle_log`` that keeps them
+        (RuntimeError otherwise; ValueError naming the components for an unknown one)."""
+        cycles, _, scale = self._loads.fatigue.logged(component)
+        if cycles is None:
+            raise RuntimeError("the analyzer's cycle log keeps no cycles (keep_cycles=False)")
+        return ComponentCycles(
+            component=component,
+            range_mpa=cycles.range * scale,
+            mean_mpa=cycles.mean * scale,
+            count=cycles.count.copy(),
+            t_ns=self._loads.clock.times_ns(cycles.i_end),
+            stress_factor=scale,
+        )
+
+    def record_matrix(self, component: str) -> RangeMeanMatrix | None:
+        """The range–mean matrix of every cycle ``component`` closed so far (MPa after the
+        stress factors, the bins of :meth:`cycle_matrices_by_day`; None for a component without
+        a stress bound); only with a ``cycle_log`` (RuntimeError otherwise)."""
+        return self._loads.fatigue.logged(component)[1]
 
     def phase_seconds_by_day(self) -> dict[str, dict[str, float]]:
         """Seconds analysed per local day and phase (``stopped``, ``start``, ``run``, ``stop``,

@@ -36,6 +36,9 @@ import numpy as np
 from millwatch.analytics.contracts import SnapshotMismatch
 from millwatch.analytics.drivetrain.mill_config import MillConfig
 from millwatch.analytics.drivetrain.stress import shear_stress_from_torque
+from millwatch.analytics.fatigue.cycle_log import CycleLog
+from millwatch.analytics.fatigue.cycles import Cycles
+from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
 from millwatch.analytics.fatigue.miner import DamageRecorder
 from millwatch.analytics.fatigue.rainflow import RainflowCounter
 from millwatch.analytics.mill.app_d import AppDCost
@@ -52,7 +55,8 @@ T = TypeVar("T")
 class FatigueCounting:
     """Rainflow counters and damage recorders of a mill's components (module docstring)."""
 
-    CONFIGURED = frozenset({"config", "roles", "fs"})
+    #: ``cycle_log``: the caller's record of the cycles (an offline analysis), not state.
+    CONFIGURED = frozenset({"config", "roles", "fs", "cycle_log"})
 
     def __init__(self, config: MillConfig, roles: LoadRoles, fs: float) -> None:
         self.config = config
@@ -63,6 +67,9 @@ class FatigueCounting:
         self.damage: dict[str, PhaseDamage] = {}
         self.lead = dict.fromkeys(keys, 0)
         self.last = dict.fromkeys(keys, math.nan)
+        #: A whole record's cycles (matrices, or every cycle), when a caller asks for them
+        #: before the first sample (:meth:`logged`).
+        self.cycle_log: CycleLog | None = None
 
     def keys(self) -> list[str]:
         """The counted traces: each component, the combined one on every plane of the critical
@@ -114,6 +121,8 @@ class FatigueCounting:
             bound = bounds.get(c)
             matrices = None if bound is None else CycleMatrixDays(*matrix_edges(bound))
             self.damage[key] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone, matrices=matrices)
+            if self.cycle_log is not None and bound is not None:  # the whole record's matrix
+                self.cycle_log.bin(key, RangeMeanMatrix(*matrix_edges(bound)), rec.scale)
 
     def stress(self, block: np.ndarray) -> dict[str, np.ndarray]:
         """Stress (MPa) of each component over a block of ring rows (NaN where missing)."""
@@ -148,6 +157,8 @@ class FatigueCounting:
             filled = self._hold(comp, x)
             cycles = self.counters[comp].feed(filled)
             self.damage[comp].record(cycles, timeline, decided, offset=self.lead[comp])
+            if self.cycle_log is not None:
+                self.cycle_log.record(comp, cycles, offset=self.lead[comp])
 
     def _hold(self, comp: str, x: np.ndarray) -> np.ndarray:
         """The NaN policy: hold the last valid value; skip samples before the first one."""
@@ -167,6 +178,21 @@ class FatigueCounting:
         if out.size:
             self.last[comp] = float(out[-1])
         return out
+
+    def logged(self, component: str) -> tuple[Cycles | None, RangeMeanMatrix | None, float]:
+        """What :attr:`cycle_log` recorded of ``component``'s counted trace (:meth:`chosen`):
+        its cycles (None when the log keeps none; stream sample indices, MPa of the counted
+        stress), its whole-record range–mean matrix (None without a stress bound) and the
+        stress factor (``scale``: K_t or the fatigue factors) the matrix and the damage apply."""
+        if self.cycle_log is None:
+            raise RuntimeError("cycles are recorded only when asked for before the first sample")
+        key = self.chosen().get(component)
+        if key is None:
+            raise ValueError(f"no component {component!r}: this mill counts "
+                             f"{', '.join(self.roles.components)}")  # fmt: skip
+        log = self.cycle_log
+        cycles = log.cycles(key) if log.keep_cycles else None
+        return cycles, log.matrix(key), self.damage[key].recorder.scale
 
     def oldest_needed(self, decided: int) -> int:
         """Oldest stream sample whose phase an open residue or a pending cycle still needs."""

@@ -14,6 +14,8 @@ import zoneinfo
 from datetime import datetime, time, timedelta
 from typing import Any
 
+import numpy as np
+
 from millwatch.analytics.mill.phase_damage import PHASE_OF_STATE
 from millwatch.analytics.operation.operating_states import OperatingState
 
@@ -42,6 +44,13 @@ class StreamClock:
         if self.fs.is_integer():
             return t0 + (sample * 1_000_000_000) // int(self.fs)
         return t0 + round(sample * 1e9 / self.fs)
+
+    def times_ns(self, samples: np.ndarray) -> np.ndarray:
+        """:meth:`t_ns` of many stream samples at once (int64 ns since the Unix epoch)."""
+        t0, i = self.t0_ns or 0, np.asarray(samples, dtype=np.int64)
+        if self.fs.is_integer():
+            return t0 + (i * 1_000_000_000) // int(self.fs)
+        return t0 + np.round(i * (1e9 / self.fs)).astype(np.int64)
 
     def local(self, sample: int) -> datetime:
         """The site's local time of stream sample ``sample``."""

@@ -8,6 +8,9 @@ remote protocol): defined once here, read by attribute, never by string key.
   amplitude), every per-channel value keyed by the channel's name in the mill file;
 * :class:`ComponentDamage` — the Miner damage of one component so far (closed cycles, and what
   closing the open rainflow residue now would add);
+* :class:`ComponentCycles` — every closed rainflow cycle of one component (kept only when an
+  offline analysis gives the analyzer a :class:`~millwatch.analytics.fatigue.cycle_log.CycleLog`
+  that keeps them), at the stress the S-N curve is read at;
 * :data:`AnalyzerEvent` — a start (:class:`StartEvent`, with a :class:`PeakResult` per drive
   side), stop (:class:`StopEvent`) or barring session (:class:`BarringEvent`), told apart by
   ``event`` (Diering 2011 §6.1.1 Figure 20, §6.2.3, §6.2.5); :func:`parse_event` reads one.
@@ -19,13 +22,16 @@ the analyzer writes (an unknown one is an error, so a key cannot drift silently)
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
 __all__ = [
     "AnalyzerEvent",
     "BarringEvent",
+    "ComponentCycles",
     "ComponentDamage",
     "PeakResult",
     "StartEvent",
@@ -82,6 +88,24 @@ class ComponentDamage(BaseModel):
         description="What closing the open rainflow residue now, as half cycles, would add."
     )
     with_residue: float = Field(description="committed + pending_residue.")
+
+
+@dataclass(frozen=True)
+class ComponentCycles:
+    """The closed rainflow cycles of one component, in the order they closed (ASTM E1049-85
+    §5.4.4): ``range_mpa`` and ``mean_mpa`` of the component's stress AFTER its stress factors
+    (``stress_factor``: K_t or the fatigue factors, the damage recorder's scale) and BEFORE any
+    mean-stress correction — the ranges and means the range–mean matrices bin and the S-N
+    curve is read at; ``count`` 1.0 (full) or 0.5 (half cycle); ``t_ns`` the time of the
+    reversal that closed each (ns since the Unix epoch, UTC). The open residue is not in it
+    (``ComponentDamage.pending_residue`` is its damage)."""
+
+    component: str
+    range_mpa: np.ndarray
+    mean_mpa: np.ndarray
+    count: np.ndarray
+    t_ns: np.ndarray
+    stress_factor: float
 
 
 class _Event(BaseModel):

@@ -46,6 +46,14 @@ class LineMeasurement:
         """Plain data; NaN becomes None (JSON-ready)."""
         return {k: _jsonable(v) for k, v in vars(self).items()}  # flat: no asdict deep copy
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> LineMeasurement:
+        """The measurement of :meth:`to_dict`'s data (None back to NaN)."""
+        m = dict(d)
+        for key in ("order", "frequency_hz", "amplitude", "snr_db"):
+            m[key] = math.nan if m[key] is None else m[key]
+        return cls(**m)
+
 
 @dataclass(frozen=True)
 class UnexplainedPeak:
@@ -118,16 +126,7 @@ class HarmonicWindow:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> HarmonicWindow:
         """The window of :meth:`to_dict`'s data (None back to NaN in the line measurements)."""
-
-        def num(v: Any) -> Any:
-            return math.nan if v is None else v
-
-        lines = []
-        for m in d["lines"]:
-            m = dict(m)
-            for key in ("order", "frequency_hz", "amplitude", "snr_db"):
-                m[key] = num(m[key])
-            lines.append(LineMeasurement(**m))
+        lines = [LineMeasurement.from_dict(m) for m in d["lines"]]
         return cls(
             d["t_start_ns"], d["t_end_ns"], tuple(tuple(s) for s in d["segments"]),
             d["pinion_speed_rpm"], d["resolution_hz"], d["tracking"], tuple(lines),

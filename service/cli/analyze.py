@@ -43,7 +43,15 @@ from millwatch.ingest.mill_files import load_mill_config
 from millwatch.worker.admission import BlockAdmission
 from millwatch.worker.offline_analysis import ReadingStats, analyze_files
 
-__all__ = ["add_parser", "analyze_recording", "plan_jobs", "recording_files", "run_jobs"]
+__all__ = [
+    "add_parser",
+    "analyze_recording",
+    "json_body",
+    "mill_result",
+    "plan_jobs",
+    "recording_files",
+    "run_jobs",
+]
 
 log = logging.getLogger(__name__)
 
@@ -220,6 +228,23 @@ def _check_alive(procs: list[Any], results: dict[int, Any], plan: list[_Job]) ->
 
 
 # ---------------------------------------------------------------- output
+def mill_result(
+    config: MillConfig, report: dict[str, Any], mill_reading: dict[str, Any], read: ReadingStats
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """One mill's report as ``analyze`` gives it (the alarms its results raise added) and its
+    ``reading`` part; the Python API (:func:`millwatch.analyze`) calls this too."""
+    report["alarms"] = alarms_for_report(report_observations(config.id, report), config)
+    return report, _stats(read, mill_reading)
+
+
+def json_body(out: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict[str, Any]:
+    """What ``analyze --json`` prints of the mills' :func:`mill_result`: one mill's report with
+    its ``reading``, several as ``{"mills": [...]}``."""
+    if len(out) == 1:
+        return {**out[0][0], "reading": out[0][1]}
+    return {"mills": [{**r, "reading": st} for r, st in out]}
+
+
 def _fmt(x: float | None, spec: str = ".1f") -> str:
     return "—" if x is None else format(x, spec)
 
@@ -473,12 +498,9 @@ def _main(args: argparse.Namespace) -> int:
             log.warning("no blocks of mill %r in the recording", config.id)
             continue
         report, mill_reading = reports[config.id]
-        report["alarms"] = alarms_for_report(report_observations(config.id, report), config)
-        out.append((report, _stats(read, mill_reading)))
+        out.append(mill_result(config, report, mill_reading, read))
     if args.json:
-        body: Any = ({**out[0][0], "reading": out[0][1]} if len(out) == 1
-                     else {"mills": [{**r, "reading": st} for r, st in out]})  # fmt: skip
-        sys.stdout.write(json.dumps(body, indent=1) + "\n")
+        sys.stdout.write(json.dumps(json_body(out), indent=1) + "\n")
     else:
         sys.stdout.write("\n".join(_summary(r, st) for r, st in out))
     _speed_note(out, configs, time.perf_counter() - started)

@@ -42,7 +42,6 @@ from typing import Any, TypeVar
 
 from asyncua import Server, ua
 
-import millwatch
 from millwatch.alarms.actions import OperatorAction
 from millwatch.api.backend import Backend
 from millwatch.api.mill_views import mill_summary
@@ -343,7 +342,10 @@ async def _build_info(server: Server) -> None:
         version = importlib.metadata.version("millwatch")
     except importlib.metadata.PackageNotFoundError:
         version = "unknown"
-    built = datetime.fromtimestamp(Path(millwatch.__file__).stat().st_mtime, UTC)
+    # the package's own __init__ (millwatch.__file__), not imported: the package root re-exports
+    # the notebook API, which a server module must not reach
+    package_init = Path(__file__).resolve().parents[1] / "__init__.py"
+    built = datetime.fromtimestamp(package_init.stat().st_mtime, UTC)
     await server.set_build_info(PRODUCT_URI, "millwatch", "millwatch", version, version, built)
 
 

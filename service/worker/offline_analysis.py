@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 import numpy as np
 
 from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.fatigue.cycle_log import CycleLog
 from millwatch.analytics.mill.analyzer import MAX_CHUNK_S, MillAnalyzer
 from millwatch.analytics.spectra.facts import HarmonicWindow
 from millwatch.analytics.spectra.tracker import HarmonicTracker
@@ -175,7 +176,12 @@ class OfflineSink(_AdmittingSink):
     :class:`~millwatch.analytics.mill.analyzer.MillAnalyzer`; no store, no archive."""
 
     def __init__(
-        self, configs: Sequence[MillConfig], *, spectra: bool = True, background: bool = False
+        self,
+        configs: Sequence[MillConfig],
+        *,
+        spectra: bool = True,
+        background: bool = False,
+        cycle_log: Callable[[], CycleLog] | None = None,
     ) -> None:
         super().__init__(configs)
         #: Told after each step of analysis (:meth:`commit`), e.g. an :class:`AnalysisProgress`.
@@ -184,7 +190,13 @@ class OfflineSink(_AdmittingSink):
         # each mill's spectra on a thread of their own
         runner = self._background_spectra if spectra and background else None
         self.analyzers = {
-            c.id: MillAnalyzer(c, spectra=spectra, spectra_runner=runner) for c in configs
+            c.id: MillAnalyzer(
+                c,
+                spectra=spectra,
+                spectra_runner=runner,
+                cycle_log=None if cycle_log is None else cycle_log(),
+            )
+            for c in configs
         }
 
     def _background_spectra(self, tracker: HarmonicTracker) -> BackgroundSpectra:
@@ -401,15 +413,18 @@ def analyze_files(
     advance: Callable[[int], None] = lambda _: None,
     uncounted: frozenset[Path] = frozenset(),
     background: bool = False,
+    cycle_log: Callable[[], CycleLog] | None = None,
 ) -> tuple[OfflineSink, ReadingStats]:
     """Analyse ``configs``' mills over ``files`` (in order, one stream); ``advance(bytes)``
     reports progress; blocks of no given mill in ``uncounted`` files are not counted (another
     job's share counts them); ``background``: each mill's spectra on a thread of its own
-    (:class:`BackgroundSpectra`: for cores that would idle otherwise). Returns the sink (its
-    analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and what reading
-    met. The files are read a batch or two ahead by a thread (:func:`_sink_batches`);
-    ``advance`` follows the analysis (:class:`AnalysisProgress`), the files' sizes in all."""
-    sink = OfflineSink(configs, spectra=spectra, background=background)
+    (:class:`BackgroundSpectra`: for cores that would idle otherwise); ``cycle_log``: makes
+    each analyzer's record of its cycles (``MillAnalyzer.cycles``, ``record_matrix``). Returns
+    the sink (its analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and
+    what reading met. The files are read a batch or two ahead by a thread
+    (:func:`_sink_batches`); ``advance`` follows the analysis (:class:`AnalysisProgress`), the
+    files' sizes in all."""
+    sink = OfflineSink(configs, spectra=spectra, background=background, cycle_log=cycle_log)
     progress = AnalysisProgress(sink, advance)
     lane = BatchLane(sink)
     stats = ReadingStats()

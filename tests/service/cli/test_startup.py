@@ -22,6 +22,7 @@ HEAVY = {
     "scipy",
     "pydantic",
     "tqdm",
+    "pandas",
 }
 
 _LIST_MODULES = """
