@@ -74,7 +74,7 @@ def test_parallel_replay_equals_one_process(
         alarms_two: list = []
         one.on_alarms, two.on_alarms = alarms_one.extend, alarms_two.extend
         n = recover(one, reader)
-        with caplog.at_level(logging.INFO, logger="service"):
+        with caplog.at_level(logging.INFO, logger="millwatch"):
             assert recover(two, reader, jobs=2, factory=MillJob) == n == len(_items())
         assert "replayed by 2 process(es)" in caplog.text
         assert _state(two, s2) == _state(one, s1)
@@ -191,7 +191,7 @@ def test_a_held_mill_fails_no_job_and_the_others_replay_as_in_one_process(
         one, two = (Worker(mills, {m: MillJob(c) for m, c in mills.items()}, s, None)
                     for s in (s1, s2))  # fmt: skip
         recover(one, reader)
-        with caplog.at_level(logging.INFO, logger="service"):
+        with caplog.at_level(logging.INFO, logger="millwatch"):
             recover(two, reader, jobs=3, factory=MillJob)
         assert "replaying the archive with 2 processes: mill-0; mill-2" in caplog.text
         assert list(two.held) == list(one.held) == ["mill-1"]
