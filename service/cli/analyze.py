@@ -285,6 +285,16 @@ def _count(value: int | dict[str, Any], words: str) -> str:
     return f"{number} {words} ({', '.join(f'{k}: {v}' for k, v in value.items())})"
 
 
+def _resonance_text(start: dict[str, Any]) -> str:
+    """A start's run-up resonance beside the model's nearest natural frequency, or why none."""
+    if start.get("resonance_hz") is None:
+        return f"run-up resonance: none ({start.get('resonance_note') or 'not measured'})"
+    natural = start.get("model_natural_hz")
+    model = "no torsional model" if natural is None else f"model natural {natural:.2f} Hz"
+    return (f"run-up resonance {start['resonance_hz']:.2f} Hz at "
+            f"{start['resonance_speed_pct']:.1f} % speed ({model})")  # fmt: skip
+
+
 def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
     lines = [f"mill {report['mill']} ({report['site']}): {report['samples']} samples, "
              f"state now {report['state']}"]  # fmt: skip
@@ -294,6 +304,7 @@ def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
             f"{_fmt(s['switch_on_peak_pct'])} %, short-circuit {_fmt(s['short_circuit_peak_pct'])}"
             f" %, rise 10-90 {_fmt(s['rise_time_10_90_ms'])} ms, accel {_fmt(s['accel_s'])} s"
         )
+        lines.append(f"    {_resonance_text(s)}")
     for s in report["stops"]:
         lines.append(f"  {s['kind']:5} {iso_utc(s['t_ns'])}: rocking peak "
                      f"{_fmt(s['rocking_peak_pct'])} % for {_fmt(s['rocking_s'])} s")  # fmt: skip
