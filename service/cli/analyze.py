@@ -110,10 +110,12 @@ class _Job:
     files: list[tuple[Path, bool]]
     spectra: bool
     background: bool = False  # the spectra of each mill on a thread of its own
+    matrices: bool = False  # each report with its range–mean matrices (for --plots)
 
 
 def plan_jobs(files: list[Path], configs: list[MillConfig], jobs: int, *,
-              spectra: bool = True, cores: int | None = None) -> list[_Job]:  # fmt: skip
+              spectra: bool = True, cores: int | None = None,
+              matrices: bool = False) -> list[_Job]:  # fmt: skip
     """Split the mills over at most ``jobs`` processes, balanced by the bytes of the files
     named after each mill (``<mill id>_…``, as ``millwatch simulate --out DIR`` writes them);
     such a file is read only by the job with its mill, any other file by every job. With
@@ -139,7 +141,8 @@ def plan_jobs(files: list[Path], configs: list[MillConfig], jobs: int, *,
     for group in groups:
         mine = {c.id for c in group}
         reads = [p for p in files if own[p] is None or own[p] in mine]
-        plan.append(_Job(group, [(p, p not in counted) for p in reads], spectra, background))
+        reads_of = [(p, p not in counted) for p in reads]
+        plan.append(_Job(group, reads_of, spectra, background, matrices))
         counted.update(reads)
     return plan
 
@@ -157,6 +160,9 @@ def _run_job(job: _Job, advance: Any) -> dict[str, Any]:
             for mill_id, analyzer in sink.analyzers.items()
             if analyzer.samples
         }
+        if job.matrices:
+            for mill_id, (report, _) in reports.items():
+                report["cycle_matrices"] = sink.analyzers[mill_id].cycle_matrices_by_day()
     finally:
         sink.close()
     return {"reports": reports, "reading": read}
@@ -364,6 +370,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="skip the harmonic spectra: states, events, steady state and damage "
                         "are the same; harmonics, unexplained peaks not computed")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the full report as JSON")
+    p.add_argument("--plots", type=Path, metavar="DIR",
+                   help="also write PNG plots into DIR: each start and stop with its events, "
+                        "each run-up's Campbell diagram, each component's range–mean matrix, "
+                        "the natural frequency start by start (millwatch.plots)")  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar "
                    "(none is shown anyway when stderr is not a terminal)")  # fmt: skip
     p.set_defaults(handler=_main)
@@ -394,8 +404,9 @@ def _main(args: argparse.Namespace) -> int:
     jobs = args.jobs or os.cpu_count() or 1
     progress = not args.no_progress and sys.stderr.isatty()
     started = time.perf_counter()
-    results = run_jobs(plan_jobs(files, configs, jobs, spectra=not args.no_spectra),
-                       progress=progress)  # fmt: skip
+    plan = plan_jobs(files, configs, jobs, spectra=not args.no_spectra,
+                     matrices=args.plots is not None)  # fmt: skip
+    results = run_jobs(plan, progress=progress)
     read = ReadingStats()
     for r in results:
         read.merge(r["reading"])
@@ -412,6 +423,12 @@ def _main(args: argparse.Namespace) -> int:
             continue
         report, mill_reading = reports[config.id]
         report["alarms"] = alarms_for_report(report_observations(config.id, report), config)
+        if args.plots is not None:
+            from millwatch.cli.analyze_plots import write_plots
+
+            written = write_plots(files, config, report, args.plots)
+            log.info("%s: %d plots written to %s", config.id, len(written), args.plots)
+            del report["cycle_matrices"]
         out.append((report, _stats(read, mill_reading)))
     if args.json:
         body: Any = ({**out[0][0], "reading": out[0][1]} if len(out) == 1
