@@ -424,7 +424,7 @@ def _main(args: argparse.Namespace) -> int:
         report, mill_reading = reports[config.id]
         report["alarms"] = alarms_for_report(report_observations(config.id, report), config)
         if args.plots is not None:
-            from millwatch.cli.analyze_plots import write_plots
+            from millwatch.plots.files import write_plots
 
             written = write_plots(files, config, report, args.plots)
             log.info("%s: %d plots written to %s", config.id, len(written), args.plots)

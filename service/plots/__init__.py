@@ -15,10 +15,12 @@ the same picture::
                 panel, :func:`millwatch.reports.figures.matrix_panel`; Fotopoulos 1983 ch. 3)
     trend       trend_figure: the run-up resonance start by start against the model's natural
                 frequency and the natural_frequency_shift alarm band
+    files       write_plots: all of them for an analysed recording, as PNG files (re-reads the
+                recording for the samples of each start and stop; ``analyze --plots DIR``)
 
 Data flow: samples + typed records (:class:`~millwatch.analytics.mill.results.StartEvent`,
 :class:`~millwatch.analytics.fatigue.matrices.RangeMeanMatrix`, …) → a figure; the spectra of a
 run-up come from :func:`millwatch.analytics.operation.runup.runup_spectrogram`, the computation
 the analyzer's resonance search uses. A new plot goes in a module of its own here, taking typed
-inputs and returning a Figure; writing files is the caller's (``millwatch.cli.analyze_plots``).
+inputs and returning a Figure; ``files`` writes them for a recording.
 """

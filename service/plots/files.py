@@ -1,8 +1,8 @@
-"""``millwatch analyze --plots DIR``: the engineering plots of an analysed recording as PNG files.
+"""The engineering plots of an analysed recording as PNG files (``millwatch analyze --plots DIR``).
 
 After the analysis, the recording is read once more for the samples of each start and stop only
-(:func:`millwatch.cli.spectrum.recording_frames`: blocks admitted as ``analyze`` admits them,
-calibrated ``gain·(raw − offset)``), and :mod:`millwatch.plots` draws, per mill:
+(blocks admitted as ``analyze`` admits them, calibrated ``gain·(raw − offset)``), and
+:mod:`millwatch.plots` draws, per mill:
 
 * ``<mill>_start_<UTC>.png`` / ``<mill>_stop_<UTC>.png`` — each start and stop with its events;
 * ``<mill>_campbell_<UTC>.png`` — each start's run-up as a Campbell diagram;
@@ -72,24 +72,29 @@ def _spans(config: MillConfig, events: Sequence[StartEvent | StopEvent]) -> list
 
 
 def _fill(files: Sequence[Path], config: MillConfig, spans: list[_Span]) -> None:
-    """Read the recording once; copy each frame's calibrated samples into the spans it meets."""
-    from millwatch.cli.spectrum import recording_frames
+    """Read the recording once; copy each admitted block's calibrated samples into the spans
+    it meets (blocks admitted as ``millwatch analyze`` admits them: repeats and malformed
+    blocks skipped)."""
+    from millwatch.ingest.archive.reader import TailTolerantReader
+    from millwatch.worker.admission import BlockAdmission
 
     if not spans:
         return
-    fs, names = float(config.sample_rate_hz), list(spans[0].data)
+    admission = BlockAdmission([config], replayed=True, warn_foreign=False)
+    fs = float(config.sample_rate_hz)
     for path in files:
-        for t0, frame in recording_frames(path, config, names):
-            n = next(iter(frame.values())).shape[0]
+        for msg in TailTolerantReader(path).messages():
+            got = admission.admit(msg.key, msg.payload, msg.log_time_ns)
+            if got is None or got.channel not in spans[0].data:
+                continue
+            ch = config.channels[got.channel]
+            raw = np.asarray(got.block.samples, dtype=np.float64)
             for span in spans:
-                start = round((t0 - span.lo_ns) * fs / 1e9)
-                a, b = max(start, 0), min(start + n, span.data[names[0]].shape[0])
-                if a >= b:
-                    continue
-                for name in names:
-                    ch = config.channels[name]
-                    raw = np.asarray(frame[name][a - start : b - start], dtype=np.float64)
-                    span.data[name][a:b] = ch.gain * (raw - ch.offset)
+                start = round((got.block.t0_ns - span.lo_ns) * fs / 1e9)
+                dest = span.data[got.channel]
+                a, b = max(start, 0), min(start + raw.shape[0], dest.shape[0])
+                if a < b:
+                    dest[a:b] = ch.gain * (raw[a - start : b - start] - ch.offset)
 
 
 def component_matrices(plain: dict[str, dict[str, Any]]) -> dict[str, RangeMeanMatrix]:
