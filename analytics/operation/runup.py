@@ -208,7 +208,7 @@ def _burst(
     band = (f >= st.band_hz[0]) & (f <= st.band_hz[1])
     background = np.quantile(spec.amplitude, st.background_quantile, axis=0)
     cells = np.where(search[:, None] & band[None, :], spec.amplitude, -np.inf)
-    k, j = np.unravel_index(int(np.argmax(cells)), cells.shape)
+    k, j = (int(i) for i in np.unravel_index(int(np.argmax(cells)), cells.shape))
     amp = float(spec.amplitude[k, j])
     contrast = amp / background[j] if background[j] > 0 else math.inf
     amp_pct = 100.0 * amp / rated_knm
@@ -220,7 +220,7 @@ def _burst(
         )
     df = float(f[1] - f[0])
     hz = float(f[0] + df * _log_vertex(spec.amplitude[k], j))
-    centre = _burst_centre(spec, int(k), int(j), st)
+    centre = _burst_centre(spec, k, j, st)
     hop = max(1, round(st.hop_s * fs))
     speed = float(np.nanmean(speed_of[max(centre - hop // 2, 0) : centre + hop // 2 + 1]))
     return RunupResonance(

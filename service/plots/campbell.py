@@ -72,7 +72,7 @@ def campbell_figure(
             ax.axhline(f, color="cyan", lw=1.0, gid=NATURAL_GID)
             ax.annotate(f"model natural {f:.2f} Hz", (2.0, f), color="cyan", fontsize=7,
                         va="bottom")  # fmt: skip
-    if start.resonance_hz is not None:
+    if start.resonance_hz is not None and start.resonance_speed_pct is not None:
         ax.plot([start.resonance_speed_pct], [start.resonance_hz], marker="o", ms=10, mfc="none",
                 mec="lime", mew=2, ls="none", gid=RESONANCE_GID,
                 label=f"resonance {start.resonance_hz:.2f} Hz at "

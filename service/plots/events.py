@@ -85,7 +85,7 @@ def event_figure(
     marks = [((t_ns - event.t_ns) / 1e9, label) for t_ns, label in event_marks(event)]
     _mark(ax, ax2, marks, float(t[-1] - t[0]) if n else 1.0)
     lines = ax.get_lines()[: len(torque)] + ax2.get_lines()
-    ax.legend(lines, [ln.get_label() for ln in lines], fontsize=8, loc="lower right")
+    ax.legend(lines, [str(ln.get_label()) for ln in lines], fontsize=8, loc="lower right")
     ax.set_title(title or f"{event.event} at {_iso(event.t_ns)}", fontsize=10)
     return fig
 

@@ -34,9 +34,10 @@ def trend_figure(
     fig = Figure(figsize=(9.0, 4.0), layout="constrained")
     ax = fig.subplots()
     found = [(k, s) for k, s in enumerate(starts, start=1) if s.resonance_hz is not None]
-    ax.plot([k for k, _ in found], [s.resonance_hz for _, s in found], "o-", ms=5, lw=0.8,
-            gid=POINT_GID, label="run-up resonance")  # fmt: skip
-    top = max([s.resonance_hz or 0.0 for _, s in found], default=0.0)
+    hz = [float(s.resonance_hz or 0.0) for _, s in found]
+    ax.plot([k for k, _ in found], hz, "o-", ms=5, lw=0.8, gid=POINT_GID,
+            label="run-up resonance")  # fmt: skip
+    top = max(hz, default=0.0)
     for f in sorted({s.model_natural_hz for _, s in found if s.model_natural_hz is not None}):
         ax.axhline(f, color="black", lw=1.0, gid="natural-line", label=f"model {f:.2f} Hz")
         w, a = f * warn_pct / 100.0, f * alarm_pct / 100.0
