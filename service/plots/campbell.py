@@ -50,6 +50,7 @@ def campbell_figure(
 
     fig = Figure(figsize=(9.0, 5.5), layout="constrained")
     ax = fig.subplots()
+    ax.set_facecolor("#202020")  # no spectrum (below the first frame's speed): dark, as quiet
     keep = spec.freq_hz <= max_hz
     if len(spec):
         order = np.argsort(spec.speed, kind="stable")
@@ -64,9 +65,9 @@ def campbell_figure(
         if f_rated * MIN_SPEED_SHOWN > max_hz:
             continue
         ax.plot(speeds, f_rated * speeds / 100.0, color="white", lw=0.8, ls="--", gid=ORDER_GID)
-        x = min(100.0, 100.0 * max_hz / f_rated * 0.97)
+        x = min(100.0, 100.0 * max_hz / f_rated * 0.97)  # where the line leaves the plot
         ax.annotate(name, (x, f_rated * x / 100.0), color="white", fontsize=7, ha="right",
-                    va="bottom")  # fmt: skip
+                    va="bottom" if x >= 100.0 else "top")  # fmt: skip
     for f in natural_hz:
         if f <= max_hz:
             ax.axhline(f, color="cyan", lw=1.0, gid=NATURAL_GID)
@@ -77,7 +78,7 @@ def campbell_figure(
                 mec="lime", mew=2, ls="none", gid=RESONANCE_GID,
                 label=f"resonance {start.resonance_hz:.2f} Hz at "
                       f"{start.resonance_speed_pct:.1f} %")  # fmt: skip
-        ax.legend(loc="upper left", fontsize=8)
+        ax.legend(loc="upper right", fontsize=8)
     ax.set_xlim(0.0, 105.0)
     ax.set_ylim(0.0, max_hz)
     ax.set_xlabel("speed (% of rated)")
