@@ -188,14 +188,14 @@ RESONANCE_SCATTER = 0.02
 def resonance_hz(config: MillConfig, drawn: float, ev: StartEvent | FailedStartEvent) -> float:
     """The frequency (Hz) of a start's run-up resonance burst: the start event's own when it
     gives one; else the drivetrain's torsional mode (the mill file's model, Fedin & Vinogradov
-    2018) in :data:`RESONANCE_BAND_HZ` nearest its middle, scattered by ±
-    :data:`RESONANCE_SCATTER` with ``drawn`` (uniform in the band), so a mill's run-ups cross
-    one natural frequency as a real drivetrain's do; without a mode in the band, ``drawn``."""
+    2018) nearest the middle of :data:`RESONANCE_BAND_HZ` (within a factor 2 of it), scattered
+    by ± :data:`RESONANCE_SCATTER` with ``drawn`` (uniform in the band), so a mill's run-ups
+    cross one natural frequency as a real drivetrain's do; without such a mode, ``drawn``."""
     if isinstance(ev, StartEvent) and ev.resonance_hz is not None:
         return ev.resonance_hz
     lo, hi = RESONANCE_BAND_HZ
     mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    modes = [f for f in natural_frequencies_of(config) if lo <= f <= hi]
+    modes = [f for f in natural_frequencies_of(config) if 0.5 * mid <= f <= 2.0 * mid]
     if not modes:
         return drawn
     mode = min(modes, key=lambda f: abs(f - mid))
