@@ -30,6 +30,9 @@ from millwatch.analytics.drivetrain.torsional_model import natural_frequencies_o
 from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
 from millwatch.analytics.mill.results import StartEvent, StopEvent, parse_event
 from millwatch.analytics.operation.runup import runup_spectrogram
+from millwatch.ingest import wire
+from millwatch.ingest.archive.batches import MessageBatch
+from millwatch.ingest.wire import decode_headers
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -49,6 +52,7 @@ class _Span:
 
     event: StartEvent | StopEvent
     lo_ns: int
+    fs: float
     data: dict[str, np.ndarray]
 
 
@@ -67,34 +71,56 @@ def _spans(config: MillConfig, events: Sequence[StartEvent | StopEvent]) -> list
         lo = ev.t_ns - round(BEFORE_S * 1e9)
         n = round((ev.end_t_ns - lo) * fs / 1e9 + AFTER_S * fs)
         data = {name: np.full(n, np.nan) for name in [*torque, *([speed] if speed else [])]}
-        out.append(_Span(ev, lo, data))
+        out.append(_Span(ev, lo, fs, data))
     return out
 
 
 def _fill(files: Sequence[Path], config: MillConfig, spans: list[_Span]) -> None:
     """Read the recording once; copy each admitted block's calibrated samples into the spans
     it meets (blocks admitted as ``millwatch analyze`` admits them: repeats and malformed
-    blocks skipped)."""
-    from millwatch.ingest.archive.reader import TailTolerantReader
-    from millwatch.worker.admission import BlockAdmission
+    blocks skipped). Only blocks whose header times touch a span are decoded (a vectorised
+    header scan per batch, as the Foxglove export reads), so a month costs a scan, not a
+    decode."""
+    from millwatch.ingest.archive.batches import BatchReader
+    from millwatch.worker.admission import BlockAdmission  # (the worker's, only when writing)
 
     if not spans:
         return
     admission = BlockAdmission([config], replayed=True, warn_foreign=False)
-    fs = float(config.sample_rate_hz)
     for path in files:
-        for msg in TailTolerantReader(path).messages():
-            got = admission.admit(msg.key, msg.payload, msg.log_time_ns)
-            if got is None or got.channel not in spans[0].data:
-                continue
-            ch = config.channels[got.channel]
-            raw = np.asarray(got.block.samples, dtype=np.float64)
-            for span in spans:
-                start = round((got.block.t0_ns - span.lo_ns) * fs / 1e9)
-                dest = span.data[got.channel]
-                a, b = max(start, 0), min(start + raw.shape[0], dest.shape[0])
-                if a < b:
-                    dest[a:b] = ch.gain * (raw[a - start : b - start] - ch.offset)
+        for batch in BatchReader(path, empty_ok=True).messages():
+            wanted = _touching(batch, spans)
+            for k in range(len(wanted)):
+                got = admission.admit(wanted.topics[int(wanted.channel[k])], wanted.payload(k),
+                                      int(wanted.log_time[k]))  # fmt: skip
+                if got is not None and got.channel in spans[0].data:
+                    _copy(config, got.channel, got.block, spans)
+
+
+def _touching(batch: MessageBatch, spans: list[_Span]) -> MessageBatch:
+    """The messages of ``batch`` whose block times touch a span (and every malformed one,
+    which admission counts)."""
+    head, ok = decode_headers(batch.buf, batch.offset, batch.length)
+    t0 = head["t0_ns"].astype(np.int64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_end = t0 + np.round(head["n"] * (1e9 / head["fs"])).astype(np.int64)
+    keep = ~ok
+    for span in spans:
+        hi = span.lo_ns + round(next(iter(span.data.values())).shape[0] * 1e9 / span.fs)
+        keep |= (t_end > span.lo_ns) & (t0 < hi)
+    return batch.select(keep)
+
+
+def _copy(config: MillConfig, channel: str, block: wire.Block, spans: list[_Span]) -> None:
+    """The block's calibrated samples into every span it overlaps."""
+    ch = config.channels[channel]
+    raw = np.asarray(block.samples, dtype=np.float64)
+    for span in spans:
+        start = round((block.t0_ns - span.lo_ns) * span.fs / 1e9)
+        dest = span.data[channel]
+        a, b = max(start, 0), min(start + raw.shape[0], dest.shape[0])
+        if a < b:
+            dest[a:b] = ch.gain * (raw[a - start : b - start] - ch.offset)
 
 
 def component_matrices(plain: dict[str, dict[str, Any]]) -> dict[str, RangeMeanMatrix]:
