@@ -6,7 +6,9 @@ One function per kind of analysis fact, so live (the worker, fact by fact) and o
 
 * a start event → ``start_peak_pct`` per side: the larger of the switch-on and short-circuit
   peaks of the motor shaft, % of rated (Diering 2011 §6.1.1, §7.2), with the motor torque
-  channel's name (the mill file's) in the context;
+  channel's name (the mill file's) in the context; and ``natural_frequency_shift_pct``: the
+  run-up resonance (§6.1.1) against the torsional model's nearest natural frequency (Fedin &
+  Vinogradov 2018), when the start crossed one and the mill file has a model;
 * a barring event → ``barring_peak_pct`` (Tables 12–13), with the torque channel's name;
 * a steady-state window → ``oscillation_range_pct`` per motor and pinion torque channel (range
   per revolution, % of rated motor torque, Tables 14–15), ``bending_amplitude_mpa`` per bending
@@ -54,7 +56,14 @@ def event_observations(mill_id: str, event: AnalyzerEvent) -> list[Observation]:
 
 
 def _start(mill_id: str, event: StartEvent) -> Iterator[Observation]:
-    """``start_peak_pct`` per side: the start's peak as :func:`start_peaks` judges it."""
+    """``start_peak_pct`` per side: the start's peak as :func:`start_peaks` judges it; and the
+    run-up resonance's ``natural_frequency_shift_pct`` when it and a model were there."""
+    f, f_n = event.resonance_hz, event.model_natural_hz
+    if f is not None and f_n:
+        context = {"channel": event.resonance_channel, "resonance_hz": f, "natural_hz": f_n,
+                   "speed_pct": event.resonance_speed_pct}  # fmt: skip
+        shift = 100.0 * abs(f - f_n) / f_n
+        yield Observation(mill_id, "natural_frequency_shift_pct", shift, event.t_ns, context)
     channels = {p.side: p.motor_channel for p in [*event.switch_on, *event.short_circuit]}
     for side, value in start_peaks(event.to_json()).items():
         context = {

@@ -71,6 +71,13 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
         "starts so far in the site's local calendar month (Diering 2011 §6.1.3, §6.2.8); "
         "context: month 'YYYY-MM'",
     ),
+    "natural_frequency_shift_pct": QuantitySpec(
+        "% of the model's natural frequency", Kind.EVENT, "channel",
+        "how far the torsional resonance crossed on one run-up (Diering 2011 §6.1.1) lies from "
+        "the torsional model's nearest natural frequency (Fedin & Vinogradov 2018), "
+        "100·|f − f_n| / f_n; context: channel (the torque channel it was measured on), "
+        "resonance_hz, natural_hz, speed_pct",
+    ),
     "oscillation_range_pct": QuantitySpec(
         "% rated motor torque", Kind.LEVEL, "channel",
         "peak-to-peak steady-state torque oscillation range of one window and torque channel "

@@ -47,6 +47,9 @@ barring_peak (event)        alarm > 185 % single / 314 % dual     1 clean sessio
 unexplained_peak (event)    warning on any reported peak          1 h without recurrence §6.2.7
 resonance_margin (level)    warning < 10 % (*option*)             ≥ 12 % for 5 min       Fedin &
 Vinogradov 2018
+natural_frequency_shift     warning > 10 %, alarm > 20 % of the   1 clean start          §6.1.1,
+(event)                     model's natural frequency (*option*)                         Fedin &
+                                                                                         Vinogradov
 remaining_life (level)      warning < 1.0×, alarm < 0.5× the      ≥ 1.05× for 5 min      §8.3
                             remaining design life (*option*)
 stale_channel (level)       warning > 10 s (*option*)             data again             §5.1
@@ -454,6 +457,33 @@ def _resonance(config: MillConfig) -> Rule:
     )  # fmt: skip
 
 
+def _natural_frequency(config: MillConfig) -> Rule:
+    """The torsional resonance crossed on a run-up (Diering 2011 §6.1.1) away from the
+    drivetrain model's natural frequency (Fedin & Vinogradov 2018), % of it. The baseline is the
+    model, not the mill's recent starts: a fixed baseline sees a slow loss of stiffness (coupling
+    wear) as well as a step, where a rolling median of recent starts follows a slow drift and
+    never alarms; a model that was off from the start shows as a shift on every start, which
+    the advice names. Event; clears after ``clean_starts_to_clear`` clean starts."""
+    a = config.alarms
+    return Rule(
+        "natural_frequency_shift", "natural_frequency_shift_pct",
+        _levels((Severity.WARNING, a.natural_frequency_shift_warn_pct),
+                (Severity.ALARM, a.natural_frequency_shift_alarm_pct)),
+        headline="Natural frequency shift {value}{limit}{pair}{where}",
+        clauses=(("pair", " ({resonance_hz} Hz vs model {natural_hz} Hz)", ""),),
+        action="check coupling, shafts and gear mounting",
+        advice="The torsional resonance crossed on this run-up lies {value} from the drivetrain "
+        "model's natural frequency. A natural frequency moves with stiffness (a 10 % lower "
+        "frequency is a fifth less stiffness): a worn or failed coupling element, a cracked "
+        "shaft, loose gear or foundation bolts. If every start since the first shows the shift, "
+        "the model (the mill file's [torsional] table) is off, not the drivetrain: correct it",
+        source="Diering 2011 §6.1.1, Fedin & Vinogradov 2018 (limits: engineering defaults)",
+        value_format="{:.1f} %",
+        deadband=a.natural_frequency_shift_deadband_pct,
+        clean_events_to_clear=a.clean_starts_to_clear,
+    )  # fmt: skip
+
+
 def _remaining_life(config: MillConfig) -> Rule:
     """Projected remaining life shorter than the remaining design life (Diering 2011 §8.2–8.3:
     bending range, start transients and start count drive damage). Level, lower is worse;
@@ -632,8 +662,8 @@ def _load_sharing(config: MillConfig) -> Rule:
 
 _BUILDERS = (
     _start_peak, _starts_per_month, _oscillation, _bending, _barring, _unexplained_peak,
-    _resonance, _remaining_life, _stale, _spike_rate, _sequence_gaps, _implausible, _archive,
-    _store,
+    _resonance, _natural_frequency, _remaining_life, _stale, _spike_rate, _sequence_gaps,
+    _implausible, _archive, _store,
     _load_sharing, _report_delivery, _analysis_lag,
 )  # fmt: skip
 

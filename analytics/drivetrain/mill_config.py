@@ -438,6 +438,12 @@ class AlarmThresholds(_Frozen):
     # resonance: warn when an excitation is within this fraction of a natural frequency
     resonance_margin_warn: Annotated[float, Field(gt=0, lt=1)] = 0.10
     resonance_margin_deadband: NonNegative = 0.02
+    # natural-frequency shift: the run-up resonance away from the model's natural frequency, %
+    # of it (f ∝ √k: 10 % is a fifth of the stiffness); clears at the next start within warn −
+    # deadband (clean_starts_to_clear)
+    natural_frequency_shift_warn_pct: Positive = 10.0
+    natural_frequency_shift_alarm_pct: Positive = 20.0
+    natural_frequency_shift_deadband_pct: NonNegative = 2.0
     # remaining life below these fractions of the remaining design life: warning, alarm
     life_warn_fraction: Positive = 1.0
     life_alarm_fraction: Positive = 0.5
@@ -466,6 +472,7 @@ class AlarmThresholds(_Frozen):
             ("bending_amplitude_warn_mpa", "bending_amplitude_alarm_mpa"),
             ("bending_amplitude_alarm_mpa", "bending_amplitude_critical_mpa"),
             ("imbalance_warn_pct", "imbalance_alarm_pct"),
+            ("natural_frequency_shift_warn_pct", "natural_frequency_shift_alarm_pct"),
             ("life_alarm_fraction", "life_warn_fraction"),  # lower life is worse
         ]
         for low, high in pairs:

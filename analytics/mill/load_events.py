@@ -18,9 +18,11 @@ from typing import Any
 import numpy as np
 
 from millwatch.analytics.drivetrain.mill_config import MillConfig
+from millwatch.analytics.drivetrain.torsional_model import natural_frequencies_of
 from millwatch.analytics.mill.load_days import KEEP_START_DAYS, KEEP_START_MONTHS, StreamClock
 from millwatch.analytics.mill.load_roles import LoadRoles
 from millwatch.analytics.operation.operating_states import OperatingState, Transition
+from millwatch.analytics.operation.runup import RunupSettings, runup_resonance
 from millwatch.analytics.operation.transients import (
     BarringAccumulator,
     PhaseWindow,
@@ -43,7 +45,9 @@ KEEP_EVENTS = 2000
 class EventBook:
     """Open phases, measured events and start counts of one mill (module docstring)."""
 
-    CONFIGURED = frozenset({"config", "settings", "roles", "clock", "keep_events"})
+    CONFIGURED = frozenset(
+        {"config", "settings", "roles", "clock", "keep_events", "runup", "natural_hz"}
+    )
 
     def __init__(
         self, config: MillConfig, settings: TransientSettings, roles: LoadRoles, clock: StreamClock
@@ -52,6 +56,10 @@ class EventBook:
         self.settings = settings
         self.roles = roles
         self.clock = clock
+        #: The run-up resonance search (:mod:`millwatch.analytics.operation.runup`) and the
+        #: natural frequencies (Hz) of the mill file's torsional model it compares with.
+        self.runup = RunupSettings()
+        self.natural_hz = natural_frequencies_of(config)
         #: Events of each kind kept; a caller that stores each as it comes may keep far fewer.
         self.keep_events = KEEP_EVENTS
         self.open_start = -1
@@ -126,7 +134,8 @@ class EventBook:
 
     def _start_event(self, ring: SampleRing, n0: int, tr: Transition) -> dict[str, Any]:
         failed = tr.state != OperatingState.RUNNING
-        m = measure_start(self.window(ring, n0, tr.sample), failed, self.settings)
+        w = self.window(ring, n0, tr.sample)
+        m = measure_start(w, failed, self.settings)
         d = self._named_peaks(dataclasses.asdict(m))
         on = max(m.switch_on, key=lambda p: p.motor_pct, default=None)
         sc = max(m.short_circuit, key=lambda p: p.motor_pct, default=None)
@@ -143,8 +152,28 @@ class EventBook:
             "shock_load": bool(on is not None and on.shock),
             "start_peak_pct": peak,
             "alarm": self.start_alarm(peak),
+            **self._resonance(w),
         }
         return keep(self.starts, d, self.keep_events)
+
+    def _resonance(self, w: PhaseWindow) -> dict[str, Any]:
+        """The torsional resonance crossed on the run-up (Diering 2011 §6.1.1, measured on the
+        first side's motor torque, else its pinion torque) beside the torsional model's nearest
+        natural frequency (Fedin & Vinogradov 2018): the start's ``resonance_*`` fields."""
+        motor = self.roles.motor[0] is not None
+        torque, rated = (
+            (w.motor[0], w.motor_rated_knm) if motor else (w.pinion[0], w.pinion_rated_knm)
+        )
+        r = runup_resonance(torque, w.speed, w.fs, w.first, rated, self.natural_hz, self.runup)
+        return {
+            "resonance_hz": r.frequency_hz,
+            "resonance_speed_pct": r.speed_pct,
+            "resonance_amplitude_pct": r.amplitude_pct,
+            "resonance_t_ns": None if r.sample is None else self.clock.t_ns(w.n0 + r.sample),
+            "resonance_channel": self.roles.motor[0] if motor else self.roles.pinion[0],
+            "model_natural_hz": r.model_natural_hz,
+            "resonance_note": r.reason,
+        }
 
     def _named_peaks(self, d: dict[str, Any]) -> dict[str, Any]:
         """The start's per-side peaks with the mill file's names of the channels they were

@@ -139,7 +139,8 @@ class PeakResult(_Event):
 
 class StartEvent(_Event):
     """One switch-on: peaks per side, acceleration, material peak, oscillation, its level
-    (``alarm``: None, warning, alarm against the mill's start-peak levels)."""
+    (``alarm``: None, warning, alarm against the mill's start-peak levels), the torsional
+    resonance crossed on the run-up and the model's nearest natural frequency."""
 
     sample: int
     end_sample: int
@@ -166,6 +167,34 @@ class StartEvent(_Event):
     #: short-circuit, % rated motor torque; absent from starts stored before it existed).
     start_peak_pct: float | None = None
     alarm: str | None
+    # The torsional resonance crossed on the run-up (Diering 2011 §6.1.1, near 90 % speed;
+    # :mod:`millwatch.analytics.operation.runup`); all null when none was found (then
+    # ``resonance_note`` says why) and absent from starts stored before they existed.
+    resonance_hz: float | None = Field(
+        None, description="Frequency of the resonance burst crossed on the run-up, Hz."
+    )
+    resonance_speed_pct: float | None = Field(
+        None,
+        description="Speed where it was crossed, % of the rated speed of the speed "
+        "channel's shaft.",
+    )
+    resonance_amplitude_pct: float | None = Field(
+        None, description="Amplitude of the burst, % of the rated torque of its channel's shaft."
+    )
+    resonance_t_ns: int | None = Field(
+        None, description="Time of the burst's centre, ns since the Unix epoch (UTC)."
+    )
+    resonance_channel: str | None = Field(
+        None, description="The torque channel (mill file's name) the resonance was measured on."
+    )
+    model_natural_hz: float | None = Field(
+        None,
+        description="The torsional model's natural frequency nearest the resonance, Hz "
+        "(Fedin & Vinogradov 2018); null without a model or a resonance.",
+    )
+    resonance_note: str | None = Field(
+        None, description="Why no resonance was found (null when one was)."
+    )
 
 
 class StopEvent(_Event):

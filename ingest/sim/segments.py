@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from millwatch.analytics.drivetrain.mill_config import DriveLayout, MillConfig
+from millwatch.analytics.drivetrain.torsional_model import natural_frequencies_of
 from millwatch.ingest.sim.seed_tables import (
     ACCEL_TIME_S,
     BARRING_AVG_RATIO,
@@ -177,6 +178,30 @@ class SidePeaks:
     brush_sign: float
 
 
+#: Where the run-up resonance lies (Diering 2011 §6.2.7: torsional resonance at 10–15 Hz).
+RESONANCE_BAND_HZ = (10.0, 15.0)
+#: Start-to-start scatter of the excited mode's frequency (the charge changes the drum's
+#: inertia), fraction: ASSUMED, not from the sources.
+RESONANCE_SCATTER = 0.02
+
+
+def resonance_hz(config: MillConfig, drawn: float, ev: StartEvent | FailedStartEvent) -> float:
+    """The frequency (Hz) of a start's run-up resonance burst: the start event's own when it
+    gives one; else the drivetrain's torsional mode (the mill file's model, Fedin & Vinogradov
+    2018) nearest the middle of :data:`RESONANCE_BAND_HZ` (within a factor 2 of it), scattered
+    by ± :data:`RESONANCE_SCATTER` with ``drawn`` (uniform in the band), so a mill's run-ups
+    cross one natural frequency as a real drivetrain's do; without such a mode, ``drawn``."""
+    if isinstance(ev, StartEvent) and ev.resonance_hz is not None:
+        return ev.resonance_hz
+    lo, hi = RESONANCE_BAND_HZ
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    modes = [f for f in natural_frequencies_of(config) if 0.5 * mid <= f <= 2.0 * mid]
+    if not modes:
+        return drawn
+    mode = min(modes, key=lambda f: abs(f - mid))
+    return mode * (1.0 + RESONANCE_SCATTER * (drawn - mid) / half)
+
+
 class StartSegment(Segment):
     """Switch-on to bypass and settling (Figure 20, characteristics 1–3); or a failed start."""
 
@@ -202,7 +227,8 @@ class StartSegment(Segment):
         self.theta_decay = math.radians(25.0)
         self.ring_hz, self.ring_tau = float(rng.uniform(5.0, 9.0)), float(rng.uniform(0.05, 0.15))
         self.res_on = params.start_resonance
-        self.res_hz, self.res_pu = float(rng.uniform(10.0, 15.0)), float(rng.uniform(0.1, 0.3))
+        drawn, self.res_pu = float(rng.uniform(*RESONANCE_BAND_HZ)), float(rng.uniform(0.1, 0.3))
+        self.res_hz = resonance_hz(config, drawn, ev)
         self.res_t, self.res_sigma = 0.9 * self.accel, 0.4
         self.sides = self._draw_sides(rng, ev, config)
         self.trip_t: float | None = None

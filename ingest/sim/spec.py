@@ -77,6 +77,9 @@ class StartEvent(_Event):
     starter: Starter | None = None
     switch_on_pct: Pos | None = None
     short_circuit_pct: Pos | None = None
+    #: The run-up resonance burst's frequency, Hz; None: the drivetrain model's mode in 10–15 Hz
+    #: (:func:`millwatch.ingest.sim.segments.resonance_hz`).
+    resonance_hz: Pos | None = None
 
 
 class StopEvent(_Event):

@@ -119,10 +119,12 @@ class _Job:
     files: list[tuple[Path, bool]]
     spectra: bool
     background: bool = False  # the spectra of each mill on a thread of its own
+    matrices: bool = False  # each report with its range–mean matrices (for --plots)
 
 
 def plan_jobs(files: list[Path], configs: list[MillConfig], jobs: int, *,
-              spectra: bool = True, cores: int | None = None) -> list[_Job]:  # fmt: skip
+              spectra: bool = True, cores: int | None = None,
+              matrices: bool = False) -> list[_Job]:  # fmt: skip
     """Split the mills over at most ``jobs`` processes, balanced by the bytes of the files
     named after each mill (``<mill id>_…``, as ``millwatch simulate --out DIR`` writes them);
     such a file is read only by the job with its mill, any other file by every job. With
@@ -148,7 +150,8 @@ def plan_jobs(files: list[Path], configs: list[MillConfig], jobs: int, *,
     for group in groups:
         mine = {c.id for c in group}
         reads = [p for p in files if own[p] is None or own[p] in mine]
-        plan.append(_Job(group, [(p, p not in counted) for p in reads], spectra, background))
+        reads_of = [(p, p not in counted) for p in reads]
+        plan.append(_Job(group, reads_of, spectra, background, matrices))
         counted.update(reads)
     return plan
 
@@ -166,6 +169,9 @@ def _run_job(job: _Job, advance: Any) -> dict[str, Any]:
             for mill_id, analyzer in sink.analyzers.items()
             if analyzer.samples
         }
+        if job.matrices:
+            for mill_id, (report, _) in reports.items():
+                report["cycle_matrices"] = sink.analyzers[mill_id].cycle_matrices_by_day()
     finally:
         sink.close()
     return {"reports": reports, "reading": read}
@@ -386,11 +392,24 @@ def _steady_lines(windows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _resonance_text(start: dict[str, Any]) -> str:
+    """A start's run-up resonance beside the model's nearest natural frequency, or why none."""
+    if start.get("resonance_hz") is None:
+        return f"run-up resonance: none ({start.get('resonance_note') or 'not measured'})"
+    natural = start.get("model_natural_hz")
+    model = "no torsional model" if natural is None else f"model natural {natural:.2f} Hz"
+    return (f"run-up resonance {start['resonance_hz']:.2f} Hz at "
+            f"{start['resonance_speed_pct']:.1f} % speed ({model})")  # fmt: skip
+
+
 def _summary(report: dict[str, Any], stats: dict[str, Any]) -> str:
     lines = [f"mill {report['mill']} ({report['site']}): {report['samples']} samples, "
              f"state now {report['state']}; {_time_basis(report)}"]  # fmt: skip
     lines.append(_data_quality_line(report))
-    lines += [_event_line(e, report["time_zone"]) for e in report["events"]]
+    for e in report["events"]:
+        lines.append(_event_line(e, report["time_zone"]))
+        if e["event"] == "start":
+            lines.append(f"    {_resonance_text(e)}")
     for month, m in report["starts_per_month"].items():
         lines.append(f"  starts {month}: {m['starts']} ({m['failed_starts']} failed), "
                      f"norm {m['norm'][0]}-{m['norm'][1]}: {m['status']}")  # fmt: skip
@@ -451,6 +470,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="skip the harmonic spectra: states, events, steady state and damage "
                         "are the same; harmonics, unexplained peaks not computed")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the full report as JSON")
+    p.add_argument("--plots", type=Path, metavar="DIR",
+                   help="also write PNG plots into DIR: each start and stop with its events, "
+                        "each run-up's Campbell diagram, each component's range–mean matrix, "
+                        "the natural frequency start by start (millwatch.plots)")  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar "
                    "(none is shown anyway when stderr is not a terminal)")  # fmt: skip
     p.set_defaults(handler=_main)
@@ -481,8 +504,9 @@ def _main(args: argparse.Namespace) -> int:
     jobs = args.jobs or os.cpu_count() or 1
     progress = not args.no_progress and sys.stderr.isatty()
     started = time.perf_counter()
-    results = run_jobs(plan_jobs(files, configs, jobs, spectra=not args.no_spectra),
-                       progress=progress)  # fmt: skip
+    plan = plan_jobs(files, configs, jobs, spectra=not args.no_spectra,
+                     matrices=args.plots is not None)  # fmt: skip
+    results = run_jobs(plan, progress=progress)
     read = ReadingStats()
     for r in results:
         read.merge(r["reading"])
@@ -498,6 +522,12 @@ def _main(args: argparse.Namespace) -> int:
             log.warning("no blocks of mill %r in the recording", config.id)
             continue
         report, mill_reading = reports[config.id]
+        if args.plots is not None:
+            from millwatch.plots.files import write_plots
+
+            written = write_plots(files, config, report, args.plots)
+            log.info("%s: %d plots written to %s", config.id, len(written), args.plots)
+            del report["cycle_matrices"]
         out.append(mill_result(config, report, mill_reading, read))
     if args.json:
         sys.stdout.write(json.dumps(json_body(out), indent=1) + "\n")

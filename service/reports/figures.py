@@ -48,6 +48,7 @@ __all__ = [
     "damage_figure",
     "day_positions",
     "envelope",
+    "matrix_panel",
     "spectrum_figure",
     "starts_figure",
     "steady_figure",
@@ -361,7 +362,7 @@ def spectrum_figure(r: MonthlyReport, component: str) -> Figure | None:
     fig.subplots_adjust(left=0.75 / FIG_WIDTH_IN, right=1 - 0.2 / FIG_WIDTH_IN, bottom=0.55 / 3.3,
                         top=1 - 0.4 / 3.3, wspace=0.45)  # fmt: skip
     ax_m, ax_sn = fig.subplots(1, 2)
-    _matrix_panel(fig, ax_m, m)
+    matrix_panel(fig, ax_m, m)
     _sn_panel(ax_sn, spec, m)
     fig.suptitle(f"{component}: {fmt(spec.cycles)} rainflow cycles in {r.month} "
                  f"({spec.days} days)", fontsize=10, y=0.99)  # fmt: skip
@@ -396,9 +397,10 @@ def _display_ranges(edges: np.ndarray) -> np.ndarray:
     return out
 
 
-def _matrix_panel(fig: Figure, ax: Axes, m: RangeMeanMatrix) -> None:
+def matrix_panel(fig: Figure, ax: Axes, m: RangeMeanMatrix) -> None:
     """Cycles per (range, mean) cell on the inner bins, cropped to the occupied ones (an
-    out-of-scale count is named in the title); ranges on a log axis (geometric bins)."""
+    out-of-scale count is named in the title); ranges on a log axis (geometric bins). Also
+    drawn by :mod:`millwatch.plots.matrix`."""
     inner = m.half_cycles[:-1, 1:-1] / 2.0  # range rows from [0, e1); mean columns inside
     rows_used = np.flatnonzero(inner.any(axis=1))
     cols_used = np.flatnonzero(inner.any(axis=0))

@@ -116,7 +116,8 @@ STARTS_EXAMPLE: dict[str, Any] = {
                 "local_time": "2024-05-01T06:40:00-04:00", "end_t_ns": 1714560030000000000,
                 "end_t": "2024-05-01T10:40:30Z", "failed": False, "switch_on_peak_pct": 262.0,
                 "short_circuit_peak_pct": None, "rise_time_10_90_ms": 41.0,
-                "shock_load": False, "peak_status": "warning"}],
+                "shock_load": False, "peak_status": "warning", "resonance_hz": 12.71,
+                "resonance_speed_pct": 89.6, "model_natural_hz": 12.67}],
 }  # fmt: skip
 """An answer of ``GET /mills/{id}/starts``, the OpenAPI example."""
 
@@ -177,6 +178,17 @@ class StartOut(BaseModel):
     )
     shock_load: bool = Field(description="True when the start was a shock load.")
     peak_status: str = Field(description="ok, warning or alarm against peak_limits_pct.")
+    resonance_hz: float | None = Field(
+        None,
+        description="Torsional resonance crossed on the run-up, Hz (its trend start by "
+        "start is the drivetrain's natural frequency); null when none was found.",
+    )
+    resonance_speed_pct: float | None = Field(
+        None, description="Speed where it was crossed, % of the speed channel's rated speed."
+    )
+    model_natural_hz: float | None = Field(
+        None, description="The torsional model's nearest natural frequency, Hz; null without."
+    )
 
 
 class PeakLimits(BaseModel):
@@ -224,6 +236,9 @@ def _start(event: EventRow, tz: zoneinfo.ZoneInfo, levels: tuple[float, float]) 
         rise_time_10_90_ms=d.get("rise_time_10_90_ms"),
         shock_load=bool(d.get("shock_load", False)),
         peak_status=peak_status(d, levels).replace("n/a", "ok"),  # API: ok|warning|alarm
+        resonance_hz=d.get("resonance_hz"),
+        resonance_speed_pct=d.get("resonance_speed_pct"),
+        model_natural_hz=d.get("model_natural_hz"),
     )
 
 

@@ -39,6 +39,11 @@ CASES = [
     ("resonance_margin", "sag-5200-lrs", {"channel": "pinion_torque", "line": "girth_mesh",
      "frequency_hz": 64.0, "natural_hz": 61.0}, [0.05, 0.05], "resonance_margin", "warning",
      [0.3, 0.10]),
+    ("natural_frequency_shift_pct", "sag-5200-lrs", {"channel": "motor_torque",
+     "resonance_hz": 11.2, "natural_hz": 12.67}, [11.6], "natural_frequency_shift", "warning",
+     [0.5, 8.0, 10.0]),
+    ("natural_frequency_shift_pct", "sag-5200-lrs", {"channel": "motor_torque"}, [25.0],
+     "natural_frequency_shift", "alarm", [1.0]),
     ("remaining_life_years", "sag-5200-lrs", {"component": "pinion_combined"}, [15, 15],
      "remaining_life", "warning", [25, 20]),
     ("remaining_life_years", "sag-5200-lrs", {"component": "pinion_combined"}, [8, 8],
@@ -229,8 +234,12 @@ def test_alarm_options_come_from_the_mill_file():
 
 def test_resonance_margin_and_life_factors_come_from_the_mill_file():
     config = with_alarms(mill(), resonance_margin_warn=0.2, life_warn_fraction=0.8,
-                         life_alarm_fraction=0.4)  # fmt: skip
+                         life_alarm_fraction=0.4, natural_frequency_shift_warn_pct=5.0,
+                         natural_frequency_shift_alarm_pct=9.0,
+                         natural_frequency_shift_deadband_pct=1.5)  # fmt: skip
     book = build_rules(config)
+    shift = book.rules["natural_frequency_shift_pct"]
+    assert [lv.threshold for lv in shift.levels] == [5.0, 9.0] and shift.deadband == 1.5
     assert book.rules["resonance_margin"].levels[0].threshold == 0.2
     assert [lv.threshold for lv in book.rules["remaining_life_years"].levels] == [0.8, 0.4]
 

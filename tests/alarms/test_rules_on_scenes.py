@@ -86,3 +86,11 @@ def test_starts_per_month_fires_on_the_second_start_above_the_limit():
 )  # fmt: skip
 def test_each_rule_fires_on_a_scene_that_crosses_it(config, scene, seconds, rule):
     assert rule in alarms_of(config, scene, seconds)
+
+
+def test_natural_frequency_shift_fires_on_a_run_up_crossing_a_shifted_mode():
+    """A start whose run-up resonance lies 15 % below the model's 12.67 Hz mode (a coupling
+    that lost a quarter of its stiffness) warns; the default scene's (the mode, ±2 %) does not."""
+    events = [{"at_s": 5.0, "kind": "start", "starter": "LRS", "resonance_hz": 0.85 * 12.667}]
+    assert "natural_frequency_shift" in alarms_of(SAG, "start-lrs", 40.0, events=events)
+    assert "natural_frequency_shift" not in alarms_of(SAG, "start-lrs", 40.0)

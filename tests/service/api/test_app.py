@@ -84,6 +84,9 @@ def test_starts_of_this_month_with_peaks_against_limits(client):
     start = body["starts"][0]
     assert start["switch_on_peak_pct"] > body["peak_limits_pct"]["warn"]  # Diering 2011 §7.2
     assert start["peak_status"] in ("warning", "alarm")
+    # the run-up resonance, stored with the start: the simulator's mode (±2 %) near 90 % speed
+    assert start["resonance_hz"] == pytest.approx(start["model_natural_hz"], rel=0.03)
+    assert 85.0 < start["resonance_speed_pct"] < 95.0
     other = client.get(f"/mills/{MILL}/starts", params={"month": "2001-02"}).json()
     assert other["count"] == 0 and other["starts"] == [] and other["month"] == "2001-02"
 

@@ -57,13 +57,19 @@ def test_events_carry_the_json_numbers_in_time_order(result, cli_json):
 
 
 def test_a_field_added_to_a_typed_record_becomes_a_column(result):
-    class StartWithResonance(StartEvent):  # as another feature may add to the start record
-        resonance_hz: float | None = None
+    class StartWithMore(StartEvent):  # as another feature may add to the start record
+        coupling_slip_deg: float | None = None
 
     start = result.report.starts[0]
-    extended = StartWithResonance(**start.model_dump(), resonance_hz=12.7)
+    extended = StartWithMore(**start.model_dump(), coupling_slip_deg=1.5)
     table = events_table([extended])
-    assert table.loc[0, "resonance_hz"] == 12.7 and table.loc[0, "kind"] == "start"
+    assert table.loc[0, "coupling_slip_deg"] == 1.5 and table.loc[0, "kind"] == "start"
+
+
+def test_the_run_up_resonance_is_a_column_of_the_starts(result):
+    starts = result.events[result.events["kind"] == "start"]
+    assert list(starts["resonance_hz"]) == [s.resonance_hz for s in result.report.starts]
+    assert "resonance_speed_pct" in starts and "model_natural_hz" in starts
 
 
 def test_damage_is_the_json_damage_by_component_and_phase(result, cli_json):
