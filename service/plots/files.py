@@ -37,7 +37,7 @@ from millwatch.ingest.wire import decode_headers
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["component_matrices", "write_plots"]
+__all__ = ["component_matrices", "event_figures", "write_plots"]
 
 log = logging.getLogger(__name__)
 
@@ -177,8 +177,24 @@ def write_plots(
     return written
 
 
+def event_figures(
+    files: Sequence[Path], config: MillConfig, event: StartEvent | StopEvent
+) -> list[tuple[str, Figure]]:
+    """The plots of one start or stop of ``files`` (read for its span only): its time plot,
+    and a start's Campbell diagram (with an rpm channel), each with its file name."""
+    (span,) = _spans(config, [event])
+    _fill(files, config, [span])
+    return _span_figures(config, span)
+
+
 def _event_plots(config: MillConfig, span: _Span, out: Path, written: list[Path]) -> None:
-    """The event's time plot, and a start's Campbell diagram."""
+    """The event's time plot, and a start's Campbell diagram, saved in ``out``."""
+    for name, fig in _span_figures(config, span):
+        _save(fig, out / name, written)
+
+
+def _span_figures(config: MillConfig, span: _Span) -> list[tuple[str, Figure]]:
+    """The event's time plot, and a start's Campbell diagram, each with its file name."""
     from millwatch.plots.campbell import campbell_figure
     from millwatch.plots.events import event_figure
 
@@ -188,9 +204,9 @@ def _event_plots(config: MillConfig, span: _Span, out: Path, written: list[Path]
     unit = f"{speed} (rpm)" if speed else "speed (none in the mill file)"
     fig = event_figure(span.lo_ns, fs, {n: span.data[n] for n in torque}, sp, ev,
                        speed_label=unit, title=f"{config.id}: {_title(ev)}")  # fmt: skip
-    _save(fig, out / f"{config.id}_{ev.event}_{_stamp(ev.t_ns)}.png", written)
+    figures = [(f"{config.id}_{ev.event}_{_stamp(ev.t_ns)}.png", fig)]
     if not isinstance(ev, StartEvent) or speed is None:
-        return
+        return figures
     shaft = config.channels[speed].shaft
     rated = config.drive.motor_speed_rpm if shaft == "motor" else config.pinion_speed_rpm
     channel = ev.resonance_channel or torque[0]
@@ -200,7 +216,8 @@ def _event_plots(config: MillConfig, span: _Span, out: Path, written: list[Path]
     fig = campbell_figure(spec, config.excitation_orders(), config.pinion_speed_rpm / 60.0,
                           natural_frequencies_of(config), ev,
                           title=f"{config.id}: run-up of {_iso(ev.t_ns)}, {channel}")  # fmt: skip
-    _save(fig, out / f"{config.id}_campbell_{_stamp(ev.t_ns)}.png", written)
+    figures.append((f"{config.id}_campbell_{_stamp(ev.t_ns)}.png", fig))
+    return figures
 
 
 def _iso(t_ns: int) -> str:

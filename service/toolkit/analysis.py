@@ -18,14 +18,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
 from millwatch.analytics.drivetrain.mill_config import MillConfig
 from millwatch.analytics.fatigue.cycle_log import CycleLog
 from millwatch.analytics.fatigue.matrices import RangeMeanMatrix
-from millwatch.analytics.mill.results import ComponentCycles
+from millwatch.analytics.mill.results import ComponentCycles, StartEvent, StopEvent
 from millwatch.cli.analyze import json_body, mill_result
 from millwatch.ingest.mill_files import load_mill_config
 from millwatch.toolkit.archive import recording_paths
@@ -40,6 +40,9 @@ from millwatch.toolkit.tables import (
     steady_table,
 )
 from millwatch.worker.offline_analysis import analyze_files
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["AnalysisResult", "analyze"]
 
@@ -63,7 +66,10 @@ class AnalysisResult:
       channel's unit and % of rated, SNR dB, detected, observable);
     * ``report`` — the whole report, typed (:class:`~millwatch.toolkit.report.MillReport`).
 
-    :meth:`cycles` and :meth:`matrix` give a component's rainflow cycles and range–mean matrix.
+    :meth:`cycles` and :meth:`matrix` give a component's rainflow cycles and range–mean matrix;
+    :meth:`plot_event`, :meth:`plot_campbell`, :meth:`plot_matrix` and :meth:`plot_trend` draw
+    them as ``millwatch analyze --plots`` does (matplotlib Figures; ``files``: the recording,
+    read again for an event's samples).
     """
 
     config: MillConfig
@@ -73,6 +79,7 @@ class AnalysisResult:
     damage_totals: pd.DataFrame
     steady: pd.DataFrame
     harmonics: pd.DataFrame
+    files: tuple[Path, ...]
     _json: dict[str, Any]
     _matrices: dict[str, RangeMeanMatrix | None]
     _cycles: dict[str, ComponentCycles] | None
@@ -105,6 +112,57 @@ class AnalysisResult:
             raise ValueError(f"component {component!r} has no range–mean matrix: give its "
                              "channels a full_scale in the mill file")  # fmt: skip
         return matrix_table(m)
+
+    def plot_event(self, k: int) -> Figure:
+        """The time plot of event ``k`` (a row of :attr:`events`): the torques and speed from
+        2 s before it to 3 s after its end, each of its moments marked and labelled."""
+        from millwatch.plots.files import event_figures
+
+        ((_, fig), *_) = event_figures(self.files, self.config, self._event(k))
+        return fig
+
+    def plot_campbell(self, k: int) -> Figure:
+        """The Campbell diagram of the run-up of start ``k`` (a row of :attr:`events`): short-time
+        spectra against speed, the excitation-order lines, the torsional model's natural
+        frequencies and the resonance found. ValueError for a stop or a mill without an rpm
+        channel."""
+        from millwatch.plots.files import event_figures
+
+        figures = event_figures(self.files, self.config, self._event(k))
+        if len(figures) < 2:
+            kind = self.events["kind"].iloc[k]
+            raise ValueError(f"event {k} is a {kind} or the mill has no rpm channel: a "
+                             "Campbell diagram needs a start's run-up speed")  # fmt: skip
+        return figures[1][1]
+
+    def plot_matrix(self, component: str) -> Figure:
+        """The range–mean matrix of :meth:`matrix` drawn (log colour scale, MPa)."""
+        from millwatch.plots.matrix import matrix_figure
+
+        m = self._matrices[self._component(component)]
+        if m is None:
+            raise ValueError(f"component {component!r} has no range–mean matrix: give its "
+                             "channels a full_scale in the mill file")  # fmt: skip
+        return matrix_figure(m, component, title=f"{self.config.id} {component}: range–mean matrix")
+
+    def plot_trend(self) -> Figure:
+        """The run-up resonance start by start against the model's natural frequency, with the
+        ``natural_frequency_shift`` alarm's warning and alarm bands."""
+        from millwatch.plots.trend import trend_figure
+
+        a = self.config.alarms
+        return trend_figure(self.report.starts, a.natural_frequency_shift_warn_pct,
+                            a.natural_frequency_shift_alarm_pct)  # fmt: skip
+
+    def _event(self, k: int) -> StartEvent | StopEvent:
+        """Event ``k`` of :attr:`events` (a start or stop), or a ValueError saying which are."""
+        table = self.report.events()
+        event = table[k] if 0 <= k < len(table) else None
+        if not isinstance(event, StartEvent | StopEvent):
+            plotted = sum(isinstance(e, StartEvent | StopEvent) for e in table)
+            raise ValueError(f"event {k} is not a start or stop: this record has {plotted} of "
+                             f"them among its {len(table)} events (rows of .events)")  # fmt: skip
+        return event
 
     def to_json(self) -> str:
         """The report as ``millwatch analyze RECORDING --mill M.toml --json`` prints it."""
@@ -149,11 +207,12 @@ def analyze(
         kept = {c: analyzer.cycles(c) for c in components} if cycles else None
     finally:
         sink.close()
-    return _result(config, json_body([(report, reading)]), matrices, kept)
+    return _result(config, tuple(files), json_body([(report, reading)]), matrices, kept)
 
 
 def _result(
     config: MillConfig,
+    files: tuple[Path, ...],
     body: dict[str, Any],
     matrices: dict[str, RangeMeanMatrix | None],
     cycles: dict[str, ComponentCycles] | None,
@@ -167,6 +226,7 @@ def _result(
         damage_totals=damage_totals_table(typed.damage),
         steady=steady_table(typed.steady_state, float(config.sample_rate_hz)),
         harmonics=harmonics_table(typed.lines()),
+        files=files,
         _json=body,
         _matrices=matrices,
         _cycles=cycles,

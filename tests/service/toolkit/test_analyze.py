@@ -199,3 +199,24 @@ def test_on_the_critical_plane_the_cycles_are_those_of_the_plane_reported(tmp_pa
         committed = result.damage_totals.loc[comp, "committed"]
         assert miner_sum(config, comp, cycles) == pytest.approx(committed, rel=1e-9)
         assert result.matrix(comp).to_numpy().sum() == cycles["count"].sum()
+
+
+def test_the_plots_draw_the_record_as_analyze_plots_does(result):
+    """Each plot method gives the figure ``analyze --plots`` writes, for the event asked for."""
+    from millwatch.plots.campbell import ORDER_GID, RESONANCE_GID
+    from millwatch.plots.events import EVENT_GID, event_marks
+
+    start = result.report.starts[0]
+    fig = result.plot_event(0)  # row 0 of .events: the start
+    markers = [a for ax in fig.axes for a in ax.get_lines() if a.get_gid() == EVENT_GID]
+    assert len(markers) == len(event_marks(start)) > 0
+    gids = [a.get_gid() for ax in result.plot_campbell(0).axes for a in ax.get_lines()]
+    assert ORDER_GID in gids
+    assert gids.count(RESONANCE_GID) == (start.resonance_hz is not None)
+    component = next(iter(result.damage.index))
+    assert result.plot_matrix(component).axes
+    assert result.plot_trend().axes
+    with pytest.raises(ValueError, match="event 1 is a stop"):
+        result.plot_campbell(1)
+    with pytest.raises(ValueError, match="event 9 is not a start or stop"):
+        result.plot_event(9)
