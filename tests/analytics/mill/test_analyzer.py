@@ -305,10 +305,10 @@ def test_speed_spikes_leave_line_frequencies_within_002_hz_and_drop_no_segment()
     assert "unknown" not in {label for _, label in states}
     rep, clean = m.report(), runs["clean"][1].report()
     summary = rep["summary"]
-    assert summary["segments_used"] == clean["summary"]["segments_used"] >= 14
+    assert summary["segments_used"] == clean["summary"]["segments_used"] >= 7  # 20 s, no overlap
     assert set(summary["segments_dropped"].values()) == {0}
     assert summary["segments_note"].endswith("segments used, none dropped")
-    assert len(windows) >= 3
+    assert len(windows) >= 1
     checked = 0
     for w in windows:
         rev_hz = sum(_true_revs(scene, a, b) for a, b in w.segments) / sum(
