@@ -9,7 +9,8 @@ malformed block, a gap, a repeat, a clock fault — goes block by block through
 the same :class:`~millwatch.worker.admission.BlockAdmission`, counters and all, taking a replay
 run's keys as their live ones), calibration and alignment. At each of the lane's
 commits every analyzer analyses what it was given as contiguous chunks of
-:data:`~millwatch.analytics.mill.analyzer.MAX_CHUNK_S`. So an archive analysed here gives the
+:data:`~millwatch.analytics.mill.analyzer.OFFLINE_CHUNK_S` (longer than the live worker's: less
+CPU per sample, a larger ring per mill, the same results). So an archive analysed here gives the
 results the live worker and a replay give for the same blocks, at the replay's cost per sample.
 
 :func:`analyze_files` runs the mills of one process; ``millwatch analyze --jobs N`` splits the
@@ -31,7 +32,7 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 import numpy as np
 
 from millwatch.analytics.drivetrain.mill_config import MillConfig
-from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.analytics.mill.analyzer import OFFLINE_CHUNK_S, MillAnalyzer
 from millwatch.analytics.spectra.facts import HarmonicWindow
 from millwatch.analytics.spectra.tracker import HarmonicTracker
 from millwatch.ingest.archive.batches import BatchReader, MessageBatch
@@ -181,7 +182,8 @@ class OfflineSink(_AdmittingSink):
         # each mill's spectra on a thread of their own
         runner = self._background_spectra if spectra and background else None
         self.analyzers = {
-            c.id: MillAnalyzer(c, spectra=spectra, spectra_runner=runner) for c in configs
+            c.id: MillAnalyzer(c, spectra=spectra, spectra_runner=runner, chunk_s=OFFLINE_CHUNK_S)
+            for c in configs
         }
 
     def _background_spectra(self, tracker: HarmonicTracker) -> BackgroundSpectra:
