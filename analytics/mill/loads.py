@@ -98,6 +98,9 @@ class LoadAnalysis:
     None before the first frame), ``fs`` (Hz), ``windows``/``starts``/``stops``/``barrings``
     (the last ``keep_windows``/``keep_events`` of each, plain dicts), ``starts_per_month``
     (local calendar month → ``{"starts": n}``), ``starts_total``.
+
+    ``ring_s``: seconds of samples the ring keeps — how far back an event may read before the
+    end of the frame that decides it, plus the longest frame fed (90 s: 80 s + 10 s frames).
     """
 
     #: The parts that own a piece of the state (each writes its keys of the snapshot and sets
@@ -115,6 +118,7 @@ class LoadAnalysis:
         thresholds: StateThresholds | None = None,
         settings: TransientSettings | None = None,
         window_s: float = 60.0,
+        ring_s: float = _RING_S,
     ) -> None:
         self.config = config
         self.fs = float(config.sample_rate_hz)
@@ -122,7 +126,7 @@ class LoadAnalysis:
         self.roles = LoadRoles.of(config)
         self.sm = OperatingStateMachine(self.fs, thresholds)
         self.timeline = PhaseTimeline()
-        self.ring = SampleRing(len(self.roles.rows), round(_RING_S * self.fs))
+        self.ring = SampleRing(len(self.roles.rows), round(ring_s * self.fs))
         self.n = 0
         self.discontinuities = 0
         self.clock = StreamClock(self.fs, config.time_zone)

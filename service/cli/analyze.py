@@ -444,10 +444,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "  millwatch analyze archive/ --mill deploy/mills/ --jobs 0   # all mills and cores\n"
             "  millwatch analyze archive/ --mill deploy/mills/sag-5200-lrs.toml --no-spectra\n"
             "\n"
-            'speed (measured, README Benchmarks "Offline analysis"): a week of one mill, running\n'
-            "74 % of the time, at about 1,200-1,400x real time per core with every analysis on\n"
-            "(1,750x on two cores); --no-spectra skips the harmonic spectra, more than half the\n"
-            "work, for questions about starts, stops and damage: about 2,900-3,000x.\n"
+            'speed (measured, README Benchmarks "Offline analysis"): 12 h of one mill, running\n'
+            "91 % of the time, at about 2,200-2,500x real time per core of CPU with every\n"
+            "analysis on; --no-spectra skips the harmonic spectra, about a third of the work,\n"
+            "for questions about starts, stops and damage: about 3,400-3,600x.\n"
             "\n"
             "output: times in site time with their offset (the zone in the header); events in\n"
             "time order (--json: 'events', beside 'starts', 'stops', 'barring'); a data-quality\n"

@@ -9,7 +9,8 @@ malformed block, a gap, a repeat, a clock fault — goes block by block through
 the same :class:`~millwatch.worker.admission.BlockAdmission`, counters and all, taking a replay
 run's keys as their live ones), calibration and alignment. At each of the lane's
 commits every analyzer analyses what it was given as contiguous chunks of
-:data:`~millwatch.analytics.mill.analyzer.MAX_CHUNK_S`. So an archive analysed here gives the
+:data:`~millwatch.analytics.mill.analyzer.OFFLINE_CHUNK_S` (longer than the live worker's: less
+CPU per sample, a larger ring per mill, the same results). So an archive analysed here gives the
 results the live worker and a replay give for the same blocks, at the replay's cost per sample.
 
 :func:`analyze_files` runs the mills of one process; ``millwatch analyze --jobs N`` splits the
@@ -32,7 +33,7 @@ import numpy as np
 
 from millwatch.analytics.drivetrain.mill_config import MillConfig
 from millwatch.analytics.fatigue.cycle_log import CycleLog
-from millwatch.analytics.mill.analyzer import MAX_CHUNK_S, MillAnalyzer
+from millwatch.analytics.mill.analyzer import OFFLINE_CHUNK_S, MillAnalyzer
 from millwatch.analytics.spectra.facts import HarmonicWindow
 from millwatch.analytics.spectra.tracker import HarmonicTracker
 from millwatch.ingest.archive.batches import BatchReader, MessageBatch
@@ -194,6 +195,7 @@ class OfflineSink(_AdmittingSink):
                 c,
                 spectra=spectra,
                 spectra_runner=runner,
+                chunk_s=OFFLINE_CHUNK_S,
                 cycle_log=None if cycle_log is None else cycle_log(),
             )
             for c in configs
@@ -220,10 +222,10 @@ class OfflineSink(_AdmittingSink):
 
     def commit(self) -> None:
         """Analyse what each mill was given since the last commit, in steps of
-        :data:`~millwatch.analytics.mill.analyzer.MAX_CHUNK_S` (the chunks ``process`` takes
-        anyway: the same results), telling :attr:`on_step` after each."""
+        :data:`~millwatch.analytics.mill.analyzer.OFFLINE_CHUNK_S` (the chunks ``process`` takes
+        anyway offline: the same results), telling :attr:`on_step` after each."""
         for analyzer in self.analyzers.values():
-            step = round(MAX_CHUNK_S * analyzer.config.sample_rate_hz)
+            step = round(OFFLINE_CHUNK_S * analyzer.config.sample_rate_hz)
             while analyzer.backlog:
                 before = analyzer.backlog
                 analyzer.process(until=analyzer.samples + step)

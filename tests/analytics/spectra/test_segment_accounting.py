@@ -21,7 +21,9 @@ from millwatch.analytics.spectra.tracker import DROP_REASONS, HarmonicTracker, d
 from millwatch.ingest.mill_files import load_mill_config
 
 CONFIG = load_mill_config(Path(__file__).resolve().parents[3] / "deploy/mills/sag-5200-lrs.toml")
-SETTINGS = HarmonicSettings(segments_per_window=2)
+# (overlapping segments, as before issue 29: a break drops several begun at once, which the
+# accounting must count; the default overlap is 0)
+SETTINGS = HarmonicSettings(segments_per_window=2, overlap=0.5)
 FS = CONFIG.sample_rate_hz
 T0 = 1_700_000_000 * 10**9
 

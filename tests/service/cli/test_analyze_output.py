@@ -156,7 +156,7 @@ def test_progress_follows_the_analysis_not_the_reading(recording, monkeypatch):
     sink.close()
     size, samples = recording.stat().st_size, analysed[0]
     assert samples == 330_000 and done[0] == size
-    assert len(seen) >= 10
+    assert len(seen) >= 5  # steps of OFFLINE_CHUNK_S (60 s) over the 330 s record
     for shown, at in seen:
         assert shown / size <= at / samples + 0.02, (shown, at)
 
