@@ -532,7 +532,7 @@ def _main(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(json.dumps(json_body(out), indent=1) + "\n")
     else:
-        sys.stdout.write("\n".join(_summary(r, st) for r, st in out))
+        sys.stdout.write("\n".join(_summary(r, st) for r, st in out) + "\n")
     _speed_note(out, configs, time.perf_counter() - started)
     return 0
 
