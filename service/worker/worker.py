@@ -343,8 +343,10 @@ class Worker:
             loss = loss | {"dropped_by_retention": dropped,
                            "never_spooled": loss["missing_blocks"] - dropped}  # fmt: skip
         self._quality(mill_id, channel, loss["first_t_ns"], "sequence_gap", **loss)
+        # (the alarm id from the first lost sample's time, a data time: a hot standby fed the
+        # same blocks raises the same alarm although it received them at another time)
         context = {"channel": channel, "first_seq": loss["first_seq"],
-                   "last_seq": loss["last_seq"]}  # fmt: skip
+                   "last_seq": loss["last_seq"], "id_anchor_ns": loss["first_t_ns"]}  # fmt: skip
         self._observe(mill_id, "sequence_gaps", loss["missing_blocks"], recv_ns, context)
         shown = self.losses[mill_id]
         entry = {"channel": channel, "problem": "sequence_gap", **loss}
