@@ -57,6 +57,7 @@ __all__ = [
     "ACTION_KINDS",
     "CATCH_UP_MARGIN_S",
     "HANDOVER_WAIT_S",
+    "RECORDED_KINDS",
     "Handover",
     "after_ns_of",
     "live_workers",
@@ -82,7 +83,12 @@ ACTION_KINDS: dict[TransitionKind, ActionKind] = {
     TransitionKind.REMOVED_FROM_SERVICE: ActionKind.REMOVE_FROM_SERVICE,
     TransitionKind.RETURNED_TO_SERVICE: ActionKind.RETURN_TO_SERVICE,
 }
-_KINDS = [str(k) for k in ACTION_KINDS]
+RECORDED_KINDS = [str(k) for k in ACTION_KINDS]
+"""The stored transition kinds an operator's action makes (what ``actions`` answers)."""
+#: The transition each action kind stores (both shelves store ``shelved``).
+_RECORDED_AS = {a: t for t, a in ACTION_KINDS.items()} | {
+    ActionKind.SHELVE_TIMED: TransitionKind.SHELVED
+}
 
 
 def after_ns_of(args: dict[str, Any]) -> int:
@@ -97,7 +103,7 @@ def after_ns_of(args: dict[str, Any]) -> int:
 def operator_actions(backend: LocalBackend, mill_id: str, after_ns: int) -> list[dict[str, Any]]:
     """The answer to ``actions``: ``mill_id``'s stored operator actions at or after
     ``after_ns`` (ns, wall clock), oldest first, as plain JSON rows."""
-    rows = store_of(backend.runtime).operator_actions(mill_id, after_ns, _KINDS)
+    rows = store_of(backend.runtime).operator_actions(mill_id, after_ns, RECORDED_KINDS)
     return [dict(r) for r in rows]
 
 
@@ -220,7 +226,7 @@ class Handover:
         """Apply the operator actions ``other`` stored for ``mill_id`` since this worker's
         newest one that this worker has not stored; how many were applied."""
         store = store_of(self.backend.runtime)
-        since = store.last_operator_action_ns(mill_id, _KINDS) or 0
+        since = store.last_operator_action_ns(mill_id, RECORDED_KINDS) or 0
         rows = self._ask(mill_id, other, Question.ACTIONS, {"after_ns": since}) or []
         applied = 0
         for row in rows:
@@ -248,8 +254,6 @@ class Handover:
         """Whether this worker stored ``action`` at ``t_ns`` already (the same alarm, kind of
         transition, time and user)."""
         store = store_of(self.backend.runtime)
-        return any(
-            t.t_ns == t_ns and t.by == action.user and ACTION_KINDS.get(t.kind) is not None
-            and ACTION_KINDS[t.kind].value.split("_")[0] == action.kind.value.split("_")[0]
-            for t in store.alarm_transitions(action.alarm_id)
-        )  # fmt: skip
+        kind = _RECORDED_AS[action.kind]
+        return any(t.t_ns == t_ns and t.by == action.user and t.kind == kind
+                   for t in store.alarm_transitions(action.alarm_id))  # fmt: skip

@@ -29,7 +29,7 @@ import httpx
 import pytest
 
 from millwatch.ingest.mill_files import load_mill_config
-from tests.integration.live import MILL_FILE, published, stored_results, wait
+from tests.integration.live import MILL, MILL_FILE, Api, published, stored_results, wait
 from tests.integration.standby import (
     API_KEY,
     PRIMARY,
@@ -57,11 +57,15 @@ def _archived(directory: Path) -> dict[str, set[int]]:
     return dict(seqs)
 
 
-def _alarms(directory: Path) -> dict[str, tuple[str, str, int | None, str | None]]:
-    """Stored alarms: id → (rule, state, acked_ns, acked_by)."""
+def _alarms(directory: Path) -> dict[str, tuple[str, str, int | None, str | None, int]]:
+    """Stored alarms: id → (rule, state, acked_ns, acked_by, acknowledgements stored)."""
     with sqlite3.connect(f"file:{directory / 'mw.db'}?mode=ro", uri=True) as db:
-        rows = db.execute("SELECT alarm_id, rule, state, acked_ns, acked_by FROM alarms")
-        return {r[0]: (r[1], r[2], r[3], r[4]) for r in rows.fetchall()}
+        rows = db.execute(
+            "SELECT a.alarm_id, a.rule, a.state, a.acked_ns, a.acked_by, "
+            "(SELECT COUNT(*) FROM alarm_transitions t WHERE t.alarm_id = a.alarm_id "
+            "AND t.kind = 'acknowledged') FROM alarms a"
+        )
+        return {r[0]: tuple(r[1:]) for r in rows.fetchall()}
 
 
 def _outage(plant: StandbyPlant, name: str) -> float:
@@ -109,6 +113,10 @@ def test_failover_to_the_hot_standby_and_back_loses_nothing(tmp_path):
         r = client.post(f"/alarms/{alarm_id}/ack", json={"by": "night shift"},
                         headers={"X-API-Key": API_KEY})  # fmt: skip
         assert r.status_code == 200, r.text
+        ready = httpx.get(plant.url + "/ready", timeout=10.0).json()
+        assert ready["ready"] and ready["warnings"], ready  # answered, but no standby left
+        lost = Api(plant.api_port).metrics()
+        assert lost[f'millwatch_mill_redundancy_lost{{mill="{MILL}"}}'] == 1.0, lost
         time.sleep(max(0.0, OUTAGE_S - (time.monotonic() - t_kill)))
         plant.start_worker(PRIMARY)
         assert wait(lambda: plant.answering() == PRIMARY, TAKEOVER_S, every_s=0.5), (
@@ -120,6 +128,10 @@ def test_failover_to_the_hot_standby_and_back_loses_nothing(tmp_path):
         t1 = _outage(plant, STANDBY)
         assert wait(plant.both_hold, TAKEOVER_S, every_s=0.5), plant.procs.logs()
         _check_answers(watch, t1, "standby down and back")
+        metrics = Api(plant.api_port).metrics()
+        held = {k for k, v in metrics.items() if k.startswith("millwatch_mill_worker{") and v}
+        assert len(held) == 2 and any('role="standby"' in k for k in held), held
+        assert any('worker="primary"' in k and 'answering="1"' in k for k in held), held
         watch.stop()
         assert watch.alarm_lists, "no /alarms answer"
         twice = [ids for ids in watch.alarm_lists if len(ids) != len(set(ids))]
@@ -151,8 +163,8 @@ def test_failover_to_the_hot_standby_and_back_loses_nothing(tmp_path):
     )
     stored = {n: _alarms(d) for n, d in plant.dirs.items()}
     assert stored[PRIMARY] == stored[STANDBY]  # the same ids, the same ack (time and who)
-    assert stored[PRIMARY][alarm_id][3] == "night shift"
+    assert stored[PRIMARY][alarm_id][3:] == ("night shift", 1)  # reconciled once
     # the data ended: one open stale-channel alarm per channel, the same in both stores
-    stale = [a for a, (rule, state, _, _) in stored[PRIMARY].items()
+    stale = [a for a, (rule, state, *_) in stored[PRIMARY].items()
              if rule == "stale_channel" and state != "cleared"]  # fmt: skip
     assert sorted(a.split(":")[2] for a in stale) == sorted(CONFIG.channels), stored[PRIMARY]
