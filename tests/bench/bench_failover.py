@@ -12,6 +12,9 @@ and ``millwatch api``. Measured:
    answer, and every answer meanwhile that was not a 200 with data. After ``--outage`` s the
    primary is restarted, and the time until it answers the mill again (start, recovery from its
    archive and the gateway's cache, catch-up with the standby, reconciliation) is measured too.
+   ``--freeze-trials``: the same with SIGSTOP (a frozen host: its token lives until the zenoh
+   lease expires, 10 s): the time to the standby's first answer, the slowest answer and the bad
+   answers over the next 15 s; then the frozen primary is SIGKILLed and restarted.
 2. **The standby's cost**, over ``--window`` s of steady running with both up: CPU of each
    worker process (``/proc/<pid>/stat``, user + system), the growth of its archive and store
    on disk, and the telemetry it receives — the mill's block payloads per second (from the
@@ -23,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import statistics
 import sys
 import tempfile
@@ -57,6 +61,12 @@ def disk_bytes(directory: Path) -> int:
     return sum(p.stat().st_size for p in directory.rglob("*") if p.is_file())
 
 
+def disk_parts(directory: Path) -> dict[str, int]:
+    """Bytes of a worker's archive and of its store (with its WAL)."""
+    return {"archive": disk_bytes(directory / "archive"),
+            "store": sum(p.stat().st_size for p in directory.glob("mw.db*"))}  # fmt: skip
+
+
 def payload_rate(directory: Path) -> float:
     """Block payload bytes per second of log time in a worker's archive."""
     total, first, last = 0, None, None
@@ -72,15 +82,15 @@ def cost(plant: StandbyPlant, window_s: float) -> dict[str, Any]:
     """CPU, disk growth and received telemetry of each worker over ``window_s``."""
     pids = {n: plant.procs.procs[n].pid for n in (PRIMARY, STANDBY)}
     cpu0 = {n: cpu_s(p) for n, p in pids.items()}
-    disk0 = {n: disk_bytes(plant.dirs[n]) for n in pids}
+    disk0 = {n: disk_parts(plant.dirs[n]) for n in pids}
     time.sleep(window_s)
     out: dict[str, Any] = {}
     for n, p in pids.items():
+        grown = {k: v - disk0[n][k] for k, v in disk_parts(plant.dirs[n]).items()}
         out[n] = {
             "cpu_pct_of_core": round(100 * (cpu_s(p) - cpu0[n]) / window_s, 1),
-            "disk_mb_per_hour": round(
-                (disk_bytes(plant.dirs[n]) - disk0[n]) / window_s * 3600 / 2**20, 1
-            ),
+            "archive_mb_per_hour": round(grown["archive"] / window_s * 3600 / 2**20, 1),
+            "store_mb_per_hour": round(grown["store"] / window_s * 3600 / 2**20, 1),
             "telemetry_kb_per_s": round(payload_rate(plant.dirs[n]) / 1024, 1),
         }
     return out
@@ -111,16 +121,46 @@ def failover_trial(plant: StandbyPlant, outage_s: float, every_s: float) -> dict
     return {"failover_ms": failover_ms, "bad_answers": bad, "takeover_s": takeover_s}
 
 
+def freeze_trial(plant: StandbyPlant, every_s: float) -> dict[str, Any]:
+    """One SIGSTOP of the primary: ms to the standby's first answer, the slowest answer and
+    the bad ones over 15 s; then it is SIGKILLed and restarted."""
+    proc = plant.procs.procs[PRIMARY]
+    bad, first, slowest = 0, None, 0.0
+    with httpx.Client(base_url=plant.url, timeout=15.0) as client:
+        t_stop = time.monotonic()
+        proc.send_signal(signal.SIGSTOP)
+        for _ in range(int(15.0 / every_s)):
+            if time.monotonic() - t_stop > 15.0:
+                break
+            t = time.monotonic()
+            s = mill_sample(client)
+            slowest = max(slowest, time.monotonic() - t)
+            if s.code == 200 and s.worker == STANDBY and first is None:
+                first = s.t
+            if s.code != 200 or s.state == "unreachable":
+                bad += 1
+            time.sleep(every_s)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    plant.start_worker(PRIMARY)
+    wait(lambda: plant.answering() == PRIMARY, 300.0, every_s=0.2)
+    return {"failover_ms": None if first is None else (first - t_stop) * 1e3,
+            "slowest_answer_s": round(slowest, 2), "bad_answers": bad}  # fmt: skip
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--trials", type=int, default=10)
     p.add_argument("--outage", type=float, default=35.0, help="s the primary stays down")
     p.add_argument("--every-ms", type=float, default=10.0, help="poll period during failover")
     p.add_argument("--window", type=float, default=60.0, help="s of steady running for costs")
+    p.add_argument("--freeze-trials", type=int, default=0, help="SIGSTOP trials after those")
+    p.add_argument("--checkpoint-seconds", type=float, default=60.0,
+                   help="the workers' [worker] checkpoint_seconds (60: the default)")  # fmt: skip
     p.add_argument("--json", action="store_true")
     args = p.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench-failover-") as d:
-        plant = StandbyPlant(Path(d))
+        plant = StandbyPlant(Path(d), checkpoint_seconds=args.checkpoint_seconds)
         try:
             plant.start()
             if not wait(plant.both_hold, 180.0, every_s=0.5):
@@ -132,6 +172,11 @@ def main() -> int:
             for i in range(args.trials):
                 trials.append(failover_trial(plant, args.outage, args.every_ms / 1e3))
                 print(f"trial {i + 1}: {trials[-1]}", file=sys.stderr)
+                wait(plant.both_hold, 60.0, every_s=0.5)
+            frozen = []
+            for i in range(args.freeze_trials):
+                frozen.append(freeze_trial(plant, args.every_ms / 1e3))
+                print(f"freeze {i + 1}: {frozen[-1]}", file=sys.stderr)
                 wait(plant.both_hold, 60.0, every_s=0.5)
         finally:
             plant.stop_all()
@@ -147,6 +192,7 @@ def main() -> int:
         "takeover_s_p50": round(statistics.median(takeovers), 1) if takeovers else None,
         "takeover_s_max": round(max(takeovers), 1) if takeovers else None,
         "cost": costs,
+        "frozen": frozen,
     }
     if args.json:
         print(json.dumps(result, indent=2))

@@ -104,14 +104,16 @@ def mill_sample(client: httpx.Client) -> Sample:
     return Sample(t, 200, body.get("state"), body.get("worker"), stale)
 
 
-def _worker_settings(directory: Path, name: str, router: str, *, standby: bool) -> Path:
+def _worker_settings(
+    directory: Path, name: str, router: str, *, standby: bool, checkpoint_seconds: float
+) -> Path:
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / "worker.toml"
     path.write_text(
         f'[zenoh]\nmode = "client"\nlisten = []\nconnect = ["{router}"]\n'
         f'[archive]\ndirectory = "archive"\n[store]\npath = "mw.db"\n'
         f'[worker]\nname = "{name}"\nstandby = {json.dumps(standby)}\n'
-        f"stale_after_s = {STALE_AFTER_S}\ncheckpoint_seconds = 5\n"
+        f"stale_after_s = {STALE_AFTER_S}\ncheckpoint_seconds = {checkpoint_seconds}\n"
         f'[api]\napi_key = "{API_KEY}"\n[mills]\nfiles = ["{MILL_FILE}"]\n',
         encoding="utf-8",
     )
@@ -130,9 +132,10 @@ def _api_settings(directory: Path, router: str, port: int) -> Path:
 
 
 class StandbyPlant:
-    """The processes (module docstring), in ``directory``; :meth:`stop_all` always."""
+    """The processes (module docstring), in ``directory``; :meth:`stop_all` always.
+    ``checkpoint_seconds``: the workers' (5 s: a restart replays little; 60 s is the default)."""
 
-    def __init__(self, directory: Path) -> None:
+    def __init__(self, directory: Path, checkpoint_seconds: float = 5.0) -> None:
         self.directory = directory
         self.procs = Processes(directory)
         port = free_loopback_port()
@@ -143,7 +146,9 @@ class StandbyPlant:
         self.dirs = {n: directory / n for n in (PRIMARY, STANDBY)}
         self.anchor_ns = (time.time_ns() // 10**9 + 5) * 10**9
         self.settings = {
-            n: _worker_settings(d, n, self.router, standby=n == STANDBY)
+            n: _worker_settings(
+                d, n, self.router, standby=n == STANDBY, checkpoint_seconds=checkpoint_seconds
+            )
             for n, d in self.dirs.items()
         }
 
