@@ -7,9 +7,9 @@ Real processes on 127.0.0.1 (:mod:`tests.integration.standby`): a router, a gate
 four 1 kHz float32 channels in 100-sample blocks, its cache 10 min), a primary, its hot standby
 and ``millwatch api``. Measured:
 
-1. **Failover**, per trial: the primary is SIGKILLed; ``GET /mills/{id}`` is asked every
-   ``--every-ms`` until an answer comes from the standby — the time from the SIGKILL to that
-   answer, and every answer meanwhile that was not a 200 with data. After ``--outage`` s the
+1. **Failover**, per trial: the primary is SIGKILLed (and reaped); ``GET /mills/{id}`` is asked
+   every ``--every-ms`` until an answer comes from the standby — the time from the SIGKILL to
+   that answer's arrival, and every answer meanwhile that was not a 200 with data. After ``--outage`` s the
    primary is restarted, and the time until it answers the mill again (start, recovery from its
    archive and the gateway's cache, catch-up with the standby, reconciliation) is measured too.
    ``--freeze-trials``: the same with SIGSTOP (a frozen host: its token lives until the zenoh
@@ -107,7 +107,7 @@ def failover_trial(plant: StandbyPlant, outage_s: float, every_s: float) -> dict
         for _ in range(int(30.0 / every_s)):
             s = mill_sample(client)
             if s.code == 200 and s.worker == STANDBY and s.state != "unreachable":
-                first = s.t
+                first = time.monotonic()  # (when the answer came, not when it was asked)
                 break
             if s.code != 200 or s.state == "unreachable":
                 bad += 1
@@ -122,21 +122,23 @@ def failover_trial(plant: StandbyPlant, outage_s: float, every_s: float) -> dict
 
 
 def freeze_trial(plant: StandbyPlant, every_s: float) -> dict[str, Any]:
-    """One SIGSTOP of the primary: ms to the standby's first answer, the slowest answer and
-    the bad ones over 15 s; then it is SIGKILLed and restarted."""
+    """One SIGSTOP of the primary: ms until the standby's first answer arrived, the slowest
+    answer, the stalest data answered and the bad answers over 15 s; then it is SIGKILLed and
+    restarted."""
     proc = plant.procs.procs[PRIMARY]
-    bad, first, slowest = 0, None, 0.0
+    bad, first, slowest, stalest = 0, None, 0.0, 0.0
     with httpx.Client(base_url=plant.url, timeout=15.0) as client:
         t_stop = time.monotonic()
         proc.send_signal(signal.SIGSTOP)
         for _ in range(int(15.0 / every_s)):
             if time.monotonic() - t_stop > 15.0:
                 break
-            t = time.monotonic()
             s = mill_sample(client)
-            slowest = max(slowest, time.monotonic() - t)
+            done = time.monotonic()
+            slowest = max(slowest, done - s.t)
+            stalest = max(stalest, s.stale_s or 0.0)
             if s.code == 200 and s.worker == STANDBY and first is None:
-                first = s.t
+                first = done  # (when the answer came, not when it was asked)
             if s.code != 200 or s.state == "unreachable":
                 bad += 1
             time.sleep(every_s)
@@ -145,7 +147,8 @@ def freeze_trial(plant: StandbyPlant, every_s: float) -> dict[str, Any]:
     plant.start_worker(PRIMARY)
     wait(lambda: plant.answering() == PRIMARY, 300.0, every_s=0.2)
     return {"failover_ms": None if first is None else (first - t_stop) * 1e3,
-            "slowest_answer_s": round(slowest, 2), "bad_answers": bad}  # fmt: skip
+            "slowest_answer_s": round(slowest, 2), "stalest_s": round(stalest, 2),
+            "bad_answers": bad}  # fmt: skip
 
 
 def main() -> int:
