@@ -9,9 +9,10 @@ and ``millwatch api``. Measured:
 
 1. **Failover**, per trial: the primary is SIGKILLed (and reaped); ``GET /mills/{id}`` is asked
    every ``--every-ms`` until an answer comes from the standby — the time from the SIGKILL to
-   that answer's arrival, and every answer meanwhile that was not a 200 with data. After ``--outage`` s the
-   primary is restarted, and the time until it answers the mill again (start, recovery from its
-   archive and the gateway's cache, catch-up with the standby, reconciliation) is measured too.
+   that answer's arrival, and every answer meanwhile that was not a 200 with data. After
+   ``--outage`` s the primary is restarted, and the time until it answers the mill again (start,
+   recovery from its archive and the gateway's cache, catch-up with the standby,
+   reconciliation) is measured too.
    ``--freeze-trials``: the same with SIGSTOP (a frozen host: its token lives until the zenoh
    lease expires, 10 s): the time to the standby's first answer, the slowest answer and the bad
    answers over the next 15 s; then the frozen primary is SIGKILLed and restarted.
