@@ -31,7 +31,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import zenoh
 
@@ -50,15 +50,13 @@ from millwatch.ingest.keys import (
 )
 from millwatch.remote.protocol import Question, decode, encode, for_worker
 
-if TYPE_CHECKING:
-    from millwatch.remote.queryables import WorkerQueryables
-
 __all__ = [
     "ACTION_KINDS",
     "CATCH_UP_MARGIN_S",
     "HANDOVER_WAIT_S",
     "RECORDED_KINDS",
     "Handover",
+    "TokenHolder",
     "after_ns_of",
     "live_workers",
     "operator_actions",
@@ -117,6 +115,15 @@ def action_of(row: dict[str, Any]) -> OperatorAction:
     return OperatorAction(row["alarm_id"], kind, str(row["by"]), row.get("comment") or "", until)
 
 
+class TokenHolder(Protocol):
+    """What :class:`Handover` needs of :class:`~millwatch.remote.queryables.WorkerQueryables`."""
+
+    @property
+    def backend(self) -> LocalBackend: ...
+
+    def hold(self, mill_id: str) -> None: ...
+
+
 def live_workers(session: zenoh.Session, config: MillConfig) -> dict[str, bool]:
     """Every worker holding a token of ``config``'s mill now: name → whether it is a standby."""
     out: dict[str, bool] = {}
@@ -141,7 +148,7 @@ class Handover:
     def __init__(
         self,
         session: zenoh.Session,
-        queryables: WorkerQueryables,
+        queryables: TokenHolder,
         *,
         wait_s: float = HANDOVER_WAIT_S,
     ) -> None:
