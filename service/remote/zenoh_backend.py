@@ -13,7 +13,9 @@ router, and as many copies as needed. It keeps three things in memory:
   answered by their standby from the next question on, or ``unreachable`` at once when no
   worker is left, without waiting for a query timeout. A question the chosen worker does not
   answer (it died between its token and the question, or it is frozen and its lease has not
-  expired) is asked again of the next live worker, after at most :data:`FAILOVER_TIMEOUT_S`.
+  expired) is asked again of the next live worker, after at most :data:`FAILOVER_TIMEOUT_S`;
+  so is one it answers ``503`` (:class:`~millwatch.errors.Unavailable`: e.g. its store is
+  closing).
   Operator actions go to *every* live worker of the mill (:meth:`ZenohBackend.act`), so a
   primary and its standby store the same ones;
 * **the alarm board** (:mod:`millwatch.api.alarm_board`) — fed by the workers' ``…/@alarms``
@@ -286,9 +288,14 @@ class ZenohBackend:
             raise Unavailable("Mill unreachable", self._gone(mill_id))
         payload = encode(args or {})
         key = query_key(config.site, config.id, what)
+        first_timeout_s = min(self.timeout_s, FAILOVER_TIMEOUT_S)
         for worker in workers[:-1]:
-            found, answer, _ = self._ask_one(for_worker(key, worker), payload,
-                                             min(self.timeout_s, FAILOVER_TIMEOUT_S))  # fmt: skip
+            try:
+                found, answer, _ = self._ask_one(for_worker(key, worker), payload, first_timeout_s)
+            except Unavailable as exc:  # (e.g. its store is closing): the next one may answer
+                log.warning("worker %s is unavailable for %s about %s (%s); asking the next",
+                            worker, what, mill_id, exc.detail)  # fmt: skip
+                continue
             if found:
                 return answer
             log.warning("worker %s did not answer %s about %s; asking the next", worker, what,

@@ -10,7 +10,7 @@ store once it is back (reconciled from the standby). At the end both archives ho
 published block, both stores hold the same alarms (stale-channel ones raised when the data ended
 included), the same acknowledgement at the same time, and the same damage.
 
-The issue asks for outages of ~35 s; the suite uses :data:`OUTAGE_S` = 8 s to stay within its
+The issue asks for outages of ~35 s; the suite uses :data:`OUTAGE_S` = 6 s to stay within its
 time budget on a loaded 2-core machine (the recovery path is the same: the gateway cache
 replays the outage either way). ``MILLWATCH_FAILOVER_OUTAGE_S=35`` runs the issue's length;
 ``tests/bench/bench_failover.py`` measures failover times with 35 s outages."""
@@ -43,7 +43,7 @@ pytestmark = pytest.mark.slow
 log = logging.getLogger(__name__)
 
 CONFIG = load_mill_config(MILL_FILE)
-OUTAGE_S = float(os.environ.get("MILLWATCH_FAILOVER_OUTAGE_S", "8"))
+OUTAGE_S = float(os.environ.get("MILLWATCH_FAILOVER_OUTAGE_S", "6"))
 MAX_STALE_S = 3.0
 #: How long a restarted worker may take to start, recover and take its mill back (a Python
 #: start took up to 12 s on a busy 2-core machine; then the catch-up from the gateway cache).
@@ -101,10 +101,15 @@ def test_failover_to_the_hot_standby_and_back_loses_nothing(tmp_path):
         alarms = wait(lambda: client.get("/alarms").json()["alarms"], 60.0, every_s=0.5)
         assert alarms, plant.procs.logs()
         alarm_id = alarms[0]["alarm_id"]
-        fresh = lambda: (s := watch.samples[-1:]) and s[0].stale_s is not None  # noqa: E731
         watch.start()
-        assert wait(lambda: fresh() and watch.samples[-1].stale_s < MAX_STALE_S, 60.0)
+        # (after the scene's start: while a start is analysed, its record holds the analysed
+        # data back ~4 s on every worker — the usual, not a failover's)
+        running = lambda: (s := watch.samples[-1:]) and s[0].state == "running"  # noqa: E731
+        assert wait(lambda: running() and (watch.samples[-1].stale_s or 99) < MAX_STALE_S, 90.0)
         t0 = time.monotonic()
+        starting = [s.stale_s for s in watch.samples if s.state == "starting" and s.stale_s]
+        log.info("before any failover, during the start: stalest %.2f s over %d answers",
+                 max(starting, default=0.0), len(starting))  # fmt: skip
 
         # the primary dies: the standby answers; an ack meanwhile reaches it alone
         t_kill = time.monotonic()
