@@ -503,8 +503,10 @@ def _new_alarm(
 ) -> Alarm:
     mill_id, name, subject = key
     message, advice = texts
+    anchor = obs.context.get("id_anchor_ns")  # (the data time a wall-clock observation is about)
+    id_ns = anchor if type(anchor) is int else obs.t_ns
     return Alarm(
-        alarm_id=lifecycle.alarm_id_for(mill_id, name, subject, obs.t_ns),
+        alarm_id=lifecycle.alarm_id_for(mill_id, name, subject, id_ns),
         mill_id=mill_id, rule=name, subject=subject, quantity=rule.quantity, unit=rule.unit,
         severity=severity, state=AlarmState.RAISED, raised_ns=obs.t_ns, updated_ns=obs.t_ns,
         value=obs.value, threshold=threshold, message=message, simulated=simulated,

@@ -4,6 +4,11 @@ An :class:`Observation` is ``(mill_id, quantity, value, t_ns, context)``: one nu
 (or the worker, for data quality) measured at time ``t_ns`` (int64 ns since the Unix epoch, UTC,
 on the sample clock where there is one). ``context`` is plain data: the *subject* of the
 observation (the channel, drive side or component it is about) and anything a message can use.
+One key is the engine's: ``id_anchor_ns`` (an int, ns), the time the alarm id is made from
+instead of ``t_ns`` (:func:`millwatch.alarms.lifecycle.alarm_id_for`). A wall-clock observation
+about the data — a channel silent since its last sample — carries the data time it is about, so
+two workers fed the same blocks (a primary and its hot standby) raise the same alarm id although
+their clocks tick apart.
 
 Quantities come in two kinds (:class:`Kind`):
 

@@ -32,7 +32,8 @@ Layout, version 1 (``/``-separated chunks)::
 
 - Scale-out (:func:`query_key`, :func:`worker_token_key`): a worker answers ``get`` about
   each of its mills on ``…/@query/<what>`` and holds a liveliness token
-  ``…/@worker/<worker>`` per mill while it runs; ``*``/``**`` never match either chunk.
+  ``…/@worker/<worker>`` per mill while it runs (a hot standby ``…/@standby/<worker>``);
+  ``*``/``**`` never match these chunks.
 
 - Gateway spools (:func:`spool_key`, :mod:`millwatch.ingest.spool`): a spool answers ``get`` for the
   blocks it holds of one channel on that channel's key followed by the verbatim chunk
@@ -365,6 +366,9 @@ def parse_alarm_key(expr: str) -> tuple[str, str]:
 # ----------------------------------------------------------------------------- scale-out keys
 QUERY_TAG = "@query"
 WORKER_TAG = "@worker"
+#: The token chunk of a hot standby (``[worker] standby = true``): a second worker of the same
+#: mills, which the API asks only while no primary (``@worker``) token of the mill is live.
+STANDBY_TAG = "@standby"
 _QUERY_LEN = 6  # millwatch / v1 / site / mill / @query / what
 _TOKEN_LEN = 6  # millwatch / v1 / site / mill / @worker / worker
 
@@ -395,30 +399,41 @@ def parse_query_key(expr: str) -> tuple[str, str, str]:
             _check_segment("query", parts[5]))  # fmt: skip
 
 
-def worker_token_key(site: str, mill: str, worker: str) -> str:
+def worker_token_key(site: str, mill: str, worker: str, *, standby: bool = False) -> str:
     """The liveliness token a worker holds while it analyses a mill:
-    ``millwatch/v1/<site>/<mill>/@worker/<worker>``. It disappears when the worker's session
-    ends (clean stop, crash: TCP closes; a hung host: the zenoh lease)."""
-    segs = [_check_segment("site", site), _check_segment("mill", mill), WORKER_TAG,
-            _check_segment("worker", worker)]  # fmt: skip
+    ``millwatch/v1/<site>/<mill>/@worker/<worker>`` (a hot standby's: ``…/@standby/<worker>``).
+    It disappears when the worker's session ends (clean stop, crash: TCP closes; a hung host:
+    the zenoh lease)."""
+    segs = [_check_segment("site", site), _check_segment("mill", mill),
+            STANDBY_TAG if standby else WORKER_TAG, _check_segment("worker", worker)]  # fmt: skip
     return "/".join([*_prefix(None), *segs])
 
 
-def worker_token_pattern(site: str = WILD, mill: str = WILD, worker: str = WILD) -> str:
+def worker_token_pattern(
+    site: str = WILD, mill: str = WILD, worker: str = WILD, *, standby: bool = False
+) -> str:
     """Worker tokens of every mill (default), one site or one mill:
-    ``millwatch/v1/*/*/@worker/*``."""
-    segs = [_segment_or_wild("site", site), _segment_or_wild("mill", mill), WORKER_TAG,
-            _segment_or_wild("worker", worker)]  # fmt: skip
+    ``millwatch/v1/*/*/@worker/*`` (``standby``: the standbys' ``…/@standby/*``)."""
+    segs = [_segment_or_wild("site", site), _segment_or_wild("mill", mill),
+            STANDBY_TAG if standby else WORKER_TAG, _segment_or_wild("worker", worker)]  # fmt: skip
     return "/".join([*_prefix(None), *segs])
 
 
 def parse_worker_token_key(expr: str) -> tuple[str, str, str]:
-    """``(site, mill, worker)`` of a worker token key; raises :class:`KeyFormatError`."""
+    """``(site, mill, worker)`` of a worker token key (a primary's or a standby's: which one is
+    :func:`is_standby_token`); raises :class:`KeyFormatError`."""
     parts = expr.split("/")
-    if len(parts) != _TOKEN_LEN or parts[4] != WORKER_TAG or parts[:2] != [ROOT, LAYOUT_VERSION]:
+    if (len(parts) != _TOKEN_LEN or parts[4] not in (WORKER_TAG, STANDBY_TAG)
+            or parts[:2] != [ROOT, LAYOUT_VERSION]):  # fmt: skip
         raise KeyFormatError("key", expr, "worker tokens look like " + worker_token_pattern())
     return (_check_segment("site", parts[2]), _check_segment("mill", parts[3]),
             _check_segment("worker", parts[5]))  # fmt: skip
+
+
+def is_standby_token(expr: str) -> bool:
+    """Whether a worker token key (:func:`parse_worker_token_key`) is a hot standby's."""
+    parts = expr.split("/")
+    return len(parts) == _TOKEN_LEN and parts[4] == STANDBY_TAG
 
 
 def worker_name(text: str) -> str:

@@ -224,6 +224,11 @@ class WorkerSettings(_Strict):
       ``["millwatch/v1/rustenburg/**"]``. Empty (default): every configured mill.
     * ``name``: the worker's name in its liveliness tokens and in API errors
       (``[a-z0-9][a-z0-9_-]*``); default: the host name.
+    * ``standby``: ``true`` makes this worker a hot standby of its partition's mills (README
+      "Scale-out"): it subscribes, archives, analyses and stores like the primary, with its
+      own ``name``, archive and store, and the API answers from it only while the mill has no
+      live primary. A primary refuses a mill another primary holds, never one a standby holds.
+      A boolean (``true``/``false``), nothing else.
     * ``recovery_jobs``: processes that replay a long archive tail at start, the mills split
       between them (0, the default: one per available core; 1: the worker alone). A tail under
       32 MB is always replayed by the worker alone.
@@ -251,10 +256,18 @@ class WorkerSettings(_Strict):
     stale_after_s: Annotated[float, Field(gt=0)] = 10.0
     name: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$")] | None = None
     partition: tuple[str, ...] = ()
+    standby: bool = False
     recovery_jobs: Annotated[int, Field(ge=0, le=256)] = 0
     gateway_wait_s: Annotated[float, Field(ge=0, le=600)] = 10.0
     max_ahead_s: float = 60.0
     max_block_bytes: int = 2**20
+
+    @field_validator("standby", mode="before")
+    @classmethod
+    def _standby(cls, value: object) -> object:
+        if not isinstance(value, bool):  # ("yes", 1 or "true" in quotes would mean a guess)
+            raise ValueError(f"{value!r} is not a boolean: write standby = true or standby = false")
+        return value
 
     @field_validator("max_ahead_s")
     @classmethod

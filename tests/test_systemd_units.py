@@ -26,7 +26,7 @@ HARDENED = {
     "Restart": "on-failure",
 }
 #: Where the instances of a template unit are checked.
-INSTANCES = ("rustenburg", "carletonville")
+INSTANCES = ("rustenburg", "carletonville", "rustenburg-standby", "carletonville-standby")
 #: The settings fields that are paths the worker writes.
 STATE_PATHS = (("archive", "directory"), ("store", "path"), ("reports", "directory"))
 

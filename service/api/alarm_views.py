@@ -113,11 +113,17 @@ def alarm_detail(store: Store, alarm_id: str) -> dict[str, Any]:
 
 
 def apply_action(
-    runtime: ServiceRuntime, store: Store, action: OperatorAction, max_shelve_s: float
+    runtime: ServiceRuntime,
+    store: Store,
+    action: OperatorAction,
+    max_shelve_s: float,
+    t_ns: int | None = None,
 ) -> dict[str, Any]:
     """Apply an operator action through the worker thread and return the alarm as stored
     afterwards (:meth:`millwatch.api.backend.Backend.act`). An acknowledgement of an
-    acknowledged alarm without a comment changes nothing and returns it as it is."""
+    acknowledged alarm without a comment changes nothing and returns it as it is. ``t_ns``:
+    the action's time (ns, wall clock) when it is not now
+    (:meth:`millwatch.worker.worker.Worker.request_action`)."""
     row = store.alarm(action.alarm_id)
     if row is None:
         alarm_detail(store, action.alarm_id)  # raises NotFound naming the id
@@ -133,12 +139,14 @@ def apply_action(
         )
     idle_ack = action.kind is ActionKind.ACKNOWLEDGE and row.state == AlarmState.ACKNOWLEDGED
     if not (idle_ack and not action.comment.strip()):
-        _act_on_worker(runtime, row.mill_id, action)
+        _act_on_worker(runtime, row.mill_id, action, t_ns)
     return alarm_detail(store, action.alarm_id)
 
 
-def _act_on_worker(runtime: ServiceRuntime, mill_id: str, action: OperatorAction) -> None:
-    request = runtime.request_action(mill_id, action)
+def _act_on_worker(
+    runtime: ServiceRuntime, mill_id: str, action: OperatorAction, t_ns: int | None
+) -> None:
+    request = runtime.request_action(mill_id, action, t_ns)
     alarm_id, what = action.alarm_id, action.label
     if request is None:
         raise Unavailable(

@@ -82,10 +82,13 @@ class LocalBackend:
     def alarm(self, alarm_id: str) -> dict[str, Any]:
         return alarm_detail(store_of(self.runtime), alarm_id)
 
-    def act(self, action: OperatorAction) -> dict[str, Any]:
+    def act(self, action: OperatorAction, t_ns: int | None = None) -> dict[str, Any]:
         """Apply an operator action through the worker thread (no key check: the caller did
-        it); shelve expiries are checked against ``[api] max_shelve_s`` here, on the worker."""
-        detail = apply_action(self.runtime, store_of(self.runtime), action, self.max_shelve_s)
+        it); shelve expiries are checked against ``[api] max_shelve_s`` here, on the worker.
+        ``t_ns``: the action's time when not now (a signed ``act`` over zenoh carries the time
+        the API signed it, so a primary and its hot standby record the same transition)."""
+        detail = apply_action(self.runtime, store_of(self.runtime), action, self.max_shelve_s,
+                              t_ns)  # fmt: skip
         self._board.merge([row_from_dict(detail)])
         return detail
 
@@ -110,6 +113,7 @@ class LocalBackend:
             "name": self.worker_name,
             "live": True,
             "partition": list(rt.settings.worker.partition),
+            "standby": rt.settings.worker.standby,
             "mills": list(self.mills),
             "blocks_handled": w.blocks_handled if w else 0,
             "archive_errors": w.archive_errors if w else 0,

@@ -35,6 +35,7 @@ from millwatch.api.limits import limits_of
 from millwatch.api.local_backend import LocalBackend
 from millwatch.ingest.zenoh_session import build_config, try_open
 from millwatch.opcua.launch import start_opcua
+from millwatch.remote.handover import Handover
 from millwatch.remote.queryables import WorkerQueryables
 from millwatch.settings import ServiceSettings, SettingsError, check_writable, load_service_settings
 from millwatch.store.database import Store
@@ -62,11 +63,12 @@ log = logging.getLogger(__name__)
 
 def worker_mills(settings: ServiceSettings, source: str | Path = "") -> dict[str, MillConfig]:
     """The configured mills this worker's partition covers (``source``: the settings file, for
-    errors); when the zenoh settings connect somewhere, also checks that no other live worker
-    analyses one of them."""
+    errors); when the zenoh settings connect somewhere, also checks that no other live primary
+    worker analyses one of them (a hot standby, ``[worker] standby = true``, shares them by
+    design: it is not checked)."""
     mills = partition_mills(settings.load_mills(source), settings.worker.partition)
     z = settings.zenoh
-    if z.connect:
+    if z.connect and not settings.worker.standby:
         tls = None if z.tls is None else z.tls.files()
         session = try_open(build_config(mode="client", connect=z.connect, tls=tls))
         if session is None:
@@ -93,9 +95,11 @@ def serve(
     backend = LocalBackend(runtime)
     assert runtime.session is not None
     queryables = WorkerQueryables(runtime.session, backend)
+    handover = Handover(runtime.session, queryables)
     opcua = None
     try:
-        queryables.start()
+        queryables.start(hold=False)
+        handover.start()  # (tokens: at once, or once caught up with another worker's)
         opcua = start_opcua(backend, settings)
         ready = ready_line(runtime, settings, api=api)
         if api:
@@ -109,6 +113,7 @@ def serve(
     finally:
         if opcua is not None:
             opcua.stop()
+        handover.close()
         queryables.close()
         runtime.stop()
     return 0

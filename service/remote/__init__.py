@@ -11,11 +11,15 @@ What is here:
 * :mod:`millwatch.remote.zenoh_backend` — the API's end (``millwatch api``): the
   :class:`~millwatch.api.backend.Backend` that asks the workers, tracks their tokens and keeps the
   alarm board from their ``…/@alarms`` messages.
+* :mod:`millwatch.remote.handover` — a returning worker of a hot-standby pair (README
+  "Scale-out"): it takes its mills' tokens once caught up with the other worker, after
+  reconciling the operator actions it missed.
 * :mod:`millwatch.remote.report_codec` — the monthly report back from its JSON, so the API renders
   it.
 * :mod:`millwatch.remote.metrics` — the Prometheus collector of ``millwatch api``.
 
-Data flow: route → ``ZenohBackend`` → zenoh ``get`` ``…/@query/<question>`` → the worker's
+Data flow: route → ``ZenohBackend`` → zenoh ``get`` ``…/@query/<question>?worker=<name>`` (a
+live primary, else its hot standby) → that worker's
 ``WorkerQueryables`` → ``LocalBackend`` → store/runtime → JSON reply (or ``reply_err`` with
 problem JSON, raised again in the API as the same error).
 

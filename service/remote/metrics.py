@@ -3,13 +3,16 @@
 No worker runs in the API process, so the families of :mod:`millwatch.api.metrics` are rebuilt
 from what the workers answer (``status``, :mod:`millwatch.remote.protocol`): the same per-mill
 families (:func:`~millwatch.api.metrics.mill_families`) and open alarms (from the API's alarm
-board), the worker counters with a ``worker`` label, and ``millwatch_mill_reachable`` per mill.
+board), the worker counters with a ``worker`` label (every live worker: hot standbys too), and
+per mill ``millwatch_mill_reachable``, ``millwatch_mill_worker`` (1 per live worker, labelled
+with its role and whether it is the one that answers) and ``millwatch_mill_redundancy_lost``
+(1 when a mill that had a primary and a standby has one or none left: alert on it).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
-from typing import Protocol
+from typing import Any, Protocol
 
 from prometheus_client import CollectorRegistry
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
@@ -33,7 +36,11 @@ class StatusSource(Protocol):
     @property
     def mills(self) -> Mapping[str, MillConfig]: ...
 
-    def statuses(self) -> dict[str, StatusAnswer]: ...
+    def statuses_by_worker(self) -> dict[str, dict[str, StatusAnswer]]: ...
+
+    def preferred(self, by_worker: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]: ...
+
+    def mill_workers(self) -> dict[str, dict[str, Any]]: ...
 
     def alarm_board(self) -> AlarmBoard: ...
 
@@ -61,8 +68,9 @@ class RemoteCollector(Collector):
         self.life = LifeCache(backend.life)
 
     def collect(self) -> Iterator[Metric]:
-        gathered = self.backend.statuses()
-        workers = {a.worker["name"]: a.worker for a in gathered.values()}
+        by_worker = self.backend.statuses_by_worker()
+        gathered: dict[str, StatusAnswer] = self.backend.preferred(by_worker)
+        workers = {a.worker["name"]: a.worker for m in by_worker.values() for a in m.values()}
         for name, key, doc in _WORKER_COUNTERS:
             family = CounterMetricFamily(name, doc, labels=["worker"])
             for worker, info in sorted(workers.items()):
@@ -91,6 +99,7 @@ class RemoteCollector(Collector):
         for mill in sorted(self.backend.mills):
             reachable.add_metric([mill], 1 if mill in gathered else 0)
         yield reachable
+        yield from self._redundancy()
         status = {m: gathered[m].status if m in gathered else MillStatus(state=UNREACHABLE)
                   for m in self.backend.mills}  # fmt: skip
 
@@ -100,6 +109,28 @@ class RemoteCollector(Collector):
 
         yield from mill_families(self.backend.mills, status, life)
         yield open_alarms(self.backend.alarm_board().rows(), self.backend.mills)
+
+    def _redundancy(self) -> Iterator[Metric]:
+        """Each mill's live workers, which one answers, and lost redundancy."""
+        mill_workers = self.backend.mill_workers()
+        held = GaugeMetricFamily(
+            "millwatch_mill_worker",
+            "1 per live worker of a mill; role primary or standby, answering 1 for the one the "
+            "API asks.",
+            labels=["mill", "worker", "role", "answering"],
+        )
+        lost = GaugeMetricFamily(
+            "millwatch_mill_redundancy_lost",
+            "1 when a mill that had a primary and a hot standby has one or none left.",
+            labels=["mill"],
+        )
+        for mill, info in sorted(mill_workers.items()):
+            for worker, role in info["workers"].items():
+                answering = "1" if worker == info["answering"] else "0"
+                held.add_metric([mill, worker, role, answering], 1)
+            lost.add_metric([mill], 1 if info["redundancy_lost"] else 0)
+        yield held
+        yield lost
 
 
 def remote_registry(backend: StatusSource) -> CollectorRegistry:

@@ -25,7 +25,14 @@ act        ``alarm_id``, ``kind``, the alarm after the operator action
            ``t_ns``, ``mac``
 journal    ``from_ns``, ``to_ns``, the mill's alarm journal entries, at most
            ``after``, ``limit``    ``limit + 1`` (:mod:`millwatch.api.journal`)
+actions    ``after_ns``            the operator actions stored since then, oldest
+                                   first (a returning worker of a hot-standby
+                                   pair reconciles them:
+                                   :mod:`millwatch.remote.handover`)
 =========  ======================  ==============================================
+
+A query may name the worker it is for in its selector, ``…/@query/<what>?worker=<name>``: a
+primary and its hot standby answer for the same mill (:mod:`millwatch.remote.queryables`).
 
 An ``ack`` changes state, so it is signed (:func:`ack_args`, checked by :func:`checked_ack`): the
 API and the worker share ``[api] api_key``; the API sends ``mac`` = HMAC-SHA256 under that key of
@@ -75,6 +82,7 @@ __all__ = [
     "ACK_WINDOW_S",
     "BY_MAX_CHARS",
     "JSON",
+    "WORKER_PARAMETER",
     "Question",
     "StatusAnswer",
     "ack_args",
@@ -87,6 +95,7 @@ __all__ = [
     "decode",
     "decode_args",
     "encode",
+    "for_worker",
     "journal_args",
     "journal_query_of",
     "month_args",
@@ -99,6 +108,13 @@ _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 
 JSON = "application/json"
 """The encoding of payloads, answers and errors."""
+WORKER_PARAMETER = "worker"
+"""The selector parameter naming the worker a query is for (module docstring)."""
+
+
+def for_worker(key: str, worker: str) -> str:
+    """The selector asking ``key`` of ``worker`` alone: ``<key>?worker=<worker>``."""
+    return f"{key}?{WORKER_PARAMETER}={worker}"
 
 
 class Question(StrEnum):
@@ -115,6 +131,7 @@ class Question(StrEnum):
     ACT = "act"
     FLEET = "fleet"
     JOURNAL = "journal"
+    ACTIONS = "actions"
 
 
 class StatusAnswer(BaseModel):

@@ -3,12 +3,21 @@
 The API process holds no store and analyses nothing; it can run anywhere that reaches the zenoh
 router, and as many copies as needed. It keeps three things in memory:
 
-* **which worker holds which mill** — a liveliness subscriber (with history) on
-  ``millwatch/v1/*/*/@worker/*`` (:func:`millwatch.ingest.keys.worker_token_pattern`). When a
-  worker dies
-  its tokens vanish (measured: a SIGKILLed worker's tokens were gone at the API within 5 ms on
-  127.0.0.1; a frozen host is bounded by the zenoh lease, 10 s by default), and its mills are
-  answered ``unreachable`` at once, without waiting for a query timeout;
+* **which workers hold which mill** — liveliness subscribers (with history) on
+  ``millwatch/v1/*/*/@worker/*`` and, for hot standbys, ``millwatch/v1/*/*/@standby/*``
+  (:func:`millwatch.ingest.keys.worker_token_pattern`). Each question about a mill goes to one
+  worker, named in the selector (``…?worker=<name>``, :mod:`millwatch.remote.protocol`): a live
+  primary, else a live standby (:meth:`ZenohBackend.candidates`). When a worker dies its
+  tokens vanish (measured: a SIGKILLed worker's tokens were gone at the API within 5 ms on
+  127.0.0.1; a frozen host is bounded by the zenoh lease, 10 s by default): its mills are
+  answered by their standby from the next question on, or ``unreachable`` at once when no
+  worker is left, without waiting for a query timeout. A question the chosen worker does not
+  answer (it died between its token and the question, or it is frozen and its lease has not
+  expired) is asked again of the next live worker, after at most :data:`FAILOVER_TIMEOUT_S`;
+  so is one it answers ``503`` (:class:`~millwatch.errors.Unavailable`: e.g. its store is
+  closing).
+  Operator actions go to *every* live worker of the mill (:meth:`ZenohBackend.act`), so a
+  primary and its standby store the same ones;
 * **the alarm board** (:mod:`millwatch.api.alarm_board`) — fed by the workers' ``…/@alarms``
   messages,
   and gathered with one ``get`` on ``…/@query/alarms`` at start and whenever a worker (re)joins;
@@ -57,6 +66,7 @@ from millwatch.errors import BadRequest, Forbidden, GatewayTimeout, NotFound, Un
 from millwatch.ingest.keys import (
     KeyFormatError,
     alarm_pattern,
+    is_standby_token,
     parse_query_key,
     parse_worker_token_key,
     query_key,
@@ -71,6 +81,7 @@ from millwatch.remote.protocol import (
     alarm_args,
     decode,
     encode,
+    for_worker,
     journal_args,
     month_args,
     problem_from,
@@ -82,11 +93,14 @@ from millwatch.reports.monthly import MonthlyReport
 from millwatch.reports.starts import MonthStarts
 from millwatch.status import MillStatus
 
-__all__ = ["DEFAULT_TIMEOUT_S", "ZenohBackend"]
+__all__ = ["DEFAULT_TIMEOUT_S", "FAILOVER_TIMEOUT_S", "ZenohBackend"]
 
 log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT_S = 10.0
+FAILOVER_TIMEOUT_S = 3.0
+"""How long (s) a question waits for a worker when another live worker of the mill could answer
+it instead (the frozen-host case: its token lives until the zenoh lease expires)."""
 
 
 @contextlib.contextmanager
@@ -126,7 +140,10 @@ class ZenohBackend:
         self._board = AlarmBoard()
         self._by_key = {(c.site, c.id): m for m, c in self.mills.items()}
         self._lock = threading.Lock()
-        self._live: dict[str, str] = {}
+        #: mill → live worker → whether it is a hot standby
+        self._live: dict[str, dict[str, bool]] = {}
+        #: mill → every worker seen holding it since this API started (whether a standby)
+        self._seen: dict[str, dict[str, bool]] = {}
         self._left: dict[str, tuple[str, int]] = {}
         self._workers: dict[str, dict[str, Any]] = {}
         self._subscribers: list[zenoh.Subscriber[None]] = []
@@ -138,11 +155,12 @@ class ZenohBackend:
     def start(self) -> None:
         """Subscribe to alarm messages and worker tokens, then gather the alarms once."""
         self._subscribers.append(self.session.declare_subscriber(alarm_pattern(), self._on_alarm))
-        self._subscribers.append(
-            self.session.liveliness().declare_subscriber(
-                worker_token_pattern(), self._on_token, history=True
+        for standby in (False, True):
+            self._subscribers.append(
+                self.session.liveliness().declare_subscriber(
+                    worker_token_pattern(standby=standby), self._on_token, history=True
+                )
             )
-        )
         self.sync_alarms()
 
     def close(self) -> None:
@@ -159,21 +177,29 @@ class ZenohBackend:
             log.warning("ignored alarm message on %s: %s", sample.key_expr, exc)
 
     def _on_token(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
         try:
-            site, mill, worker = parse_worker_token_key(str(sample.key_expr))
+            site, mill, worker = parse_worker_token_key(key)
         except KeyFormatError:
             return
         mill_id = self._by_key.get((site, mill))
         if mill_id is None:
             log.info("worker %s analyses %s/%s, which this API does not serve", worker, site, mill)
             return
+        standby = is_standby_token(key)
         with self._lock:
+            live = self._live.setdefault(mill_id, {})
             if sample.kind == zenoh.SampleKind.PUT:
-                self._live[mill_id] = worker
+                live[worker] = standby
+                self._seen.setdefault(mill_id, {})[worker] = standby
                 self._left.pop(mill_id, None)
-            elif self._live.get(mill_id) == worker:
-                del self._live[mill_id]
-                self._left[mill_id] = (worker, time.time_ns())
+            elif worker in live:
+                del live[worker]
+                if not live:
+                    self._left[mill_id] = (worker, time.time_ns())
+        role = "hot standby" if standby else "worker"
+        joined = sample.kind == zenoh.SampleKind.PUT
+        log.info("%s %s %s mill %s", role, worker, "holds" if joined else "left", mill_id)
         if sample.kind == zenoh.SampleKind.PUT and not self._resync_pending.is_set():
             self._resync_pending.set()  # coalesce the joins of one worker's mills
             self._resync.submit(self._resync_alarms)
@@ -187,9 +213,32 @@ class ZenohBackend:
 
     # ------------------------------------------------------------------ asking
     def live_workers(self) -> dict[str, str]:
-        """Mill → name of the worker that holds its token now."""
+        """Mill → name of the worker that answers it now (:meth:`candidates`' first)."""
+        return {m: c[0] for m in self.mills if (c := self.candidates(m))}
+
+    def candidates(self, mill_id: str) -> list[str]:
+        """The live workers of ``mill_id`` in the order they are asked: primaries, then hot
+        standbys (each by name)."""
         with self._lock:
-            return dict(self._live)
+            live = dict(self._live.get(mill_id, {}))
+        return sorted(live, key=lambda w: (live[w], w))
+
+    def mill_workers(self) -> dict[str, dict[str, Any]]:
+        """Per mill: its live workers (name → ``primary``/``standby``), which one answers, and
+        whether it has lost its redundancy — it had more than one worker since this API
+        started, and has one or none left (``/ready`` warns, ``/metrics`` counts)."""
+        out = {}
+        for mill_id in self.mills:
+            with self._lock:
+                live = dict(self._live.get(mill_id, {}))
+                seen = len(self._seen.get(mill_id, {}))
+            order = sorted(live, key=lambda w: (live[w], w))
+            out[mill_id] = {
+                "workers": {w: "standby" if live[w] else "primary" for w in order},
+                "answering": order[0] if order else None,
+                "redundancy_lost": seen > 1 and len(live) < 2,
+            }
+        return out
 
     def sync_alarms(self) -> int:
         """Gather every live mill's alarms into the board; returns the rows that changed."""
@@ -200,14 +249,23 @@ class ZenohBackend:
         self, what: Question, site: str | None = None, args: dict[str, Any] | None = None
     ) -> dict[str, Any]:
         """One ``get`` on every mill's (of ``site``'s) ``@query/<what>`` (with ``args``): the
-        answers by mill id (mills whose worker is gone, or that did not answer within the
-        timeout, are missing)."""
-        out: dict[str, Any] = {}
+        answers by mill id, each from the first of the mill's :meth:`candidates` that answered
+        (mills whose workers are gone, or did not answer within the timeout, are missing)."""
+        return self.preferred(self._gather_all(what, site, args))
+
+    def _gather_all(
+        self, what: Question, site: str | None = None, args: dict[str, Any] | None = None
+    ) -> dict[str, dict[str, Any]]:
+        """:meth:`_gather`'s answers of every worker that answered: mill → worker → answer
+        (a worker that did not name itself in the reply's attachment is ``""``)."""
+        out: dict[str, dict[str, Any]] = {}
         if not self.live_workers():
             return out
         pattern = query_pattern(what) if site is None else query_pattern(what, site=site)
         payload = None if args is None else encode(args)
-        for reply in self.session.get(pattern, payload=payload, timeout=self.timeout_s):
+        replies = self.session.get(pattern, payload=payload, timeout=self.timeout_s,
+                                   consolidation=zenoh.ConsolidationMode.NONE)  # fmt: skip
+        for reply in replies:
             if reply.ok is None:
                 log.warning("a worker failed %s: %s", what, _error_payload(reply)[:200])
                 continue
@@ -217,27 +275,36 @@ class ZenohBackend:
                 continue
             mill_id = self._by_key.get((site, mill))
             if mill_id is not None:
-                out[mill_id] = decode(reply.ok.payload.to_bytes())
+                worker = _attached_worker(reply.ok)
+                out.setdefault(mill_id, {})[worker] = decode(reply.ok.payload.to_bytes())
         return out
 
     def _ask(self, mill_id: str, what: Question, args: dict[str, Any] | None = None) -> Any:
-        """The answer of ``mill_id``'s worker to ``what`` (module docstring for the errors)."""
+        """The answer of ``mill_id``'s worker to ``what``: its first :meth:`candidates`, the
+        next one when it does not answer (module docstring for the errors)."""
         config = config_of(self.mills, mill_id)
-        worker = self.live_workers().get(mill_id)
-        if worker is None:
+        workers = self.candidates(mill_id)
+        if not workers:
             raise Unavailable("Mill unreachable", self._gone(mill_id))
-        t0 = time.monotonic()
         payload = encode(args or {})
         key = query_key(config.site, config.id, what)
-        text = "no reply"
-        for reply in self.session.get(key, payload=payload, timeout=self.timeout_s):
-            if reply.ok is not None:
-                return decode(reply.ok.payload.to_bytes())
-            raw = _error_payload(reply)
-            problem = problem_from(raw)
-            if problem is not None:
-                raise problem
-            text = raw[:200].decode("utf-8", "replace")  # zenoh's own, e.g. "Timeout"
+        first_timeout_s = min(self.timeout_s, FAILOVER_TIMEOUT_S)
+        for worker in workers[:-1]:
+            try:
+                found, answer, _ = self._ask_one(for_worker(key, worker), payload, first_timeout_s)
+            except Unavailable as exc:  # (e.g. its store is closing): the next one may answer
+                log.warning("worker %s is unavailable for %s about %s (%s); asking the next",
+                            worker, what, mill_id, exc.detail)  # fmt: skip
+                continue
+            if found:
+                return answer
+            log.warning("worker %s did not answer %s about %s; asking the next", worker, what,
+                        mill_id)  # fmt: skip
+        worker = workers[-1]
+        t0 = time.monotonic()
+        found, answer, text = self._ask_one(for_worker(key, worker), payload, self.timeout_s)
+        if found:
+            return answer
         who = self._who(worker)
         if time.monotonic() - t0 < self.timeout_s * 0.9:
             detail = f"{who} did not answer about mill {mill_id!r} ({text}); it may have just "
@@ -245,6 +312,44 @@ class ZenohBackend:
         raise GatewayTimeout("Worker did not answer", f"{who} did not answer about mill "
                              f"{mill_id!r} within {self.timeout_s:g} s (api.query_timeout_s); "
                              "it may be overloaded or hung.")  # fmt: skip
+
+    def _ask_one(self, selector: str, payload: bytes, timeout_s: float) -> tuple[bool, Any, str]:
+        """``(True, answer, "")`` from the worker ``selector`` names, or ``(False, None, why)``
+        when it did not answer; raises the problem it answered with."""
+        text = "no reply"
+        for reply in self.session.get(selector, payload=payload, timeout=timeout_s):
+            if reply.ok is not None:
+                return True, decode(reply.ok.payload.to_bytes()), ""
+            raw = _error_payload(reply)
+            problem = problem_from(raw)
+            if problem is not None:
+                raise problem
+            text = raw[:200].decode("utf-8", "replace")  # zenoh's own, e.g. "Timeout"
+        return False, None, text
+
+    def _ask_every(self, mill_id: str, what: Question, args: dict[str, Any]) -> Any:
+        """``what`` of every live worker of ``mill_id`` (one ``get`` naming none): the answer of
+        the first of :meth:`candidates` that answered; the first problem when none did."""
+        config = config_of(self.mills, mill_id)
+        order = self.candidates(mill_id)
+        if not order:
+            raise Unavailable("Mill unreachable", self._gone(mill_id))
+        answers: dict[str, Any] = {}
+        problems: list[Exception] = []
+        key = query_key(config.site, config.id, what)
+        for reply in self.session.get(key, payload=encode(args), timeout=self.timeout_s,
+                                      consolidation=zenoh.ConsolidationMode.NONE):  # fmt: skip
+            if reply.ok is not None:
+                answers[_attached_worker(reply.ok)] = decode(reply.ok.payload.to_bytes())
+                continue
+            problem = problem_from(_error_payload(reply))
+            if problem is not None:
+                problems.append(problem)
+        if answers:
+            return answers[min(answers, key=lambda w: order.index(w) if w in order else 99)]
+        if problems:
+            raise problems[0]
+        return self._ask(mill_id, what, args)  # (nobody answered: the usual errors)
 
     def _who(self, worker: str) -> str:
         partition = self._workers.get(worker, {}).get("partition")
@@ -277,16 +382,35 @@ class ZenohBackend:
         return self._board
 
     def statuses(self) -> dict[str, StatusAnswer]:
-        """Every reachable mill's status and worker (one gather); an answer that does not fit
-        this API's version is logged and left out (its mill counts as unreachable)."""
+        """Every reachable mill's status and worker (one gather), from the worker that answers
+        it (:meth:`candidates`); an answer that does not fit this API's version is logged and
+        left out (its mill counts as unreachable)."""
+        return self.preferred(self.statuses_by_worker())
+
+    def preferred(self, by_worker: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+        """Per mill, the answer of the first of its :meth:`candidates` among ``by_worker``'s
+        (mill → worker → answer)."""
         out = {}
-        for mill_id, raw in self._gather(Question.STATUS).items():
-            try:
-                out[mill_id] = StatusAnswer.model_validate(raw)
-            except ValidationError as exc:
-                log.warning("status of %s unreadable: %s", mill_id, exc)
-                continue
-            self._remember(out[mill_id].worker)
+        for mill_id, answers in by_worker.items():
+            order = self.candidates(mill_id)
+            best = min(answers, key=lambda w: order.index(w) if w in order else len(order))
+            out[mill_id] = answers[best]
+        return out
+
+    def statuses_by_worker(self) -> dict[str, dict[str, StatusAnswer]]:
+        """Every reachable mill's status from each of its live workers (one gather): mill →
+        worker → answer."""
+        out: dict[str, dict[str, StatusAnswer]] = {}
+        for mill_id, answers in self._gather_all(Question.STATUS).items():
+            for attached, raw in answers.items():
+                try:
+                    answer = StatusAnswer.model_validate(raw)
+                except ValidationError as exc:
+                    log.warning("status of %s unreadable: %s", mill_id, exc)
+                    continue
+                self._remember(answer.worker)
+                name = answer.worker.get("name") or attached
+                out.setdefault(mill_id, {})[str(name)] = answer
         return out
 
     def mills_overview(self) -> list[dict[str, Any]]:
@@ -361,9 +485,11 @@ class ZenohBackend:
         return self._ask(self._alarm_row_mill(alarm_id), Question.ALARM, alarm_args(alarm_id))
 
     def act(self, action: OperatorAction) -> dict[str, Any]:
-        """Ask the alarm's worker to apply an operator action (the route checked the key, the
-        OPC UA server the session's user), signed with ``api_key`` over the whole action
-        (:func:`~millwatch.remote.protocol.act_args`); :class:`Forbidden` without one."""
+        """Ask every live worker of the alarm's mill (a primary and its hot standby) to apply
+        an operator action (the route checked the key, the OPC UA server the session's user),
+        signed with ``api_key`` over the whole action and its time, which both record
+        (:func:`~millwatch.remote.protocol.act_args`); :class:`Forbidden` without a key. The
+        answer is the preferred worker's (:meth:`candidates`)."""
         if not self.api_key:
             raise Forbidden("Alarm actions disabled", "This API has no api.api_key configured, "
                             "so it cannot sign alarm actions for the workers.")  # fmt: skip
@@ -372,7 +498,7 @@ class ZenohBackend:
             action.check_expiry(time.time_ns(), self.max_shelve_s)
         except InvalidActionError as exc:
             raise BadRequest("Invalid shelve expiry", str(exc)) from exc
-        detail = self._ask(mill_id, Question.ACT, act_args(action, self.api_key))
+        detail = self._ask_every(mill_id, Question.ACT, act_args(action, self.api_key))
         self._board.merge([row_from_dict(detail)])
         return detail
 
@@ -381,10 +507,15 @@ class ZenohBackend:
         return self.act(OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by))
 
     def readiness(self) -> dict[str, Any]:
-        """Ready when zenoh is connected, every mill's worker answers and is ready itself
-        (archive, store, worker thread), every mill's data is fresh and every mill is analysed
-        (``held_mills``: why a held one is not), as the in-process ``/ready`` says."""
-        gathered = self.statuses()
+        """Ready when zenoh is connected, every mill's worker answers and every live worker
+        (hot standbys too) is ready itself (archive, store, worker thread), every mill's data
+        is fresh and every mill is analysed (``held_mills``: why a held one is not), as the
+        in-process ``/ready`` says. ``mill_workers`` names each mill's live workers and the one
+        that answers (:meth:`mill_workers`); ``warnings`` names each mill that lost its
+        redundancy (it had a primary and a standby, one is gone): still ready, since the mill
+        is answered, but one more failure makes it dark."""
+        by_worker = self.statuses_by_worker()
+        gathered: dict[str, StatusAnswer] = self.preferred(by_worker)
         stale = {
             m: gathered[m].status.stale_channels if m in gathered else list(c.channels)
             for m, c in self.mills.items()
@@ -392,7 +523,12 @@ class ZenohBackend:
         held = {m: a.status.held_reason for m, a in gathered.items() if a.status.held_reason}
         stalled = {m: a.status.stalled_reason for m, a in gathered.items()
                    if a.status.stalled_reason}  # fmt: skip
-        workers = {a.worker.get("name"): a.worker.get("checks", {}) for a in gathered.values()}
+        workers = {a.worker.get("name"): a.worker.get("checks", {})
+                   for answers in by_worker.values() for a in answers.values()}  # fmt: skip
+        mill_workers = self.mill_workers()
+        warnings = [f"Mill {m!r} has no standby left: only {', '.join(w['workers']) or 'no'} "
+                    "worker answers it; start the missing worker."
+                    for m, w in mill_workers.items() if w["redundancy_lost"]]  # fmt: skip
         checks: dict[str, Any] = {
             "zenoh": not self.session.is_closed() and bool(self.session.info.routers_zid()),
             "workers": workers,
@@ -410,7 +546,8 @@ class ZenohBackend:
             and all(checks["draining"].values())
         )
         return {"ready": ready, "checks": checks, "stale_channels": stale, "held_mills": held,
-                "stalled_mills": stalled}  # fmt: skip
+                "stalled_mills": stalled, "mill_workers": mill_workers,
+                "warnings": warnings}  # fmt: skip
 
     def reports_status(self) -> dict[str, Any]:
         """Each live worker's month-end report job, as its status answers carry it (without
@@ -436,6 +573,12 @@ class ZenohBackend:
         gathered = self._gather(Question.JOURNAL, args=args)
         unreachable = [m for m in self.mills if m not in gathered]
         return JournalPage(merge_pages(gathered.values(), query.limit), unreachable)
+
+
+def _attached_worker(sample: zenoh.Sample) -> str:
+    """The worker a reply names in its attachment (:mod:`millwatch.remote.queryables`)."""
+    attachment = sample.attachment
+    return "" if attachment is None else attachment.to_bytes().decode("utf-8", "replace")
 
 
 def _error_payload(reply: zenoh.Reply) -> bytes:

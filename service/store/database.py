@@ -353,6 +353,33 @@ class Store:
         sql += " ORDER BY t.t_ns, t.alarm_id, t.seq LIMIT ?"
         return self._query_rows(sql, (*args, limit))
 
+    def operator_actions(
+        self, mill_id: str, after_ns: int, kinds: Sequence[str], limit: int = 1000
+    ) -> list[sqlite3.Row]:
+        """The transitions an operator made (``by`` set, ``kind`` one of ``kinds``) of
+        ``mill_id``'s alarms at ``t_ns`` ≥ ``after_ns``, oldest first, at most ``limit``; each
+        row has ``alarm_id``, ``seq``, ``kind``, ``t_ns``, ``by``, ``comment`` and the alarm's
+        current ``shelving_state`` and ``shelved_until_ns`` (what a returning hot-standby pair
+        worker reconciles, :mod:`millwatch.remote.handover`)."""
+        marks = ", ".join("?" * len(kinds))
+        sql = ("SELECT t.alarm_id, t.seq, t.kind, t.t_ns, t.by, t.comment, a.shelving_state, "
+               "a.shelved_until_ns FROM alarm_transitions t JOIN alarms a "
+               "ON a.alarm_id = t.alarm_id WHERE a.mill_id = ? AND t.t_ns >= ? "
+               f"AND t.by IS NOT NULL AND t.kind IN ({marks}) "
+               "ORDER BY t.t_ns, t.alarm_id, t.seq LIMIT ?")  # fmt: skip
+        return self._query_rows(sql, (mill_id, after_ns, *kinds, limit))
+
+    def last_operator_action_ns(self, mill_id: str, kinds: Sequence[str]) -> int | None:
+        """The time (ns) of ``mill_id``'s newest operator transition (:meth:`operator_actions`),
+        or None."""
+        marks = ", ".join("?" * len(kinds))
+        row = self._query_one(
+            "SELECT MAX(t.t_ns) FROM alarm_transitions t JOIN alarms a ON a.alarm_id = t.alarm_id "
+            f"WHERE a.mill_id = ? AND t.by IS NOT NULL AND t.kind IN ({marks})",
+            (mill_id, *kinds),
+        )
+        return None if row is None or row[0] is None else int(row[0])
+
     def latest_checkpoints(self) -> dict[str, tuple[dict[str, Any], dict[str, Any]]]:
         """The newest intact checkpoint of every part: ``part → (position, state)`` (see
         :meth:`choose_checkpoints`, which also says what it refused)."""

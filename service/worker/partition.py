@@ -11,7 +11,9 @@ an error naming it: a typo would otherwise leave mills unanalysed without a word
 
 Two workers must not analyse the same mill: :func:`check_exclusive` asks the router for the
 mills' liveliness tokens (:func:`millwatch.ingest.keys.worker_token_key`) before a worker declares
-its own.
+its own. The exception is a hot standby (``[worker] standby = true``, README "Scale-out"): its
+tokens are ``…/@standby/<name>``, which the check does not see, so a primary starts (and
+recovers) while a standby holds its mills, and a standby starts beside a live primary.
 """
 
 from __future__ import annotations
@@ -61,9 +63,10 @@ def worker_identity(settings: ServiceSettings) -> str:
 
 
 def check_exclusive(session: zenoh.Session, mills: dict[str, MillConfig], me: str) -> None:
-    """Raise :class:`SettingsError` when another live worker holds a token of one of ``mills``
-    (its partition overlaps ours); ``me``: this worker's name, whose own old tokens (a restart
-    before the router noticed the crash) are not a conflict."""
+    """Raise :class:`SettingsError` when another live primary worker holds a token of one of
+    ``mills`` (its partition overlaps ours); ``me``: this worker's name, whose own old tokens (a
+    restart before the router noticed the crash) are not a conflict. Standbys' tokens are not
+    asked for: they never conflict (module docstring)."""
     taken: list[str] = []
     for config in mills.values():
         pattern = worker_token_pattern(config.site, config.id)
@@ -77,5 +80,6 @@ def check_exclusive(session: zenoh.Session, mills: dict[str, MillConfig], me: st
         raise SettingsError(
             "worker.partition: another worker already analyses "
             + ", ".join(sorted(taken))
-            + "; make the workers' partitions disjoint (each mill exactly once)"
+            + "; make the workers' partitions disjoint (each mill exactly once), or make this "
+            "worker a hot standby of them ([worker] standby = true)"
         )

@@ -443,13 +443,15 @@ class ServiceRuntime:
         None when the worker is not running."""
         return self.request_action(mill_id, OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by))
 
-    def request_action(self, mill_id: str, action: OperatorAction) -> ActionRequest | None:
+    def request_action(
+        self, mill_id: str, action: OperatorAction, t_ns: int | None = None
+    ) -> ActionRequest | None:
         """Queue an operator action for the worker thread (see
-        :meth:`Worker.request_action`); None when the worker is not running."""
+        :meth:`Worker.request_action`, ``t_ns`` its time); None when the worker is not running."""
         worker = self.worker
         if worker is None or not self.worker_alive:
             return None
-        return worker.request_action(mill_id, action)
+        return worker.request_action(mill_id, action, t_ns)
 
     # ------------------------------------------------------------------ readiness
     def readiness(self) -> dict[str, Any]:

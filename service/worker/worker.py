@@ -176,6 +176,9 @@ class ActionRequest:
     mill_id: str
     action: OperatorAction
     done: Future[list[Transition]] = field(default_factory=Future)
+    #: When the action counts (ns, wall clock): the time the API signed it, so a hot standby
+    #: and its primary record the same transition time; None: the worker's clock when applied.
+    t_ns: int | None = None
 
 
 class ArchiveLog(Protocol):
@@ -340,8 +343,10 @@ class Worker:
             loss = loss | {"dropped_by_retention": dropped,
                            "never_spooled": loss["missing_blocks"] - dropped}  # fmt: skip
         self._quality(mill_id, channel, loss["first_t_ns"], "sequence_gap", **loss)
+        # (the alarm id from the first lost sample's time, a data time: a hot standby fed the
+        # same blocks raises the same alarm although it received them at another time)
         context = {"channel": channel, "first_seq": loss["first_seq"],
-                   "last_seq": loss["last_seq"]}  # fmt: skip
+                   "last_seq": loss["last_seq"], "id_anchor_ns": loss["first_t_ns"]}  # fmt: skip
         self._observe(mill_id, "sequence_gaps", loss["missing_blocks"], recv_ns, context)
         shown = self.losses[mill_id]
         entry = {"channel": channel, "problem": "sequence_gap", **loss}
@@ -531,9 +536,18 @@ class Worker:
 
     def _silence(self, mill_id: str, now: int, quiet: dict[str, int]) -> list[Observation]:
         """``stale_channel`` observations: seconds each channel has been silent
-        (:meth:`silence_ns`)."""
-        return [Observation(mill_id, "stale_channel", q / 1e9, now, {"channel": channel})
-                for channel, q in quiet.items()]  # fmt: skip
+        (:meth:`silence_ns`); the alarm id is made from the end of the channel's last analysed
+        block (``id_anchor_ns``: :mod:`millwatch.alarms.observations`), a data time, so a hot
+        standby and its primary raise one alarm for one silence."""
+        channels = self.health[mill_id].channels
+        out = []
+        for channel, q in quiet.items():
+            context: dict[str, Any] = {"channel": channel}
+            end = channels[channel].last_sample_ns
+            if end is not None:
+                context["id_anchor_ns"] = end
+            out.append(Observation(mill_id, "stale_channel", q / 1e9, now, context))
+        return out
 
     def _archive(self, archive: ArchiveLog, item: QueuedBlock) -> None:
         try:
@@ -615,13 +629,15 @@ class Worker:
         """:meth:`request_action` of an acknowledgement by ``by``."""
         return self.request_action(mill_id, OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, by))
 
-    def request_action(self, mill_id: str, action: OperatorAction) -> ActionRequest:
+    def request_action(
+        self, mill_id: str, action: OperatorAction, t_ns: int | None = None
+    ) -> ActionRequest:
         """Ask the worker thread to apply an operator action to an alarm of ``mill_id`` (any
         thread may call this); wait on the request's ``done`` future. The worker applies it
         at its next :meth:`step` (within ~0.1 s) at its wall clock, stores and publishes its
         transitions like any other, then checkpoints (an action is a wall-clock fact the
-        archive cannot replay)."""
-        request = ActionRequest(mill_id, action)
+        archive cannot replay). ``t_ns``: the action's own time (:class:`ActionRequest`)."""
+        request = ActionRequest(mill_id, action, t_ns=t_ns)
         self._acks.put(request)
         return request
 
@@ -683,7 +699,8 @@ class Worker:
         engine = self.pipelines[request.mill_id].alarms
         alarm_id = request.action.alarm_id
         stored = None if engine.alarm(alarm_id) is not None else self.store.alarm(alarm_id)
-        return engine.act(request.action, self._clock(), stored)
+        t_ns = self._clock() if request.t_ns is None else request.t_ns
+        return engine.act(request.action, t_ns, stored)
 
     def _expire_shelves(self) -> set[str]:
         """Unshelve the alarms whose timed shelve expired (wall clock; at most every

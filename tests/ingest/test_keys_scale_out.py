@@ -7,6 +7,7 @@ import zenoh
 
 from millwatch.ingest.keys import (
     KeyFormatError,
+    is_standby_token,
     key_matches,
     live_pattern,
     parse_query_key,
@@ -34,6 +35,16 @@ def test_worker_tokens_build_parse_and_match_their_pattern():
     assert parse_worker_token_key(key) == ("carletonville", "rod-1100-grid", "south")
     assert key_matches(worker_token_pattern(), key)
     assert key_matches(worker_token_pattern(mill="rod-1100-grid"), key)
+    assert not is_standby_token(key)
+
+
+def test_a_hot_standbys_tokens_are_apart_from_the_primaries():
+    key = worker_token_key("carletonville", "rod-1100-grid", "south-b", standby=True)
+    assert key == "millwatch/v1/carletonville/rod-1100-grid/@standby/south-b"
+    assert parse_worker_token_key(key) == ("carletonville", "rod-1100-grid", "south-b")
+    assert is_standby_token(key)
+    assert key_matches(worker_token_pattern(standby=True), key)
+    assert not key_matches(worker_token_pattern(), key)  # a primary's check never sees it
 
 
 def test_wildcards_never_reach_queries_or_tokens():

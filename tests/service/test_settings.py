@@ -243,3 +243,14 @@ def test_the_longest_shelve_is_bounded(tmp_path):
     path.write_text("[api]\nmax_shelve_s = 864000\n")
     with pytest.raises(SettingsError, match=r"api\.max_shelve_s"):
         load_service_settings(path)
+
+
+@pytest.mark.parametrize("value", ['"yes"', '"true"', "1", "0"])
+def test_standby_is_a_boolean_nothing_else(tmp_path, value):
+    path = tmp_path / "standby.toml"
+    path.write_text(f"[worker]\nstandby = {value}\n")
+    with pytest.raises(SettingsError, match=r"worker\.standby: .* is not a boolean"):
+        load_service_settings(path)
+    path.write_text("[worker]\nstandby = true\n")
+    assert load_service_settings(path).worker.standby is True
+    assert ServiceSettings().worker.standby is False

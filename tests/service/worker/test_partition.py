@@ -75,14 +75,34 @@ def test_a_second_worker_for_the_same_mill_is_refused():
         token.undeclare()
 
 
+def test_a_hot_standby_shares_the_mills_of_a_primary_but_two_primaries_do_not():
+    port = free_loopback_port()
+    sag = {"sag-5200-lrs": MILLS["sag-5200-lrs"]}
+    router = build_config(mode="router", listen=[tcp_endpoint(port)])
+    client = build_config(mode="client", connect=[tcp_endpoint(port)])
+    with open_session(router) as first, open_session(client) as second:
+        standby = first.liveliness().declare_token(
+            worker_token_key("rustenburg", "sag-5200-lrs", "north-standby", standby=True)
+        )
+        check_exclusive(second, sag, "north")  # a primary starts while its standby holds
+        primary = first.liveliness().declare_token(
+            worker_token_key("rustenburg", "sag-5200-lrs", "north")
+        )
+        with pytest.raises(SettingsError, match=r"standby = true"):
+            check_exclusive(second, sag, "south")  # a second primary is refused, with the way out
+        primary.undeclare()
+        standby.undeclare()
+
+
 def test_the_example_plant_workers_split_the_mills_exactly_once():
     deploy = Path(__file__).resolve().parents[3] / "deploy"
-    split = {}
+    split, standbys = {}, {}
     for path in sorted(deploy.glob("worker-*.toml")):
         settings = load_service_settings(path)
-        split[settings.worker.name] = set(
-            partition_mills(settings.load_mills(), settings.worker.partition)
-        )
+        mills = set(partition_mills(settings.load_mills(), settings.worker.partition))
+        (standbys if settings.worker.standby else split)[settings.worker.name] = mills
+    # each primary has a hot standby of exactly its mills (the two-host layout)
+    assert {f"{name}-standby": mills for name, mills in split.items()} == standbys
     assert len(split) == 2 and all(split.values())
     assert sorted(m for mills in split.values() for m in mills) == sorted(MILLS)
     api = load_service_settings(deploy / "api.toml")
