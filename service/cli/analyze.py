@@ -333,6 +333,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "  millwatch analyze start.mcap --mill deploy/mills/sag-5200-lrs.toml --json\n"
             "  millwatch analyze archive/ --mill deploy/mills/ --jobs 0   # all mills and cores\n"
             "  millwatch analyze archive/ --mill deploy/mills/sag-5200-lrs.toml --no-spectra\n"
+            "  millwatch analyze /mnt/archive --mill deploy/mills --scheduler tcp://10.0.0.5:8786\n"
             "\n"
             'speed (measured, README Benchmarks "Offline analysis"): a week of one mill, running\n'
             "74 % of the time, at about 1,200-1,400x real time per core with every analysis on\n"
@@ -349,6 +350,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="processes to split the mills over (default 1; 0 = one per core); one "
                         "mill is always analysed by one process")  # fmt: skip
+    p.add_argument("--scheduler", metavar="tcp://HOST:8786|local:N",
+                   help="run on Dask distributed instead of --jobs, one task per mill (the "
+                        "workers read the files at the paths given: a shared filesystem); "
+                        "local:N starts N worker processes on this machine for the run; the "
+                        "same report, byte for byte (README 'Fleet re-analysis')")  # fmt: skip
     p.add_argument("--no-spectra", action="store_true",
                    help="skip the harmonic spectra: states, events, steady state and damage "
                         "are the same; harmonics, unexplained peaks not computed")  # fmt: skip
@@ -383,8 +389,14 @@ def _main(args: argparse.Namespace) -> int:
     jobs = args.jobs or os.cpu_count() or 1
     progress = not args.no_progress and sys.stderr.isatty()
     started = time.perf_counter()
-    results = run_jobs(plan_jobs(files, configs, jobs, spectra=not args.no_spectra),
-                       progress=progress)  # fmt: skip
+    if args.scheduler:  # (Dask is an optional extra: imported only when asked for)
+        from millwatch.fleet.distributed import analyze_on_dask
+
+        results = analyze_on_dask(files, configs, args.scheduler, spectra=not args.no_spectra,
+                                  progress=progress)  # fmt: skip
+    else:
+        results = run_jobs(plan_jobs(files, configs, jobs, spectra=not args.no_spectra),
+                           progress=progress)  # fmt: skip
     read = ReadingStats()
     for r in results:
         read.merge(r["reading"])
