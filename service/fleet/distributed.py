@@ -35,7 +35,7 @@ import os
 import re
 import sys
 import uuid
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -206,15 +206,20 @@ def _quiet_scheduler() -> Iterator[None]:
 
 
 def run_on_dask(
-    tasks: Sequence[MillTask], client: Client, *, progress: bool = False
+    tasks: Sequence[MillTask],
+    client: Client,
+    *,
+    progress: bool = False,
+    analyze: Callable[[MillTask], dict[str, Any]] = analyze_mill,
 ) -> list[dict[str, Any]]:
-    """Run the tasks on the client's cluster; their results in the order of ``tasks``. A
-    progress bar over tasks (mills) on stderr when ``progress``. Errors name the mill."""
+    """Run ``analyze`` on each task on the client's cluster; their results in the order of
+    ``tasks``. A progress bar over tasks (mills) on stderr when ``progress``. Errors name the
+    mill."""
     from distributed import as_completed
 
     run = uuid.uuid4().hex[:8]
     futures = {
-        client.submit(analyze_mill, task, key=f"millwatch-analyze-{task.mill}-{run}", pure=False): k
+        client.submit(analyze, task, key=f"millwatch-analyze-{task.mill}-{run}", pure=False): k
         for k, task in enumerate(tasks)
     }
     results: dict[int, dict[str, Any]] = {}
