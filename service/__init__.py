@@ -21,10 +21,12 @@ Composition: the service around the analytics — commands, worker, store, API, 
 * ``reports/`` — the monthly damage report, life and starts summaries, and their renderers.
 * ``export/`` — the archive for other tools: a span of a mill as an MCAP file Foxglove plots,
   with the analyzer's and alarm rules' conclusions (``millwatch archive export``).
+* ``fleet/`` — fleet re-analysis: ``millwatch analyze --scheduler`` as one task per mill on a
+  Dask cluster (an optional dependency), the same report as one process.
 
-Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote`` / ``export``; ``worker`` →
-``store``; ``api`` → ``store``, ``reports``, and the ``worker`` runtime it serves; ``remote``
-sits between ``api`` and the workers. A new command goes in ``cli/``, a new route in
-``api/routes/``, a new report in ``reports/``, a new stored table in ``store/``, a new export
-format in ``export/``.
+Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote`` / ``export`` / ``fleet``;
+``fleet`` → ``worker``; ``worker`` → ``store``; ``api`` → ``store``, ``reports``, and the
+``worker`` runtime it serves; ``remote`` sits between ``api`` and the workers. A new command goes
+in ``cli/``, a new route in ``api/routes/``, a new report in ``reports/``, a new stored table in
+``store/``, a new export format in ``export/``, another engine for re-analysis in ``fleet/``.
 """

@@ -1,0 +1,182 @@
+"""Benchmark: fleet re-analysis, ``millwatch analyze --scheduler local:N``, over 1 and 2 workers.
+
+Issue 29: a year of a 20-mill site is 7,300 mill-days; how fast does it go on a Dask cluster,
+and is it the same as one process? The fleet is four mills (the SAG and rod mill files of
+``deploy/mills`` and a copy of each under another id, four channels each), each
+``millwatch simulate --scene month`` (seed 0, float32, hourly files named after the mill) of
+``--hours`` hours, written once (``--fleet DIR`` keeps and reuses them). Cases, each the whole
+command as a subprocess (start-up, the cluster's start, reading, analysis, the JSON report):
+
+* ``--jobs 1``: one process, the reference;
+* ``--scheduler local:1`` and ``local:2``: one task per mill on a local cluster of 1 and 2
+  worker processes (one thread each);
+* ``local:2, shared files``: the same files under names of no mill, as a worker's archive
+  holds all its mills: every task reads (decompresses) every mill's blocks and keeps its own.
+
+Reported: wall time, CPU time of the command and all its processes (user + system, the
+workers' included: they are its children), mill-hours analysed per CPU-hour and per wall-hour,
+and that every case's JSON equals the reference byte for byte (else the run fails). Then the
+arithmetic for a 20-mill year at the measured rates.
+
+    .venv/bin/python tests/bench/bench_fleet.py [--hours 3] [--fleet DIR] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+MILLS = ROOT / "deploy" / "mills"
+MILLWATCH = Path(sys.executable).with_name("millwatch")
+#: A year of a 20-mill site.
+SITE_MILLS, SITE_DAYS = 20, 365
+
+
+def fleet_configs(directory: Path) -> list[Path]:
+    """The four mill files: the SAG and rod mills and a copy of each under another id."""
+    directory.mkdir(parents=True, exist_ok=True)
+    configs = []
+    for name in ("sag-5200-lrs", "rod-1100-grid"):
+        text = (MILLS / f"{name}.toml").read_text()
+        configs.append(MILLS / f"{name}.toml")
+        twin = directory / f"{name}-2.toml"
+        twin.write_text(text.replace(f'id = "{name}"', f'id = "{name}-2"', 1))
+        configs.append(twin)
+    return configs
+
+
+def ensure_fleet(directory: Path, configs: list[Path], hours: float) -> None:
+    """Each mill's ``hours`` of the month scene (written unless present)."""
+    if any(directory.glob("*.mcap")):
+        return
+    started = time.perf_counter()
+    for config in configs:
+        subprocess.run([str(MILLWATCH), "simulate", "--scene", "month", "--seed", "0", "--dtype",
+                        "float32", "--duration", f"{hours * 3600:.0f}s", "--mill", str(config),
+                        "--out", str(directory), "--no-progress"],
+                       check=True, stdout=subprocess.DEVNULL)  # fmt: skip
+    print(f"fleet: {len(configs)} mills × {hours:g} h written in "
+          f"{time.perf_counter() - started:.0f} s", file=sys.stderr)  # fmt: skip
+
+
+def shared_names(directory: Path, shared: Path) -> None:
+    """The fleet's files under names of no mill (links), in time order then mill order."""
+    shared.mkdir(exist_ok=True)
+    for old in shared.glob("*.mcap"):
+        old.unlink()
+    files = sorted(directory.glob("*.mcap"), key=lambda p: (p.name.rsplit("_", 1)[1], p.name))
+    for k, path in enumerate(files):
+        (shared / f"archive_{k:05d}.mcap").symlink_to(path.resolve())
+
+
+def run_once(recording: Path, configs: list[Path], extra: list[str]) -> tuple[float, float, str]:
+    """(wall s, CPU s of the command and its processes, JSON) of one ``millwatch analyze``."""
+    mills = [a for c in configs for a in ("--mill", str(c))]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
+    done = subprocess.run([str(MILLWATCH), "analyze", str(recording), *mills, "--json",
+                           "--no-progress", *extra], check=True, capture_output=True,
+                          text=True)  # fmt: skip
+    wall = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, done.stdout
+
+
+def site_year(rate_cpu: float, rate_task: float, read_other: float) -> dict[str, Any]:
+    """A 20-mill year at ``rate_cpu`` mill-hours per CPU-hour: CPU-hours, and wall hours on W
+    workers (one task per mill: ceil(20 / W) mill-years one after the other on a worker, each
+    at ``rate_task`` mill-hours per wall-hour of a worker with a core of its own); and the same
+    from an archive of shared files, where each task also reads the 19 other mills' blocks at
+    ``read_other`` (a fraction of one mill's own cost per other mill)."""
+    mill_hours = SITE_MILLS * SITE_DAYS * 24
+    year = SITE_DAYS * 24 / rate_task
+    shared = 1 + (SITE_MILLS - 1) * read_other
+    return {
+        "mill_days": SITE_MILLS * SITE_DAYS,
+        "cpu_hours": mill_hours / rate_cpu,
+        "wall_hours": {w: math.ceil(SITE_MILLS / w) * year for w in (1, 2, 4, 10, 20)},
+        "read_other_pct": 100 * read_other,
+        "shared_cpu_hours": mill_hours / rate_cpu * shared,
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--hours", type=float, default=3.0, help="hours of the month scene per mill")
+    ap.add_argument("--fleet", type=Path, help="directory to keep and reuse the recordings in")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        directory = args.fleet or Path(tmp) / "fleet"
+        configs = fleet_configs(directory / "mills")
+        ensure_fleet(directory, configs, args.hours)
+        shared_names(directory, directory / "shared")
+        cases = {
+            "--jobs 1": (directory, []),
+            "local:1": (directory, ["--scheduler", "local:1"]),
+            "local:2": (directory, ["--scheduler", "local:2"]),
+            "local:2, shared files": (directory / "shared", ["--scheduler", "local:2"]),
+        }
+        rows, reference = [], None
+        for name, (recording, extra) in cases.items():
+            wall, cpu, out = run_once(recording, configs, extra)
+            reference = reference if reference is not None else out
+            report = json.loads(out)
+            if name != "local:2, shared files":  # (its reading part names other files)
+                assert out == reference, f"{name}: the JSON differs from one process's"
+            else:
+                assert [m["damage"] for m in report["mills"]] == [
+                    m["damage"] for m in json.loads(reference)["mills"]
+                ], f"{name}: the damage differs from one process's"
+            mill_h = sum(m["samples"] for m in report["mills"]) / 1000.0 / 3600
+            rows.append({"case": name, "mill_hours": mill_h, "wall_s": wall, "cpu_s": cpu,
+                         "per_cpu_hour": mill_h * 3600 / cpu,
+                         "per_wall_hour": mill_h * 3600 / wall})  # fmt: skip
+    running = _running_share(json.loads(reference or "{}"))
+    # a task's rate on a worker with its own core: the one-worker cluster's CPU rate
+    # reading a mill's blocks that a task then drops, as a share of a mill's own analysis
+    read_other = (rows[3]["cpu_s"] / rows[2]["cpu_s"] - 1) / (len(configs) - 1)
+    year = site_year(rows[0]["per_cpu_hour"], rows[1]["per_cpu_hour"], max(read_other, 0.0))
+    if args.json:
+        print(json.dumps({"rows": rows, "running_pct": running, "site_year": year}, indent=1))
+        return 0
+    _print(rows, running, year)
+    return 0
+
+
+def _running_share(report: dict[str, Any]) -> float:
+    mills = report.get("mills", [])
+    run = sum(m["phase_seconds"].get("run", 0.0) for m in mills)
+    return 100 * run / max(sum(m["samples"] / 1000.0 for m in mills), 1e-9)
+
+
+def _print(rows: list[dict[str, Any]], running: float, year: dict[str, Any]) -> None:
+    print(f"4 mills × {rows[0]['mill_hours'] / 4:g} h of the month scene ({running:.0f} % "
+          f"running), {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")  # fmt: skip
+    print(f"{'case':24} {'wall s':>7} {'cpu s':>7} {'mill-h/CPU-h':>13} {'mill-h/wall-h':>14}")
+    for r in rows:
+        print(f"{r['case']:24} {r['wall_s']:7.1f} {r['cpu_s']:7.1f} {r['per_cpu_hour']:13,.0f} "
+              f"{r['per_wall_hour']:14,.0f}")  # fmt: skip
+    print("every case's JSON = one process's, byte for byte (shared files: the same damage)")
+    print(f"20-mill year ({year['mill_days']:,} mill-days) at the one-process rate: "
+          f"{year['cpu_hours']:,.0f} CPU-hours")  # fmt: skip
+    for w, hours in year["wall_hours"].items():
+        print(f"  on {w:2d} worker(s), a core each: {hours:7.1f} h wall")
+    print(f"shared files: each other mill's blocks read costs {year['read_other_pct']:.1f} % of "
+          f"a mill's analysis; a 20-mill year from a shared archive: "
+          f"{year['shared_cpu_hours']:,.0f} CPU-hours")  # fmt: skip
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
