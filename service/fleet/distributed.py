@@ -5,7 +5,8 @@ machine, the rainflow residue, the damage booked per phase, the spectra's window
 over from one block to the next — so one mill's recording is analysed by one task, in the
 recording's order, exactly as one process does (:func:`millwatch.worker.offline_analysis
 .analyze_files`). The mills are independent of each other, so the tasks are the mills: a
-20-mill site's year is 20 tasks of a year each. Splitting one mill's recording in time would
+20-mill site's year is 20 tasks of a year each (or, from a shared archive, one task per worker
+thread, each a group of mills: below). Splitting one mill's recording in time would
 need the analyzer's state at each cut; restoring a snapshot continues bitwise (crash recovery
 relies on it), but the snapshot at a cut exists only once the recording before it has been
 analysed, so the pieces would run one after the other anyway. Guessing a start state (an idle
@@ -21,6 +22,10 @@ Which files a task reads, and counts in: a file named after a mill (``<mill id>_
 ``millwatch simulate --out DIR`` names them) is read only by that mill's task; any other file
 (a worker's archive, which holds all its mills' blocks) by every task, and exactly one task
 counts the blocks of no given mill in it (blocks of the other given mills are not foreign).
+Reading a shared file costs every task that reads it the decompression and scan of all its
+mills' blocks (measured: 0.16-0.17 s of CPU per other mill-hour, about a tenth of a running
+mill's analysis), so with shared files the mills are dealt into one task per worker thread
+instead of one task per mill: a 20-mill archive on 4 workers is read 4 times, not 20.
 
 Failures: an unreachable scheduler is named with its address and the time waited; a worker
 that dies mid-task is replaced by Dask and the task run again (up to the scheduler's
@@ -69,12 +74,12 @@ _LOCAL = re.compile(r"local(?::(?P<n>\d+))?")
 
 @dataclass(frozen=True)
 class MillTask:
-    """One mill's analysis: its configuration, the files it reads in the recording's order
-    (as given: relative ones are taken from ``cwd``, the command's working directory), those it
-    does not count foreign blocks in (another task does), the other given mills (their blocks
-    are not foreign) and whether spectra are computed."""
+    """One task: its mills (one, or a group when they share files), the files it reads in the
+    recording's order (as given: relative ones are taken from ``cwd``, the command's working
+    directory), those it does not count foreign blocks in (another task does), the other given
+    mills (their blocks are not foreign) and whether spectra are computed."""
 
-    config: MillConfig
+    configs: tuple[MillConfig, ...]
     files: tuple[Path, ...]
     uncounted: frozenset[Path]
     others: tuple[MillConfig, ...]
@@ -83,27 +88,38 @@ class MillTask:
 
     @property
     def mill(self) -> str:
-        return self.config.id
+        """The task's mill ids, for messages (``a, b``)."""
+        return ", ".join(c.id for c in self.configs)
 
 
 def plan_tasks(
-    files: Sequence[Path], configs: Sequence[MillConfig], *, spectra: bool = True
+    files: Sequence[Path],
+    configs: Sequence[MillConfig],
+    *,
+    spectra: bool = True,
+    shared_groups: int | None = None,
 ) -> list[MillTask]:
-    """One task per mill, in the order given (see the module docstring for who reads and
-    counts which file)."""
+    """One task per mill in the order given, or, when a file is named after no mill (a shared
+    archive, which every task would read whole), ``shared_groups`` tasks of mills (dealt in
+    turn; None: still one per mill): see the module docstring for who reads and counts which
+    file."""
     ids = sorted((c.id for c in configs), key=len, reverse=True)  # longest prefix wins
-    cwd = Path.cwd()
 
     def owner(path: Path) -> str | None:
         return next((m for m in ids if path.name.startswith(f"{m}_")), None)
 
+    groups = [[c] for c in configs]
+    if shared_groups is not None and any(owner(p) is None for p in files):
+        n = max(1, min(shared_groups, len(configs)))
+        groups = [list(configs[k::n]) for k in range(n)]
     tasks: list[MillTask] = []
     counted: set[Path] = set()
-    for config in configs:
-        reads = [p for p in files if owner(p) in (None, config.id)]
-        others = tuple(c for c in configs if c.id != config.id)
+    for group in groups:
+        mine = {c.id for c in group}
+        reads = [p for p in files if owner(p) is None or owner(p) in mine]
+        others = tuple(c for c in configs if c.id not in mine)
         uncounted = frozenset(counted & set(reads))
-        tasks.append(MillTask(config, tuple(reads), uncounted, others, cwd, spectra))
+        tasks.append(MillTask(tuple(group), tuple(reads), uncounted, others, Path.cwd(), spectra))
         counted.update(reads)
     return tasks
 
@@ -120,7 +136,7 @@ def analyze_mill(task: MillTask) -> dict[str, Any]:
                 "workers read the files themselves, at the path given (a shared filesystem)"
             )
     sink, read = analyze_files(
-        paths, [task.config], spectra=task.spectra, others=task.others,
+        paths, task.configs, spectra=task.spectra, others=task.others,
         uncounted=frozenset(task.cwd / p for p in task.uncounted),
     )  # fmt: skip
     try:
@@ -128,10 +144,11 @@ def analyze_mill(task: MillTask) -> dict[str, Any]:
         given = {str(path): str(p) for path, p in zip(paths, task.files, strict=True)}
         read.files = [given[f] for f in read.files]
         read.unreadable_tails = {given[f]: e for f, e in read.unreadable_tails.items()}
-        analyzer = sink.analyzers[task.mill]
-        reports = (
-            {task.mill: (analyzer.report(), sink.reading(task.mill))} if analyzer.samples else {}
-        )
+        reports = {
+            mill_id: (analyzer.report(), sink.reading(mill_id))
+            for mill_id, analyzer in sink.analyzers.items()
+            if analyzer.samples
+        }
     finally:
         sink.close()
     return {"reports": reports, "reading": read}
@@ -226,13 +243,13 @@ def run_on_dask(
     analyze: Callable[[MillTask], dict[str, Any]] = analyze_mill,
 ) -> list[dict[str, Any]]:
     """Run ``analyze`` on each task on the client's cluster; their results in the order of
-    ``tasks``. A progress bar over tasks (mills) on stderr when ``progress``. Errors name the
-    mill."""
+    ``tasks``. A progress bar over tasks on stderr when ``progress``. Errors name the task's
+    mills."""
     from distributed import as_completed
 
     run = uuid.uuid4().hex[:8]
     futures = {
-        client.submit(analyze, task, key=f"millwatch-analyze-{task.mill}-{run}", pure=False): k
+        client.submit(analyze, task, key=f"millwatch-analyze-{k}-{run}", pure=False): k
         for k, task in enumerate(tasks)
     }
     results: dict[int, dict[str, Any]] = {}
@@ -256,11 +273,11 @@ def _result(future: Any, task: MillTask) -> dict[str, Any]:
         result: dict[str, Any] = future.result()
     except KilledWorker as exc:
         raise RuntimeError(
-            f"analysis of mill {task.mill} on Dask: every worker that ran it died ({exc}); "
+            f"analysis of mill(s) {task.mill} on Dask: every worker that ran it died ({exc}); "
             "a worker's memory limit, or a crash in it, is the usual cause"
         ) from exc
     except ValueError as exc:  # a user error (an unreadable file) reads as one
-        raise ValueError(f"analysis of mill {task.mill} on Dask: {exc}") from exc
+        raise ValueError(f"analysis of mill(s) {task.mill} on Dask: {exc}") from exc
     return result
 
 
@@ -269,6 +286,9 @@ def analyze_on_dask(
     spectra: bool = True, progress: bool = False, timeout_s: float = CONNECT_TIMEOUT_S,
 ) -> list[dict[str, Any]]:  # fmt: skip
     """``millwatch analyze --scheduler``: the mills of ``files`` analysed on the scheduler
-    (:func:`dask_client`), one task each (:func:`plan_tasks`, :func:`run_on_dask`)."""
+    (:func:`dask_client`), one task each, or from shared files one task per worker thread
+    (:func:`plan_tasks`, :func:`run_on_dask`)."""
     with dask_client(scheduler, timeout_s=timeout_s) as client:
-        return run_on_dask(plan_tasks(files, configs, spectra=spectra), client, progress=progress)
+        threads = sum(client.nthreads().values()) or None  # (none yet: one task per mill)
+        tasks = plan_tasks(files, configs, spectra=spectra, shared_groups=threads)
+        return run_on_dask(tasks, client, progress=progress)

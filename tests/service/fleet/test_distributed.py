@@ -87,6 +87,12 @@ def test_dask_gives_the_report_of_one_process_byte_for_byte(plant, cluster):
     assert foreign == len(load_mill_config(BALL).channels) * 40_000 // 100  # blocks of 100
 
 
+def test_a_group_of_mills_on_a_worker_gives_the_same_bytes(plant, cluster):
+    """Three mills, shared files, two worker threads: two tasks, one of two mills."""
+    given = [str(plant), "--mill", str(SAG), "--mill", str(ROD), "--mill", str(BALL)]
+    assert _analyze(*given, "--scheduler", cluster.scheduler_address) == _analyze(*given)
+
+
 def test_one_task_per_mill_reads_its_own_files_and_the_shared_ones(plant):
     files = sorted(plant.glob("*.mcap"))
     sag, rod = load_mill_config(SAG), load_mill_config(ROD)
@@ -97,6 +103,18 @@ def test_one_task_per_mill_reads_its_own_files_and_the_shared_ones(plant):
     assert own and set(tasks[0].files) == {*own, *shared} and not tasks[0].uncounted
     assert tasks[1].files == tuple(shared) and tasks[1].uncounted == set(shared)
     assert tasks[0].others == (rod,) and tasks[1].others == (sag,)
+
+
+def test_mills_sharing_files_are_grouped_one_task_per_worker_thread(plant):
+    """A shared file is read whole by every task that reads it: with shared files, as many
+    tasks as worker threads; with each mill's own files, one per mill whatever the threads."""
+    ball, rod, sag = (load_mill_config(m) for m in (BALL, ROD, SAG))
+    shared = [plant / "b.mcap", plant / "c.mcap"]
+    grouped = plan_tasks(shared, [sag, rod, ball], shared_groups=2)
+    assert [t.mill for t in grouped] == ["sag-5200-lrs, ball-dual-lrs", "rod-1100-grid"]
+    assert grouped[1].others == (sag, ball) and grouped[1].uncounted == set(shared)
+    own = sorted(plant.glob("sag-5200-lrs_*.mcap"))
+    assert len(plan_tasks(own, [sag, rod, ball], shared_groups=2)) == 3
 
 
 def test_a_local_cluster_started_for_the_run(plant):
@@ -141,7 +159,7 @@ def test_a_mill_whose_workers_keep_dying_is_named(plant, cluster):
     tasks = plan_tasks([plant / "b.mcap"], [load_mill_config(ROD)])
     with (
         dask_client(cluster.scheduler_address) as client,
-        pytest.raises(RuntimeError, match="mill rod-1100-grid on Dask: every worker"),
+        pytest.raises(RuntimeError, match=r"mill\(s\) rod-1100-grid on Dask: every worker"),
     ):
         run_on_dask(tasks, client, analyze=_die_always)
 
@@ -152,7 +170,7 @@ def test_a_file_the_workers_cannot_see_is_named_with_the_mill(plant, cluster):
     with dask_client(cluster.scheduler_address) as client, pytest.raises(ValueError) as err:
         run_on_dask([elsewhere], client)
     message = str(err.value)
-    assert "mill rod-1100-grid" in message and "not-shared/b.mcap" in message
+    assert "mill(s) rod-1100-grid" in message and "not-shared/b.mcap" in message
     assert "not found on the Dask worker tcp://127.0.0.1:" in message
 
 
