@@ -15,7 +15,9 @@ command as a subprocess (start-up, the cluster's start, reading, analysis, the J
   mills' (two tasks of two mills: one per worker thread).
 
 And, in this process, what reading another mill's blocks costs a task (one mill's files read by
-a task of another mill: decompressed, scanned, dropped), CPU seconds per mill-hour.
+a task of another mill: decompressed, scanned, dropped), CPU seconds per mill-hour; and the
+tasks alone on 1 and 2 workers of a cluster started first (its start timed apart), wall time and
+the workers' CPU time, so the scaling shows without the start-up.
 
 Reported: wall time, CPU time of the command and all its processes (user + system, the
 workers' included: they are its children), mill-hours analysed per CPU-hour and per wall-hour,
@@ -123,6 +125,29 @@ def site_year(rate_cpu: float, rate_task: float, read_s: float) -> dict[str, Any
     return out
 
 
+def _cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def tasks_only(directory: Path, configs: list[Path], workers: int) -> dict[str, float]:
+    """In this process: the cluster's start (wall s), then the tasks alone on ``workers``
+    workers (wall s, and the workers' CPU s), so start-up does not hide the scaling."""
+    from millwatch.fleet.distributed import dask_client, plan_tasks, run_on_dask
+    from millwatch.ingest.mill_files import load_mill_config
+
+    mills = [load_mill_config(c) for c in configs]
+    started = time.perf_counter()
+    with dask_client(f"local:{workers}") as client:
+        up = time.perf_counter() - started
+        before = sum(client.run(_cpu_s).values())
+        started = time.perf_counter()
+        run_on_dask(plan_tasks(sorted(directory.glob("*.mcap")), mills), client)
+        wall = time.perf_counter() - started
+        cpu = sum(client.run(_cpu_s).values()) - before
+    return {"workers": workers, "start_s": up, "wall_s": wall, "cpu_s": cpu}
+
+
 def read_cost(directory: Path, configs: list[Path], hours: float) -> float:
     """CPU s per mill-hour of reading one mill's files in a task of another mill (best of 3)."""
     import resource as r
@@ -175,13 +200,21 @@ def main() -> int:
                          "per_cpu_hour": mill_h * 3600 / cpu,
                          "per_wall_hour": mill_h * 3600 / wall})  # fmt: skip
         read_s = read_cost(directory, configs, args.hours)
+        alone = [tasks_only(directory, configs, w) for w in (1, 2)]
     running = _running_share(json.loads(reference or "{}"))
     # a task's rate on a worker with its own core: the one-worker cluster's CPU rate
     year = site_year(rows[0]["per_cpu_hour"], rows[1]["per_cpu_hour"], read_s)
     if args.json:
-        print(json.dumps({"rows": rows, "running_pct": running, "site_year": year}, indent=1))
+        print(json.dumps({"rows": rows, "tasks_only": alone, "running_pct": running,
+                          "site_year": year}, indent=1))  # fmt: skip
         return 0
     _print(rows, running, year)
+    mill_h = rows[0]["mill_hours"]
+    print("tasks alone (cluster started first)   start s  wall s  workers' cpu s  mill-h/wall-h")
+    for a in alone:
+        print(f"local:{a['workers']:<31d} {a['start_s']:7.1f} {a['wall_s']:7.1f} "
+              f"{a['cpu_s']:15.1f} {mill_h * 3600 / a['wall_s']:14,.0f}")  # fmt: skip
+    print(f"speed-up of the tasks on 2 workers: {alone[0]['wall_s'] / alone[1]['wall_s']:.2f}x")
     return 0
 
 
