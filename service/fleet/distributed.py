@@ -23,7 +23,7 @@ Which files a task reads, and counts in: a file named after a mill (``<mill id>_
 (a worker's archive, which holds all its mills' blocks) by every task, and exactly one task
 counts the blocks of no given mill in it (blocks of the other given mills are not foreign).
 Reading a shared file costs every task that reads it the decompression and scan of all its
-mills' blocks (measured: 0.16-0.17 s of CPU per other mill-hour, about a tenth of a running
+mills' blocks (measured: 0.13-0.21 s of CPU per other mill-hour, about a tenth of a running
 mill's analysis), so with shared files the mills are dealt into one task per worker thread
 instead of one task per mill: a 20-mill archive on 4 workers is read 4 times, not 20.
 
