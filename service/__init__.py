@@ -25,12 +25,16 @@ Composition: the service around the analytics — commands, worker, store, API, 
   and ``millwatch.analyze`` (``millwatch analyze`` as DataFrames), re-exported here lazily
   (module ``__getattr__``), so that a command never imports pandas.
 
-Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote`` / ``export``; ``toolkit`` →
-``worker`` and ``cli.analyze`` (the same analysis, the same report); ``worker`` → ``store``;
-``api`` → ``store``, ``reports``, and the ``worker`` runtime it serves; ``remote`` sits between
-``api`` and the workers. A new command goes in ``cli/``, a new route in ``api/routes/``, a new
-report in ``reports/``, a new stored table in ``store/``, a new export format in ``export/``, a
-new notebook function in ``toolkit/`` (and the re-export below).
+* ``fleet/`` — fleet re-analysis: ``millwatch analyze --scheduler`` as one task per mill on a
+  Dask cluster (an optional dependency), the same report as one process.
+
+Who calls whom: ``cli`` → ``worker`` / ``api`` / ``remote`` / ``export`` / ``fleet``;
+``toolkit`` → ``worker`` and ``cli.analyze`` (the same analysis, the same report); ``fleet`` →
+``worker``; ``worker`` → ``store``; ``api`` → ``store``, ``reports``, and the ``worker`` runtime
+it serves; ``remote`` sits between ``api`` and the workers. A new command goes in ``cli/``, a
+new route in ``api/routes/``, a new report in ``reports/``, a new stored table in ``store/``, a
+new export format in ``export/``, a new notebook function in ``toolkit/`` (and the re-export
+below), another engine for re-analysis in ``fleet/``.
 """
 
 from typing import TYPE_CHECKING, Any

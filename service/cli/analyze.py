@@ -26,7 +26,7 @@ import os
 import queue
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -120,6 +120,7 @@ class _Job:
     spectra: bool
     background: bool = False  # the spectra of each mill on a thread of its own
     matrices: bool = False  # each report with its range–mean matrices (for --plots)
+    others: list[MillConfig] = field(default_factory=list)  # given mills other jobs analyse
 
 
 def plan_jobs(files: list[Path], configs: list[MillConfig], jobs: int, *,
@@ -151,7 +152,8 @@ def plan_jobs(files: list[Path], configs: list[MillConfig], jobs: int, *,
         mine = {c.id for c in group}
         reads = [p for p in files if own[p] is None or own[p] in mine]
         reads_of = [(p, p not in counted) for p in reads]
-        plan.append(_Job(group, reads_of, spectra, background, matrices))
+        others = [c for c in configs if c.id not in mine]  # their blocks are not foreign
+        plan.append(_Job(group, reads_of, spectra, background, matrices, others))
         counted.update(reads)
     return plan
 
@@ -161,7 +163,7 @@ def _run_job(job: _Job, advance: Any) -> dict[str, Any]:
     sink, read = analyze_files(
         [p for p, _ in job.files], job.configs, spectra=job.spectra, advance=advance,
         uncounted=frozenset(p for p, counts in job.files if not counts),
-        background=job.background,
+        background=job.background, others=job.others,
     )  # fmt: skip
     try:
         reports = {
@@ -443,6 +445,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "  millwatch analyze start.mcap --mill deploy/mills/sag-5200-lrs.toml --json\n"
             "  millwatch analyze archive/ --mill deploy/mills/ --jobs 0   # all mills and cores\n"
             "  millwatch analyze archive/ --mill deploy/mills/sag-5200-lrs.toml --no-spectra\n"
+            "  millwatch analyze /mnt/archive --mill deploy/mills --scheduler tcp://10.0.0.5:8786\n"
             "\n"
             'speed (measured, README Benchmarks "Offline analysis"): 12 h of one mill, running\n'
             "91 % of the time, at about 2,200-2,500x real time per core of CPU with every\n"
@@ -466,6 +469,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="processes to split the mills over (default 1; 0 = one per core); one "
                         "mill is always analysed by one process")  # fmt: skip
+    p.add_argument("--scheduler", metavar="tcp://HOST:8786|local:N",
+                   help="run on Dask distributed instead of --jobs, one task per mill (the "
+                        "workers read the files at the paths given: a shared filesystem); "
+                        "local:N starts N worker processes on this machine for the run; the "
+                        "same report, byte for byte (README 'Fleet re-analysis')")  # fmt: skip
     p.add_argument("--no-spectra", action="store_true",
                    help="skip the harmonic spectra: states, events, steady state and damage "
                         "are the same; harmonics, unexplained peaks not computed")  # fmt: skip
@@ -501,12 +509,22 @@ def _main(args: argparse.Namespace) -> int:
     files = [f for r in args.recording for f in recording_files(r)]
     if args.jobs < 0:
         raise ValueError(f"--jobs {args.jobs}: must be ≥ 0 (0 = one process per core)")
+    if args.scheduler and args.plots is not None:
+        raise ValueError(f"--plots {args.plots} with --scheduler {args.scheduler}: the plots are "
+                         "drawn from the recording on this machine; run --plots without "
+                         "--scheduler (one mill at a time is quick)")  # fmt: skip
     jobs = args.jobs or os.cpu_count() or 1
     progress = not args.no_progress and sys.stderr.isatty()
     started = time.perf_counter()
-    plan = plan_jobs(files, configs, jobs, spectra=not args.no_spectra,
-                     matrices=args.plots is not None)  # fmt: skip
-    results = run_jobs(plan, progress=progress)
+    if args.scheduler:  # (Dask is an optional extra: imported only when asked for)
+        from millwatch.fleet.distributed import analyze_on_dask
+
+        results = analyze_on_dask(files, configs, args.scheduler, spectra=not args.no_spectra,
+                                  progress=progress)  # fmt: skip
+    else:
+        plan = plan_jobs(files, configs, jobs, spectra=not args.no_spectra,
+                         matrices=args.plots is not None)  # fmt: skip
+        results = run_jobs(plan, progress=progress)
     read = ReadingStats()
     for r in results:
         read.merge(r["reading"])

@@ -38,6 +38,7 @@ from millwatch.analytics.spectra.facts import HarmonicWindow
 from millwatch.analytics.spectra.tracker import HarmonicTracker
 from millwatch.ingest.archive.batches import BatchReader, MessageBatch
 from millwatch.ingest.archive.files import ArchiveError
+from millwatch.ingest.keys import ChannelRoutes
 from millwatch.ingest.wire import decode_headers
 from millwatch.worker.admission import BlockAdmission
 from millwatch.worker.batch_lane import BatchLane
@@ -416,24 +417,27 @@ def analyze_files(
     uncounted: frozenset[Path] = frozenset(),
     background: bool = False,
     cycle_log: Callable[[], CycleLog] | None = None,
+    others: Sequence[MillConfig] = (),
 ) -> tuple[OfflineSink, ReadingStats]:
     """Analyse ``configs``' mills over ``files`` (in order, one stream); ``advance(bytes)``
     reports progress; blocks of no given mill in ``uncounted`` files are not counted (another
-    job's share counts them); ``background``: each mill's spectra on a thread of its own
-    (:class:`BackgroundSpectra`: for cores that would idle otherwise); ``cycle_log``: makes
-    each analyzer's record of its cycles (``MillAnalyzer.cycles``, ``record_matrix``). Returns
-    the sink (its analyzers flushed; :meth:`OfflineSink.close` it after reading the reports) and
-    what reading met. The files are read a batch or two ahead by a thread
-    (:func:`_sink_batches`); ``advance`` follows the analysis (:class:`AnalysisProgress`), the
-    files' sizes in all."""
+    job's share counts them), nor are the blocks of ``others`` (mills another job analyses);
+    ``background``: each mill's spectra on a thread of its own (:class:`BackgroundSpectra`: for
+    cores that would idle otherwise); ``cycle_log``: makes each analyzer's record of its cycles
+    (``MillAnalyzer.cycles``, ``record_matrix``). Returns the sink (its analyzers flushed;
+    :meth:`OfflineSink.close` it after reading the reports) and what reading met. The files are
+    read a batch or two ahead by a thread (:func:`_sink_batches`); ``advance`` follows the
+    analysis (:class:`AnalysisProgress`), the files' sizes in all."""
     sink = OfflineSink(configs, spectra=spectra, background=background, cycle_log=cycle_log)
     progress = AnalysisProgress(sink, advance)
     lane = BatchLane(sink)
     stats = ReadingStats()
+    theirs = ChannelRoutes(others, replayed=True).route
     for path, ours, foreign, nbytes in _sink_batches(files, sink, stats):
         if path not in uncounted:
             for key, blocks in foreign.items():
-                sink.admission.count_foreign(key, blocks)
+                if theirs(key) is None:
+                    sink.admission.count_foreign(key, blocks)
         if len(ours):
             lane.replay(ours)
         progress.handed(nbytes)
