@@ -187,7 +187,7 @@ class MillAnalyzer:
         self._tacho = self._tacho_stage(fs)
         self._loads = LoadAnalysis(self.analysis_config, ring_s=RING_LOOKBACK_S + chunk_s)
         self._loads.fatigue.cycle_log = cycle_log  # (a whole record's: offline analyses only)
-        self._loads.fatigue.damage_batch = damage_batch
+        self._loads.fatigue.damage_batch = self._loads.app_d.batch = damage_batch
         # mills started together compute their spectra at different samples (issue 5 latency)
         self._harmonics = HarmonicTracker(self.analysis_config, stagger=stagger_for(config.id))
         #: What feeds the tracker: the tracker itself, or the runner built around it
