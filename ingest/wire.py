@@ -334,7 +334,10 @@ def decode_headers(
     size = HEADER_SIZE
     padded = buf if buf.shape[0] >= size else np.concatenate((buf, np.zeros(size, np.uint8)))
     at = np.minimum(offset, padded.shape[0] - size)
-    head = padded[at[:, None] + np.arange(size)].reshape(-1).view(HEADER_DTYPE)
+    # each payload's first ``size`` bytes as a row of a sliding-window view: one index per
+    # payload, not one per byte (the (payloads × size) index array cost ~4 % of an analysis)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, size)
+    head = windows[at].reshape(-1).view(HEADER_DTYPE)
     itemsize = _ITEMSIZE[head["dtype"]]
     fs = head["fs"]
     ok = (

@@ -21,7 +21,7 @@ Curves and sums::
                      correction, equivalent range
     sn_models        named S-N models → curves
     exact_sum        correctly rounded sums (compensated, for a year of 1 kHz data); ExactSum
-    *_kernels        compiled loops of rainflow, damage and the exact sum
+    *_kernels        compiled loops of rainflow, damage, the exact sum and matrix binning
 
 Damage by operating phase (a recorder that also needs the operating states) lives one room up,
 in :mod:`millwatch.analytics.mill.phase_damage`, so that fatigue and operation import nothing of

@@ -37,6 +37,7 @@ import numpy.typing as npt
 from numpy.typing import ArrayLike
 
 from millwatch.analytics.contracts import check_snapshot
+from millwatch.analytics.fatigue import matrix_kernels as _mk
 from millwatch.analytics.fatigue.cycles import Cycles
 from millwatch.analytics.fatigue.sn_curves import GoodmanCorrection, SNCurve
 from millwatch.analytics.snapshot_arrays import pack_array, unpack_array
@@ -125,10 +126,17 @@ class _Matrix:
     def cell_index(self, x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
         """The flat cell (row bin × columns + column bin, under/overflow bins included) of each
         pair of coordinates (signal unit): what :meth:`add_cells` books."""
-        if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(x1))):
+        a = np.ascontiguousarray(x0, dtype=np.float64)
+        b = np.ascontiguousarray(x1, dtype=np.float64)
+        if a.shape != b.shape or a.ndim != 1:
+            if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(x1))):
+                raise ValueError("cycles hold non-finite values")
+            flat = _bin_index(self._edges[0], x0) * self._counts.shape[1]
+            return flat + _bin_index(self._edges[1], x1)
+        out = np.empty(a.shape[0], dtype=np.int64)
+        if not _mk.flat_cells(self._edges[0], self._edges[1], a, b, out):
             raise ValueError("cycles hold non-finite values")
-        flat = _bin_index(self._edges[0], x0) * self._counts.shape[1]
-        return flat + _bin_index(self._edges[1], x1)
+        return out
 
     def add_cells(self, cells: npt.ArrayLike, half_cycles: npt.ArrayLike) -> None:
         """Add ``half_cycles`` (whole numbers ≥ 0) at the flat ``cells`` of :meth:`cell_index`."""

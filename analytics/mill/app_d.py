@@ -206,7 +206,8 @@ class _Portion:
     """One open portion: a rainflow counter per component, its cycles not yet costed, their
     damage so far and the portion's sample count."""
 
-    def __init__(self, components: list[str]) -> None:
+    def __init__(self, components: list[str], batch: int = _BATCH) -> None:
+        self.batch = batch  # cycles held before they are costed (results do not depend on it)
         self.counters = {c: RainflowCounter() for c in components}
         self.damage = {c: MinerSum() for c in components}
         self.raw: dict[str, list[tuple[np.ndarray, ...]]] = {c: [] for c in components}
@@ -216,12 +217,13 @@ class _Portion:
     def feed(self, stress: Mapping[str, np.ndarray], recorders: Mapping[str, DamageRecorder],
              n: int) -> None:  # fmt: skip
         for comp, x in stress.items():
-            cycles = self.counters[comp].feed(x[np.isfinite(x)])
+            ok = np.isfinite(x)
+            cycles = self.counters[comp].feed(x if ok.all() else x[ok])
             if len(cycles):
                 self.raw[comp].append((cycles.range.copy(), cycles.mean.copy(),
                                        cycles.count.copy()))  # fmt: skip
                 self.raw_n[comp] += len(cycles)
-                if self.raw_n[comp] >= _BATCH:
+                if self.raw_n[comp] >= self.batch:
                     self._cost(comp, recorders[comp])
         self.samples += n
 
@@ -268,7 +270,8 @@ class AppDCounting:
 
     #: ``recorders``: the components' damage recorders of the load stage (its configuration),
     #: as last passed in.
-    CONFIGURED = frozenset({"fs", "components", "margin", "preroll", "recorders"})
+    #: ``batch``: cycles a portion holds before costing them (an offline analysis: more).
+    CONFIGURED = frozenset({"fs", "components", "margin", "preroll", "recorders", "batch"})
 
     def __init__(self, fs: float, components: list[str]) -> None:
         self.fs = fs
@@ -276,6 +279,7 @@ class AppDCounting:
         self.margin = round(SWITCH_OFF_MARGIN_S * fs)
         self.preroll = round(START_PREROLL_S * fs)
         self.recorders: Mapping[str, DamageRecorder] = {}
+        self.batch = _BATCH
         self.app_d_portions = _Book(self.components)
 
     @property
@@ -342,12 +346,12 @@ class AppDCounting:
         b = self._b
         b.state, since, b.since = int(st), b.since, tr.sample
         if st == OperatingState.STARTING:
-            b.start_stop, b.cycle_run = _Portion(self.components), self._zero_run()
+            b.start_stop, b.cycle_run = _Portion(self.components, self.batch), self._zero_run()
             if prev == OperatingState.STOPPED:
                 self._preroll(ring, max(since, tr.sample - self.preroll), tr.sample, stress,
                               recorders)  # fmt: skip
         elif st == OperatingState.RUNNING:
-            self._b.run = _Portion(self.components)
+            self._b.run = _Portion(self.components, self.batch)
         elif st == OperatingState.STOPPED and prev == OperatingState.STOPPING:
             self._book_start_stop(recorders)
         elif st in (OperatingState.STOPPED, OperatingState.BARRING):

@@ -44,7 +44,7 @@ from millwatch.analytics.fatigue.rainflow import RainflowCounter
 from millwatch.analytics.mill.app_d import AppDCost
 from millwatch.analytics.mill.cycle_matrix import CycleMatrixDays, matrix_edges
 from millwatch.analytics.mill.load_roles import LoadRoles
-from millwatch.analytics.mill.phase_damage import PhaseDamage, PhaseTimeline
+from millwatch.analytics.mill.phase_damage import BATCH, PhaseDamage, PhaseTimeline
 from millwatch.analytics.mill.report import damage_table
 
 __all__ = ["FatigueCounting"]
@@ -56,7 +56,7 @@ class FatigueCounting:
     """Rainflow counters and damage recorders of a mill's components (module docstring)."""
 
     #: ``cycle_log``: the caller's record of the cycles (an offline analysis), not state.
-    CONFIGURED = frozenset({"config", "roles", "fs", "cycle_log"})
+    CONFIGURED = frozenset({"config", "roles", "fs", "cycle_log", "damage_batch"})
 
     def __init__(self, config: MillConfig, roles: LoadRoles, fs: float) -> None:
         self.config = config
@@ -70,6 +70,9 @@ class FatigueCounting:
         #: A whole record's cycles (matrices, or every cycle), when a caller asks for them
         #: before the first sample (:meth:`logged`).
         self.cycle_log: CycleLog | None = None
+        #: Raw cycles each damage recorder holds before costing them in one pass
+        #: (:data:`millwatch.analytics.mill.phase_damage.BATCH`; results do not depend on it).
+        self.damage_batch = BATCH
 
     def keys(self) -> list[str]:
         """The counted traces: each component, the combined one on every plane of the critical
@@ -120,7 +123,9 @@ class FatigueCounting:
             )
             bound = bounds.get(c)
             matrices = None if bound is None else CycleMatrixDays(*matrix_edges(bound))
-            self.damage[key] = PhaseDamage(rec, t0_ns, self.fs, cfg.time_zone, matrices=matrices)
+            self.damage[key] = PhaseDamage(
+                rec, t0_ns, self.fs, cfg.time_zone, matrices=matrices, batch=self.damage_batch
+            )
             if self.cycle_log is not None and bound is not None:  # the whole record's matrix
                 self.cycle_log.bin(key, RangeMeanMatrix(*matrix_edges(bound)), rec.scale)
 
@@ -316,6 +321,8 @@ class FatigueCounting:
         self.last = {k: float(v) for k, v in d["last"].items()}
         self.counters = {c: RainflowCounter.restore(s) for c, s in d["counters"].items()}
         self.damage = {c: PhaseDamage.restore(s) for c, s in d["damage"].items()}
+        for pd in self.damage.values():
+            pd.batch = self.damage_batch
         self._add_matrices()
 
     def _add_matrices(self) -> None:

@@ -94,8 +94,8 @@ class SteadyProgress:
         2011 §8.1: what the bending alarms, metrics and reports show)."""
         amplitude = {name: w.range_per_rev[name] / 2.0
                      for name, scale in self.meter.channels.items() if scale is None}  # fmt: skip
-        return dataclasses.asdict(w) | {"t_ns": self.clock.t_ns(w.sample),
-                                        "bending_amplitude_mpa": amplitude}  # fmt: skip
+        return _as_dict(w) | {"t_ns": self.clock.t_ns(w.sample),
+                              "bending_amplitude_mpa": amplitude}  # fmt: skip
 
     def snapshot(self) -> dict[str, Any]:
         """The meter's progress and kept windows (plain JSON data)."""
@@ -110,3 +110,13 @@ class SteadyProgress:
         self.steady_until = d["steady_until"]
         self.windows = d["windows"]
         self.meter.restore_state(d["meter"])
+
+
+_WINDOW_FIELDS = tuple(f.name for f in dataclasses.fields(SteadyWindow))
+
+
+def _as_dict(w: SteadyWindow) -> dict[str, Any]:
+    """``dataclasses.asdict(w)`` for a window (scalars and flat dicts of scalars), without its
+    recursive deep copy: a window a minute, that copy was ~4 % of an offline analysis's CPU."""
+    return {name: dict(v) if isinstance(v := getattr(w, name), dict) else v
+            for name in _WINDOW_FIELDS}  # fmt: skip

@@ -84,6 +84,12 @@ MONTH_S = 28 * 86_400.0
 SECONDS_PER_YEAR = 365.25 * 86_400.0
 """A Julian year (s): the one year every damage rate and remaining life is counted in."""
 
+BATCH = 4096
+"""Raw cycles :class:`PhaseDamage` holds before costing and attributing them in one pass (the
+live default: a stopped mill's noise fills it in a few seconds). An offline analysis takes
+:data:`millwatch.analytics.mill.analyzer.OFFLINE_DAMAGE_BATCH`: the sums are exact, so the
+results are bitwise the same whatever the batch."""
+
 APP_D_SCENARIOS = {"5/day": 140.0, "1/day": 28.0, "1/week": 4.0, "1/month": 1.0}
 """Starts per (4-week) month of the four App. D scenarios."""
 
@@ -136,6 +142,7 @@ class PhaseDamage:
 
     ``record(cycles, timeline, decided_until)`` attributes the decided cycles and keeps the rest
     pending. ``t0_ns``/``fs`` convert stream samples to time; ``time_zone`` names the site's days.
+    ``batch``: raw cycles held before they are costed and attributed (:data:`BATCH`).
     ``matrices`` (optional): the range-mean matrices the attributed cycles are also binned in by
     day and phase, at their stress after the recorder's ``scale`` (MPa;
     :mod:`millwatch.analytics.mill.cycle_matrix`).
@@ -149,6 +156,7 @@ class PhaseDamage:
         time_zone: str = "UTC",
         keep_days: int = 400,
         matrices: CycleMatrixDays | None = None,
+        batch: int = BATCH,
     ) -> None:
         self.recorder = recorder
         self.t0_ns = int(t0_ns)
@@ -161,7 +169,7 @@ class PhaseDamage:
         self.total = MinerSum()
         self.cycles_by_day: dict[str, dict[str, float]] = {}
         self.matrices = matrices
-        self.batch = 4096
+        self.batch = batch
         # cycles not yet costed: rows range, mean, count; and stream i_end (grown on demand)
         self._raw_f = np.empty((3, 0))
         self._raw_i = np.empty(0, dtype=np.int64)

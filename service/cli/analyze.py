@@ -450,7 +450,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             'speed (measured, README Benchmarks "Offline analysis"): 12 h of one mill, running\n'
             "91 % of the time, at about 2,200-2,500x real time per core of CPU with every\n"
             "analysis on; --no-spectra skips the harmonic spectra, about a third of the work,\n"
-            "for questions about starts, stops and damage: about 3,400-3,600x.\n"
+            "for questions about starts, stops and damage: about 3,500-3,700x.\n"
             "\n"
             "output: times in site time with their offset (the zone in the header); events in\n"
             "time order (--json: 'events', beside 'starts', 'stops', 'barring'); a data-quality\n"

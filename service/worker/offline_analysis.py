@@ -33,7 +33,7 @@ import numpy as np
 
 from millwatch.analytics.drivetrain.mill_config import MillConfig
 from millwatch.analytics.fatigue.cycle_log import CycleLog
-from millwatch.analytics.mill.analyzer import OFFLINE_CHUNK_S, MillAnalyzer
+from millwatch.analytics.mill.analyzer import OFFLINE_CHUNK_S, OFFLINE_DAMAGE_BATCH, MillAnalyzer
 from millwatch.analytics.spectra.facts import HarmonicWindow
 from millwatch.analytics.spectra.tracker import HarmonicTracker
 from millwatch.ingest.archive.batches import BatchReader, MessageBatch
@@ -197,6 +197,7 @@ class OfflineSink(_AdmittingSink):
                 spectra=spectra,
                 spectra_runner=runner,
                 chunk_s=OFFLINE_CHUNK_S,
+                damage_batch=OFFLINE_DAMAGE_BATCH,
                 cycle_log=None if cycle_log is None else cycle_log(),
             )
             for c in configs

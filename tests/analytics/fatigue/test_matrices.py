@@ -218,3 +218,39 @@ def test_snapshot_round_trip_through_json() -> None:
             type(mat).restore(snap | {"version": 99})
         with pytest.raises(ValueError, match="counts"):
             type(mat).restore(snap | {"half_cycles": [[1]]})
+
+
+_FINITE = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
+
+
+@given(
+    edges0=st.lists(_FINITE, min_size=2, max_size=12, unique=True),
+    edges1=st.lists(_FINITE, min_size=2, max_size=12, unique=True),
+    x=st.lists(st.tuples(_FINITE, _FINITE), min_size=1, max_size=50),
+    on_edges=st.booleans(),
+)
+@settings(max_examples=200, deadline=None)
+def test_cell_index_is_searchsorted_right(
+    edges0: list[float], edges1: list[float], x: list[tuple[float, float]], on_edges: bool
+) -> None:
+    """The compiled binning books each value where ``searchsorted(edges, x, "right")`` does,
+    on any spacing of the edges and exactly on an edge or beside it."""
+    e0, e1 = np.sort(edges0), np.sort(edges1)
+    a, b = np.array([p[0] for p in x]), np.array([p[1] for p in x])
+    if on_edges:  # each edge, its neighbours one ulp away, and far outside
+        a = np.concatenate([a, e0, np.nextafter(e0, np.inf), np.nextafter(e0, -np.inf), [1e300]])
+        b = np.resize(np.concatenate([b, e1, np.nextafter(e1, -np.inf), [-1e300]]), a.size)
+    m = RangeMeanMatrix(e0, e1)
+    got = m.cell_index(a, b)
+    want = np.searchsorted(e0, a, side="right") * (e1.size + 1) + np.searchsorted(
+        e1, b, side="right"
+    )
+    assert got.tolist() == want.tolist()
+
+
+def test_cell_index_rejects_non_finite() -> None:
+    m = RangeMeanMatrix(uniform_edges(0.0, 10.0, 5), uniform_edges(-5.0, 5.0, 5))
+    with pytest.raises(ValueError, match="non-finite"):
+        m.cell_index(np.array([1.0, np.inf]), np.array([0.0, 0.0]))
+    with pytest.raises(ValueError, match="non-finite"):
+        m.cell_index(np.array([1.0, 2.0]), np.array([0.0, np.nan]))

@@ -15,9 +15,11 @@ from millwatch.analytics.mill.analyzer import (
     DERIVED_SPEED,
     MAX_CHUNK_S,
     OFFLINE_CHUNK_S,
+    OFFLINE_DAMAGE_BATCH,
     MillAnalyzer,
     analysis_config,
 )
+from millwatch.analytics.mill.phase_damage import BATCH
 from millwatch.ingest.mill_files import load_mill_config
 from millwatch.ingest.sim.scenes import get_scene
 
@@ -85,10 +87,12 @@ def test_speed_from_tacho_pulses_when_no_rpm_channel_is_configured():
     assert np.isfinite(rep["steady_state"][0]["speed_pct"])
 
 
-def _queued_report(config, scene, names, rng, max_batch: int, chunk_s: float = MAX_CHUNK_S) -> str:
+def _queued_report(
+    config, scene, names, rng, max_batch: int, chunk_s: float = MAX_CHUNK_S, damage_batch=BATCH
+) -> str:
     """Blocks added in random batches of 1..max_batch block times, processed in between (in
-    chunks of up to ``chunk_s``)."""
-    m = MillAnalyzer(config, chunk_s=chunk_s)
+    chunks of up to ``chunk_s``; damage costed in batches of ``damage_batch`` cycles)."""
+    m = MillAnalyzer(config, chunk_s=chunk_s, damage_batch=damage_batch)
     block_times = list(range(0, scene.n_samples, 100))
     data = scene.render(0, scene.n_samples)
     k = 0
@@ -106,7 +110,8 @@ def _queued_report(config, scene, names, rng, max_batch: int, chunk_s: float = M
 def test_long_chunks_give_the_block_by_block_report_bitwise():
     """Starts, stops, barring, faults, steady windows, damage and spectra: the analysis of
     chunks up to MAX_CHUNK_S — and up to an offline analysis's OFFLINE_CHUNK_S, batches of up
-    to 200 s — equals the analysis block by block (random batching)."""
+    to 200 s — equals the analysis block by block (random batching), whatever batch of cycles
+    the damage is costed in (an offline analysis's OFFLINE_DAMAGE_BATCH, or a few cycles)."""
     from millwatch.ingest.sim.spec import (
         BarringEvent,
         DropoutEvent,
@@ -131,7 +136,9 @@ def test_long_chunks_give_the_block_by_block_report_bitwise():
                 one.push(name, t0, fs, x)
         want = report(one)
         assert _queued_report(config, scene, channels, rng, 400) == want
-        assert _queued_report(config, scene, channels, rng, 2000, OFFLINE_CHUNK_S) == want
+        assert _queued_report(config, scene, channels, rng, 2000, OFFLINE_CHUNK_S,
+                              OFFLINE_DAMAGE_BATCH) == want  # fmt: skip
+        assert _queued_report(config, scene, channels, rng, 2000, OFFLINE_CHUNK_S, 7) == want
         rep = json.loads(want)
         assert rep["starts"] and rep["barring"] and rep["steady_state"]
 
