@@ -82,7 +82,8 @@ speed_drift_pct = 1.0
                  str(tmp_path / "spiked.png"), "--report", str(report)]) == 0  # fmt: skip
     got = json.loads(report.read_text())
     assert got["data_quality"]["faults"]["speed"]["spikes"] >= 10
-    assert got["summary"]["segments_used"] == clean["summary"]["segments_used"] >= 7
+    # 2 min of running in segments that do not overlap (HarmonicSettings.overlap 0): 5 of them
+    assert got["summary"]["segments_used"] == clean["summary"]["segments_used"] >= 5
     assert set(got["summary"]["segments_dropped"].values()) == {0}
     pairs = [(g, w) for g, w in zip(got["harmonics"], clean["harmonics"], strict=True)
              if w["frequency_hz"] is not None]  # fmt: skip
