@@ -153,7 +153,15 @@ def test_failover_to_the_hot_standby_and_back_loses_nothing(tmp_path):
         time.sleep(STALE_AFTER_S + 3.0)
         ends = lambda: {n: plant.worker_status(n).get("last_sample_ns") for n in plant.dirs}  # noqa: E731
         assert wait(lambda: len(set(ends().values())) == 1, 60.0, every_s=1.0), ends()
-        time.sleep(2.0)  # (a status snapshot every 0.5 s; the alarms' batch commits)
+
+        def stale_stored(name: str) -> int:
+            return sum(r[0] == "stale_channel" for r in _alarms(plant.dirs[name]).values())
+
+        # both stores hold every channel's stale alarm (raised on each worker's own check and
+        # committed in its next batch: a bounded wait, not a fixed sleep, on a loaded machine)
+        assert wait(lambda: min(map(stale_stored, (PRIMARY, STANDBY))) >= len(CONFIG.channels),
+                    30.0, every_s=0.5), ({n: stale_stored(n) for n in (PRIMARY, STANDBY)},
+                                         plant.procs.logs())  # fmt: skip
         for name in (PRIMARY, STANDBY):
             assert plant.procs.stop(name) == 0, plant.procs.logs()
     finally:
