@@ -37,9 +37,9 @@ from millwatch.alarms.report import alarms_for_report
 from millwatch.alarms.times import iso_local
 from millwatch.analytics.drivetrain.mill_config import MillConfig
 from millwatch.analytics.mill.analyzer import MillAnalyzer
+from millwatch.cli.args import mill_option
 from millwatch.ingest import wire
 from millwatch.ingest.archive.reader import RawMessage
-from millwatch.ingest.mill_files import load_mill_config
 from millwatch.worker.admission import BlockAdmission
 from millwatch.worker.offline_analysis import ReadingStats, analyze_files
 
@@ -494,10 +494,7 @@ def _configs(paths: list[Path]) -> list[MillConfig]:
         if not files:
             raise ValueError(f"--mill {path}: directory holds no .toml mill configurations")
         for f in files:
-            try:
-                config = load_mill_config(f)
-            except ValueError as exc:
-                raise ValueError(f"--mill {exc}") from exc
+            config = mill_option(f)
             if config.id in configs:
                 raise ValueError(f"--mill {f}: mill {config.id!r} is given twice")
             configs[config.id] = config

@@ -42,7 +42,7 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
 from millwatch.alarms.times import iso_utc
-from millwatch.cli.args import duration_seconds, utc_time_ns
+from millwatch.cli.args import duration_seconds, mill_option, utc_time_ns
 from millwatch.cli.legacy.archive_import import add_import_parser
 from millwatch.ingest.archive.files import MCAP_MAGIC, ArchiveError
 from millwatch.ingest.archive.reader import TailTolerantReader
@@ -272,15 +272,11 @@ def _export(args: argparse.Namespace) -> int:
     # heavy imports here, not at module level: 'millwatch --help' must not pay for them
     from millwatch.cli.analyze import _Blocks, recording_files
     from millwatch.export.foxglove import export_archive
-    from millwatch.ingest.mill_files import load_mill_config
     from millwatch.worker.offline_analysis import export_files
 
     if args.out.exists() and not args.force:
         raise ArchiveCommandError(f"--out {args.out}: file exists; remove it or add --force")
-    try:
-        config = load_mill_config(args.mill)
-    except ValueError as exc:
-        raise ValueError(f"--mill {exc}") from exc
+    config = mill_option(args.mill)
     files = [f for path in args.archive for f in recording_files(path)]
     progress = not args.no_progress and sys.stderr.isatty()
     started = time.perf_counter()

@@ -9,11 +9,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # (imported when used: the TLS module loads cryptography)
+    from millwatch.analytics.drivetrain.mill_config import MillConfig
     from millwatch.ingest.zenoh_tls import TlsFiles
 
 __all__ = [
     "add_tls_arguments",
     "duration_seconds",
+    "mill_option",
     "non_negative_float",
     "positive_float",
     "positive_int",
@@ -125,3 +127,14 @@ def tls_files(args: argparse.Namespace, default_name: str | None) -> TlsFiles | 
                          "gateway.rustenburg.sag-5200-lrs)")  # fmt: skip
     d = args.tls_dir
     return TlsFiles(d / "ca.pem", d / f"{name}.pem", d / f"{name}-key.pem")
+
+
+def mill_option(path: Path) -> MillConfig:
+    """The mill file ``path`` given to ``--mill``, loaded; a bad one is a ValueError that names
+    the option and the file's problem (the command's usual error line)."""
+    from millwatch.ingest.mill_files import load_mill_config  # (pydantic: only when run)
+
+    try:
+        return load_mill_config(path)
+    except ValueError as exc:
+        raise ValueError(f"--mill {exc}") from exc

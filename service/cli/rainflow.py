@@ -37,7 +37,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 from millwatch.analytics.fatigue.residue_modes import RESIDUE_MODE_HELP, ResidueMode
 from millwatch.analytics.fatigue.sn_models import APP_D_S_UT, SN_MODEL_NAMES
-from millwatch.cli.args import non_negative_float, positive_float, positive_int
+from millwatch.cli.args import mill_option, non_negative_float, positive_float, positive_int
 
 if TYPE_CHECKING:  # numpy and the counter are imported by the functions that count
     import numpy as np
@@ -352,17 +352,13 @@ def _from_mill(args: argparse.Namespace) -> tuple[SNCurve, GoodmanCorrection | N
     analyzer uses for ``--component`` of ``--mill`` (without ``--component``: the material's
     curve, no correction, ``--kt``). S-N options beside ``--mill`` are refused: one source."""
     from millwatch.analytics.drivetrain.mill_config import FATIGUE_KINDS
-    from millwatch.ingest.mill_files import load_mill_config
 
     given = [f"--{n.replace('_', '-')}" for n in ("sn_model", "s_ut", "s_e", "fat")
              if getattr(args, n) is not None] + (["--goodman"] if args.goodman else [])  # fmt: skip
     if given:
         raise ValueError(f"{', '.join(given)}: the mill file given with --mill sets the S-N "
                          "curve and its correction; give one or the other")  # fmt: skip
-    try:
-        config = load_mill_config(args.mill)
-    except ValueError as exc:
-        raise ValueError(f"--mill {exc}") from exc
+    config = mill_option(args.mill)
     comp = args.component
     if comp is None:
         kt = 1.0 if args.kt is None else args.kt

@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from millwatch.cli.args import positive_int, utc_time_ns
+from millwatch.cli.args import mill_option, positive_int, utc_time_ns
 
 __all__ = ["add_import_parser", "mapping_pair"]
 
@@ -106,14 +106,10 @@ def _import(args: argparse.Namespace) -> int:
     # heavy imports here: 'millwatch archive import --help' must not load numpy or a reader
     from millwatch.ingest.legacy.read import read_recording
     from millwatch.ingest.legacy.to_mcap import write_mcap
-    from millwatch.ingest.mill_files import load_mill_config
 
     if args.out.exists() and not args.force:
         raise ValueError(f"--out {args.out}: file exists; remove it or add --force")
-    try:
-        config = load_mill_config(args.mill)
-    except ValueError as exc:
-        raise ValueError(f"--mill {exc}") from exc
+    config = mill_option(args.mill)
     sources = [s for s, _ in args.map]
     doubled = sorted({s for s in sources if sources.count(s) > 1})
     if doubled:
