@@ -44,6 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from millwatch.analytics.operation.transients import TransientSettings
+
 __all__ = [
     "RunupResonance",
     "RunupSettings",
@@ -65,7 +67,7 @@ class RunupSettings:
     pad: int = 4
     band_hz: tuple[float, float] = (2.0, 40.0)
     speed_band: tuple[float, float] = (0.75, 0.99)
-    speed_full: float = 0.99
+    speed_full: float = TransientSettings().speed_full  # the start's own "at speed" (one value)
     background_from: float = 0.4
     background_quantile: float = 0.25
     min_contrast: float = 4.0
