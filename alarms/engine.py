@@ -15,8 +15,9 @@ transitions and the same deterministic alarm ids (:func:`millwatch.alarms.lifecy
   level is reached — one annunciation per level, not one per observation.
 * **event** quantities — an offending event raises (or escalates) at once. The condition
   returns to normal after ``clean_events_to_clear`` consecutive clean events, or once
-  ``quiet_s_to_clear`` passed without a recurrence (checked on every later observation of the
-  mill and on :meth:`AlarmEngine.tick`), or on acknowledgement when ``clear_on_ack``. Every
+  ``quiet_s_to_clear`` (acknowledged: ``acked_quiet_s_to_clear``) passed without a recurrence
+  (checked on every later observation of the mill and on :meth:`AlarmEngine.tick`, and stamped
+  at the moment the quiet time ended), or on acknowledgement when ``clear_on_ack``. Every
   later offending event while the alarm is open *re-annunciates* it (same alarm id, new value
   and limit, ``exceed_count`` + 1, raised again if acknowledged; a ``reannunciated``
   transition the store, REST and OPC UA carry like any other).
@@ -477,16 +478,30 @@ class AlarmEngine:
                 continue
             cond = self._conditions[key]
             rule = self.books[mill_id].rule(key[1])
-            quiet = rule.quiet_s_to_clear
-            if quiet is None or cond.alarm is None or not cond.alarm.condition:
+            alarm = cond.alarm
+            if alarm is None or not alarm.condition:
                 continue
+            quiet = _quiet_s(rule, alarm)
             since = cond.last_offence_ns if cond.last_offence_ns is not None else t_ns
-            if t_ns - since >= quiet * _NS:
-                why = f"no recurrence for {(t_ns - since) / _NS:.0f} s"
-                alarm = cond.alarm
-                out.append(lifecycle.return_to_normal(alarm, rule.latched, t_ns, None, None, why))
-                self._keep(key, cond)
+            if quiet is None or t_ns - since < quiet * _NS:
+                continue
+            # stamped when the quiet time ended, not when it was next looked at, so the
+            # clear's time does not depend on how often observations or ticks come
+            at = max(since + round(quiet * _NS), alarm.updated_ns)
+            why = f"no recurrence for {(at - since) / _NS:.0f} s"
+            out.append(lifecycle.return_to_normal(alarm, rule.latched, at, None, None, why))
+            self._keep(key, cond)
         return out
+
+
+def _quiet_s(rule: Rule, alarm: Alarm) -> float | None:
+    """The rule's quiet time to clear, s: ``acked_quiet_s_to_clear`` once acknowledged when it
+    is shorter than ``quiet_s_to_clear`` (or the rule has none), else ``quiet_s_to_clear``."""
+    quiet = rule.quiet_s_to_clear
+    held = rule.acked_quiet_s_to_clear
+    if held is None or alarm.state is not AlarmState.ACKNOWLEDGED:
+        return quiet
+    return held if quiet is None else min(quiet, held)
 
 
 _SERVICE = (ActionKind.REMOVE_FROM_SERVICE, ActionKind.RETURN_TO_SERVICE)

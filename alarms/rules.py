@@ -16,7 +16,8 @@ Lifecycle knobs (:mod:`millwatch.alarms.engine` applies them):
   condition returns to normal. A value hovering inside the deadband changes nothing.
 * event rules: raise at once; the condition returns to normal after ``clean_events_to_clear``
   consecutive clean events (at or inside the clear level), after ``quiet_s_to_clear`` seconds
-  without a recurrence, or — with ``clear_on_ack`` — when acknowledged.
+  without a recurrence (once acknowledged: ``acked_quiet_s_to_clear``), or — with
+  ``clear_on_ack`` — when acknowledged.
 * ``latched``: a condition that returns to normal before anyone acknowledged it keeps the alarm
   raised until acknowledged (the control room must see that it happened).
 
@@ -34,8 +35,8 @@ database):
 =========================== ===================================== ====================== =======
 rule                        levels                                clears                 source
 =========================== ===================================== ====================== =======
-start_peak (event)          starter type's mean + 2 / + 3         1 clean start          Tab. 3–11,
-                            std. dev., capped at the shaft's                             §8.2
+start_peak (event)          starter type's mean + 2 / + 3         1 clean start, or 12 h Tab. 3–11,
+                            std. dev., capped at the shaft's      after it once acked    §8.2
                             limit (E-LRS 131/151 %, LRS 310/348
                             %, Grid 1207/1539 %)
 starts_per_month (level)    warning > 5, alarm > 20               on ack (then quiet at  §6.1.3,
@@ -162,6 +163,7 @@ class Rule:
     clear_delay_s: float = 0.0
     clean_events_to_clear: int | None = None
     quiet_s_to_clear: float | None = None
+    acked_quiet_s_to_clear: float | None = None
     clear_on_ack: bool = False
     latched: bool = False
     criterion: str | None = None
@@ -310,7 +312,10 @@ def _start_peak(config: MillConfig) -> Rule:
     """Start peak torque, % of motor rated torque, against the mill's starter type's set points
     (:meth:`MillConfig.start_peak_limits`: mean + 2 / + 3 standard deviations of Diering 2011
     Tables 3–11, capped at the motor shaft's absolute limit). Event; re-annunciates on every
-    exceeding start; clears after ``clean_starts_to_clear`` clean starts (default 1)."""
+    exceeding start; clears after ``clean_starts_to_clear`` clean starts (default 1), or, once
+    acknowledged, ``start_peak_hold_s`` (12 h) after its last exceeding start: a mill left
+    stopped after a bad start would otherwise keep a seen alarm standing for days (EEMUA 191
+    stale alarms)."""
     a = config.alarms
     limits = config.start_peak_limits()
     starter, advice = START_ADVICE[config.drive.starter]
@@ -330,6 +335,7 @@ def _start_peak(config: MillConfig) -> Rule:
         source=f"{limits.source} (§6.2.1–6.2.2), §8.2, §10.2, §10.4",
         value_format="{:.0f} %",
         deadband=a.start_peak_deadband_pct, clean_events_to_clear=a.clean_starts_to_clear,
+        acked_quiet_s_to_clear=a.start_peak_hold_s,
     )  # fmt: skip
 
 

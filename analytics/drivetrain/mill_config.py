@@ -431,6 +431,9 @@ class AlarmThresholds(_Frozen):
     clear_delay_s: NonNegative = 300.0            # … and within the clear level to clear
     start_peak_deadband_pct: NonNegative = 10.0
     clean_starts_to_clear: Annotated[int, Field(ge=1)] = 1  # the next normal start clears
+    # an acknowledged start-peak alarm returns to normal this long after its last exceeding
+    # start (option: the next shift has seen it; EEMUA 191, no alarm standing over a day)
+    start_peak_hold_s: Positive = 43200.0
     oscillation_deadband_pct: NonNegative = 2.0
     bending_deadband_mpa: NonNegative = 2.0
     barring_deadband_pct: NonNegative = 10.0

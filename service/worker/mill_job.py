@@ -47,6 +47,7 @@ from millwatch.alarms.from_analysis import (
     resonance_observations,
     window_observations,
 )
+from millwatch.alarms.lifecycle import Transition
 from millwatch.alarms.observations import Observation, local_month
 from millwatch.analytics.drivetrain.mill_config import MillConfig
 from millwatch.analytics.drivetrain.torsional_model import NO_MODEL_NOTE
@@ -164,6 +165,7 @@ class MillJob:
             if self.analyzer.samples < self._next_damage:
                 return update
             self._book(update)
+            update.alarm_transitions += self._tick()
             if self.analyzer.samples >= self._next_life:
                 update.alarm_transitions += self.alarms.observe_all(self._life_observations())
                 self._next_life = self.analyzer.samples + self._life_every
@@ -300,6 +302,13 @@ class MillJob:
         live = {c: d.model_dump() for c, d in self.analyzer.damage_summary().items()}
         inputs = self.ledger.inputs(t_ns or 0, live, t_ns)
         return compute_life(inputs)
+
+    def _tick(self) -> list[Transition]:
+        """Let the alarm engine see sample time pass at a damage interval, so an event alarm
+        that clears after a quiet time (``unexplained_peak``, an acknowledged ``start_peak``)
+        clears while a mill stands still and observes nothing."""
+        t_ns = self.analyzer.next_sample_ns
+        return [] if t_ns is None else self.alarms.tick(t_ns, self.config.id)
 
     def _life_observations(self) -> list[Observation]:
         """``remaining_life_years`` per component: the shortest of its remaining-life range

@@ -177,6 +177,44 @@ def test_unexplained_peak_clears_after_a_quiet_hour():
     assert cleared.kind == "cleared" and "no recurrence for 3600 s" in cleared.message
 
 
+def test_a_quiet_clear_is_stamped_when_the_quiet_time_ended_however_late_it_is_seen():
+    """The clear of a quiet event alarm carries the moment its quiet time ended, whether the
+    next observation or tick comes a second or a day later: the same journal live (ticking
+    every damage interval) and offline (observations only)."""
+    ch = {"channel": "motor_torque"}
+    stamps = []
+    for late_s in (1.0, 86400.0):
+        eng = engine()
+        feed(eng, "unexplained_peak_hz", [12.5], **ch)
+        (cleared,) = eng.tick(T0 + int((3600 + late_s) * NS))
+        stamps.append(cleared.t_ns)
+    assert stamps == [T0 + 3600 * NS] * 2
+
+
+def test_an_acknowledged_start_peak_returns_to_normal_12_h_after_its_last_exceeding_start():
+    """A seen start-peak alarm of a mill left stopped does not stand for days (EEMUA 191): once
+    acknowledged it clears ``start_peak_hold_s`` (12 h) after its last exceeding start, stamped
+    then; unacknowledged it waits for a clean start or the operator, however long."""
+    eng = engine()
+    (raised,) = feed(eng, "start_peak_pct", [792], channel="motor_torque")
+    assert eng.tick(T0 + 2 * 86400 * NS) == []  # nobody saw it: it stands
+    eng.acknowledge(raised.alarm_id, "ops", T0 + 600 * NS)
+    feed(eng, "start_peak_pct", [518], start_s=3600, channel="motor_torque")  # re-annunciates
+    assert kinds(eng.acknowledge(raised.alarm_id, "ops", T0 + 4000 * NS)) == ["acknowledged"]
+    assert eng.tick(T0 + (3600 + 43199) * NS) == []
+    (cleared,) = eng.tick(T0 + 3 * 86400 * NS)
+    assert cleared.kind == "cleared" and cleared.t_ns == T0 + (3600 + 43200) * NS
+    assert "no recurrence for 43200 s" in cleared.message
+
+
+def test_the_start_peak_hold_is_a_mill_file_option():
+    eng = engine(start_peak_hold_s=3600.0)
+    (raised,) = feed(eng, "start_peak_pct", [792], channel="motor_torque")
+    eng.acknowledge(raised.alarm_id, "ops", T0 + 60 * NS)
+    (cleared,) = eng.tick(T0 + 2 * 3600 * NS)
+    assert cleared.t_ns == T0 + 3600 * NS
+
+
 def test_bad_input_is_ignored_not_raised():
     eng = engine()
     assert eng.observe(obs("start_peak_pct", 900, 0, mill_id="other-mill")) == []

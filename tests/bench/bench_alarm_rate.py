@@ -87,7 +87,9 @@ def measure(path: Path, days: float, seed: int, spectra: bool, ack_min: float) -
     """One mill's alarm rate and longest standing alarm on ``days`` of the month scene."""
     t0 = time.process_time()
     config, observations, t_end = _observations(path, days, seed, spectra)
-    transitions = _run(AlarmEngine.for_mills([config]), observations, int(ack_min * 60 * NS))
+    engine = AlarmEngine.for_mills([config])
+    transitions = _run(engine, observations, int(ack_min * 60 * NS))
+    transitions += engine.tick(t_end)  # quiet clears due by the scene's end (stamped when due)
     raised: dict[str, int] = {}
     cleared: dict[str, int] = {}
     for t in transitions:
