@@ -28,7 +28,7 @@ from asyncua.server.address_space import AddressSpace, AttributeValue, NodeData
 
 from millwatch.opcua.ua_types import nid
 
-__all__ = ["Blueprint", "Recorder", "renamed"]
+__all__ = ["Blueprint", "Recorder"]
 
 
 class Recorder:
@@ -47,11 +47,20 @@ class Recorder:
         return result
 
 
+_FOLDER = "folder"
+"""A reference's place in a :class:`_Node`: to the condition's folder."""
+
+
 @dataclass(frozen=True)
 class _Node:
-    node_id: ua.NodeId
+    """One node of the blueprint: ``suffix`` of its NodeId after the condition's (``""``: the
+    condition), its attribute values (``stamped``: those with timestamps), its references each
+    with the suffix of its target (None: outside the condition, :data:`_FOLDER`: its folder)."""
+
+    suffix: str
     attributes: dict[Any, ua.DataValue]
-    references: tuple[ua.ReferenceDescription, ...]
+    stamped: tuple[Any, ...]
+    references: tuple[tuple[ua.ReferenceDescription, str | None], ...]
 
 
 @dataclass(frozen=True)
@@ -59,88 +68,91 @@ class Blueprint:
     """The nodes of one condition (``root``, under ``folder``) as asyncua made them."""
 
     root: ua.NodeId
-    folder: ua.NodeId
     nodes: tuple[_Node, ...]
+    from_folder: ua.ReferenceDescription  # the folder's reference to the condition
 
     @classmethod
     def record(cls, aspace: AddressSpace, root: ua.NodeId, folder: ua.NodeId,
                made: list[ua.NodeId]) -> Blueprint:  # fmt: skip
         """The nodes ``made`` (``root`` and its descendants) as they are now in ``aspace``."""
+        old = str(root.Identifier)
         nodes = []
         for node_id in made:
             data = aspace[node_id]
             attributes = {k: a.value for k, a in data.attributes.items() if a.value is not None}
-            nodes.append(_Node(node_id, attributes, tuple(data.references)))
-        return cls(root, folder, tuple(nodes))
+            stamped = tuple(k for k, v in attributes.items() if _has_times(v))
+            refs = tuple((r, _FOLDER if r.NodeId == folder else _suffix(r.NodeId, old))
+                         for r in data.references)  # fmt: skip
+            nodes.append(_Node(_suffix(node_id, old) or "", attributes, stamped, refs))
+        down = next(r for r in aspace[folder].references if r.NodeId == root)
+        return cls(root, tuple(nodes), down)
 
     def add(self, aspace: AddressSpace, root: ua.NodeId, name: ua.QualifiedName,
             folder: ua.NodeId) -> list[ua.NodeId]:  # fmt: skip
         """Add the copy ``root`` (BrowseName ``name``) under ``folder``; the NodeIds made.
         :class:`ua.UaStatusCodeError` ``BadNodeIdExists`` when one of them exists already."""
-        old, new = str(self.root.Identifier), str(root.Identifier)
-        made = [renamed(n.node_id, old, new) for n in self.nodes]
+        new, ns = str(root.Identifier), root.NamespaceIndex
+        made = [nid(new + n.suffix, ns) for n in self.nodes]
         if any(node_id in aspace for node_id in made):
             raise ua.UaStatusCodeError(ua.StatusCodes.BadNodeIdExists)
         now = datetime.now(UTC)
+        text = ua.LocalizedText(name.Name)
         for node, node_id in zip(self.nodes, made, strict=True):
             data = NodeData(node_id)
-            for attr, value in node.attributes.items():
-                data.attributes[attr] = AttributeValue(_restamped(value, now))
+            data.attributes = {k: AttributeValue(v) for k, v in node.attributes.items()}
+            for k in node.stamped:
+                data.attributes[k] = AttributeValue(_restamped(node.attributes[k], now))
             data.attributes[ua.AttributeIds.NodeId] = AttributeValue(
                 ua.DataValue(ua.Variant(node_id, ua.VariantType.NodeId)))  # fmt: skip
-            if node.node_id == self.root:
-                _rename(data, name)
-            data.references = [self._moved(r, old, new, folder, name) for r in node.references]
+            if not node.suffix:
+                _rename(data, name, text)
+            data.references = [_moved(r, where, new, ns, folder, name, text)
+                               for r, where in node.references]  # fmt: skip
             aspace[node_id] = data
-        aspace[folder].references.append(self._from_folder(root, name))
+        down = copy.copy(self.from_folder)
+        down.NodeId, down.BrowseName, down.DisplayName = root, name, text
+        aspace[folder].references.append(down)
         return made
 
-    def _moved(self, ref: ua.ReferenceDescription, old: str, new: str, folder: ua.NodeId,
-               name: ua.QualifiedName) -> ua.ReferenceDescription:  # fmt: skip
-        """``ref`` of a blueprint node as that of the copy's node (a reference to the
-        condition itself names it as the copy is named)."""
-        target = folder if ref.NodeId == self.folder else renamed(ref.NodeId, old, new)
-        if target is ref.NodeId:
-            return ref  # outside the condition (its type definition): shared
-        out = copy.copy(ref)
-        out.NodeId = target
-        if ref.NodeId == self.root:
-            out.BrowseName, out.DisplayName = name, ua.LocalizedText(name.Name)
+
+def _moved(ref: ua.ReferenceDescription, where: str | None, new: str, ns: int,
+           folder: ua.NodeId, name: ua.QualifiedName,
+           text: ua.LocalizedText) -> ua.ReferenceDescription:  # fmt: skip
+    """``ref`` of a blueprint node as that of the copy's node (a reference to the condition
+    itself names it as the copy is named)."""
+    if where is None:
+        return ref  # outside the condition (its type definition): shared
+    out = copy.copy(ref)
+    if where == _FOLDER:
+        out.NodeId = folder
         return out
-
-    def _from_folder(self, root: ua.NodeId, name: ua.QualifiedName) -> ua.ReferenceDescription:
-        """The folder's forward reference to the copy (asyncua's ``_add_ref_from_parent``)."""
-        refs = next(n.references for n in self.nodes if n.node_id == self.root)
-        up = next(r for r in refs if r.NodeId == self.folder)
-        kind = next(r.NodeId for r in refs
-                    if r.ReferenceTypeId == nid(ua.ObjectIds.HasTypeDefinition))  # fmt: skip
-        return ua.ReferenceDescription(
-            ReferenceTypeId=up.ReferenceTypeId, IsForward=True, NodeId=root,
-            BrowseName=name, DisplayName=ua.LocalizedText(name.Name),
-            NodeClass=ua.NodeClass.Object, TypeDefinition=kind,
-        )  # fmt: skip
+    out.NodeId = nid(new + where, ns)
+    if not where:
+        out.BrowseName, out.DisplayName = name, text
+    return out
 
 
-def renamed(node_id: ua.NodeId, old: str, new: str) -> ua.NodeId:
-    """``node_id`` of the blueprint's condition ``old`` as that of the condition ``new``."""
+def _suffix(node_id: ua.NodeId, old: str) -> str | None:
+    """What follows ``old`` in ``node_id`` when it is the condition ``old`` or below it."""
     ident: Any = node_id.Identifier
     if isinstance(ident, str) and (ident == old or ident.startswith(old + ".")):
-        return nid(new + ident[len(old) :], node_id.NamespaceIndex)
-    return node_id
+        return ident[len(old) :]
+    return None
 
 
-def _rename(data: NodeData, name: ua.QualifiedName) -> None:
-    text = ua.LocalizedText(name.Name)
+def _rename(data: NodeData, name: ua.QualifiedName, text: ua.LocalizedText) -> None:
     data.attributes[ua.AttributeIds.BrowseName] = AttributeValue(
         ua.DataValue(ua.Variant(name, ua.VariantType.QualifiedName)))  # fmt: skip
     data.attributes[ua.AttributeIds.DisplayName] = AttributeValue(
         ua.DataValue(ua.Variant(text, ua.VariantType.LocalizedText)))  # fmt: skip
 
 
+def _has_times(value: ua.DataValue) -> bool:
+    return value.SourceTimestamp is not None or value.ServerTimestamp is not None
+
+
 def _restamped(value: ua.DataValue, now: datetime) -> ua.DataValue:
-    """``value`` with its timestamps (where it has them) set to ``now``."""
-    if value.SourceTimestamp is None and value.ServerTimestamp is None:
-        return value
+    """``value`` with its timestamps (those it has) set to ``now``."""
     times: dict[str, Any] = {
         "SourceTimestamp": value.SourceTimestamp and now,
         "ServerTimestamp": value.ServerTimestamp and now,
