@@ -16,6 +16,8 @@ methods → backend's operator actions → board → conditions):
 * :mod:`millwatch.opcua.conditions` — alarms as Part 9 condition objects
   (ExclusiveLevelAlarmType/AlarmConditionType with ShelvingState, ConfirmedState, InputNode)
   and their events; ConditionRefresh(2) for any notifier.
+* :mod:`millwatch.opcua.blueprint` — a condition after the first of its type made by copying
+  the first one's nodes (asyncua's instantiate browses the type for every node).
 * :mod:`millwatch.opcua.methods` — the operator methods (Acknowledge, Confirm, AddComment,
   TimedShelve/OneShotShelve/Unshelve, Enable/Disable) through the backend's ``act`` (what the
   REST actions call), as the OPC UA user; operators only.

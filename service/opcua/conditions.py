@@ -68,6 +68,7 @@ from millwatch.alarms.rules import Severity
 from millwatch.errors import ApiError, BadRequest, Conflict, GatewayTimeout, NotFound, Unavailable
 from millwatch.opcua.access import SESSION
 from millwatch.opcua.address_space import MillNodes
+from millwatch.opcua.blueprint import Blueprint, Recorder
 from millwatch.opcua.ua_types import nid, stamped, status
 from millwatch.opcua.units import UNITS
 from millwatch.opcua.values import ns_to_datetime
@@ -160,7 +161,7 @@ class Conditions:
         self._by_node: dict[ua.NodeId, str] = {}  # condition and ShelvingState → alarm id
         self._seen: dict[str, int] = {}
         self._refresh_events: dict[int, Any] = {}
-        self._blueprints: dict[int, tuple[str, list[ua.AddNodesItem]]] = {}
+        self._blueprints: dict[int, Blueprint] = {}
         self.events_sent = 0
         self.method_handlers: Callable[[str], Callable[..., Any]] | None = None
         """The handler of a method by browse name, bound to each instance's method copies
@@ -233,13 +234,13 @@ class Conditions:
         node_id = mill.node_id(f"Alarms/{row.alarm_id}")
         limited = row.threshold is not None
         type_id = _LIMIT_TYPE if limited else _PLAIN_TYPE
-        created = await self._instantiate(mill.alarms_folder, type_id, node_id,
-                                          ua.QualifiedName(row.alarm_id, mill.ns))  # fmt: skip
+        created = set(await self._instantiate(mill.alarms_folder, type_id, node_id,
+                                              ua.QualifiedName(row.alarm_id, mill.ns)))  # fmt: skip
         node = self.server.get_node(node_id)
         if limited:
             high = await node.add_property(_child(node_id, "HighLimit"),
                                            ua.QualifiedName("HighLimit", 0), 0.0)  # fmt: skip
-            created.append(high.nodeid)
+            created.add(high.nodeid)
         value = await self._value_variable(node, node_id, mill, row)
         event = copy.copy(self._templates[type_id])
         event.data_types = dict(event.data_types)
@@ -264,38 +265,30 @@ class Conditions:
     async def _instantiate(self, folder: Node, type_id: int, node_id: ua.NodeId,
                            name: ua.QualifiedName) -> list[ua.NodeId]:  # fmt: skip
         """Instantiate the condition type with its ShelvingState and ConfirmedState: the first
-        time of a type by asyncua's ``instantiate`` (its nodes recorded as a blueprint: it
-        browses the type hierarchy for every node, ~0.1 s), afterwards by adding the
-        blueprint's nodes, renamed, in one call. The NodeIds of the nodes made."""
+        time of a type by asyncua's ``instantiate`` (it browses the type hierarchy for every
+        node, ~0.1 s; the nodes made are kept as a :class:`~millwatch.opcua.blueprint.Blueprint`),
+        afterwards by copying the blueprint's nodes (~1 ms). The NodeIds of the nodes made."""
+        aspace = self.server.iserver.aspace
         blueprint = self._blueprints.get(type_id)
-        if blueprint is None:
-            recorder = _Recorder(self.server.iserver.isession)
-            session: Any = recorder
-            parent = Node(session, folder.nodeid)
-            made = await instantiate(parent, self.server.get_node(nid(type_id)), node_id, name,
-                                     instantiate_optional=False)  # fmt: skip
-            for part, part_type in _PARTS:
-                await instantiate(made[0], self.server.get_node(nid(part_type)),
-                                  _child(node_id, part), ua.QualifiedName(part, 0),
-                                  instantiate_optional=False)  # fmt: skip
-            self._blueprints[type_id] = (str(node_id.Identifier), recorder.items)
-            return [item.RequestedNewNodeId for item in recorder.items]
-        old, items = blueprint
-        new = str(node_id.Identifier)
-        fresh = []
-        for item in items:
-            item = copy.deepcopy(item)
-            item.RequestedNewNodeId = _renamed(item.RequestedNewNodeId, old, new)
-            item.ParentNodeId = (folder.nodeid if item.RequestedNewNodeId == node_id
-                                 else _renamed(item.ParentNodeId, old, new))  # fmt: skip
-            if item.RequestedNewNodeId == node_id:
-                item.BrowseName = name
-                item.NodeAttributes.DisplayName = ua.LocalizedText(name.Name)
-            fresh.append(item)
-        results = await self.server.iserver.isession.add_nodes(fresh)
-        for result in results:
-            result.StatusCode.check()
-        return [item.RequestedNewNodeId for item in fresh]
+        if blueprint is not None:
+            return blueprint.add(aspace, node_id, name, folder.nodeid)
+        recorder = Recorder(self.server.iserver.isession)
+        session: Any = recorder
+        parent = Node(session, folder.nodeid)
+        made = await instantiate(parent, self.server.get_node(nid(type_id)), node_id, name,
+                                 instantiate_optional=False)  # fmt: skip
+        for part, part_type in _PARTS:
+            await instantiate(made[0], self.server.get_node(nid(part_type)),
+                              _child(node_id, part), ua.QualifiedName(part, 0),
+                              instantiate_optional=False)  # fmt: skip
+        # its DisplayName the alarm id, as of the copies (asyncua gives it the type's name)
+        await self.server.get_node(node_id).write_attribute(
+            ua.AttributeIds.DisplayName,
+            ua.DataValue(ua.Variant(ua.LocalizedText(name.Name), ua.VariantType.LocalizedText)),
+        )
+        self._blueprints[type_id] = Blueprint.record(aspace, node_id, folder.nodeid,
+                                                     recorder.made)  # fmt: skip
+        return recorder.made
 
     def _link_methods(self, created: Iterable[ua.NodeId]) -> None:
         """Bind the instance's copies of the methods (asyncua copies them, uncallable)."""
@@ -440,30 +433,6 @@ class Conditions:
 
 
 _ALARM_FIELDS = frozenset(Alarm.__dataclass_fields__)
-
-
-class _Recorder:
-    """asyncua's server session, recording the nodes it adds (a condition's blueprint)."""
-
-    def __init__(self, session: Any) -> None:
-        self._session = session
-        self.items: list[ua.AddNodesItem] = []
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._session, name)
-
-    async def add_nodes(self, items: list[ua.AddNodesItem]) -> list[ua.AddNodesResult]:
-        self.items.extend(copy.deepcopy(items))
-        result: list[ua.AddNodesResult] = await self._session.add_nodes(items)
-        return result
-
-
-def _renamed(node_id: ua.NodeId, old: str, new: str) -> ua.NodeId:
-    """``node_id`` of the blueprint's condition ``old`` as that of the condition ``new``."""
-    ident: Any = node_id.Identifier
-    if isinstance(ident, str) and (ident == old or ident.startswith(old + ".")):
-        return nid(new + ident[len(old) :], node_id.NamespaceIndex)
-    return node_id
 
 
 def _child(node_id: ua.NodeId, name: str) -> ua.NodeId:

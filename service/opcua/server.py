@@ -7,8 +7,9 @@ runtime in this process under ``millwatch serve`` and the workers over zenoh und
 ``millwatch api``:
 
 * every ``update_s`` (≤ 1 s) it asks every mill's status at once (``mill_statuses``), then per
-  mill ``life`` and ``starts`` (a backend call may block on SQLite or zenoh, so calls run on
-  one helper thread, never on the loop) and writes only the values that changed;
+  mill ``life`` and ``starts`` — when the mill's status changed or :data:`SLOW_EVERY_S` passed
+  (a backend call may block on SQLite or zenoh, so calls run on one helper thread, never on the
+  loop) — and writes only the values that changed;
 * every :data:`ALARM_EVERY_S` it looks at the alarm board's version and sends the condition
   events of the alarms that changed (:mod:`millwatch.opcua.conditions`);
 * the Part 9 methods (Acknowledge, Confirm, AddComment, shelving, Enable/Disable) call the
@@ -71,11 +72,24 @@ from millwatch.opcua.ua_types import nid
 from millwatch.opcua.values import Point, mill_points
 from millwatch.settings import OpcUaSettings, OpcUaUser, SettingsError
 
-__all__ = ["ALARM_EVERY_S", "PRODUCT_URI", "OpcUaError", "OpcUaServer", "OpcUaStats"]
+__all__ = [
+    "ALARM_EVERY_S",
+    "PRODUCT_URI",
+    "SLOW_EVERY_S",
+    "OpcUaError",
+    "OpcUaServer",
+    "OpcUaStats",
+]
 
 log = logging.getLogger(__name__)
 
 ALARM_EVERY_S = 0.2
+SLOW_EVERY_S = 0.5
+"""How long (s) a mill's ``life`` and ``starts`` answers are used again while its status is
+unchanged. They are SQLite reads and the life computation — most of a value update's cost when
+asked of every mill every tick — and change with the store (a checkpoint, a start, which also
+change the status) or, in life's projections, slowly with the wall clock: asked at least every
+0.5 s, their values stay within issue 19's 1 s of the store."""
 START_TIMEOUT_S = 60.0
 _POLICIES = {
     "None": ua.SecurityPolicyType.NoSecurity,
@@ -126,6 +140,7 @@ class OpcUaServer:
         self._logins: Logins | None = None
         self._mills: dict[str, MillNodes] = {}
         self._answers: dict[str, tuple[Any, Any, Any]] = {}  # last answers per mill (helper)
+        self._asked: dict[str, float] = {}  # when life and starts were last asked (monotonic)
         self._conditions: Conditions | None = None
 
     @property
@@ -261,17 +276,23 @@ class OpcUaServer:
         """Every mill's points (on the helper thread): the state, stale channels and hold of
         each mill as ``GET /mills/{id}`` says them (:func:`~millwatch.api.mill_views.mill_summary`
         of its status; a mill whose worker is gone is ``unreachable``). A mill whose answers
-        equal the last ones is left out."""
+        equal the last ones is left out; its life and starts are asked again only when its
+        status changed or :data:`SLOW_EVERY_S` passed."""
         statuses = self._ask("*", "status", self.backend.mill_statuses)
         if statuses is None:
             return {}
         out = {}
+        now = time.monotonic()
         for mill_id, config in self.backend.mills.items():
             status = statuses.get(mill_id)
+            last = self._answers.get(mill_id)
+            if last is not None and now - self._asked[mill_id] < SLOW_EVERY_S and last[0] == status:
+                continue  # status unchanged, life and starts asked less than 0.5 s ago
             life = self._ask(mill_id, "life", self.backend.life, mill_id)
             starts = self._ask(mill_id, "starts", self.backend.starts, mill_id, None)
+            self._asked[mill_id] = now
             answers = (status, life, starts)
-            if self._answers.get(mill_id) == answers:
+            if last == answers:
                 continue  # nothing changed: no points to make, no values to compare
             self._answers[mill_id] = answers
             summary = MillSummary.model_validate(mill_summary(config, status, None))

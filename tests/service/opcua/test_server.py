@@ -8,10 +8,12 @@ import asyncio
 import math
 import re
 import shutil
+import time
 from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 from asyncua import Client, Node, ua
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
@@ -22,12 +24,13 @@ from millwatch.alarms.actions import COMMENT_MAX_CHARS
 from millwatch.api.local_backend import LocalBackend
 from millwatch.opcua.address_space import NAMESPACE_URI
 from millwatch.opcua.conditions import SEVERITY
-from millwatch.opcua.server import OpcUaError, OpcUaServer
+from millwatch.opcua.server import SLOW_EVERY_S, OpcUaError, OpcUaServer
 from millwatch.opcua.units import UNITS, unit_id
 from millwatch.settings import OpcUaSettings
 from tests.service.conftest import API_KEY, MILL
 from tests.service.opcua.conftest import (
     MILL_B,
+    MILL_IDLE,
     OPERATOR,
     OPERATOR_PW,
     VIEWER,
@@ -135,6 +138,35 @@ def test_values_equal_the_rest_answers(plant: Plant) -> None:
     assert got == want
     assert want["StartsThisMonth"] >= 1 and want["State"] != "unknown"
     assert all(v > 0 for k, v in want.items() if k.endswith("/Damage"))
+
+
+def test_an_unchanged_mill_has_its_life_and_starts_read_every_half_second_not_every_tick(
+    plant: Plant,
+) -> None:
+    """The idle mill's status does not change: its life (SQLite reads and the life computation)
+    is asked again only after SLOW_EVERY_S, not at every update_s tick — and still at least
+    that often, so its values stay within 1 s of the store."""
+    backend: Any = plant.opcua.backend
+    asked: list[float] = []
+    real = backend.life
+
+    def life(mill_id: str) -> Any:
+        if mill_id == MILL_IDLE:
+            asked.append(time.monotonic())
+        return real(mill_id)
+
+    backend.life = life
+    try:
+        polls = plant.opcua.stats.polls
+        time.sleep(4.0)
+        polls = plant.opcua.stats.polls - polls
+    finally:
+        del backend.life
+    gaps = np.diff(asked)
+    assert polls >= 8, polls  # ticks of update_s = 0.25 s (slower on a loaded machine)
+    assert len(asked) <= polls // 2 + 1, (len(asked), polls)
+    assert len(asked) >= polls // 4, (len(asked), polls)
+    assert gaps.min() >= SLOW_EVERY_S - 0.05, gaps
 
 
 def test_analog_items_carry_engineering_units(plant: Plant) -> None:
