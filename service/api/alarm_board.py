@@ -40,7 +40,8 @@ kept as ready JSON bytes with their ETag (the listed ``(alarm_id, seq)`` pairs a
 changes exactly when the body would): a poll that finds its listing cached costs a dict lookup,
 and a ``304`` costs no serialisation at all.
 
-Memory: the board holds every alarm ever stored, like the table (about 1 kB each).
+Memory: the board holds every alarm ever stored, like the table (about 1 kB each), and every
+comment twice (the record, and its listed form with the ISO time, made once).
 """
 
 from __future__ import annotations
@@ -148,6 +149,9 @@ class AlarmBoard:
         self._changes: dict[str, int] = {}
         # alarm id → its comments, oldest (lowest seq) first; a tuple replaced whole on change
         self._comments: dict[str, tuple[Comment, ...]] = {}
+        # (alarm id, seq) → the comment as listed (ISO time added), made once: comments never
+        # change, and adding the ISO times is most of a listing's rendering
+        self._comment_bodies: dict[tuple[str, int], dict[str, Any]] = {}
 
     @property
     def version(self) -> int:
@@ -192,6 +196,7 @@ class AlarmBoard:
         held = self._comments.get(alarm_id, ())
         if any(c.seq == comment.seq for c in held):
             return False
+        self._comment_bodies[(alarm_id, comment.seq)] = with_iso(comment.to_dict())
         self._comments[alarm_id] = tuple(sorted((*held, comment), key=lambda c: c.seq))
         return True
 
@@ -237,6 +242,12 @@ class AlarmBoard:
         notes = self._comments.get(row.alarm_id, ())
         return {**row_to_dict(row), "comments": [c.to_dict() for c in notes]}
 
+    def _listed(self, row: Alarm) -> dict[str, Any]:
+        """:meth:`entry` with ISO-8601 beside every ``_ns`` (the comments' made once)."""
+        notes = self._comments.get(row.alarm_id, ())
+        bodies = [self._comment_bodies[(row.alarm_id, c.seq)] for c in notes]
+        return {**with_iso(row_to_dict(row)), "comments": bodies}
+
     def rows(self, mill_id: str | None = None) -> list[Alarm]:
         """Alarms (of one mill), most recently changed first."""
         ordered = self._ordered()
@@ -268,7 +279,7 @@ class AlarmBoard:
             and (since_ns is None or r.updated_ns >= since_ns)
             and (mill_id is None or r.mill_id == mill_id)
         ]
-        alarms = [with_iso(self.entry(r)) for r in rows]
+        alarms = [self._listed(r) for r in rows]
         body = {"alarms": alarms, "count": len(rows), "cursor": str(cursor),
                 "resync": isinstance(since, Cursor) and not issued}  # fmt: skip
         listing = Listing(_encode(body), _listing_etag(rows, cursor), version)
