@@ -13,8 +13,8 @@ What is here:
   and each alarm's two texts: ``message`` (≤ 200 characters: what, value against limit, where,
   one action) and ``advice`` (why, what to check, the source); start-peak levels per starter
   type come from :mod:`millwatch.analytics.drivetrain.start_limits`.
-* :mod:`millwatch.alarms.lifecycle` — the alarm records (:class:`Alarm`, ``TransitionRecord``; the
-  one definition the store and the API map by field name) and the transitions
+* :mod:`millwatch.alarms.lifecycle` — the alarm records (:class:`Alarm`, ``TransitionRecord``,
+  ``Comment``; the one definition the store and the API map by field name) and the transitions
   raised → acknowledged → cleared; event alarms re-annunciate in place; the value at raise is
   kept; confirmation, comments, shelving, suppression and out of service on the same record,
   each a transition (who, when, comment).
@@ -23,7 +23,8 @@ What is here:
   service; ISA-18.2, OPC UA Part 9), validated; the same for REST and OPC UA.
 * :mod:`millwatch.alarms.engine` — :class:`AlarmEngine`: applies the rules to observations, drives
   the lifecycle, applies operator actions (:meth:`AlarmEngine.act`), suppresses by design while a
-  mill is stopped, expires timed shelves, snapshots and restores its state.
+  mill is stopped (from the start and stop events observed, live and offline alike), expires
+  timed shelves, snapshots and restores its state.
 * :mod:`millwatch.alarms.wire` — the ``…/@alarms`` message of a transition (publish, decode).
 * :mod:`millwatch.alarms.report` — the alarms a recording would have raised (``millwatch analyze``).
 * :mod:`millwatch.alarms.times` — a moment as text, the one ISO-8601 form of every surface (alarm

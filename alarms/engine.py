@@ -30,7 +30,10 @@ frozen — its observations are not judged, so it raises, escalates and clears n
 returned to service (kept in the snapshot). Suppression by design is state-based: while a mill
 is stopped (:meth:`AlarmEngine.set_running`, from its start and stop events) the alarms of
 :data:`SUPPRESSED_WHILE_STOPPED` rules are suppressed. :meth:`AlarmEngine.expire_shelves` ends
-timed shelves at their wall-clock expiry.
+timed shelves at their wall-clock expiry. The start and stop reach the engine as observations
+(:data:`~millwatch.alarms.observations.MILL_RUNNING`, from
+:func:`millwatch.alarms.from_analysis.event_observations`), so the live worker and ``millwatch
+analyze``, which observe the same events, suppress alike — decided here, once.
 
 Bad input never raises: an unknown mill or quantity, or a non-finite value, is logged once per
 kind and ignored. State is bounded: trackers exist only for subjects with an open alarm or a
@@ -58,7 +61,7 @@ from millwatch.alarms.actions import (
     ShelvingState,
 )
 from millwatch.alarms.lifecycle import Alarm, AlarmState, Transition
-from millwatch.alarms.observations import Kind, Observation
+from millwatch.alarms.observations import MILL_RUNNING, Kind, Observation
 from millwatch.alarms.rules import Rule, RuleBook, Severity, build_rules
 from millwatch.analytics.drivetrain.mill_config import MillConfig
 
@@ -149,8 +152,15 @@ class AlarmEngine:
 
     # ------------------------------------------------------------------ input
     def observe(self, obs: Observation) -> list[Transition]:
-        """Evaluate one observation; returns the transitions it caused (often none)."""
+        """Evaluate one observation; returns the transitions it caused (often none). A
+        :data:`~millwatch.alarms.observations.MILL_RUNNING` observation (the mill's start or
+        stop event) is :meth:`set_running`."""
         with self._lock:
+            if obs.quantity == MILL_RUNNING:
+                if obs.mill_id not in self.books:
+                    self._rule_for(obs)  # (logs the unknown mill once)
+                    return []
+                return self.set_running(obs.mill_id, obs.value > 0.5, obs.t_ns)
             rule = self._rule_for(obs)
             if rule is None:
                 return []

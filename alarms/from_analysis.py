@@ -4,6 +4,8 @@
 One function per kind of analysis fact, so live (the worker, fact by fact) and offline
 (``millwatch analyze``, from the report) derive exactly the same observations:
 
+* a start or stop event → :data:`~millwatch.alarms.observations.MILL_RUNNING` (1 or 0), so
+  the engine suppresses the running-mill rules from a stop to the next start, live and offline;
 * a start event → ``start_peak_pct`` per side: the larger of the switch-on and short-circuit
   peaks of the motor shaft, % of rated (Diering 2011 §6.1.1, §7.2), with the motor torque
   channel's name (the mill file's) in the context; and ``natural_frequency_shift_pct``: the
@@ -26,18 +28,20 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from typing import Any
 
-from millwatch.alarms.observations import Observation
+from millwatch.alarms.observations import Observation, running_observation
 from millwatch.analytics.mill.results import (
     AnalyzerEvent,
     BarringEvent,
     StartEvent,
     SteadyWindowResult,
+    StopEvent,
     parse_event,
 )
 from millwatch.analytics.operation.transients import start_peaks
 
 __all__ = [
     "event_observations",
+    "in_time_order",
     "peak_observations",
     "report_observations",
     "resonance_observations",
@@ -46,9 +50,13 @@ __all__ = [
 
 
 def event_observations(mill_id: str, event: AnalyzerEvent) -> list[Observation]:
-    """Observations of one analyzer event (start, stop, barring)."""
+    """Observations of one analyzer event (start, stop, barring); a start and a stop begin
+    with the mill's :data:`~millwatch.alarms.observations.MILL_RUNNING` (suppression by
+    design, decided by the engine)."""
     if isinstance(event, StartEvent):
-        return list(_start(mill_id, event))
+        return [running_observation(mill_id, True, event.t_ns), *_start(mill_id, event)]
+    if isinstance(event, StopEvent):
+        return [running_observation(mill_id, False, event.t_ns)]
     if isinstance(event, BarringEvent):
         context = {"side": None, "channel": event.channel}
         return [Observation(mill_id, "barring_peak_pct", event.peak_pct, event.t_ns, context)]
@@ -135,9 +143,10 @@ def resonance_observations(
 
 def report_observations(mill_id: str, report: dict[str, Any]) -> list[Observation]:
     """Every observation a whole analysis report holds (its events and windows read as the
-    typed results they are), in time order."""
+    typed results they are), in time order (at one time: events, then windows, as the live
+    worker observes them)."""
     out: list[Observation] = []
-    for event in [*report.get("starts", ()), *report.get("barring", ())]:
+    for event in [*report.get("starts", ()), *report.get("stops", ()), *report.get("barring", ())]:
         out += event_observations(mill_id, parse_event({"event": _kind(event), **event}))
     for window in report.get("steady_state", ()):
         out += window_observations(mill_id, SteadyWindowResult.model_validate(window))
@@ -145,8 +154,13 @@ def report_observations(mill_id: str, report: dict[str, Any]) -> list[Observatio
         out += peak_observations(mill_id, report["unexplained_peaks"], int(report["t_end_ns"]))
     if report.get("resonance_margins") and report.get("t_end_ns") is not None:
         out += resonance_observations(mill_id, report["resonance_margins"], int(report["t_end_ns"]))
-    return sorted(out, key=lambda o: o.t_ns)
+    return in_time_order(out)
 
 
 def _kind(event: dict[str, Any]) -> str:
     return str(event.get("event") or ("start" if "switch_on" in event else "barring"))
+
+
+def in_time_order(observations: Iterable[Observation]) -> list[Observation]:
+    """``observations`` sorted by time, stable (the order both paths observe in)."""
+    return sorted(observations, key=lambda o: o.t_ns)

@@ -29,7 +29,7 @@ who (``by``), when (the worker's wall clock) and the ``comment`` given:
 
 * ``acknowledged`` (above) may carry a comment; ``commented`` — a comment alone, on any alarm,
   open or cleared (``comment_count``, ``last_comment…`` on the alarm; every comment stays in
-  the transitions).
+  the transitions, and :class:`Comment` is one of them as the API lists it).
 * ``confirmed`` — :func:`confirm`: after acknowledgement (Part 9 ConfirmedState); an
   escalation or re-annunciation asks for it again (``confirmed`` back to False).
 * ``shelved`` / ``unshelved`` / ``shelve_expired`` — :func:`shelve` (timed until
@@ -64,9 +64,10 @@ API model — and that test says which is missing.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any
+from typing import Any, Protocol
 
 from millwatch.alarms.actions import ActionKind, ActionNotAllowedError, ShelvingState
 from millwatch.alarms.rules import Severity
@@ -74,6 +75,7 @@ from millwatch.alarms.rules import Severity
 __all__ = [
     "Alarm",
     "AlarmState",
+    "Comment",
     "Transition",
     "TransitionKind",
     "TransitionRecord",
@@ -241,6 +243,51 @@ class TransitionRecord:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(TransitionRecord)}
         d.update(kind=str(self.kind), severity=str(self.severity), state=str(self.state))
         return d
+
+
+class _Fields(Protocol):
+    """Plain data read by field name (a dict, a store row)."""
+
+    def __getitem__(self, key: str, /) -> Any: ...
+
+
+@dataclass(frozen=True, slots=True)
+class Comment:
+    """One comment on an alarm — the record ``/alarms`` entries, ``/alarms/{id}`` and the alarm
+    board carry: ``user`` who wrote it, ``t_ns`` when (ns UTC, the worker's wall clock),
+    ``text``, and the transition that carried it (``kind``: ``commented`` alone, or an
+    acknowledgement, confirmation, shelve… given with a comment; ``seq``, which orders an
+    alarm's comments and tells them apart). Made from that transition (:meth:`of`): the
+    comment is stored once, in ``alarm_transitions``."""
+
+    user: str | None
+    t_ns: int
+    text: str
+    kind: str
+    seq: int
+
+    @classmethod
+    def of(cls, t: TransitionRecord) -> Comment | None:
+        """The comment ``t`` carried, or None."""
+        return cls(t.by, t.t_ns, t.comment, str(t.kind), t.seq) if t.comment else None
+
+    @classmethod
+    def of_row(cls, row: _Fields) -> Comment | None:
+        """:meth:`of` a transition as plain data (:meth:`TransitionRecord.to_row`, a store
+        row, an ``…/@alarms`` message)."""
+        text = row["comment"]
+        if not text:
+            return None
+        return cls(row["by"], int(row["t_ns"]), str(text), str(row["kind"]), int(row["seq"]))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON data (the fields)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(Comment)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Comment:
+        """From :meth:`to_dict`'s data (other keys, e.g. the ISO ``t``, ignored)."""
+        return cls(d["user"], int(d["t_ns"]), str(d["text"]), str(d["kind"]), int(d["seq"]))
 
 
 @dataclass(frozen=True, slots=True)

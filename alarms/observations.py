@@ -37,12 +37,14 @@ from enum import StrEnum
 from typing import Any
 
 __all__ = [
+    "MILL_RUNNING",
     "QUANTITIES",
     "Kind",
     "Observation",
     "QuantitySpec",
     "derive_start_counts",
     "local_month",
+    "running_observation",
 ]
 
 
@@ -159,6 +161,13 @@ QUANTITIES: Mapping[str, QuantitySpec] = {
 }  # fmt: skip
 
 
+MILL_RUNNING = "mill_running"
+"""The mill's operating state, observed at its start (1) and stop (0) events: no rule watches
+it; the engine suppresses by design the alarms of rules that judge a running mill from a stop to
+the next start (:meth:`millwatch.alarms.engine.AlarmEngine.observe`), so the live worker and
+``millwatch analyze``, which both observe the events, suppress alike."""
+
+
 @dataclass(frozen=True, slots=True)
 class Observation:
     """One observed value of a quantity of :data:`QUANTITIES` (see the module docstring)."""
@@ -184,6 +193,11 @@ class Observation:
     def usable(self) -> bool:
         """A known quantity with a finite value."""
         return self.quantity in QUANTITIES and math.isfinite(self.value)
+
+
+def running_observation(mill_id: str, running: bool, t_ns: int) -> Observation:
+    """:data:`MILL_RUNNING` at ``t_ns``: the mill started (``running``) or stopped."""
+    return Observation(mill_id, MILL_RUNNING, 1.0 if running else 0.0, t_ns)
 
 
 def local_month(t_ns: int, time_zone: str) -> str:

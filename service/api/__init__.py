@@ -15,9 +15,9 @@ What is here:
 * :mod:`millwatch.api.mill_views`, :mod:`millwatch.api.alarm_views` — what the per-mill and alarm
   endpoints answer, from the store and the worker's status snapshot; operator actions
   (:mod:`millwatch.alarms.actions`) applied through the worker thread.
-* :mod:`millwatch.api.alarm_board` — every alarm's current state in memory (cheap ``/alarms``),
-  with the change cursor: a change number of the board and its epoch, never sample time, so a
-  poller misses no change (an acknowledgement of an older alarm included).
+* :mod:`millwatch.api.alarm_board` — every alarm's current state and comments in memory (cheap
+  ``/alarms``), with the change cursor: a change number of the board and its epoch, never
+  sample time, so a poller misses no change (an acknowledgement of an older alarm included).
 * :mod:`millwatch.api.journal` — the alarm journal (``/alarms/journal``): stored transitions in
   time order by mill and time, keyset-paged; per-mill pages of workers merged in order.
 * :mod:`millwatch.api.models` — the request and response bodies (OpenAPI schema); the typed

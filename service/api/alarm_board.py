@@ -15,6 +15,15 @@ Merging is by the alarm's ``seq`` (it counts the alarm's transitions): a row rep
 only when its ``seq`` is higher, so the same transition arriving twice (store load and callback,
 republished after a crash recovery, message and query reply) changes nothing, whatever the order.
 
+Comments: every alarm's entry lists its comments (:class:`~millwatch.alarms.lifecycle.Comment`:
+who, when, text; the issue's interface puts them in ``/alarms`` as in ``/alarms/{id}``), kept
+here beside the rows, so a poll costs no store query for them either. They come with what feeds
+the rows — a transition that carries a comment (callback or ``…/@alarms`` message), the
+``comments`` of a query reply or an action's answer, every stored comment at the load (one
+query, :meth:`millwatch.store.database.Store.alarm_comments`) — and merge as a set keyed by the
+transition's ``seq``: the same comment twice is one, whatever the order. A comment new to the
+board is a change of its alarm like a newer row (its seq grew with it anyway).
+
 The change cursor: every row the board accepts gets the board's next *change number* (1, 2, …,
 in the order the board took them, whatever the alarms' own times), and the board has an *epoch*,
 a random id drawn when it is made. A listing's ``cursor`` (:class:`Cursor`, ``"<epoch>-<n>"``) is
@@ -31,7 +40,8 @@ kept as ready JSON bytes with their ETag (the listed ``(alarm_id, seq)`` pairs a
 changes exactly when the body would): a poll that finds its listing cached costs a dict lookup,
 and a ``304`` costs no serialisation at all.
 
-Memory: the board holds every alarm ever stored, like the table (about 1 kB each).
+Memory: the board holds every alarm ever stored, like the table (about 1 kB each), and every
+comment twice (the record, and its listed form with the ISO time, made once).
 """
 
 from __future__ import annotations
@@ -42,15 +52,15 @@ import math
 import re
 import secrets
 import threading
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-from millwatch.alarms.lifecycle import Alarm, Transition
+from millwatch.alarms.lifecycle import Alarm, Comment, Transition
 from millwatch.alarms.wire import decode_transition
 from millwatch.api.times import with_iso
 
-__all__ = ["CURSOR_PATTERN", "AlarmBoard", "Cursor", "Listing", "row_from_dict"]
+__all__ = ["CURSOR_PATTERN", "AlarmBoard", "Cursor", "Listing", "row_from_dict", "row_to_dict"]
 
 MAX_CACHED_LISTINGS = 256
 _ROW_FIELDS = frozenset(f.name for f in fields(Alarm))
@@ -137,6 +147,11 @@ class AlarmBoard:
         self._change = 0
         # alarm id → its change number, in change order (a changed row is moved to the end)
         self._changes: dict[str, int] = {}
+        # alarm id → its comments, oldest (lowest seq) first; a tuple replaced whole on change
+        self._comments: dict[str, tuple[Comment, ...]] = {}
+        # (alarm id, seq) → the comment as listed (ISO time added), made once: comments never
+        # change, and adding the ISO times is most of a listing's rendering
+        self._comment_bodies: dict[tuple[str, int], dict[str, Any]] = {}
 
     @property
     def version(self) -> int:
@@ -152,36 +167,86 @@ class AlarmBoard:
         return len(self._rows)
 
     # ------------------------------------------------------------------ writing
-    def merge(self, rows: Iterable[Alarm]) -> int:
-        """Take the rows that are newer (higher ``seq``) than the board's; returns how many."""
-        changed = 0
+    def merge(self, rows: Iterable[Alarm], comments: Iterable[tuple[str, Comment]] = ()) -> int:
+        """Take the rows that are newer (higher ``seq``) than the board's and the ``(alarm id,
+        comment)`` pairs it does not hold yet (module docstring); returns how many alarms
+        changed."""
         with self._lock:
-            for row in rows:
-                old = self._rows.get(row.alarm_id)
-                if old is None or row.seq > old.seq:
-                    self._rows[row.alarm_id] = row
-                    self._change += 1
-                    self._changes.pop(row.alarm_id, None)
-                    self._changes[row.alarm_id] = self._change
-                    changed += 1
+            touched = [row.alarm_id for row in rows if self._take_row(row)]
+            touched += [alarm_id for alarm_id, c in comments if self._take_comment(alarm_id, c)]
+            changed = [a for a in dict.fromkeys(touched) if a in self._rows]
+            for alarm_id in changed:
+                self._change += 1
+                self._changes.pop(alarm_id, None)
+                self._changes[alarm_id] = self._change
             if changed:
                 self._version += 1
                 self._sorted = None
                 self._listings = {}
-        return changed
+        return len(changed)
+
+    def _take_row(self, row: Alarm) -> bool:
+        old = self._rows.get(row.alarm_id)
+        if old is not None and row.seq <= old.seq:
+            return False
+        self._rows[row.alarm_id] = row
+        return True
+
+    def _take_comment(self, alarm_id: str, comment: Comment) -> bool:
+        held = self._comments.get(alarm_id, ())
+        if any(c.seq == comment.seq for c in held):
+            return False
+        self._comment_bodies[(alarm_id, comment.seq)] = with_iso(comment.to_dict())
+        self._comments[alarm_id] = tuple(sorted((*held, comment), key=lambda c: c.seq))
+        return True
 
     def apply_transitions(self, transitions: Iterable[Transition]) -> int:
-        """Merge the alarms' states after stored transitions (``Worker.on_alarms``)."""
-        return self.merge(t.alarm for t in transitions)
+        """Merge the alarms' states and comments after stored transitions
+        (``Worker.on_alarms``)."""
+        transitions = list(transitions)
+        notes = [(t.alarm_id, c) for t in transitions if (c := Comment.of(t)) is not None]
+        return self.merge((t.alarm for t in transitions), notes)
 
     def apply_message(self, payload: bytes) -> int:
-        """Merge one ``…/@alarms`` message; raises :class:`millwatch.alarms.wire.AlarmWireError`."""
-        return self.merge([row_from_dict(decode_transition(payload)["alarm"])])
+        """Merge one ``…/@alarms`` message (the alarm, and the comment its transition carried);
+        raises :class:`millwatch.alarms.wire.AlarmWireError`."""
+        message = decode_transition(payload)
+        row = row_from_dict(message["alarm"])
+        step = message["transition"]
+        comment = Comment.of_row(step) if step.get("comment") else None
+        return self.merge([row], [] if comment is None else [(row.alarm_id, comment)])
+
+    def merge_entries(self, entries: Iterable[Mapping[str, Any]]) -> int:
+        """Merge alarms as plain data with their ``comments`` (:meth:`entry`'s, a query reply's,
+        ``/alarms/{id}``'s, an action's answer); returns how many alarms changed."""
+        rows, notes = [], []
+        for entry in entries:
+            row = row_from_dict(dict(entry))
+            rows.append(row)
+            notes += [(row.alarm_id, Comment.from_dict(c)) for c in entry.get("comments", ())]
+        return self.merge(rows, notes)
 
     # ------------------------------------------------------------------ reading
     def get(self, alarm_id: str) -> Alarm | None:
         """One alarm's current state, or None."""
         return self._rows.get(alarm_id)
+
+    def comments(self, alarm_id: str) -> tuple[Comment, ...]:
+        """One alarm's comments, oldest first."""
+        return self._comments.get(alarm_id, ())
+
+    def entry(self, row: Alarm) -> dict[str, Any]:
+        """An alarm's ``/alarms`` entry as plain data (no ISO times): :func:`row_to_dict` and
+        its ``comments``. (Read without the lock: a comment tuple is replaced whole, so at
+        worst a comment that arrived while this was made is listed one version early.)"""
+        notes = self._comments.get(row.alarm_id, ())
+        return {**row_to_dict(row), "comments": [c.to_dict() for c in notes]}
+
+    def _listed(self, row: Alarm) -> dict[str, Any]:
+        """:meth:`entry` with ISO-8601 beside every ``_ns`` (the comments' made once)."""
+        notes = self._comments.get(row.alarm_id, ())
+        bodies = [self._comment_bodies[(row.alarm_id, c.seq)] for c in notes]
+        return {**with_iso(row_to_dict(row)), "comments": bodies}
 
     def rows(self, mill_id: str | None = None) -> list[Alarm]:
         """Alarms (of one mill), most recently changed first."""
@@ -214,7 +279,7 @@ class AlarmBoard:
             and (since_ns is None or r.updated_ns >= since_ns)
             and (mill_id is None or r.mill_id == mill_id)
         ]
-        alarms = [with_iso(row_to_dict(r)) for r in rows]
+        alarms = [self._listed(r) for r in rows]
         body = {"alarms": alarms, "count": len(rows), "cursor": str(cursor),
                 "resync": isinstance(since, Cursor) and not issued}  # fmt: skip
         listing = Listing(_encode(body), _listing_etag(rows, cursor), version)

@@ -34,7 +34,7 @@ from millwatch.alarms.actions import (
     OperatorAction,
 )
 from millwatch.alarms.engine import UnknownAlarmError
-from millwatch.alarms.lifecycle import Alarm, AlarmState
+from millwatch.alarms.lifecycle import Alarm, AlarmState, Comment
 from millwatch.api.times import with_iso
 from millwatch.errors import BadRequest, Conflict, NotFound, Unavailable
 from millwatch.store.database import Store
@@ -83,10 +83,14 @@ def etag(rows: list[Alarm]) -> str:
 def alarm_list(
     store: Store, states: tuple[str, ...], since_ns: int | None, mill_id: str | None
 ) -> tuple[dict[str, Any], str]:
-    """The listing (alarms, count, next cursor) and its ETag."""
+    """The listing (alarms with their comments, count, next cursor) and its ETag."""
     rows = store.alarms(states or None, since_ns, mill_id)
+    notes: dict[str, list[dict[str, Any]]] = {}
+    for alarm_id, comment in store.alarm_comments():
+        notes.setdefault(alarm_id, []).append(comment.to_dict())
+    alarms = [with_iso({**r.to_dict(), "comments": notes.get(r.alarm_id, [])}) for r in rows]
     cursor = max((r.updated_ns for r in rows), default=since_ns)
-    body = {"alarms": [with_iso(r.to_dict()) for r in rows], "count": len(rows), "cursor": cursor}
+    body = {"alarms": alarms, "count": len(rows), "cursor": cursor}
     return body, etag(rows)
 
 
@@ -99,17 +103,16 @@ def matches(if_none_match: str | None, tag: str) -> bool:
 
 
 def alarm_detail(store: Store, alarm_id: str) -> dict[str, Any]:
-    """One alarm with its transitions and its comments (each: ``user``, ``t_ns``, ``text``,
-    the transition's ``kind`` and ``seq``); :class:`NotFound` naming the id."""
+    """One alarm with its comments (:class:`~millwatch.alarms.lifecycle.Comment`, as its
+    ``/alarms`` entry lists them) and its transitions; :class:`NotFound` naming the id."""
     row = store.alarm(alarm_id)
     if row is None:
         raise NotFound(
             "Unknown alarm", f"No alarm {alarm_id!r} is stored here; GET /alarms lists the alarms."
         )
-    transitions = [t.to_row() for t in store.alarm_transitions(alarm_id)]
-    comments = [{"user": t["by"], "t_ns": t["t_ns"], "text": t["comment"], "kind": t["kind"],
-                 "seq": t["seq"]} for t in transitions if t["comment"]]  # fmt: skip
-    return {**row.to_dict(), "transitions": transitions, "comments": comments}
+    steps = store.alarm_transitions(alarm_id)
+    comments = [c.to_dict() for t in steps if (c := Comment.of(t)) is not None]
+    return {**row.to_dict(), "comments": comments, "transitions": [t.to_row() for t in steps]}
 
 
 def apply_action(

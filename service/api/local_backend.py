@@ -7,7 +7,8 @@ thread refreshes every 0.5 s; operator actions (acknowledge, confirm, comment, s
 through the worker thread.
 
 The alarm board (:mod:`millwatch.api.alarm_board`) is fed by the runtime's stored transitions (it
-registers on ``runtime.alarm_listeners``) and loaded once from the store when the store is open.
+registers on ``runtime.alarm_listeners``) and loaded once from the store when the store is open
+(every alarm and every stored comment).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from prometheus_client import CollectorRegistry
 
 from millwatch.alarms.actions import ActionKind, OperatorAction
 from millwatch.alarms.lifecycle import Transition
-from millwatch.api.alarm_board import AlarmBoard, row_from_dict
+from millwatch.api.alarm_board import AlarmBoard
 from millwatch.api.alarm_views import alarm_detail, apply_action
 from millwatch.api.identity import ApiKeys
 from millwatch.api.journal import JournalPage, JournalQuery, journal_entries
@@ -69,7 +70,8 @@ class LocalBackend:
 
     def _load_board(self) -> bool:
         if not self._board_loaded and self.runtime.store is not None:
-            self._board.merge(self.runtime.store.alarms())
+            store = self.runtime.store
+            self._board.merge(store.alarms(), store.alarm_comments())
             self._board_loaded = True
         return self._board_loaded
 
@@ -89,7 +91,7 @@ class LocalBackend:
         the API signed it, so a primary and its hot standby record the same transition)."""
         detail = apply_action(self.runtime, store_of(self.runtime), action, self.max_shelve_s,
                               t_ns)  # fmt: skip
-        self._board.merge([row_from_dict(detail)])
+        self._board.merge_entries([detail])
         return detail
 
     def ack(self, alarm_id: str, by: str) -> dict[str, Any]:

@@ -163,7 +163,7 @@ ALARM_EXAMPLE: JsonDict = {
     "acked_by": None,
     "cleared_ns": None,
     "cleared": None,
-    "seq": 1,
+    "seq": 2,
     "simulated": False,
     "value_at_raise": 362.0,
     "threshold_at_raise": 348.41,
@@ -189,12 +189,39 @@ ALARM_EXAMPLE: JsonDict = {
     "last_commented": "2024-05-01T10:45:00Z",
     "shelved": True,
 }
+ALARM_ENTRY_EXAMPLE: JsonDict = {
+    **ALARM_EXAMPLE,
+    "comments": [
+        {
+            "user": "j.perez",
+            "t_ns": 1714560300000000000,
+            "text": "Starter electrolyte being checked by the electrician on shift",
+            "kind": "shelved",
+            "seq": 2,
+            "t": "2024-05-01T10:45:00Z",
+        }
+    ],
+}
+"""An alarm's entry in ``/alarms``: the record (:data:`ALARM_EXAMPLE`) and its comments."""
+
+
+class CommentOut(BaseModel):
+    """One comment on an alarm (:class:`~millwatch.alarms.lifecycle.Comment`; from its
+    transitions: an acknowledgement, a confirmation, a shelve… may carry one, and ``commented``
+    transitions are comments alone)."""
+
+    user: str | None = Field(description="Who wrote it (the key's or OPC UA session's user).")
+    t_ns: int = Field(description="When, ns UTC (the worker's wall clock).")
+    t: str = Field(description="When, ISO-8601 UTC (= t_ns).")
+    text: str
+    kind: str = Field(description="The transition that carried it (commented, acknowledged…).")
+    seq: int = Field(description="That transition's seq (orders the alarm's comments).")
 
 
 class AlarmOut(BaseModel):
     """The current state of one alarm; times ns UTC and (without ``_ns``) ISO-8601 UTC."""
 
-    model_config = ConfigDict(json_schema_extra={"examples": [ALARM_EXAMPLE]})
+    model_config = ConfigDict(json_schema_extra={"examples": [ALARM_ENTRY_EXAMPLE]})
 
     alarm_id: str
     mill_id: str
@@ -283,6 +310,11 @@ class AlarmOut(BaseModel):
     last_commented_ns: int | None = Field(None, description="When, ns UTC.")
     last_commented: str | None = Field(None, description="When, ISO-8601 UTC.")
     shelved: bool = Field(False, description="shelving_state is timed_shelved or one_shot_shelved.")
+    comments: list[CommentOut] = Field(
+        default_factory=list,
+        description="Every comment on the alarm, oldest first: who, when, the text (the same "
+        "in /alarms and /alarms/{id}; a new one is a change the since cursor returns).",
+    )
 
 
 class TransitionOut(BaseModel):
@@ -306,24 +338,12 @@ class TransitionOut(BaseModel):
     comment: str | None = Field(description="The comment given with the action, if any.")
 
 
-class CommentOut(BaseModel):
-    """One comment on an alarm (from its transitions: an acknowledgement, a confirmation, a
-    shelve… may carry one, and ``commented`` transitions are comments alone)."""
-
-    user: str | None = Field(description="Who wrote it.")
-    t_ns: int
-    t: str = Field(description="When, ISO-8601 UTC (= t_ns).")
-    text: str
-    kind: str = Field(description="The transition that carried it (commented, acknowledged…).")
-    seq: int
-
-
 class AlarmList(BaseModel):
     model_config = ConfigDict(
         json_schema_extra={
             "examples": [
                 {
-                    "alarms": [ALARM_EXAMPLE],
+                    "alarms": [ALARM_ENTRY_EXAMPLE],
                     "count": 1,
                     "cursor": "7f3a9c2e-118",
                     "resync": False,
@@ -348,7 +368,6 @@ class AlarmList(BaseModel):
 
 class AlarmDetail(AlarmOut):
     transitions: list[TransitionOut]
-    comments: list[CommentOut] = Field(description="Every comment, oldest first.")
 
 
 _PRINTABLE = r"^[^\x00-\x1f\x7f-\x9f]*$"

@@ -46,7 +46,6 @@ from typing import Any
 import zenoh
 
 from millwatch.analytics.drivetrain.mill_config import MillConfig
-from millwatch.api.alarm_board import row_to_dict
 from millwatch.api.local_backend import LocalBackend
 from millwatch.errors import ApiError, NotFound, Unavailable
 from millwatch.ingest.keys import query_key, query_pattern, worker_token_key
@@ -109,7 +108,7 @@ ANSWERS: dict[Question, Answer] = {
     Question.STARTS: lambda b, m, a: b.starts(m, month_of(a)).model_dump(mode="json"),
     Question.SPECTRUM: lambda b, m, _: b.spectrum(m),
     Question.REPORT: lambda b, m, a: report_to_dict(b.monthly_report(m, month_of(a))),
-    Question.ALARMS: lambda b, m, _: [row_to_dict(r) for r in b.alarm_board().rows(m)],
+    Question.ALARMS: lambda b, m, _: [b.alarm_board().entry(r) for r in b.alarm_board().rows(m)],
     Question.ALARM: _alarm,
     Question.ACK: _ack,
     Question.ACT: _act,

@@ -58,7 +58,7 @@ from millwatch.alarms.actions import (
 from millwatch.alarms.times import iso_utc
 from millwatch.alarms.wire import AlarmWireError
 from millwatch.analytics.drivetrain.mill_config import MillConfig
-from millwatch.api.alarm_board import AlarmBoard, row_from_dict
+from millwatch.api.alarm_board import AlarmBoard
 from millwatch.api.identity import ApiKeys
 from millwatch.api.journal import JournalPage, JournalQuery, merge_pages
 from millwatch.api.mill_views import config_of, mill_detail, mill_summary, site_mills
@@ -243,7 +243,7 @@ class ZenohBackend:
     def sync_alarms(self) -> int:
         """Gather every live mill's alarms into the board; returns the rows that changed."""
         gathered = self._gather(Question.ALARMS)
-        return self._board.merge(row_from_dict(r) for rows in gathered.values() for r in rows)
+        return self._board.merge_entries(r for rows in gathered.values() for r in rows)
 
     def _gather(
         self, what: Question, site: str | None = None, args: dict[str, Any] | None = None
@@ -499,7 +499,7 @@ class ZenohBackend:
         except InvalidActionError as exc:
             raise BadRequest("Invalid shelve expiry", str(exc)) from exc
         detail = self._ask_every(mill_id, Question.ACT, act_args(action, self.api_key))
-        self._board.merge([row_from_dict(detail)])
+        self._board.merge_entries([detail])
         return detail
 
     def ack(self, alarm_id: str, by: str) -> dict[str, Any]:

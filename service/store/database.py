@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from millwatch.alarms.lifecycle import Alarm, TransitionRecord
+from millwatch.alarms.lifecycle import Alarm, Comment, TransitionRecord
 from millwatch.analytics.mill.phase_damage import phase_totals
 from millwatch.store import migrations, sampler
 from millwatch.store.checkpoint_seal import CheckpointDamaged, Opened, seal, unseal
@@ -326,6 +326,18 @@ class Store:
         sql = (f"SELECT {column_list(TransitionRecord)} FROM alarm_transitions "
                "WHERE alarm_id = ? ORDER BY seq")  # fmt: skip
         return [from_row(TransitionRecord, r) for r in self._query_rows(sql, (alarm_id,))]
+
+    def alarm_comments(self) -> list[tuple[str, Comment]]:
+        """Every stored comment as ``(alarm id, comment)``, each alarm's oldest first (the
+        alarm board's load: :mod:`millwatch.api.alarm_board`)."""
+        sql = ("SELECT alarm_id, seq, kind, t_ns, by, comment FROM alarm_transitions "
+               "WHERE comment IS NOT NULL AND comment != '' ORDER BY alarm_id, seq")  # fmt: skip
+        out = []
+        for row in self._query_rows(sql, ()):
+            comment = Comment.of_row(row)
+            if comment is not None:
+                out.append((str(row["alarm_id"]), comment))
+        return out
 
     def alarm_journal(
         self,

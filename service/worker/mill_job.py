@@ -43,6 +43,7 @@ import numpy as np
 from millwatch.alarms.engine import AlarmEngine
 from millwatch.alarms.from_analysis import (
     event_observations,
+    in_time_order,
     peak_observations,
     resonance_observations,
     window_observations,
@@ -241,13 +242,7 @@ class MillJob:
                 self.ledger.add(starts=[event.t_ns])
             elif isinstance(event, StopEvent):
                 self.ledger.add(stops=[(event.t_ns, event.app_d)])
-            if isinstance(event, StartEvent | StopEvent):  # (suppression by design: engine)
-                update.alarm_transitions += self.alarms.observe_all(observations)
-                observations = []
-                running = isinstance(event, StartEvent)
-                update.alarm_transitions += self.alarms.set_running(self.config.id, running,
-                                                                    event.t_ns)  # fmt: skip
-            observations += self._event_observations(event)
+            observations += self._event_observations(event)  # (starts, stops: suppression)
         for window in self._new_windows():
             update.records.append(("steady", int(window["t_ns"]), window))
             self._latest_typed = SteadyWindowResult.model_validate(window)
@@ -262,8 +257,8 @@ class MillJob:
             observations += resonance_observations(
                 self.config.id, [m.to_dict() for m in margins], int(hw.t_end_ns)
             )
-        if observations:
-            update.alarm_transitions += self.alarms.observe_all(observations)
+        if observations:  # (in time order, as millwatch analyze observes them)
+            update.alarm_transitions += self.alarms.observe_all(in_time_order(observations))
 
     def _event_row(self, event: AnalyzerEvent) -> EventRow:
         return EventRow(self.config.id, event.event, event.t_ns, event.to_json(), event.end_t_ns)

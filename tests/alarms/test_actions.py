@@ -20,6 +20,7 @@ from millwatch.alarms.actions import (
 )
 from millwatch.alarms.engine import AlarmEngine, UnknownAlarmError
 from millwatch.alarms.lifecycle import Alarm, Transition
+from millwatch.alarms.observations import running_observation
 from tests.alarms.helpers import NS, T0, engine, feed, kinds, obs
 
 A = ActionKind
@@ -222,18 +223,25 @@ def test_return_to_service_on_another_alarm_of_the_condition_is_refused():
 
 
 # ---------------------------------------------------------------- suppression by design
+def _running(eng: AlarmEngine, running: bool, t_s: float, mill_id: str = "sag-5200-lrs"):
+    """The mill's start or stop event as the engine gets it, live and offline: an
+    observation (:func:`millwatch.alarms.from_analysis.event_observations`)."""
+    return eng.observe(running_observation(mill_id, running, T0 + int(t_s * NS)))
+
+
 def test_running_mill_rules_are_suppressed_from_a_stop_to_the_next_start():
     eng = engine(raise_delay_s=0)
     (bending,) = feed(eng, "bending_amplitude_mpa", [30], channel="b")
     (start,) = feed(eng, "start_peak_pct", [400], start_s=10)
-    (suppressed,) = eng.set_running("sag-5200-lrs", False, T0 + 100 * NS)
+    assert _running(eng, False, 100, mill_id="nowhere") == []  # (an unknown mill: ignored)
+    (suppressed,) = _running(eng, False, 100)
     assert (suppressed.alarm_id, suppressed.kind) == (bending.alarm_id, "suppressed")
     assert suppressed.alarm.suppressed and not suppressed.alarm.annunciated
     assert not eng.alarm(start.alarm_id).suppressed  # a start peak matters when stopped too
-    assert eng.set_running("sag-5200-lrs", False, T0 + 200 * NS) == []  # already stopped
+    assert _running(eng, False, 200) == []  # already stopped
     (osc,) = feed(eng, "oscillation_range_pct", [50, 50], start_s=300, channel="m")
     assert osc.kind == "raised" and osc.alarm.suppressed  # born suppressed while stopped
-    back = eng.set_running("sag-5200-lrs", True, T0 + 900 * NS)
+    back = _running(eng, True, 900)
     assert sorted(kinds(back)) == ["unsuppressed", "unsuppressed"]
     assert not any(a.suppressed for a in eng.open_alarms())
 
@@ -253,7 +261,7 @@ def _apply_step(eng: AlarmEngine, step: tuple, t_s: int, known: dict[str, Alarm]
     if what == "obs":
         return eng.observe(obs("start_peak_pct", arg, t_s))
     if what == "run":
-        return eng.set_running("sag-5200-lrs", arg, t_ns)
+        return _running(eng, arg, t_s)
     if what == "expire":
         return eng.expire_shelves(t_ns)
     if not known:

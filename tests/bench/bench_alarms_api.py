@@ -15,6 +15,11 @@ over asyncio streams: httpx cost more CPU per request than the server), in
 Reports latency quantiles as the clients saw them, status counts, the rate achieved and the
 server process's CPU time per request (this process: API, worker thread, zenoh), which does not
 depend on how busy the machine is. Clients and server share this machine's cores.
+
+``--comment-every S``: an operator comments on one of the open alarms every ``S`` seconds
+while the pollers run (through the worker thread, as ``POST /alarms/{id}/comment`` does), so
+each comment is a change every poller fetches (a 200 with the alarms and all their comments)
+instead of a 304.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from urllib.parse import urlsplit
 import numpy as np
 import uvicorn
 
+from millwatch.alarms.actions import ActionKind, OperatorAction
 from millwatch.api.app import create_app
 from millwatch.ingest.sim.publisher import ScenePublisher, starting_now
 from millwatch.ingest.sim.scenes import get_scene
@@ -76,6 +82,22 @@ def start_service(directory: Path) -> tuple[ServiceRuntime, uvicorn.Server, int]
             break
         time.sleep(0.05)
     return runtime, server, hport
+
+
+def comment_now_and_then(runtime: ServiceRuntime, every_s: float, stop: threading.Event) -> int:
+    """Comment on the open alarms in turn every ``every_s`` until ``stop`` is set (the pollers
+    are done); returns how many comments were made."""
+    assert runtime.store is not None
+    alarms = [a.alarm_id for a in runtime.store.alarms(("raised", "acknowledged"))]
+    made = 0
+    while alarms and not stop.wait(every_s):
+        text = f"Comment {made}: starter checked on shift, electrolyte topped up"
+        note = OperatorAction(alarms[made % len(alarms)], ActionKind.COMMENT, "bench", text)
+        request = runtime.request_action("sag-5200-lrs", note)
+        if request is not None:
+            request.done.result(timeout=10)
+            made += 1
+    return made
 
 
 class Connection:
@@ -162,6 +184,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--client-processes", type=int, default=2)
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--comment-every", type=float, default=0.0, help="s between comments")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as d:
         runtime, server, port = start_service(Path(d))
@@ -170,9 +193,16 @@ def main() -> None:
         time.sleep(IDLE_S)  # what the server costs without requests (worker thread, zenoh)
         idle_cpu_s = (time.process_time() - idle0) / (time.monotonic() - t_idle)
         cpu0 = time.process_time()
+        comments: list[int] = []
+        stop = threading.Event()
+        commenter = threading.Thread(target=lambda: comments.append(comment_now_and_then(
+            runtime, args.comment_every, stop)) if args.comment_every > 0 else None)  # fmt: skip
+        commenter.start()
         results, client_cpu = poll_from_other_processes(
             url, args.clients, args.rate, args.seconds, args.client_processes
         )
+        stop.set()
+        commenter.join(timeout=30)
         server_cpu = time.process_time() - cpu0
         server.should_exit = True
         runtime.stop()
@@ -186,7 +216,7 @@ def main() -> None:
            "server_net_cpu_us_per_request":
                (server_cpu - idle_cpu_s * args.seconds) / len(results) * 1e6,
            "client_cpu_us_per_request": client_cpu / len(results) * 1e6,
-           "status": codes}  # fmt: skip
+           "status": codes, "comments": sum(comments)}  # fmt: skip
     print(json.dumps(out, indent=None if not args.json else 2))
 
 

@@ -102,7 +102,8 @@ def alarms_router(backend: Backend) -> APIRouter:
 
     @router.get(
         "/alarms",
-        summary="Alarms, most recently changed first; cheap to poll (ETag, since cursor)",
+        summary="Alarms with their comments, most recently changed first; cheap to poll (ETag, "
+        "since cursor)",
         response_model=AlarmList,
         responses={**_POLL_RESPONSES, **problem_responses(404, 422, 503)},
     )
@@ -200,7 +201,8 @@ def _add_action_routes(router: APIRouter, act: Any) -> None:
         ACTION_PATHS[ActionKind.COMMENT],
         summary="Add a comment to an alarm, open or cleared",
         description="The comment is kept in the alarm's transitions (kind commented); the "
-        "alarm lists the count and the newest, its detail every comment." + _WHO,
+        "alarm's entry in GET /alarms (the next since poll returns it) and its detail list "
+        "every comment with who and when." + _WHO,
         response_model=AlarmDetail,
         responses=_ACTION_RESPONSES,
     )

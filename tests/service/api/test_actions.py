@@ -1,6 +1,7 @@
 """Operator actions over REST on the real app and runtime (zenoh on 127.0.0.1, archive, store):
 per-user keys (the key's user is recorded; a viewer is refused), every action route with its
-404/409/422 answers, comments in the detail and the listing, and every action a new ``seq``."""
+404/409/422 answers, every comment in the detail and in the listing's entry (the next cursor
+poll brings a new one), and every action a new ``seq``."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from datetime import UTC, datetime, timedelta
 import httpx
 import pytest
 
+from millwatch.alarms.times import iso_utc
 from millwatch.ingest.zenoh_session import free_loopback_port
 from millwatch.settings import ApiSettings, ApiUser
 from tests.service.conftest import API_KEY, MILL, _settings, served_runtime
@@ -102,6 +104,24 @@ def test_confirm_then_comment_each_a_new_seq(client, alarm_id):
     commented = _post(client, alarm_id, "comment", {"comment": "Electrician on the way"}).json()
     assert commented["seq"] == seq + 2 and commented["comment_count"] == 2
     assert [c["text"] for c in commented["comments"]] == [
+        "Starter being checked", "Electrician on the way"]  # fmt: skip
+
+
+def test_every_comment_is_in_the_alarm_s_entry_and_the_next_cursor_poll(client, alarm_id):
+    listing = client.get("/alarms")
+    cursor, etag = listing.json()["cursor"], listing.headers["ETag"]
+    entry = next(a for a in listing.json()["alarms"] if a["alarm_id"] == alarm_id)
+    assert entry["comments"] == client.get(f"/alarms/{alarm_id}").json()["comments"]
+    detail = _post(client, alarm_id, "comment", {"comment": "Relined last week"}).json()
+    assert client.get("/alarms", headers={"If-None-Match": etag}).status_code == 200
+    polled = client.get("/alarms", params={"since": cursor}).json()
+    entry = next(a for a in polled["alarms"] if a["alarm_id"] == alarm_id)
+    assert entry["comments"] == detail["comments"]
+    last = entry["comments"][-1]
+    assert (last["user"], last["text"], last["kind"], last["seq"]) == (
+        "j.perez", "Relined last week", "commented", detail["seq"])  # fmt: skip
+    assert last["t"] == iso_utc(last["t_ns"]) and len(entry["comments"]) == entry["comment_count"]
+    assert [c["text"] for c in entry["comments"]][:2] == [
         "Starter being checked", "Electrician on the way"]  # fmt: skip
 
 

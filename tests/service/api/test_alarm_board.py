@@ -8,7 +8,9 @@ import random
 
 import pytest
 
+from millwatch.alarms.actions import ActionKind, OperatorAction
 from millwatch.alarms.lifecycle import Alarm, Transition
+from millwatch.alarms.times import iso_utc
 from millwatch.alarms.wire import encode_transition
 from millwatch.api.alarm_board import AlarmBoard
 from millwatch.api.alarm_views import alarm_list
@@ -21,6 +23,8 @@ def _history() -> list[Transition]:
     eng = engine()
     fired = feed(eng, "start_peak_pct", [260, 312], step_s=3600)  # raised, escalated
     fired += eng.acknowledge(fired[0].alarm_id, "ops", T0 + 7200 * NS)
+    note = OperatorAction(fired[0].alarm_id, ActionKind.COMMENT, "ops", "starter being checked")
+    fired += eng.act(note, T0 + 7300 * NS)
     fired += feed(eng, "bending_amplitude_mpa", [30, 30], start_s=9000, channel="pinion_bending")
     fired += feed(eng, "bending_amplitude_mpa", [0] * 40, start_s=9200, channel="pinion_bending")
     return fired
@@ -89,3 +93,45 @@ def test_wire_messages_merge_like_transitions():
     assert wired_body["alarms"] == direct_body["alarms"]
     assert isinstance(wired.get(fired[0].alarm_id), Alarm)
     assert wired.rows("sag-5200-lrs") == direct.rows() and wired.rows("ball-9") == []
+
+
+def test_every_alarm_entry_lists_its_comments_and_a_comment_is_a_change():
+    eng = engine()
+    fired = feed(eng, "start_peak_pct", [312], step_s=3600)
+    fired += feed(eng, "bending_amplitude_mpa", [30] * 10, start_s=9000, channel="pinion_bending")
+    alarm_id = fired[0].alarm_id
+    ack = OperatorAction(alarm_id, ActionKind.ACKNOWLEDGE, "ops", "starter being checked")
+    fired += eng.act(ack, T0 + 7200 * NS)
+    board = AlarmBoard()
+    board.apply_transitions(fired)
+    cursor = board.cursor
+    alarms = json.loads(board.listing((), None, None).body)["alarms"]
+    entry = next(a for a in alarms if a["alarm_id"] == alarm_id)
+    assert [(c["user"], c["text"], c["kind"]) for c in entry["comments"]] == [
+        ("ops", "starter being checked", "acknowledged")]  # fmt: skip
+    assert entry["comments"][0]["t"] == iso_utc(entry["comments"][0]["t_ns"])
+    assert [a["comments"] for a in alarms if a["alarm_id"] != alarm_id] == [[]]
+    note = OperatorAction(alarm_id, ActionKind.COMMENT, "ops2", "second look")
+    board.apply_transitions(eng.act(note, T0 + 7400 * NS))
+    polled = json.loads(board.listing((), cursor, None).body)
+    assert [a["alarm_id"] for a in polled["alarms"]] == [alarm_id]
+    assert [(c["user"], c["text"]) for c in polled["alarms"][0]["comments"]] == [
+        ("ops", "starter being checked"), ("ops2", "second look")]  # fmt: skip
+
+
+def test_comments_merge_as_a_set_whatever_the_source(tmp_path):
+    fired = _history()
+    board = AlarmBoard()
+    board.apply_transitions(fired)
+    version = board.version
+    assert board.apply_transitions(fired) == 0 and board.version == version
+    entries = [board.entry(r) for r in board.rows()]
+    assert board.merge_entries(entries) == 0  # (a query reply of what it holds)
+    copied = AlarmBoard()
+    copied.merge_entries(reversed(entries))
+    assert [copied.entry(r) for r in copied.rows()] == entries
+    with Store(tmp_path / "s.db") as store:
+        _write(store, fired)
+        loaded = AlarmBoard()
+        loaded.merge(store.alarms(), store.alarm_comments())
+    assert [loaded.entry(r) for r in loaded.rows()] == entries

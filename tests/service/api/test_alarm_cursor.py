@@ -1,7 +1,8 @@
 """The change cursor of ``GET /alarms`` never misses a change: a poller that sends back the
 cursor it got, and merges what comes back, holds exactly the board after every poll — whatever
-the interleaving of raises, acknowledgements (of old alarms too), re-annunciations, clears,
-duplicate deliveries, mills whose sample clocks lag each other, and a restart of the API.
+the interleaving of raises, acknowledgements (of old alarms too), comments (each alarm's entry
+lists them all), re-annunciations, clears, duplicate deliveries, mills whose sample clocks lag
+each other, and a restart of the API.
 
 The alarm records come from the lifecycle functions that make them in the engine
 (:mod:`millwatch.alarms.lifecycle`); the board is the one ``/alarms`` answers from."""
@@ -20,15 +21,17 @@ from hypothesis import strategies as st
 from millwatch.alarms.lifecycle import (
     Alarm,
     AlarmState,
+    Comment,
     Transition,
     acknowledge,
+    add_comment,
     alarm_id_for,
     clear,
     raise_alarm,
     reannunciate,
 )
 from millwatch.alarms.rules import Severity
-from millwatch.api.alarm_board import AlarmBoard, Cursor, row_to_dict
+from millwatch.api.alarm_board import AlarmBoard, Cursor
 from millwatch.api.app import create_app
 from millwatch.api.times import with_iso
 from millwatch.settings import ServiceSettings
@@ -74,11 +77,13 @@ class Plant:
             self.board.apply_transitions([self.history[a % len(self.history)]])
         elif op == "restart":
             self.board = AlarmBoard()
-            self.board.merge(self.board_rows_from_store())
+            self.board.merge(self.board_rows_from_store(), self.comments_from_store())
         elif self.alarms:
             self._change(op, self.alarms[a % len(self.alarms)], T0 + t_s * NS)
 
     def _change(self, op: str, alarm: Alarm, t_ns: int) -> None:
+        if op == "comment":  # (on a cleared alarm too)
+            self.record([add_comment(alarm, "operator-7", t_ns, f"note {len(self.history)}")])
         if not alarm.open:
             return
         if op == "ack":
@@ -91,6 +96,10 @@ class Plant:
     def board_rows_from_store(self) -> list[Alarm]:
         """What the store holds: every alarm's latest state (as the engine has it)."""
         return [a.copy() for a in self.alarms]
+
+    def comments_from_store(self) -> list[tuple[str, Comment]]:
+        """Every comment the store holds (its transitions')."""
+        return [(t.alarm_id, c) for t in self.history if (c := Comment.of(t)) is not None]
 
 
 @dataclass
@@ -125,14 +134,16 @@ class Poller:
 
     def expected(self, board: AlarmBoard) -> dict[str, dict[str, Any]]:
         return {
-            r.alarm_id: with_iso(row_to_dict(r))
+            r.alarm_id: with_iso(board.entry(r))
             for r in board.rows(self.mill)
             if not self.states or r.state in self.states
         }
 
 
 STEP = st.tuples(
-    st.sampled_from(["raise", "ack", "reannunciate", "clear", "redeliver", "restart", "poll"]),
+    st.sampled_from(
+        ["raise", "ack", "comment", "reannunciate", "clear", "redeliver", "restart", "poll"]
+    ),
     st.integers(0, 30),
     st.integers(-3600, 3600),  # sample or wall time, s: any order
 )

@@ -4,11 +4,19 @@ model or in a migration fails here, naming it."""
 
 from __future__ import annotations
 
+import dataclasses
 import sqlite3
 
-from millwatch.alarms.lifecycle import Alarm, TransitionRecord
+from millwatch.alarms.lifecycle import Alarm, Comment, TransitionRecord
 from millwatch.analytics.drivetrain.mill_config import MillConfig
-from millwatch.api.models import ALARM_EXAMPLE, AlarmDetail, AlarmOut, TransitionOut
+from millwatch.api.models import (
+    ALARM_ENTRY_EXAMPLE,
+    ALARM_EXAMPLE,
+    AlarmDetail,
+    AlarmOut,
+    CommentOut,
+    TransitionOut,
+)
 from millwatch.api.routes.params import MILL_ID_PATTERN
 from millwatch.store.database import Store
 from millwatch.store.records import columns
@@ -21,10 +29,18 @@ def _iso_beside_ns(names: tuple[str, ...]) -> tuple[str, ...]:
 
 def test_the_alarm_bodies_have_the_fields_of_the_records_in_their_order():
     alarm = (*_iso_beside_ns(columns(Alarm)), "shelved")  # (shelved: computed, Alarm.to_dict)
-    assert tuple(AlarmOut.model_fields) == alarm
+    assert tuple(AlarmOut.model_fields) == (*alarm, "comments")
     assert tuple(ALARM_EXAMPLE) == alarm
+    assert tuple(ALARM_ENTRY_EXAMPLE) == (*alarm, "comments")
     assert tuple(TransitionOut.model_fields) == _iso_beside_ns(columns(TransitionRecord))
-    assert tuple(AlarmDetail.model_fields) == (*alarm, "transitions", "comments")
+    assert tuple(AlarmDetail.model_fields) == (*alarm, "comments", "transitions")
+
+
+def test_a_comment_body_has_the_fields_of_the_comment_record():
+    names = tuple(f.name for f in dataclasses.fields(Comment))
+    assert set(CommentOut.model_fields) == set(_iso_beside_ns(names))
+    example = ALARM_ENTRY_EXAMPLE["comments"][0]
+    assert Comment.from_dict(example).to_dict() == {k: example[k] for k in names}
 
 
 def test_the_alarm_as_plain_data_is_what_the_body_lists():

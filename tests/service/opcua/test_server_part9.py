@@ -145,6 +145,17 @@ def test_a_condition_is_a_limit_alarm_with_its_states_input_value_and_limit(
 
 
 # ---------------------------------------------------------------------- methods
+def _listed_comments(plant: Plant, alarm_id: str, text: str) -> list[dict[str, Any]]:
+    """The comments of the alarm's entry in REST ``GET /alarms`` once ``text`` is among them
+    (the REST app's alarm board takes the worker's stored transitions; at most 5 s)."""
+    deadline = time.monotonic() + 5.0
+    while True:
+        entry = next(a for a in rest(plant, "/alarms")["alarms"] if a["alarm_id"] == alarm_id)
+        if text in [c["text"] for c in entry["comments"]] or time.monotonic() > deadline:
+            return list(entry["comments"])
+        time.sleep(0.05)
+
+
 def test_every_operator_method_reaches_the_store_with_the_opc_ua_user(plant: Plant) -> None:
     alarm = acked_alarm(plant, MILL)
     alarm_id = alarm["alarm_id"]
@@ -163,6 +174,7 @@ def test_every_operator_method_reaches_the_store_with_the_opc_ua_user(plant: Pla
             out["ack twice"] = _code(twice.value)
             await call(c, cond, "AddComment", eid(), _comment("pinion inspected, no cracks"))
             out["comment"] = rest(plant, f"/alarms/{alarm_id}")
+            out["listed"] = _listed_comments(plant, alarm_id, "pinion inspected, no cracks")
             await call(c, cond, "Confirm", eid(), _comment("starter checked"))
             out["confirmed"] = (rest(plant, f"/alarms/{alarm_id}"),
                                 await read(c, cond, "ConfirmedState.Id"))  # fmt: skip
@@ -191,6 +203,10 @@ def test_every_operator_method_reaches_the_store_with_the_opc_ua_user(plant: Pla
     comments = [t for t in out["comment"]["transitions"] if t["kind"] == "commented"]
     assert comments[-1]["comment"] == "pinion inspected, no cracks"
     assert comments[-1]["by"] == OPERATOR
+    listed = out["listed"][-1]  # (the REST listing, fed by the worker like any change)
+    assert (listed["user"], listed["text"], listed["kind"]) == (
+        OPERATOR, "pinion inspected, no cracks", "commented")  # fmt: skip
+    assert out["listed"] == out["comment"]["comments"]
     stored, node = out["confirmed"]
     assert stored["confirmed"] is True and node is True
     stored, state, hidden = out["timed"]
