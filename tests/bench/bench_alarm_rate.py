@@ -9,12 +9,16 @@ long stops, telemetry spikes and dropouts; one seed per mill) goes through the p
 operator is assumed to acknowledge every annunciation ``--ack-min`` minutes after it (10; EEMUA
 191 expects a response within minutes). Printed per mill:
 
-* ``annunc``: annunciations — raised, escalated, re-annunciated and recurred transitions (what
+* ``annunc``: annunciations — raised, escalated, re-annunciated and recurred transitions of
+  an alarm on the list, and an unacknowledged one back on it when its suppression ends (what
   sounds in the control room); ``per 10 min @20``: the rate an operator watching 20 such mills
   would see, against EEMUA 191's ≤ 1 per 10 minutes (steady operation);
 * ``max stand h``: the longest an alarm stood (raised until cleared, or until the end of the
-  scene if still open), against "no alarm standing > 24 h" (EEMUA 191 stale alarms), and
-  ``(rule)`` the rule of that alarm;
+  scene if still open, time suppressed by design included), and ``(rule)`` its rule;
+* ``max shown h``: the longest unbroken stretch an alarm stood *on the control room's list*
+  (open, neither suppressed by design — a running mill's rule while the mill is stopped —
+  nor shelved nor out of service), against "no alarm standing > 24 h" (EEMUA 191 standing
+  alarms: what the operator sees), and its rule;
 * ``by rule``: annunciations per rule.
 
 Scene time: a scene of ``--days`` days; the rate scales by that span. Analysis speed, not alarm
@@ -69,7 +73,7 @@ def _run(engine: AlarmEngine, observations: list[Any], ack_ns: int) -> list[Tran
     for obs in observations:
         out += _acks(engine, due, obs.t_ns)
         fired = engine.observe(obs)
-        due += [(t.t_ns + ack_ns, t.alarm_id) for t in fired if t.kind in ANNUNCIATIONS]
+        due += [(t.t_ns + ack_ns, t.alarm_id) for t in fired if _sounds(t)]
         out += fired
     return out + _acks(engine, due, None)
 
@@ -81,6 +85,35 @@ def _acks(engine: AlarmEngine, due: list[tuple[int, str]], until: int | None) ->
         if engine.alarm(alarm_id) is not None:
             out += engine.acknowledge(alarm_id, "bench operator", t_ns)
     return out
+
+
+def _sounds(t: Transition) -> bool:
+    """An annunciation the control room hears: a raise, escalation, re-annunciation or
+    recurrence of an alarm on its list (not one born suppressed by design), or an
+    unacknowledged alarm coming back on the list when the mill starts."""
+    if t.kind == "unsuppressed":
+        return t.alarm.annunciated and t.alarm.state == "raised"
+    return t.kind in ANNUNCIATIONS and t.alarm.annunciated
+
+
+def _longest_shown(transitions: list[Transition], t_end: int) -> dict[str, float]:
+    """Each alarm's longest unbroken stretch annunciated (open, and neither suppressed by
+    design, shelved nor out of service: on the control room's list), hours."""
+    start: dict[str, int | None] = {}
+    longest: dict[str, float] = {}
+    for t in sorted(transitions, key=lambda t: t.t_ns):
+        began = start.get(t.alarm_id)
+        if t.alarm.annunciated and began is None:
+            start[t.alarm_id] = t.t_ns
+        elif not t.alarm.annunciated and began is not None:
+            hours = (t.t_ns - began) / NS / 3600
+            longest[t.alarm_id] = max(longest.get(t.alarm_id, 0.0), hours)
+            start[t.alarm_id] = None
+    for alarm_id, began in start.items():
+        if began is not None:
+            hours = (t_end - began) / NS / 3600
+            longest[alarm_id] = max(longest.get(alarm_id, 0.0), hours)
+    return longest
 
 
 def measure(path: Path, days: float, seed: int, spectra: bool, ack_min: float) -> dict[str, Any]:
@@ -98,7 +131,9 @@ def measure(path: Path, days: float, seed: int, spectra: bool, ack_min: float) -
             cleared[t.alarm_id] = t.t_ns
     standing = {a: (cleared.get(a, t_end) - r) / NS / 3600 for a, r in raised.items()}
     longest = max(standing, key=standing.__getitem__, default=None)
-    by_rule = Counter(t.alarm.rule for t in transitions if t.kind in ANNUNCIATIONS)
+    shown = _longest_shown(transitions, t_end)
+    longest_shown = max(shown, key=shown.__getitem__, default=None)
+    by_rule = Counter(t.alarm.rule for t in transitions if _sounds(t))
     n = sum(by_rule.values())
     return {
         "mill": config.id,
@@ -108,6 +143,8 @@ def measure(path: Path, days: float, seed: int, spectra: bool, ack_min: float) -
         "per_10_min_20": n * OPERATOR_MILLS * 600.0 / (days * 86400.0),
         "max_standing_h": max(standing.values(), default=0.0),
         "longest": "-" if longest is None else longest.split(":")[1],  # (its rule)
+        "max_shown_h": max(shown.values(), default=0.0),
+        "longest_shown": "-" if longest_shown is None else longest_shown.split(":")[1],
         "by_rule": dict(sorted(by_rule.items())),
         "cpu_s": time.process_time() - t0,
     }
@@ -131,16 +168,17 @@ def main(argv: list[str] | None = None) -> int:
           f"operator acks after {a.ack_min:g} min; EEMUA 191: <= {EEMUA_PER_10_MIN:g} per "
           f"10 min for {OPERATOR_MILLS} mills, none standing > {EEMUA_STANDING_H:g} h")  # fmt: skip
     print(f"{'mill':<15} {'starter':<7} {'starts':>6} {'annunc':>6} {'per 10 min @20':>14} "
-          f"{'max stand h':>11} {'(rule)':<16} {'cpu s':>7}  by rule")  # fmt: skip
+          f"{'max stand h':>11} {'(rule)':<18} {'max shown h':>11} {'(rule)':<18} "
+          f"{'cpu s':>7}  by rule")  # fmt: skip
     ok = True
     for r in rows:
-        ok &= r["per_10_min_20"] <= EEMUA_PER_10_MIN and r["max_standing_h"] <= EEMUA_STANDING_H
+        ok &= r["per_10_min_20"] <= EEMUA_PER_10_MIN and r["max_shown_h"] <= EEMUA_STANDING_H
         rules = ", ".join(f"{k} {v}" for k, v in r["by_rule"].items()) or "-"
         print(f"{r['mill']:<15} {r['starter']:<7} {r['starts']:>6} {r['annunciations']:>6} "
-              f"{r['per_10_min_20']:>14.3f} {r['max_standing_h']:>11.1f} {r['longest']:<16} "
-              f"{r['cpu_s']:>7.0f}  "
+              f"{r['per_10_min_20']:>14.3f} {r['max_standing_h']:>11.1f} {r['longest']:<18} "
+              f"{r['max_shown_h']:>11.1f} {r['longest_shown']:<18} {r['cpu_s']:>7.0f}  "
               f"{rules}")  # fmt: skip
-    print("EEMUA 191 met" if ok else "EEMUA 191 NOT met")
+    print("EEMUA 191 (rate; no alarm shown > 24 h unbroken) " + ("met" if ok else "NOT met"))
     return 0 if ok else 1
 
 
