@@ -287,6 +287,7 @@ def cumulative_figure(r: MonthlyReport) -> Figure | None:
     if any(_prior_ramp(c, days, n) is not None for n in c.damage):
         ax.plot([], [], color="#555", linestyle=":", label="assumed before monitoring (prior)")
     ax.set_ylim(min(lows, default=1e-6) / 3.0, 3.0)
+    _cheap_log(ax.yaxis, 8)
     ax.margins(x=0.03)  # no point on the frame
     ax.set_ylabel("Miner damage D (1 = failure)")
     ax.set_xlabel("date")
@@ -322,6 +323,7 @@ def trend_figure(r: MonthlyReport) -> Figure | None:
     if positive:  # components differ by decades: a log axis, room above for the legend
         axes[1].set_yscale("log")
         axes[1].set_ylim(min(positive) / 3.0, max(positive) * 1000.0)
+        _cheap_log(axes[1].yaxis, 4)
     axes[1].legend(fontsize=7, ncols=6, loc="upper left")
     for ax, stats, label in ((axes[2], "oscillation_range_pct", "oscillation, % rated"),
                              (axes[3], "bending_amplitude_mpa", "bending, MPa")):  # fmt: skip
