@@ -25,7 +25,15 @@ from fpdf import FPDF
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from PIL import Image
 
-from millwatch.reports.render.document import MPL_LOCK, Document, Figure, Paragraph, Section, Table
+from millwatch.reports.render.document import (
+    MPL_LOCK,
+    Document,
+    Figure,
+    Paragraph,
+    Section,
+    Table,
+    frozen_heap,
+)
 from millwatch.reports.render.pdf_fonts import FONT_FAMILY, font_files
 from millwatch.reports.render.pdf_table import PT_MM, TableWriter, wrap
 
@@ -239,11 +247,12 @@ class _Writer:
 
 
 def document_pdf(doc: Document) -> bytes:
-    """The whole document as PDF bytes."""
-    pdf = _Pdf(doc)
-    pdf.add_page()
-    writer = _Writer(pdf)
-    writer.title(doc)
-    for s in doc.sections:
-        writer.section(s)
-    return bytes(pdf.output())
+    """The whole document as PDF bytes (the heap frozen meanwhile: :func:`frozen_heap`)."""
+    with frozen_heap():
+        pdf = _Pdf(doc)
+        pdf.add_page()
+        writer = _Writer(pdf)
+        writer.title(doc)
+        for s in doc.sections:
+            writer.section(s)
+        return bytes(pdf.output())
