@@ -48,9 +48,9 @@ __all__ = [
     "Paragraph",
     "Section",
     "Table",
+    "collector_paused",
     "columns",
     "fmt",
-    "frozen_heap",
     "local_time",
     "rows",
 ]
@@ -72,30 +72,33 @@ MPL_LOCK = threading.RLock()
 NBSP = "\u00a0"
 
 
-_FREEZE_LOCK = threading.Lock()
-_freezes = 0
+_PAUSE_LOCK = threading.Lock()
+_pauses = 0
+_was_enabled = False
 
 
 @contextmanager
-def frozen_heap() -> Iterator[None]:
-    """Render with the objects alive before it (the built report: ~3×10⁵ objects with its
-    steady windows) left out of the cyclic garbage collector's scans (:func:`gc.freeze`).
-    Drawing creates many short-lived objects, which set off full collections that walked the
-    whole report each time: a quarter of a render's CPU time. Garbage made while rendering is
-    collected as before; nested and concurrent renders share one freeze, released (the objects
-    back in the oldest generation) when the last of them ends."""
-    global _freezes
-    with _FREEZE_LOCK:
-        if _freezes == 0:
-            gc.freeze()
-        _freezes += 1
+def collector_paused() -> Iterator[None]:
+    """Render with Python's cyclic garbage collector paused (:func:`gc.disable`). Drawing makes
+    many short-lived objects, which set off full collections that walked the whole built report
+    (~3×10⁵ objects with its steady windows) each time: a quarter of a render's CPU time. The
+    garbage of the render is collected when the collector runs again; nested and concurrent
+    renders share one pause, ended (if the collector was running before) by the last of them.
+    Not :func:`gc.freeze`: its ``unfreeze`` would undo the freeze the service makes of what its
+    start-up built (:mod:`millwatch.worker.runtime`)."""
+    global _pauses, _was_enabled
+    with _PAUSE_LOCK:
+        if _pauses == 0:
+            _was_enabled = gc.isenabled()
+            gc.disable()
+        _pauses += 1
     try:
         yield
     finally:
-        with _FREEZE_LOCK:
-            _freezes -= 1
-            if _freezes == 0:
-                gc.unfreeze()
+        with _PAUSE_LOCK:
+            _pauses -= 1
+            if _pauses == 0 and _was_enabled:
+                gc.enable()
 
 
 def fmt(x: float | None, digits: int = 3) -> str:

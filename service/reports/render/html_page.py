@@ -30,7 +30,7 @@ from millwatch.reports.render.document import (
     Paragraph,
     Section,
     Table,
-    frozen_heap,
+    collector_paused,
 )
 
 __all__ = ["CSS", "document_html"]
@@ -141,10 +141,10 @@ def _section(s: Section) -> str:
 
 
 def document_html(doc: Document) -> str:
-    """The whole document as one HTML page (UTF-8 text; the heap frozen meanwhile:
-    :func:`~millwatch.reports.render.document.frozen_heap`)."""
+    """The whole document as one HTML page (UTF-8 text; the garbage collector paused meanwhile:
+    :func:`~millwatch.reports.render.document.collector_paused`)."""
     intro = "".join(_paragraph(p) for p in doc.intro)
-    with frozen_heap():
+    with collector_paused():
         body = "".join(_section(s) for s in doc.sections)
     footer = f"<p class='meta'>{html.escape(doc.footer)}</p>" if doc.footer else ""
     return (

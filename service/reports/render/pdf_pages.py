@@ -36,7 +36,7 @@ from millwatch.reports.render.document import (
     Paragraph,
     Section,
     Table,
-    frozen_heap,
+    collector_paused,
 )
 from millwatch.reports.render.pdf_fonts import FONT_FAMILY, font_files
 from millwatch.reports.render.pdf_table import PT_MM, TableWriter, wrap
@@ -254,11 +254,12 @@ class _Writer:
 
 
 def document_pdf(doc: Document) -> bytes:
-    """The whole document as PDF bytes (the heap frozen meanwhile: :func:`frozen_heap`)."""
+    """The whole document as PDF bytes (the garbage collector paused meanwhile:
+    :func:`~millwatch.reports.render.document.collector_paused`)."""
     settings = image_parsing.SETTINGS  # fpdf2's, read when an image is added
     level, settings.compression_level = settings.compression_level, IMAGE_ZLIB_LEVEL
     try:
-        with frozen_heap():
+        with collector_paused():
             return _typeset(doc)
     finally:
         settings.compression_level = level
