@@ -2,15 +2,17 @@
 
 Each builder takes a :class:`~millwatch.reports.monthly.MonthlyReport` and returns a figure or
 ``None`` when the month has nothing to plot; :mod:`millwatch.reports.monthly_document` places them
-in the document, and the renderers save them (SVG in HTML, vector SVG in the PDF).
+in the document, and the renderers draw them (SVG in HTML, Agg pixels in the PDF).
 matplotlib's rcParams are one per process and read while drawing: renderers build and save
 figures holding :data:`millwatch.reports.render.document.MPL_LOCK`, so concurrent requests cannot
 leak settings into one another.
 
 Plots cost most of a report's time, so they are kept cheap: fixed margins instead of a layout
 engine (it draws every figure twice), one collection per bar series (a patch per bar costs
-~1 ms), few ticks, and the month's steady-state windows (tens of thousands) drawn as a min–max
-envelope per plot column (:func:`envelope`), which keeps every peak visible against the levels.
+~1 ms), few ticks and made only inside the view (:func:`_ticks_in_view`), log axes labelled as
+plain text without minor ticks (:func:`_cheap_log`: mathtext labels cost ~40 ms each), and the
+month's steady-state windows (tens of thousands) drawn as a min–max envelope per plot column
+(:func:`envelope`), which keeps every peak visible against the levels.
 """
 
 from __future__ import annotations
