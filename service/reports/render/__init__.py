@@ -9,12 +9,14 @@ What is here:
 
 * :mod:`millwatch.reports.render.document` — the model: sections of paragraphs, tables (header row
   of columns with units, raw cells, column groups for wide tables) and figures; number
-  formatting; the lock held while matplotlib draws.
+  formatting; the lock held while matplotlib draws; the garbage collector paused while a
+  renderer runs (``collector_paused``: full collections walked the whole built report).
 * :mod:`millwatch.reports.render.html_page` — one self-contained HTML page (inline SVG plots, CSS
   that fits and prints tables on A4).
 * :mod:`millwatch.reports.render.pdf_pages` — an A4 PDF with fpdf2 (pure Python): running header,
-  page numbers, figures as images; :mod:`millwatch.reports.render.pdf_table` typesets its tables
-  (wrapped cells, repeated headers, never cut), :mod:`millwatch.reports.render.pdf_fonts` gives it
+  page numbers, paragraphs wrapped with cached word widths, figures as images;
+  :mod:`millwatch.reports.render.pdf_table` typesets its tables (wrapped cells, repeated headers,
+  never cut), :mod:`millwatch.reports.render.pdf_fonts` gives it
   DejaVu Sans from matplotlib's own fonts.
 * :mod:`millwatch.reports.render.csv_tables` — every table as tidy CSV (header row with units),
   zipped or one by name.

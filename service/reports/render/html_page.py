@@ -30,6 +30,7 @@ from millwatch.reports.render.document import (
     Paragraph,
     Section,
     Table,
+    collector_paused,
 )
 
 __all__ = ["CSS", "document_html"]
@@ -140,9 +141,11 @@ def _section(s: Section) -> str:
 
 
 def document_html(doc: Document) -> str:
-    """The whole document as one HTML page (UTF-8 text)."""
+    """The whole document as one HTML page (UTF-8 text; the garbage collector paused meanwhile:
+    :func:`~millwatch.reports.render.document.collector_paused`)."""
     intro = "".join(_paragraph(p) for p in doc.intro)
-    body = "".join(_section(s) for s in doc.sections)
+    with collector_paused():
+        body = "".join(_section(s) for s in doc.sections)
     footer = f"<p class='meta'>{html.escape(doc.footer)}</p>" if doc.footer else ""
     return (
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"

@@ -45,23 +45,29 @@ Measure = Callable[[str], float]
 
 
 def wrap(text: str, width: float, measure: Measure) -> list[str]:
-    """``text`` as lines no wider than ``width`` (mm): words kept whole where they fit."""
+    """``text`` as lines no wider than ``width`` (mm): words kept whole where they fit. A line's
+    width is kept as a running sum (widths add up: no kerning), so each word is measured once."""
     width += 1e-6  # a column as wide as its widest word, give or take a rounding error
+    space = measure(" ")
     lines: list[str] = []
     for para in text.split("\n"):
-        line = ""
+        line, line_w = "", 0.0
         for word in para.split(" "):
-            trial = f"{line} {word}" if line else word
-            if measure(trial) <= width or (not line and measure(word) <= width):
-                line = trial
+            word_w = measure(word)
+            if line and line_w + space + word_w <= width:
+                line, line_w = f"{line} {word}", line_w + space + word_w
+                continue
+            if not line and word_w <= width:
+                line, line_w = word, word_w
                 continue
             if line:
                 lines.append(line)
-            line = word
-            while measure(line) > width and len(line) > 1:  # longer than the column
+            line, line_w = word, word_w
+            while line_w > width and len(line) > 1:  # longer than the column
                 cut = _fitting_prefix(line, width, measure)
                 lines.append(line[:cut])
                 line = line[cut:]
+                line_w = measure(line)
         lines.append(line)
     return lines
 
@@ -144,6 +150,15 @@ class TableWriter:
 
     def __init__(self, pdf: FPDF, family: str, bottom: float) -> None:
         self.pdf, self.family, self.bottom = pdf, family, bottom
+        self._measures: dict[tuple[float, str], Measure] = {}
+
+    def measure(self, size: float, style: str) -> Measure:
+        """The (cached) string width in mm at ``size`` pt in ``style``: one per document, so
+        a word or cell measured once is not measured again."""
+        key = (size, style)
+        if key not in self._measures:
+            self._measures[key] = _Metrics(self.pdf, self.family, size).measure(style)
+        return self._measures[key]
 
     def table(self, t: Table) -> None:
         """All column groups of ``t`` (see the module docstring)."""
@@ -161,7 +176,7 @@ class TableWriter:
         self._draw(t, layout)
 
     def _lines(self, cells: list[str], layout: Layout, style: str) -> list[list[str]]:
-        m = _Metrics(self.pdf, self.family, layout.size).measure(style)
+        m = self.measure(layout.size, style)
         return [wrap(c, w - 2 * PAD_X, m) for c, w in zip(cells, layout.widths, strict=True)]
 
     def _height(self, lines: list[list[str]], size: float) -> float:
@@ -197,12 +212,13 @@ class TableWriter:
         pdf.set_line_width(0.15)
         pdf.set_fill_color(*HEAD_FILL)
         line_h = size * PT_MM * LEADING
+        measure = self.measure(size, "B" if header else "")
         for col, cell, w in zip(t.columns, lines, layout.widths, strict=True):
             pdf.rect(x, y, w, h, style="DF" if header else "D")
             colour = STATUS_RGB.get(" ".join(cell)) if col.status and not header else None
             pdf.set_text_color(*(colour or (0, 0, 0)))
             for k, text in enumerate(cell):
-                tx = x + PAD_X if col.text else x + w - PAD_X - pdf.get_string_width(text)
+                tx = x + PAD_X if col.text else x + w - PAD_X - measure(text)
                 pdf.text(tx, y + PAD_Y + k * line_h + size * PT_MM * 0.95, text)
             x += w
         pdf.set_text_color(0, 0, 0)

@@ -7,6 +7,7 @@ worker); the PDF's text is read back with pypdf."""
 from __future__ import annotations
 
 import csv
+import gc
 import html
 import io
 import re
@@ -187,3 +188,37 @@ def test_a_document_draws_each_figure_once_and_every_format_the_same(store):
     document_pdf(doc)
     assert document_html(doc) == alone
     assert all(f.build() is f.build() for f in figures)
+
+
+def test_paragraphs_and_notes_print_every_word_in_order_across_pages():
+    words = [f"w{i}" for i in range(900)]  # ~4 pages of running text at the body size
+    long_text, note = " ".join(words), "note: " + " ".join(words[:60])
+    doc = Document("t", "h", "x", (), (
+        Section("s", "S", (Paragraph(long_text), Paragraph(note, "note"),
+                           Paragraph("a " + "x" * 400, "meta"))),))  # fmt: skip
+    text, pages = pdf_text(document_pdf(doc))
+    assert long_text in text and note in text and pages >= 3
+    assert "".join(re.findall("x+", text)) == "x" * 400  # a word wider than the page, broken
+
+
+def test_a_render_leaves_the_garbage_collector_as_it_found_it(report):
+    doc = monthly_document(report)
+    document_pdf(doc)
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        document_html(doc)
+        assert not gc.isenabled()  # a caller's own pause is not ended by a render
+    finally:
+        gc.enable()
+
+
+def test_figures_make_ticks_only_where_they_are_drawn(report):
+    doc = monthly_document(report)
+    for f in (b for s in doc.sections for b in s.blocks if isinstance(b, dm.Figure)):
+        fig = f.build()
+        fig.canvas.draw()
+        for axis in (a for ax in fig.axes for a in (ax.xaxis, ax.yaxis)):
+            lo, hi = sorted(axis.get_view_interval())
+            locs = [*axis.get_majorticklocs(), *axis.get_minorticklocs()]
+            assert all(lo - 1e-6 * (hi - lo) <= x <= hi + 1e-6 * (hi - lo) for x in locs), f.name
