@@ -35,6 +35,7 @@ at_s = 200
 #: per-window spectra; ``analyze`` the record's long-run spectra: see
 #: :mod:`millwatch.alarms.from_analysis`).
 SHARED = {"start_peak", "bending_amplitude", "oscillation_range", "starts_per_month"}
+NS = 1_000_000_000
 STEP = ("seq", "kind", "t_ns", "severity", "state", "value", "threshold", "message")
 
 
@@ -75,3 +76,40 @@ def test_analyze_and_the_live_worker_give_the_same_transitions_suppression_inclu
     kinds = [str(t["kind"]) for t in bending[0]["transitions"]]
     assert kinds[:3] == ["raised", "suppressed", "unsuppressed"], kinds
     assert _steps(offline) == _steps(live)
+
+
+def test_the_worker_clears_a_held_start_peak_alarm_while_the_mill_stands_still(tmp_path):
+    """An acknowledged start-peak alarm returns to normal ``start_peak_hold_s`` after its last
+    exceeding start even when the mill observes nothing (stopped: no steady windows): the
+    worker lets the engine see sample time pass at every damage interval. Every start exceeds
+    here (warning lowered to 100 %); the hold of 155 s after the start near 5 s ends inside the
+    standstill from the stop (150 s) to the next start (200 s), and the blocks end at 195 s;
+    damage intervals of 20 s put a tick in the standstill after it."""
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text(SCENE)
+    alarms = SAG.alarms.model_copy(
+        update={"start_peak_warn_pct": 100.0, "start_peak_hold_s": 155.0}
+    )
+    job = MillJob(
+        SAG.model_copy(update={"alarms": alarms}), damage_every_s=20.0
+    )  # ticks ~8 s + 20 k
+    channel = {c.key: n for n, c in SAG.channels.items()}
+    transitions: list[Any] = []
+    t_first: int | None = None
+    for k, b in enumerate(scene_blocks(load_scene_file(scene_file, SAG))):
+        block = decode_block(b.payload)
+        t_first = block.t0_ns if t_first is None else t_first
+        if block.t0_ns - t_first >= 195 * NS:
+            break
+        job.add_block(channel[b.key.rsplit("/", 1)[-1]], block)
+        if k % BATCH == BATCH - 1:
+            for t in job.finish().alarm_transitions:
+                transitions.append(t)
+                if t.alarm.rule == "start_peak" and t.kind == "raised":
+                    job.alarms.acknowledge(t.alarm_id, "ops", t.t_ns + NS)
+    transitions += job.finish().alarm_transitions
+    kinds = [str(t.kind) for t in transitions if t.alarm.rule == "start_peak"]
+    assert kinds == ["raised", "cleared"], kinds
+    raised, cleared = (t for t in transitions if t.alarm.rule == "start_peak")
+    assert cleared.t_ns == raised.t_ns + 155 * NS
+    assert 150 * NS < cleared.t_ns - t_first < 195 * NS
