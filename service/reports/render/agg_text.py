@@ -1,0 +1,107 @@
+"""matplotlib's Agg canvas with each line of text rasterised once and its pixels reused.
+
+matplotlib 3.11 lays a text out with HarfBuzz (``FT2Font._layout``, ~0.02 ms a character) both
+to measure it and again to draw it, then renders and composites it glyph by glyph: a fifth of
+the PDF figures' drawing time, though half of a report's texts repeat (tick labels 0, 10, 100,
+the legends of the three spectrum figures) and every render of the same report repeats them
+all. :class:`TextCanvas` draws plain (non-math) text the way matplotlib 3.10 did — the line
+rendered to one grey bitmap by FreeType (``set_text`` + ``draw_glyphs_to_bitmap``) and
+composited once at a whole pixel — and keeps the bitmap and the line's metrics in a bounded
+process-wide cache (:data:`CACHE_SIZE` lines) keyed by text, font file, size, resolution and
+anti-aliasing. The placement differs from 3.11's sub-pixel placement by at most a pixel or two
+(≤ 0.3 mm on the page at the report's 120 dpi); mathtext, TeX and texts with font features or a
+language set are drawn by matplotlib itself.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import OrderedDict
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
+
+__all__ = ["CACHE_SIZE", "TextCanvas", "TextRenderer", "clear_text_cache"]
+
+#: Most text lines kept (a 12-month report draws ~120 different ones; a bitmap is a few kB).
+CACHE_SIZE = 2048
+
+Line = tuple[np.ndarray, float, float, float, float, float]
+"""A rendered line: grey bitmap; its offset x, y; the line's width, height and descent (pixels)."""
+#: (text, font, size pt, dpi, hinting, antialiased) -> the rendered line
+_lines: OrderedDict[tuple[Any, ...], Line] = OrderedDict()
+_LOCK = threading.Lock()
+
+
+def clear_text_cache() -> None:
+    """Forget every cached line (tests; a changed font)."""
+    with _LOCK:
+        _lines.clear()
+
+
+def _remember(key: tuple[Any, ...], line: Line) -> None:
+    with _LOCK:
+        _lines[key] = line
+        while len(_lines) > CACHE_SIZE:
+            _lines.popitem(last=False)
+
+
+def _recall(key: tuple[Any, ...]) -> Line | None:
+    with _LOCK:
+        line = _lines.get(key)
+        if line is not None:
+            _lines.move_to_end(key)
+        return line
+
+
+class TextRenderer(RendererAgg):
+    """:class:`RendererAgg` drawing plain text as one cached bitmap per line."""
+
+    def _line(self, s: str, prop: Any, antialiased: bool) -> Line:
+        """The line rendered by FreeType, at most once while it stays in the cache."""
+        font = self._prepare_font(prop)  # the (fallback-chained) font at this size and dpi
+        key = (s, font.fname, tuple(prop.get_family()), prop.get_weight(), prop.get_style(),
+               prop.get_size_in_points(), self.dpi, get_hinting_flag(), antialiased)  # fmt: skip
+        line = _recall(key)
+        if line is None:
+            font.set_text(s, 0.0, flags=get_hinting_flag())
+            font.draw_glyphs_to_bitmap(antialiased=antialiased)
+            w, h = font.get_width_height()
+            xo, yo = font.get_bitmap_offset()
+            line = (np.array(font.get_image(), dtype=np.uint8), xo / 64.0, yo / 64.0,
+                    w / 64.0, h / 64.0, font.get_descent() / 64.0)  # fmt: skip
+            _remember(key, line)
+        return line
+
+    def draw_text(self, gc: Any, x: float, y: float, s: str, prop: Any, angle: float,
+                  ismath: Any = False, mtext: Any = None) -> None:  # fmt: skip
+        """Plain text from the cache, composited once (as matplotlib 3.10 drew it)."""
+        if ismath or (mtext is not None and (mtext.get_fontfeatures() or mtext.get_language())):
+            super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)
+            return
+        image, xo, yo, _w, _h, d = self._line(s, prop, bool(gc.get_antialiased()))
+        if not image.size:
+            return
+        xd, yd = d * math.sin(math.radians(angle)), d * math.cos(math.radians(angle))
+        self._renderer.draw_text_image(image, round(x + xo + xd), round(y + yo + yd) + 1,
+                                       angle, gc)  # fmt: skip
+
+    def get_text_width_height_descent(self, s: str, prop: Any, ismath: Any) -> Any:
+        """Width, height and descent (pixels) of plain text from the cache."""
+        if ismath:
+            return super().get_text_width_height_descent(s, prop, ismath)
+        return self._line(s, prop, True)[3:]
+
+
+class TextCanvas(FigureCanvasAgg):
+    """:class:`FigureCanvasAgg` drawing with a :class:`TextRenderer`."""
+
+    def get_renderer(self) -> RendererAgg:
+        w, h = self.get_width_height(physical=True)
+        key = w, h, self.figure.dpi
+        if self._lastKey != key:
+            self.renderer = TextRenderer(w, h, self.figure.dpi)
+            self._lastKey = key
+        return self.renderer
