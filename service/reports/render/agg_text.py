@@ -10,7 +10,9 @@ composited once at a whole pixel — and keeps the bitmap and the line's metrics
 process-wide cache (:data:`CACHE_SIZE` lines) keyed by text, font file, size, resolution and
 anti-aliasing. The placement differs from 3.11's sub-pixel placement by at most a pixel or two
 (≤ 0.3 mm on the page at the report's 120 dpi); mathtext, TeX and texts with font features or a
-language set are drawn by matplotlib itself.
+language set are drawn by matplotlib itself. The renderer also answers matplotlib's question for
+a font's ascent, descent and line gap (``_get_font_height_metrics``, asked before it reads them
+from the font's tables for every text it lays out) from a cache, with the same numbers.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
+from matplotlib.font_manager import fontManager, get_font
 
 __all__ = ["CACHE_SIZE", "TextCanvas", "TextRenderer", "clear_text_cache"]
 
@@ -32,6 +35,9 @@ Line = tuple[np.ndarray, float, float, float, float, float]
 """A rendered line: grey bitmap; its offset x, y; the line's width, height and descent (pixels)."""
 #: (text, font, size pt, dpi, hinting, antialiased) -> the rendered line
 _lines: OrderedDict[tuple[Any, ...], Line] = OrderedDict()
+#: (font properties, dpi) -> the font's ascent, descent and line gap (pixels); a few fonts and
+#: sizes, so unbounded
+_heights: dict[tuple[Any, ...], tuple[float, float, float]] = {}
 _LOCK = threading.Lock()
 
 
@@ -39,6 +45,7 @@ def clear_text_cache() -> None:
     """Forget every cached line (tests; a changed font)."""
     with _LOCK:
         _lines.clear()
+        _heights.clear()
 
 
 def _remember(key: tuple[Any, ...], line: Line) -> None:
@@ -54,6 +61,29 @@ def _recall(key: tuple[Any, ...]) -> Line | None:
         if line is not None:
             _lines.move_to_end(key)
         return line
+
+
+def _prop_key(prop: Any) -> tuple[Any, ...]:
+    """What a :class:`~matplotlib.font_manager.FontProperties` hashes (its font and size)."""
+    return (tuple(prop.get_family()), prop.get_style(), prop.get_variant(), prop.get_weight(),
+            prop.get_stretch(), prop.get_size_in_points(), prop.get_file(),
+            prop.get_math_fontfamily())  # fmt: skip
+
+
+def _height_metrics(font: Any, size_pt: float, dpi: float) -> tuple[float, float, float]:
+    """Ascent, descent, line gap (pixels) from the OS/2 table, else hhea, computed as
+    matplotlib's ``Text._get_layout`` does; a font with neither: None, and matplotlib measures
+    the text instead."""
+    for table_name, gap, ascent, descent in (
+        ("OS/2", "sTypoLineGap", "sTypoAscender", "sTypoDescender"),
+        ("hhea", "lineGap", "ascent", "descent"),
+    ):
+        table = font.get_sfnt_table(table_name)
+        if table is None:
+            continue
+        scale = 1 / font.get_sfnt_table("head")["unitsPerEm"] * size_pt * dpi / 72
+        return table[ascent] * scale, -table[descent] * scale, table[gap] * scale
+    return None, None, None  # type: ignore[return-value]
 
 
 class TextRenderer(RendererAgg):
@@ -74,6 +104,20 @@ class TextRenderer(RendererAgg):
                     w / 64.0, h / 64.0, font.get_descent() / 64.0)  # fmt: skip
             _remember(key, line)
         return line
+
+    def _get_font_height_metrics(self, prop: Any) -> tuple[float, float, float]:
+        """Ascent, descent and line gap (pixels) of ``prop``'s font, as matplotlib's
+        ``Text._get_layout`` reads them from the font's OS/2 or hhea table for every text it
+        lays out (a hook it asks renderers for first), read once per font, size and dpi."""
+        key = (*_prop_key(prop), self.dpi)
+        with _LOCK:
+            metrics = _heights.get(key)
+        if metrics is None:
+            font = get_font(fontManager._find_fonts_by_props(prop))
+            metrics = _height_metrics(font, prop.get_size_in_points(), self.dpi)
+            with _LOCK:
+                _heights[key] = metrics
+        return metrics
 
     def draw_text(self, gc: Any, x: float, y: float, s: str, prop: Any, angle: float,
                   ismath: Any = False, mtext: Any = None) -> None:  # fmt: skip

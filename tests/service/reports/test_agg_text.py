@@ -1,5 +1,6 @@
 """The PDF figures' text drawn from cached line bitmaps (:mod:`millwatch.reports.render.agg_text`)
-lands where matplotlib's own Agg renderer puts it, with the same ink and the same metrics."""
+lands where matplotlib's own Agg renderer puts it, with the same ink and the same metrics; the
+figures' pixels reach the PDF whole."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ from matplotlib.font_manager import FontProperties
 
 from millwatch.reports.render import agg_text
 from millwatch.reports.render.agg_text import TextCanvas, TextRenderer, clear_text_cache
+from millwatch.reports.render.document import Figure as DocFigure
+from millwatch.reports.render.pdf_pages import FIGURE_DPI, _Writer
 
 TEXTS = ["day of month", "Starts per day — 84 in 2024-01 (norm 3–5)", "10⁻⁴", "≥ 43 MPa"]
 
@@ -88,3 +91,30 @@ def test_figure_drawn_alike() -> None:
     ours, theirs = draw(TextCanvas), draw(FigureCanvasAgg)
     assert ours.shape == theirs.shape
     assert ours.sum() == pytest.approx(theirs.sum(), rel=0.05)
+
+
+def test_font_height_metrics_are_matplotlibs() -> None:
+    """The ascent, descent and line gap matplotlib's ``Text`` asks the renderer for equal what it
+    reads from the font itself (a text laid out alike on both renderers)."""
+    fig = Figure(figsize=(3, 2), dpi=120)
+    text = fig.text(0.1, 0.5, "damage / day\nper component", fontsize=9)
+    ours = text._get_layout(TextRenderer(360, 240, 120))
+    theirs = text._get_layout(RendererAgg(360, 240, 120))
+    assert ours[0].bounds == pytest.approx(theirs[0].bounds)
+    assert [xy for *_, xy in ours[1]] == [xy for *_, xy in theirs[1]]  # line positions
+
+
+def test_pdf_figure_pixels_at_figure_dpi() -> None:
+    """The PDF's picture of a figure: drawn at FIGURE_DPI, every pixel the canvas drew, and the
+    figure left at its own dpi for another format."""
+    fig = Figure(figsize=(4.5, 1.5), dpi=100)
+    ax = fig.subplots()
+    ax.plot([0, 1], [0, 1], color="#d62728")
+    image = _Writer.image(DocFigure("f", lambda: fig))
+    assert image is not None and image.mode == "RGB"
+    assert image.size == (round(4.5 * FIGURE_DPI), round(1.5 * FIGURE_DPI))
+    assert fig.dpi == 100
+    fig.set_dpi(FIGURE_DPI)
+    canvas = TextCanvas(fig)
+    canvas.draw()
+    assert np.array_equal(np.asarray(image), np.asarray(canvas.buffer_rgba())[..., :3])
