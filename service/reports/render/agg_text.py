@@ -9,8 +9,9 @@ rendered to one grey bitmap by FreeType (``set_text`` + ``draw_glyphs_to_bitmap`
 composited once at a whole pixel — and keeps the bitmap and the line's metrics in a bounded
 process-wide cache (:data:`CACHE_SIZE` lines) keyed by text, font file, size, resolution and
 anti-aliasing. The placement differs from 3.11's sub-pixel placement by at most a pixel or two
-(≤ 0.3 mm on the page at the report's 120 dpi); mathtext, TeX and texts with font features or a
-language set are drawn by matplotlib itself. The renderer also answers matplotlib's question for
+(≤ 0.3 mm on the page at the report's 120 dpi); mathtext, TeX, texts with font features or a
+language set, and texts at angles other than multiples of 90° (their bitmap would be resampled,
+blurred) are drawn by matplotlib itself. The renderer also answers matplotlib's question for
 a font's ascent, descent and line gap (``_get_font_height_metrics``, asked before it reads them
 from the font's tables for every text it lays out) from a cache, with the same numbers.
 """
@@ -122,7 +123,11 @@ class TextRenderer(RendererAgg):
     def draw_text(self, gc: Any, x: float, y: float, s: str, prop: Any, angle: float,
                   ismath: Any = False, mtext: Any = None) -> None:  # fmt: skip
         """Plain text from the cache, composited once (as matplotlib 3.10 drew it)."""
-        if ismath or (mtext is not None and (mtext.get_fontfeatures() or mtext.get_language())):
+        if (
+            ismath
+            or angle % 90 != 0  # resampling a bitmap at other angles blurs it
+            or (mtext is not None and (mtext.get_fontfeatures() or mtext.get_language()))
+        ):
             super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)
             return
         image, xo, yo, _w, _h, d = self._line(s, prop, bool(gc.get_antialiased()))

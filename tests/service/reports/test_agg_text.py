@@ -36,7 +36,7 @@ def _box(ink: np.ndarray) -> np.ndarray:
     return np.array([xs.min(), xs.max(), ys.min(), ys.max()])
 
 
-@pytest.mark.parametrize("angle", [0.0, 90.0])
+@pytest.mark.parametrize("angle", [0.0, 90.0, 270.0])
 @pytest.mark.parametrize("text", TEXTS)
 def test_line_lands_where_matplotlib_draws_it(text: str, angle: float) -> None:
     clear_text_cache()
@@ -56,6 +56,11 @@ def test_metrics_are_matplotlibs(text: str) -> None:
     ours = TextRenderer(10, 10, 120).get_text_width_height_descent(text, prop, False)
     theirs = RendererAgg(10, 10, 120).get_text_width_height_descent(text, prop, False)
     assert ours == pytest.approx(theirs)
+
+
+def test_slanted_text_is_drawn_by_matplotlib() -> None:
+    """At 30° a rotated bitmap would be resampled (blurred): matplotlib draws it."""
+    assert np.array_equal(_drawn(TextRenderer, TEXTS[0], 30.0), _drawn(RendererAgg, TEXTS[0], 30.0))
 
 
 def test_math_text_is_drawn_by_matplotlib() -> None:
