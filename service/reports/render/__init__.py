@@ -17,7 +17,9 @@ What is here:
   page numbers, paragraphs wrapped with cached word widths, figures as images;
   :mod:`millwatch.reports.render.pdf_table` typesets its tables (wrapped cells, repeated headers,
   never cut), :mod:`millwatch.reports.render.pdf_fonts` gives it
-  DejaVu Sans from matplotlib's own fonts.
+  DejaVu Sans from matplotlib's own fonts; :mod:`millwatch.reports.render.agg_text` draws the
+  figures' text as one cached bitmap a line (matplotlib 3.11 lays out and renders it glyph by
+  glyph: a fifth of the figures' drawing time).
 * :mod:`millwatch.reports.render.csv_tables` — every table as tidy CSV (header row with units),
   zipped or one by name.
 

@@ -11,7 +11,8 @@ Generic over :class:`~millwatch.reports.render.document.Document`, like
   ``cell``: fpdf2's ``multi_cell`` re-measured the line it was building at every character.
 * Tables: :mod:`millwatch.reports.render.pdf_table` — wrapped cells, header row repeated on each
   page, rows never split, wide tables as column groups; no text is ever cut.
-* Figures: drawn by matplotlib's Agg at 120 dpi (~150 dpi on the page) and placed at the text
+* Figures: drawn by matplotlib's Agg at 120 dpi (~150 dpi on the page), their text a cached
+  bitmap a line (:class:`~millwatch.reports.render.agg_text.TextCanvas`), and placed at the text
   width; a figure starts a new page rather than being split or squeezed. (Vector SVG through
   fpdf2's SVG reader cost ~0.3 s a figure, twice the drawing itself.) Their pixels are
   compressed at zlib level :data:`IMAGE_ZLIB_LEVEL` (set on fpdf2's settings for the render and
@@ -24,11 +25,10 @@ from __future__ import annotations
 
 import logging
 
-import numpy as np
 from fpdf import FPDF, image_parsing
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from PIL import Image
 
+from millwatch.reports.render.agg_text import TextCanvas
 from millwatch.reports.render.document import (
     MPL_LOCK,
     Document,
@@ -222,11 +222,13 @@ class _Writer:
             fig = f.build()
             if fig is None:
                 return None
-            dpi, canvas = fig.dpi, FigureCanvasAgg(fig)
+            dpi, canvas = fig.dpi, TextCanvas(fig)
             fig.set_dpi(FIGURE_DPI)
             canvas.draw()
             fig.set_dpi(dpi)  # the figure as it was, for another format of the same document
-            return Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3])
+            rgba = canvas.buffer_rgba()  # (height, width, 4) bytes at FIGURE_DPI
+            h, w = rgba.shape[:2]  # to RGB by Pillow: 3× faster than numpy's strided copy
+            return Image.frombuffer("RGBA", (w, h), rgba, "raw", "RGBA", 0, 1).convert("RGB")
 
     def _image_size(self, image: Image.Image) -> tuple[float, float]:
         """Width and height (mm): the text width, or less for a figure taller than a page
