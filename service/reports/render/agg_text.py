@@ -14,10 +14,14 @@ language set, and texts at angles other than multiples of 90° (their bitmap wou
 blurred) are drawn by matplotlib itself. The renderer also answers matplotlib's question for
 a font's ascent, descent and line gap (``_get_font_height_metrics``, asked before it reads them
 from the font's tables for every text it lays out) from a cache, with the same numbers.
+
+These are matplotlib internals (:data:`_NEEDS`): :func:`canvas_for` gives the
+:class:`TextCanvas` only when the installed matplotlib has them, else its own canvas.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 from collections import OrderedDict
@@ -26,8 +30,9 @@ from typing import Any
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
 from matplotlib.font_manager import fontManager, get_font
+from matplotlib.text import Text
 
-__all__ = ["CACHE_SIZE", "TextCanvas", "TextRenderer", "clear_text_cache"]
+__all__ = ["CACHE_SIZE", "TextCanvas", "TextRenderer", "canvas_for", "clear_text_cache"]
 
 #: Most text lines kept (a 12-month report draws ~120 different ones; a bitmap is a few kB).
 CACHE_SIZE = 2048
@@ -40,6 +45,11 @@ _lines: OrderedDict[tuple[Any, ...], Line] = OrderedDict()
 #: sizes, so unbounded
 _heights: dict[tuple[Any, ...], tuple[float, float, float]] = {}
 _LOCK = threading.Lock()
+#: matplotlib internals the cached drawing relies on (checked with the installed version: a
+#: matplotlib without them draws the report with its own canvas, only slower)
+_NEEDS = ((RendererAgg, "_prepare_font"), (FigureCanvasAgg, "_lastKey"), (Text, "get_fontfeatures"),
+          (Text, "get_language"), (fontManager, "_find_fonts_by_props"))  # fmt: skip
+log = logging.getLogger(__name__)
 
 
 def clear_text_cache() -> None:
@@ -154,3 +164,21 @@ class TextCanvas(FigureCanvasAgg):
             self.renderer = TextRenderer(w, h, self.figure.dpi)
             self._lastKey = key
         return self.renderer
+
+
+def canvas_for(figure: Any) -> FigureCanvasAgg:
+    """A :class:`TextCanvas` for ``figure`` when the installed matplotlib has the internals it
+    uses (:data:`_NEEDS`), else matplotlib's own :class:`FigureCanvasAgg` (the same figure,
+    drawn more slowly), said once in the log."""
+    missing = [f"{type(o).__name__ if not isinstance(o, type) else o.__name__}.{name}"
+               for o, name in _NEEDS if not hasattr(o, name)]  # fmt: skip
+    if not missing:
+        return TextCanvas(figure)
+    if not _warned:
+        _warned.append(True)
+        log.info("report figures drawn by matplotlib's own Agg canvas (this matplotlib lacks %s)",
+                 ", ".join(missing))  # fmt: skip
+    return FigureCanvasAgg(figure)
+
+
+_warned: list[bool] = []

@@ -28,7 +28,7 @@ import logging
 from fpdf import FPDF, image_parsing
 from PIL import Image
 
-from millwatch.reports.render.agg_text import TextCanvas
+from millwatch.reports.render.agg_text import canvas_for
 from millwatch.reports.render.document import (
     MPL_LOCK,
     Document,
@@ -222,7 +222,7 @@ class _Writer:
             fig = f.build()
             if fig is None:
                 return None
-            dpi, canvas = fig.dpi, TextCanvas(fig)
+            dpi, canvas = fig.dpi, canvas_for(fig)
             fig.set_dpi(FIGURE_DPI)
             canvas.draw()
             fig.set_dpi(dpi)  # the figure as it was, for another format of the same document

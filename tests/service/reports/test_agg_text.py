@@ -123,3 +123,21 @@ def test_pdf_figure_pixels_at_figure_dpi() -> None:
     canvas = TextCanvas(fig)
     canvas.draw()
     assert np.array_equal(np.asarray(image), np.asarray(canvas.buffer_rgba())[..., :3])
+
+
+def test_a_matplotlib_without_the_internals_used_gets_its_own_canvas(monkeypatch, caplog):
+    """The cached drawing leans on matplotlib internals; a version without one of them draws
+    the report's figures with its own Agg canvas (slower, never broken), and says so once."""
+    figure = Figure(figsize=(2, 1), dpi=FIGURE_DPI)
+    figure.add_subplot().set_title("damage")
+    assert type(agg_text.canvas_for(figure)) is TextCanvas
+    monkeypatch.delattr(RendererAgg, "_prepare_font")
+    monkeypatch.setattr(agg_text, "_warned", [])
+    with caplog.at_level("INFO", logger=agg_text.__name__):
+        canvas = agg_text.canvas_for(figure)
+        agg_text.canvas_for(figure)
+    assert type(canvas) is FigureCanvasAgg
+    assert [r.getMessage() for r in caplog.records] == [
+        "report figures drawn by matplotlib's own Agg canvas (this matplotlib lacks "
+        "RendererAgg._prepare_font)"
+    ]
